@@ -1,0 +1,140 @@
+"""Exploratory actions as data: a name, a movement and the movement's parameters (SI units).
+
+The paper's seven actions (§5.2) are in :data:`PAPER_ACTIONS`; users define their own with
+:class:`ExploratoryAction` or load them from TOML with :func:`actions_from_toml`.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+__all__ = [
+    "Movement",
+    "ExploratoryAction",
+    "PAPER_ACTIONS",
+    "MODALITIES_BY_MOVEMENT",
+    "actions_from_toml",
+]
+
+
+class Movement(str, enum.Enum):
+    """How the skin interacts with the object."""
+
+    PRESS = "press"
+    SLIDE = "slide"
+    STATIC_CONTACT = "static_contact"
+
+
+#: Which feature modalities each movement yields (DESIGN.md §4, paper Table 2).
+MODALITIES_BY_MOVEMENT: Mapping[Movement, tuple[str, ...]] = {
+    Movement.PRESS: ("force", "thermal"),
+    Movement.SLIDE: ("texture", "thermal"),
+    Movement.STATIC_CONTACT: ("force", "thermal"),
+}
+
+_REQUIRED: Mapping[Movement, tuple[str, ...]] = {
+    Movement.PRESS: ("depth", "hold_time"),
+    Movement.STATIC_CONTACT: ("depth", "hold_time"),
+    Movement.SLIDE: ("normal_force", "speed", "slide_time"),
+}
+
+
+@dataclass(frozen=True)
+class ExploratoryAction:
+    """One exploratory action with its parameters.
+
+    Units are SI throughout: ``depth`` in m (indentation below the point of light contact),
+    ``hold_time`` and ``slide_time`` in s, ``normal_force`` in N, ``speed`` in m/s.
+    Parameters that do not belong to the movement stay at 0.
+    """
+
+    name: str
+    movement: Movement
+    depth: float = 0.0
+    hold_time: float = 0.0
+    normal_force: float = 0.0
+    speed: float = 0.0
+    slide_time: float = 0.0
+    description: str = field(default="", compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "movement", Movement(self.movement))
+        if not self.name or not self.name.strip():
+            raise ValueError("an exploratory action needs a non-empty name")
+        for key in ("depth", "hold_time", "normal_force", "speed", "slide_time"):
+            value = getattr(self, key)
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+                raise ValueError(f"action {self.name!r}: {key} must be a finite number >= 0, got {value!r}")
+        for key in _REQUIRED[self.movement]:
+            if getattr(self, key) <= 0:
+                raise ValueError(
+                    f"action {self.name!r}: a {self.movement.value} movement needs {key} > 0"
+                )
+
+    @property
+    def modalities(self) -> tuple[str, ...]:
+        """Feature modalities this action yields, in kernel order."""
+        return MODALITIES_BY_MOVEMENT[self.movement]
+
+    @property
+    def duration(self) -> float:
+        """Length of the recording window in seconds (the hold or the slide)."""
+        return self.slide_time if self.movement is Movement.SLIDE else self.hold_time
+
+    def to_dict(self) -> dict[str, Any]:
+        data = asdict(self)
+        data["movement"] = self.movement.value
+        return data
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> ExploratoryAction:
+        known = {f for f in cls.__dataclass_fields__}
+        unknown = set(data) - known
+        if unknown:
+            raise ValueError(f"action {data.get('name')!r}: unknown field(s) {sorted(unknown)}")
+        return cls(**dict(data))
+
+
+PAPER_ACTIONS: Mapping[str, ExploratoryAction] = {
+    a.name: a
+    for a in (
+        ExploratoryAction("P1", Movement.PRESS, depth=0.001, hold_time=3.0, description="press 1 mm, hold 3 s"),
+        ExploratoryAction("P2", Movement.PRESS, depth=0.002, hold_time=3.0, description="press 2 mm, hold 3 s"),
+        ExploratoryAction("S1", Movement.SLIDE, normal_force=0.1, speed=0.01, slide_time=5.0,
+                          description="slide at 0.1 N, 1 cm/s for 5 s"),
+        ExploratoryAction("S2", Movement.SLIDE, normal_force=0.1, speed=0.05, slide_time=1.0,
+                          description="slide at 0.1 N, 5 cm/s for 1 s"),
+        ExploratoryAction("S3", Movement.SLIDE, normal_force=0.2, speed=0.01, slide_time=5.0,
+                          description="slide at 0.2 N, 1 cm/s for 5 s"),
+        ExploratoryAction("S4", Movement.SLIDE, normal_force=0.2, speed=0.05, slide_time=1.0,
+                          description="slide at 0.2 N, 5 cm/s for 1 s"),
+        ExploratoryAction("C1", Movement.STATIC_CONTACT, depth=0.002, hold_time=15.0,
+                          description="static contact 2 mm, hold 15 s"),
+    )
+}
+
+
+def actions_from_toml(path: str | Path) -> dict[str, ExploratoryAction]:
+    """Load actions from a TOML file with one ``[[action]]`` table per action."""
+    path = Path(path)
+    with path.open("rb") as fh:
+        doc = tomllib.load(fh)
+    tables = doc.get("action")
+    if not isinstance(tables, list) or not tables:
+        raise ValueError(f"{path}: expected one or more [[action]] tables")
+    actions: dict[str, ExploratoryAction] = {}
+    for i, table in enumerate(tables):
+        try:
+            action = ExploratoryAction.from_dict(table)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{path}: action #{i + 1}: {exc}") from None
+        if action.name in actions:
+            raise ValueError(f"{path}: action {action.name!r} is defined twice")
+        actions[action.name] = action
+    return actions

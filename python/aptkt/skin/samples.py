@@ -1,0 +1,125 @@
+"""Skin samples in physical units and the recordings exploratory actions produce.
+
+Samples are kept flat, one row per sensor packet in arrival order with a ``cell_id``
+column, exactly as the parser emits them; per-cell views and time-aligned grids are derived.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["SkinSamples", "Recording", "FIELDS"]
+
+#: Per-sample fields, their trailing shape and dtype.
+FIELDS: Mapping[str, tuple[tuple[int, ...], type]] = {
+    "cell_id": ((), np.uint16),
+    "t_ns": ((), np.int64),
+    "proximity": ((), np.float64),
+    "acc": ((3,), np.float64),  # g
+    "temp": ((2,), np.float64),  # °C: accelerometer die, LM71
+    "force": ((3,), np.float64),  # N after the per-cell calibration
+}
+
+
+@dataclass
+class SkinSamples:
+    """A batch of sensor samples (rows) from one or more cells, in arrival order."""
+
+    cell_id: np.ndarray
+    t_ns: np.ndarray
+    proximity: np.ndarray
+    acc: np.ndarray
+    temp: np.ndarray
+    force: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = None
+        for name, (tail, dtype) in FIELDS.items():
+            arr = np.asarray(getattr(self, name), dtype=dtype)
+            if arr.shape[1:] != tail:
+                raise ValueError(f"SkinSamples.{name}: expected shape (n, {tail}), got {arr.shape}")
+            if n is None:
+                n = arr.shape[0]
+            elif arr.shape[0] != n:
+                raise ValueError(f"SkinSamples.{name}: {arr.shape[0]} rows, expected {n}")
+            setattr(self, name, arr)
+
+    def __len__(self) -> int:
+        return int(self.cell_id.shape[0])
+
+    @classmethod
+    def empty(cls) -> SkinSamples:
+        return cls(**{name: np.zeros((0, *tail), dtype) for name, (tail, dtype) in FIELDS.items()})
+
+    @classmethod
+    def concat(cls, parts: Iterable[SkinSamples]) -> SkinSamples:
+        parts = [p for p in parts if len(p)]
+        if not parts:
+            return cls.empty()
+        return cls(**{name: np.concatenate([getattr(p, name) for p in parts]) for name in FIELDS})
+
+    def take(self, index: np.ndarray | slice) -> SkinSamples:
+        return SkinSamples(**{name: getattr(self, name)[index] for name in FIELDS})
+
+    def for_cell(self, cell_id: int) -> SkinSamples:
+        return self.take(self.cell_id == cell_id)
+
+    def between(self, start_ns: int, stop_ns: int) -> SkinSamples:
+        """Samples that arrived in ``[start_ns, stop_ns)``."""
+        return self.take((self.t_ns >= start_ns) & (self.t_ns < stop_ns))
+
+    def as_dict(self) -> dict[str, np.ndarray]:
+        return {name: getattr(self, name) for name in FIELDS}
+
+
+@dataclass
+class Recording:
+    """What one exploratory action recorded: the samples of a time window plus context.
+
+    ``cells`` are the patch's cell ids in a fixed order; ``silent_cells`` lists cells of the
+    patch that sent nothing (or stopped sending) during the window: they are reported here,
+    never zero-filled.
+    """
+
+    samples: SkinSamples
+    start_ns: int
+    stop_ns: int
+    cells: tuple[int, ...]
+    silent_cells: tuple[int, ...] = ()
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def duration(self) -> float:
+        return (self.stop_ns - self.start_ns) * 1e-9
+
+    def grid(self, field_name: str, rate_hz: float, cells: Sequence[int] | None = None) -> np.ndarray:
+        """Resample one field onto a common time grid, per cell.
+
+        Returns an array of shape ``(n_cells, n_steps, *field_shape)`` where
+        ``n_steps = round(duration * rate_hz)`` and step k is at ``start + k / rate_hz``.
+        Each cell is linearly interpolated between its own samples (held constant beyond its
+        first and last one). Cells without samples raise :class:`ValueError`.
+        """
+        if rate_hz <= 0:
+            raise ValueError("rate_hz must be > 0")
+        cells = tuple(self.cells if cells is None else cells)
+        n_steps = max(int(round(self.duration * rate_hz)), 1)
+        t_grid = self.start_ns + np.arange(n_steps) * (1e9 / rate_hz)
+        values = getattr(self.samples, field_name)
+        tail = values.shape[1:]
+        out = np.empty((len(cells), n_steps, *tail), dtype=np.float64)
+        for i, cid in enumerate(cells):
+            mask = self.samples.cell_id == cid
+            if not mask.any():
+                raise ValueError(f"cell {cid} has no samples in this recording")
+            t = self.samples.t_ns[mask].astype(np.float64)
+            v = values[mask].reshape(int(mask.sum()), -1)
+            flat = np.empty((n_steps, v.shape[1]))
+            for j in range(v.shape[1]):
+                flat[:, j] = np.interp(t_grid, t, v[:, j])
+            out[i] = flat.reshape((n_steps, *tail))
+        return out
