@@ -1,0 +1,1 @@
+"""Sub-commands of the ``aptkt`` command line, one module each (see :mod:`aptkt.cli`)."""
