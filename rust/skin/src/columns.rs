@@ -3,7 +3,7 @@
 
 use crate::packet::PACKET_LEN;
 use crate::parser::PacketSink;
-use crate::sensor::{scale, SensorRaw};
+use crate::sensor::{decode_sensor, scale, SensorRaw};
 use crate::{PacketType, EncodeError};
 
 /// Sensor packets in physical units: `acc`, `temp`, `force` are row-major `(n, 3)`, `(n, 2)`,
@@ -28,6 +28,37 @@ impl PhysicalColumns {
 }
 
 impl PacketSink for PhysicalColumns {
+    fn sensor_block(&mut self, block: &[u8]) {
+        let n = block.len() / PACKET_LEN;
+        let start = self.cell_id.len();
+        // Zero-filling then overwriting is cheaper than per-element pushes: the zip below then
+        // compiles to straight-line stores without capacity or bounds checks.
+        self.cell_id.resize(start + n, 0);
+        self.proximity.resize(start + n, 0.0);
+        self.acc.resize(3 * (start + n), 0.0);
+        self.temp.resize(2 * (start + n), 0.0);
+        self.force.resize(3 * (start + n), 0.0);
+        let rows = block
+            .chunks_exact(PACKET_LEN)
+            .zip(&mut self.cell_id[start..])
+            .zip(&mut self.proximity[start..])
+            .zip(self.acc[3 * start..].chunks_exact_mut(3))
+            .zip(self.temp[2 * start..].chunks_exact_mut(2))
+            .zip(self.force[3 * start..].chunks_exact_mut(3));
+        for (((((p, cell), prox), acc), temp), force) in rows {
+            let Some(p) = p.first_chunk::<PACKET_LEN>() else { continue };
+            let r = decode_sensor(p);
+            *cell = r.cell_id;
+            *prox = f64::from(r.proximity) * scale::PROXIMITY;
+            acc.copy_from_slice(&r.acc.map(|a| f64::from(a) * scale::ACC));
+            temp.copy_from_slice(&[
+                f64::from(r.temp[0]) * scale::TEMP_ACC + scale::TEMP_ACC_OFFSET,
+                f64::from(r.temp[1]) * scale::TEMP_LM71,
+            ]);
+            force.copy_from_slice(&r.force.map(|f| f64::from(f) * scale::FORCE));
+        }
+    }
+
     #[inline(always)]
     fn sensor(&mut self, p: &SensorRaw) {
         self.cell_id.push(p.cell_id);
@@ -89,6 +120,32 @@ impl RawColumns {
 }
 
 impl PacketSink for RawColumns {
+    fn sensor_block(&mut self, block: &[u8]) {
+        let n = block.len() / PACKET_LEN;
+        let start = self.cell_id.len();
+        self.cell_id.resize(start + n, 0);
+        self.proximity.resize(start + n, 0);
+        self.acc.resize(3 * (start + n), 0);
+        self.temp.resize(2 * (start + n), 0);
+        self.force.resize(3 * (start + n), 0);
+        let rows = block
+            .chunks_exact(PACKET_LEN)
+            .zip(&mut self.cell_id[start..])
+            .zip(&mut self.proximity[start..])
+            .zip(self.acc[3 * start..].chunks_exact_mut(3))
+            .zip(self.temp[2 * start..].chunks_exact_mut(2))
+            .zip(self.force[3 * start..].chunks_exact_mut(3));
+        for (((((p, cell), prox), acc), temp), force) in rows {
+            let Some(p) = p.first_chunk::<PACKET_LEN>() else { continue };
+            let r = decode_sensor(p);
+            *cell = r.cell_id;
+            *prox = r.proximity;
+            acc.copy_from_slice(&r.acc);
+            temp.copy_from_slice(&r.temp);
+            force.copy_from_slice(&r.force);
+        }
+    }
+
     #[inline(always)]
     fn sensor(&mut self, p: &SensorRaw) {
         self.push(p);

@@ -19,6 +19,19 @@ pub trait PacketSink {
     /// A valid sensor packet (header 0xFF).
     fn sensor(&mut self, packet: &SensorRaw);
 
+    /// A run of consecutive valid sensor packets (`block.len()` is a multiple of 20, every
+    /// packet already checked). The parser reports clean stretches of the stream this way so
+    /// that a sink can decode them column by column in a tight loop; the default decodes one
+    /// packet at a time through [`PacketSink::sensor`].
+    #[inline(always)]
+    fn sensor_block(&mut self, block: &[u8]) {
+        for p in block.chunks_exact(PACKET_LEN) {
+            if let Some(p) = p.first_chunk::<PACKET_LEN>() {
+                self.sensor(&decode_sensor(p));
+            }
+        }
+    }
+
     /// A valid packet of any other type. The default ignores it (the parser counts it anyway).
     #[inline(always)]
     fn other(&mut self, _kind: PacketType, _packet: &[u8; PACKET_LEN]) {}
@@ -212,13 +225,16 @@ impl StreamParser {
             match check_frame(packet) {
                 Ok(()) => {
                     if kind == 0 {
-                        stats.sensor_packets += 1;
-                        sink.sensor(&decode_sensor(packet));
+                        // Clean stream: take every following valid sensor packet in one go.
+                        let end = sensor_run_end(buf, pos + PACKET_LEN);
+                        stats.sensor_packets += ((end - pos) / PACKET_LEN) as u64;
+                        sink.sensor_block(&buf[pos..end]);
+                        pos = end;
                     } else {
                         stats.other_packets[kind as usize] += 1;
                         sink.other(PacketType::ALL[kind as usize & 0xF], packet);
+                        pos += PACKET_LEN;
                     }
-                    pos += PACKET_LEN;
                 }
                 Err(why) => {
                     let reason = match why {
@@ -233,6 +249,18 @@ impl StreamParser {
         }
         Run::Next(pos)
     }
+}
+
+/// End of the run of consecutive valid sensor packets starting at `pos`.
+#[inline(always)]
+fn sensor_run_end(buf: &[u8], mut pos: usize) -> usize {
+    while let Some(p) = buf.get(pos..).and_then(|s| s.first_chunk::<PACKET_LEN>()) {
+        if p[0] != PacketType::Sensor.header() || check_frame(p).is_err() {
+            break;
+        }
+        pos += PACKET_LEN;
+    }
+    pos
 }
 
 /// Index of the first byte ≥ 0x80, eight bytes at a time (garbage and gaps are skipped fast).
