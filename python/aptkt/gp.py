@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from aptkt import _core
-from aptkt._core import KernelNotPositiveDefiniteError
+from aptkt.errors import KernelNotPositiveDefiniteError, NotFittedError
 
 __all__ = ["LaplaceGPC", "TransferSource", "kernel_matrix", "KernelNotPositiveDefiniteError"]
 
@@ -352,7 +352,7 @@ class LaplaceGPC:
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "_model"):
-            raise AttributeError("this LaplaceGPC is not fitted yet; call fit(X, y) first")
+            raise NotFittedError("this LaplaceGPC is not fitted yet; call fit(X, y) first")
 
     # -- fitted views -------------------------------------------------------------------------
     @property
@@ -386,6 +386,7 @@ class LaplaceGPC:
         return np.asarray(self._model.predict_proba(_as_matrix(X, "X", self.n_features_in_)))
 
     def predict(self, X: Any) -> np.ndarray:
+        self._check_fitted()
         return self.classes_[np.argmax(self.predict_proba(X), axis=1)]
 
     def latent(self, X: Any) -> tuple[np.ndarray, np.ndarray]:
