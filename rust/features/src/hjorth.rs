@@ -24,68 +24,76 @@ pub struct Hjorth {
 pub fn hjorth<T: Sample>(x: ArrayView1<'_, T>) -> Hjorth {
     match x.as_slice() {
         Some(s) => hjorth_slice(s),
-        None => hjorth_iter(x.len(), || x.iter().map(|v| v.to_f64())),
+        None => {
+            let lane: Vec<f64> = x.iter().map(|v| v.to_f64()).collect();
+            hjorth_slice(&lane)
+        }
     }
 }
 
+const NAN3: Hjorth = Hjorth {
+    activity: f64::NAN,
+    mobility: f64::NAN,
+    complexity: f64::NAN,
+};
+
+/// Lanes of 4 independent accumulators let the CPU overlap the additions (a single running
+/// sum is bound by the floating-point add latency).
 fn hjorth_slice<T: Sample>(s: &[T]) -> Hjorth {
-    hjorth_iter(s.len(), || s.iter().map(|v| v.to_f64()))
-}
-
-#[inline(always)]
-fn hjorth_iter<I: Iterator<Item = f64>>(n: usize, values: impl Fn() -> I) -> Hjorth {
+    let n = s.len();
     if n < 3 {
-        return Hjorth {
-            activity: f64::NAN,
-            mobility: f64::NAN,
-            complexity: f64::NAN,
-        };
+        return NAN3;
     }
-    let mut it = values();
-    let mut sum = 0.0;
-    let mut first = 0.0;
-    let mut second = 0.0;
-    let mut prev = 0.0;
-    let mut last = 0.0;
-    for (i, v) in (&mut it).enumerate() {
-        sum += v;
-        match i {
-            0 => first = v,
-            1 => second = v,
-            _ => {}
+    let mut sums = [0.0f64; 4];
+    let mut chunks = s.chunks_exact(4);
+    for c in &mut chunks {
+        for u in 0..4 {
+            sums[u] += c[u].to_f64();
         }
-        prev = last;
-        last = v;
     }
+    let tail: f64 = chunks.remainder().iter().map(|v| v.to_f64()).sum();
     let nf = n as f64;
-    let mean_x = sum / nf;
-    let mean_d1 = (last - first) / (nf - 1.0);
+    let mean_x = (sums[0] + sums[1] + sums[2] + sums[3] + tail) / nf;
+    let at = |i: usize| s[i].to_f64();
+    let mean_d1 = (at(n - 1) - at(0)) / (nf - 1.0);
     // diff(x')[k] = x[k+2] - 2 x[k+1] + x[k]; its sum telescopes to (x[n-1]-x[n-2]) - (x[1]-x[0]).
-    let mean_d2 = ((last - prev) - (second - first)) / (nf - 2.0);
+    let mean_d2 = ((at(n - 1) - at(n - 2)) - (at(1) - at(0))) / (nf - 2.0);
 
-    let mut ss0 = 0.0;
-    let mut ss1 = 0.0;
-    let mut ss2 = 0.0;
-    let mut x_prev = f64::NAN;
-    let mut d_prev = f64::NAN;
-    for (i, v) in values().enumerate() {
-        let c0 = v - mean_x;
-        ss0 += c0 * c0;
-        if i >= 1 {
-            let d = v - x_prev;
-            let c1 = d - mean_d1;
-            ss1 += c1 * c1;
-            if i >= 2 {
-                let c2 = (d - d_prev) - mean_d2;
-                ss2 += c2 * c2;
-            }
-            d_prev = d;
+    let (c00, c01) = (at(0) - mean_x, at(1) - mean_x);
+    let c11 = (at(1) - at(0)) - mean_d1;
+    let mut ss0 = [0.0f64; 4];
+    let mut ss1 = [0.0f64; 4];
+    let mut ss2 = [0.0f64; 4];
+    // Every window of three samples contributes one term to each of the three sums.
+    let mut windows = s.windows(6).step_by(4);
+    let full = (n - 2) / 4;
+    for _ in 0..full {
+        let Some(w) = windows.next() else { break };
+        for u in 0..4 {
+            let (x0, x1, x2) = (w[u].to_f64(), w[u + 1].to_f64(), w[u + 2].to_f64());
+            let d1 = x2 - x1;
+            let c0 = x2 - mean_x;
+            let c1 = d1 - mean_d1;
+            let c2 = (d1 - (x1 - x0)) - mean_d2;
+            ss0[u] += c0 * c0;
+            ss1[u] += c1 * c1;
+            ss2[u] += c2 * c2;
         }
-        x_prev = v;
     }
-    let var0 = ss0 / nf;
-    let var1 = ss1 / (nf - 1.0);
-    let var2 = ss2 / (nf - 2.0);
+    let (mut r0, mut r1, mut r2) = (c00 * c00 + c01 * c01, c11 * c11, 0.0);
+    for i in (2 + 4 * full)..n {
+        let (x0, x1, x2) = (at(i - 2), at(i - 1), at(i));
+        let d1 = x2 - x1;
+        let c0 = x2 - mean_x;
+        let c1 = d1 - mean_d1;
+        let c2 = (d1 - (x1 - x0)) - mean_d2;
+        r0 += c0 * c0;
+        r1 += c1 * c1;
+        r2 += c2 * c2;
+    }
+    let var0 = (ss0.iter().sum::<f64>() + r0) / nf;
+    let var1 = (ss1.iter().sum::<f64>() + r1) / (nf - 1.0);
+    let var2 = (ss2.iter().sum::<f64>() + r2) / (nf - 2.0);
     let mobility = (var1 / var0).sqrt();
     let complexity = (var2 / var1).sqrt() / mobility;
     Hjorth {
@@ -116,7 +124,6 @@ pub fn hjorth_along<T: Sample>(
             format!("Hjorth parameters need at least 3 samples along axis {axis}, got {len}"),
         ));
     }
-    check_finite(name, &x)?;
     let mut out_shape: Vec<usize> = x.shape().to_vec();
     out_shape.remove(axis);
     let n_out: usize = out_shape.iter().product();
@@ -125,6 +132,11 @@ pub fn hjorth_along<T: Sample>(
     let mut complexity = Vec::with_capacity(n_out);
     for lane in x.lanes(Axis(axis)) {
         let h = hjorth(lane);
+        // A NaN or infinity anywhere in a lane makes its variance non-finite; only then is the
+        // whole input scanned to report where (finite data are read once less).
+        if !h.activity.is_finite() {
+            check_finite(name, &x)?;
+        }
         activity.push(h.activity);
         mobility.push(h.mobility);
         complexity.push(h.complexity);
