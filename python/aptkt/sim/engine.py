@@ -16,13 +16,14 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager, nullcontext
 from typing import Protocol
 
 import numpy as np
 
 from aptkt.sim.kinematics import Trajectory
-from aptkt.sim.physics import ContactPhysics, ForceTrace, Frames
+from aptkt.sim.physics import ContactPhysics, ForceTrace, Frames, MechChunk
 
 __all__ = ["FrameSink", "SimEngine", "Driver", "FastDriver", "RealTimeDriver", "StopReason"]
 
@@ -53,6 +54,7 @@ class SimEngine:
         self.state = physics.initial_state(t0_ns, np.asarray(start_position, dtype=np.float64))
         self.trajectory = Trajectory.resting(t0_ns, start_position)
         self._pending = Frames.empty()
+        self._lean: dict | None = None
         self.lock = threading.RLock()
 
     @property
@@ -93,11 +95,13 @@ class SimEngine:
         return trace
 
     def run(self, t_end_ns: int, tick_ns: int, *, stop: Callable[[], bool] | None = None,
-            wrench_limit: float | None = None, window_ns: int = 500_000_000) -> tuple[int, str]:
+            wrench_limit: float | None = None, window_ns: int | None = None) -> tuple[int, str]:
         """Advance to ``t_end_ns`` checking every ``tick_ns``: ``stop()`` (which reads the skin, so
         frames are delivered tick by tick) and the true wrench against ``wrench_limit``. Returns
         the time reached and why it ended; after a stop the state is exactly that at the
         stopping tick."""
+        if window_ns is None:  # guarded moves stop early: keep their speculation short
+            window_ns = 250_000_000 if stop is not None else 4_000_000_000
         while self.now_ns < t_end_ns:
             start = self.state
             w_end = min(t_end_ns, self.now_ns + window_ns)
@@ -154,6 +158,84 @@ class SimEngine:
         return self.now_ns, StopReason.DONE
 
 
+    # ------------------------------------------------------------------ lean force control
+    def lean_begin(self, calibration_gain: np.ndarray, calibration_offset: np.ndarray,
+                   latest_force: np.ndarray) -> None:
+        """Start a closed-loop stretch in which the controller reads the skin's total normal
+        force every tick but the packets are computed once per window (:meth:`lean_flush`).
+
+        The reading is computed exactly as the skin computes it — the packets' force fields,
+        quantised to the wire's 12 bits, calibrated with the skin's calibration, newest packet
+        per cell by arrival time — starting from the skin's ``latest_force`` (n_cells, 3, N).
+        """
+        if self._lean is not None:
+            raise RuntimeError("lean force control is already running")
+        self._lean = {
+            "chunks": [],
+            "gain": np.asarray(calibration_gain, dtype=np.float64),
+            "offset": np.asarray(calibration_offset, dtype=np.float64),
+            "latest": np.array(latest_force, dtype=np.float64),
+            "queue_t": np.zeros(0, dtype=np.int64),
+            "queue_c": np.zeros(0, dtype=np.int64),
+            "queue_f": np.zeros((0, 3)),
+        }
+        if len(self._pending):
+            self._lean_queue(self._pending.t_ns, self._pending.cell_index, self._pending.force)
+
+    def _lean_queue(self, t_ns: np.ndarray, cells: np.ndarray, force_norm: np.ndarray) -> None:
+        lean = self._lean
+        raw = np.clip(np.rint(np.asarray(force_norm) * 1024.0), 0, 4095)  # the wire's 12-bit field
+        newtons = lean["gain"][cells] * (raw * (1.0 / 1024.0) - lean["offset"][cells])
+        t = np.concatenate([lean["queue_t"], t_ns])
+        order = np.argsort(t, kind="stable")
+        lean["queue_t"] = t[order]
+        lean["queue_c"] = np.concatenate([lean["queue_c"], cells])[order]
+        lean["queue_f"] = np.concatenate([lean["queue_f"], newtons])[order]
+
+    def lean_advance(self, t_end_ns: int, wrench_limit: float | None = None) -> str:
+        """Advance the mechanics to ``t_end_ns`` (one control tick) without making packets."""
+        lean = self._lean
+        chunk = self.physics.mechanics(self.state, self.trajectory, t_end_ns)
+        if chunk.size:
+            lean["chunks"].append(chunk)
+            lean["samples"] = lean.get("samples", 0) + chunk.size
+            arrival, force_norm = self.physics.force_readings(chunk)
+            self._lean_queue(arrival, chunk.cells, force_norm)
+        due = int(np.searchsorted(lean["queue_t"], t_end_ns, side="right"))
+        if due:
+            # Newest packet of each cell wins, as in the skin's latest values.
+            lean["latest"][lean["queue_c"][:due]] = lean["queue_f"][:due]
+            for key in ("queue_t", "queue_c", "queue_f"):
+                lean[key] = lean[key][due:]
+        if lean.get("samples", 0) > 2000:  # keep the window bounded; packets every ~1 s
+            self.lean_flush()
+            lean["samples"] = 0
+        self.trajectory.forget_before(self.now_ns)  # the chunks hold the motion they need
+        # Each cell's newest sample is at or before the tick: the wrench now is their sum.
+        if wrench_limit is not None and self.wrench() > wrench_limit:
+            return StopReason.WRENCH
+        return StopReason.DONE
+
+    def lean_reading(self) -> float:
+        """The skin's total normal force as it reads now (same arithmetic as the skin source)."""
+        return float(self._lean["latest"].sum())
+
+    def lean_flush(self) -> None:
+        """Make the packets of the stretch so far and deliver those that have arrived."""
+        lean = self._lean
+        if lean is None or not lean["chunks"]:
+            return
+        chunk = MechChunk.concat(lean["chunks"])
+        lean["chunks"] = []
+        frames, _ = self.physics.finish(self.state, chunk, detail=True)
+        self._deliver_until(frames, self.now_ns)
+        self.trajectory.forget_before(self.now_ns)
+
+    def lean_end(self) -> None:
+        self.lean_flush()
+        self._lean = None
+
+
 def _merge(a: Frames, b: Frames) -> Frames:
     if not len(a):
         return b
@@ -192,7 +274,34 @@ class FastDriver:
 
     def run(self, t_end_ns: int, tick_ns: int, *, stop: Callable[[], bool] | None = None,
             wrench_limit: float | None = None) -> tuple[int, str]:
+        if self.engine._lean is not None:
+            if stop is not None:
+                raise RuntimeError("a guarded move inside a force-control loop")
+            why = self.engine.lean_advance(t_end_ns, wrench_limit)
+            return self.engine.now_ns, why
         return self.engine.run(t_end_ns, tick_ns, stop=stop, wrench_limit=wrench_limit)
+
+    @contextmanager
+    def force_loop(self, lean: bool = True) -> Iterator[Callable[[], float] | None]:
+        """A closed force loop. With ``lean`` the controller gets the skin's reading computed
+        from the packets before they are made (identical arithmetic, see SimEngine.lean_begin):
+        one light mechanics step per tick, packets once per window. Yields the reading function,
+        or None when the controller must read the skin itself."""
+        sink = self.engine.sink
+        cal = getattr(sink, "calibration", None)
+        latest = getattr(sink, "latest", None)
+        if not lean or cal is None or latest is None:
+            yield None
+            return
+        self.engine.lean_begin(cal.gain, cal.offset, latest()["force"])
+        try:
+            yield self.engine.lean_reading
+        finally:
+            self.engine.lean_end()
+
+    def flush(self) -> None:
+        if self.engine._lean is not None:
+            self.engine.lean_flush()
 
 
 class RealTimeDriver:
@@ -225,6 +334,13 @@ class RealTimeDriver:
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=2.0)
+
+    def force_loop(self, lean: bool = True):  # noqa: ARG002 - same signature as FastDriver's
+        """Real time: the controller reads the skin itself."""
+        return nullcontext(None)
+
+    def flush(self) -> None:
+        pass
 
     def now_ns(self) -> int:
         with self.engine.lock:

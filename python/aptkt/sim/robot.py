@@ -31,12 +31,15 @@ class SimRobot:
     """
 
     def __init__(self, driver: Driver, limits: SafetyLimits | None = None, *, control_rate_hz: float = 125.0,
-                 depth_error: float = 0.0, force_gain: float = 0.02):
+                 depth_error: float = 0.0, force_gain: float = 0.02, lean_force_control: bool = True):
         self.driver = driver
         self.limits = limits or SafetyLimits()
         self.tick_ns = int(round(1e9 / control_rate_hz))
         self.depth_error = depth_error
         self.force_gain = force_gain  # m/s per N of force error (admittance of the force loop)
+        #: Fast simulation only: the force loop gets the skin's reading computed from the packets
+        #: before they are made (same numbers, one light step per tick); see FastDriver.force_loop.
+        self.lean_force_control = lean_force_control
         self._placement: Placement | None = None
         self._contact_z: float | None = None
         #: ``(start_ns, stop_ns)`` of the last hold or constant-speed slide (see aptkt.exploration).
@@ -104,8 +107,10 @@ class SimRobot:
         p0, _ = self._pose()
         speed = self.limits.approach_speed
         travel = self.limits.max_approach_travel
-        bottom = p0 - np.array([0.0, 0.0, travel])
-        self._check_point(bottom, "approach")
+        if self._placement is not None:  # the guarded move ends at the workspace floor at the latest
+            travel = min(travel, p0[2] - self._placement.workspace_min[2])
+        if travel <= 0:
+            raise SafetyLimitError("approach: already at the workspace floor")
         t = self.now_ns()
         t_acc = speed / self.limits.max_acceleration
         down = np.array([0.0, 0.0, -1.0])
@@ -164,28 +169,30 @@ class SimRobot:
         length = speed * (duration + t_acc)
         self._check_point(p + d * length, "slide")
 
-        # 1. Establish the normal force (admittance control on the skin's reading).
-        settled, t_limit = 0, self.now_ns() + int(3e9)
-        while settled < 5:
-            err = self._force_tick(normal_force, total_force, p_xy_velocity=np.zeros(3))
-            settled = settled + 1 if abs(err) < 0.1 * normal_force else 0
-            if self.now_ns() > t_limit:
-                self.stop()
-                raise RobotError(f"could not establish {normal_force} N within 3 s (reading off by {err:+.3f} N)")
-        # 2. Accelerate, slide, decelerate, keeping the force.
-        phases = [(t_acc, lim.max_acceleration), (duration, 0.0), (t_acc, -lim.max_acceleration)]
-        v = 0.0
-        for k, (span, acc) in enumerate(phases):
-            t_start = self.now_ns()
-            t_stop = t_start + int(round(span * 1e9))
-            while self.now_ns() < t_stop:
-                tau = (self.now_ns() - t_start) * 1e-9
-                self._force_tick(normal_force, total_force, p_xy_velocity=d * (v + acc * tau), acc=d * acc,
-                                 until=min(t_stop, self.now_ns() + self.tick_ns))
-            v = max(v + acc * span, 0.0)
-            if k == 1:
-                self.action_window_ns = (t_start, t_stop)
-        self.stop()
+        with self.driver.force_loop(self.lean_force_control) as reading:
+            measure = reading or total_force
+            # 1. Establish the normal force (admittance control on the skin's reading).
+            settled, t_limit = 0, self.now_ns() + int(3e9)
+            while settled < 5:
+                err = self._force_tick(normal_force, measure, p_xy_velocity=np.zeros(3))
+                settled = settled + 1 if abs(err) < 0.1 * normal_force else 0
+                if self.now_ns() > t_limit:
+                    self.stop()
+                    raise RobotError(f"could not establish {normal_force} N within 3 s (reading off by {err:+.3f} N)")
+            # 2. Accelerate, slide, decelerate, keeping the force.
+            phases = [(t_acc, lim.max_acceleration), (duration, 0.0), (t_acc, -lim.max_acceleration)]
+            v = 0.0
+            for k, (span, acc) in enumerate(phases):
+                t_start = self.now_ns()
+                t_stop = t_start + int(round(span * 1e9))
+                while self.now_ns() < t_stop:
+                    tau = (self.now_ns() - t_start) * 1e-9
+                    self._force_tick(normal_force, measure, p_xy_velocity=d * (v + acc * tau), acc=d * acc,
+                                     until=min(t_stop, self.now_ns() + self.tick_ns))
+                v = max(v + acc * span, 0.0)
+                if k == 1:
+                    self.action_window_ns = (t_start, t_stop)
+            self.stop()
 
     def _force_tick(self, target: float, total_force: ForceReading, p_xy_velocity: np.ndarray,
                     acc: np.ndarray | None = None, until: int | None = None) -> float:

@@ -153,6 +153,7 @@ class StickSlip:
         self._streams = [CounterStream(np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, 9000 + c)), 2)
                          for c in range(n_cells)]
         self.n_cells = n_cells
+        self._z_cache: dict[int, tuple[int, np.ndarray]] = {}
         self._omega = 2 * np.pi * k.slip_ring_frequency
         self._decay = k.slip_ring_damping * self._omega
         h = 1.0 / (1 + 1j * k.slip_ring_frequency / k.acc_bandwidth)
@@ -162,9 +163,29 @@ class StickSlip:
         n = self.n_cells
         return StickSlipState(np.zeros(n), np.full(n, np.inf), np.zeros(n, dtype=np.int64), [[] for _ in range(n)])
 
+    def may_slip(self, state: StickSlipState, force: np.ndarray, speed: np.ndarray, path: np.ndarray) -> bool:
+        """Whether any sample of this stretch can slip (or a past slip still rings)."""
+        if any(state.ringing):
+            return True
+        v_c = (self.mu_s - self.mu_k) * force / math.sqrt(self.k.tangential_stiffness * self.k.tangential_mass)
+        return bool(np.any((speed < v_c) & (path > 0) & (force > 0)))
+
+    def settle(self, state: StickSlipState, cells: np.ndarray, force: np.ndarray, path: np.ndarray) -> None:
+        """No slip possible: the springs of ``cells`` carry the kinetic friction (or nothing)."""
+        state.load[cells] = np.where((force > 0) & (path > 0), self.mu_k * force, 0.0)
+        state.threshold[cells] = np.inf
+
+    def _z(self, cell: int, event: int) -> float:
+        """Standard normal deviate of a cell's ``event``-th slip, drawn in blocks of 256."""
+        block, off = divmod(event, 256)
+        cached = self._z_cache.get(cell)
+        if cached is None or cached[0] != block:
+            cached = (block, self._streams[cell].normal(block * 256, 128).reshape(-1))
+            self._z_cache[cell] = cached
+        return float(cached[1][off])
+
     def _threshold(self, cell: int, event: int, force: float) -> float:
-        z = self._streams[cell].normal(event, 1)[0, 0]
-        return self.mu_s * force * max(0.5, 1.0 + self.k.slip_threshold_sd * z)
+        return self.mu_s * force * max(0.5, 1.0 + self.k.slip_threshold_sd * self._z(cell, event))
 
     def run(self, state: StickSlipState, cell: int, t: np.ndarray, path: np.ndarray, force: np.ndarray,
             speed: np.ndarray) -> np.ndarray:
@@ -175,47 +196,48 @@ class StickSlip:
         """
         k = self.k
         n = t.shape[0]
-        out = np.zeros(n)
         dmu = self.mu_s - self.mu_k
-        root_km = math.sqrt(k.tangential_stiffness * k.tangential_mass)
+        v_c = np.where(force > 0, dmu * force / math.sqrt(k.tangential_stiffness * k.tangential_mass), 0.0)
+        strength = np.where((v_c > 0) & (speed < v_c), 1.0 - speed / np.maximum(v_c, 1e-300), 0.0)
+        active = (strength > 0) & (path > 0)
         ring = state.ringing[cell]
-        v_c_all = np.where(force > 0, dmu * force / root_km, 0.0)
-        if not ring and not np.any((speed < v_c_all) & (path > 0)):
-            # No slip can happen in this stretch: the spring just carries the kinetic friction.
-            state.load[cell] = self.mu_k * force[-1] if (force[-1] > 0 and path[-1] > 0) else 0.0
-            state.threshold[cell] = np.inf
-            return out
-        t_prev = None
-        for i in range(n):
-            f, v = force[i], speed[i]
-            v_c = dmu * f / root_km if f > 0 else 0.0
-            strength = 1.0 - v / v_c if v_c > 0 and v < v_c else 0.0
-            if strength <= 0.0 or path[i] <= 0.0:
-                # Steady sliding (or no sliding): the spring carries the kinetic friction.
-                state.load[cell] = self.mu_k * f if (f > 0 and path[i] > 0) else 0.0
+        t_before = t[0] - 1.0 / k.rate_hz
+        i = 0
+        while i < n:
+            j = i
+            while j < n and active[j] == active[i]:
+                j += 1
+            if not active[i]:
+                # Steady sliding (or none): the spring carries the kinetic friction.
+                state.load[cell] = self.mu_k * force[j - 1] if (force[j - 1] > 0 and path[j - 1] > 0) else 0.0
                 state.threshold[cell] = np.inf
             else:
                 if not np.isfinite(state.threshold[cell]):
-                    state.threshold[cell] = self._threshold(cell, int(state.events[cell]), f)
-                start = state.load[cell]
-                state.load[cell] += k.tangential_stiffness * path[i]
-                t0 = t[i - 1] if i > 0 else (t_prev if t_prev is not None else t[i] - 1.0 / k.rate_hz)
-                while state.load[cell] >= state.threshold[cell]:
-                    frac = (state.threshold[cell] - start) / max(state.load[cell] - start, 1e-15)
-                    t_e = t0 + min(max(frac, 0.0), 1.0) * (t[i] - t0)
-                    drop = 2.0 * dmu * f * strength
-                    ring.append((t_e, drop / k.tangential_mass))
-                    state.load[cell] -= drop
-                    start = state.threshold[cell] - drop
+                    state.threshold[cell] = self._threshold(cell, int(state.events[cell]), float(force[i]))
+                load = state.load[cell] + k.tangential_stiffness * np.cumsum(path[i:j])
+                while True:
+                    hit = int(np.searchsorted(load, state.threshold[cell], side="left"))
+                    if hit >= load.size:
+                        break
+                    s = i + hit
+                    before = load[hit - 1] if hit > 0 else state.load[cell]
+                    t0 = t[s - 1] if s > 0 else t_before
+                    frac = (state.threshold[cell] - before) / max(load[hit] - before, 1e-15)
+                    drop = 2.0 * dmu * float(force[s])
+                    ring.append((t0 + min(max(frac, 0.0), 1.0) * (t[s] - t0), strength[s] * drop / k.tangential_mass))
+                    load[hit:] -= drop
                     state.events[cell] += 1
-                    state.threshold[cell] = self._threshold(cell, int(state.events[cell]), f)
-            if ring:
-                tau = t[i] - np.array([e[0] for e in ring])
-                peak = np.array([e[1] for e in ring])
-                live = tau >= 0
-                out[i] = np.sum(np.where(live, peak * self._gain * np.exp(-self._decay * tau)
-                                          * np.sin(self._omega * tau + self._lag), 0.0))
-                # Forget slips that have rung out (< 0.1 % of their peak).
-                if ring and tau[0] * self._decay > 7.0:
-                    state.ringing[cell] = ring = [e for e, tt in zip(ring, tau) if tt * self._decay <= 7.0]
+                    state.threshold[cell] = self._threshold(cell, int(state.events[cell]), float(force[s]))
+                state.load[cell] = float(load[-1])
+            i = j
+        out = np.zeros(n)
+        if ring:
+            ev = np.array(ring)  # (E, 2): time, peak
+            tau = t[:, None] - ev[None, :, 0]
+            live = tau >= 0
+            wave = ev[None, :, 1] * self._gain * np.exp(-self._decay * np.where(live, tau, 0.0)) \
+                * np.sin(self._omega * tau + self._lag)
+            out = np.sum(np.where(live, wave, 0.0), axis=1)
+            # Forget slips that have rung out (< 0.1 % of their peak).
+            state.ringing[cell] = [e for e in ring if (t[-1] - e[0]) * self._decay <= 7.0]
         return out
