@@ -14,6 +14,7 @@ from aptkt.errors import AptktError
 COMMAND_MODULES: tuple[str, ...] = (
     "aptkt.commands.demo",
     "aptkt.commands.skin",
+    "aptkt.commands.dataset",
 )
 
 

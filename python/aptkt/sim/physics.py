@@ -338,7 +338,8 @@ class ContactPhysics:
         noise = np.empty((index.size, 10))
         noise[:, 0::2] = r * np.cos(2 * np.pi * u01[:, 1:10:2])
         noise[:, 1::2] = r * np.sin(2 * np.pi * u01[:, 1:10:2])
-        arrival = t_ns + self._latency_ns + np.rint(u01[:, 10] * self.k.link_jitter * 1e9).astype(np.int64)
+        # The PC stamps arrivals with microsecond resolution.
+        arrival = t_ns + self._latency_ns + 1000 * np.rint(u01[:, 10] * self.k.link_jitter * 1e6).astype(np.int64)
         return noise, arrival
 
     def _force_reading(self, f_true: np.ndarray, noise: np.ndarray, cells: np.ndarray) -> np.ndarray:
