@@ -48,6 +48,12 @@ class Trajectory:
     def evaluate(self, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position, velocity and acceleration (each (n, 3)) at times ``t_ns``."""
         t_ns = np.asarray(t_ns, dtype=np.int64)
+        if t_ns.size == 0 or len(self.t0) == 1 or int(t_ns.min()) >= self.t0[-1]:
+            # Common case (a control tick): every time lies in the newest segment.
+            i = len(self.t0) - 1
+            tau = np.maximum((t_ns - self.t0[i]) * 1e-9, 0.0)[:, None]
+            p0, v0, a = self.p0[i], self.v0[i], self.a[i]
+            return p0 + v0 * tau + 0.5 * a * tau**2, v0 + a * tau, np.broadcast_to(a, (t_ns.size, 3)).copy()
         starts = np.asarray(self.t0, dtype=np.int64)
         idx = np.clip(np.searchsorted(starts, t_ns, side="right") - 1, 0, len(starts) - 1)
         tau = np.maximum((t_ns - starts[idx]) * 1e-9, 0.0)[:, None]

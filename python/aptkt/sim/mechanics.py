@@ -41,7 +41,7 @@ class IndentationLaw:
             raise ValueError("skin stiffness must be > 0")
         self.layers = tuple(layers)
         self.skin_stiffness = float(skin_stiffness)
-        sigma = np.concatenate([[0.0], np.logspace(-4, 7, 1500)])
+        sigma = np.concatenate([[0.0], np.logspace(-4, 7, 4000)])
         delta = self.depth(sigma, modulus_scale)
         self._sigma, self._delta = sigma, delta
         self._modulus_scale = modulus_scale

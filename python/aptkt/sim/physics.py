@@ -300,7 +300,7 @@ class ContactPhysics:
         tex[:, 2] += 0.3 * slip[rows]
         sp = speed[rows]
         direction = np.where(sp[:, None] > 1e-9, vel[rows, :2] / np.maximum(sp, 1e-12)[:, None], [1.0, 0.0])
-        world = acc[rows].copy()
+        world = acc[rows] + self._arm_vibration(t_s[rows], vel[rows])
         world[:, :2] += tex[:, 0:1] * direction + tex[:, 1:2] * np.stack([-direction[:, 1], direction[:, 0]], axis=1)
         world[:, 2] += tex[:, 2] + GRAVITY  # specific force: an accelerometer at rest reads +1 g up
         acc_cell = np.einsum("mi,mij->mj", world, self._axes[c_e]) / GRAVITY
@@ -328,6 +328,17 @@ class ContactPhysics:
             force_true=f_cell[rows],
         )
         return frames.take(np.lexsort((c_e, arrival))), trace
+
+    def _arm_vibration(self, t_s: np.ndarray, vel: np.ndarray) -> np.ndarray:
+        """The arm's own vibration while it moves (m/s^2, base frame): a few modes whose
+        amplitude grows with the TCP speed (reaching the trial's rms at 5 cm/s)."""
+        speed = np.linalg.norm(vel, axis=1)
+        if not np.any(speed > 1e-6) or self.cond.arm_vibration <= 0:
+            return np.zeros((t_s.size, 3))
+        modes = np.asarray(self.cond.arm_modes)  # (m, 5)
+        amp = self.cond.arm_vibration * GRAVITY * np.sqrt(2.0 / len(modes)) * np.minimum(speed / 0.05, 2.0)
+        wave = np.sin(2 * np.pi * modes[:, 0][None, :] * t_s[:, None] + modes[:, 1][None, :])  # (n, m)
+        return amp[:, None] * (wave @ modes[:, 2:5])
 
     def _noise_and_arrival(self, ks: np.ndarray, cells: np.ndarray, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Normal deviates (n, 10) and arrival times of samples ``ks`` of ``cells``."""
@@ -396,6 +407,21 @@ class ContactPhysics:
         increments = elastic - prev
         lengths = last - first + 1
         width = int(lengths.max())
+        if width <= 4 and np.all(lengths == width):
+            # A control tick: every cell has the same few samples; recur over them directly.
+            inc = increments.reshape(present.size, width, 3)
+            dt = 1.0 / self.imp.clock_rate[present]
+            out = rel.long_term * elastic.reshape(present.size, width, 3)
+            for i, (wgt, tau) in enumerate(zip(rel.weights, rel.times)):
+                a = np.exp(-dt / tau)[:, None]
+                gain = wgt * (tau / dt)[:, None] * (1.0 - a)
+                h = st.relax_h[i, present]
+                for j in range(width):
+                    h = a * h + gain * inc[:, j]
+                    out[:, j] += h
+                st.relax_h[i, present] = h
+            st.relax_last[present] = elastic[last]
+            return out.reshape(-1, 3)
         pos = np.arange(cells.size) - np.repeat(first, lengths)  # position of each sample in its row
         row = np.repeat(np.arange(present.size), lengths)
         grid = np.zeros((present.size, width, 3))

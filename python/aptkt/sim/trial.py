@@ -31,6 +31,10 @@ class TrialVariation:
     object_temperature_sd: float = 0.15  # K, object slightly off room temperature
     skin_offset_sd: float = 0.06  # K, skin not fully recovered from the previous action
     depth_error_sd: float = 15e-6  # m, robot repeatability along the press axis
+    texture_sd: float = 0.15  # relative spot-to-spot variation of the roughness amplitude
+    friction_sd: float = 0.06  # relative spot-to-spot variation of the friction coefficients
+    arm_vibration: float = 0.003  # g rms of the arm's own vibration when moving at 5 cm/s
+    arm_vibration_sd: float = 0.4  # log-normal spread of that amplitude between trials
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
@@ -50,6 +54,8 @@ class TrialConditions:
     friction_scale: float
     roughness_scale: float
     conductance_scale: float
+    arm_vibration: float  # g rms at 5 cm/s
+    arm_modes: tuple[tuple[float, float, float, float, float], ...]  # (Hz, phase, dx, dy, dz)
     ambient: float
     object_temperature: float
     skin_offset: float
@@ -57,8 +63,8 @@ class TrialConditions:
 
     @classmethod
     def draw(cls, obj: ObjectSpec, variation: TrialVariation, seq: np.random.SeedSequence) -> TrialConditions:
-        g = spawn_generators(seq, ["pose", "material", "thermal", "robot"])
-        pose, mat, th = g["pose"], g["material"], g["thermal"]
+        g = spawn_generators(seq, ["pose", "material", "thermal", "robot", "arm"])
+        pose, mat, th, arm = g["pose"], g["material"], g["thermal"], g["arm"]
         tilt = np.tan(np.deg2rad(variation.tilt_sd) * pose.standard_normal(2))
         cv = obj.variability
         ambient = variation.ambient + variation.ambient_sd * th.standard_normal()
@@ -69,9 +75,11 @@ class TrialConditions:
             tilt=(float(tilt[0]), float(tilt[1])),
             modulus_scale=float(np.exp(cv * mat.standard_normal())),
             relaxation_scale=float(np.exp(cv * mat.standard_normal())),
-            friction_scale=float(np.exp(0.5 * cv * mat.standard_normal())),
-            roughness_scale=float(np.exp(cv * mat.standard_normal())),
+            friction_scale=float(np.exp(math.hypot(0.5 * cv, variation.friction_sd) * mat.standard_normal())),
+            roughness_scale=float(np.exp(math.hypot(cv, variation.texture_sd) * mat.standard_normal())),
             conductance_scale=float(np.exp(cv * mat.standard_normal())),
+            arm_vibration=float(variation.arm_vibration * np.exp(variation.arm_vibration_sd * arm.standard_normal())),
+            arm_modes=tuple(_arm_mode(arm) for _ in range(3)),
             ambient=float(ambient),
             object_temperature=float(ambient + obj.temperature_offset
                                      + variation.object_temperature_sd * th.standard_normal()),
@@ -81,3 +89,11 @@ class TrialConditions:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+
+def _arm_mode(rng: np.random.Generator) -> tuple[float, float, float, float, float]:
+    """One vibration mode of the moving arm: frequency, phase and a unit direction."""
+    d = rng.standard_normal(3)
+    d /= np.linalg.norm(d)
+    return (float(rng.uniform(18.0, 110.0)), float(rng.uniform(0, 2 * np.pi)), float(d[0]), float(d[1]), float(d[2]))
+

@@ -157,8 +157,8 @@ class SimWorld:
         engine = SimEngine(physics, skin, start)
         holder["engine"] = engine
         skin.open()
-        # One packet per cell before anything moves, as a running skin would have sent.
-        engine.advance(int(8e6), detail=False)
+        # A few packets per cell before anything moves, as a running skin would have sent.
+        engine.advance(int(20e6), detail=True)
         robot = SimRobot(FastDriver(engine), self.limits, depth_error=cond.depth_error)
         try:
             yield SimSession(robot, placement, engine, self.patch, skin=skin, conditions=cond)
