@@ -2,7 +2,8 @@
 
 For every action, features per recording (paper §3.2): stiffness F̄ (press, static contact),
 texture descriptor TD (slides), and the thermal curve [T̄, ∇T̄] reduced by PCA (10 dims, fitted
-on the training split only). Features are standardised on the training split; a k-NN
+on the training split only, scaled as a whole). Features are standardised on the training
+split and each modality gets the same weight in the distance; a k-NN
 classifier (k = 3) is trained on 10 observations per object and tested on the others;
 random splits are repeated. Reported: accuracy over all 15 objects and over the 5 new objects
 only, per modality and combined.
@@ -69,13 +70,18 @@ def _prepare(X: dict[str, np.ndarray], train: np.ndarray, test: np.ndarray, moda
     for m in modalities:
         a, b = X[m][train], X[m][test]
         if m == "thermal":
+            # PCA keeps the components' relative variances (as an isotropic kernel on them
+            # would see them): one common scale for the whole modality.
             pca = PCA(n_components=min(10, a.shape[0] - 1, a.shape[1])).fit(a)
             a, b = pca.transform(a), pca.transform(b)
-        sc = StandardScaler().fit(a)
-        # Each modality gets equal weight in the distance, whatever its dimension.
-        w = 1.0 / np.sqrt(a.shape[1])
-        parts_tr.append(sc.transform(a) * w)
-        parts_te.append(sc.transform(b) * w)
+            scale = np.sqrt(np.sum(pca.explained_variance_))
+            a, b = a / scale, b / scale
+        else:
+            sc = StandardScaler().fit(a)
+            a, b = sc.transform(a) / np.sqrt(a.shape[1]), sc.transform(b) / np.sqrt(a.shape[1])
+        # Each modality gets the same total weight in the distance, whatever its dimension.
+        parts_tr.append(a)
+        parts_te.append(b)
     return np.hstack(parts_tr), np.hstack(parts_te)
 
 

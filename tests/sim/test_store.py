@@ -3,7 +3,6 @@ real SIGKILL, and bit-for-bit reproducible generation."""
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys

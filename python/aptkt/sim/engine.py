@@ -69,11 +69,6 @@ class SimEngine:
         """True total normal force now (the robot's own force sensing, not the skin)."""
         return float(self.state.latest_force.sum())
 
-    def hold_here(self) -> None:
-        """Stop the TCP where it is now."""
-        p, _ = self.tcp()
-        self.trajectory.append(self.now_ns, p, np.zeros(3), np.zeros(3))
-
     def _deliver_until(self, frames: Frames, t_ns: int) -> None:
         if len(frames):
             frames = _merge(self._pending, frames) if len(self._pending) else frames
@@ -87,7 +82,7 @@ class SimEngine:
     def advance(self, t_ns: int, detail: bool | None = None) -> ForceTrace:
         """Move simulated time to ``t_ns`` and deliver what has arrived by then."""
         if t_ns <= self.now_ns:
-            return ForceTrace.concat([])
+            return ForceTrace.empty()
         want = self.sink.wants_detail() if detail is None else detail
         self.state, frames, trace = self.physics.step(self.state, self.trajectory, t_ns, detail=want)
         self._deliver_until(frames, t_ns)

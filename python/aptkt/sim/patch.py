@@ -50,7 +50,8 @@ class SkinConstants:
     lateral_coupling: float = 0.35  # lateral response of obliquely oriented texture
     # --- stick-slip (spring-block with a friction drop)
     tangential_stiffness: float = 60.0  # N/m per cell
-    tangential_mass: float = 0.010  # kg, effective mass of a cell in shear
+    tangential_mass: float = 0.004  # kg, effective mass of a cell in shear
+    slip_coupling: float = 0.35  # share of a slip's force drop that reaches the accelerometer
     slip_ring_frequency: float = 70.0  # Hz, shear mode of the cover that a slip excites
     slip_ring_damping: float = 0.15
     slip_threshold_sd: float = 0.06  # relative spread of the static friction between events

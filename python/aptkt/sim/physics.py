@@ -164,7 +164,8 @@ class ContactPhysics:
         self.obj, self.cond, self.geo, self.imp = obj, conditions, geometry, imperfections
         k = self.k = geometry.constants
         self.n = n = geometry.n_cells
-        self.law = IndentationLaw(obj.layers, k.skin_stiffness, conditions.modulus_scale)
+        self.law = IndentationLaw(obj.layers, k.skin_stiffness * conditions.skin_stiffness_scale,
+                                  conditions.modulus_scale)
         weights = tuple(w * conditions.relaxation_scale for w in obj.relaxation.weights)
         if weights and sum(weights) > 0.95:  # keep the long-term stiffness positive
             weights = tuple(w * 0.95 / sum(weights) for w in weights)
@@ -191,6 +192,8 @@ class ContactPhysics:
         self._axes = np.stack([_FLIP @ imperfections.mount_rotation[c] for c in range(n)])  # cell axes in base
         self.cell_ids = np.asarray(geometry.cell_ids, dtype=np.int64)
         self._latency_ns = int(round(k.link_latency * 1e9))
+        drift = np.asarray(conditions.force_gain_drift, dtype=np.float64)
+        self._gain_drift = np.resize(drift, n)  # the sensors read high (> 1) or low in this trial
 
     # ---------------------------------------------------------------------------------------
     def initial_state(self, t_ns: int, position: np.ndarray) -> PhysicsState:
@@ -356,7 +359,8 @@ class ContactPhysics:
     def _force_reading(self, f_true: np.ndarray, noise: np.ndarray, cells: np.ndarray) -> np.ndarray:
         """Normalised force readings (offset + (F + noise) / gain) of the sensors of ``cells``."""
         imp = self.imp
-        return imp.force_offset[cells] + (f_true + self.k.force_noise * noise[:, 0:3]) / imp.force_gain[cells]
+        gain = imp.force_gain[cells] / self._gain_drift[cells][:, None]
+        return imp.force_offset[cells] + (f_true + self.k.force_noise * noise[:, 0:3]) / gain
 
     def force_readings(self, chunk: MechChunk) -> tuple[np.ndarray, np.ndarray]:
         """Arrival times and normalised force readings (n, 3) of every sample of ``chunk``: the

@@ -224,7 +224,7 @@ class StickSlip:
                     t0 = t[s - 1] if s > 0 else t_before
                     frac = (state.threshold[cell] - before) / max(load[hit] - before, 1e-15)
                     drop = 2.0 * dmu * float(force[s])
-                    ring.append((t0 + min(max(frac, 0.0), 1.0) * (t[s] - t0), strength[s] * drop / k.tangential_mass))
+                    ring.append((t0 + min(max(frac, 0.0), 1.0) * (t[s] - t0), strength[s] * k.slip_coupling * drop / k.tangential_mass))
                     load[hit:] -= drop
                     state.events[cell] += 1
                     state.threshold[cell] = self._threshold(cell, int(state.events[cell]), float(force[s]))

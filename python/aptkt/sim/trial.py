@@ -27,14 +27,18 @@ class TrialVariation:
     rotation: float = 30.0  # degrees, object turned uniformly within ± this
     tilt_sd: float = 0.12  # degrees, the face leans (uneven base, objects not square)
     ambient: float = 24.0  # °C, room temperature
-    ambient_sd: float = 0.4  # K, drift of the room over a session
+    ambient_sd: float = 0.08  # K, drift of the room between trials of a session
     object_temperature_sd: float = 0.15  # K, object slightly off room temperature
-    skin_offset_sd: float = 0.06  # K, skin not fully recovered from the previous action
-    depth_error_sd: float = 15e-6  # m, robot repeatability along the press axis
+    skin_offset_sd: float = 0.03  # K, skin not fully recovered from the previous action
+    depth_error_sd: float = 40e-6  # m, robot repeatability along the press axis (UR10: ±0.1 mm)
     texture_sd: float = 0.15  # relative spot-to-spot variation of the roughness amplitude
     friction_sd: float = 0.06  # relative spot-to-spot variation of the friction coefficients
-    arm_vibration: float = 0.003  # g rms of the arm's own vibration when moving at 5 cm/s
+    contact_sd: float = 0.12  # relative variation of the thermal contact (area, cleanliness)
+    arm_vibration: float = 0.0025  # g rms of the arm's own vibration when moving at 5 cm/s
     arm_vibration_sd: float = 0.4  # log-normal spread of that amplitude between trials
+    skin_stiffness_sd: float = 0.05  # relative drift of the skin cover's stiffness (temperature, wear)
+    force_gain_sd: float = 0.04  # relative drift of the force sensors' gain, common to the patch
+    cell_gain_sd: float = 0.03  # ... and per cell
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
@@ -54,6 +58,8 @@ class TrialConditions:
     friction_scale: float
     roughness_scale: float
     conductance_scale: float
+    skin_stiffness_scale: float
+    force_gain_drift: tuple[float, ...]  # per cell multiplier of the sensors' true gain
     arm_vibration: float  # g rms at 5 cm/s
     arm_modes: tuple[tuple[float, float, float, float, float], ...]  # (Hz, phase, dx, dy, dz)
     ambient: float
@@ -63,7 +69,7 @@ class TrialConditions:
 
     @classmethod
     def draw(cls, obj: ObjectSpec, variation: TrialVariation, seq: np.random.SeedSequence) -> TrialConditions:
-        g = spawn_generators(seq, ["pose", "material", "thermal", "robot", "arm"])
+        g = spawn_generators(seq, ["pose", "material", "thermal", "robot", "arm", "sensors"])
         pose, mat, th, arm = g["pose"], g["material"], g["thermal"], g["arm"]
         tilt = np.tan(np.deg2rad(variation.tilt_sd) * pose.standard_normal(2))
         cv = obj.variability
@@ -77,7 +83,10 @@ class TrialConditions:
             relaxation_scale=float(np.exp(cv * mat.standard_normal())),
             friction_scale=float(np.exp(math.hypot(0.5 * cv, variation.friction_sd) * mat.standard_normal())),
             roughness_scale=float(np.exp(math.hypot(cv, variation.texture_sd) * mat.standard_normal())),
-            conductance_scale=float(np.exp(cv * mat.standard_normal())),
+            conductance_scale=float(np.exp(math.hypot(cv, variation.contact_sd) * mat.standard_normal())),
+            skin_stiffness_scale=float(np.exp(variation.skin_stiffness_sd * g["sensors"].standard_normal())),
+            force_gain_drift=tuple(float(x) for x in np.exp(variation.force_gain_sd * g["sensors"].standard_normal()
+                                                             + variation.cell_gain_sd * g["sensors"].standard_normal(7))),
             arm_vibration=float(variation.arm_vibration * np.exp(variation.arm_vibration_sd * arm.standard_normal())),
             arm_modes=tuple(_arm_mode(arm) for _ in range(3)),
             ambient=float(ambient),

@@ -12,6 +12,7 @@ process that makes them. :meth:`SimWorld.session` gives the robot and skin for y
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -142,8 +143,9 @@ class SimWorld:
         physics = ContactPhysics(obj, pose, cond, self.geometry, self.imperfections, noise)
         start = np.array([placement.x, placement.y, obj.height + _APPROACH_ALTITUDE])
         if realtime:
+            # Simulated time is the monotonic clock, the one SerialSkin stamps packets with.
             link = PtySkinLink()
-            engine = SimEngine(physics, link, start)
+            engine = SimEngine(physics, link, start, t0_ns=time.monotonic_ns())
             driver = RealTimeDriver(engine)
             robot = SimRobot(driver, self.limits, depth_error=cond.depth_error)
             try:
