@@ -85,9 +85,19 @@ def _prepare(X: dict[str, np.ndarray], train: np.ndarray, test: np.ndarray, moda
     return np.hstack(parts_tr), np.hstack(parts_te)
 
 
-def evaluate(data: dict, objects: list[str], per_object: int, splits: int, k: int, seed: int) -> dict:
+def _classifier(name: str, k: int):
+    if name == "gpc":
+        from sklearn.gaussian_process import GaussianProcessClassifier
+        from sklearn.gaussian_process.kernels import RBF, ConstantKernel
+
+        return GaussianProcessClassifier(ConstantKernel(1.0) * RBF(1.0), n_restarts_optimizer=0, random_state=0)
     from sklearn.neighbors import KNeighborsClassifier
 
+    return KNeighborsClassifier(n_neighbors=k)
+
+
+def evaluate(data: dict, objects: list[str], per_object: int, splits: int, k: int, seed: int,
+             classifier: str = "knn") -> dict:
     rng = np.random.default_rng(seed)
     results = {}
     for action, d in sorted(data.items()):
@@ -107,7 +117,7 @@ def evaluate(data: dict, objects: list[str], per_object: int, splits: int, k: in
             test = ~train
             for name, mods in combos.items():
                 a, b = _prepare(X, train, test, mods)
-                clf = KNeighborsClassifier(n_neighbors=k).fit(a, yk[train])
+                clf = _classifier(classifier, k).fit(a, yk[train])
                 acc[name].append(float(np.mean(clf.predict(b) == yk[test])))
         results[action] = {name: float(np.mean(v)) for name, v in acc.items()}
     return results
@@ -141,6 +151,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--splits", type=int, default=20)
     ap.add_argument("--train", type=int, default=10, help="training observations per object")
     ap.add_argument("-k", type=int, default=3)
+    ap.add_argument("--classifier", choices=("knn", "gpc"), default="knn",
+                    help="k-NN, or scikit-learn's GaussianProcessClassifier (RBF, one-vs-rest, fitted hyper-parameters)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", metavar="OUT")
     ap.add_argument("--confusion", metavar="ACTION", action="append", default=[])
@@ -151,10 +163,11 @@ def main(argv: list[str] | None = None) -> int:
     lib = default_library()
     everything = [o for o in lib if any(o in d["objects"] for d in data.values())]
     new = [o for o in lib.with_role("new") if o in everything]
-    res_all = evaluate(data, everything, args.train, args.splits, args.k, args.seed)
-    res_new = evaluate(data, new, args.train, args.splits, args.k, args.seed)
+    res_all = evaluate(data, everything, args.train, args.splits, args.k, args.seed, args.classifier)
+    res_new = evaluate(data, new, args.train, args.splits, args.k, args.seed, args.classifier)
+    clf = f"k-NN (k={args.k})" if args.classifier == "knn" else "GPC (RBF, one-vs-rest)"
     print(f"features of {sum(len(d['objects']) for d in data.values())} recordings, {time.perf_counter() - t0:.1f} s; "
-          f"k-NN (k={args.k}), {args.train} training observations per object, {args.splits} random splits")
+          f"{clf}, {args.train} training observations per object, {args.splits} random splits")
     for label, res, n in (("all objects", res_all, len(everything)), ("new objects", res_new, len(new))):
         print(f"\n{label} ({n}, chance {100 / n:.0f} %)")
         names = sorted({m for r in res.values() for m in r})

@@ -152,3 +152,22 @@ def test_thermal_recovery_while_lifted(world):
         warm = s.skin.latest()["temp"][:, 1].mean()
     assert cold < start - 1.0
     assert warm > cold + 0.8 * (start - cold)  # mostly recovered in the paper's 30 s
+
+
+def test_configured_update_rate():
+    """The cells stream at the configured rate (protocol command 0xC8: 63, 125 or 250 Hz)."""
+    from aptkt.sim.patch import SkinConstants
+
+    rec = SimWorld(seed=1, constants=SkinConstants(rate_hz=125.0)).explore("towel", "P1", 0)
+    per_cell = np.bincount(rec.samples.cell_id)[list(rec.cells)]
+    assert np.all(np.abs(per_cell - 375) <= 2)
+
+
+def test_layout_from_a_skin_patch_file():
+    from aptkt.skin import CellConfig, PatchConfig
+
+    cells = tuple(CellConfig(100 + i, (20.0 * i, 0.0, 0.0), (0.0,) * 3, (1.0,) * 3) for i in range(3))
+    world = SimWorld(seed=1, layout=PatchConfig("row", cells))
+    rec = world.explore("towel", "P1", 0)
+    assert rec.cells == (100, 101, 102) and set(np.unique(rec.samples.cell_id)) == {100, 101, 102}
+    assert world.patch.cell_ids == (100, 101, 102)

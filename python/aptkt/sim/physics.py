@@ -192,8 +192,9 @@ class ContactPhysics:
         self._axes = np.stack([_FLIP @ imperfections.mount_rotation[c] for c in range(n)])  # cell axes in base
         self.cell_ids = np.asarray(geometry.cell_ids, dtype=np.int64)
         self._latency_ns = int(round(k.link_latency * 1e9))
-        drift = np.asarray(conditions.force_gain_drift, dtype=np.float64)
-        self._gain_drift = np.resize(drift, n)  # the sensors read high (> 1) or low in this trial
+        self._gain_drift = np.asarray(conditions.force_gain_drift, dtype=np.float64)  # > 1: reads high
+        if self._gain_drift.shape != (n,):
+            raise ValueError(f"trial conditions are for {self._gain_drift.size} cells, the patch has {n}")
 
     # ---------------------------------------------------------------------------------------
     def initial_state(self, t_ns: int, position: np.ndarray) -> PhysicsState:

@@ -68,7 +68,8 @@ class TrialConditions:
     depth_error: float  # m
 
     @classmethod
-    def draw(cls, obj: ObjectSpec, variation: TrialVariation, seq: np.random.SeedSequence) -> TrialConditions:
+    def draw(cls, obj: ObjectSpec, variation: TrialVariation, seq: np.random.SeedSequence,
+             n_cells: int = 7) -> TrialConditions:
         g = spawn_generators(seq, ["pose", "material", "thermal", "robot", "arm", "sensors"])
         pose, mat, th, arm = g["pose"], g["material"], g["thermal"], g["arm"]
         tilt = np.tan(np.deg2rad(variation.tilt_sd) * pose.standard_normal(2))
@@ -86,7 +87,7 @@ class TrialConditions:
             conductance_scale=float(np.exp(math.hypot(cv, variation.contact_sd) * mat.standard_normal())),
             skin_stiffness_scale=float(np.exp(variation.skin_stiffness_sd * g["sensors"].standard_normal())),
             force_gain_drift=tuple(float(x) for x in np.exp(variation.force_gain_sd * g["sensors"].standard_normal()
-                                                             + variation.cell_gain_sd * g["sensors"].standard_normal(7))),
+                                                             + variation.cell_gain_sd * g["sensors"].standard_normal(n_cells))),
             arm_vibration=float(variation.arm_vibration * np.exp(variation.arm_vibration_sd * arm.standard_normal())),
             arm_modes=tuple(_arm_mode(arm) for _ in range(3)),
             ambient=float(ambient),

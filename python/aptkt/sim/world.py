@@ -59,20 +59,26 @@ class SimWorld:
 
     ``seed`` keys every trial; ``patch_seed`` fixes the patch's own imperfections (its
     calibration errors, crooked cells, clocks), so two worlds with different seeds share the
-    same skin, as two data sets recorded with one robot do.
+    same skin, as two data sets recorded with one robot do. ``layout`` takes the cell ids and
+    positions from a skin patch file; the force calibration is always the simulated patch's
+    own (:attr:`patch`, the one to give a skin source reading this world).
     """
 
     def __init__(self, objects: ObjectLibrary | None = None, *, seed: int = 0,
                  variation: TrialVariation | None = None, limits: SafetyLimits | None = None,
                  constants: SkinConstants | None = None, patch_seed: int = 0,
-                 cell_ids: tuple[int, ...] = DEFAULT_CELL_IDS, settings: ExplorationSettings | None = None):
+                 cell_ids: tuple[int, ...] = DEFAULT_CELL_IDS, layout: PatchConfig | None = None,
+                 settings: ExplorationSettings | None = None):
         if not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
         self.objects = objects if objects is not None else default_library()
         self.seed = int(seed)
         self.variation = variation or TrialVariation()
         self.limits = limits or SafetyLimits()
-        self.geometry = PatchGeometry(cell_ids, constants or SkinConstants())
+        if layout is not None:  # cell ids and positions from a skin patch file
+            self.geometry = PatchGeometry.from_patch(layout.cell_ids, layout.positions_mm, constants or SkinConstants())
+        else:
+            self.geometry = PatchGeometry(cell_ids, constants or SkinConstants())
         self.imperfections = PatchImperfections.generate(self.geometry.constants, self.geometry.n_cells, patch_seed)
         self.settings = settings or ExplorationSettings(stamp_wall_clock=False)
         self.patch = PatchConfig(
@@ -115,7 +121,8 @@ class SimWorld:
 
     def conditions(self, object_name: str, action_name: str, trial: int) -> TrialConditions:
         obj = self.objects[object_name]
-        return TrialConditions.draw(obj, self.variation, trial_seed_sequence(self.seed, obj.name, action_name, trial))
+        return TrialConditions.draw(obj, self.variation, trial_seed_sequence(self.seed, obj.name, action_name, trial),
+                                    self.geometry.n_cells)
 
     def _action(self, action: ExploratoryAction | str) -> ExploratoryAction:
         if isinstance(action, ExploratoryAction):
@@ -136,7 +143,7 @@ class SimWorld:
         """
         obj = self.objects[object_name]
         seq = trial_seed_sequence(self.seed, obj.name, action_name, trial)
-        cond = TrialConditions.draw(obj, self.variation, seq)
+        cond = TrialConditions.draw(obj, self.variation, seq, self.geometry.n_cells)
         noise = np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, *stable_words("noise")))
         placement = self.placement(obj.name, action)
         pose = ObjectPose(OBJECT_SPOT, obj.height, 0.0)
