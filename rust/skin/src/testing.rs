@@ -5,6 +5,7 @@
 
 use crate::packet::{PacketType, END_MARKER, PACKET_LEN};
 use crate::parser::{PacketSink, RejectReason, Stats, StreamParser, MAX_CARRY};
+use crate::columns::{PhysicalColumns, RawColumns};
 use crate::sensor::SensorRaw;
 
 /// Keeps every packet the parser reports, in order.
@@ -122,9 +123,16 @@ pub fn fuzz_check(data: &[u8]) {
     let max_chunk = [1usize, 3, 19, 20, 21, 64][seed as usize % 6];
     let mut parser = StreamParser::new();
     let mut got = Collect::default();
+    // The column sinks decode clean runs with their own block decoders; run them on the same
+    // chunks through parsers of their own.
+    let (mut raw_parser, mut raw) = (StreamParser::new(), RawColumns::default());
+    let (mut phys_parser, mut phys) = (StreamParser::new(), PhysicalColumns::default());
     let mut offset = 0;
     for n in chunk_sizes(stream.len(), seed, max_chunk) {
-        parser.feed(&stream[offset..offset + n], &mut got);
+        let chunk = &stream[offset..offset + n];
+        parser.feed(chunk, &mut got);
+        raw_parser.feed(chunk, &mut raw);
+        phys_parser.feed(chunk, &mut phys);
         offset += n;
         assert!(parser.pending() <= MAX_CARRY);
         let st = parser.stats();
@@ -135,5 +143,17 @@ pub fn fuzz_check(data: &[u8]) {
         );
     }
     assert_eq!(got, expected, "packets differ from the reference");
+    let rows: Vec<SensorRaw> = (0..raw.len()).filter_map(|i| raw.row(i)).collect();
+    assert_eq!(rows, expected.sensors, "RawColumns differ from the reference");
+    let mut want = PhysicalColumns::default();
+    for r in &expected.sensors {
+        let p = r.to_physical();
+        want.cell_id.push(p.cell_id);
+        want.proximity.push(p.proximity);
+        want.acc.extend_from_slice(&p.acc);
+        want.temp.extend_from_slice(&p.temp);
+        want.force.extend_from_slice(&p.force);
+    }
+    assert_eq!(phys, want, "PhysicalColumns differ from the reference");
     assert_eq!(parser.stats(), &expected_stats, "statistics differ from the reference");
 }
