@@ -166,8 +166,9 @@ def test_feed_accepts_bytes_like_and_rejects_other_types():
     data = encode_sensor_packets(random_raw(np.random.default_rng(5), 4))
     for form in (bytearray(data), memoryview(data), np.frombuffer(data, dtype=np.uint8)):
         assert StreamParser().feed(form, raw=True)["cell_id"].shape == (4,)
-    with pytest.raises(TypeError, match="bytes-like"):
-        StreamParser().feed("not bytes")
+    for bad in ("not bytes", 5, None, [1, 2]):
+        with pytest.raises(TypeError, match="bytes-like"):
+            StreamParser().feed(bad)
     empty = StreamParser().feed(b"")
     assert empty["acc"].shape == (0, 3) and empty["temp"].shape == (0, 2)
 

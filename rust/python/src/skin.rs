@@ -11,7 +11,7 @@ use numpy::ndarray::{Array1, Array2};
 use numpy::{Element, IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::{PyBytes, PyDict};
+use pyo3::types::{PyBytes, PyDict, PyMemoryView};
 
 /// Rows of a 2-D field as a `(n, width)` array, taking ownership of the buffer.
 fn rows_array<'py, T: Element>(
@@ -105,15 +105,19 @@ impl PyStreamParser {
         } else {
             // bytearray / memoryview / numpy: copy into bytes, since a mutable buffer could
             // change while the GIL is released.
-            converted = py.get_type::<PyBytes>().call1((data,)).map_err(|_| {
-                pyo3::exceptions::PyTypeError::new_err(format!(
-                    "StreamParser.feed expects bytes-like data, got {}",
-                    data.get_type()
-                        .name()
-                        .map(|n| n.to_string())
-                        .unwrap_or_default()
-                ))
-            })?;
+            // Through a memoryview, so that only buffer-protocol objects are accepted (`bytes(5)`
+            // would quietly make five zero bytes).
+            converted = PyMemoryView::from(data)
+                .and_then(|view| py.get_type::<PyBytes>().call1((view,)))
+                .map_err(|_| {
+                    pyo3::exceptions::PyTypeError::new_err(format!(
+                        "StreamParser.feed expects bytes-like data, got {}",
+                        data.get_type()
+                            .name()
+                            .map(|n| n.to_string())
+                            .unwrap_or_default()
+                    ))
+                })?;
             converted.cast::<PyBytes>()?.as_bytes()
         };
         let parser = &mut self.inner;
