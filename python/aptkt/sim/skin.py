@@ -17,7 +17,6 @@ import os
 import tty
 from collections.abc import Callable
 
-import numpy as np
 
 from aptkt.sim.physics import Frames
 from aptkt.skin import PatchConfig, encode_sensor_packets, quantize
@@ -126,7 +125,3 @@ class PtySkinLink:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-
-def frames_to_raw(frames: Frames) -> dict[str, np.ndarray]:
-    """The raw integers a frame batch becomes on the wire (for tests and storage)."""
-    return quantize(frames.cell_id, frames.proximity, frames.acc, frames.temp, frames.force)
