@@ -42,6 +42,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     i.add_argument("--json", action="store_true", help="print JSON")
     i.set_defaults(func=run_info)
 
+    f = ds.add_parser("features", help="extract every recording's feature observation and store it in the file")
+    f.add_argument("file")
+    f.add_argument("--actions", metavar="P1,S1,...", help="only these actions (default: all recorded)")
+    f.add_argument("--no-progress", action="store_true", help="no progress bar")
+    f.set_defaults(func=run_features)
+
     r = ds.add_parser("repair", help="make a file whose writer died appendable again (keeps every complete recording)")
     r.add_argument("file", metavar="FILE")
     r.add_argument("--no-backup", action="store_true", help="do not keep the original as FILE.crashed")
@@ -118,6 +124,15 @@ def run_info(args: argparse.Namespace) -> int:
     desc = info.get("description") or {}
     if "seed" in desc:
         print(f"  generated on the simulated world, seed {desc['seed']}, {desc.get('repetitions')} repetitions")
+    return 0
+
+
+def run_features(args: argparse.Namespace) -> int:
+    from aptkt.learning.dataset import extract_features
+
+    counts = extract_features(args.file, actions=_split(args.actions),
+                              progress=not args.no_progress and sys.stderr.isatty())
+    print(f"{args.file}: features of " + ", ".join(f"{a} ({n} recordings)" for a, n in counts.items()))
     return 0
 
 

@@ -4,15 +4,15 @@ replays pre-recorded observations (the paper's offline protocol)."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Protocol, runtime_checkable
+from collections.abc import Callable, Mapping
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from aptkt.errors import AptktError
 from aptkt.learning.observations import ObservationTable
 
-__all__ = ["Environment", "PoolEnvironment", "PoolExhaustedError"]
+__all__ = ["Environment", "PoolEnvironment", "PoolExhaustedError", "RecordingEnvironment"]
 
 
 class PoolExhaustedError(AptktError):
@@ -55,3 +55,43 @@ class PoolEnvironment:
         if not queue:
             raise PoolExhaustedError(f"every pooled observation of {action!r} on {obj!r} has been used")
         return self.table[action].row(int(queue.pop(0)))
+
+
+class RecordingEnvironment:
+    """Observations made live: every request runs the exploratory action on a robot — the
+    simulated world (``SimWorld(...).explore``) or a hardware session — and extracts its
+    features. Trial numbers count up per (action, object) from ``first_trial``; every recording
+    is handed to ``on_recording`` (e.g. a :class:`~aptkt.data.DatasetWriter`'s ``append``) so
+    nothing observed is lost.
+    """
+
+    def __init__(
+        self,
+        explore: Callable[[str, Any, int], Any],
+        actions: Mapping[str, Any],
+        *,
+        first_trial: int = 0,
+        settings: Any = None,
+        on_recording: Callable[[Any], Any] | None = None,
+    ) -> None:
+        self._explore = explore
+        self.actions = dict(actions)
+        self._next: dict[tuple[str, str], int] = {}
+        self._first = int(first_trial)
+        self._settings = settings
+        self._on_recording = on_recording
+
+    def available(self, action: str, obj: str) -> bool:
+        return action in self.actions
+
+    def observe(self, action: str, obj: str) -> Mapping[str, np.ndarray]:
+        from aptkt.learning.extract import observe_recording
+
+        if action not in self.actions:
+            raise KeyError(f"unknown action {action!r}; known: {sorted(self.actions)}")
+        trial = self._next.get((action, obj), self._first)
+        self._next[(action, obj)] = trial + 1
+        recording = self._explore(obj, self.actions[action], trial)
+        if self._on_recording is not None:
+            self._on_recording(recording)
+        return observe_recording(recording, self.actions[action], self._settings)
