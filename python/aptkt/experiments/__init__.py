@@ -1,0 +1,1 @@
+"""Experiments on the simulated world: the demo and the reproduction of the paper's figures."""

@@ -1,0 +1,67 @@
+"""Plots of learning results (matplotlib, no display needed)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["learning_curves", "save_figure", "METHOD_COLOURS"]
+
+#: The paper's colours (Fig. 9): baseline red, APTKT blue, APTKT with auxiliary features green.
+METHOD_COLOURS = {"baseline": "tab:red", "APTKT": "tab:blue", "APTKT+aux": "tab:green"}
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def learning_curves(
+    ax,
+    curves: Mapping[str, np.ndarray],
+    x: np.ndarray,
+    *,
+    title: str = "",
+    ylabel: str = "accuracy on the test set",
+    xlabel: str = "observations collected after the initial round",
+) -> None:
+    """Mean curve with a band of ± one standard deviation over trials, per method.
+
+    ``curves[method]`` has shape (trials, len(x)).
+    """
+    for method, values in curves.items():
+        values = np.asarray(values, dtype=float)
+        mean = np.nanmean(values, axis=0)
+        sd = np.nanstd(values, axis=0)
+        colour = METHOD_COLOURS.get(method)
+        ax.plot(x, mean, label=f"{method} (n={values.shape[0]})", color=colour, lw=2)
+        ax.fill_between(x, mean - sd, mean + sd, color=colour, alpha=0.18, lw=0)
+    ax.set_ylim(0, 1.02)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right", fontsize="small")
+
+
+def save_figure(fig, path_stem: str | Path, formats: Sequence[str] = ("png", "svg")) -> list[Path]:
+    path_stem = Path(path_stem)
+    path_stem.parent.mkdir(parents=True, exist_ok=True)
+    out = []
+    for fmt in formats:
+        p = path_stem.with_suffix(f".{fmt}")
+        fig.savefig(p, dpi=150, bbox_inches="tight")
+        out.append(p)
+    _pyplot().close(fig)
+    return out
+
+
+def figure(nrows: int = 1, ncols: int = 1, **kw):
+    return _pyplot().subplots(nrows, ncols, **kw)
