@@ -5,10 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 
 import pytest
-
-pytest.importorskip("rtde_control", reason="the UR10 tests need the ur_rtde package (test extra)")
-
-from loopback_helpers import (  # noqa: E402
+from loopback_helpers import (
     DEFAULT_CONTACT,
     FAST,
     PLACEMENT,
@@ -17,8 +14,8 @@ from loopback_helpers import (  # noqa: E402
     free_loopback_host,
 )
 
-from aptkt.robot import UR10, SafetyLimits  # noqa: E402
-from aptkt.robot.loopback import Loopback  # noqa: E402
+from aptkt.robot import UR10, SafetyLimits
+from aptkt.robot.loopback import Loopback
 
 
 @pytest.fixture(scope="module")

@@ -10,9 +10,12 @@ import time
 
 import numpy as np
 import pytest
-from loopback_helpers import PLACEMENT, at_rest, fire_after, in_contact
 
-from aptkt.errors import (
+pytest.importorskip("rtde_control", reason="the UR10 tests need the ur_rtde package (test extra)")
+
+from loopback_helpers import PLACEMENT, at_rest, fire_after, in_contact  # noqa: E402
+
+from aptkt.errors import (  # noqa: E402
     ProgramStoppedError,
     ProtectiveStopError,
     RobotConnectionError,
@@ -20,7 +23,7 @@ from aptkt.errors import (
     SafetyLimitError,
     SkinDisconnectedError,
 )
-from aptkt.robot import Placement
+from aptkt.robot import Placement  # noqa: E402
 
 
 def assert_stopped_and_retracted(loopback, z_before: float, raised: pytest.ExceptionInfo | None = None) -> dict:

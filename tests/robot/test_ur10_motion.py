@@ -6,10 +6,13 @@ import time
 
 import numpy as np
 import pytest
-from loopback_helpers import PLACEMENT, STIFFNESS, SURFACE_Z, FakeSkin, at_rest, free_loopback_host, in_contact
 
-from aptkt.robot import UR10, Robot, SafetyLimits
-from aptkt.robot.loopback import Loopback
+pytest.importorskip("rtde_control", reason="the UR10 tests need the ur_rtde package (test extra)")
+
+from loopback_helpers import PLACEMENT, STIFFNESS, SURFACE_Z, FakeSkin, at_rest, free_loopback_host, in_contact  # noqa: E402
+
+from aptkt.robot import UR10, Robot, SafetyLimits  # noqa: E402
+from aptkt.robot.loopback import Loopback  # noqa: E402
 
 
 def test_connects_uploads_the_control_script_and_arms_the_controller_watchdog(robot, loopback):

@@ -660,7 +660,8 @@ class SimulatedController:
         assert m.target is not None and m.start is not None
         self.velocity[3:] = 0.0
         remaining = m.length - m.progress
-        speed = min(m.speed + m.acceleration * dt, m.velocity, math.sqrt(2.0 * m.acceleration * max(remaining, 0.0)))
+        step = m.acceleration * dt
+        speed = min(m.speed + step, m.velocity, _braking_speed(remaining, m.acceleration, dt))
         if remaining <= speed * dt or m.length <= 1e-12:
             m.progress = m.length
             step_speed = remaining / dt if m.length > 1e-12 else 0.0
@@ -711,11 +712,18 @@ class SimulatedController:
             # A discrete admittance loop against stiffness k is stable for gain*k*dt < 2;
             # the simulated controller keeps it well damped, as a tuned real one is.
             gain = min(gain, 0.5 / (stiffness * self.dt))
+        accel = self.config.force_mode_acceleration
         for i in range(3):
             if fm.selection[i]:
-                want = gain * (fm.wrench[i] - applied[i])
+                error = fm.wrench[i] - applied[i]
+                want = gain * error
+                if stiffness > 0:
+                    # Never faster than what can still be braked (at the acceleration cap)
+                    # before the force error is gone: no overshoot on stiff contacts.
+                    reach = _braking_speed(abs(error) / stiffness, accel, self.dt)
+                    want = max(-reach, min(reach, want))
                 want = max(-fm.limits[i], min(fm.limits[i], want))
-                step = self.config.force_mode_acceleration * self.dt
+                step = accel * self.dt
                 local[i] = current[i] + max(-step, min(step, want - current[i]))
         return r @ local
 
@@ -879,6 +887,13 @@ class SimulatedController:
             if low == "shutdown":
                 return "Shutting down"
             return f"could not understand: '{cmd}'"
+
+
+def _braking_speed(distance: float, acceleration: float, dt: float) -> float:
+    """Fastest speed from which braking by ``acceleration * dt`` per cycle still stops within
+    ``distance`` (the discrete form of sqrt(2 a d); the continuous one brakes harder than a)."""
+    step = acceleration * dt
+    return step * (-0.5 + math.sqrt(0.25 + 2.0 * max(distance, 0.0) / (step * dt)))
 
 
 def _injected_offset(text: str, kind: str) -> int:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = ["rotvec_to_matrix", "matrix_to_rotvec", "interpolate_rotvec", "integrate_rotvec", "limit_norm"]
@@ -18,20 +20,22 @@ def rotvec_to_matrix(r: np.ndarray) -> np.ndarray:
 
 
 def matrix_to_rotvec(m: np.ndarray) -> np.ndarray:
-    cos = (np.trace(m) - 1.0) / 2.0
-    cos = min(1.0, max(-1.0, cos))
-    angle = float(np.arccos(cos))
+    # atan2 of (sin, cos) keeps small angles exact, where arccos of the trace loses them.
+    w = np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
+    sin = float(np.linalg.norm(w)) / 2.0
+    cos = (float(np.trace(m)) - 1.0) / 2.0
+    angle = math.atan2(sin, cos)
     if angle < 1e-12:
-        return np.zeros(3)
+        return w / 2.0
     if np.pi - angle < 1e-6:
         # Near pi the antisymmetric part vanishes; take the axis from the symmetric part.
         b = (m + np.eye(3)) / 2.0
-        axis = np.sqrt(np.clip(np.diag(b), 0.0, None))
-        i = int(np.argmax(axis))
+        i = int(np.argmax(np.diag(b)))
         axis = b[:, i] / np.sqrt(b[i, i])
+        if float(axis @ w) < 0:
+            axis = -axis
         return axis * angle
-    w = np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
-    return w / (2.0 * np.sin(angle)) * angle
+    return w * (angle / (2.0 * sin))
 
 
 def interpolate_rotvec(r0: np.ndarray, r1: np.ndarray, s: float) -> np.ndarray:

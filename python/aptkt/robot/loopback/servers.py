@@ -262,13 +262,22 @@ class LoopbackServer:
         for t in self._threads:
             t.join(timeout=2.0)
 
-    def _open_listeners(self) -> None:
+    def _open_listeners(self, retry_for: float = 0.0) -> None:
         opened: dict[int, socket.socket] = {}
         try:
             for port in self.ports:
                 s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
                 s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-                s.bind((self.host, port))
+                deadline = time.monotonic() + retry_for
+                while True:
+                    try:
+                        s.bind((self.host, port))
+                        break
+                    except OSError:
+                        if time.monotonic() >= deadline:
+                            s.close()
+                            raise
+                        time.sleep(0.01)
                 s.listen(16)
                 s.settimeout(0.05)
                 opened[port] = s
@@ -285,6 +294,12 @@ class LoopbackServer:
     def _close_listeners(self) -> None:
         listeners, self._listeners = self._listeners, {}
         for s in listeners.values():
+            # shutdown() stops listening at once; close() alone leaves the socket accepting
+            # into its backlog until the accept thread's poll returns.
+            try:
+                s.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
             s.close()
 
     def _accept(self, listener: socket.socket, port: int) -> None:
@@ -365,7 +380,8 @@ class LoopbackServer:
         self.frozen = False
         if self._refusing and self._running:
             self._refusing = False
-            self._open_listeners()
+            # The closed listeners may take an accept-poll period to release their ports.
+            self._open_listeners(retry_for=1.0)
 
     @property
     def connections(self) -> dict[str, int]:
