@@ -11,7 +11,7 @@ import math
 import socket
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 from aptkt.robot import UR10, Placement
 from aptkt.robot.loopback import Loopback

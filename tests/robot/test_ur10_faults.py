@@ -286,3 +286,52 @@ def test_close_destroys_the_clients_even_while_a_fault_is_kept(make_robot, skin)
     robot.close()
     assert kept.value.__traceback__ is not None
     assert [c() for c in clients] == [None, None]
+
+
+def test_recover_after_a_stopped_program(robot, loopback, skin):
+    in_contact(robot, skin)
+    loopback.stop_program("operator pressed stop")
+    time.sleep(0.05)  # see test_a_command_racing_a_program_stop_fails_fast for the race
+    with pytest.raises(ProgramStoppedError):
+        robot.press(0.001, 0.5)
+    robot.recover()
+    assert loopback.state()["program_running"]
+    robot.move_above(PLACEMENT, 0.01)
+    assert at_rest(loopback)["pose"][2] == pytest.approx(0.01, abs=1e-6)
+
+
+def test_recover_after_a_lost_link(make_robot, loopback, skin):
+    robot = make_robot()
+    in_contact(robot, skin)
+    loopback.drop_connections(refuse_for=None)
+    # A command racing the drop: ur_rtde would wait for its stale state (up to 300 s).
+    t0 = time.monotonic()
+    with pytest.raises(RobotConnectionError):
+        robot.press(0.001, 1.0)
+    assert time.monotonic() - t0 < robot.limits.watchdog_timeout + 0.3
+    with pytest.raises(RobotConnectionError, match="cannot connect"):
+        robot.recover()  # the controller is still unreachable
+    loopback.restore()
+    robot.recover()
+    state = loopback.state()
+    assert state["program_running"] and state["connections"].get("rtde") == 2
+    robot.move_above(PLACEMENT, 0.01)
+    assert at_rest(loopback)["pose"][2] == pytest.approx(0.01, abs=1e-6)
+
+
+def test_a_command_racing_a_program_stop_fails_fast(make_robot, loopback, skin):
+    robot = make_robot()
+    in_contact(robot, skin)
+    # Stopped before the script answered "ready" to the approach's last command: ur_rtde's
+    # next command then spins up to 4 s for that "ready" (as with a real controller).
+    loopback.stop_program("operator pressed stop")
+    t0 = time.monotonic()
+    with pytest.raises(ProgramStoppedError):
+        robot.press(0.001, 0.5)
+    assert time.monotonic() - t0 < 0.5
+    assert not at_rest(loopback)["moving"]
+    robot.close()  # lets the spinning call end, so the connection really closes
+    deadline = time.monotonic() + 2.0
+    while loopback.state()["connections"].get("rtde") and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert not loopback.state()["connections"].get("rtde")

@@ -22,9 +22,12 @@ during a movement only the supervision loop does, so a stalled loop stops the ar
 from __future__ import annotations
 
 import math
+import queue
 import threading
 import time
 from collections import deque
+from concurrent.futures import Future
+from concurrent.futures import TimeoutError as FutureTimeout
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -58,6 +61,8 @@ _RECEIVE_VARIABLES = [
     "robot_status_bits",
     "safety_status_bits",
 ]
+# Longest a single rtde_control call may take on a healthy link (s).
+_COMMAND_TIMEOUT = 10.0
 # Controller time over which the measured TCP acceleration is averaged (s).
 _ACCEL_WINDOW = 0.03
 # Commands ur_rtde's control script executes every cycle without a done-handshake.
@@ -75,6 +80,39 @@ class _Sample:
         self.speed = speed
         self.force = force
         self.skin = skin
+
+
+class _Worker:
+    """The one thread that calls ``rtde_control``, so a call stuck on a dead link can be
+    abandoned: ur_rtde waits up to 300 s for a "done" that a stale state never shows."""
+
+    def __init__(self, name: str):
+        self._queue: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self.thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self.thread.start()
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Future[Any]:
+        future: Future[Any] = Future()
+        self._queue.put((future, fn, args))
+        return future
+
+    def close(self) -> None:
+        self._queue.put(None)
+
+    def _run(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            future, fn, args = item
+            del item
+            if future.set_running_or_notify_cancel():
+                try:
+                    future.set_result(fn(*args))
+                except BaseException as exc:  # handed to the caller through the future
+                    future.set_exception(exc)
+            # Drop the bound method at once: a frame of this loop must not keep the client alive.
+            del future, fn, args
 
 
 class UR10:
@@ -134,7 +172,9 @@ class UR10:
             self.placements = dict(placements)
         else:
             self.placements = {p.object_name: p for p in placements}
-        self.workspace = None if workspace is None else (tuple(map(float, workspace[0])), tuple(map(float, workspace[1])))
+        self.workspace = None
+        if workspace is not None:
+            self.workspace = (tuple(map(float, workspace[0])), tuple(map(float, workspace[1])))
         self.tool_orientation = tuple(float(v) for v in tool_orientation)
         if len(self.tool_orientation) != 3:
             raise ValueError("tool_orientation must be a rotation vector of 3 numbers")
@@ -151,7 +191,7 @@ class UR10:
         self.max_supervision_hz = max_supervision_hz
         self._retracting = False
         self._trace: deque[_Sample] = deque(maxlen=max(100, int(trace_seconds * 500)))
-        self._io = threading.RLock()
+        self._worker: _Worker | None = None
         self._control: Any = None
         self._receive: Any = None
         self._lost: str | None = None
@@ -200,6 +240,7 @@ class UR10:
             self._drop_clients()
             raise RobotConnectionError(f"cannot connect to the UR controller at {self.host}: {exc}") from None
         self._lost = None
+        self._worker = _Worker(f"ur10-rtde-control-{self.host}")
         self.frequency = self._detect_frequency()
         self._reset_supervision()
         self._command("setWatchdog", 1.0 / self.limits.watchdog_timeout)
@@ -232,11 +273,17 @@ class UR10:
         if self._control is not None and self._lost is None:
             self.stop()
             try:
-                with self._io:
-                    if self._control.isConnected():
-                        self._control.stopScript()
-            except RuntimeError:
+                if self._link_ok():
+                    self._call("stopScript")
+            except AptktError:
                 pass
+        if self._worker is not None:
+            self._worker.close()
+            # A call still spinning inside ur_rtde (it holds the client) would keep the old
+            # connection and its input registers alive: let it end (ur_rtde gives up after
+            # at most 4 s on a live link). An abandoned worker is not waited for.
+            self._worker.thread.join(timeout=_COMMAND_TIMEOUT)
+            self._worker = None
         self._drop_clients()
 
     def _drop_clients(self) -> None:
@@ -424,9 +471,8 @@ class UR10:
             try:
                 if not self._link_ok():
                     break
-                with self._io:
-                    getattr(self._control, name)(*args)
-            except RuntimeError:
+                self._call(name, *args)
+            except AptktError:
                 break
         self._mode = None
 
@@ -539,14 +585,53 @@ class UR10:
         self._require_link()
         if not self._link_ok():
             raise self._lose(f"no fresh robot data before sending {name}")
-        try:
-            with self._io:
-                result = getattr(self._control, name)(*args)
-        except RuntimeError as exc:
-            raise self._lose(f"{name} failed: {exc}") from None
+        result = self._call(name, *args)
         if result is False:
             self._explain(name)
         return result
+
+    def _call(self, name: str, *args: Any) -> Any:
+        """Run one rtde_control method on the worker thread while watching the link.
+
+        ur_rtde blocks on its own (possibly stale) state: a refused command returns within
+        milliseconds, but one sent as the link died may wait up to 300 s, and one racing a
+        program stop spins up to 4 s. So: give up at once when the link goes stale, and look
+        at the controller state after a short grace period.
+        """
+        worker = self._worker
+        if worker is None or self._control is None:
+            raise RobotConnectionError(f"not connected to the UR controller at {self.host}")
+        future = worker.submit(getattr(self._control, name), *args)
+        start = time.monotonic()
+        while True:
+            try:
+                return future.result(timeout=0.01)
+            except FutureTimeout:
+                pass
+            except RuntimeError as exc:
+                raise self._lose(f"{name} failed: {exc}") from None
+            waited = time.monotonic() - start
+            if not self._link_ok():
+                self._abandon_worker()
+                raise self._lose(f"{name} was sent on a link without fresh data")
+            if waited > 0.2:
+                try:
+                    if self._receive.isProtectiveStopped() or self._receive.isEmergencyStopped():
+                        raise ProtectiveStopError(f"the controller is in a protective/emergency stop ({name})")
+                    if self._receive.getRuntimeState() != _PLAYING:
+                        raise ProgramStoppedError(f"the control program is not running on the controller ({name})")
+                except RuntimeError as exc:
+                    raise self._lose(str(exc)) from None
+            if waited > _COMMAND_TIMEOUT:
+                self._abandon_worker()
+                raise self._lose(f"{name} did not complete within {_COMMAND_TIMEOUT:.0f} s")
+
+    def _abandon_worker(self) -> None:
+        # The stuck call ends on ur_rtde's own timeout; its thread then exits. Nothing else
+        # is queued behind it: a lost link sends nothing more.
+        if self._worker is not None:
+            self._worker.close()
+            self._worker = None
 
     def _explain(self, name: str) -> None:
         """A command was refused: say why as precisely as the controller lets us.
@@ -557,8 +642,13 @@ class UR10:
         """
         deadline = time.monotonic() + 5.0 / self.frequency + 0.02
         stopped = False
+        first_ts: float | None = None
         while True:
             try:
+                if not (self._control.isConnected() and self._receive.isConnected()):
+                    raise self._lose(f"the RTDE connection closed ({name} refused)")
+                ts = float(self._receive.getTimestamp())
+                first_ts = ts if first_ts is None else first_ts
                 if self._receive.isProtectiveStopped() or self._receive.isEmergencyStopped():
                     raise ProtectiveStopError(f"the controller is in a protective/emergency stop ({name} refused)")
                 # A protective stop pauses the program too: only call it a stopped program if
@@ -567,6 +657,8 @@ class UR10:
             except RuntimeError as exc:
                 raise self._lose(str(exc)) from None
             if time.monotonic() > deadline:
+                if ts == first_ts:
+                    raise self._lose(f"no fresh robot data after {name} was refused")
                 if stopped:
                     raise ProgramStoppedError(f"the control program is not running on the controller ({name} refused)")
                 raise RobotError(f"the controller refused {name}")
@@ -688,12 +780,7 @@ class UR10:
     def _kick(self) -> None:
         """Feed the controller's watchdog: repeat the held real-time command, or kick."""
         name, args = self._hold or ("kickWatchdog", ())
-        try:
-            with self._io:
-                result = getattr(self._control, name)(*args)
-        except RuntimeError as exc:
-            raise self._lose(f"{name} failed: {exc}") from None
-        if result is False:
+        if self._call(name, *args) is False:
             self._explain(name)
 
     def _keep_alive(self) -> None:
@@ -701,18 +788,17 @@ class UR10:
         # supervision loop feeds it, so a stalled loop lets the controller stop the arm.
         interval = self.limits.watchdog_timeout / 5.0
         while not self._keepalive_stop.wait(interval):
-            if self._in_motion or self._lost is not None:
-                continue
-            if not self._io.acquire(timeout=interval):
+            worker = self._worker
+            if self._in_motion or self._lost is not None or worker is None:
                 continue
             try:
-                if (self._control is not None and self._receive is not None and self._control.isConnected()
-                        and self._receive.getRuntimeState() == _PLAYING):
-                    self._control.kickWatchdog()
-            except (RuntimeError, AttributeError):  # AttributeError: closed meanwhile
+                if self._receive.getRuntimeState() != _PLAYING:
+                    continue
+                # Through the worker, so it never interleaves with a command; never waits
+                # long: a stuck worker is the supervision's business.
+                worker.submit(self._control.kickWatchdog).result(timeout=interval)
+            except (RuntimeError, AttributeError, FutureTimeout):  # AttributeError: closed meanwhile
                 pass
-            finally:
-                self._io.release()
 
     def _move_to(self, target: np.ndarray, speed: float) -> None:
         """Asynchronous moveL to ``target``, supervised until the controller reports it done."""
@@ -730,7 +816,10 @@ class UR10:
             # Done = the controller ran a new asynchronous operation and it is over.
             return status[0] != before[0] and not status[1]
 
-        end = self._supervise(until=finished, timeout=timeout, what="the moveL")
+        done = self._supervise(until=finished, timeout=timeout, what="the moveL")
+        # The receive stream may trail the control stream by a package: read on until it
+        # shows a cycle after the one that reported the move done, so the pose is final.
+        end = self._supervise(until=lambda s: s.timestamp > done.timestamp, timeout=1.0, what="the moveL")
         self._mode = None
         miss = float(np.linalg.norm(end.pose[:3] - target[:3]))
         if miss > 2e-4:

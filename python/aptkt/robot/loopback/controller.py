@@ -23,7 +23,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -650,8 +650,9 @@ class SimulatedController:
             self.velocity[3:] = omega
             return lin, None
         if m.kind == "stop":
-            lin = limit_norm(lin, max(0.0, float(np.linalg.norm(lin)) - m.acceleration * dt))
-            omega = limit_norm(self.velocity[3:], max(0.0, float(np.linalg.norm(self.velocity[3:])) - m.acceleration * dt))
+            step = m.acceleration * dt
+            lin = limit_norm(lin, max(0.0, float(np.linalg.norm(lin)) - step))
+            omega = limit_norm(self.velocity[3:], max(0.0, float(np.linalg.norm(self.velocity[3:])) - step))
             self.velocity[3:] = omega
             if not np.any(lin) and not np.any(omega):
                 self._finish_motion()
