@@ -13,6 +13,8 @@ from aptkt.errors import AptktError
 # parser and sets ``func`` (called with the parsed arguments, returns an exit code).
 COMMAND_MODULES: tuple[str, ...] = (
     "aptkt.commands.demo",
+    "aptkt.commands.skin",
+    "aptkt.commands.dataset",
 )
 
 

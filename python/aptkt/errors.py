@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from aptkt._core import AptktError
+from aptkt._core import AptktError, KernelNotPositiveDefiniteError
 
 __all__ = [
     "AptktError",
@@ -15,11 +15,17 @@ __all__ = [
     "RobotConnectionError",
     "ProgramStoppedError",
     "ConfigError",
+    "NotFittedError",
+    "KernelNotPositiveDefiniteError",
 ]
 
 
 class ConfigError(AptktError, ValueError):
     """A configuration file or value is invalid; the message names the file and the field."""
+
+
+class NotFittedError(AptktError, AttributeError):
+    """A model was used before ``fit``."""
 
 
 class SkinError(AptktError):

@@ -1,15 +1,32 @@
 use pyo3::create_exception;
-use pyo3::exceptions::PyException;
+use pyo3::exceptions::{PyException, PyValueError};
 use pyo3::prelude::*;
 
 create_exception!(
     aptkt._core,
     AptktError,
     PyException,
-    "Base class of every error raised by aptkt's compiled core."
+    "Base class of every error raised on purpose by aptkt."
+);
+create_exception!(
+    aptkt._core,
+    KernelNotPositiveDefiniteError,
+    AptktError,
+    "A kernel matrix stayed non-positive-definite even after the largest permitted jitter."
 );
 
+/// Maps the Gaussian-process core's errors: bad input is a `ValueError`, a numerically
+/// hopeless kernel has its own type.
+pub fn gp_error(e: aptkt_gp::GpError) -> PyErr {
+    match e {
+        aptkt_gp::GpError::InvalidInput(_) | aptkt_gp::GpError::NonFinite(_) => PyValueError::new_err(e.to_string()),
+        aptkt_gp::GpError::NotPositiveDefinite { .. } => KernelNotPositiveDefiniteError::new_err(e.to_string()),
+    }
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add("AptktError", m.py().get_type::<AptktError>())?;
+    let py = m.py();
+    m.add("AptktError", py.get_type::<AptktError>())?;
+    m.add("KernelNotPositiveDefiniteError", py.get_type::<KernelNotPositiveDefiniteError>())?;
     Ok(())
 }

@@ -1,0 +1,100 @@
+"""LaplaceGPC vs scikit-learn's GaussianProcessClassifier, side by side on the same data.
+
+Usage: python benches/bench_gp.py [--quick] [--skip-sklearn-opt-above N]
+
+For each n (and d), one data set with 5 classes; reports for
+  fixed-kernel fit, optimised fit with the same number of starts (1 + 2 restarts),
+  predict_proba on 1000 points,
+the wall times, their ratio (sklearn / aptkt), the LML per class reached by both optimised fits
+and the test accuracies.
+"""
+
+from __future__ import annotations
+
+import argparse
+import warnings
+
+import numpy as np
+from sklearn.datasets import make_classification
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.gaussian_process import GaussianProcessClassifier
+from sklearn.gaussian_process.kernels import RBF, ConstantKernel
+
+from _common import best_of, median_of, save, table
+from aptkt.gp import LaplaceGPC
+
+RESTARTS = 2
+
+
+def data(n: int, d: int, seed: int = 0):
+    X, y = make_classification(
+        n_samples=n + 500, n_features=d, n_informative=min(d, 6), n_redundant=0,
+        n_classes=5, n_clusters_per_class=1, class_sep=1.5, random_state=seed,
+    )
+    X = (X - X.mean(0)) / X.std(0)
+    return X[:n], y[:n], X[n:], y[n:]
+
+
+def per_class_lml(model: GaussianProcessClassifier) -> np.ndarray:
+    return np.array([e.log_marginal_likelihood_value_ for e in model.base_estimator_.estimators_])
+
+
+def run(n: int, d: int, sklearn_opt: bool) -> dict:
+    X, y, Xt, yt = data(n, d)
+    Xp = np.random.default_rng(1).normal(size=(1000, d))
+    row: dict = {"n": n, "d": d}
+
+    fixed_kernel = ConstantKernel(2.0, "fixed") * RBF(np.sqrt(d), "fixed")
+    sk_fixed = lambda: GaussianProcessClassifier(fixed_kernel, optimizer=None).fit(X, y)  # noqa: E731
+    ours_fixed = lambda: LaplaceGPC(np.sqrt(d), 2.0, optimize=False).fit(X, y)  # noqa: E731
+    row["fixed sklearn s"] = median_of(sk_fixed)
+    row["fixed aptkt s"] = median_of(ours_fixed)
+    row["fixed ratio"] = row["fixed sklearn s"] / row["fixed aptkt s"]
+
+    sk_model = sk_fixed()
+    our_model = ours_fixed()
+    row["predict sklearn s"] = best_of(lambda: sk_model.predict_proba(Xp))
+    row["predict aptkt s"] = best_of(lambda: our_model.predict_proba(Xp))
+    row["predict ratio"] = row["predict sklearn s"] / row["predict aptkt s"]
+
+    ours = LaplaceGPC(n_restarts=RESTARTS, random_state=0)
+    row["opt aptkt s"] = median_of(lambda: ours.fit(X, y), repeat=3 if n <= 400 else 1)
+    row["aptkt LML (sum)"] = float(ours.log_marginal_likelihood_.sum())
+    row["aptkt acc"] = ours.score(Xt, yt)
+    if sklearn_opt:
+        sk = GaussianProcessClassifier(ConstantKernel(1.0) * RBF(1.0), n_restarts_optimizer=RESTARTS, random_state=0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            row["opt sklearn s"] = median_of(lambda: sk.fit(X, y), repeat=1)
+        row["opt ratio"] = row["opt sklearn s"] / row["opt aptkt s"]
+        sk_lml = per_class_lml(sk)
+        row["sklearn LML (sum)"] = float(sk_lml.sum())
+        row["classes with LML >= sklearn"] = int(np.sum(ours.log_marginal_likelihood_ >= sk_lml - 1e-6 * np.abs(sk_lml)))
+        row["sklearn acc"] = sk.score(Xt, yt)
+    return row
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="n = 50, 100 only")
+    parser.add_argument("--skip-sklearn-opt-above", type=int, default=10**9,
+                        help="skip scikit-learn's (slow) optimised fit for n above this")
+    args = parser.parse_args()
+    sizes = [50, 100] if args.quick else [50, 100, 200, 400, 800]
+    rows = []
+    for d in (8, 22):
+        for n in sizes:
+            row = run(n, d, sklearn_opt=n <= args.skip_sklearn_opt_above)
+            rows.append(row)
+            print(row, flush=True)
+    if not args.quick:
+        rows.append(run(200, 15, sklearn_opt=True))
+    cols = ["n", "d", "fixed ratio", "predict ratio", "opt ratio", "opt aptkt s", "opt sklearn s",
+            "aptkt LML (sum)", "sklearn LML (sum)", "classes with LML >= sklearn", "aptkt acc", "sklearn acc",
+            "fixed aptkt s", "fixed sklearn s", "predict aptkt s", "predict sklearn s"]
+    print(table(rows, cols))
+    print("saved", save("gp", {"rows": rows, "restarts": RESTARTS}))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,7 @@
+"""Data sets: recordings and features in HDF5 (:mod:`aptkt.data.store`, layout in
+:mod:`aptkt.data.schema`) and their generation on the simulated world (:mod:`aptkt.data.generate`)."""
+
+from aptkt.data.schema import SCHEMA, SCHEMA_VERSION
+from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, repair, write_features
+
+__all__ = ["SCHEMA", "SCHEMA_VERSION", "DatasetError", "DatasetReader", "DatasetWriter", "repair", "write_features"]

@@ -1,0 +1,59 @@
+"""The on-disk layout of aptkt data sets (HDF5), version 1.
+
+::
+
+    /                                attrs: schema = "aptkt.dataset", schema_version = 1,
+                                            software_version, description (JSON)
+    /recordings/index                (N,) compound: object, action, trial, start_ns, stop_ns,
+                                            row_start, row_stop — one row per recording
+    /recordings/metadata             (N,) JSON text per recording (action parameters, trial,
+                                            calibration, placement, timestamps, ...)
+    /recordings/samples/cell_id      (M,)   uint16   all samples of all recordings, row ranges
+    /recordings/samples/t_ns         (M,)   int64    from the index; raw integers as the wire
+    /recordings/samples/proximity    (M,)   uint16   carries them (physical = raw * scale +
+    /recordings/samples/acc          (M, 3) int16    offset, see RAW_SCALE), force before the
+    /recordings/samples/temp         (M, 2) int16    per-cell calibration (stored in each
+    /recordings/samples/force        (M, 3) uint16   recording's metadata)
+    /features/<action>/<modality>    (K, D) float64  optional, rows of recordings ...
+    /features/<action>/recording     (K,)   int64    ... given by these recording numbers
+
+A recording exists once its index row exists: samples and metadata are written first, the
+index row last, then the file is flushed. Readers trust only the index.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["SCHEMA", "SCHEMA_VERSION", "INDEX_DTYPE", "SAMPLE_FIELDS", "RAW_SCALE"]
+
+SCHEMA = "aptkt.dataset"
+SCHEMA_VERSION = 1
+
+INDEX_DTYPE = np.dtype([
+    ("object", "S64"),
+    ("action", "S32"),
+    ("trial", "<i4"),
+    ("start_ns", "<i8"),
+    ("stop_ns", "<i8"),
+    ("row_start", "<i8"),
+    ("row_stop", "<i8"),
+])
+
+#: Stored per-sample fields: trailing shape and dtype.
+SAMPLE_FIELDS: dict[str, tuple[tuple[int, ...], np.dtype]] = {
+    "cell_id": ((), np.dtype("<u2")),
+    "t_ns": ((), np.dtype("<i8")),
+    "proximity": ((), np.dtype("<u2")),
+    "acc": ((3,), np.dtype("<i2")),
+    "temp": ((2,), np.dtype("<i2")),
+    "force": ((3,), np.dtype("<u2")),
+}
+
+#: physical = raw * scale + offset, per field (per column for temp): the protocol's scales.
+RAW_SCALE: dict[str, tuple[tuple[float, float], ...]] = {
+    "proximity": ((1 / 65536, 0.0),),
+    "acc": ((1 / 256, 0.0),),
+    "temp": ((0.5, 24.0), (0.03125, 0.0)),
+    "force": ((1 / 1024, 0.0),),
+}

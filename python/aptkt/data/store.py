@@ -1,0 +1,408 @@
+"""Recordings (and optionally features) in HDF5: a versioned, compact, crash-safe store.
+
+Layout: :mod:`aptkt.data.schema`. Samples are stored as the raw integers the skin sends (the
+force before calibration, with the calibration kept in each recording's metadata), which is
+exact, about a fifth of float64 and compresses well.
+
+Crash safety: the writer runs in HDF5's single-writer/multiple-reader (SWMR) mode, in which
+the library keeps the file consistent on disk at every moment: every dataset is created
+before the first recording, a recording is appended as samples → metadata → index row, and the
+file is flushed after each one. A writer killed at any point (even mid-write) leaves a file in
+which every recording whose index row was flushed is readable; a half-written recording has
+no index row and is ignored. :class:`DatasetReader` opens files in SWMR-read mode, which also
+works while a writer is running or after it died. To *append* to a file whose writer died,
+:func:`repair` first copies its complete recordings into a fresh file (the HDF5 library refuses
+to reopen a crashed SWMR file for writing until that is done).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections import Counter
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from aptkt.data.schema import INDEX_DTYPE, RAW_SCALE, SAMPLE_FIELDS, SCHEMA, SCHEMA_VERSION
+from aptkt.errors import AptktError
+from aptkt.skin.samples import Recording, SkinSamples
+
+__all__ = ["DatasetError", "DatasetWriter", "DatasetReader", "repair", "write_features", "recording_key",
+           "samples_to_raw", "raw_to_samples"]
+
+_CHUNK_ROWS = 16384
+_COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+
+
+class DatasetError(AptktError):
+    """A data set file is missing, not an aptkt data set, of another schema version, or
+    cannot be written (e.g. a writer died: run ``aptkt dataset repair``)."""
+
+
+def recording_key(rec: Recording) -> tuple[str, str, int]:
+    """``(object, action, trial)`` of a recording, from its metadata."""
+    meta = rec.metadata
+    action = meta.get("action")
+    name = action.get("name") if isinstance(action, Mapping) else action
+    if not isinstance(meta.get("object"), str) or not isinstance(name, str) or not isinstance(meta.get("trial"), int):
+        raise ValueError("recording metadata needs 'object' (str), 'action' (name or dict with 'name') and 'trial' (int)")
+    return meta["object"], name, int(meta["trial"])
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.floating):
+        return float(obj)
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (tuple, set)):
+        return list(obj)
+    raise TypeError(f"metadata value of type {type(obj).__name__} is not JSON-serialisable")
+
+
+def _calibration(meta: Mapping[str, Any], cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-sample (gain, offset) rows from the calibration in a recording's metadata."""
+    cal = meta.get("calibration")
+    if not cal:
+        raise ValueError("the recording's metadata has no 'calibration' (needed to store raw forces)")
+    ids = np.asarray(cal["cell_ids"], dtype=np.int64)
+    gain = np.asarray(cal["gain"], dtype=np.float64).reshape(len(ids), 3)
+    offset = np.asarray(cal["offset"], dtype=np.float64).reshape(len(ids), 3)
+    table = {int(c): i for i, c in enumerate(ids)}
+    try:
+        rows = np.array([table[int(c)] for c in cells], dtype=np.int64)
+    except KeyError as exc:
+        raise ValueError(f"no calibration for cell {exc.args[0]}") from None
+    return gain[rows], offset[rows]
+
+
+def _to_raw(name: str, values: np.ndarray, column: int = 0) -> np.ndarray:
+    scale, offset = RAW_SCALE[name][column]
+    raw = np.rint((values - offset) / scale)
+    off_grid = (raw * scale + offset) != values
+    if np.any(off_grid):
+        bad = int(np.flatnonzero(off_grid.reshape(off_grid.shape[0], -1).any(axis=1))[0])
+        raise ValueError(f"{name}: values are not on the protocol's grid (row {bad}); only skin data can be stored raw")
+    return raw
+
+
+def samples_to_raw(samples: SkinSamples, metadata: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """Physical samples → the raw integers of the wire (exact; raises if they are not)."""
+    gain, offset = _calibration(metadata, samples.cell_id) if len(samples) else (np.ones((0, 3)), np.zeros((0, 3)))
+    force_norm = samples.force / gain + offset
+    force = np.rint(force_norm * 1024.0)
+    back = gain * (force * (1.0 / 1024.0) - offset)
+    if not np.allclose(back, samples.force, rtol=1e-9, atol=1e-12):
+        raise ValueError("force: calibrated values do not come from 12-bit readings with this calibration")
+    out = {
+        "cell_id": samples.cell_id.astype("<u2"),
+        "t_ns": samples.t_ns.astype("<i8"),
+        "proximity": _to_raw("proximity", samples.proximity).astype("<u2"),
+        "acc": _to_raw("acc", samples.acc).astype("<i2"),
+        "temp": np.stack([_to_raw("temp", samples.temp[:, 0], 0), _to_raw("temp", samples.temp[:, 1], 1)],
+                         axis=1).astype("<i2"),
+        "force": force.astype("<u2"),
+    }
+    return out
+
+
+def raw_to_samples(raw: Mapping[str, np.ndarray], metadata: Mapping[str, Any]) -> SkinSamples:
+    """Raw integers → physical samples, with the same arithmetic as the skin sources."""
+    cells = np.asarray(raw["cell_id"], dtype=np.uint16)
+    if len(cells):
+        gain, offset = _calibration(metadata, cells)
+    else:
+        gain, offset = np.ones((0, 3)), np.zeros((0, 3))
+    temp = np.asarray(raw["temp"], dtype=np.float64)
+    return SkinSamples(
+        cell_id=cells,
+        t_ns=np.asarray(raw["t_ns"], dtype=np.int64),
+        proximity=np.asarray(raw["proximity"], dtype=np.float64) * (1 / 65536),
+        acc=np.asarray(raw["acc"], dtype=np.float64) * (1 / 256),
+        temp=np.stack([temp[:, 0] * 0.5 + 24.0, temp[:, 1] * 0.03125], axis=1),
+        force=gain * (np.asarray(raw["force"], dtype=np.float64) * (1 / 1024) - offset),
+    )
+
+
+class DatasetWriter:
+    """Append recordings to a data set file, crash-safe (see the module docstring).
+
+    ``mode="w"`` creates a new file (an existing one is an error unless ``overwrite``);
+    ``mode="a"`` appends to an existing data set (create it if missing).
+    """
+
+    def __init__(self, path: str | Path, mode: str = "w", *, description: Mapping[str, Any] | None = None,
+                 overwrite: bool = False):
+        from aptkt import __version__
+
+        self.path = Path(path)
+        if mode not in ("w", "a"):
+            raise ValueError("mode must be 'w' or 'a'")
+        if mode == "a" and self.path.exists():
+            try:
+                self._f = h5py.File(self.path, "a", libver="latest")
+            except OSError as exc:
+                if "already open" in str(exc) or "consistency flags" in str(exc):
+                    raise DatasetError(f"{self.path}: a writer of this file did not close it (crashed or "
+                                       f"still running); run 'aptkt dataset repair {self.path}' first") from exc
+                raise DatasetError(f"{self.path}: cannot open for appending: {exc}") from exc
+            _check_schema(self._f, self.path)
+        else:
+            if self.path.exists() and not overwrite:
+                raise DatasetError(f"{self.path} exists (use overwrite=True / --overwrite, or append)")
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._f = h5py.File(self.path, "w", libver="latest", track_order=False)
+            f = self._f
+            f.attrs["schema"] = SCHEMA
+            f.attrs["schema_version"] = SCHEMA_VERSION
+            f.attrs["software_version"] = __version__
+            f.attrs["description"] = json.dumps(dict(description or {}), sort_keys=True, default=_json_default)
+            g = f.create_group("recordings")
+            g.create_dataset("index", shape=(0,), maxshape=(None,), dtype=INDEX_DTYPE, chunks=(256,),
+                             track_times=False)
+            g.create_dataset("metadata", shape=(0,), maxshape=(None,), dtype=h5py.string_dtype("utf-8"),
+                             chunks=(64,), track_times=False, **_COMPRESSION)
+            s = g.create_group("samples")
+            for name, (tail, dtype) in SAMPLE_FIELDS.items():
+                s.create_dataset(name, shape=(0, *tail), maxshape=(None, *tail), dtype=dtype,
+                                 chunks=(_CHUNK_ROWS, *tail), track_times=False, **_COMPRESSION)
+            f.flush()
+        self._index = self._f["recordings/index"]
+        self._meta = self._f["recordings/metadata"]
+        self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
+        self._keys = {(r["object"].decode(), r["action"].decode(), int(r["trial"])) for r in self._index[...]}
+        self._f.swmr_mode = True
+
+    def __enter__(self) -> DatasetWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __len__(self) -> int:
+        return int(self._index.shape[0])
+
+    def keys(self) -> set[tuple[str, str, int]]:
+        """``(object, action, trial)`` of every stored recording."""
+        return set(self._keys)
+
+    def append(self, rec: Recording) -> int:
+        """Store one recording (flushed before returning); returns its number in the file."""
+        key = recording_key(rec)
+        meta = dict(rec.metadata)
+        meta.setdefault("cells", list(rec.cells))
+        meta["silent_cells"] = list(rec.silent_cells)
+        raw = samples_to_raw(rec.samples, meta)
+        return self._append_raw(key, rec.start_ns, rec.stop_ns, raw,
+                                json.dumps(meta, sort_keys=True, default=_json_default))
+
+    def _append_raw(self, key: tuple[str, str, int], start_ns: int, stop_ns: int, raw: Mapping[str, np.ndarray],
+                    meta_json: str) -> int:
+        obj, action, trial = key
+        if key in self._keys:
+            raise DatasetError(f"{self.path}: {obj}/{action}/trial {trial} is already stored")
+        if len(obj.encode()) > 64 or len(action.encode()) > 32:
+            raise ValueError("object names are limited to 64 bytes and action names to 32")
+        n = int(raw["cell_id"].shape[0])
+        # Each recording starts on a fresh chunk: chunks are then written once, never rewritten
+        # by the next recording's flush (which would leak file space); the zero padding between
+        # recordings compresses to almost nothing and no index row points at it.
+        end = int(self._samples["cell_id"].shape[0])
+        row0 = -(-end // _CHUNK_ROWS) * _CHUNK_ROWS
+        # Samples first, then the metadata, the index row last: the index defines what exists.
+        for name, ds in self._samples.items():
+            ds.resize(row0 + n, axis=0)
+            if n:
+                ds[row0:row0 + n] = raw[name]
+        i = len(self)
+        self._meta.resize(i + 1, axis=0)
+        self._meta[i] = meta_json
+        row = np.array([(obj.encode(), action.encode(), trial, start_ns, stop_ns, row0, row0 + n)], dtype=INDEX_DTYPE)
+        self._index.resize(i + 1, axis=0)
+        self._index[i:i + 1] = row
+        self._f.flush()
+        self._keys.add(key)
+        return i
+
+    def close(self) -> None:
+        if getattr(self, "_f", None) is not None and self._f.id.valid:
+            self._f.flush()
+            self._f.close()
+
+
+def _check_schema(f: h5py.File, path: Path) -> None:
+    schema = f.attrs.get("schema")
+    version = f.attrs.get("schema_version")
+    if isinstance(schema, bytes):
+        schema = schema.decode()
+    if schema != SCHEMA:
+        raise DatasetError(f"{path}: not an aptkt data set (schema attribute {schema!r})")
+    if version != SCHEMA_VERSION:
+        raise DatasetError(f"{path}: schema version {version}, this aptkt reads version {SCHEMA_VERSION}")
+
+
+class DatasetReader:
+    """Read a data set (also while a writer runs, or after a writer died)."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        if not self.path.exists():
+            raise DatasetError(f"{self.path}: no such file")
+        try:
+            self._f = h5py.File(self.path, "r", swmr=True)
+        except OSError as exc:
+            raise DatasetError(f"{self.path}: not a readable HDF5 data set: {exc}") from exc
+        _check_schema(self._f, self.path)
+        # A snapshot: recordings appended after opening are not seen (reopen to see them).
+        self.index = self._f["recordings/index"][...]
+        self._meta = self._f["recordings/metadata"]
+        self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
+
+    def __enter__(self) -> DatasetReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._f.id.valid:
+            self._f.close()
+
+    def __len__(self) -> int:
+        return int(self.index.shape[0])
+
+    @property
+    def description(self) -> dict[str, Any]:
+        return json.loads(self._f.attrs.get("description", "{}"))
+
+    @property
+    def attrs(self) -> dict[str, Any]:
+        return {k: (v.decode() if isinstance(v, bytes) else v) for k, v in self._f.attrs.items()}
+
+    def key(self, i: int) -> tuple[str, str, int]:
+        r = self.index[i]
+        return r["object"].decode(), r["action"].decode(), int(r["trial"])
+
+    def keys(self) -> list[tuple[str, str, int]]:
+        return [self.key(i) for i in range(len(self))]
+
+    def select(self, *, object: str | None = None, action: str | None = None) -> list[int]:  # noqa: A002
+        """Recording numbers matching an object and/or action name."""
+        out = []
+        for i in range(len(self)):
+            o, a, _ = self.key(i)
+            if (object is None or o == object) and (action is None or a == action):
+                out.append(i)
+        return out
+
+    def metadata(self, i: int) -> dict[str, Any]:
+        value = self._meta[i]
+        return json.loads(value.decode() if isinstance(value, bytes) else value)
+
+    def raw(self, i: int) -> dict[str, np.ndarray]:
+        """The stored raw integers of recording ``i``."""
+        if not (0 <= i < len(self)):
+            raise IndexError(f"recording {i} out of range (0..{len(self) - 1})")
+        r = self.index[i]
+        sl = slice(int(r["row_start"]), int(r["row_stop"]))
+        return {name: ds[sl] for name, ds in self._samples.items()}
+
+    def recording(self, i: int) -> Recording:
+        meta = self.metadata(i)
+        r = self.index[i]
+        return Recording(
+            samples=raw_to_samples(self.raw(i), meta),
+            start_ns=int(r["start_ns"]),
+            stop_ns=int(r["stop_ns"]),
+            cells=tuple(int(c) for c in meta.get("cells", ())),
+            silent_cells=tuple(int(c) for c in meta.get("silent_cells", ())),
+            metadata=meta,
+        )
+
+    def __iter__(self) -> Iterator[Recording]:
+        for i in range(len(self)):
+            yield self.recording(i)
+
+    def features(self, action: str, modality: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(recording numbers, values)`` of stored features; KeyError if there are none."""
+        g = self._f.get(f"features/{action}")
+        if g is None or modality not in g:
+            raise KeyError(f"no stored {modality!r} features for action {action!r}")
+        return g["recording"][...], g[modality][...]
+
+    def feature_names(self) -> dict[str, list[str]]:
+        g = self._f.get("features")
+        if g is None:
+            return {}
+        return {a: sorted(k for k in g[a] if k != "recording") for a in g}
+
+    def info(self) -> dict[str, Any]:
+        """A summary: counts per object and action, samples, size on disk, schema."""
+        objects = Counter(self.index["object"].astype(str).tolist())
+        actions = Counter(self.index["action"].astype(str).tolist())
+        rows = int(np.sum(self.index["row_stop"] - self.index["row_start"])) if len(self) else 0
+        durations = (self.index["stop_ns"] - self.index["start_ns"]) * 1e-9
+        return {
+            "path": str(self.path),
+            "schema": f"{self.attrs.get('schema')} v{self.attrs.get('schema_version')}",
+            "software_version": self.attrs.get("software_version"),
+            "recordings": len(self),
+            "objects": dict(objects),
+            "actions": dict(actions),
+            "samples": rows,
+            "recorded_seconds": float(durations.sum()) if len(self) else 0.0,
+            "file_bytes": self.path.stat().st_size,
+            "bytes_per_sample": self.path.stat().st_size / rows if rows else float("nan"),
+            "features": self.feature_names(),
+            "description": self.description,
+        }
+
+
+def write_features(path: str | Path, action: str, modality: str, recordings: Sequence[int],
+                   values: np.ndarray) -> None:
+    """Store a feature matrix (one row per recording number) under ``/features/<action>``.
+
+    Opens the file for ordinary (non-SWMR) writing: no writer may be running.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    recordings = np.asarray(recordings, dtype=np.int64)
+    if values.ndim != 2 or values.shape[0] != recordings.shape[0]:
+        raise ValueError("values must be (n_recordings, dim) with one row per recording number")
+    with h5py.File(path, "a", libver="latest") as f:
+        _check_schema(f, Path(path))
+        n = f["recordings/index"].shape[0]
+        if recordings.size and (recordings.min() < 0 or recordings.max() >= n):
+            raise ValueError(f"recording numbers must be in 0..{n - 1}")
+        g = f.require_group(f"features/{action}")
+        if "recording" in g and not np.array_equal(g["recording"][...], recordings):
+            raise ValueError(f"features of {action!r} exist for other recordings; write all modalities together")
+        if "recording" not in g:
+            g.create_dataset("recording", data=recordings, track_times=False)
+        if modality in g:
+            del g[modality]
+        g.create_dataset(modality, data=values, track_times=False)
+
+
+def repair(path: str | Path, *, backup: bool = True) -> int:
+    """Make a file whose writer died appendable again: copy its complete recordings into a
+    fresh file and put that in its place (the original is kept as ``<name>.crashed`` when
+    ``backup``). Returns the number of recordings kept."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".repairing")
+    with DatasetReader(path) as src:
+        desc = src.description
+        with DatasetWriter(tmp, "w", description=desc, overwrite=True) as dst:
+            for i in range(len(src)):
+                r = src.index[i]
+                dst._append_raw(src.key(i), int(r["start_ns"]), int(r["stop_ns"]), src.raw(i),
+                                src._meta[i].decode() if isinstance(src._meta[i], bytes) else src._meta[i])
+        n = len(src)
+    if backup:
+        os.replace(path, path.with_name(path.name + ".crashed"))
+    os.replace(tmp, path)
+    return n

@@ -1,0 +1,131 @@
+"""Run one exploratory action on any robot and skin: the executor shared by every backend.
+
+Sequence (paper §5.2): move above the object, approach until light contact (total normal force
+above 0.05 N), record while the movement runs, lift off, wait for the temperature sensors to
+recover (30 s). The recording is cropped to the action's window — the hold of a press or static
+contact, the constant-speed part of a slide — which the robot reports in its optional
+``action_window_ns`` attribute (``(start_ns, stop_ns)`` on the skin's clock); robots without it
+get the last ``action.duration`` seconds of the movement.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+from dataclasses import asdict, dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from aptkt.actions import ExploratoryAction, Movement
+from aptkt.errors import AptktError
+from aptkt.robot.base import Placement, Robot
+from aptkt.skin.base import SkinSource
+from aptkt.skin.samples import Recording
+
+__all__ = ["ExplorationSettings", "explore", "crop_recording"]
+
+
+@dataclass(frozen=True)
+class ExplorationSettings:
+    """How the executor approaches, lifts and waits (SI units)."""
+
+    clearance: float = 0.003  # m above the placement's surface where the guarded approach starts
+    contact_threshold: float = 0.05  # N, light contact (paper §5.2)
+    lift_height: float = 0.01  # m after the action
+    thermal_wait: float = 30.0  # s for the temperature sensors to recover (paper §5.2)
+    stamp_wall_clock: bool = True  # add the UTC time to the metadata (off for reproducible data)
+
+    def __post_init__(self) -> None:
+        for name in ("clearance", "contact_threshold", "lift_height"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"ExplorationSettings.{name} must be > 0")
+        if not self.thermal_wait >= 0:
+            raise ValueError("ExplorationSettings.thermal_wait must be >= 0")
+
+
+def crop_recording(rec: Recording, start_ns: int, stop_ns: int) -> Recording:
+    """The part of ``rec`` in ``[start_ns, stop_ns)``."""
+    start_ns, stop_ns = max(start_ns, rec.start_ns), min(stop_ns, rec.stop_ns)
+    return Recording(
+        samples=rec.samples.between(start_ns, stop_ns),
+        start_ns=start_ns,
+        stop_ns=stop_ns,
+        cells=rec.cells,
+        silent_cells=rec.silent_cells,
+        metadata=dict(rec.metadata),
+    )
+
+
+def _calibration(skin: SkinSource) -> dict[str, Any] | None:
+    cal = getattr(skin, "calibration", None)
+    if cal is None:
+        return None
+    try:
+        return {
+            "model": "newtons = gain * (normalised - offset)",
+            "cell_ids": [int(c) for c in cal.cell_ids],
+            "offset": np.asarray(cal.offset, dtype=float).tolist(),
+            "gain": np.asarray(cal.gain, dtype=float).tolist(),
+        }
+    except AttributeError:
+        return None
+
+
+def explore(robot: Robot, skin: SkinSource, placement: Placement, action: ExploratoryAction, *,
+            trial: int = 0, settings: ExplorationSettings | None = None,
+            metadata: dict[str, Any] | None = None) -> Recording:
+    """Apply ``action`` once to the object at ``placement`` and return its :class:`Recording`.
+
+    On a robot or skin error the arm is stopped and lifted if possible, and the error is
+    re-raised with the data recorded so far in its ``recording`` attribute.
+    """
+    from aptkt import __version__
+
+    settings = settings or ExplorationSettings()
+    if hasattr(robot, "action_window_ns"):
+        robot.action_window_ns = None  # type: ignore[attr-defined]
+    meta: dict[str, Any] = {
+        "object": placement.object_name,
+        "action": action.to_dict(),
+        "trial": int(trial),
+        "placement": asdict(placement),
+        "settings": asdict(replace(settings)),
+        "robot": type(robot).__name__,
+        "skin": type(skin).__name__,
+        "software_version": __version__,
+    }
+    if settings.stamp_wall_clock:
+        meta["wall_time_utc"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
+    meta.update(metadata or {})
+
+    robot.move_above(placement, settings.clearance)
+    contact_z = robot.approach_contact(skin.total_normal_force, settings.contact_threshold)
+    meta["contact_z"] = float(contact_z)
+    meta["movement_start_ns"] = int(robot.now_ns())
+    skin.start_recording(meta)
+    try:
+        if action.movement is Movement.SLIDE:
+            robot.slide(action.normal_force, action.speed, action.slide_time, placement.slide_direction,
+                        skin.total_normal_force)
+        else:
+            robot.press(action.depth, action.hold_time)
+    except AptktError as exc:
+        rec = skin.stop_recording()
+        exc.recording = rec  # type: ignore[attr-defined]
+        try:
+            robot.stop()
+            robot.lift(settings.lift_height)
+        except AptktError:
+            pass  # the original error is what the caller needs
+        raise
+    rec = skin.stop_recording()
+    window = getattr(robot, "action_window_ns", None)
+    if window is None:
+        window = (rec.stop_ns - int(round(action.duration * 1e9)), rec.stop_ns)
+    rec.metadata["movement_stop_ns"] = int(rec.stop_ns)
+    rec.metadata["window_ns"] = [int(window[0]), int(window[1])]
+    rec.metadata["calibration"] = _calibration(skin)
+    out = crop_recording(rec, int(window[0]), int(window[1]))
+    robot.lift(settings.lift_height)
+    robot.wait(settings.thermal_wait)
+    return out

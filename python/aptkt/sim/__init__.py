@@ -1,0 +1,26 @@
+"""The simulated world: objects, contact physics, a skin that speaks the wire protocol and a
+robot on simulated time (docs/simulation.md).
+
+>>> from aptkt.sim import SimWorld
+>>> rec = SimWorld(seed=0).explore("rough_sponge", "P2", trial=0)
+"""
+
+from aptkt.sim.objects import ObjectLibrary, ObjectSpec, default_library, load_library
+from aptkt.sim.robot import SimRobot
+from aptkt.sim.skin import PtySkinLink, SimSkin
+from aptkt.sim.trial import TrialConditions, TrialVariation
+from aptkt.sim.world import SimSession, SimWorld
+
+__all__ = [
+    "SimWorld",
+    "SimSession",
+    "SimRobot",
+    "SimSkin",
+    "PtySkinLink",
+    "ObjectLibrary",
+    "ObjectSpec",
+    "default_library",
+    "load_library",
+    "TrialConditions",
+    "TrialVariation",
+]

@@ -1,0 +1,454 @@
+"""The contact physics of one trial: from the TCP's motion to every sensor value of every cell.
+
+:class:`ContactPhysics` is a pure step function, ``step(state, trajectory, t_end) -> (state',
+frames, force trace)``: it produces every cell's samples whose sample time falls in
+``(state.t, t_end]``. Because every stateful part is integrated exactly at the sample times and
+all randomness is addressed by (cell, sample index), the output does not depend on how a
+motion is cut into steps, and a step can be undone by keeping the old state (the simulated
+robot uses that to stop exactly where a safety limit is crossed).
+
+Units: SI inside; frames carry the protocol's physical units (g, °C, normalised force).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from aptkt.sim.kinematics import Trajectory
+from aptkt.sim.mechanics import IndentationLaw, SurfaceShape
+from aptkt.sim.objects import ObjectSpec, Relaxation
+from aptkt.sim.patch import PatchGeometry, PatchImperfections
+from aptkt.sim.recurrence import linear_recurrence_rows
+from aptkt.sim.seeding import CounterStream
+from aptkt.sim.texture import StickSlip, StickSlipState, texture_acceleration, texture_field, waviness_waves
+from aptkt.sim.thermal import CellThermal, speed_bins
+from aptkt.sim.trial import TrialConditions
+
+__all__ = ["GRAVITY", "Frames", "ForceTrace", "MechChunk", "PhysicsState", "ContactPhysics", "ObjectPose"]
+
+GRAVITY = 9.80665
+#: Cell accelerometer axes in the base frame for a skin facing down: x along base x, z out of
+#: the skin (base -z), y completing a right-handed frame.
+_FLIP = np.diag([1.0, -1.0, -1.0])
+#: Random words per sample: 10 → 10 normals (force 3, acc 3, temp 2, proximity 1, spare 1),
+#: 1 uniform (arrival jitter), 1 spare.
+_NOISE_SLOTS = 12
+
+
+@dataclass(frozen=True)
+class ObjectPose:
+    """Where the object's top face nominally is (the trial adds its own shift and turn)."""
+
+    centre: tuple[float, float]
+    surface_z: float
+    rotation: float  # rad
+
+
+@dataclass
+class Frames:
+    """Sensor samples of all cells in arrival order, in physical units."""
+
+    cell_index: np.ndarray  # (n,) position of the cell in the patch
+    cell_id: np.ndarray  # (n,)
+    t_sample_ns: np.ndarray  # (n,)
+    t_ns: np.ndarray  # (n,) arrival time on the PC
+    proximity: np.ndarray  # (n,)
+    acc: np.ndarray  # (n, 3) g
+    temp: np.ndarray  # (n, 2) °C: accelerometer die, LM71
+    force: np.ndarray  # (n, 3) normalised reading (offset + F / gain)
+    force_true: np.ndarray  # (n,) N, true normal force on the cell
+
+    def __len__(self) -> int:
+        return int(self.t_ns.shape[0])
+
+    @classmethod
+    def empty(cls) -> Frames:
+        z = np.zeros
+        return cls(z(0, np.int64), z(0, np.int64), z(0, np.int64), z(0, np.int64), z(0), z((0, 3)),
+                   z((0, 2)), z((0, 3)), z(0))
+
+    def take(self, index: np.ndarray | slice) -> Frames:
+        return Frames(**{k: getattr(self, k)[index] for k in self.__dataclass_fields__})
+
+
+@dataclass
+class ForceTrace:
+    """True normal force of every sample (also those not turned into frames), cell-major:
+    what the robot's own wrench sensing sees."""
+
+    cell_index: np.ndarray  # (m,)
+    t_sample_ns: np.ndarray  # (m,)
+    force: np.ndarray  # (m,) N on the cell
+
+    @classmethod
+    def empty(cls) -> ForceTrace:
+        return cls(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+
+    def total_at(self, ticks_ns: np.ndarray, latest: np.ndarray) -> np.ndarray:
+        """Total force at each tick: every cell's newest sample at or before the tick (``latest``
+        holds each cell's force before this trace)."""
+        ticks_ns = np.asarray(ticks_ns, dtype=np.int64)
+        total = np.zeros(ticks_ns.shape[0])
+        for c in range(latest.shape[0]):
+            m = self.cell_index == c
+            t, f = self.t_sample_ns[m], self.force[m]
+            if not f.size:
+                total += latest[c]
+                continue
+            idx = np.searchsorted(t, ticks_ns, side="right") - 1
+            total += np.where(idx >= 0, f[np.maximum(idx, 0)], latest[c])
+        return total
+
+
+@dataclass
+class MechChunk:
+    """Samples of a stretch of time with the TCP motion and the contact stress at their times
+    (cell-major: all samples of a cell together, in sample order)."""
+
+    cells: np.ndarray  # (m,)
+    ks: np.ndarray  # (m,)
+    t_s: np.ndarray  # (m,)
+    t_ns: np.ndarray  # (m,)
+    pos: np.ndarray  # (m, 3)
+    vel: np.ndarray  # (m, 3)
+    acc: np.ndarray  # (m, 3)
+    sigma: np.ndarray  # (m, 3) Pa at the force sensors
+
+    @property
+    def size(self) -> int:
+        return int(self.cells.size)
+
+    @classmethod
+    def empty(cls) -> MechChunk:
+        z = np.zeros
+        return cls(z(0, np.int64), z(0, np.int64), z(0), z(0, np.int64), z((0, 3)), z((0, 3)), z((0, 3)), z((0, 3)))
+
+    @classmethod
+    def concat(cls, chunks: list[MechChunk]) -> MechChunk:
+        """Chunks in time order → one cell-major chunk."""
+        chunks = [c for c in chunks if c.size]
+        if not chunks:
+            return cls.empty()
+        fields = cls.__dataclass_fields__
+        joined = {f: np.concatenate([getattr(c, f) for c in chunks]) for f in fields}
+        order = np.lexsort((joined["ks"], joined["cells"]))
+        return cls(**{f: v[order] for f, v in joined.items()})
+
+
+@dataclass
+class PhysicsState:
+    t_ns: int  # everything with sample time <= t_ns has been produced
+    next_k: np.ndarray  # (C,) next sample index of each cell
+    relax_h: np.ndarray  # (terms, C, 3) relaxing parts of the stress
+    relax_last: np.ndarray  # (C, 3) elastic stress at each cell's previous sample
+    thermal: np.ndarray  # (C, N)
+    thermal_t: np.ndarray  # (C,) s, time of the thermal state (the cell's last sample)
+    last_xy: np.ndarray  # (C, 2) cell centre at its last sample (for sliding distances)
+    latest_force: np.ndarray  # (C,) N, true force on each cell at its last sample
+    slip: StickSlipState
+
+    def copy(self) -> PhysicsState:
+        return PhysicsState(self.t_ns, self.next_k.copy(), self.relax_h.copy(), self.relax_last.copy(),
+                            self.thermal.copy(), self.thermal_t.copy(), self.last_xy.copy(),
+                            self.latest_force.copy(), self.slip.copy())
+
+
+class ContactPhysics:
+    """Physics of one object in one trial against the simulated patch."""
+
+    def __init__(self, obj: ObjectSpec, pose: ObjectPose, conditions: TrialConditions, geometry: PatchGeometry,
+                 imperfections: PatchImperfections, noise_seq: np.random.SeedSequence):
+        self.obj, self.cond, self.geo, self.imp = obj, conditions, geometry, imperfections
+        k = self.k = geometry.constants
+        self.n = n = geometry.n_cells
+        self.law = IndentationLaw(obj.layers, k.skin_stiffness * conditions.skin_stiffness_scale,
+                                  conditions.modulus_scale)
+        weights = tuple(w * conditions.relaxation_scale for w in obj.relaxation.weights)
+        if weights and sum(weights) > 0.95:  # keep the long-term stiffness positive
+            weights = tuple(w * 0.95 / sum(weights) for w in weights)
+        self.relaxation = Relaxation(weights, obj.relaxation.times)
+        self.shape = SurfaceShape(
+            centre=(pose.centre[0] + conditions.shift[0], pose.centre[1] + conditions.shift[1]),
+            rotation=pose.rotation + conditions.rotation,
+            surface_z=pose.surface_z,
+            tilt=conditions.tilt,
+            crown_radius=obj.crown_radius,
+            waves=waviness_waves(obj),
+            size=obj.size,
+        )
+        self.texture = texture_field(obj).scaled(conditions.roughness_scale)
+        self.mu_k = obj.surface.friction_kinetic * conditions.friction_scale
+        self.top_modulus = obj.top.modulus * conditions.modulus_scale
+        self.thermal = CellThermal(k, obj.layers, obj.surface.contact_conductance, conditions.ambient,
+                                   conditions.object_temperature, conditions.conductance_scale)
+        mu_s = obj.surface.friction_static * conditions.friction_scale
+        self.slip = StickSlip(k, mu_s, self.mu_k, _child(noise_seq, 1), n)
+        self._noise = CounterStream(_child(noise_seq, 2), _NOISE_SLOTS)
+        self._sensor_xy = geometry.sensor_positions  # (C, 3, 2)
+        self._centres = geometry.cell_centres  # (C, 2)
+        self._axes = np.stack([_FLIP @ imperfections.mount_rotation[c] for c in range(n)])  # cell axes in base
+        self.cell_ids = np.asarray(geometry.cell_ids, dtype=np.int64)
+        self._latency_ns = int(round(k.link_latency * 1e9))
+        drift = np.asarray(conditions.force_gain_drift, dtype=np.float64)
+        self._gain_drift = np.resize(drift, n)  # the sensors read high (> 1) or low in this trial
+
+    # ---------------------------------------------------------------------------------------
+    def initial_state(self, t_ns: int, position: np.ndarray) -> PhysicsState:
+        """At rest at ``position`` (out of contact), skin in its steady state plus the trial's offset."""
+        start = self.thermal.initial_state(self.cond.skin_offset)
+        t_s = t_ns * 1e-9
+        next_k = np.array([max(0, math.floor((t_s - self.imp.clock_phase[c]) * self.imp.clock_rate[c]) + 1)
+                           for c in range(self.n)], dtype=np.int64)
+        terms = len(self.relaxation.weights)
+        return PhysicsState(
+            t_ns=int(t_ns),
+            next_k=next_k,
+            relax_h=np.zeros((terms, self.n, 3)),
+            relax_last=np.zeros((self.n, 3)),
+            thermal=np.tile(start, (self.n, 1)),
+            thermal_t=np.full(self.n, t_s),
+            last_xy=np.asarray(position[:2], dtype=np.float64) + self._centres,
+            latest_force=np.zeros(self.n),
+            slip=self.slip.rest(),
+        )
+
+    def _samples(self, state: PhysicsState, t_end_ns: int) -> tuple[np.ndarray, np.ndarray]:
+        """Cell index and sample index of every sample in ``(state.t, t_end]``, cell-major."""
+        rate, phase = self.imp.clock_rate, self.imp.clock_phase
+        last = np.floor((t_end_ns * 1e-9 - phase) * rate).astype(np.int64)
+        # Guard the float edge: a sample whose rounded ns time lies beyond t_end is not due yet.
+        t_last = np.rint((phase + last / rate) * 1e9).astype(np.int64)
+        last = np.where(t_last > t_end_ns, last - 1, last)
+        counts = np.maximum(last - state.next_k + 1, 0)
+        cells = np.repeat(np.arange(self.n), counts)
+        starts = np.repeat(state.next_k, counts)
+        offsets = np.arange(cells.size) - np.repeat(np.cumsum(counts) - counts, counts)
+        return cells, starts + offsets
+
+    def step(self, state: PhysicsState, traj: Trajectory, t_end_ns: int, *,
+             detail: bool = True) -> tuple[PhysicsState, Frames, ForceTrace]:
+        """Advance to ``t_end_ns``: the new state, the frames (arrival order) and the true force of
+        every sample. With ``detail=False`` only each cell's newest sample becomes a frame (the
+        state is integrated exactly all the same)."""
+        st = state.copy()
+        chunk = self.mechanics(st, traj, t_end_ns)
+        frames, trace = self.finish(st, chunk, detail=detail)
+        return st, frames, trace
+
+    def mechanics(self, st: PhysicsState, traj: Trajectory, t_end_ns: int) -> MechChunk:
+        """First half of a step (updates ``st`` in place): the samples due by ``t_end_ns``, the TCP
+        motion at their times and the contact stress at every force sensor, with relaxation."""
+        st.t_ns = max(int(t_end_ns), st.t_ns)
+        cells, ks = self._samples(st, st.t_ns)
+        if cells.size == 0:
+            return MechChunk.empty()
+        imp = self.imp
+        t_s = imp.clock_phase[cells] + ks / imp.clock_rate[cells]
+        t_ns = np.rint(t_s * 1e9).astype(np.int64)
+        pos, vel, acc = traj.evaluate(t_ns)
+        first, last, present = _runs(cells)
+        st.next_k[present] = ks[last] + 1
+        sxy = pos[:, None, :2] + self._sensor_xy[cells]  # (m, 3, 2)
+        depth = self.shape.height(sxy) - (pos[:, 2:3] + imp.sensor_height[cells])
+        elastic = self.law.stress(np.where(np.isfinite(depth), depth, -1.0))
+        sigma = np.maximum(self._relax(st, elastic, cells, first, last, present), 0.0)
+        f_true = sigma * self.k.sensor_area  # (m, 3) N
+        st.latest_force[present] = f_true[last].sum(axis=1)
+        return MechChunk(cells, ks, t_s, t_ns, pos, vel, acc, sigma)
+
+    def finish(self, st: PhysicsState, chunk: MechChunk, *, detail: bool = True) -> tuple[Frames, ForceTrace]:
+        """Second half of a step: heat, stick-slip, texture, sensor noise and readings for the
+        samples of ``chunk`` (which must follow ``st``'s non-mechanical state)."""
+        if chunk.size == 0:
+            return Frames.empty(), ForceTrace.empty()
+        k, imp = self.k, self.imp
+        cells, ks, t_s, t_ns, pos, vel, acc, sigma = (chunk.cells, chunk.ks, chunk.t_s, chunk.t_ns, chunk.pos,
+                                                      chunk.vel, chunk.acc, chunk.sigma)
+        first, last, present = _runs(cells)
+        f_true = sigma * k.sensor_area
+        f_cell = f_true.sum(axis=1)
+        trace = ForceTrace(cells, t_ns, f_cell)
+        pressure = sigma.mean(axis=1)
+
+        # --- heat exchange, per cell and piecewise in (contact fraction, sliding speed)
+        speed = np.hypot(vel[:, 0], vel[:, 1])
+        in_contact = pressure > 0
+        phi_bin = self.thermal.contact_bins(pressure / (pressure + k.contact_pressure_half))
+        v_bin = np.where(in_contact, speed_bins(speed), 0)
+        temps = self._heat(st, t_s, phi_bin, v_bin, first, last, present)
+
+        # --- stick-slip needs every sample (it has state); texture only the emitted ones
+        centre = pos[:, :2] + self._centres[cells]
+        prev = np.empty_like(centre)
+        prev[1:] = centre[:-1]
+        prev[first] = st.last_xy[present]
+        path = np.where(in_contact, np.hypot(*(centre - prev).T), 0.0)
+        st.last_xy[present] = centre[last]
+        slip = np.zeros(cells.size)
+        if self.slip.may_slip(st.slip, f_cell, speed, path):
+            for c, a0, b0 in zip(present, first, last + 1):
+                slip[a0:b0] = self.slip.run(st.slip, int(c), t_s[a0:b0], path[a0:b0], f_cell[a0:b0], speed[a0:b0])
+        else:
+            self.slip.settle(st.slip, present, f_cell[last], path[last])
+
+        rows = np.arange(cells.size) if detail else last
+        c_e = cells[rows]
+        u = self.shape.to_object(centre[rows])
+        w = self.shape.to_object_direction(vel[rows, :2])
+        tex = texture_acceleration(self.texture, k, u, w, pressure[rows], self.top_modulus, self.mu_k)
+        tex[:, 0] += slip[rows]
+        tex[:, 2] += 0.3 * slip[rows]
+        sp = speed[rows]
+        direction = np.where(sp[:, None] > 1e-9, vel[rows, :2] / np.maximum(sp, 1e-12)[:, None], [1.0, 0.0])
+        world = acc[rows] + self._arm_vibration(t_s[rows], vel[rows])
+        world[:, :2] += tex[:, 0:1] * direction + tex[:, 1:2] * np.stack([-direction[:, 1], direction[:, 0]], axis=1)
+        world[:, 2] += tex[:, 2] + GRAVITY  # specific force: an accelerometer at rest reads +1 g up
+        acc_cell = np.einsum("mi,mij->mj", world, self._axes[c_e]) / GRAVITY
+
+        # --- sensor noise (addressed by sample index and cell) and readings
+        noise, arrival = self._noise_and_arrival(ks[rows], c_e, t_ns[rows])
+        force = self._force_reading(f_true[rows], noise, c_e)
+        acc_g = acc_cell + imp.acc_bias[c_e] + k.acc_noise * noise[:, 3:6]
+        temp = np.stack([temps[rows, 1] + k.die_self_heating + k.die_temp_noise * noise[:, 6],
+                         temps[rows, 0] + k.temp_noise * noise[:, 7]], axis=1)
+        below = self.shape.height(centre[rows])
+        on_face = np.isfinite(below)
+        gap = np.maximum(pos[rows, 2] - np.where(on_face, below, 0.0), 0.0)
+        refl = np.where(on_face, self.obj.reflectivity, k.table_reflectivity)
+        prox = k.prox_dark + k.prox_gain * refl / (1.0 + (gap / k.prox_distance) ** 2) + k.prox_noise * noise[:, 8]
+        frames = Frames(
+            cell_index=c_e,
+            cell_id=self.cell_ids[c_e],
+            t_sample_ns=t_ns[rows],
+            t_ns=arrival,
+            proximity=prox,
+            acc=acc_g,
+            temp=temp,
+            force=force,
+            force_true=f_cell[rows],
+        )
+        return frames.take(np.lexsort((c_e, arrival))), trace
+
+    def _arm_vibration(self, t_s: np.ndarray, vel: np.ndarray) -> np.ndarray:
+        """The arm's own vibration while it moves (m/s^2, base frame): a few modes whose
+        amplitude grows with the TCP speed (reaching the trial's rms at 5 cm/s)."""
+        speed = np.linalg.norm(vel, axis=1)
+        if not np.any(speed > 1e-6) or self.cond.arm_vibration <= 0:
+            return np.zeros((t_s.size, 3))
+        modes = np.asarray(self.cond.arm_modes)  # (m, 5)
+        amp = self.cond.arm_vibration * GRAVITY * np.sqrt(2.0 / len(modes)) * np.minimum(speed / 0.05, 2.0)
+        wave = np.sin(2 * np.pi * modes[:, 0][None, :] * t_s[:, None] + modes[:, 1][None, :])  # (n, m)
+        return amp[:, None] * (wave @ modes[:, 2:5])
+
+    def _noise_and_arrival(self, ks: np.ndarray, cells: np.ndarray, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Normal deviates (n, 10) and arrival times of samples ``ks`` of ``cells``."""
+        index = ks * self.n + cells
+        lo = int(index.min())
+        u01 = self._noise.uniform(lo, int(index.max()) - lo + 1)[index - lo]
+        r = np.sqrt(-2.0 * np.log(1.0 - u01[:, 0:10:2]))
+        noise = np.empty((index.size, 10))
+        noise[:, 0::2] = r * np.cos(2 * np.pi * u01[:, 1:10:2])
+        noise[:, 1::2] = r * np.sin(2 * np.pi * u01[:, 1:10:2])
+        # The PC stamps arrivals with microsecond resolution.
+        arrival = t_ns + self._latency_ns + 1000 * np.rint(u01[:, 10] * self.k.link_jitter * 1e6).astype(np.int64)
+        return noise, arrival
+
+    def _force_reading(self, f_true: np.ndarray, noise: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        """Normalised force readings (offset + (F + noise) / gain) of the sensors of ``cells``."""
+        imp = self.imp
+        gain = imp.force_gain[cells] / self._gain_drift[cells][:, None]
+        return imp.force_offset[cells] + (f_true + self.k.force_noise * noise[:, 0:3]) / gain
+
+    def force_readings(self, chunk: MechChunk) -> tuple[np.ndarray, np.ndarray]:
+        """Arrival times and normalised force readings (n, 3) of every sample of ``chunk``: the
+        force part of the packets :meth:`finish` will produce, for a controller that needs it
+        before the rest of the packets is computed."""
+        noise, arrival = self._noise_and_arrival(chunk.ks, chunk.cells, chunk.t_ns)
+        return arrival, self._force_reading(chunk.sigma * self.k.sensor_area, noise, chunk.cells)
+
+    def _heat(self, st: PhysicsState, t_s: np.ndarray, phi_bin: np.ndarray, v_bin: np.ndarray,
+              first: np.ndarray, last: np.ndarray, present: np.ndarray) -> np.ndarray:
+        """[LM71, PCB] temperatures of every sample; updates the cells' thermal states.
+
+        Each cell's samples split into runs of constant (contact, speed) configuration; the
+        r-th runs of all cells are solved together (a batch of exact LTI solutions)."""
+        runs: list[list[tuple[int, int]]] = []
+        for a0, b0 in zip(first, last + 1):
+            change = np.flatnonzero((np.diff(phi_bin[a0:b0]) != 0) | (np.diff(v_bin[a0:b0]) != 0)) + 1 + a0
+            starts = np.concatenate([[a0], change])
+            runs.append(list(zip(starts.tolist(), np.concatenate([change, [b0]]).tolist())))
+        temps = np.empty((t_s.shape[0], 2))
+        for r in range(max(len(x) for x in runs)):
+            items = [(int(present[ci]), *cell_runs[r]) for ci, cell_runs in enumerate(runs) if r < len(cell_runs)]
+            cells_g = np.array([c for c, _, _ in items])
+            a_g = np.array([a for _, a, _ in items])
+            b_g = np.array([b for _, _, b in items])
+            lengths = b_g - a_g
+            idx = np.minimum(a_g[:, None] + np.arange(int(lengths.max()))[None, :], (b_g - 1)[:, None])
+            dt = t_s[idx] - st.thermal_t[cells_g][:, None]
+            out, end = self.thermal.propagate_many(st.thermal[cells_g], dt, lengths - 1, phi_bin[a_g], v_bin[a_g])
+            for g in range(len(items)):
+                temps[a_g[g]:b_g[g]] = out[g, : lengths[g]]
+            st.thermal[cells_g] = end
+            st.thermal_t[cells_g] = t_s[b_g - 1]
+        return temps
+
+    def _relax(self, st: PhysicsState, elastic: np.ndarray, cells: np.ndarray, first: np.ndarray,
+               last: np.ndarray, present: np.ndarray) -> np.ndarray:
+        """Quasi-linear viscoelastic stress of every sample (see :mod:`aptkt.sim.mechanics`);
+        updates the per-cell hereditary state in ``st``. Cells are laid out as rows of a padded
+        grid so that all cells recur together."""
+        rel = self.relaxation
+        if not rel.weights:
+            st.relax_last[present] = elastic[last]
+            return elastic
+        prev = np.empty_like(elastic)
+        prev[1:] = elastic[:-1]
+        prev[first] = st.relax_last[present]
+        increments = elastic - prev
+        lengths = last - first + 1
+        width = int(lengths.max())
+        if width <= 4 and np.all(lengths == width):
+            # A control tick: every cell has the same few samples; recur over them directly.
+            inc = increments.reshape(present.size, width, 3)
+            dt = 1.0 / self.imp.clock_rate[present]
+            out = rel.long_term * elastic.reshape(present.size, width, 3)
+            for i, (wgt, tau) in enumerate(zip(rel.weights, rel.times)):
+                a = np.exp(-dt / tau)[:, None]
+                gain = wgt * (tau / dt)[:, None] * (1.0 - a)
+                h = st.relax_h[i, present]
+                for j in range(width):
+                    h = a * h + gain * inc[:, j]
+                    out[:, j] += h
+                st.relax_h[i, present] = h
+            st.relax_last[present] = elastic[last]
+            return out.reshape(-1, 3)
+        pos = np.arange(cells.size) - np.repeat(first, lengths)  # position of each sample in its row
+        row = np.repeat(np.arange(present.size), lengths)
+        grid = np.zeros((present.size, width, 3))
+        grid[row, pos] = increments
+        dt = 1.0 / self.imp.clock_rate[present]
+        out = rel.long_term * elastic
+        for i, (wgt, tau) in enumerate(zip(rel.weights, rel.times)):
+            a = np.exp(-dt / tau)
+            gain = (wgt * (tau / dt) * (1.0 - a))[:, None, None]
+            h = linear_recurrence_rows(a, gain * grid, st.relax_h[i, present])
+            out += h[row, pos]
+            st.relax_h[i, present] = h[np.arange(present.size), lengths - 1]
+        st.relax_last[present] = elastic[last]
+        return out
+
+
+def _runs(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """First and last index of each cell's block in a cell-major array, and the cells present."""
+    bounds = np.flatnonzero(np.diff(cells)) + 1
+    first = np.concatenate([[0], bounds])
+    last = np.concatenate([bounds - 1, [cells.size - 1]])
+    return first, last, cells[first]
+
+
+def _child(seq: np.random.SeedSequence, n: int) -> np.random.SeedSequence:
+    return np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, n))

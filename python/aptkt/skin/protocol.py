@@ -1,0 +1,147 @@
+"""The skin's wire protocol: streaming parser, quantiser and encoder (all implemented in Rust).
+
+See ``skin-protocol.md`` (the hardware contract). Every packet is 20 bytes; sensor packets
+(header 0xFF) carry one cell's proximity, 3-axis acceleration, 2 temperatures and 3 forces.
+
+* :class:`StreamParser` turns a byte stream, fed in arbitrary chunks, into numpy columns.
+* :func:`quantize` maps physical values onto the raw integers the wire can carry.
+* :func:`encode_sensor_packets` turns raw integers into wire bytes (used by the simulator and
+  by the tests; ``StreamParser().feed(encode_sensor_packets(r), raw=True)`` returns ``r``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from aptkt._core import PACKET_LEN, PACKET_TYPES, StreamParser
+from aptkt._core import _encode_sensor_packets as _encode_core
+from aptkt._core import _quantize as _quantize_core
+from aptkt._core import encode_packet_bytes as _encode_packet_core
+
+__all__ = [
+    "StreamParser",
+    "PACKET_LEN",
+    "PACKET_TYPES",
+    "RAW_FIELDS",
+    "RAW_RANGES",
+    "SCALE",
+    "quantize",
+    "encode_sensor_packets",
+    "encode_packet",
+]
+
+#: Raw sensor fields: trailing shape and the dtype ``feed(raw=True)`` / :func:`quantize` return.
+RAW_FIELDS: Mapping[str, tuple[tuple[int, ...], type]] = MappingProxyType(
+    {
+        "cell_id": ((), np.uint16),
+        "proximity": ((), np.uint16),
+        "acc": ((3,), np.int16),
+        "temp": ((2,), np.int16),  # accelerometer die (8 bit), LM71 (14 bit)
+        "force": ((3,), np.uint16),
+    }
+)
+
+#: Representable raw values per field (per column for ``temp``), inclusive.
+RAW_RANGES: Mapping[str, tuple[tuple[int, int], ...]] = MappingProxyType(
+    {
+        "cell_id": ((0, 0x3FFF),),
+        "proximity": ((0, 0xFFFF),),
+        "acc": ((-512, 511),),
+        "temp": ((-128, 127), (-8192, 8191)),
+        "force": ((0, 0x0FFF),),
+    }
+)
+
+#: physical = raw * scale + offset, per field (temp: per column).
+SCALE: Mapping[str, tuple[tuple[float, float], ...]] = MappingProxyType(
+    {
+        "proximity": ((1 / 65536, 0.0),),
+        "acc": ((1 / 256, 0.0),),  # g
+        "temp": ((0.5, 24.0), (0.03125, 0.0)),  # °C
+        "force": ((1 / 1024, 0.0),),  # normalised
+    }
+)
+
+
+def _float_rows(name: str, value: ArrayLike, n: int, width: int | None) -> np.ndarray:
+    shape = (n,) if width is None else (n, width)
+    arr = np.asarray(value, dtype=np.float64)
+    try:
+        arr = np.broadcast_to(arr, shape)
+    except ValueError:
+        raise ValueError(f"{name}: shape {arr.shape} does not broadcast to {shape}") from None
+    return np.ascontiguousarray(arr)
+
+
+def _int64(name: str, value: ArrayLike) -> np.ndarray:
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "iu":
+        raise TypeError(f"{name} must hold integers, got dtype {arr.dtype}")
+    if arr.dtype == np.uint64 and arr.size and int(arr.max()) > np.iinfo(np.int64).max:
+        raise ValueError(f"{name}: value {int(arr.max())} is outside every field's range")
+    return np.ascontiguousarray(arr, dtype=np.int64)
+
+
+def quantize(
+    cell_id: ArrayLike,
+    proximity: ArrayLike,
+    acc_g: ArrayLike,
+    temp_c: ArrayLike,
+    force_norm: ArrayLike,
+) -> dict[str, np.ndarray]:
+    """Physical values → the raw integers the wire carries.
+
+    Each value is divided by its scale (after removing the offset), rounded half to even and
+    clipped to the field's representable range (``RAW_RANGES``). ``cell_id`` is ``(n,)``
+    integers in 0..16383 (an identity: out of range raises ``ValueError``); the other inputs
+    broadcast to ``proximity`` (n,), ``acc_g`` (n, 3) in g, ``temp_c`` (n, 2) in °C
+    (accelerometer die, LM71) and ``force_norm`` (n, 3) normalised. NaN raises ``ValueError``.
+    Returns the dict :meth:`StreamParser.feed` returns with ``raw=True``.
+    """
+    cells = _int64("cell_id", np.atleast_1d(cell_id))
+    if cells.ndim != 1:
+        raise ValueError(f"cell_id must be 1-D, got shape {cells.shape}")
+    n = cells.shape[0]
+    return _quantize_core(
+        cells,
+        _float_rows("proximity", proximity, n, None),
+        _float_rows("acc_g", acc_g, n, 3),
+        _float_rows("temp_c", temp_c, n, 2),
+        _float_rows("force_norm", force_norm, n, 3),
+    )
+
+
+def encode_sensor_packets(raw: Mapping[str, np.ndarray]) -> bytes:
+    """Raw integer fields → consecutive 20-byte sensor packets, one per row.
+
+    ``raw`` has the keys of :data:`RAW_FIELDS`: ``cell_id`` (n,), ``proximity`` (n,), ``acc``
+    (n, 3), ``temp`` (n, 2), ``force`` (n, 3), any integer dtype. A value outside its field's
+    bit width raises ``ValueError`` naming the field and the row (nothing is wrapped silently).
+    """
+    missing = [k for k in RAW_FIELDS if k not in raw]
+    if missing:
+        raise KeyError(f"encode_sensor_packets: missing field(s) {', '.join(missing)}")
+    cols = {}
+    n = None
+    for name, (tail, _) in RAW_FIELDS.items():
+        arr = _int64(name, raw[name])
+        if arr.ndim != 1 + len(tail) or arr.shape[1:] != tail:
+            expected = "(" + ", ".join(["n", *map(str, tail)]) + (",)" if not tail else ")")
+            raise ValueError(f"{name} must have shape {expected}, got {arr.shape}")
+        if n is None:
+            n = arr.shape[0]
+        elif arr.shape[0] != n:
+            raise ValueError(f"{name} has {arr.shape[0]} rows, cell_id has {n}")
+        cols[name] = arr
+    return _encode_core(cols["cell_id"], cols["proximity"], cols["acc"], cols["temp"], cols["force"])
+
+
+def encode_packet(kind: str | int, payload: bytes = bytes(18)) -> bytes:
+    """One packet of any type (by name from :data:`PACKET_TYPES` or header byte) from its 18
+    payload bytes, each < 0x80. Useful to emit commands or to test handling of other types."""
+    header = PACKET_TYPES[kind] if isinstance(kind, str) else int(kind)
+    return _encode_packet_core(header, bytes(payload))

@@ -1,0 +1,478 @@
+//! The multi-modal RBF kernel of DESIGN.md §5 (paper Eq. 1) and its dependent (transfer)
+//! variant (paper Eq. 2), with hyper-parameters in an unconstrained "theta" vector.
+//!
+//! `K(x, x') = σ² · Σ_m γ_m exp(-|x_m - x'_m|² / (2 ℓ_m²)) · Λ(x, x')` where `x_m` is modality
+//! m's block of feature columns, `γ = softmax(η)` lies on the simplex, and `Λ = λ` between a
+//! source-task row and a target-task row and 1 otherwise. `λK + (1-λ) blockdiag(K)` is a convex
+//! combination of PSD matrices, so the dependent kernel is PSD exactly when λ ∈ [0, 1].
+//!
+//! theta layout: `[log σ², log ℓ_1..ℓ_M, η_1..η_M (only if M > 1), λ (only with transfer)]`.
+//! The reported logits are normalised (`η_m = log γ_m`), and λ is kept on its natural [0, 1] scale.
+
+use faer::Mat;
+
+use crate::error::{GpError, GpResult};
+
+/// Row-major feature matrix.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Data {
+    pub values: Vec<f64>,
+    pub n: usize,
+    pub d: usize,
+}
+
+impl Data {
+    pub fn new(values: Vec<f64>, n: usize, d: usize) -> GpResult<Self> {
+        if values.len() != n * d {
+            return Err(GpError::InvalidInput(format!(
+                "feature buffer has {} values, expected {n} x {d}",
+                values.len()
+            )));
+        }
+        Ok(Data { values, n, d })
+    }
+
+    #[inline]
+    pub fn row(&self, i: usize) -> &[f64] {
+        &self.values[i * self.d..(i + 1) * self.d]
+    }
+
+    /// Fails on the first NaN or infinity, naming `what`, the row and the column.
+    pub fn check_finite(&self, what: &str) -> GpResult<()> {
+        if let Some(pos) = self.values.iter().position(|v| !v.is_finite()) {
+            return Err(GpError::NonFinite(format!(
+                "{what} contains a non-finite value ({}) at row {}, column {}",
+                self.values[pos],
+                pos / self.d.max(1),
+                pos % self.d.max(1)
+            )));
+        }
+        Ok(())
+    }
+
+    /// Rows of `self` followed by the rows of `other`.
+    pub fn stacked(&self, other: &Data) -> Data {
+        let mut values = Vec::with_capacity(self.values.len() + other.values.len());
+        values.extend_from_slice(&self.values);
+        values.extend_from_slice(&other.values);
+        Data {
+            values,
+            n: self.n + other.n,
+            d: self.d,
+        }
+    }
+}
+
+/// Which hyper-parameters theta holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Layout {
+    pub n_modalities: usize,
+    pub transfer: bool,
+}
+
+/// Lowest logit stored for a weight of 0 (γ ≈ 1e-22 relative).
+const MIN_LOGIT: f64 = -50.0;
+
+impl Layout {
+    pub fn has_weights(&self) -> bool {
+        self.n_modalities > 1
+    }
+    pub fn len(&self) -> usize {
+        1 + self.n_modalities + if self.has_weights() { self.n_modalities } else { 0 } + usize::from(self.transfer)
+    }
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+    pub const SIGNAL: usize = 0;
+    pub fn length_scale(&self, m: usize) -> usize {
+        1 + m
+    }
+    pub fn weight(&self, m: usize) -> Option<usize> {
+        self.has_weights().then(|| 1 + self.n_modalities + m)
+    }
+    pub fn lambda(&self) -> Option<usize> {
+        self.transfer.then(|| self.len() - 1)
+    }
+
+    pub fn names(&self, modality_names: &[String]) -> Vec<String> {
+        let mut names = vec!["log_signal_variance".to_string()];
+        for m in 0..self.n_modalities {
+            names.push(format!("log_length_scale[{}]", modality_names[m]));
+        }
+        if self.has_weights() {
+            for m in 0..self.n_modalities {
+                names.push(format!("weight_logit[{}]", modality_names[m]));
+            }
+        }
+        if self.transfer {
+            names.push("transfer_lambda".to_string());
+        }
+        names
+    }
+
+    /// Natural-scale hyper-parameters from theta.
+    pub fn decode(&self, theta: &[f64]) -> GpResult<Hyper> {
+        if theta.len() != self.len() {
+            return Err(GpError::InvalidInput(format!(
+                "theta has {} entries, this model has {} hyper-parameters",
+                theta.len(),
+                self.len()
+            )));
+        }
+        if let Some(bad) = theta.iter().position(|v| !v.is_finite()) {
+            return Err(GpError::NonFinite(format!("theta[{bad}] is not finite ({})", theta[bad])));
+        }
+        let m = self.n_modalities;
+        let signal_variance = theta[0].exp();
+        let length_scales: Vec<f64> = theta[1..=m].iter().map(|v| v.exp()).collect();
+        let weights = if self.has_weights() {
+            softmax(&theta[1 + m..1 + 2 * m])
+        } else {
+            vec![1.0]
+        };
+        let lambda = match self.lambda() {
+            Some(i) => {
+                let l = theta[i];
+                if !(0.0..=1.0).contains(&l) {
+                    return Err(GpError::InvalidInput(format!(
+                        "transfer lambda must lie in [0, 1] (the dependent kernel is indefinite otherwise), got {l}"
+                    )));
+                }
+                l
+            }
+            None => 1.0,
+        };
+        Ok(Hyper {
+            signal_variance,
+            length_scales,
+            weights,
+            lambda,
+        })
+    }
+
+    pub fn encode(&self, h: &Hyper) -> Vec<f64> {
+        let mut theta = Vec::with_capacity(self.len());
+        theta.push(h.signal_variance.ln());
+        theta.extend(h.length_scales.iter().map(|l| l.ln()));
+        if self.has_weights() {
+            let total: f64 = h.weights.iter().sum();
+            theta.extend(h.weights.iter().map(|w| (w / total).ln().max(MIN_LOGIT)));
+        }
+        if self.transfer {
+            theta.push(h.lambda);
+        }
+        theta
+    }
+}
+
+pub fn softmax(logits: &[f64]) -> Vec<f64> {
+    let max = logits.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    let e: Vec<f64> = logits.iter().map(|v| (v - max).exp()).collect();
+    let s: f64 = e.iter().sum();
+    e.into_iter().map(|v| v / s).collect()
+}
+
+/// Natural-scale hyper-parameters.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Hyper {
+    pub signal_variance: f64,
+    pub length_scales: Vec<f64>,
+    pub weights: Vec<f64>,
+    pub lambda: f64,
+}
+
+/// Validated modality column groups.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Modalities {
+    pub groups: Vec<Vec<usize>>,
+}
+
+impl Modalities {
+    pub fn new(groups: Vec<Vec<usize>>, d: usize) -> GpResult<Self> {
+        if groups.is_empty() {
+            return Err(GpError::InvalidInput("at least one modality is needed".into()));
+        }
+        for (m, g) in groups.iter().enumerate() {
+            if g.is_empty() {
+                return Err(GpError::InvalidInput(format!("modality {m} has no feature columns")));
+            }
+            if let Some(c) = g.iter().find(|&&c| c >= d) {
+                return Err(GpError::InvalidInput(format!(
+                    "modality {m} refers to column {c}, but the data have {d} columns"
+                )));
+            }
+        }
+        Ok(Modalities { groups })
+    }
+
+    pub fn all_columns(d: usize) -> Self {
+        Modalities {
+            groups: vec![(0..d).collect()],
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.groups.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.groups.is_empty()
+    }
+
+    #[inline]
+    fn sq_dist(&self, m: usize, a: &[f64], b: &[f64]) -> f64 {
+        self.groups[m]
+            .iter()
+            .map(|&c| {
+                let t = a[c] - b[c];
+                t * t
+            })
+            .sum()
+    }
+}
+
+/// Squared distances per modality between all rows of a training set (source rows first).
+pub struct PairDistances {
+    pub n: usize,
+    pub n_source: usize,
+    pub per_modality: Vec<Mat<f64>>,
+}
+
+impl PairDistances {
+    pub fn new(x: &Data, n_source: usize, modalities: &Modalities) -> Self {
+        let n = x.n;
+        let per_modality = (0..modalities.len())
+            .map(|m| {
+                let mut d = Mat::<f64>::zeros(n, n);
+                for j in 0..n {
+                    for i in (j + 1)..n {
+                        let v = modalities.sq_dist(m, x.row(i), x.row(j));
+                        d[(i, j)] = v;
+                        d[(j, i)] = v;
+                    }
+                }
+                d
+            })
+            .collect();
+        PairDistances {
+            n,
+            n_source,
+            per_modality,
+        }
+    }
+
+    #[inline]
+    pub fn is_cross(&self, i: usize, j: usize) -> bool {
+        (i < self.n_source) != (j < self.n_source)
+    }
+
+    /// Median of the non-zero pairwise distances of modality m among the target rows (all rows
+    /// when there are too few): the data-scaled starting length-scale.
+    pub fn median_distance(&self, m: usize) -> f64 {
+        let start = if self.n - self.n_source >= 2 { self.n_source } else { 0 };
+        let d = &self.per_modality[m];
+        let mut v: Vec<f64> = Vec::new();
+        for j in start..self.n {
+            for i in (j + 1)..self.n {
+                let x = d[(i, j)];
+                if x > 0.0 {
+                    v.push(x.sqrt());
+                }
+            }
+        }
+        if v.is_empty() {
+            return 1.0;
+        }
+        let mid = v.len() / 2;
+        let (_, median, _) = v.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+        *median
+    }
+}
+
+/// The kernel matrix at given hyper-parameters, with the per-modality unit RBF matrices the
+/// gradient needs.
+pub struct KernelEval {
+    pub k: Mat<f64>,
+    pub parts: Vec<Mat<f64>>,
+    /// Jitter added to the diagonal of `k`, relative to the signal variance.
+    pub jitter: f64,
+}
+
+impl KernelEval {
+    pub fn new(dist: &PairDistances, h: &Hyper) -> Self {
+        let n = dist.n;
+        let parts: Vec<Mat<f64>> = dist
+            .per_modality
+            .iter()
+            .zip(h.length_scales.iter())
+            .map(|(d, &l)| {
+                let c = -0.5 / (l * l);
+                Mat::<f64>::from_fn(n, n, |i, j| (c * d[(i, j)]).exp())
+            })
+            .collect();
+        let mut k = Mat::<f64>::zeros(n, n);
+        for j in 0..n {
+            for i in 0..n {
+                let mut s = 0.0;
+                for (part, w) in parts.iter().zip(h.weights.iter()) {
+                    s += w * part[(i, j)];
+                }
+                let mask = if dist.is_cross(i, j) { h.lambda } else { 1.0 };
+                k[(i, j)] = h.signal_variance * s * mask;
+            }
+        }
+        KernelEval { k, parts, jitter: 0.0 }
+    }
+
+    pub fn with_jitter(mut self, relative: f64, signal_variance: f64) -> Self {
+        let add = (relative - self.jitter) * signal_variance;
+        for i in 0..self.k.nrows() {
+            self.k[(i, i)] += add;
+        }
+        self.jitter = relative;
+        self
+    }
+
+    /// For every hyper-parameter p: `s1[p] = Σ_ij G_ij ∂K_ij/∂θ_p` and `b[p] = (∂K/∂θ_p) v`.
+    /// One pass over the matrix computes every derivative element on the fly, so no
+    /// n × n × p gradient tensor is ever stored.
+    pub fn contract_gradients(
+        &self,
+        layout: &Layout,
+        h: &Hyper,
+        dist: &PairDistances,
+        g: &Mat<f64>,
+        v: &[f64],
+    ) -> (Vec<f64>, Vec<Vec<f64>>) {
+        let n = dist.n;
+        let p_len = layout.len();
+        let n_mod = layout.n_modalities;
+        let mut s1 = vec![0.0; p_len];
+        let mut b = vec![vec![0.0; n]; p_len];
+        let mut c = vec![0.0; p_len];
+        let inv_l2: Vec<f64> = h.length_scales.iter().map(|l| 1.0 / (l * l)).collect();
+        let sf2 = h.signal_variance;
+        for j in 0..n {
+            let vj = v[j];
+            for i in 0..n {
+                let cross = dist.is_cross(i, j);
+                let mask = if cross { h.lambda } else { 1.0 };
+                let mut unit = 0.0;
+                for m in 0..n_mod {
+                    unit += h.weights[m] * self.parts[m][(i, j)];
+                }
+                c[Layout::SIGNAL] = sf2 * unit * mask;
+                for m in 0..n_mod {
+                    let km = self.parts[m][(i, j)];
+                    c[layout.length_scale(m)] =
+                        sf2 * h.weights[m] * km * dist.per_modality[m][(i, j)] * inv_l2[m] * mask;
+                    if let Some(w) = layout.weight(m) {
+                        c[w] = sf2 * h.weights[m] * (km - unit) * mask;
+                    }
+                }
+                if let Some(li) = layout.lambda() {
+                    c[li] = if cross { sf2 * unit } else { 0.0 };
+                }
+                let gij = g[(i, j)];
+                for p in 0..p_len {
+                    s1[p] += gij * c[p];
+                    b[p][i] += c[p] * vj;
+                }
+            }
+        }
+        (s1, b)
+    }
+}
+
+/// Cross-kernel `K(X_train, X*)` (n_train × m) for test rows that belong to the target task.
+pub fn cross_kernel(
+    train: &Data,
+    n_source: usize,
+    test: &Data,
+    modalities: &Modalities,
+    h: &Hyper,
+) -> Mat<f64> {
+    let coef: Vec<f64> = h.length_scales.iter().map(|l| -0.5 / (l * l)).collect();
+    Mat::<f64>::from_fn(train.n, test.n, |i, j| {
+        let (a, b) = (train.row(i), test.row(j));
+        let mut s = 0.0;
+        for m in 0..modalities.len() {
+            s += h.weights[m] * (coef[m] * modalities.sq_dist(m, a, b)).exp();
+        }
+        let mask = if i < n_source { h.lambda } else { 1.0 };
+        h.signal_variance * s * mask
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn data() -> Data {
+        Data::new(
+            vec![0.0, 1.0, 2.0, 0.5, -1.0, 0.3, 1.5, 2.5, 0.0, 0.2, 0.1, 0.9],
+            4,
+            3,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn theta_round_trip() {
+        let layout = Layout { n_modalities: 2, transfer: true };
+        let h = Hyper {
+            signal_variance: 2.5,
+            length_scales: vec![0.3, 4.0],
+            weights: vec![0.25, 0.75],
+            lambda: 0.4,
+        };
+        let back = layout.decode(&layout.encode(&h)).unwrap();
+        assert!((back.signal_variance - 2.5).abs() < 1e-12);
+        assert!((back.weights[1] - 0.75).abs() < 1e-12);
+        assert_eq!(back.lambda, 0.4);
+        assert_eq!(layout.len(), 6);
+        assert!(layout.decode(&[0.0; 5]).is_err());
+        let mut bad = layout.encode(&h);
+        bad[5] = 1.5;
+        assert!(matches!(layout.decode(&bad), Err(GpError::InvalidInput(_))));
+    }
+
+    #[test]
+    fn kernel_matches_direct_formula() {
+        let x = data();
+        let mods = Modalities::new(vec![vec![0, 1], vec![2]], 3).unwrap();
+        let dist = PairDistances::new(&x, 1, &mods);
+        let h = Hyper {
+            signal_variance: 1.7,
+            length_scales: vec![0.8, 2.0],
+            weights: vec![0.6, 0.4],
+            lambda: 0.3,
+        };
+        let ev = KernelEval::new(&dist, &h);
+        for i in 0..4 {
+            for j in 0..4 {
+                let (a, b) = (x.row(i), x.row(j));
+                let d0 = (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2);
+                let d1 = (a[2] - b[2]).powi(2);
+                let k = 0.6 * (-d0 / (2.0 * 0.64)).exp() + 0.4 * (-d1 / 8.0).exp();
+                let mask = if (i < 1) != (j < 1) { 0.3 } else { 1.0 };
+                assert!((ev.k[(i, j)] - 1.7 * k * mask).abs() < 1e-14);
+            }
+        }
+        // The cross-kernel of the training rows against the target rows equals the block of K.
+        let target = Data::new(x.values[3..].to_vec(), 3, 3).unwrap();
+        let kx = cross_kernel(&x, 1, &target, &mods, &h);
+        for i in 0..4 {
+            for j in 0..3 {
+                assert!((kx[(i, j)] - ev.k[(i, j + 1)]).abs() < 1e-14);
+            }
+        }
+    }
+
+    #[test]
+    fn modalities_are_validated() {
+        assert!(Modalities::new(vec![], 3).is_err());
+        assert!(Modalities::new(vec![vec![]], 3).is_err());
+        assert!(Modalities::new(vec![vec![0, 3]], 3).is_err());
+    }
+}

@@ -1,0 +1,274 @@
+//! Binary Laplace-approximation GP classification with the logistic likelihood
+//! (Rasmussen & Williams, GPML, Algorithms 3.1, 3.2 and 5.1). Labels are ±1.
+
+use faer::{Mat, MatRef};
+
+use crate::error::{GpError, GpResult};
+use crate::kernel::{KernelEval, Layout, PairDistances, Hyper};
+use crate::likelihood::{log_sigmoid, sigmoid};
+use crate::linalg;
+
+/// Newton mode-finding settings.
+#[derive(Debug, Clone, Copy)]
+pub struct NewtonConfig {
+    pub max_iter: usize,
+    /// Stop when the objective Ψ(f) changes by less than this.
+    pub tol: f64,
+}
+
+impl Default for NewtonConfig {
+    fn default() -> Self {
+        NewtonConfig { max_iter: 100, tol: 1e-10 }
+    }
+}
+
+/// The posterior mode and everything Algorithms 3.2 and 5.1 reuse.
+pub struct Mode {
+    pub f: Vec<f64>,
+    /// `a = K⁻¹ f`; at convergence it equals `∇ log p(y | f) = t - π`.
+    pub a: Vec<f64>,
+    pub pi: Vec<f64>,
+    pub sw: Vec<f64>,
+    /// Lower Cholesky factor of `B = I + W½ K W½`.
+    pub l: Mat<f64>,
+    pub lml: f64,
+    pub iterations: usize,
+    pub converged: bool,
+}
+
+/// `Ψ(f) = -½ aᵀ f + Σ log σ(y f)`.
+fn objective(a: &[f64], f: &[f64], y: &[f64]) -> f64 {
+    let quad: f64 = a.iter().zip(f).map(|(a, f)| a * f).sum();
+    let lik: f64 = f.iter().zip(y).map(|(f, y)| log_sigmoid(y * f)).sum();
+    -0.5 * quad + lik
+}
+
+/// `W½` and the Cholesky factor of `B` at latent values `f`. Err carries the failing pivot.
+fn factor_b(k: MatRef<'_, f64>, f: &[f64]) -> Result<(Vec<f64>, Vec<f64>, Mat<f64>), usize> {
+    let n = f.len();
+    let pi: Vec<f64> = f.iter().map(|&v| sigmoid(v)).collect();
+    let sw: Vec<f64> = pi.iter().map(|p| (p * (1.0 - p)).sqrt()).collect();
+    let mut b = Mat::<f64>::from_fn(n, n, |i, j| sw[i] * k[(i, j)] * sw[j] + if i == j { 1.0 } else { 0.0 });
+    linalg::cholesky_lower(&mut b)?;
+    Ok((pi, sw, b))
+}
+
+/// Algorithm 3.1 with a step-halving safeguard (the plain Newton step can overshoot when the
+/// kernel is large), warm-started from `warm_a` when given and better than f = 0.
+/// Err carries the failing Cholesky pivot.
+pub fn find_mode(k: MatRef<'_, f64>, y: &[f64], warm_a: Option<&[f64]>, cfg: &NewtonConfig) -> Result<Mode, usize> {
+    let n = y.len();
+    let mut a = vec![0.0; n];
+    let mut f = vec![0.0; n];
+    let mut psi = objective(&a, &f, y);
+    if let Some(w) = warm_a {
+        let mut fw = vec![0.0; n];
+        linalg::matvec(k, w, &mut fw);
+        let psi_w = objective(w, &fw, y);
+        if psi_w > psi {
+            a.copy_from_slice(w);
+            f = fw;
+            psi = psi_w;
+        }
+    }
+    let mut converged = false;
+    let mut iterations = 0;
+    let mut kb = vec![0.0; n];
+    let mut f_new = vec![0.0; n];
+    for it in 0..cfg.max_iter {
+        iterations = it + 1;
+        let (pi, sw, l) = factor_b(k, &f)?;
+        // b = W f + ∇log p(y|f), with ∇log p = t - π and t = (y + 1) / 2.
+        let b: Vec<f64> = (0..n)
+            .map(|i| sw[i] * sw[i] * f[i] + (0.5 * (y[i] + 1.0) - pi[i]))
+            .collect();
+        linalg::matvec(k, &b, &mut kb);
+        let mut v: Vec<f64> = (0..n).map(|i| sw[i] * kb[i]).collect();
+        linalg::solve_lower(l.as_ref(), &mut v);
+        linalg::solve_lower_transpose(l.as_ref(), &mut v);
+        let a_full: Vec<f64> = (0..n).map(|i| b[i] - sw[i] * v[i]).collect();
+        // Halve the step in a-space until the objective does not decrease.
+        let mut step = 1.0;
+        let mut a_new = a_full.clone();
+        let mut psi_new;
+        loop {
+            linalg::matvec(k, &a_new, &mut f_new);
+            psi_new = objective(&a_new, &f_new, y);
+            if psi_new >= psi - 1e-12 * psi.abs().max(1.0) || step < 1e-6 {
+                break;
+            }
+            step *= 0.5;
+            for i in 0..n {
+                a_new[i] = a[i] + step * (a_full[i] - a[i]);
+            }
+        }
+        let change = (psi_new - psi).abs();
+        a = a_new;
+        std::mem::swap(&mut f, &mut f_new);
+        psi = psi_new;
+        if change < cfg.tol {
+            converged = true;
+            break;
+        }
+    }
+    let (pi, sw, l) = factor_b(k, &f)?;
+    let log_det_half: f64 = (0..n).map(|i| l[(i, i)].ln()).sum();
+    let lml = objective(&a, &f, y) - log_det_half;
+    Ok(Mode {
+        f,
+        a,
+        pi,
+        sw,
+        l,
+        lml,
+        iterations,
+        converged,
+    })
+}
+
+/// Mode-finding with the jitter policy: if `B` cannot be factorised, add
+/// `jitter · σ²` to K's diagonal for jitter = 1e-10, 1e-8, ... up to `max_jitter`, then fail.
+pub fn find_mode_with_jitter(
+    eval: KernelEval,
+    signal_variance: f64,
+    y: &[f64],
+    warm_a: Option<&[f64]>,
+    cfg: &NewtonConfig,
+    max_jitter: f64,
+) -> GpResult<(KernelEval, Mode)> {
+    if let Some(bad) = eval.k.col_iter().flat_map(|c| c.iter()).find(|v| !v.is_finite()) {
+        return Err(GpError::NonFinite(format!(
+            "the kernel matrix contains a non-finite value ({bad}); the hyper-parameters are out of range"
+        )));
+    }
+    let mut eval = eval;
+    let mut jitter = 0.0;
+    loop {
+        match find_mode(eval.k.as_ref(), y, warm_a, cfg) {
+            Ok(mode) => return Ok((eval, mode)),
+            Err(pivot) => {
+                let next = if jitter == 0.0 { 1e-10 } else { jitter * 100.0 };
+                if next > max_jitter * (1.0 + 1e-12) {
+                    return Err(GpError::NotPositiveDefinite { pivot, jitter });
+                }
+                jitter = next;
+                eval = eval.with_jitter(jitter, signal_variance);
+            }
+        }
+    }
+}
+
+/// Gradient of the Laplace log marginal likelihood with respect to every entry of theta
+/// (Algorithm 5.1).
+pub fn lml_gradient(layout: &Layout, h: &Hyper, dist: &PairDistances, eval: &KernelEval, mode: &Mode) -> Vec<f64> {
+    let n = mode.f.len();
+    let k = &eval.k;
+    // Z = W½ B⁻¹ W½ (GPML's R).
+    let binv = linalg::inverse_from_cholesky(mode.l.as_ref());
+    let z = Mat::<f64>::from_fn(n, n, |i, j| mode.sw[i] * binv[(i, j)] * mode.sw[j]);
+    // diag(K - K Z K) = diag(K) - column sums of C² with C = L⁻¹ W½ K.
+    let mut c = Mat::<f64>::from_fn(n, n, |i, j| mode.sw[i] * k[(i, j)]);
+    linalg::solve_lower_mat(mode.l.as_ref(), c.as_mut());
+    // s2 = ∂LML/∂f̂ = -½ diag(Σ) ∘ ∂W/∂f, with Σ = (K⁻¹ + W)⁻¹ and, for the logistic,
+    // ∂W_ii/∂f_i = π(1-π)(1-2π) (= -∇³ log p; GPML writes this factor as ∇³ log p).
+    let s2: Vec<f64> = (0..n)
+        .map(|j| {
+            let cc: f64 = c.col(j).iter().map(|v| v * v).sum();
+            let var = k[(j, j)] - cc;
+            let p = mode.pi[j];
+            -0.5 * var * (p * (1.0 - p) * (1.0 - 2.0 * p))
+        })
+        .collect();
+    // ∂LML/∂θ = ½ aᵀ C a - ½ tr(Z C) + s2ᵀ (b - K Z b), b = C ∇log p = C a at the mode.
+    let g = Mat::<f64>::from_fn(n, n, |i, j| 0.5 * (mode.a[i] * mode.a[j] - z[(i, j)]));
+    let (s1, bs) = eval.contract_gradients(layout, h, dist, &g, &mode.a);
+    let mut zb = vec![0.0; n];
+    let mut kzb = vec![0.0; n];
+    s1.iter()
+        .zip(bs.iter())
+        .map(|(s1p, b)| {
+            linalg::matvec(z.as_ref(), b, &mut zb);
+            linalg::matvec(k.as_ref(), &zb, &mut kzb);
+            s1p + (0..n).map(|i| s2[i] * (b[i] - kzb[i])).sum::<f64>()
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kernel::{Data, Modalities};
+
+    #[test]
+    fn mode_satisfies_the_fixed_point() {
+        // At the mode, f = K ∇log p(y|f).
+        let x = Data::new((0..20).map(|i| (i as f64 * 0.37).sin() * 2.0).collect(), 10, 2).unwrap();
+        let y: Vec<f64> = (0..10).map(|i| if i % 3 == 0 { 1.0 } else { -1.0 }).collect();
+        let mods = Modalities::all_columns(2);
+        let dist = PairDistances::new(&x, 0, &mods);
+        let h = Hyper { signal_variance: 4.0, length_scales: vec![0.7], weights: vec![1.0], lambda: 1.0 };
+        let ev = KernelEval::new(&dist, &h);
+        let mode = find_mode(ev.k.as_ref(), &y, None, &NewtonConfig::default()).unwrap();
+        assert!(mode.converged);
+        let grad: Vec<f64> = (0..10).map(|i| 0.5 * (y[i] + 1.0) - mode.pi[i]).collect();
+        let mut kg = vec![0.0; 10];
+        linalg::matvec(ev.k.as_ref(), &grad, &mut kg);
+        for i in 0..10 {
+            assert!((kg[i] - mode.f[i]).abs() < 1e-6, "{} vs {}", kg[i], mode.f[i]);
+        }
+    }
+
+    #[test]
+    fn gradient_matches_finite_differences() {
+        let x = Data::new((0..36).map(|i| ((i * 7) as f64 * 0.31).cos() * 1.5).collect(), 12, 3).unwrap();
+        let y: Vec<f64> = (0..12).map(|i| if (i * 5) % 7 < 3 { 1.0 } else { -1.0 }).collect();
+        let mods = Modalities::new(vec![vec![0, 1], vec![2]], 3).unwrap();
+        let dist = PairDistances::new(&x, 4, &mods);
+        let layout = Layout { n_modalities: 2, transfer: true };
+        let theta = vec![1.1, -0.2, 0.4, 0.3, -0.5, 0.35];
+        let lml = |t: &[f64]| {
+            let h = layout.decode(t).unwrap();
+            let ev = KernelEval::new(&dist, &h);
+            find_mode(ev.k.as_ref(), &y, None, &NewtonConfig { max_iter: 200, tol: 1e-14 }).unwrap().lml
+        };
+        let h = layout.decode(&theta).unwrap();
+        let ev = KernelEval::new(&dist, &h);
+        let mode = find_mode(ev.k.as_ref(), &y, None, &NewtonConfig { max_iter: 200, tol: 1e-14 }).unwrap();
+        let grad = lml_gradient(&layout, &h, &dist, &ev, &mode);
+        for p in 0..theta.len() {
+            let e = 1e-5;
+            let mut tp = theta.clone();
+            let mut tm = theta.clone();
+            tp[p] += e;
+            tm[p] -= e;
+            let fd = (lml(&tp) - lml(&tm)) / (2.0 * e);
+            assert!((fd - grad[p]).abs() < 1e-6 * (1.0 + fd.abs()), "param {p}: fd {fd} vs analytic {}", grad[p]);
+        }
+    }
+
+    #[test]
+    fn indefinite_kernel_raises_after_jitter() {
+        // A kernel with a large negative eigenvalue cannot be rescued by small jitter.
+        let k = Mat::<f64>::from_fn(2, 2, |i, j| if i == j { 1.0 } else { 30.0 });
+        let ev = KernelEval { k, parts: vec![], jitter: 0.0 };
+        let r = find_mode_with_jitter(ev, 1.0, &[1.0, -1.0], None, &NewtonConfig::default(), 1e-6);
+        assert!(matches!(r, Err(GpError::NotPositiveDefinite { .. })), "{:?}", r.err());
+    }
+
+    #[test]
+    fn slightly_indefinite_kernel_is_rescued_by_jitter() {
+        // B = I + W½KW½ with W = 1/4 at f = 0 has an exact zero pivot when K_00 = -4; the
+        // smallest jitter makes it factorisable again.
+        let k = Mat::<f64>::from_fn(2, 2, |i, j| match (i, j) {
+            (0, 0) => -4.0,
+            (1, 1) => 1.0,
+            _ => 0.0,
+        });
+        let ev = KernelEval { k, parts: vec![], jitter: 0.0 };
+        let r = find_mode_with_jitter(ev, 1.0, &[1.0, -1.0], None, &NewtonConfig { max_iter: 1, tol: 1e-10 }, 1e-6);
+        match r {
+            Ok((ev, _)) => assert!(ev.jitter > 0.0 && ev.jitter <= 1e-6),
+            Err(e) => panic!("expected jitter to rescue the factorisation: {e}"),
+        }
+    }
+}

@@ -1,0 +1,147 @@
+//! The few dense operations the Laplace algorithms need, on top of faer (sequential: the
+//! parallelism is over one-vs-all classifiers, one per thread).
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt;
+use faer::linalg::triangular_solve;
+use faer::{Mat, MatMut, MatRef, Par};
+
+/// In-place lower Cholesky factor of a symmetric positive-definite matrix (only the lower
+/// triangle is read). Returns the failing pivot on error. The strictly upper triangle is
+/// zeroed so the result is the factor itself.
+pub fn cholesky_lower(a: &mut Mat<f64>) -> Result<(), usize> {
+    let n = a.nrows();
+    let mut buf = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(n, Par::Seq, Default::default()));
+    let stack = MemStack::new(&mut buf);
+    llt::factor::cholesky_in_place(a.as_mut(), Default::default(), Par::Seq, stack, Default::default())
+        .map_err(|e| match e {
+            llt::factor::LltError::NonPositivePivot { index } => index,
+        })?;
+    for j in 1..n {
+        for i in 0..j {
+            a[(i, j)] = 0.0;
+        }
+    }
+    Ok(())
+}
+
+/// Solves `L x = b` in place for a lower-triangular `L`.
+pub fn solve_lower(l: MatRef<'_, f64>, rhs: &mut [f64]) {
+    let n = rhs.len();
+    let rhs = MatMut::from_column_major_slice_mut(rhs, n, 1);
+    triangular_solve::solve_lower_triangular_in_place(l, rhs, Par::Seq);
+}
+
+/// Solves `Lᵀ x = b` in place for a lower-triangular `L`.
+pub fn solve_lower_transpose(l: MatRef<'_, f64>, rhs: &mut [f64]) {
+    let n = rhs.len();
+    let rhs = MatMut::from_column_major_slice_mut(rhs, n, 1);
+    triangular_solve::solve_upper_triangular_in_place(l.transpose(), rhs, Par::Seq);
+}
+
+/// Solves `L X = B` in place for a matrix right-hand side.
+pub fn solve_lower_mat(l: MatRef<'_, f64>, rhs: MatMut<'_, f64>) {
+    triangular_solve::solve_lower_triangular_in_place(l, rhs, Par::Seq);
+}
+
+/// `(L Lᵀ)⁻¹` from the lower Cholesky factor, as a full symmetric matrix.
+pub fn inverse_from_cholesky(l: MatRef<'_, f64>) -> Mat<f64> {
+    let n = l.nrows();
+    let mut out = Mat::<f64>::zeros(n, n);
+    let mut buf = MemBuffer::new(llt::inverse::inverse_scratch::<f64>(n, Par::Seq));
+    let stack = MemStack::new(&mut buf);
+    llt::inverse::inverse(out.as_mut(), l, Par::Seq, stack);
+    for j in 1..n {
+        for i in 0..j {
+            out[(i, j)] = out[(j, i)];
+        }
+    }
+    out
+}
+
+/// `y = A x` for a column-major square or rectangular `A`.
+pub fn matvec(a: MatRef<'_, f64>, x: &[f64], y: &mut [f64]) {
+    y.iter_mut().for_each(|v| *v = 0.0);
+    for (j, &xj) in x.iter().enumerate() {
+        if xj == 0.0 {
+            continue;
+        }
+        let col = a.col(j);
+        for (i, yi) in y.iter_mut().enumerate() {
+            *yi += col[i] * xj;
+        }
+    }
+}
+
+/// `y = Aᵀ x`.
+pub fn matvec_t(a: MatRef<'_, f64>, x: &[f64], y: &mut [f64]) {
+    for (j, yj) in y.iter_mut().enumerate() {
+        let col = a.col(j);
+        let mut s = 0.0;
+        for (i, &xi) in x.iter().enumerate() {
+            s += col[i] * xi;
+        }
+        *yj = s;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spd(n: usize) -> Mat<f64> {
+        let a = Mat::<f64>::from_fn(n, n, |i, j| ((i * 7 + j * 13) % 11) as f64 / 11.0 - 0.4);
+        let mut s = Mat::<f64>::zeros(n, n);
+        for i in 0..n {
+            for j in 0..n {
+                let mut v = 0.0;
+                for k in 0..n {
+                    v += a[(i, k)] * a[(j, k)];
+                }
+                s[(i, j)] = v + if i == j { 1.0 } else { 0.0 };
+            }
+        }
+        s
+    }
+
+    #[test]
+    fn cholesky_reconstructs() {
+        let a = spd(9);
+        let mut l = a.clone();
+        cholesky_lower(&mut l).unwrap();
+        let r = &l * l.transpose();
+        for i in 0..9 {
+            for j in 0..9 {
+                assert!((r[(i, j)] - a[(i, j)]).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn solves_and_inverse_agree() {
+        let a = spd(12);
+        let mut l = a.clone();
+        cholesky_lower(&mut l).unwrap();
+        let inv = inverse_from_cholesky(l.as_ref());
+        let b: Vec<f64> = (0..12).map(|i| (i as f64).sin()).collect();
+        let mut x = b.clone();
+        solve_lower(l.as_ref(), &mut x);
+        solve_lower_transpose(l.as_ref(), &mut x);
+        let mut y = vec![0.0; 12];
+        matvec(inv.as_ref(), &b, &mut y);
+        for i in 0..12 {
+            assert!((x[i] - y[i]).abs() < 1e-10);
+        }
+        let mut back = vec![0.0; 12];
+        matvec(a.as_ref(), &x, &mut back);
+        for i in 0..12 {
+            assert!((back[i] - b[i]).abs() < 1e-10);
+        }
+    }
+
+    #[test]
+    fn indefinite_matrix_fails() {
+        let mut a = Mat::<f64>::from_fn(2, 2, |i, j| if i == j { 1.0 } else { 3.0 });
+        assert!(cholesky_lower(&mut a).is_err());
+    }
+}
