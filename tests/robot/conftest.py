@@ -2,10 +2,17 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import pytest
-from loopback_helpers import (
+
+# The test modules import their helpers by name (``loopback_helpers``); with pytest's
+# importlib import mode the test directory is not on sys.path by itself.
+sys.path.insert(0, str(Path(__file__).parent))
+
+from loopback_helpers import (  # noqa: E402
     DEFAULT_CONTACT,
     FAST,
     PLACEMENT,
@@ -14,8 +21,8 @@ from loopback_helpers import (
     free_loopback_host,
 )
 
-from aptkt.robot import UR10, SafetyLimits
-from aptkt.robot.loopback import Loopback
+from aptkt.robot import UR10, SafetyLimits  # noqa: E402
+from aptkt.robot.loopback import Loopback  # noqa: E402
 
 
 @pytest.fixture(scope="module")
