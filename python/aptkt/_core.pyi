@@ -83,3 +83,33 @@ def fit_gpc(
 def kernel_matrix(
     x: NDArray[np.float64], theta: Sequence[float], modalities: Sequence[Sequence[int]], n_source: int = 0
 ) -> NDArray[np.float64]: ...
+
+# -- skin protocol ----------------------------------------------------------------------------
+PACKET_LEN: int
+PACKET_TYPES: dict[str, int]
+
+class StreamParser:
+    def __init__(self) -> None: ...
+    def feed(self, data: bytes | bytearray | memoryview, *, raw: bool = False) -> dict[str, NDArray]: ...
+    @property
+    def stats(self) -> dict[str, int | dict[str, int]]: ...
+    @property
+    def pending(self) -> int: ...
+    def discard_pending(self) -> None: ...
+    def reset(self) -> None: ...
+
+def _quantize(
+    cell_id: NDArray[np.int64],
+    proximity: NDArray[np.float64],
+    acc_g: NDArray[np.float64],
+    temp_c: NDArray[np.float64],
+    force_norm: NDArray[np.float64],
+) -> dict[str, NDArray]: ...
+def _encode_sensor_packets(
+    cell_id: NDArray[np.int64],
+    proximity: NDArray[np.int64],
+    acc: NDArray[np.int64],
+    temp: NDArray[np.int64],
+    force: NDArray[np.int64],
+) -> bytes: ...
+def encode_packet_bytes(header: int, payload: bytes) -> bytes: ...

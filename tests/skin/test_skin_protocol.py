@@ -166,8 +166,9 @@ def test_feed_accepts_bytes_like_and_rejects_other_types():
     data = encode_sensor_packets(random_raw(np.random.default_rng(5), 4))
     for form in (bytearray(data), memoryview(data), np.frombuffer(data, dtype=np.uint8)):
         assert StreamParser().feed(form, raw=True)["cell_id"].shape == (4,)
-    with pytest.raises(TypeError, match="bytes-like"):
-        StreamParser().feed("not bytes")
+    for bad in ("not bytes", 5, None, [1, 2]):
+        with pytest.raises(TypeError, match="bytes-like"):
+            StreamParser().feed(bad)
     empty = StreamParser().feed(b"")
     assert empty["acc"].shape == (0, 3) and empty["temp"].shape == (0, 2)
 
@@ -204,3 +205,35 @@ def test_stats_and_pending_report_link_health():
     p.reset()
     assert p.stats["bytes"] == 0
     assert "packets=0" in repr(p)
+
+
+def test_feed_releases_the_gil():
+    import sys
+    import threading
+    import time
+
+    data = encode_sensor_packets(random_raw(np.random.default_rng(8), 1_000_000))  # 20 MB
+    counter = [0]
+    stop = threading.Event()
+
+    def spin() -> None:
+        while not stop.is_set():
+            counter[0] += 1
+            if counter[0] % 100 == 0:
+                time.sleep(0)  # hand the GIL back quickly whenever the main thread waits for it
+
+    old = sys.getswitchinterval()
+    # No forced switches: the spinner can only run while the main thread has released the GIL.
+    sys.setswitchinterval(5.0)
+    t = threading.Thread(target=spin)
+    try:
+        t.start()
+        before = counter[0]
+        out = StreamParser().feed(data, raw=True)
+        ran_during_feed = counter[0] - before
+    finally:
+        stop.set()
+        sys.setswitchinterval(old)
+        t.join()
+    assert len(out["cell_id"]) == 1_000_000
+    assert ran_during_feed > 0

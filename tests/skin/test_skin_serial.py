@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from skin_helpers import frames, take, wait_until
 
-from aptkt.errors import SkinDisconnectedError
+from aptkt.errors import SilentCellError, SkinDisconnectedError
 from aptkt.skin import SerialSkin, StreamParser, encode_packet, encode_sensor_packets
 from aptkt.skin.serial_skin import BAUDRATE
 
@@ -60,8 +60,11 @@ def test_recording_and_silent_cell(adapter):
     # cell 7 stops after the 20th frame
     keep = ~((raw["cell_id"] == 7) & (np.arange(700) >= 140))
     with SerialSkin(adapter.port) as skin:
+        with pytest.raises(SilentCellError, match=r"\[1, 2, 3, 4, 5, 6, 7\]"):
+            skin.wait_for_cells(timeout_s=0.05)  # nothing sent yet
         skin.start_recording({"action": "P2"})
         adapter.stream(take(raw, keep), rate_hz=250, per_tick=7)
+        skin.wait_for_cells(timeout_s=5)  # all seven cells are talking
         adapter.wait()
         assert wait_until(lambda: skin.stats["packets"] == int(keep.sum()))
         rec = skin.stop_recording()  # cells 1-6 sent until now; cell 7 stopped ~300 ms ago

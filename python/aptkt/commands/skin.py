@@ -55,7 +55,11 @@ def _make_source(args: argparse.Namespace) -> Any:
 
 
 def _fmt(x: float, spec: str) -> str:
-    return "-" if not np.isfinite(x) else format(x, spec)
+    """``format(x, spec)``, or a dash of the same width for a value not received yet."""
+    if np.isfinite(x):
+        return format(x, spec)
+    width = spec.split(".")[0]
+    return "-".rjust(int(width) if width.isdigit() else 1)
 
 
 def render(stats: dict[str, Any], latest: dict[str, np.ndarray], elapsed_s: float, title: str) -> str:

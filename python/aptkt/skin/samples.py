@@ -96,19 +96,35 @@ class Recording:
     def duration(self) -> float:
         return (self.stop_ns - self.start_ns) * 1e-9
 
-    def grid(self, field_name: str, rate_hz: float, cells: Sequence[int] | None = None) -> np.ndarray:
+    def grid(
+        self,
+        field_name: str,
+        rate_hz: float | None = None,
+        cells: Sequence[int] | None = None,
+        *,
+        n_steps: int | None = None,
+    ) -> np.ndarray:
         """Resample one field onto a common time grid, per cell.
 
-        Returns an array of shape ``(n_cells, n_steps, *field_shape)`` where
-        ``n_steps = round(duration * rate_hz)`` and step k is at ``start + k / rate_hz``.
-        Each cell is linearly interpolated between its own samples (held constant beyond its
-        first and last one). Cells without samples raise :class:`ValueError`.
+        Give either ``rate_hz`` (``n_steps = round(duration * rate_hz)``, step k at
+        ``start + k / rate_hz``) or ``n_steps`` (steps spread evenly over the window). Returns
+        an array of shape ``(n_cells, n_steps, *field_shape)``. Each cell is linearly
+        interpolated between its own samples (held constant beyond its first and last one).
+        Cells without samples raise :class:`ValueError`.
         """
-        if rate_hz <= 0:
-            raise ValueError("rate_hz must be > 0")
+        if (rate_hz is None) == (n_steps is None):
+            raise ValueError("give exactly one of rate_hz and n_steps")
+        if rate_hz is not None:
+            if rate_hz <= 0:
+                raise ValueError("rate_hz must be > 0")
+            n_steps = max(int(round(self.duration * rate_hz)), 1)
+            step_ns = 1e9 / rate_hz
+        else:
+            if n_steps < 1:
+                raise ValueError("n_steps must be >= 1")
+            step_ns = (self.stop_ns - self.start_ns) / n_steps
+        t_grid = self.start_ns + np.arange(n_steps) * step_ns
         cells = tuple(self.cells if cells is None else cells)
-        n_steps = max(int(round(self.duration * rate_hz)), 1)
-        t_grid = self.start_ns + np.arange(n_steps) * (1e9 / rate_hz)
         values = getattr(self.samples, field_name)
         tail = values.shape[1:]
         out = np.empty((len(cells), n_steps, *tail), dtype=np.float64)

@@ -9,7 +9,10 @@
 //! theta layout: `[log σ², log ℓ_1..ℓ_M, η_1..η_M (only if M > 1), λ (only with transfer)]`.
 //! The reported logits are normalised (`η_m = log γ_m`), and λ is kept on its natural [0, 1] scale.
 
-use faer::Mat;
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, Par};
+
+use crate::fastmath::exp_nonpositive_in_place;
 
 use crate::error::{GpError, GpResult};
 
@@ -219,16 +222,42 @@ impl Modalities {
         self.groups.is_empty()
     }
 
-    #[inline]
-    fn sq_dist(&self, m: usize, a: &[f64], b: &[f64]) -> f64 {
-        self.groups[m]
-            .iter()
-            .map(|&c| {
-                let t = a[c] - b[c];
-                t * t
-            })
-            .sum()
+    /// Squared distances `|a_i - b_j|²` over modality m's columns, shape (a.n, b.n).
+    ///
+    /// Computed as `|a|² + |b|² - 2 a·b` with one matrix product (the bulk of kernel
+    /// construction). Rows are first centred by `center` (the training columns' means):
+    /// distances do not change, and the expansion then loses no precision to large offsets.
+    pub fn sq_distances(&self, m: usize, a: &Data, b: &Data, center: &[f64]) -> Mat<f64> {
+        let cols = &self.groups[m];
+        let block = |x: &Data| Mat::<f64>::from_fn(x.n, cols.len(), |i, k| x.values[i * x.d + cols[k]] - center[cols[k]]);
+        let (ab, bb) = (block(a), block(b));
+        let norms = |x: &Mat<f64>| -> Vec<f64> {
+            (0..x.nrows()).map(|i| (0..x.ncols()).map(|k| x[(i, k)] * x[(i, k)]).sum()).collect()
+        };
+        let (na, nb) = (norms(&ab), norms(&bb));
+        let mut d = Mat::<f64>::zeros(a.n, b.n);
+        matmul(d.as_mut(), Accum::Replace, ab.as_ref(), bb.as_ref().transpose(), -2.0, Par::Seq);
+        for j in 0..b.n {
+            let col = d.col_as_slice_mut(j);
+            for (i, v) in col.iter_mut().enumerate() {
+                *v = (*v + na[i] + nb[j]).max(0.0);
+            }
+        }
+        d
     }
+}
+
+/// Column means of the data: the centring used by [`Modalities::sq_distances`].
+pub fn column_means(x: &Data) -> Vec<f64> {
+    let mut mean = vec![0.0; x.d];
+    for i in 0..x.n {
+        for (m, v) in mean.iter_mut().zip(x.row(i)) {
+            *m += v;
+        }
+    }
+    let n = x.n.max(1) as f64;
+    mean.iter_mut().for_each(|m| *m /= n);
+    mean
 }
 
 /// Squared distances per modality between all rows of a training set (source rows first).
@@ -239,16 +268,16 @@ pub struct PairDistances {
 }
 
 impl PairDistances {
-    pub fn new(x: &Data, n_source: usize, modalities: &Modalities) -> Self {
+    pub fn new(x: &Data, n_source: usize, modalities: &Modalities, center: &[f64]) -> Self {
         let n = x.n;
         let per_modality = (0..modalities.len())
             .map(|m| {
-                let mut d = Mat::<f64>::zeros(n, n);
+                let mut d = modalities.sq_distances(m, x, x, center);
+                // Exact symmetry and a zero diagonal, whatever the product's rounding.
                 for j in 0..n {
+                    d[(j, j)] = 0.0;
                     for i in (j + 1)..n {
-                        let v = modalities.sq_dist(m, x.row(i), x.row(j));
-                        d[(i, j)] = v;
-                        d[(j, i)] = v;
+                        d[(j, i)] = d[(i, j)];
                     }
                 }
                 d
@@ -305,22 +334,10 @@ impl KernelEval {
             .per_modality
             .iter()
             .zip(h.length_scales.iter())
-            .map(|(d, &l)| {
-                let c = -0.5 / (l * l);
-                Mat::<f64>::from_fn(n, n, |i, j| (c * d[(i, j)]).exp())
-            })
+            .map(|(d, &l)| rbf_from_sq_distances(d, l))
             .collect();
         let mut k = Mat::<f64>::zeros(n, n);
-        for j in 0..n {
-            for i in 0..n {
-                let mut s = 0.0;
-                for (part, w) in parts.iter().zip(h.weights.iter()) {
-                    s += w * part[(i, j)];
-                }
-                let mask = if dist.is_cross(i, j) { h.lambda } else { 1.0 };
-                k[(i, j)] = h.signal_variance * s * mask;
-            }
-        }
+        combine_parts(&mut k, &parts, h, dist.n_source, true);
         KernelEval { k, parts, jitter: 0.0 }
     }
 
@@ -384,24 +401,57 @@ impl KernelEval {
     }
 }
 
-/// Cross-kernel `K(X_train, X*)` (n_train × m) for test rows that belong to the target task.
+/// `exp(-D / (2 ℓ²))` elementwise.
+pub fn rbf_from_sq_distances(d: &Mat<f64>, length_scale: f64) -> Mat<f64> {
+    let c = -0.5 / (length_scale * length_scale);
+    let mut out = d.clone();
+    for j in 0..out.ncols() {
+        let col = out.col_as_slice_mut(j);
+        col.iter_mut().for_each(|v| *v *= c);
+        exp_nonpositive_in_place(col);
+    }
+    out
+}
+
+/// `out = σ² Σ_m γ_m parts_m`, with the rows before `n_source` scaled by λ against the target
+/// columns (`symmetric`: columns are the same rows, so the source columns are scaled too).
+pub fn combine_parts(out: &mut Mat<f64>, parts: &[Mat<f64>], h: &Hyper, n_source: usize, symmetric: bool) {
+    for j in 0..out.ncols() {
+        let col = out.col_as_slice_mut(j);
+        col.iter_mut().for_each(|v| *v = 0.0);
+        for (part, w) in parts.iter().zip(&h.weights) {
+            let scale = h.signal_variance * w;
+            for (o, p) in col.iter_mut().zip(part.col_as_slice(j)) {
+                *o += scale * p;
+            }
+        }
+        let column_is_source = symmetric && j < n_source;
+        let (lo, hi) = if column_is_source { (n_source, col.len()) } else { (0, n_source) };
+        col[lo..hi].iter_mut().for_each(|v| *v *= h.lambda);
+    }
+}
+
+/// Cross-kernel `K(X_train, X*)` (n_train × m) for test rows that belong to the target task,
+/// given the per-modality squared distances between the training rows and the test rows.
+pub fn cross_kernel_from_distances(dists: &[Mat<f64>], n_source: usize, h: &Hyper) -> Mat<f64> {
+    let parts: Vec<Mat<f64>> = dists.iter().zip(&h.length_scales).map(|(d, &l)| rbf_from_sq_distances(d, l)).collect();
+    let (n, m) = (dists[0].nrows(), dists[0].ncols());
+    let mut out = Mat::<f64>::zeros(n, m);
+    combine_parts(&mut out, &parts, h, n_source, false);
+    out
+}
+
+/// Cross-kernel `K(X_train, X*)` computed from scratch.
 pub fn cross_kernel(
     train: &Data,
     n_source: usize,
     test: &Data,
     modalities: &Modalities,
     h: &Hyper,
+    center: &[f64],
 ) -> Mat<f64> {
-    let coef: Vec<f64> = h.length_scales.iter().map(|l| -0.5 / (l * l)).collect();
-    Mat::<f64>::from_fn(train.n, test.n, |i, j| {
-        let (a, b) = (train.row(i), test.row(j));
-        let mut s = 0.0;
-        for m in 0..modalities.len() {
-            s += h.weights[m] * (coef[m] * modalities.sq_dist(m, a, b)).exp();
-        }
-        let mask = if i < n_source { h.lambda } else { 1.0 };
-        h.signal_variance * s * mask
-    })
+    let dists: Vec<Mat<f64>> = (0..modalities.len()).map(|m| modalities.sq_distances(m, train, test, center)).collect();
+    cross_kernel_from_distances(&dists, n_source, h)
 }
 
 #[cfg(test)]
@@ -441,7 +491,8 @@ mod tests {
     fn kernel_matches_direct_formula() {
         let x = data();
         let mods = Modalities::new(vec![vec![0, 1], vec![2]], 3).unwrap();
-        let dist = PairDistances::new(&x, 1, &mods);
+        let center = column_means(&x);
+        let dist = PairDistances::new(&x, 1, &mods, &center);
         let h = Hyper {
             signal_variance: 1.7,
             length_scales: vec![0.8, 2.0],
@@ -456,15 +507,15 @@ mod tests {
                 let d1 = (a[2] - b[2]).powi(2);
                 let k = 0.6 * (-d0 / (2.0 * 0.64)).exp() + 0.4 * (-d1 / 8.0).exp();
                 let mask = if (i < 1) != (j < 1) { 0.3 } else { 1.0 };
-                assert!((ev.k[(i, j)] - 1.7 * k * mask).abs() < 1e-14);
+                assert!((ev.k[(i, j)] - 1.7 * k * mask).abs() < 1e-13);
             }
         }
         // The cross-kernel of the training rows against the target rows equals the block of K.
         let target = Data::new(x.values[3..].to_vec(), 3, 3).unwrap();
-        let kx = cross_kernel(&x, 1, &target, &mods, &h);
+        let kx = cross_kernel(&x, 1, &target, &mods, &h, &center);
         for i in 0..4 {
             for j in 0..3 {
-                assert!((kx[(i, j)] - ev.k[(i, j + 1)]).abs() < 1e-14);
+                assert!((kx[(i, j)] - ev.k[(i, j + 1)]).abs() < 1e-13);
             }
         }
     }

@@ -48,7 +48,14 @@ fn factor_b(k: MatRef<'_, f64>, f: &[f64]) -> Result<(Vec<f64>, Vec<f64>, Mat<f6
     let n = f.len();
     let pi: Vec<f64> = f.iter().map(|&v| sigmoid(v)).collect();
     let sw: Vec<f64> = pi.iter().map(|p| (p * (1.0 - p)).sqrt()).collect();
-    let mut b = Mat::<f64>::from_fn(n, n, |i, j| sw[i] * k[(i, j)] * sw[j] + if i == j { 1.0 } else { 0.0 });
+    let mut b = Mat::<f64>::zeros(n, n);
+    for j in 0..n {
+        let (dst, src) = (b.col_as_slice_mut(j), k.col(j));
+        for i in j..n {
+            dst[i] = sw[i] * src[i] * sw[j];
+        }
+        dst[j] += 1.0;
+    }
     linalg::cholesky_lower(&mut b)?;
     Ok((pi, sw, b))
 }
@@ -205,7 +212,7 @@ mod tests {
         let x = Data::new((0..20).map(|i| (i as f64 * 0.37).sin() * 2.0).collect(), 10, 2).unwrap();
         let y: Vec<f64> = (0..10).map(|i| if i % 3 == 0 { 1.0 } else { -1.0 }).collect();
         let mods = Modalities::all_columns(2);
-        let dist = PairDistances::new(&x, 0, &mods);
+        let dist = PairDistances::new(&x, 0, &mods, &crate::kernel::column_means(&x));
         let h = Hyper { signal_variance: 4.0, length_scales: vec![0.7], weights: vec![1.0], lambda: 1.0 };
         let ev = KernelEval::new(&dist, &h);
         let mode = find_mode(ev.k.as_ref(), &y, None, &NewtonConfig::default()).unwrap();
@@ -223,7 +230,7 @@ mod tests {
         let x = Data::new((0..36).map(|i| ((i * 7) as f64 * 0.31).cos() * 1.5).collect(), 12, 3).unwrap();
         let y: Vec<f64> = (0..12).map(|i| if (i * 5) % 7 < 3 { 1.0 } else { -1.0 }).collect();
         let mods = Modalities::new(vec![vec![0, 1], vec![2]], 3).unwrap();
-        let dist = PairDistances::new(&x, 4, &mods);
+        let dist = PairDistances::new(&x, 4, &mods, &crate::kernel::column_means(&x));
         let layout = Layout { n_modalities: 2, transfer: true };
         let theta = vec![1.1, -0.2, 0.4, 0.3, -0.5, 0.35];
         let lml = |t: &[f64]| {

@@ -5,6 +5,7 @@
 //! task's observations with relatedness λ (paper Eq. 2).
 
 pub mod error;
+pub mod fastmath;
 pub mod kernel;
 pub mod laplace;
 pub mod likelihood;

@@ -5,7 +5,8 @@ use faer::Mat;
 use rayon::prelude::*;
 
 use crate::error::{GpError, GpResult};
-use crate::kernel::{cross_kernel, Data, Hyper, KernelEval, Layout, Modalities, PairDistances};
+use crate::fastmath::exp_nonpositive_in_place;
+use crate::kernel::{column_means, Data, Hyper, KernelEval, Layout, Modalities, PairDistances};
 use crate::laplace::{find_mode_with_jitter, lml_gradient, Mode, NewtonConfig};
 use crate::likelihood::{predictive_probability, Predictive};
 use crate::linalg;
@@ -145,7 +146,14 @@ struct BinaryProblem {
 }
 
 impl BinaryProblem {
-    fn new(target: &Data, labels: &[usize], positive: usize, source: Option<&Source>, modalities: &Modalities) -> Self {
+    fn new(
+        target: &Data,
+        labels: &[usize],
+        positive: usize,
+        source: Option<&Source>,
+        modalities: &Modalities,
+        center: &[f64],
+    ) -> Self {
         let y_target = labels.iter().map(|&c| if c == positive { 1.0 } else { -1.0 });
         let (x, y, n_source) = match source {
             Some(s) => {
@@ -154,7 +162,7 @@ impl BinaryProblem {
             }
             None => (target.clone(), y_target.collect(), 0),
         };
-        let dist = PairDistances::new(&x, n_source, modalities);
+        let dist = PairDistances::new(&x, n_source, modalities, center);
         BinaryProblem { x, y, n_source, dist }
     }
 
@@ -215,7 +223,8 @@ fn theta_box(layout: &Layout, spec: &ModelSpec, has_source: bool) -> (Vec<f64>, 
 
 fn fit_binary(problem: BinaryProblem, layout: &Layout, spec: &ModelSpec, lambda: f64, seed: u64) -> GpResult<BinaryFit> {
     let m = layout.n_modalities;
-    let medians: Vec<f64> = (0..m).map(|k| problem.dist.median_distance(k)).collect();
+    let needs_scale = spec.optimize || spec.length_scales.iter().any(|l| l.is_nan());
+    let medians: Vec<f64> = (0..m).map(|k| if needs_scale { problem.dist.median_distance(k) } else { 1.0 }).collect();
     let init_ls: Vec<f64> = spec.length_scales.iter().zip(&medians).map(|(&l, &med)| if l.is_nan() { med } else { l }).collect();
     let init = Hyper {
         signal_variance: spec.signal_variance,
@@ -294,18 +303,56 @@ fn fit_binary(problem: BinaryProblem, layout: &Layout, spec: &ModelSpec, lambda:
 }
 
 impl BinaryFit {
-    /// Latent predictive mean and variance for target-task test rows (Algorithm 3.2).
-    pub fn latent(&self, test: &Data, modalities: &Modalities) -> (Vec<f64>, Vec<f64>) {
-        let ks = cross_kernel(&self.x, self.n_source, test, modalities, &self.hyper);
-        let n = self.x.n;
+    /// Latent predictive mean and variance for target-task test rows (Algorithm 3.2), given the
+    /// per-modality squared distances from the shared target rows to the test rows.
+    ///
+    /// One pass per test column builds k*, its mean contribution and `W½ k*` in a buffer that
+    /// stays in cache; one triangular solve then gives every variance.
+    fn latent(&self, test: &Data, target_dists: &[Mat<f64>], modalities: &Modalities, center: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        let (n, ns) = (self.x.n, self.n_source);
+        let source_dists: Vec<Mat<f64>> = if ns == 0 {
+            Vec::new()
+        } else {
+            let source = Data {
+                values: self.x.values[..ns * self.x.d].to_vec(),
+                n: ns,
+                d: self.x.d,
+            };
+            (0..modalities.len()).map(|m| modalities.sq_distances(m, &source, test, center)).collect()
+        };
+        let h = &self.hyper;
+        let coef: Vec<f64> = h.length_scales.iter().map(|l| -0.5 / (l * l)).collect();
+        let mut v = Mat::<f64>::zeros(n, test.n);
         let mut mean = vec![0.0; test.n];
-        linalg::matvec_t(ks.as_ref(), &self.grad_log_lik, &mut mean);
-        let mut v = Mat::<f64>::from_fn(n, test.n, |i, j| self.sw[i] * ks[(i, j)]);
+        let mut buf = vec![0.0; n];
+        for j in 0..test.n {
+            let col = v.col_as_slice_mut(j);
+            for m in 0..modalities.len() {
+                if ns > 0 {
+                    for (b, d) in buf[..ns].iter_mut().zip(source_dists[m].col_as_slice(j)) {
+                        *b = coef[m] * d;
+                    }
+                }
+                for (b, d) in buf[ns..].iter_mut().zip(target_dists[m].col_as_slice(j)) {
+                    *b = coef[m] * d;
+                }
+                exp_nonpositive_in_place(&mut buf);
+                let scale = h.signal_variance * h.weights[m];
+                for (c, b) in col.iter_mut().zip(&buf) {
+                    *c += scale * b;
+                }
+            }
+            col[..ns].iter_mut().for_each(|c| *c *= h.lambda);
+            mean[j] = col.iter().zip(&self.grad_log_lik).map(|(k, g)| k * g).sum();
+            for (c, s) in col.iter_mut().zip(&self.sw) {
+                *c *= s;
+            }
+        }
         linalg::solve_lower_mat(self.l.as_ref(), v.as_mut());
-        let prior_var = self.hyper.signal_variance * (1.0 + self.jitter);
+        let prior_var = h.signal_variance * (1.0 + self.jitter);
         let var = (0..test.n)
             .map(|j| {
-                let vv: f64 = v.col(j).iter().map(|a| a * a).sum();
+                let vv: f64 = v.col_as_slice(j).iter().map(|a| a * a).sum();
                 (prior_var - vv).max(0.0)
             })
             .collect();
@@ -316,6 +363,9 @@ impl BinaryFit {
 /// A fitted one-vs-all model.
 pub struct OneVsAll {
     pub classifiers: Vec<BinaryFit>,
+    /// The target training rows shared by every classifier, and their column means.
+    pub x: Data,
+    pub center: Vec<f64>,
     pub n_classes: usize,
     pub layout: Layout,
     pub spec: ModelSpec,
@@ -380,6 +430,7 @@ fn fit_impl(
         }
     }
     let transfer = sources.iter().any(|s| s.is_some());
+    let center = column_means(x);
     let layout = Layout { n_modalities: spec.modalities.len(), transfer };
     let positives: Vec<usize> = if n_classes == 2 && !transfer { vec![1] } else { (0..n_classes).collect() };
     if let Some(t) = thetas {
@@ -396,7 +447,7 @@ fn fit_impl(
         .enumerate()
         .map(|(k, &c)| {
             let source = sources[c].as_ref();
-            let problem = BinaryProblem::new(x, labels, c, source, &spec.modalities);
+            let problem = BinaryProblem::new(x, labels, c, source, &spec.modalities, &center);
             match thetas {
                 Some(t) => problem.finish(&layout, spec, t[k].clone(), true, 1),
                 None => {
@@ -408,6 +459,8 @@ fn fit_impl(
         .collect::<GpResult<Vec<_>>>()?;
     Ok(OneVsAll {
         classifiers,
+        x: x.clone(),
+        center,
         n_classes,
         layout,
         spec: spec.clone(),
@@ -427,7 +480,16 @@ impl OneVsAll {
     pub fn latent(&self, x: &Data) -> GpResult<(Vec<f64>, Vec<f64>)> {
         self.check_test(x)?;
         let k = self.classifiers.len();
-        let per: Vec<(Vec<f64>, Vec<f64>)> = self.classifiers.par_iter().map(|c| c.latent(x, &self.spec.modalities)).collect();
+        let mods = &self.spec.modalities;
+        let shared: Vec<Mat<f64>> = (0..mods.len())
+            .into_par_iter()
+            .map(|m| mods.sq_distances(m, &self.x, x, &self.center))
+            .collect();
+        let per: Vec<(Vec<f64>, Vec<f64>)> = self
+            .classifiers
+            .par_iter()
+            .map(|c| c.latent(x, &shared, mods, &self.center))
+            .collect();
         let mut mean = vec![0.0; x.n * k];
         let mut var = vec![0.0; x.n * k];
         for (c, (m, v)) in per.into_iter().enumerate() {
@@ -481,7 +543,7 @@ impl OneVsAll {
             .zip(thetas.par_iter())
             .map(|(c, t)| {
                 let problem = BinaryProblem {
-                    dist: PairDistances::new(&c.x, c.n_source, &self.spec.modalities),
+                    dist: PairDistances::new(&c.x, c.n_source, &self.spec.modalities, &self.center),
                     x: c.x.clone(),
                     y: c.y.clone(),
                     n_source: c.n_source,

@@ -245,7 +245,7 @@ fn kernel_matrix<'py>(
     let h = layout.decode(&theta).map_err(gp_error)?;
     let n = data.n;
     let k = py.detach(|| {
-        let dist = PairDistances::new(&data, n_source, &mods);
+        let dist = PairDistances::new(&data, n_source, &mods, &aptkt_gp::kernel::column_means(&data));
         let ev = KernelEval::new(&dist, &h);
         let mut flat = Vec::with_capacity(n * n);
         for i in 0..n {

@@ -4,19 +4,24 @@
 //! become the numpy arrays' memory (no copy); 2-D fields are row-major `(n, 3)` / `(n, 2)`.
 
 use aptkt_skin::{
-    encode_packet, encode_sensor_columns, quantize as quantize_one, PacketType, PhysicalColumns, RawColumns,
-    RawColumnsRef, RejectReason, Stats, StreamParser, PACKET_LEN, PAYLOAD_LEN,
+    encode_packet, encode_sensor_columns, quantize as quantize_one, PacketType, PhysicalColumns,
+    RawColumns, RawColumnsRef, RejectReason, Stats, StreamParser, PACKET_LEN, PAYLOAD_LEN,
 };
 use numpy::ndarray::{Array1, Array2};
 use numpy::{Element, IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::{PyBytes, PyDict};
+use pyo3::types::{PyBytes, PyDict, PyMemoryView};
 
 /// Rows of a 2-D field as a `(n, width)` array, taking ownership of the buffer.
-fn rows_array<'py, T: Element>(py: Python<'py>, v: Vec<T>, width: usize) -> PyResult<Bound<'py, PyAny>> {
+fn rows_array<'py, T: Element>(
+    py: Python<'py>,
+    v: Vec<T>,
+    width: usize,
+) -> PyResult<Bound<'py, PyAny>> {
     let n = v.len() / width;
-    let a = Array2::from_shape_vec((n, width), v).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let a =
+        Array2::from_shape_vec((n, width), v).map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok(a.into_pyarray(py).into_any())
 }
 
@@ -81,24 +86,38 @@ pub struct PyStreamParser {
 impl PyStreamParser {
     #[new]
     fn new() -> Self {
-        PyStreamParser { inner: StreamParser::new() }
+        PyStreamParser {
+            inner: StreamParser::new(),
+        }
     }
 
     /// Parse the next chunk; returns a dict of numpy arrays (see the class docstring).
     #[pyo3(signature = (data, *, raw = false))]
-    fn feed<'py>(&mut self, py: Python<'py>, data: &Bound<'py, PyAny>, raw: bool) -> PyResult<Bound<'py, PyDict>> {
+    fn feed<'py>(
+        &mut self,
+        py: Python<'py>,
+        data: &Bound<'py, PyAny>,
+        raw: bool,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let converted;
         let bytes: &[u8] = if let Ok(b) = data.cast::<PyBytes>() {
             b.as_bytes()
         } else {
             // bytearray / memoryview / numpy: copy into bytes, since a mutable buffer could
             // change while the GIL is released.
-            converted = py.get_type::<PyBytes>().call1((data,)).map_err(|_| {
-                pyo3::exceptions::PyTypeError::new_err(format!(
-                    "StreamParser.feed expects bytes-like data, got {}",
-                    data.get_type().name().map(|n| n.to_string()).unwrap_or_default()
-                ))
-            })?;
+            // Through a memoryview, so that only buffer-protocol objects are accepted (`bytes(5)`
+            // would quietly make five zero bytes).
+            converted = PyMemoryView::from(data)
+                .and_then(|view| py.get_type::<PyBytes>().call1((view,)))
+                .map_err(|_| {
+                    pyo3::exceptions::PyTypeError::new_err(format!(
+                        "StreamParser.feed expects bytes-like data, got {}",
+                        data.get_type()
+                            .name()
+                            .map(|n| n.to_string())
+                            .unwrap_or_default()
+                    ))
+                })?;
             converted.cast::<PyBytes>()?.as_bytes()
         };
         let parser = &mut self.inner;
@@ -157,7 +176,9 @@ impl PyStreamParser {
 
 fn same_rows(name: &str, got: usize, n: usize) -> PyResult<()> {
     if got != n {
-        return Err(PyValueError::new_err(format!("{name} has {got} rows, cell_id has {n}")));
+        return Err(PyValueError::new_err(format!(
+            "{name} has {got} rows, cell_id has {n}"
+        )));
     }
     Ok(())
 }
@@ -166,7 +187,8 @@ fn contiguous<'a, T: Element, D: numpy::ndarray::Dimension>(
     name: &str,
     a: &'a numpy::PyReadonlyArray<'_, T, D>,
 ) -> PyResult<&'a [T]> {
-    a.as_slice().map_err(|_| PyValueError::new_err(format!("{name} must be C-contiguous")))
+    a.as_slice()
+        .map_err(|_| PyValueError::new_err(format!("{name} must be C-contiguous")))
 }
 
 /// Physical values → raw integers (round half to even, clip to each field's range).
@@ -184,20 +206,44 @@ fn quantize<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let n = cell_id.len();
     same_rows("proximity", proximity.len(), n)?;
-    for (name, a, width) in [("acc_g", &acc_g, 3), ("temp_c", &temp_c, 2), ("force_norm", &force_norm, 3)] {
+    for (name, a, width) in [
+        ("acc_g", &acc_g, 3),
+        ("temp_c", &temp_c, 2),
+        ("force_norm", &force_norm, 3),
+    ] {
         let shape = a.shape();
         if shape[0] != n || shape[1] != width {
-            return Err(PyValueError::new_err(format!("{name} must have shape ({n}, {width}), got {shape:?}")));
+            return Err(PyValueError::new_err(format!(
+                "{name} must have shape ({n}, {width}), got {shape:?}"
+            )));
         }
     }
-    let (c, p) = (contiguous("cell_id", &cell_id)?, contiguous("proximity", &proximity)?);
-    let (a, t, f) = (contiguous("acc_g", &acc_g)?, contiguous("temp_c", &temp_c)?, contiguous("force_norm", &force_norm)?);
+    let (c, p) = (
+        contiguous("cell_id", &cell_id)?,
+        contiguous("proximity", &proximity)?,
+    );
+    let (a, t, f) = (
+        contiguous("acc_g", &acc_g)?,
+        contiguous("temp_c", &temp_c)?,
+        contiguous("force_norm", &force_norm)?,
+    );
     let result = py.detach(|| -> Result<RawColumns, String> {
         let mut out = RawColumns::default();
-        let rows = c.iter().zip(p).zip(a.chunks_exact(3)).zip(t.chunks_exact(2)).zip(f.chunks_exact(3));
+        let rows = c
+            .iter()
+            .zip(p)
+            .zip(a.chunks_exact(3))
+            .zip(t.chunks_exact(2))
+            .zip(f.chunks_exact(3));
         for (i, ((((&cell, &prox), acc), temp), force)) in rows.enumerate() {
-            let raw = quantize_one(cell, prox, [acc[0], acc[1], acc[2]], [temp[0], temp[1]], [force[0], force[1], force[2]])
-                .map_err(|e| format!("row {i}: {e}"))?;
+            let raw = quantize_one(
+                cell,
+                prox,
+                [acc[0], acc[1], acc[2]],
+                [temp[0], temp[1]],
+                [force[0], force[1], force[2]],
+            )
+            .map_err(|e| format!("row {i}: {e}"))?;
             out.push(&raw);
         }
         Ok(out)
@@ -226,21 +272,34 @@ fn encode_sensor_packets<'py>(
     };
     for (name, a, width) in [("acc", &acc, 3), ("temp", &temp, 2), ("force", &force, 3)] {
         if a.shape()[1] != width {
-            return Err(PyValueError::new_err(format!("{name} must have {width} columns, got {:?}", a.shape())));
+            return Err(PyValueError::new_err(format!(
+                "{name} must have {width} columns, got {:?}",
+                a.shape()
+            )));
         }
     }
-    let bytes = py.detach(|| encode_sensor_columns(&cols)).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let bytes = py
+        .detach(|| encode_sensor_columns(&cols))
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok(PyBytes::new(py, &bytes))
 }
 
 /// One packet of any type from its header byte and 18 payload bytes (each < 0x80).
 #[pyfunction]
-fn encode_packet_bytes<'py>(py: Python<'py>, header: u8, payload: &[u8]) -> PyResult<Bound<'py, PyBytes>> {
-    let kind = PacketType::from_header(header)
-        .ok_or_else(|| PyValueError::new_err(format!("{header:#04x} is not a known packet header")))?;
-    let payload: &[u8; PAYLOAD_LEN] = payload
-        .try_into()
-        .map_err(|_| PyValueError::new_err(format!("payload must be {PAYLOAD_LEN} bytes, got {}", payload.len())))?;
+fn encode_packet_bytes<'py>(
+    py: Python<'py>,
+    header: u8,
+    payload: &[u8],
+) -> PyResult<Bound<'py, PyBytes>> {
+    let kind = PacketType::from_header(header).ok_or_else(|| {
+        PyValueError::new_err(format!("{header:#04x} is not a known packet header"))
+    })?;
+    let payload: &[u8; PAYLOAD_LEN] = payload.try_into().map_err(|_| {
+        PyValueError::new_err(format!(
+            "payload must be {PAYLOAD_LEN} bytes, got {}",
+            payload.len()
+        ))
+    })?;
     let packet = encode_packet(kind, payload).map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok(PyBytes::new(py, &packet))
 }

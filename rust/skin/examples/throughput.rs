@@ -6,7 +6,10 @@ use std::time::Instant;
 use aptkt_skin::{encode_sensor, PhysicalColumns, RawColumns, SensorRaw, StreamParser};
 
 fn main() {
-    let mb: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(64);
+    let mb: usize = std::env::args()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(64);
     let n = mb * 1_000_000 / 20;
     let mut stream = Vec::with_capacity(n * 20);
     for i in 0..n {
@@ -29,7 +32,11 @@ fn main() {
                 let t = Instant::now();
                 for c in stream.chunks(chunk) {
                     if label == "phys-reuse" {
-                        reuse.cell_id.clear(); reuse.proximity.clear(); reuse.acc.clear(); reuse.temp.clear(); reuse.force.clear();
+                        reuse.cell_id.clear();
+                        reuse.proximity.clear();
+                        reuse.acc.clear();
+                        reuse.temp.clear();
+                        reuse.force.clear();
                         parser.feed(c, &mut reuse);
                         rows += reuse.len();
                     } else if label == "physical" {

@@ -4,7 +4,7 @@
 use crate::packet::PACKET_LEN;
 use crate::parser::PacketSink;
 use crate::sensor::{decode_sensor, scale, SensorRaw};
-use crate::{PacketType, EncodeError};
+use crate::{EncodeError, PacketType};
 
 /// Sensor packets in physical units: `acc`, `temp`, `force` are row-major `(n, 3)`, `(n, 2)`,
 /// `(n, 3)`.
@@ -27,8 +27,44 @@ impl PhysicalColumns {
     }
 }
 
+/// Packets per step of a block decode: the step's output (74 bytes per packet) is zero-filled
+/// and then overwritten while it is still in L1/L2, so the zero-fill costs no memory traffic.
+const STEP: usize = 512;
+
 impl PacketSink for PhysicalColumns {
     fn sensor_block(&mut self, block: &[u8]) {
+        for step in block.chunks(STEP * PACKET_LEN) {
+            self.decode_step(step);
+        }
+    }
+
+    #[inline(always)]
+    fn sensor(&mut self, p: &SensorRaw) {
+        self.cell_id.push(p.cell_id);
+        self.proximity
+            .push(f64::from(p.proximity) * scale::PROXIMITY);
+        self.acc
+            .extend_from_slice(&p.acc.map(|a| f64::from(a) * scale::ACC));
+        self.temp.extend_from_slice(&[
+            f64::from(p.temp[0]) * scale::TEMP_ACC + scale::TEMP_ACC_OFFSET,
+            f64::from(p.temp[1]) * scale::TEMP_LM71,
+        ]);
+        self.force
+            .extend_from_slice(&p.force.map(|f| f64::from(f) * scale::FORCE));
+    }
+
+    fn reserve(&mut self, n: usize) {
+        self.cell_id.reserve(n);
+        self.proximity.reserve(n);
+        self.acc.reserve(3 * n);
+        self.temp.reserve(2 * n);
+        self.force.reserve(3 * n);
+    }
+}
+
+impl PhysicalColumns {
+    #[inline(always)]
+    fn decode_step(&mut self, block: &[u8]) {
         let n = block.len() / PACKET_LEN;
         let start = self.cell_id.len();
         // Zero-filling then overwriting is cheaper than per-element pushes: the zip below then
@@ -46,7 +82,9 @@ impl PacketSink for PhysicalColumns {
             .zip(self.temp[2 * start..].chunks_exact_mut(2))
             .zip(self.force[3 * start..].chunks_exact_mut(3));
         for (((((p, cell), prox), acc), temp), force) in rows {
-            let Some(p) = p.first_chunk::<PACKET_LEN>() else { continue };
+            let Some(p) = p.first_chunk::<PACKET_LEN>() else {
+                continue;
+            };
             let r = decode_sensor(p);
             *cell = r.cell_id;
             *prox = f64::from(r.proximity) * scale::PROXIMITY;
@@ -57,26 +95,6 @@ impl PacketSink for PhysicalColumns {
             ]);
             force.copy_from_slice(&r.force.map(|f| f64::from(f) * scale::FORCE));
         }
-    }
-
-    #[inline(always)]
-    fn sensor(&mut self, p: &SensorRaw) {
-        self.cell_id.push(p.cell_id);
-        self.proximity.push(f64::from(p.proximity) * scale::PROXIMITY);
-        self.acc.extend_from_slice(&p.acc.map(|a| f64::from(a) * scale::ACC));
-        self.temp.extend_from_slice(&[
-            f64::from(p.temp[0]) * scale::TEMP_ACC + scale::TEMP_ACC_OFFSET,
-            f64::from(p.temp[1]) * scale::TEMP_LM71,
-        ]);
-        self.force.extend_from_slice(&p.force.map(|f| f64::from(f) * scale::FORCE));
-    }
-
-    fn reserve(&mut self, n: usize) {
-        self.cell_id.reserve(n);
-        self.proximity.reserve(n);
-        self.acc.reserve(3 * n);
-        self.temp.reserve(2 * n);
-        self.force.reserve(3 * n);
     }
 }
 
@@ -136,7 +154,9 @@ impl PacketSink for RawColumns {
             .zip(self.temp[2 * start..].chunks_exact_mut(2))
             .zip(self.force[3 * start..].chunks_exact_mut(3));
         for (((((p, cell), prox), acc), temp), force) in rows {
-            let Some(p) = p.first_chunk::<PACKET_LEN>() else { continue };
+            let Some(p) = p.first_chunk::<PACKET_LEN>() else {
+                continue;
+            };
             let r = decode_sensor(p);
             *cell = r.cell_id;
             *prox = r.proximity;
@@ -175,7 +195,12 @@ pub struct RawColumnsRef<'a> {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum ColumnsError {
     #[error("column {field} has {got} values, expected {expected} ({rows} rows)")]
-    Shape { field: &'static str, got: usize, expected: usize, rows: usize },
+    Shape {
+        field: &'static str,
+        got: usize,
+        expected: usize,
+        rows: usize,
+    },
     #[error("row {row}: {source}")]
     Value { row: usize, source: EncodeError },
 }
@@ -190,15 +215,30 @@ impl<'a> RawColumnsRef<'a> {
             ("force", self.force.len(), 3),
         ] {
             if got != width * n {
-                return Err(ColumnsError::Shape { field, got, expected: width * n, rows: n });
+                return Err(ColumnsError::Shape {
+                    field,
+                    got,
+                    expected: width * n,
+                    rows: n,
+                });
             }
         }
         Ok(n)
     }
 }
 
-fn narrow<T: TryFrom<i64>>(field: &'static str, v: i64, min: i64, max: i64) -> Result<T, EncodeError> {
-    T::try_from(v).map_err(|_| EncodeError { field, value: v, min, max })
+fn narrow<T: TryFrom<i64>>(
+    field: &'static str,
+    v: i64,
+    min: i64,
+    max: i64,
+) -> Result<T, EncodeError> {
+    T::try_from(v).map_err(|_| EncodeError {
+        field,
+        value: v,
+        min,
+        max,
+    })
 }
 
 /// Encodes all rows into `20 * n` bytes of consecutive sensor packets.
@@ -214,9 +254,20 @@ pub fn encode_sensor_columns(cols: &RawColumnsRef<'_>) -> Result<Vec<u8>, Column
             Ok(SensorRaw {
                 cell_id: narrow("cell_id", cols.cell_id[row], 0, 0x3FFF)?,
                 proximity: narrow("proximity", cols.proximity[row], 0, 0xFFFF)?,
-                acc: [narrow("acc", acc[0], -512, 511)?, narrow("acc", acc[1], -512, 511)?, narrow("acc", acc[2], -512, 511)?],
-                temp: [narrow("temp", temp[0], -128, 127)?, narrow("temp", temp[1], -8192, 8191)?],
-                force: [narrow("force", force[0], 0, 4095)?, narrow("force", force[1], 0, 4095)?, narrow("force", force[2], 0, 4095)?],
+                acc: [
+                    narrow("acc", acc[0], -512, 511)?,
+                    narrow("acc", acc[1], -512, 511)?,
+                    narrow("acc", acc[2], -512, 511)?,
+                ],
+                temp: [
+                    narrow("temp", temp[0], -128, 127)?,
+                    narrow("temp", temp[1], -8192, 8191)?,
+                ],
+                force: [
+                    narrow("force", force[0], 0, 4095)?,
+                    narrow("force", force[1], 0, 4095)?,
+                    narrow("force", force[2], 0, 4095)?,
+                ],
             })
         })()
         .map_err(value)?;
@@ -249,7 +300,13 @@ mod tests {
         let acc = [-512i64, 0, 511, 1, 2, 3];
         let temp = [-128i64, 8191, 127, -8192];
         let force = [0i64, 4095, 7, 8, 9, 10];
-        let cols = RawColumnsRef { cell_id: &cell_id, proximity: &proximity, acc: &acc, temp: &temp, force: &force };
+        let cols = RawColumnsRef {
+            cell_id: &cell_id,
+            proximity: &proximity,
+            acc: &acc,
+            temp: &temp,
+            force: &force,
+        };
         let bytes = encode_sensor_columns(&cols).unwrap();
         assert_eq!(bytes.len(), 40);
         let mut parsed = RawColumns::default();
@@ -263,13 +320,53 @@ mod tests {
         assert_eq!(parsed.row(2), None);
 
         let bad_temp = [-128i64, 8191, 128, 0];
-        let err = encode_sensor_columns(&RawColumnsRef { temp: &bad_temp, ..cols }).unwrap_err();
-        assert_eq!(err, ColumnsError::Value { row: 1, source: EncodeError { field: "temp", value: 128, min: -128, max: 127 } });
+        let err = encode_sensor_columns(&RawColumnsRef {
+            temp: &bad_temp,
+            ..cols
+        })
+        .unwrap_err();
+        assert_eq!(
+            err,
+            ColumnsError::Value {
+                row: 1,
+                source: EncodeError {
+                    field: "temp",
+                    value: 128,
+                    min: -128,
+                    max: 127
+                }
+            }
+        );
         let big = [1i64, 1 << 40];
-        let err = encode_sensor_columns(&RawColumnsRef { cell_id: &big, ..cols }).unwrap_err();
-        assert!(matches!(err, ColumnsError::Value { row: 1, source: EncodeError { field: "cell_id", .. } }));
+        let err = encode_sensor_columns(&RawColumnsRef {
+            cell_id: &big,
+            ..cols
+        })
+        .unwrap_err();
+        assert!(matches!(
+            err,
+            ColumnsError::Value {
+                row: 1,
+                source: EncodeError {
+                    field: "cell_id",
+                    ..
+                }
+            }
+        ));
         let short = [1i64; 5];
-        let err = encode_sensor_columns(&RawColumnsRef { force: &short, ..cols }).unwrap_err();
-        assert!(matches!(err, ColumnsError::Shape { field: "force", got: 5, expected: 6, rows: 2 }));
+        let err = encode_sensor_columns(&RawColumnsRef {
+            force: &short,
+            ..cols
+        })
+        .unwrap_err();
+        assert!(matches!(
+            err,
+            ColumnsError::Shape {
+                field: "force",
+                got: 5,
+                expected: 6,
+                rows: 2
+            }
+        ));
     }
 }

@@ -24,7 +24,9 @@ mod sensor;
 #[doc(hidden)]
 pub mod testing;
 
-pub use columns::{encode_sensor_columns, ColumnsError, PhysicalColumns, RawColumns, RawColumnsRef};
+pub use columns::{
+    encode_sensor_columns, ColumnsError, PhysicalColumns, RawColumns, RawColumnsRef,
+};
 pub use error::{EncodeError, QuantizeError};
 pub use packet::{encode_packet, is_valid_packet, PacketType, END_MARKER, PACKET_LEN, PAYLOAD_LEN};
 pub use parser::{PacketSink, RejectReason, Stats, StreamParser, MAX_CARRY};

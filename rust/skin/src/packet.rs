@@ -65,7 +65,9 @@ impl PacketType {
     /// The type a header byte announces, if it is a known header.
     #[inline]
     pub fn from_header(byte: u8) -> Option<PacketType> {
-        PacketType::ALL.get(HEADER_KIND[byte as usize] as usize).copied()
+        PacketType::ALL
+            .get(HEADER_KIND[byte as usize] as usize)
+            .copied()
     }
 
     /// Stable snake_case name, used as the key in statistics.
@@ -148,7 +150,12 @@ pub fn encode_packet(
     out[0] = kind.header();
     for (i, &b) in payload.iter().enumerate() {
         if b >= 0x80 {
-            return Err(crate::EncodeError { field: "payload", value: i64::from(b), min: 0, max: 0x7F });
+            return Err(crate::EncodeError {
+                field: "payload",
+                value: i64::from(b),
+                min: 0,
+                max: 0x7F,
+            });
         }
         out[1 + i] = b;
     }
@@ -168,7 +175,11 @@ mod tests {
         }
         let known: Vec<u8> = PacketType::ALL.iter().map(|t| t.header()).collect();
         for b in 0..=255u8 {
-            assert_eq!(PacketType::from_header(b).is_some(), known.contains(&b), "byte {b:#x}");
+            assert_eq!(
+                PacketType::from_header(b).is_some(),
+                known.contains(&b),
+                "byte {b:#x}"
+            );
         }
         assert!(PacketType::from_header(END_MARKER).is_none());
     }

@@ -8,7 +8,9 @@
 //! packets can never overlap another valid packet (their bytes 1..=19 are < 0x80 or 0xAA, which
 //! is no header), so every valid packet in the stream is found, whatever the chunking.
 
-use crate::packet::{check_frame, Invalid, PacketType, END_MARKER, HEADER_KIND, NOT_A_HEADER, PACKET_LEN};
+use crate::packet::{
+    check_frame, Invalid, PacketType, END_MARKER, HEADER_KIND, NOT_A_HEADER, PACKET_LEN,
+};
 use crate::sensor::{decode_sensor, SensorRaw};
 
 /// At most this many bytes are carried from one `feed` to the next (an unfinished packet).
@@ -55,8 +57,11 @@ pub enum RejectReason {
 }
 
 impl RejectReason {
-    pub const ALL: [RejectReason; 3] =
-        [RejectReason::UnknownHeader, RejectReason::PayloadHighBit, RejectReason::BadEndMarker];
+    pub const ALL: [RejectReason; 3] = [
+        RejectReason::UnknownHeader,
+        RejectReason::PayloadHighBit,
+        RejectReason::BadEndMarker,
+    ];
 
     pub const fn name(self) -> &'static str {
         match self {
@@ -121,7 +126,11 @@ impl Default for StreamParser {
 
 impl StreamParser {
     pub fn new() -> Self {
-        StreamParser { carry: [0; MAX_CARRY], carry_len: 0, stats: Stats::default() }
+        StreamParser {
+            carry: [0; MAX_CARRY],
+            carry_len: 0,
+            stats: Stats::default(),
+        }
     }
 
     pub fn stats(&self) -> &Stats {
@@ -276,7 +285,11 @@ fn find_high(s: &[u8]) -> Option<usize> {
         }
         offset += 8;
     }
-    chunks.remainder().iter().position(|&b| b >= 0x80).map(|k| offset + k)
+    chunks
+        .remainder()
+        .iter()
+        .position(|&b| b >= 0x80)
+        .map(|k| offset + k)
 }
 
 #[cfg(test)]
@@ -286,8 +299,14 @@ mod tests {
     use crate::{encode_packet, encode_sensor, PAYLOAD_LEN};
 
     fn sensor(cell: u16) -> [u8; PACKET_LEN] {
-        encode_sensor(&SensorRaw { cell_id: cell, proximity: cell * 3, acc: [1, -2, 3], temp: [-4, 5], force: [6, 7, 8] })
-            .unwrap()
+        encode_sensor(&SensorRaw {
+            cell_id: cell,
+            proximity: cell * 3,
+            acc: [1, -2, 3],
+            temp: [-4, 5],
+            force: [6, 7, 8],
+        })
+        .unwrap()
     }
 
     fn parse(chunks: &[&[u8]]) -> (Collect, StreamParser) {
@@ -386,7 +405,14 @@ mod tests {
         let stream = [&sensor(1)[..], &ping, &rate, &ping, &sensor(2)].concat();
         let (c, p) = parse(&[&stream[..7], &stream[7..]]);
         assert_eq!(cells(&c), vec![1, 2]);
-        assert_eq!(c.others, vec![(PacketType::Ping, ping), (PacketType::UpdateRate, rate), (PacketType::Ping, ping)]);
+        assert_eq!(
+            c.others,
+            vec![
+                (PacketType::Ping, ping),
+                (PacketType::UpdateRate, rate),
+                (PacketType::Ping, ping)
+            ]
+        );
         assert_eq!(p.stats().other(PacketType::Ping), 2);
         assert_eq!(p.stats().other(PacketType::UpdateRate), 1);
         assert_eq!(p.stats().packets_total(), 5);

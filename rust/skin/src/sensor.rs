@@ -73,7 +73,10 @@ pub fn decode_sensor(p: &[u8; PACKET_LEN]) -> SensorRaw {
         cell_id: ((b(1) << 7) | b(2)) as u16,
         proximity: ((b(3) << 9) | (b(4) << 2) | ((b(10) >> 3) & 0x3)) as u16,
         acc: [acc(5, 8), acc(6, 9), acc(7, 10)],
-        temp: [sign_extend(temp_acc, 8), sign_extend((b(17) << 7) | b(18), 14)],
+        temp: [
+            sign_extend(temp_acc, 8),
+            sign_extend((b(17) << 7) | b(18), 14),
+        ],
         force: [force(11, 12), force(13, 14), force(15, 16)],
     }
 }
@@ -100,7 +103,12 @@ impl SensorRaw {
             if range.contains(&value) {
                 Ok(())
             } else {
-                Err(EncodeError { field, value, min: *range.start(), max: *range.end() })
+                Err(EncodeError {
+                    field,
+                    value,
+                    min: *range.start(),
+                    max: *range.end(),
+                })
             }
         };
         check("cell_id", i64::from(self.cell_id), RANGE_CELL_ID)?;
@@ -163,7 +171,11 @@ pub fn encode_sensor(raw: &SensorRaw) -> Result<[u8; PACKET_LEN], EncodeError> {
 
 /// Rounds half to even (like numpy) and clips to the representable range.
 #[inline]
-fn quantize_one(field: &'static str, value: f64, range: RangeInclusive<i64>) -> Result<i64, QuantizeError> {
+fn quantize_one(
+    field: &'static str,
+    value: f64,
+    range: RangeInclusive<i64>,
+) -> Result<i64, QuantizeError> {
     if value.is_nan() {
         return Err(QuantizeError::NaN { field });
     }
@@ -199,8 +211,11 @@ pub fn quantize(
         proximity: quantize_one("proximity", proximity / scale::PROXIMITY, RANGE_PROXIMITY)? as u16,
         acc,
         temp: [
-            quantize_one("temp", (temp_c[0] - scale::TEMP_ACC_OFFSET) / scale::TEMP_ACC, RANGE_TEMP_ACC)?
-                as i16,
+            quantize_one(
+                "temp",
+                (temp_c[0] - scale::TEMP_ACC_OFFSET) / scale::TEMP_ACC,
+                RANGE_TEMP_ACC,
+            )? as i16,
             quantize_one("temp", temp_c[1] / scale::TEMP_LM71, RANGE_TEMP_LM71)? as i16,
         ],
         force,
@@ -263,7 +278,13 @@ mod tests {
 
     #[test]
     fn unused_bits_are_ignored_by_the_decoder() {
-        let raw = SensorRaw { cell_id: 7, proximity: 1, acc: [1, 2, 3], temp: [4, 5], force: [6, 7, 8] };
+        let raw = SensorRaw {
+            cell_id: 7,
+            proximity: 1,
+            acc: [1, 2, 3],
+            temp: [4, 5],
+            force: [6, 7, 8],
+        };
         let mut p = encode_sensor(&raw).unwrap();
         p[10] |= 0b0110_0000;
         for i in [12, 14, 16] {
@@ -276,14 +297,38 @@ mod tests {
     fn encoder_rejects_each_out_of_range_field() {
         let ok = SensorRaw::default();
         let cases = [
-            SensorRaw { cell_id: 0x4000, ..ok },
-            SensorRaw { acc: [512, 0, 0], ..ok },
-            SensorRaw { acc: [0, -513, 0], ..ok },
-            SensorRaw { temp: [128, 0], ..ok },
-            SensorRaw { temp: [-129, 0], ..ok },
-            SensorRaw { temp: [0, 8192], ..ok },
-            SensorRaw { temp: [0, -8193], ..ok },
-            SensorRaw { force: [0, 0, 4096], ..ok },
+            SensorRaw {
+                cell_id: 0x4000,
+                ..ok
+            },
+            SensorRaw {
+                acc: [512, 0, 0],
+                ..ok
+            },
+            SensorRaw {
+                acc: [0, -513, 0],
+                ..ok
+            },
+            SensorRaw {
+                temp: [128, 0],
+                ..ok
+            },
+            SensorRaw {
+                temp: [-129, 0],
+                ..ok
+            },
+            SensorRaw {
+                temp: [0, 8192],
+                ..ok
+            },
+            SensorRaw {
+                temp: [0, -8193],
+                ..ok
+            },
+            SensorRaw {
+                force: [0, 0, 4096],
+                ..ok
+            },
         ];
         for c in cases {
             assert!(encode_sensor(&c).is_err(), "{c:?}");
@@ -300,19 +345,42 @@ mod tests {
 
     #[test]
     fn quantize_rounds_half_to_even_and_clips() {
-        let r = quantize(3, 0.5, [1.0, -3.0, 2.5 / 256.0], [24.25, 20.0], [0.5, 10.0, -1.0]).unwrap();
+        let r = quantize(
+            3,
+            0.5,
+            [1.0, -3.0, 2.5 / 256.0],
+            [24.25, 20.0],
+            [0.5, 10.0, -1.0],
+        )
+        .unwrap();
         assert_eq!(r.cell_id, 3);
         assert_eq!(r.proximity, 32768);
         assert_eq!(r.acc, [256, -512, 2]); // -3 g clips to -512; 2.5 → 2 (half to even)
         assert_eq!(r.temp, [0, 640]); // (24.25 - 24) / 0.5 = 0.5 → 0
         assert_eq!(r.force, [512, 4095, 0]);
-        let inf = quantize(0, f64::INFINITY, [f64::NEG_INFINITY; 3], [1e300, -1e300], [f64::INFINITY; 3]).unwrap();
+        let inf = quantize(
+            0,
+            f64::INFINITY,
+            [f64::NEG_INFINITY; 3],
+            [1e300, -1e300],
+            [f64::INFINITY; 3],
+        )
+        .unwrap();
         assert_eq!(inf.proximity, 65535);
         assert_eq!(inf.acc, [-512; 3]);
         assert_eq!(inf.temp, [127, -8192]);
         assert_eq!(inf.force, [4095; 3]);
-        assert!(matches!(quantize(0, f64::NAN, [0.0; 3], [0.0; 2], [0.0; 3]), Err(QuantizeError::NaN { .. })));
-        assert!(matches!(quantize(16384, 0.0, [0.0; 3], [0.0; 2], [0.0; 3]), Err(QuantizeError::CellId(_))));
-        assert!(matches!(quantize(-1, 0.0, [0.0; 3], [0.0; 2], [0.0; 3]), Err(QuantizeError::CellId(_))));
+        assert!(matches!(
+            quantize(0, f64::NAN, [0.0; 3], [0.0; 2], [0.0; 3]),
+            Err(QuantizeError::NaN { .. })
+        ));
+        assert!(matches!(
+            quantize(16384, 0.0, [0.0; 3], [0.0; 2], [0.0; 3]),
+            Err(QuantizeError::CellId(_))
+        ));
+        assert!(matches!(
+            quantize(-1, 0.0, [0.0; 3], [0.0; 2], [0.0; 3]),
+            Err(QuantizeError::CellId(_))
+        ));
     }
 }

@@ -3,6 +3,7 @@
 //! protocol text (no word tricks, no carry, no shared decoder) to compare the real one against.
 //! Not part of the supported API.
 
+use crate::columns::{PhysicalColumns, RawColumns};
 use crate::packet::{PacketType, END_MARKER, PACKET_LEN};
 use crate::parser::{PacketSink, RejectReason, Stats, StreamParser, MAX_CARRY};
 use crate::sensor::SensorRaw;
@@ -26,7 +27,11 @@ impl PacketSink for Collect {
 
 fn signed(value: u32, bits: u32) -> i16 {
     let v = value as i32;
-    (if v >= 1 << (bits - 1) { v - (1 << bits) } else { v }) as i16
+    (if v >= 1 << (bits - 1) {
+        v - (1 << bits)
+    } else {
+        v
+    }) as i16
 }
 
 /// The decoding table of the protocol, formula by formula.
@@ -40,7 +45,10 @@ pub fn reference_decode(b: &[u8]) -> SensorRaw {
             signed(((b(6) & 0x7F) << 3) | (b(9) & 0x7), 10),
             signed(((b(7) & 0x7F) << 3) | (b(10) & 0x7), 10),
         ],
-        temp: [signed(((b(8) << 1) & 0xF0) | ((b(9) >> 3) & 0xF), 8), signed(((b(17) & 0x7F) << 7) | (b(18) & 0x7F), 14)],
+        temp: [
+            signed(((b(8) << 1) & 0xF0) | ((b(9) >> 3) & 0xF), 8),
+            signed(((b(17) & 0x7F) << 7) | (b(18) & 0x7F), 14),
+        ],
         force: [
             (((b(11) & 0x7F) << 5) | (b(12) & 0x1F)) as u16,
             (((b(13) & 0x7F) << 5) | (b(14) & 0x1F)) as u16,
@@ -54,11 +62,18 @@ pub fn reference_decode(b: &[u8]) -> SensorRaw {
 /// carries it.
 pub fn reference_scan(s: &[u8]) -> (Collect, Stats) {
     let mut out = Collect::default();
-    let mut st = Stats { bytes_in: s.len() as u64, ..Stats::default() };
+    let mut st = Stats {
+        bytes_in: s.len() as u64,
+        ..Stats::default()
+    };
     let mut pos = 0;
     while pos < s.len() {
         let b = s[pos];
-        let kind = if b >= 0x80 { PacketType::from_header(b) } else { None };
+        let kind = if b >= 0x80 {
+            PacketType::from_header(b)
+        } else {
+            None
+        };
         let Some(kind) = kind else {
             if b >= 0x80 && b != END_MARKER {
                 st.rejected[RejectReason::UnknownHeader as usize] += 1;
@@ -69,7 +84,11 @@ pub fn reference_scan(s: &[u8]) -> (Collect, Stats) {
         };
         let end = (pos + PACKET_LEN).min(s.len());
         let window = &s[pos..end];
-        let high_payload = window.iter().take(PACKET_LEN - 1).skip(1).any(|&x| x >= 0x80);
+        let high_payload = window
+            .iter()
+            .take(PACKET_LEN - 1)
+            .skip(1)
+            .any(|&x| x >= 0x80);
         if high_payload {
             st.rejected[RejectReason::PayloadHighBit as usize] += 1;
         } else if window.len() < PACKET_LEN {
@@ -102,7 +121,9 @@ pub fn chunk_sizes(len: usize, seed: u64, max: usize) -> Vec<usize> {
     let mut sizes = Vec::new();
     let mut total = 0;
     while total < len {
-        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         let n = ((state >> 33) as usize % (max + 1)).min(len - total);
         sizes.push(n);
         total += n;
@@ -122,9 +143,16 @@ pub fn fuzz_check(data: &[u8]) {
     let max_chunk = [1usize, 3, 19, 20, 21, 64][seed as usize % 6];
     let mut parser = StreamParser::new();
     let mut got = Collect::default();
+    // The column sinks decode clean runs with their own block decoders; run them on the same
+    // chunks through parsers of their own.
+    let (mut raw_parser, mut raw) = (StreamParser::new(), RawColumns::default());
+    let (mut phys_parser, mut phys) = (StreamParser::new(), PhysicalColumns::default());
     let mut offset = 0;
     for n in chunk_sizes(stream.len(), seed, max_chunk) {
-        parser.feed(&stream[offset..offset + n], &mut got);
+        let chunk = &stream[offset..offset + n];
+        parser.feed(chunk, &mut got);
+        raw_parser.feed(chunk, &mut raw);
+        phys_parser.feed(chunk, &mut phys);
         offset += n;
         assert!(parser.pending() <= MAX_CARRY);
         let st = parser.stats();
@@ -135,5 +163,24 @@ pub fn fuzz_check(data: &[u8]) {
         );
     }
     assert_eq!(got, expected, "packets differ from the reference");
-    assert_eq!(parser.stats(), &expected_stats, "statistics differ from the reference");
+    let rows: Vec<SensorRaw> = (0..raw.len()).filter_map(|i| raw.row(i)).collect();
+    assert_eq!(
+        rows, expected.sensors,
+        "RawColumns differ from the reference"
+    );
+    let mut want = PhysicalColumns::default();
+    for r in &expected.sensors {
+        let p = r.to_physical();
+        want.cell_id.push(p.cell_id);
+        want.proximity.push(p.proximity);
+        want.acc.extend_from_slice(&p.acc);
+        want.temp.extend_from_slice(&p.temp);
+        want.force.extend_from_slice(&p.force);
+    }
+    assert_eq!(phys, want, "PhysicalColumns differ from the reference");
+    assert_eq!(
+        parser.stats(),
+        &expected_stats,
+        "statistics differ from the reference"
+    );
 }

@@ -36,12 +36,18 @@ fn stream(rng: &mut Rng) -> Vec<u8> {
                     temp: [rng.below(256) as i16 - 128, rng.below(16384) as i16 - 8192],
                     force: [0, 1, 2].map(|_| rng.below(4096) as u16),
                 };
-                let Ok(mut p) = encode_sensor(&raw) else { continue };
+                let Ok(mut p) = encode_sensor(&raw) else {
+                    continue;
+                };
                 if rng.below(4) == 0 {
                     let at = rng.below(20) as usize;
                     p[at] ^= 1 << rng.below(8); // any single bit error
                 }
-                let keep = if rng.below(5) == 0 { rng.below(21) as usize } else { 20 };
+                let keep = if rng.below(5) == 0 {
+                    rng.below(21) as usize
+                } else {
+                    20
+                };
                 out.extend_from_slice(&p[..keep]);
             }
             5 => out.push([0xFF, 0xAA, 0xC8, 0xE2, 0x80][rng.below(5) as usize]),

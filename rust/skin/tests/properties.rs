@@ -2,8 +2,8 @@
 
 use aptkt_skin::testing::{chunk_sizes, fuzz_check, reference_decode, reference_scan, Collect};
 use aptkt_skin::{
-    decode_sensor, encode_packet, encode_sensor, is_valid_packet, quantize, PacketType, SensorRaw, StreamParser,
-    END_MARKER, PACKET_LEN, PAYLOAD_LEN,
+    decode_sensor, encode_packet, encode_sensor, is_valid_packet, quantize, PacketType, SensorRaw,
+    StreamParser, END_MARKER, PACKET_LEN, PAYLOAD_LEN,
 };
 use proptest::prelude::*;
 
@@ -93,11 +93,22 @@ fn piece(garbage: BoxedStrategy<u8>) -> impl Strategy<Value = Piece> {
 }
 
 fn no_end_marker() -> BoxedStrategy<u8> {
-    any::<u8>().prop_filter("no 0xAA", |&b| b != END_MARKER).boxed()
+    any::<u8>()
+        .prop_filter("no 0xAA", |&b| b != END_MARKER)
+        .boxed()
 }
 
 fn intact_sensors(pieces: &[Piece]) -> Vec<SensorRaw> {
-    pieces.iter().filter_map(|p| if let Piece::Intact(r) = p { Some(*r) } else { None }).collect()
+    pieces
+        .iter()
+        .filter_map(|p| {
+            if let Piece::Intact(r) = p {
+                Some(*r)
+            } else {
+                None
+            }
+        })
+        .collect()
 }
 
 fn is_subsequence<T: PartialEq>(needle: &[T], haystack: &[T]) -> bool {

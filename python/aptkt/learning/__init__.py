@@ -1,0 +1,40 @@
+"""Learning tactual properties of new objects with prior tactile knowledge (paper §4).
+
+=====================  =====================================================================
+observations           feature observations as plain arrays (any sensor)
+pipeline               per-modality transforms (scaling, log, thermal PCA) fitted on training
+prior                  prior knowledge: old objects' observations, pipelines, models; save/load
+transfer               from where and how much to transfer (Eq. 3)
+active                 uncertainty and next (action, object) selection (Eq. 4)
+learner                the APTKT process and the baseline
+environment            where observations come from (pools; robots through aptkt.exploration)
+evaluation             accuracy on held-out test observations, fused over actions
+=====================  =====================================================================
+"""
+
+from aptkt.learning.config import GPSettings, LearnerConfig
+from aptkt.learning.environment import Environment, PoolEnvironment, PoolExhaustedError
+from aptkt.learning.learner import APTKT, LearningRun, StepRecord
+from aptkt.learning.observations import Observations, ObservationTable
+from aptkt.learning.pipeline import FeaturePipeline, ModalityTransform
+from aptkt.learning.prior import ActionPrior, PriorKnowledge
+from aptkt.learning.transfer import TransferDecision, decide_transfer
+
+__all__ = [
+    "APTKT",
+    "ActionPrior",
+    "Environment",
+    "FeaturePipeline",
+    "GPSettings",
+    "LearnerConfig",
+    "LearningRun",
+    "ModalityTransform",
+    "Observations",
+    "ObservationTable",
+    "PoolEnvironment",
+    "PoolExhaustedError",
+    "PriorKnowledge",
+    "StepRecord",
+    "TransferDecision",
+    "decide_transfer",
+]

@@ -1,0 +1,57 @@
+"""Where observations come from: the learner asks an environment for one observation of
+(action, object). A live robot (the simulated world, or the UR10) explores the object; a pool
+replays pre-recorded observations (the paper's offline protocol)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from aptkt.errors import AptktError
+from aptkt.learning.observations import ObservationTable
+
+__all__ = ["Environment", "PoolEnvironment", "PoolExhaustedError"]
+
+
+class PoolExhaustedError(AptktError):
+    """A pool has no unused observation left for an (action, object) pair."""
+
+
+@runtime_checkable
+class Environment(Protocol):
+    def observe(self, action: str, obj: str) -> Mapping[str, np.ndarray]:
+        """One new feature observation (modality name -> raw vector)."""
+        ...
+
+    def available(self, action: str, obj: str) -> bool:
+        """Whether another observation of the pair can be had."""
+        ...
+
+
+class PoolEnvironment:
+    """Pre-recorded observations, drawn without replacement in a seeded random order."""
+
+    def __init__(self, table: ObservationTable, seed: int = 0) -> None:
+        self.table = dict(table)
+        rng = np.random.default_rng(seed)
+        self._queues: dict[tuple[str, str], list[int]] = {}
+        for action, obs in self.table.items():
+            for obj in obs.object_names:
+                idx = np.flatnonzero(obs.objects == obj)
+                self._queues[(action, obj)] = list(rng.permutation(idx))
+
+    def available(self, action: str, obj: str) -> bool:
+        return bool(self._queues.get((action, obj)))
+
+    def remaining(self, action: str, obj: str) -> int:
+        return len(self._queues.get((action, obj), []))
+
+    def observe(self, action: str, obj: str) -> Mapping[str, np.ndarray]:
+        if (action, obj) not in self._queues:
+            raise KeyError(f"the pool has no observations of action {action!r} on object {obj!r}")
+        queue = self._queues[(action, obj)]
+        if not queue:
+            raise PoolExhaustedError(f"every pooled observation of {action!r} on {obj!r} has been used")
+        return self.table[action].row(int(queue.pop(0)))

@@ -1,0 +1,308 @@
+"""The APTKT learning process (paper §4.3, Fig. 4) and its baseline.
+
+1. Initial data collection: every action once on every new object.
+2. Initial prior-knowledge transfer: for every action, fit the new objects' observation model
+   with the multi-modal kernel and, per new object, the dependent kernel on the most related
+   prior object (Eq. 2–3); optionally with the prior models' posteriors as an auxiliary
+   modality (Eq. 5).
+3. Iterate: pick the next (action, object) by uncertainty with ε-exploration (Eq. 4), observe,
+   and update only that action's model, weights, λ and transfer — until the budget is spent or
+   the models stop improving.
+
+The baseline is the same loop with ``transfer="none"`` (no prior observations, no λ).
+"""
+
+from __future__ import annotations
+
+import time
+import zlib
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from aptkt.gp import LaplaceGPC, TransferSource
+from aptkt.learning.active import entropy, select_next
+from aptkt.learning.config import LearnerConfig
+from aptkt.learning.environment import Environment
+from aptkt.learning.evaluation import accuracy, fused_accuracy
+from aptkt.learning.observations import Observations, ObservationTable
+from aptkt.learning.pipeline import FeaturePipeline
+from aptkt.learning.prior import ActionPrior, PriorKnowledge
+from aptkt.learning.transfer import TransferDecision, decide_transfer
+
+__all__ = ["ActionLearner", "APTKT", "LearningRun", "StepRecord"]
+
+AUXILIARY = "auxiliary"
+
+
+class ActionLearner:
+    """The new objects' observation model of one action, with its transfer decisions."""
+
+    def __init__(
+        self,
+        action: str,
+        new_objects: Sequence[str],
+        config: LearnerConfig,
+        prior: ActionPrior | None,
+        test: Observations | None = None,
+    ) -> None:
+        self.action = action
+        self.new_objects = [str(o) for o in new_objects]
+        self.config = config
+        self.prior = prior
+        self.observations: Observations | None = None
+        self.model: LaplaceGPC | None = None
+        self.decisions: dict[str, TransferDecision] = {}
+        self.train_entropy: np.ndarray = np.zeros(0)
+        self.n_updates = 0
+        self._test = test
+        self._test_cache: tuple[np.ndarray, dict[str, list[int]]] | None = None
+        self.test_posteriors: np.ndarray | None = None
+        # Source-task features of each old object, computed once.
+        self._source_cache: dict[str, np.ndarray] = {}
+
+    # -- data --------------------------------------------------------------------------------
+    def add(self, obj: str, observation: Mapping[str, np.ndarray], trial: int = 0) -> None:
+        one = Observations.single(self.action, obj, observation, trial)
+        self.observations = one if self.observations is None else Observations.concat([self.observations, one])
+
+    def count(self, obj: str) -> int:
+        return 0 if self.observations is None else int(np.sum(self.observations.objects == obj))
+
+    # -- features ----------------------------------------------------------------------------
+    def _pipeline(self) -> FeaturePipeline:
+        if self.prior is not None:
+            # The feature space of the prior knowledge, so old and new observations compare.
+            return self.prior.pipeline
+        return FeaturePipeline().fit(self.observations)
+
+    def _features(self, obs: Observations, pipeline: FeaturePipeline) -> tuple[np.ndarray, dict[str, list[int]]]:
+        X, groups = pipeline.transform(obs)
+        return self._augment(X, groups)
+
+    def _augment(self, X: np.ndarray, groups: dict[str, list[int]]) -> tuple[np.ndarray, dict[str, list[int]]]:
+        if not (self.config.auxiliary and self.prior is not None):
+            return X, groups
+        aux = self.prior.posteriors(X)
+        groups = dict(groups)
+        groups[AUXILIARY] = list(range(X.shape[1], X.shape[1] + aux.shape[1]))
+        return np.hstack([X, aux]), groups
+
+    def _source_features(self, old_object: str) -> np.ndarray:
+        if old_object not in self._source_cache:
+            X = self.prior.features_of(old_object)
+            self._source_cache[old_object] = self._augment(X, {})[0]
+        return self._source_cache[old_object]
+
+    # -- model -------------------------------------------------------------------------------
+    def update(self, step: int) -> None:
+        """Refit this action's model on everything observed so far (weights, λ, transfer)."""
+        obs = self.observations
+        missing = [o for o in self.new_objects if self.count(o) == 0]
+        if missing:
+            raise RuntimeError(f"action {self.action!r}: no observation yet of {missing}")
+        pipeline = self._pipeline()
+        X_plain, groups_plain = pipeline.transform(obs)
+        X, groups = self._augment(X_plain, groups_plain)
+        sources: dict[str, TransferSource] = {}
+        self.decisions = {}
+        if self.prior is not None and self.config.transfer != "none":
+            old_post = self.prior.posteriors(X_plain)
+            for obj in self.new_objects:
+                decision = decide_transfer(
+                    obj, self.prior.objects, old_post[obs.objects == obj], self.config.eps_neg, self.config.transfer
+                )
+                self.decisions[obj] = decision
+                if decision.transfers:
+                    sources[obj] = TransferSource(self._source_features(decision.source), decision.transfer_lambda)
+        seed = (self.config.seed * 1_000_003 + zlib.crc32(self.action.encode()) + step) % 2**32
+        model = self.config.gp.make(groups, random_state=seed)
+        self.model = model.fit(X, obs.objects, sources=sources or None)
+        self.train_entropy = entropy(self.model.predict_proba(X))
+        self.n_updates += 1
+        if self._test is not None:
+            if self._test_cache is None or self.prior is None:
+                self._test_cache = self._features(self._test, pipeline)
+            self.test_posteriors = self.model.predict_proba(self._test_cache[0])
+
+    def uncertainty(self, obj: str) -> float:
+        """UNC(α, c_j): mean entropy of the posterior over this pair's observations."""
+        mask = self.observations.objects == obj
+        return float(self.train_entropy[mask].mean())
+
+    @property
+    def test_objects(self) -> np.ndarray:
+        if self._test is None:
+            raise RuntimeError("no test observations were given")
+        return self._test.objects
+
+    def test_accuracy(self) -> float:
+        if self._test is None or self.test_posteriors is None:
+            raise RuntimeError("no test observations were given")
+        return accuracy(self.test_posteriors, [str(c) for c in self.model.classes_], self._test.objects)
+
+
+@dataclass
+class StepRecord:
+    """State after one observation (step 0: after the initial round and transfer)."""
+
+    step: int
+    n_observations: int
+    action: str | None
+    object: str | None
+    explored: bool
+    uncertainty: float
+    accuracy: dict[str, float]
+    mean_accuracy: float
+    fused_accuracy: float
+    transfer: dict[str, dict[str, Any]]
+    seconds: float
+
+    def as_row(self) -> dict[str, Any]:
+        row = {k: getattr(self, k) for k in ("step", "n_observations", "action", "object", "explored",
+                                              "uncertainty", "mean_accuracy", "fused_accuracy", "seconds")}
+        row.update({f"accuracy[{a}]": v for a, v in self.accuracy.items()})
+        return row
+
+
+@dataclass
+class LearningRun:
+    """Everything one learning run produced, with the configuration that produced it."""
+
+    config: LearnerConfig
+    actions: list[str]
+    new_objects: list[str]
+    prior_objects: list[str]
+    steps: list[StepRecord] = field(default_factory=list)
+    stopped_early: bool = False
+
+    def curve(self) -> dict[str, np.ndarray]:
+        return {
+            "step": np.array([s.step for s in self.steps]),
+            "n_observations": np.array([s.n_observations for s in self.steps]),
+            "mean_accuracy": np.array([s.mean_accuracy for s in self.steps]),
+            "fused_accuracy": np.array([s.fused_accuracy for s in self.steps]),
+        }
+
+    def rows(self) -> list[dict[str, Any]]:
+        return [s.as_row() for s in self.steps]
+
+
+class APTKT:
+    """Active prior tactile knowledge transfer (``config.transfer="paper"``) or the baseline.
+
+    ``prior`` may be None only for the baseline; with a prior, the baseline still uses the
+    prior's feature space (its scaling and thermal PCA) so that the two differ by the transfer
+    alone.
+    """
+
+    def __init__(self, config: LearnerConfig | None = None, prior: PriorKnowledge | None = None) -> None:
+        self.config = config or LearnerConfig()
+        if self.config.uses_prior and prior is None:
+            raise ValueError("transfer and auxiliary features need prior knowledge; pass prior=... "
+                             "or use LearnerConfig(transfer='none') for the baseline")
+        self.prior = prior
+        self.learners: dict[str, ActionLearner] = {}
+
+    def run(
+        self,
+        env: Environment,
+        actions: Sequence[str],
+        new_objects: Sequence[str],
+        test: ObservationTable | None = None,
+        on_step: Callable[[StepRecord], None] | None = None,
+    ) -> LearningRun:
+        cfg = self.config
+        actions = [str(a) for a in actions]
+        new_objects = [str(o) for o in new_objects]
+        if len(new_objects) < 2:
+            raise ValueError("learning needs at least two new objects")
+        if self.prior is not None:
+            missing = [a for a in actions if a not in self.prior]
+            if missing:
+                raise ValueError(f"the prior knowledge has no experience of action(s) {missing}")
+            overlap = set(new_objects) & set(self.prior.objects)
+            if overlap:
+                raise ValueError(f"objects {sorted(overlap)} are both prior and new")
+        rng = np.random.default_rng(cfg.seed)
+        self.learners = {
+            a: ActionLearner(a, new_objects, cfg, self.prior[a] if self.prior is not None else None,
+                             None if test is None else test[a])
+            for a in actions
+        }
+        run = LearningRun(cfg, actions, new_objects, self.prior.objects if self.prior else [])
+        t0 = time.perf_counter()
+        for a in actions:
+            for o in new_objects:
+                self.learners[a].add(o, env.observe(a, o))
+        for a in actions:
+            self.learners[a].update(step=0)
+        n_obs = len(actions) * len(new_objects)
+        self._record(run, 0, n_obs, None, time.perf_counter() - t0, on_step)
+
+        best_unc, stale = np.inf, 0
+        for step in range(1, cfg.budget + 1):
+            t0 = time.perf_counter()
+            unc = {(a, o): self.learners[a].uncertainty(o) for a in actions for o in new_objects}
+            available = [(a, o) for a in actions for o in new_objects if env.available(a, o)]
+            if not available:
+                run.stopped_early = True
+                break
+            sel = select_next(unc, actions, new_objects, cfg.eps_explor, rng, available)
+            learner = self.learners[sel.action]
+            learner.add(sel.object, env.observe(sel.action, sel.object), trial=step)
+            learner.update(step=step)
+            n_obs += 1
+            self._record(run, step, n_obs, sel, time.perf_counter() - t0, on_step)
+            if cfg.patience is not None:
+                mean_unc = float(np.mean(list(unc.values())))
+                if mean_unc < best_unc - 1e-6:
+                    best_unc, stale = mean_unc, 0
+                else:
+                    stale += 1
+                if stale >= cfg.patience:
+                    run.stopped_early = True
+                    break
+        return run
+
+    def _record(self, run: LearningRun, step: int, n_obs: int, sel: Any, seconds: float,
+                on_step: Callable[[StepRecord], None] | None) -> None:
+        has_test = all(l.test_posteriors is not None for l in self.learners.values())
+        acc = {a: l.test_accuracy() for a, l in self.learners.items()} if has_test else {}
+        fused = float("nan")
+        if has_test and _same_class_order(self.learners):
+            classes = [str(c) for c in next(iter(self.learners.values())).model.classes_]
+            fused = fused_accuracy(
+                {a: l.test_posteriors for a, l in self.learners.items()},
+                {a: l.test_objects for a, l in self.learners.items()},
+                classes,
+            )
+        updated = self.learners[sel.action] if sel is not None else None
+        transfer = {
+            a: {o: d.as_dict() for o, d in l.decisions.items()}
+            for a, l in self.learners.items()
+            if updated is None or l is updated
+        }
+        record = StepRecord(
+            step=step,
+            n_observations=n_obs,
+            action=None if sel is None else sel.action,
+            object=None if sel is None else sel.object,
+            explored=False if sel is None else sel.explored,
+            uncertainty=float("nan") if sel is None else sel.uncertainty,
+            accuracy=acc,
+            mean_accuracy=float(np.mean(list(acc.values()))) if acc else float("nan"),
+            fused_accuracy=fused,
+            transfer=transfer,
+            seconds=seconds,
+        )
+        run.steps.append(record)
+        if on_step is not None:
+            on_step(record)
+
+
+def _same_class_order(learners: Mapping[str, ActionLearner]) -> bool:
+    orders = {tuple(str(c) for c in l.model.classes_) for l in learners.values() if l.model is not None}
+    return len(orders) == 1

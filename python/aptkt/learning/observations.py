@@ -1,0 +1,130 @@
+"""Feature observations as plain arrays: the learner's input, whatever produced it.
+
+An observation of an exploratory action is one vector per modality (e.g. ``force``: the mean
+normal force, ``thermal``: the temperature curve). :class:`Observations` holds many observations
+of one action with the object each came from; an :data:`ObservationTable` maps action names to
+them. Users with another sensor build these from their own arrays (see
+:meth:`Observations.from_arrays`) — nothing here depends on the simulator or the skin.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Observations", "ObservationTable", "validate_table"]
+
+
+@dataclass
+class Observations:
+    """Observations of one action: ``modalities[name]`` is ``(n, d_name)``; ``objects`` is ``(n,)``."""
+
+    action: str
+    modalities: dict[str, np.ndarray]
+    objects: np.ndarray
+    trials: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+    def __post_init__(self) -> None:
+        self.objects = np.asarray(self.objects).astype(str)
+        n = self.objects.shape[0]
+        if self.objects.ndim != 1:
+            raise ValueError(f"action {self.action!r}: objects must be 1-D")
+        if not self.modalities:
+            raise ValueError(f"action {self.action!r}: at least one modality is needed")
+        mods = {}
+        for name, values in self.modalities.items():
+            arr = np.asarray(values, dtype=np.float64)
+            if arr.ndim == 1:
+                arr = arr[:, None]
+            if arr.ndim != 2 or arr.shape[0] != n:
+                raise ValueError(
+                    f"action {self.action!r}, modality {name!r}: expected shape ({n}, d), got {arr.shape}"
+                )
+            bad = np.argwhere(~np.isfinite(arr))
+            if bad.size:
+                r, c = bad[0]
+                raise ValueError(
+                    f"action {self.action!r}, modality {name!r}: non-finite value {arr[r, c]} "
+                    f"in observation {r} (object {str(self.objects[r])!r}), column {c}"
+                )
+            mods[str(name)] = arr
+        self.modalities = mods
+        trials = np.asarray(self.trials, dtype=np.int64)
+        self.trials = trials if trials.shape == (n,) else np.arange(n, dtype=np.int64)
+
+    @classmethod
+    def from_arrays(
+        cls, action: str, objects: Sequence[Any], trials: Sequence[int] | None = None, **modalities: Any
+    ) -> Observations:
+        """``Observations.from_arrays("P1", objects, force=f, thermal=t)``."""
+        return cls(action, dict(modalities), np.asarray(objects), np.asarray(trials if trials is not None else []))
+
+    def __len__(self) -> int:
+        return int(self.objects.shape[0])
+
+    @property
+    def modality_names(self) -> tuple[str, ...]:
+        return tuple(self.modalities)
+
+    @property
+    def object_names(self) -> list[str]:
+        return sorted(set(self.objects.tolist()))
+
+    def take(self, index: Any) -> Observations:
+        return Observations(
+            self.action, {k: v[index] for k, v in self.modalities.items()}, self.objects[index], self.trials[index]
+        )
+
+    def of_objects(self, objects: Iterable[str]) -> Observations:
+        return self.take(np.isin(self.objects, list(objects)))
+
+    def row(self, i: int) -> dict[str, np.ndarray]:
+        return {k: v[i] for k, v in self.modalities.items()}
+
+    @classmethod
+    def concat(cls, parts: Sequence[Observations]) -> Observations:
+        if not parts:
+            raise ValueError("nothing to concatenate")
+        names = parts[0].modality_names
+        for p in parts[1:]:
+            if p.action != parts[0].action or p.modality_names != names:
+                raise ValueError("can only concatenate observations of the same action and modalities")
+        return cls(
+            parts[0].action,
+            {k: np.concatenate([p.modalities[k] for p in parts]) for k in names},
+            np.concatenate([p.objects for p in parts]),
+            np.concatenate([p.trials for p in parts]),
+        )
+
+    @classmethod
+    def single(cls, action: str, obj: str, observation: Mapping[str, np.ndarray], trial: int = 0) -> Observations:
+        return cls(action, {k: np.asarray(v, dtype=np.float64)[None, :] for k, v in observation.items()},
+                   np.array([obj]), np.array([trial]))
+
+    def to_npz(self, prefix: str) -> dict[str, np.ndarray]:
+        out = {f"{prefix}/objects": self.objects.astype("U"), f"{prefix}/trials": self.trials}
+        for k, v in self.modalities.items():
+            out[f"{prefix}/modality/{k}"] = v
+        return out
+
+    @classmethod
+    def from_npz(cls, action: str, arrays: Mapping[str, np.ndarray], prefix: str) -> Observations:
+        mods = {
+            key[len(f"{prefix}/modality/"):]: np.asarray(arrays[key])
+            for key in arrays
+            if key.startswith(f"{prefix}/modality/")
+        }
+        return cls(action, mods, np.asarray(arrays[f"{prefix}/objects"]), np.asarray(arrays[f"{prefix}/trials"]))
+
+
+#: Observations of several actions, by action name.
+ObservationTable = Mapping[str, Observations]
+
+
+def validate_table(table: ObservationTable) -> None:
+    for name, obs in table.items():
+        if obs.action != name:
+            raise ValueError(f"table entry {name!r} holds observations of action {obs.action!r}")

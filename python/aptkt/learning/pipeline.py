@@ -1,0 +1,170 @@
+"""From raw feature observations to the model's input: per-modality transforms fitted on
+training observations only (DESIGN.md §4).
+
+Per modality, in order: optional ``log10`` of some columns (texture activities span orders of
+magnitude), z-scoring of every column, optional PCA (the thermal curve ``[T̄, ∇T̄]`` is reduced
+to 10 components, paper §3.2.3) whose scores are divided by the first component's standard
+deviation so every modality reaches the kernel on a comparable scale. The fitted parameters
+are plain arrays and are saved with the prior knowledge (no pickle).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from aptkt.learning.observations import Observations
+
+__all__ = ["ModalityTransform", "FeaturePipeline", "DEFAULT_TRANSFORMS"]
+
+
+@dataclass
+class ModalityTransform:
+    """Transform of one modality. Configuration fields, then fitted ones (trailing underscore)."""
+
+    log_columns: tuple[int, ...] = ()
+    pca_components: int | None = None
+    mean_: np.ndarray | None = field(default=None, repr=False)
+    scale_: np.ndarray | None = field(default=None, repr=False)
+    components_: np.ndarray | None = field(default=None, repr=False)
+    pca_scale_: float = 1.0
+
+    def _prepare(self, X: np.ndarray) -> np.ndarray:
+        X = np.array(X, dtype=np.float64)
+        if self.log_columns:
+            cols = list(self.log_columns)
+            # Clamp at a tiny positive value: a perfectly still accelerometer axis has activity
+            # 0 after quantisation, and log10(0) would be -inf.
+            X[:, cols] = np.log10(np.maximum(X[:, cols], 1e-12))
+        return X
+
+    def fit(self, X: np.ndarray) -> ModalityTransform:
+        X = self._prepare(X)
+        if X.shape[0] < 1:
+            raise ValueError("cannot fit a feature transform on zero observations")
+        self.mean_ = X.mean(axis=0)
+        scale = X.std(axis=0)
+        self.scale_ = np.where(scale > 1e-12, scale, 1.0)
+        Z = (X - self.mean_) / self.scale_
+        self.components_ = None
+        self.pca_scale_ = 1.0
+        if self.pca_components is not None:
+            # Rank of centred data is at most n - 1; keep that many at most.
+            k = max(1, min(self.pca_components, X.shape[0] - 1, X.shape[1]))
+            _, s, vt = np.linalg.svd(Z, full_matrices=False)
+            self.components_ = vt[:k]
+            first_sd = s[0] / np.sqrt(max(X.shape[0], 1)) if s.size else 0.0
+            self.pca_scale_ = float(first_sd) if first_sd > 1e-12 else 1.0
+        return self
+
+    @property
+    def fitted(self) -> bool:
+        return self.mean_ is not None
+
+    @property
+    def n_features_out(self) -> int:
+        if not self.fitted:
+            raise RuntimeError("transform not fitted")
+        return int(self.components_.shape[0]) if self.components_ is not None else int(self.mean_.shape[0])
+
+    def transform(self, X: np.ndarray) -> np.ndarray:
+        if not self.fitted:
+            raise RuntimeError("transform not fitted")
+        Z = (self._prepare(X) - self.mean_) / self.scale_
+        if self.components_ is not None:
+            Z = Z @ self.components_.T / self.pca_scale_
+        return Z
+
+    def state(self) -> dict[str, np.ndarray]:
+        out = {
+            "log_columns": np.asarray(self.log_columns, dtype=np.int64),
+            "pca_components": np.asarray(-1 if self.pca_components is None else self.pca_components),
+        }
+        if self.fitted:
+            out.update(mean=self.mean_, scale=self.scale_, pca_scale=np.asarray(self.pca_scale_))
+            if self.components_ is not None:
+                out["components"] = self.components_
+        return out
+
+    @classmethod
+    def from_state(cls, state: Mapping[str, np.ndarray]) -> ModalityTransform:
+        pca = int(state["pca_components"])
+        t = cls(tuple(int(c) for c in state["log_columns"]), None if pca < 0 else pca)
+        if "mean" in state:
+            t.mean_ = np.asarray(state["mean"])
+            t.scale_ = np.asarray(state["scale"])
+            t.pca_scale_ = float(state["pca_scale"])
+            t.components_ = np.asarray(state["components"]) if "components" in state else None
+        return t
+
+
+#: Transforms used for the skin's modalities unless configured otherwise. Texture columns 0-2
+#: are the Hjorth activities (variances); the other modalities are z-scored as they are.
+DEFAULT_TRANSFORMS: Mapping[str, ModalityTransform] = {
+    "force": ModalityTransform(),
+    "texture": ModalityTransform(log_columns=(0, 1, 2)),
+    "thermal": ModalityTransform(pca_components=10),
+}
+
+
+class FeaturePipeline:
+    """Per-modality transforms for one action; modalities without a configured transform are
+    z-scored."""
+
+    def __init__(self, transforms: Mapping[str, ModalityTransform] | None = None) -> None:
+        base = DEFAULT_TRANSFORMS if transforms is None else transforms
+        self.transforms: dict[str, ModalityTransform] = {k: replace(v) for k, v in base.items()}
+        self.modality_names_: tuple[str, ...] = ()
+
+    def fit(self, obs: Observations) -> FeaturePipeline:
+        """Fit on training observations (never on test data)."""
+        fitted = {}
+        for name in obs.modality_names:
+            template = self.transforms.get(name, ModalityTransform())
+            fitted[name] = replace(template, mean_=None, scale_=None, components_=None).fit(obs.modalities[name])
+        self.transforms = fitted
+        self.modality_names_ = obs.modality_names
+        return self
+
+    def transform(self, obs: Observations) -> tuple[np.ndarray, dict[str, list[int]]]:
+        """Feature matrix and the column group of each modality (for the multi-modal kernel)."""
+        if not self.modality_names_:
+            raise RuntimeError("FeaturePipeline is not fitted")
+        if obs.modality_names != self.modality_names_:
+            raise ValueError(
+                f"action {obs.action!r}: observations have modalities {obs.modality_names}, "
+                f"the pipeline was fitted on {self.modality_names_}"
+            )
+        blocks, groups, start = [], {}, 0
+        for name in self.modality_names_:
+            block = self.transforms[name].transform(obs.modalities[name])
+            blocks.append(block)
+            groups[name] = list(range(start, start + block.shape[1]))
+            start += block.shape[1]
+        return np.hstack(blocks), groups
+
+    def state(self, prefix: str) -> dict[str, np.ndarray]:
+        out: dict[str, np.ndarray] = {f"{prefix}/modalities": np.asarray(self.modality_names_, dtype="U")}
+        for name in self.modality_names_:
+            for key, value in self.transforms[name].state().items():
+                out[f"{prefix}/{name}/{key}"] = value
+        return out
+
+    @classmethod
+    def from_state(cls, arrays: Mapping[str, Any], prefix: str) -> FeaturePipeline:
+        pipe = cls({})
+        names = tuple(str(n) for n in np.asarray(arrays[f"{prefix}/modalities"]))
+        transforms = {}
+        for name in names:
+            sub = {
+                key[len(f"{prefix}/{name}/"):]: arrays[key]
+                for key in arrays
+                if key.startswith(f"{prefix}/{name}/")
+            }
+            transforms[name] = ModalityTransform.from_state(sub)
+        pipe.transforms = transforms
+        pipe.modality_names_ = names
+        return pipe

@@ -1,0 +1,165 @@
+"""Prior tactile knowledge: what the robot learned on earlier ("old") objects, per action —
+their feature observations, the feature pipeline fitted on them, and the fitted observation
+model (a one-vs-all Laplace GPC over the old objects) with its hyper-parameters.
+
+Saved as one ``.npz`` file of plain arrays plus JSON metadata; loading executes no code
+(``allow_pickle=False``) and restores the models exactly at their saved hyper-parameters.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aptkt import __version__
+from aptkt.gp import LaplaceGPC
+from aptkt.learning.config import GPSettings
+from aptkt.learning.observations import Observations, ObservationTable
+from aptkt.learning.pipeline import FeaturePipeline, ModalityTransform
+
+__all__ = ["ActionPrior", "PriorKnowledge"]
+
+_FORMAT = "aptkt.PriorKnowledge/1"
+
+
+@dataclass
+class ActionPrior:
+    """The prior experience of one exploratory action."""
+
+    action: str
+    observations: Observations
+    pipeline: FeaturePipeline
+    model: LaplaceGPC
+
+    @property
+    def objects(self) -> list[str]:
+        return [str(c) for c in self.model.classes_]
+
+    def features(self, obs: Observations) -> tuple[np.ndarray, dict[str, list[int]]]:
+        """Observations in this prior's feature space."""
+        return self.pipeline.transform(obs)
+
+    def posteriors(self, X: np.ndarray) -> np.ndarray:
+        """``p(c_i^old | v)`` for feature rows already in this prior's space, (n, n_old)."""
+        return self.model.predict_proba(X)
+
+    def training_features(self) -> np.ndarray:
+        return self.pipeline.transform(self.observations)[0]
+
+    def features_of(self, old_object: str) -> np.ndarray:
+        return self.pipeline.transform(self.observations.of_objects([old_object]))[0]
+
+
+class PriorKnowledge:
+    """Prior experiences of several actions over the same old objects."""
+
+    def __init__(self, actions: Mapping[str, ActionPrior], metadata: Mapping[str, Any] | None = None) -> None:
+        if not actions:
+            raise ValueError("prior knowledge needs at least one action")
+        self.actions: dict[str, ActionPrior] = dict(actions)
+        self.metadata: dict[str, Any] = dict(metadata or {})
+
+    def __getitem__(self, action: str) -> ActionPrior:
+        try:
+            return self.actions[action]
+        except KeyError:
+            raise KeyError(f"no prior knowledge for action {action!r}; known: {sorted(self.actions)}") from None
+
+    def __contains__(self, action: object) -> bool:
+        return action in self.actions
+
+    @property
+    def objects(self) -> list[str]:
+        return sorted({o for a in self.actions.values() for o in a.objects})
+
+    @classmethod
+    def build(
+        cls,
+        table: ObservationTable,
+        objects: Iterable[str] | None = None,
+        *,
+        gp: GPSettings | None = None,
+        transforms: Mapping[str, ModalityTransform] | None = None,
+        seed: int = 0,
+        progress: Any = None,
+    ) -> PriorKnowledge:
+        """Fit the observation model of every action in ``table`` on the given old objects."""
+        gp = gp or GPSettings()
+        actions = {}
+        for k, (name, obs) in enumerate(table.items()):
+            if objects is not None:
+                obs = obs.of_objects(objects)
+            if len(obs.object_names) < 2:
+                raise ValueError(f"action {name!r}: prior knowledge needs at least two old objects")
+            pipeline = FeaturePipeline(transforms).fit(obs)
+            X, groups = pipeline.transform(obs)
+            model = gp.make(groups, random_state=seed + k).fit(X, obs.objects)
+            actions[name] = ActionPrior(name, obs, pipeline, model)
+            if progress is not None:
+                progress.update(1)
+        meta = {"software_version": __version__, "seed": seed, "gp": gp.__dict__}
+        return cls(actions, meta)
+
+    # -- persistence ---------------------------------------------------------------------------
+    def save(self, path: str | Path) -> Path:
+        path = Path(path)
+        arrays: dict[str, np.ndarray] = {}
+        for i, (name, prior) in enumerate(self.actions.items()):
+            p = f"a{i}"
+            arrays.update(prior.observations.to_npz(f"{p}/obs"))
+            arrays.update(prior.pipeline.state(f"{p}/pipeline"))
+            for key, value in prior.model.state().items():
+                arrays[f"{p}/model/{key}"] = value
+        meta = {"format": _FORMAT, "actions": list(self.actions), "metadata": self.metadata}
+        arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+        tmp = path.with_name(path.name + ".tmp")
+        with tmp.open("wb") as fh:
+            np.savez_compressed(fh, **arrays)
+        tmp.replace(path)  # never leave a half-written file under the real name
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> PriorKnowledge:
+        path = Path(path)
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+        if "meta" not in arrays:
+            raise ValueError(f"{path}: not a prior-knowledge file")
+        meta = json.loads(bytes(arrays["meta"]).decode())
+        if meta.get("format") != _FORMAT:
+            raise ValueError(f"{path}: unsupported format {meta.get('format')!r} (expected {_FORMAT})")
+        actions = {}
+        for i, name in enumerate(meta["actions"]):
+            p = f"a{i}"
+            obs = Observations.from_npz(name, arrays, f"{p}/obs")
+            pipeline = FeaturePipeline.from_state(arrays, f"{p}/pipeline")
+            model_state = {k[len(f"{p}/model/"):]: v for k, v in arrays.items() if k.startswith(f"{p}/model/")}
+            model = LaplaceGPC.from_state(model_state)
+            actions[name] = ActionPrior(name, obs, pipeline, model)
+        return cls(actions, meta.get("metadata", {}))
+
+    def summary(self) -> list[dict[str, Any]]:
+        """One row per action: objects, observations, modality weights and length-scales."""
+        rows = []
+        for name, prior in self.actions.items():
+            m = prior.model
+            rows.append({
+                "action": name,
+                "objects": prior.objects,
+                "observations": len(prior.observations),
+                "modalities": m.modality_names_,
+                "weights_mean": m.modality_weights_.mean(axis=0).round(3).tolist(),
+                "length_scales_mean": m.length_scales_.mean(axis=0).round(3).tolist(),
+                "log_marginal_likelihood": m.log_marginal_likelihood_.round(2).tolist(),
+            })
+        return rows
+
+    def subset(self, objects: Sequence[str], *, gp: GPSettings | None = None, seed: int = 0) -> PriorKnowledge:
+        """Prior knowledge rebuilt on a subset of the old objects (refits the models)."""
+        table = {name: prior.observations for name, prior in self.actions.items()}
+        return PriorKnowledge.build(table, objects, gp=gp, seed=seed)

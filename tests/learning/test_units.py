@@ -1,0 +1,111 @@
+"""Hand-computed cases for the pieces of the method."""
+
+import numpy as np
+import pytest
+
+from aptkt.learning import FeaturePipeline, ModalityTransform, Observations, decide_transfer
+from aptkt.learning.active import entropy, select_next, uncertainty
+from aptkt.learning.evaluation import accuracy, fused_accuracy
+from aptkt.learning.transfer import mean_posteriors
+
+
+def test_mean_posterior_and_lambda():
+    # Two observations of new object "n"; old model posteriors over (a, b, c).
+    post = np.array([[0.5, 0.3, 0.2], [0.7, 0.1, 0.2]])
+    np.testing.assert_allclose(mean_posteriors(post), [0.6, 0.2, 0.2])
+    d = decide_transfer("n", ["a", "b", "c"], post, eps_neg=0.4)
+    assert d.source == "a" and d.transfer_lambda == pytest.approx(0.6)
+    assert d.transfers and d.as_dict()["mean_posterior"] == pytest.approx({"a": 0.6, "b": 0.2, "c": 0.2})
+
+
+def test_eps_neg_cut_off():
+    post = np.array([[0.38, 0.32, 0.30]])
+    assert decide_transfer("n", ["a", "b", "c"], post, eps_neg=0.4).source is None
+    assert decide_transfer("n", ["a", "b", "c"], post, eps_neg=0.4).transfer_lambda == 0.0
+    at_threshold = decide_transfer("n", ["a", "b", "c"], np.array([[0.4, 0.3, 0.3]]), eps_neg=0.4)
+    assert at_threshold.source == "a"  # Eq. 3 transfers when p̄ >= ε_neg
+    assert decide_transfer("n", ["a", "b", "c"], post, eps_neg=0.0, mode="none").source is None
+    with pytest.raises(ValueError):
+        decide_transfer("n", ["a", "b"], post, eps_neg=0.4)
+
+
+def test_entropy_and_uncertainty():
+    p = np.array([[1.0, 0.0], [0.5, 0.5], [0.25, 0.75]])
+    h = entropy(p)
+    np.testing.assert_allclose(h, [0.0, np.log(2), -(0.25 * np.log(0.25) + 0.75 * np.log(0.75))])
+    assert uncertainty(p) == pytest.approx(h.mean())
+
+
+def test_selection_argmax_and_ties():
+    unc = {("P1", "x"): 0.2, ("P1", "y"): 0.9, ("S1", "x"): 0.9, ("S1", "y"): 0.1}
+    rng = np.random.default_rng(0)
+    sel = select_next(unc, ["P1", "S1"], ["x", "y"], eps_explor=0.0, rng=rng)
+    assert (sel.action, sel.object, sel.explored) == ("P1", "y", False)  # first of the tied maxima
+    sel = select_next(unc, ["P1", "S1"], ["x", "y"], eps_explor=0.0, rng=rng, available=[("S1", "x"), ("S1", "y")])
+    assert (sel.action, sel.object) == ("S1", "x")
+
+
+def test_exploration_is_uniform_over_pairs():
+    unc = {("P1", "x"): 0.0, ("P1", "y"): 1.0, ("S1", "x"): 0.0, ("S1", "y"): 0.0}
+    rng = np.random.default_rng(1)
+    picks = [select_next(unc, ["P1", "S1"], ["x", "y"], 1.0, rng) for _ in range(4000)]
+    assert all(p.explored for p in picks)
+    counts = {}
+    for p in picks:
+        counts[(p.action, p.object)] = counts.get((p.action, p.object), 0) + 1
+    assert set(counts) == set(unc)
+    assert all(abs(c / 4000 - 0.25) < 0.03 for c in counts.values())
+    # With ε = 0.3 about 30 % of picks explore.
+    rng = np.random.default_rng(2)
+    frac = np.mean([select_next(unc, ["P1", "S1"], ["x", "y"], 0.3, rng).explored for _ in range(4000)])
+    assert abs(frac - 0.3) < 0.03
+
+
+def test_pca_is_fitted_on_training_observations_only():
+    rng = np.random.default_rng(0)
+    train = Observations("C1", {"thermal": rng.normal(size=(30, 40))}, np.repeat(["a", "b", "c"], 10))
+    test = Observations("C1", {"thermal": rng.normal(size=(20, 40)) * 50 + 9}, np.repeat(["a", "b"], 10))
+    pipe = FeaturePipeline({"thermal": ModalityTransform(pca_components=10)}).fit(train)
+    t = pipe.transforms["thermal"]
+    np.testing.assert_allclose(t.mean_, train.modalities["thermal"].mean(axis=0))
+    before = (t.mean_.copy(), t.components_.copy())
+    X_test, groups = pipe.transform(test)
+    assert X_test.shape == (20, 10) and groups == {"thermal": list(range(10))}
+    np.testing.assert_array_equal(t.mean_, before[0])  # transforming test data changes nothing
+    np.testing.assert_array_equal(t.components_, before[1])
+    # The scores of the training data are uncorrelated (PCA on the training data).
+    X_train, _ = pipe.transform(train)
+    cov = np.cov(X_train.T)
+    assert np.max(np.abs(cov - np.diag(np.diag(cov)))) < 1e-10
+
+
+def test_pca_keeps_at_most_rank_components():
+    obs = Observations("C1", {"thermal": np.random.default_rng(1).normal(size=(4, 40))}, ["a", "b", "c", "d"])
+    pipe = FeaturePipeline().fit(obs)
+    assert pipe.transform(obs)[0].shape == (4, 3)
+
+
+def test_log_columns_and_constant_columns():
+    X = np.array([[1e-4, 1.0, 5.0], [1e-2, 2.0, 5.0], [1e-3, 3.0, 5.0]])
+    obs = Observations("S1", {"texture": X}, ["a", "b", "c"])
+    pipe = FeaturePipeline({"texture": ModalityTransform(log_columns=(0,))}).fit(obs)
+    Z, _ = pipe.transform(obs)
+    np.testing.assert_allclose(Z[:, 0], (np.array([-4, -2, -3]) + 3) / np.std([-4, -2, -3]))
+    np.testing.assert_allclose(Z[:, 2], 0.0)  # constant column: centred, not divided by zero
+
+
+def test_observations_reject_nan_with_location():
+    with pytest.raises(ValueError, match=r"modality 'force': non-finite value nan in observation 1 \(object 'b'\)"):
+        Observations("P1", {"force": [[1.0], [np.nan]]}, ["a", "b"])
+    with pytest.raises(ValueError, match="expected shape"):
+        Observations("P1", {"force": np.zeros((3, 1))}, ["a", "b"])
+
+
+def test_accuracy_and_fusion():
+    classes = ["a", "b"]
+    pa = np.array([[0.9, 0.1], [0.4, 0.6], [0.45, 0.55]])
+    assert accuracy(pa, classes, ["a", "b", "a"]) == pytest.approx(2 / 3)
+    # Two actions; the third sample is wrong under action A alone but right when fused.
+    pb = np.array([[0.6, 0.4], [0.3, 0.7], [0.8, 0.2]])
+    truth = {"A": np.array(["a", "b", "a"]), "B": np.array(["a", "b", "a"])}
+    assert fused_accuracy({"A": pa, "B": pb}, truth, classes) == 1.0
