@@ -13,8 +13,13 @@ import threading
 import time
 from collections.abc import Callable
 
+import numpy as np
+
 from aptkt.robot import UR10, Placement
 from aptkt.robot.loopback import Loopback
+from aptkt.skin import encode_sensor_packets, quantize
+from aptkt.skin.config import default_patch
+from aptkt.skin.source import SkinSourceBase
 
 SURFACE_Z = 0.0
 STIFFNESS = 200.0  # N/m
@@ -108,3 +113,37 @@ def fire_after(seconds: float, action: Callable[[], object]) -> threading.Timer:
     timer.daemon = True
     timer.start()
     return timer
+
+
+class LoopbackSkin(SkinSourceBase):
+    """A skin source for end-to-end tests: 7 cells at 250 Hz, their force sensors sharing the
+    loopback's contact force, through the real protocol encoder, parser and calibration."""
+
+    def __init__(self, loopback: Loopback, rate_hz: float = 250.0):
+        super().__init__(default_patch())
+        self.loopback = loopback
+        self.period = 1.0 / rate_hz
+        self.cells = np.array(self.patch.cell_ids, dtype=np.int64)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def open(self) -> None:
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+        self._mark_opened()
+        self.wait_for_cells()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+
+    def _run(self) -> None:
+        n = len(self.cells)
+        while not self._stop.wait(self.period):
+            per_sensor = self.loopback.normal_force() / (3 * n)
+            force = self.calibration.to_normalised(self.cells, np.full((n, 3), per_sensor))
+            raw = quantize(self.cells, np.zeros(n), np.tile([0.0, 0.0, 1.0], (n, 1)),
+                           np.full((n, 2), 30.0), force)
+            self._ingest_bytes(encode_sensor_packets(raw), self._now())

@@ -335,3 +335,26 @@ def test_a_command_racing_a_program_stop_fails_fast(make_robot, loopback, skin):
     while loopback.state()["connections"].get("rtde") and time.monotonic() < deadline:
         time.sleep(0.02)
     assert not loopback.state()["connections"].get("rtde")
+
+
+def test_abandoned_clients_are_destroyed_only_when_their_call_has_ended():
+    import threading
+
+    from aptkt.robot import ur10
+
+    destroyed = []
+
+    class Client:
+        def __del__(self):
+            destroyed.append(threading.current_thread().name)
+
+    release = threading.Event()
+    stuck = threading.Thread(target=release.wait, name="stuck-call", daemon=True)
+    stuck.start()
+    ur10._bury(stuck, Client())
+    assert ur10._sweep_graveyard() == 0 and destroyed == []  # still in use: kept alive
+    release.set()
+    stuck.join()
+    assert destroyed == []  # the call ended, but nothing is destroyed behind our back ...
+    assert ur10._sweep_graveyard() == 1
+    assert destroyed == [threading.current_thread().name]  # ... only when swept, here

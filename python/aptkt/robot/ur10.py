@@ -21,6 +21,8 @@ during a movement only the supervision loop does, so a stalled loop stops the ar
 
 from __future__ import annotations
 
+import atexit
+import ctypes
 import math
 import queue
 import threading
@@ -80,6 +82,40 @@ class _Sample:
         self.speed = speed
         self.force = force
         self.skin = skin
+
+
+# Clients whose last call was abandoned on a dead link. The stuck call ends on ur_rtde's own
+# timeout (up to 300 s); the client must then not be destroyed wherever the last reference
+# happens to drop, because its destructor sleeps 0.5 s holding the GIL: that would freeze the
+# supervision of whatever moves at that moment. They are destroyed at idle moments instead
+# (connect/close), or never, if still in use when the interpreter exits.
+_graveyard: list[tuple[threading.Thread, Any]] = []
+_graveyard_lock = threading.Lock()
+
+
+def _bury(thread: threading.Thread, client: Any) -> None:
+    with _graveyard_lock:
+        _graveyard.append((thread, client))
+
+
+def _sweep_graveyard() -> int:
+    """Destroy the buried clients whose stuck call has ended; returns how many."""
+    with _graveyard_lock:
+        done = [entry for entry in _graveyard if not entry[0].is_alive()]
+        _graveyard[:] = [entry for entry in _graveyard if entry[0].is_alive()]
+    count = len(done)
+    del done  # the destructors run here, at a moment chosen by the caller
+    return count
+
+
+@atexit.register
+def _leak_clients_in_use() -> None:
+    # A client still inside a stuck call must outlive the interpreter's clean-up: destroying
+    # it under the running call would be a use-after-free.
+    _sweep_graveyard()
+    with _graveyard_lock:
+        if _graveyard:
+            ctypes.pythonapi.Py_IncRef(ctypes.py_object(_graveyard))
 
 
 class _Worker:
@@ -200,6 +236,9 @@ class UR10:
         self._skin: ForceReading | None = None
         self._mode: str | None = None  # "speed" | "force+speed" | "force" | "move"
         self._hold: tuple[str, tuple[Any, ...]] | None = None
+        #: ``(start_ns, stop_ns)`` of the last hold (press) or constant-speed part of a slide,
+        #: on :meth:`now_ns`'s clock; :func:`aptkt.exploration.explore` crops recordings to it.
+        self.action_window_ns: tuple[int, int] | None = None
         self._in_motion = False
         self._keepalive: threading.Thread | None = None
         self._keepalive_stop = threading.Event()
@@ -285,6 +324,7 @@ class UR10:
             self._worker.thread.join(timeout=_COMMAND_TIMEOUT)
             self._worker = None
         self._drop_clients()
+        _sweep_graveyard()
 
     def _drop_clients(self) -> None:
         # ur_rtde's destructors disconnect and sleep 0.5 s each *with the GIL held*; an
@@ -391,7 +431,9 @@ class UR10:
         self._check_box(target[:3], "the press depth")
         with self._motion("press"):
             self._move_to(target, self.limits.approach_speed)
+            start = self.now_ns()
             self._supervise(duration=hold_time, what="the hold")
+            self.action_window_ns = (start, self.now_ns())
 
     def slide(self, normal_force: float, speed: float, duration: float,
               direction: tuple[float, float], total_force: ForceReading) -> None:
@@ -411,8 +453,9 @@ class UR10:
             raise ValueError("slide direction must not be zero")
         dx, dy = dx / norm, dy / norm
         pose = self._peek_pose()
-        # The whole slide, stopping ramp included, must stay in the box: check its far end.
-        reach = speed * duration + speed * speed / (2.0 * self.limits.max_acceleration)
+        # Ramp up, `duration` at full speed, ramp down: all of it must stay in the box.
+        ramp = speed / self.limits.max_acceleration
+        reach = speed * duration + speed * ramp
         self._check_box(np.array([pose[0] + dx * reach, pose[1] + dy * reach, pose[2]]),
                         f"a {reach * 1000:.1f} mm slide")
         with self._motion("slide"):
@@ -437,7 +480,12 @@ class UR10:
                             what=f"establishing {normal_force} N")
             self._mode = "force+speed"
             self._command("speedL", [dx * speed, dy * speed, 0.0, 0.0, 0.0, 0.0], self.limits.max_acceleration, 0.0)
-            self._supervise(duration=duration, what="the slide")
+            # The controller takes the command at its next cycle and ramps at max_acceleration:
+            # full speed one period + `ramp` s after sending (the planned window; the trace in
+            # recording_metadata shows the measured speed).
+            start = self.now_ns() + int(round((ramp + 1.0 / self.frequency) * 1e9))
+            self._supervise(duration=ramp + duration, what="the slide")
+            self.action_window_ns = (start, start + int(round(duration * 1e9)))
             self._leave_force_mode()
 
     def lift(self, height: float) -> None:
@@ -631,6 +679,7 @@ class UR10:
         # is queued behind it: a lost link sends nothing more.
         if self._worker is not None:
             self._worker.close()
+            _bury(self._worker.thread, self._control)
             self._worker = None
 
     def _explain(self, name: str) -> None:
