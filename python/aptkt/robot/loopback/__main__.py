@@ -23,6 +23,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--surface-z", type=float, default=0.0, help="height of the simulated surface (m)")
     parser.add_argument("--stiffness", type=float, default=200.0, help="surface stiffness (N/m)")
     parser.add_argument("--friction", type=float, default=0.3, help="Coulomb friction coefficient")
+    parser.add_argument("--object", default=None, metavar="NAME",
+                        help="press a simulated-world object (aptkt.sim library) lying at --object-xy "
+                             "instead of the spring surface")
+    parser.add_argument("--object-xy", type=float, nargs=2, default=(0.0, -0.5), metavar=("X", "Y"))
     parser.add_argument("--start-pose", type=float, nargs=6, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
                         default=None, help="initial TCP pose")
     parser.add_argument("--stdio", action="store_true", help=argparse.SUPPRESS)
@@ -37,10 +41,13 @@ def main(argv: list[str] | None = None) -> int:
         config = ControllerConfig(**json.loads(args.config_json))
     else:
         extra = {} if args.start_pose is None else {"start_pose": tuple(args.start_pose)}
+        contact: dict = {"type": "spring", "surface_z": args.surface_z, "stiffness": args.stiffness,
+                         "friction": args.friction}
+        if args.object:
+            contact = {"type": "sim_object", "object": args.object, "x": args.object_xy[0], "y": args.object_xy[1]}
         config = ControllerConfig(
             version=CB3_VERSION if args.series == "cb3" else E_SERIES_VERSION,
-            contact={"type": "spring", "surface_z": args.surface_z, "stiffness": args.stiffness,
-                     "friction": args.friction},
+            contact=contact,
             **extra,
         )
 

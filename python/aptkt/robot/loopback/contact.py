@@ -9,9 +9,10 @@ mode regulates). A model is any object with
 * ``normal`` — unit vector (base frame) the surface pushes the TCP along (default +z);
 * ``friction`` — optional Coulomb coefficient for the tangential force while sliding.
 
-Models are built inside the controller process from a JSON-able spec (see :func:`build`), so
-a model from another module (e.g. the simulated world's indentation model) plugs in by its
-import path: ``{"factory": "package.module:Class", "params": {...}}``.
+:class:`SpringSurface` is the simple built-in; ``{"type": "sim_object", ...}`` brings the
+simulated world's indentation physics for any object of its library. Models are built inside
+the controller process from a JSON-able spec (see :func:`build`), so any other model plugs in
+by its import path: ``{"factory": "package.module:Class", "params": {...}}``.
 """
 
 from __future__ import annotations
@@ -88,8 +89,10 @@ def build(spec: Mapping[str, Any] | None) -> Any:
     """Build a contact model from a JSON-able spec.
 
     ``None`` or ``{"type": "none"}`` → :class:`NoContact`; ``{"type": "spring", ...fields}`` →
-    :class:`SpringSurface`; ``{"factory": "module:attr", "params": {...}}`` → ``attr(**params)``
-    for any model importable in the controller process.
+    :class:`SpringSurface`; ``{"type": "sim_object", "object": name, "x": .., "y": ..}`` → an
+    object of the simulated world (:class:`aptkt.robot.loopback.world.SimObjectSurface`);
+    ``{"factory": "module:attr", "params": {...}}`` → ``attr(**params)`` for any model
+    importable in the controller process.
     """
     if spec is None:
         return NoContact()
@@ -106,8 +109,13 @@ def build(spec: Mapping[str, Any] | None) -> Any:
         model = factory(**params)
     else:
         kind = spec.pop("type", "spring")
+        if kind == "sim_object":
+            # The simulated world's contact physics (imported only when asked for).
+            from aptkt.robot.loopback.world import SimObjectSurface
+
+            return SimObjectSurface(**spec)
         if kind not in _BUILTIN:
-            raise ValueError(f"contact spec: unknown type {kind!r} (known: {sorted(_BUILTIN)})")
+            raise ValueError(f"contact spec: unknown type {kind!r} (known: {sorted([*_BUILTIN, 'sim_object'])})")
         model = _BUILTIN[kind](**spec)
     if not callable(getattr(model, "normal_force", None)):
         raise ValueError(f"contact model {model!r} has no normal_force(pose) method")
