@@ -87,7 +87,11 @@ def main() -> None:
                 robot.approach_contact(skin, 0.05)
                 fired: list[int] = []
                 z_fault = lb.state()["pose"][2] - 0.001
-                timer = threading.Timer(0.3, lambda: (fired.append(time.monotonic_ns()), inject(lb, skin)))
+                def fire(fired=fired, inject=inject, skin=skin) -> None:
+                    fired.append(time.monotonic_ns())
+                    inject(lb, skin)
+
+                timer = threading.Timer(0.3, fire)
                 timer.start()
                 try:
                     robot.press(0.001, 3.0)
