@@ -13,6 +13,7 @@ __all__ = [
     "SafetyLimitError",
     "ProtectiveStopError",
     "RobotConnectionError",
+    "ProgramStoppedError",
     "ConfigError",
     "NotFittedError",
     "KernelNotPositiveDefiniteError",
@@ -53,3 +54,8 @@ class ProtectiveStopError(RobotError):
 
 class RobotConnectionError(RobotError):
     """The connection to the controller was lost or could not be established."""
+
+
+class ProgramStoppedError(RobotError):
+    """The control program on the controller stopped or paused (pendant or dashboard stop, the
+    controller's communication watchdog, a script error); the arm no longer follows commands."""

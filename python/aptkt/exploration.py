@@ -125,6 +125,9 @@ def explore(robot: Robot, skin: SkinSource, placement: Placement, action: Explor
     rec.metadata["movement_stop_ns"] = int(rec.stop_ns)
     rec.metadata["window_ns"] = [int(window[0]), int(window[1])]
     rec.metadata["calibration"] = _calibration(skin)
+    robot_metadata = getattr(robot, "recording_metadata", None)
+    if callable(robot_metadata):  # e.g. the UR10's own trace and clock (robot timestamps)
+        rec.metadata.update(robot_metadata(int(rec.start_ns), int(rec.stop_ns)))
     out = crop_recording(rec, int(window[0]), int(window[1]))
     robot.lift(settings.lift_height)
     robot.wait(settings.thermal_wait)

@@ -11,10 +11,23 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
-__all__ = ["Robot", "SafetyLimits", "Placement", "ForceReading"]
+__all__ = ["Robot", "SafetyLimits", "Placement", "ForceReading", "TimedForceReading"]
 
 #: A function returning the current total normal force on the skin in newtons.
 ForceReading = Callable[[], float]
+
+
+@runtime_checkable
+class TimedForceReading(Protocol):
+    """A :data:`ForceReading` that also says when its value was last refreshed.
+
+    ``last_update_ns()`` uses the robot's clock (:meth:`Robot.now_ns`). Backends use it for
+    their stale-skin watchdog; a plain callable can only be checked for exceptions and NaN.
+    """
+
+    def __call__(self) -> float: ...
+
+    def last_update_ns(self) -> int: ...
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,89 @@
+"""``python -m aptkt.robot.loopback``: run a loopback UR controller in this terminal.
+
+Then connect anything that speaks to a UR controller (ur_rtde, ``aptkt.robot.UR10``) to the
+host it prints. ``--stdio`` is the mode :class:`~aptkt.robot.loopback.Loopback` uses for its
+child process (JSON commands on stdin, answers on stdout).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+from aptkt.robot.loopback.controller import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m aptkt.robot.loopback", description=__doc__.split("\n")[0])
+    parser.add_argument("--host", default="127.0.0.1", help="loopback address to serve on (default 127.0.0.1)")
+    parser.add_argument("--series", choices=("cb3", "e-series"), default="cb3",
+                        help="cb3: PolyScope 3.15, RTDE at 125 Hz; e-series: PolyScope 5.11, 500 Hz")
+    parser.add_argument("--surface-z", type=float, default=0.0, help="height of the simulated surface (m)")
+    parser.add_argument("--stiffness", type=float, default=200.0, help="surface stiffness (N/m)")
+    parser.add_argument("--friction", type=float, default=0.3, help="Coulomb friction coefficient")
+    parser.add_argument("--object", default=None, metavar="NAME",
+                        help="press a simulated-world object (aptkt.sim library) lying at --object-xy "
+                             "instead of the spring surface")
+    parser.add_argument("--object-xy", type=float, nargs=2, default=(0.0, -0.5), metavar=("X", "Y"))
+    parser.add_argument("--start-pose", type=float, nargs=6, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
+                        default=None, help="initial TCP pose")
+    parser.add_argument("--stdio", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--config-json", default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--ports-json", default=None, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+
+    ports = {"rtde": 30004, "dashboard": 29999, "script": [30001, 30002, 30003]}
+    if args.ports_json:
+        ports.update(json.loads(args.ports_json))
+    if args.config_json:
+        config = ControllerConfig(**json.loads(args.config_json))
+    else:
+        extra = {} if args.start_pose is None else {"start_pose": tuple(args.start_pose)}
+        contact: dict = {"type": "spring", "surface_z": args.surface_z, "stiffness": args.stiffness,
+                         "friction": args.friction}
+        if args.object:
+            contact = {"type": "sim_object", "object": args.object, "x": args.object_xy[0], "y": args.object_xy[1]}
+        config = ControllerConfig(
+            version=CB3_VERSION if args.series == "cb3" else E_SERIES_VERSION,
+            contact=contact,
+            **extra,
+        )
+
+    if args.stdio:
+        from aptkt.robot.loopback.process import serve_stdio
+
+        serve_stdio(config, args.host, ports, sys.stdin, sys.stdout)
+        return 0
+
+    from aptkt.robot.loopback.controller import SimulatedController
+    from aptkt.robot.loopback.servers import LoopbackServer
+
+    controller = SimulatedController(config)
+    try:
+        server = LoopbackServer(controller, host=args.host, rtde_port=ports["rtde"],
+                                dashboard_port=ports["dashboard"], script_ports=ports["script"]).start()
+    except OSError as exc:
+        print(f"cannot serve on {args.host}: {exc}", file=sys.stderr)
+        return 1
+    print(f"loopback UR controller (PolyScope {config.polyscope_version}, {config.frequency:.0f} Hz) "
+          f"on {args.host}: RTDE {ports['rtde']}, dashboard {ports['dashboard']}, script {ports['script']}. "
+          "Ctrl-C stops.")
+    try:
+        while True:
+            time.sleep(1.0)
+            s = controller.snapshot()
+            x, y, z = s["pose"][:3]
+            print(f"t={s['time']:8.2f}s  tcp=({x:+.4f}, {y:+.4f}, {z:+.4f}) m  "
+                  f"Fn={s['normal_force']:.3f} N  program={'running' if s['program_running'] else 'stopped'}"
+                  f"{'  PROTECTIVE STOP' if s['protective_stopped'] else ''}", flush=True)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,259 @@
+"""Run a loopback controller in its own process and drive it from the parent.
+
+ur_rtde's constructors (``RTDEControlInterface(...)``, ``RTDEReceiveInterface(...)``) keep the
+Python GIL while they wait for the controller's answers, so a controller served by threads of
+the *same* interpreter can never answer them: the client would deadlock. The loopback
+therefore always runs in a child process (``python -m aptkt.robot.loopback --stdio``);
+:class:`Loopback` is the parent's handle. Commands cross the child's stdin/stdout as JSON lines.
+"""
+
+from __future__ import annotations
+
+import json
+import select
+import subprocess
+import sys
+import tempfile
+import threading
+import traceback
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict
+from typing import Any
+
+from aptkt.robot.loopback.controller import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
+
+__all__ = ["Loopback", "LoopbackError"]
+
+
+class LoopbackError(RuntimeError):
+    """The loopback process failed to start or to execute a command."""
+
+
+def serve_stdio(config: ControllerConfig, host: str, ports: Mapping[str, Any], stdin: Any, stdout: Any) -> None:
+    """Child side: serve the controller, read JSON commands from ``stdin``, answer on ``stdout``."""
+    # Imported here so importing this module never builds a controller.
+    from aptkt.robot.loopback.controller import SimulatedController
+    from aptkt.robot.loopback.servers import LoopbackServer
+
+    def answer(reply: dict[str, Any]) -> None:
+        stdout.write(json.dumps(reply) + "\n")
+        stdout.flush()
+
+    try:
+        controller = SimulatedController(config)
+        server = LoopbackServer(controller, host=host, rtde_port=ports["rtde"],
+                                dashboard_port=ports["dashboard"], script_ports=ports["script"]).start()
+    except Exception as exc:  # report start-up failures (port busy, bad config) to the parent
+        answer({"ok": False, "error": f"{type(exc).__name__}: {exc}"})
+        return
+    answer({"ok": True, "result": "ready"})
+
+    def dispatch(op: str, args: dict[str, Any]) -> Any:
+        if op == "state":
+            state = controller.snapshot()
+            state["connections"] = server.connections
+            return state
+        if op == "normal_force":
+            with controller.lock:
+                return controller.normal_force()
+        if op == "reset":
+            controller.reset(pose=args.get("pose"), keep_program=bool(args.get("keep_program", False)))
+            server.restore()
+            return None
+        if op == "set_contact":
+            controller.set_contact(args.get("spec"))
+            return None
+        if op == "protective_stop":
+            controller.trigger_protective_stop(args.get("reason", "injected by test"))
+            return None
+        if op == "stop_program":
+            controller.stop_program(args.get("reason", "injected by test"))
+            return None
+        if op == "disturb":
+            controller.disturb(args["velocity"], float(args["duration"]), args.get("acceleration"))
+            return None
+        if op == "drop_connections":
+            return server.drop_connections(args.get("refuse_for", 0.0))
+        if op == "freeze":
+            server.freeze(bool(args.get("frozen", True)))
+            return None
+        if op == "restore":
+            server.restore()
+            return None
+        if op == "scripts":
+            with controller.lock:
+                return list(controller.received_scripts)
+        if op == "ping":
+            return "pong"
+        raise ValueError(f"unknown loopback command {op!r}")
+
+    try:
+        for line in stdin:
+            if not line.strip():
+                continue
+            msg = json.loads(line)
+            if msg.get("op") == "shutdown":
+                answer({"ok": True, "result": None})
+                break
+            try:
+                reply = {"ok": True, "result": dispatch(msg["op"], msg.get("args", {}))}
+            except Exception as exc:
+                reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}", "trace": traceback.format_exc()}
+            answer(reply)
+    finally:  # the parent closed the pipe or asked to stop
+        server.close()
+
+
+class Loopback:
+    """Handle on a loopback UR controller running in a child process.
+
+    >>> with Loopback(contact={"type": "spring", "surface_z": 0.0}) as lb:   # doctest: +SKIP
+    ...     rtde_r = rtde_receive.RTDEReceiveInterface(lb.host)
+    ...     lb.state()["pose"]
+
+    ``series="cb3"`` (125 Hz, PolyScope 3.15) or ``"e-series"`` (500 Hz, PolyScope 5.11), or an
+    explicit ``version`` tuple. Other keyword arguments are :class:`ControllerConfig` fields.
+    """
+
+    def __init__(self, host: str = "127.0.0.1", *, series: str = "cb3",
+                 contact: Mapping[str, Any] | None = None,
+                 ports: Mapping[str, Any] | None = None, start_timeout: float = 30.0, **config: Any):
+        if "version" not in config:
+            if series not in ("cb3", "e-series"):
+                raise ValueError(f"series must be 'cb3' or 'e-series', got {series!r}")
+            config["version"] = CB3_VERSION if series == "cb3" else E_SERIES_VERSION
+        self.config = ControllerConfig(contact=None if contact is None else dict(contact), **config)
+        self.host = host
+        self.ports = {"rtde": 30004, "dashboard": 29999, "script": [30001, 30002, 30003]}
+        if ports:
+            self.ports.update(ports)
+        self.start_timeout = start_timeout
+        self._proc: subprocess.Popen[str] | None = None
+        self._stderr: Any = None
+        self._lock = threading.Lock()
+
+    @property
+    def frequency(self) -> float:
+        return self.config.frequency
+
+    def start(self) -> Loopback:
+        cmd = [sys.executable, "-m", "aptkt.robot.loopback", "--stdio", "--host", self.host,
+               "--config-json", json.dumps(asdict(self.config)), "--ports-json", json.dumps(self.ports)]
+        self._stderr = tempfile.TemporaryFile(mode="w+")
+        self._proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr,
+                                      text=True, bufsize=1)
+        try:
+            reply = self._read_reply(self.start_timeout, "start")
+        except LoopbackError:
+            self._kill()
+            raise
+        if not reply["ok"]:
+            self._kill()
+            raise LoopbackError(f"loopback on {self.host} failed to start: {reply['error']}")
+        return self
+
+    def __enter__(self) -> Loopback:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def running(self) -> bool:
+        return self._proc is not None and self._proc.poll() is None
+
+    def close(self) -> None:
+        """Stop the controller process (its sockets close with it)."""
+        if self._proc is None:
+            return
+        try:
+            self.call("shutdown", timeout=5.0)
+        except LoopbackError:
+            pass
+        self._kill()
+
+    def _kill(self) -> None:
+        proc, self._proc = self._proc, None
+        if proc is None:
+            return
+        for stream in (proc.stdin, proc.stdout):
+            try:
+                stream.close()
+            except OSError:
+                pass
+        try:
+            proc.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=5.0)
+
+    def _stderr_tail(self) -> str:
+        try:
+            self._stderr.seek(0)
+            return self._stderr.read()[-2000:]
+        except (OSError, ValueError, AttributeError):
+            return ""
+
+    def _read_reply(self, timeout: float, op: str) -> dict[str, Any]:
+        assert self._proc is not None and self._proc.stdout is not None
+        ready, _, _ = select.select([self._proc.stdout], [], [], timeout)
+        if not ready:
+            raise LoopbackError(f"loopback did not answer {op!r} within {timeout} s")
+        line = self._proc.stdout.readline()
+        if not line:
+            raise LoopbackError(f"loopback process exited during {op!r}: {self._stderr_tail()}")
+        return json.loads(line)
+
+    def call(self, op: str, timeout: float = 10.0, **args: Any) -> Any:
+        """Send one command to the controller process and return its result."""
+        with self._lock:
+            if self._proc is None or self._proc.stdin is None:
+                raise LoopbackError("loopback is not running")
+            try:
+                self._proc.stdin.write(json.dumps({"op": op, "args": args}) + "\n")
+                self._proc.stdin.flush()
+            except (OSError, ValueError) as exc:
+                raise LoopbackError(f"loopback process is gone: {exc}: {self._stderr_tail()}") from None
+            reply = self._read_reply(timeout, op)
+        if not reply["ok"]:
+            raise LoopbackError(f"loopback {op!r} failed: {reply['error']}")
+        return reply["result"]
+
+    # Convenience wrappers ------------------------------------------------------------
+    def state(self) -> dict[str, Any]:
+        """Pose, velocity, wrench, program and safety state, recent controller log lines."""
+        return self.call("state")
+
+    def normal_force(self) -> float:
+        """Normal force of the contact model at the current TCP pose (what a skin would feel)."""
+        return float(self.call("normal_force"))
+
+    def reset(self, pose: Sequence[float] | None = None, keep_program: bool = False) -> None:
+        self.call("reset", pose=None if pose is None else list(pose), keep_program=keep_program)
+
+    def set_contact(self, spec: Mapping[str, Any] | None) -> None:
+        self.call("set_contact", spec=None if spec is None else dict(spec))
+
+    def protective_stop(self, reason: str = "injected by test") -> None:
+        self.call("protective_stop", reason=reason)
+
+    def stop_program(self, reason: str = "injected by test") -> None:
+        self.call("stop_program", reason=reason)
+
+    def disturb(self, velocity: Sequence[float], duration: float, acceleration: float | None = None) -> None:
+        """Push the TCP with an extra base-frame velocity (see SimulatedController.disturb)."""
+        self.call("disturb", velocity=list(velocity), duration=duration, acceleration=acceleration)
+
+    def drop_connections(self, refuse_for: float | None = 0.0) -> int:
+        """Close every connection; refuse new ones for ``refuse_for`` s (None: until restore)."""
+        return int(self.call("drop_connections", refuse_for=refuse_for))
+
+    def freeze(self, frozen: bool = True) -> None:
+        self.call("freeze", frozen=frozen)
+
+    def restore(self) -> None:
+        self.call("restore")
+
+    def scripts(self) -> list[str]:
+        """The last programs received on the script ports (newest last)."""
+        return list(self.call("scripts"))

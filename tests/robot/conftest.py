@@ -1,0 +1,87 @@
+"""Fixtures for the UR10 backend: a loopback controller process and the real ur_rtde client."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+# The test modules import their helpers by name (``loopback_helpers``); with pytest's
+# importlib import mode the test directory is not on sys.path by itself.
+sys.path.insert(0, str(Path(__file__).parent))
+
+from loopback_helpers import (  # noqa: E402
+    DEFAULT_CONTACT,
+    FAST,
+    PLACEMENT,
+    START_POSE,
+    FakeSkin,
+    free_loopback_host,
+)
+
+from aptkt.robot import UR10, SafetyLimits  # noqa: E402
+from aptkt.robot.loopback import Loopback  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def loopback() -> Iterator[Loopback]:
+    lb = Loopback(
+        free_loopback_host(),
+        contact=DEFAULT_CONTACT,
+        start_pose=START_POSE,
+        unlock_delay=0.0,
+    )
+    with lb:
+        yield lb
+
+
+@pytest.fixture
+def skin(loopback: Loopback) -> FakeSkin:
+    return FakeSkin(loopback)
+
+
+@pytest.fixture(scope="module")
+def _shared_robot(loopback: Loopback) -> Iterator[dict]:
+    holder: dict = {"robot": None}
+    yield holder
+    if holder["robot"] is not None:
+        holder["robot"].close()
+
+
+@pytest.fixture
+def make_robot(loopback: Loopback, _shared_robot: dict) -> Iterator[Callable[..., UR10]]:
+    """Factory: a fresh loopback state and a connected UR10 with the given limit overrides."""
+    robots: list[UR10] = []
+    if _shared_robot["robot"] is not None:
+        # The controller gives the command registers to one client at a time (IN_USE).
+        _shared_robot["robot"].close()
+        _shared_robot["robot"] = None
+
+    def make(pose: tuple[float, ...] = START_POSE, contact: dict | None = None, **limits: float) -> UR10:
+        loopback.reset(pose=pose)
+        loopback.set_contact(contact or DEFAULT_CONTACT)
+        robot = UR10(loopback.host, [PLACEMENT], SafetyLimits(**{**FAST, **limits}))
+        robots.append(robot)
+        return robot
+
+    yield make
+    for robot in robots:
+        robot.close()
+
+
+@pytest.fixture
+def robot(loopback: Loopback, _shared_robot: dict) -> UR10:
+    """A connected UR10 at the start pose, reused between tests while it stays healthy
+    (connecting is cheap, but ur_rtde's disconnect sleeps 0.5 s per client)."""
+    current = _shared_robot["robot"]
+    healthy = current is not None and current.connected and loopback.state()["program_running"]
+    loopback.reset(pose=START_POSE, keep_program=healthy)
+    loopback.set_contact(DEFAULT_CONTACT)
+    if not healthy:
+        if current is not None:
+            current.close()
+        loopback.reset(pose=START_POSE)
+        current = _shared_robot["robot"] = UR10(loopback.host, [PLACEMENT], SafetyLimits(**FAST))
+    return current

@@ -1,0 +1,360 @@
+"""Every fault path of the UR10 backend leaves the arm stopped and raises a typed error.
+
+Faults are injected into the loopback controller (protective stop, program stop, dropped or
+frozen network, trajectory faults) or into the fake skin, in the middle of a movement.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rtde_control", reason="the UR10 tests need the ur_rtde package (test extra)")
+
+from loopback_helpers import PLACEMENT, at_rest, fire_after, in_contact  # noqa: E402
+
+from aptkt.errors import (  # noqa: E402
+    ProgramStoppedError,
+    ProtectiveStopError,
+    RobotConnectionError,
+    RobotError,
+    SafetyLimitError,
+    SkinDisconnectedError,
+)
+from aptkt.robot import Placement  # noqa: E402
+
+
+def assert_stopped_and_retracted(loopback, z_before: float, raised: pytest.ExceptionInfo | None = None) -> dict:
+    """The arm is at rest, under program control, and above where the fault caught it."""
+    state = at_rest(loopback, 0.1)
+    why = f"{state}\nnotes: {getattr(raised.value, '__notes__', None) if raised else None}"
+    assert not state["moving"], why
+    assert state["motion"] is None and not state["force_mode"], why
+    assert state["program_running"] and not state["protective_stopped"], why
+    assert state["pose"][2] > z_before + 0.005, why  # retracted upwards
+    assert state["normal_force"] == 0.0, why
+    return state
+
+
+# ----------------------------------------------------------------------------- force limits
+def test_skin_force_above_the_limit_mid_press(robot, loopback, skin):
+    z = in_contact(robot, skin)
+    skin.scale = 40.0  # the skin now reads 40x the contact force: 0.2 N looks like 8 N
+    with pytest.raises(SafetyLimitError, match="skin normal force .* exceeds max_normal_force 5.0") as raised:
+        robot.press(0.002, 1.0)
+    assert_stopped_and_retracted(loopback, z - 0.002, raised)
+
+
+def test_tcp_wrench_above_the_limit_when_the_skin_feels_nothing(make_robot, loopback, skin):
+    # A dead skin (fresh readings of 0 N) lets the approach run into a stiff object; the TCP
+    # wrench catches it at 5 N = 1 mm into a 5000 N/m surface.
+    robot = make_robot(contact={"type": "spring", "surface_z": 0.0, "stiffness": 5000.0})
+    skin.dead = True
+    robot.move_above(PLACEMENT, 0.004)
+    with pytest.raises(SafetyLimitError, match="TCP wrench along the normal .* exceeds max_normal_force") as raised:
+        robot.approach_contact(skin, 0.05)
+    state = assert_stopped_and_retracted(loopback, -0.001, raised)
+    assert state["pose"][2] < 0.04  # a retract, not a flight
+
+
+def test_no_contact_within_the_approach_travel(make_robot, loopback, skin):
+    robot = make_robot(max_approach_travel=0.006)
+    loopback.set_contact({"type": "spring", "surface_z": -0.02})  # the object is lower than configured
+    robot.move_above(PLACEMENT, 0.004)
+    with pytest.raises(SafetyLimitError, match="no contact .* approach travel limit") as raised:
+        robot.approach_contact(skin, 0.05)
+    assert_stopped_and_retracted(loopback, 0.004 - 0.006, raised)
+
+
+def test_nan_from_the_skin_is_a_fault(robot, loopback, skin):
+    z = in_contact(robot, skin)
+    skin.nan_after = 0.1
+    skin.arm()
+    with pytest.raises(SafetyLimitError, match="non-finite") as raised:
+        robot.press(0.001, 1.0)
+    assert_stopped_and_retracted(loopback, z - 0.001, raised)
+
+
+# ----------------------------------------------------------------------------- speed / acceleration
+def test_measured_speed_above_the_limit(make_robot, loopback, skin):
+    robot = make_robot(max_speed=0.02)
+    in_contact(robot, skin)
+    robot.lift(0.004)
+    z = loopback.state()["pose"][2]
+    # A trajectory fault: the controller accelerates the arm sideways within the acceleration
+    # limit until the speed limit (x1.5 tolerance = 0.03 m/s) trips.
+    fire_after(0.1, lambda: loopback.disturb([0.0, 0.1, 0.0], duration=2.0, acceleration=0.3))
+    with pytest.raises(SafetyLimitError, match="measured TCP speed .* exceeds the limit 0.02") as raised:
+        robot.wait(2.0)
+    assert_stopped_and_retracted(loopback, z - 0.006, raised)
+
+
+def test_measured_acceleration_above_the_limit(robot, loopback, skin):
+    in_contact(robot, skin)
+    robot.lift(0.004)
+    z = loopback.state()["pose"][2]
+    # A velocity step of 5 cm/s within one control period (about 1.7 m/s^2 over the 30 ms
+    # the backend averages over), at a speed well below the speed limit.
+    fire_after(0.1, lambda: loopback.disturb([0.05, 0.0, 0.0], duration=2.0))
+    with pytest.raises(SafetyLimitError, match="measured TCP acceleration .* exceeds the limit 0.5") as raised:
+        robot.wait(2.0)
+    assert_stopped_and_retracted(loopback, z - 0.006, raised)
+
+
+def test_commands_beyond_the_limits_are_refused_before_moving(robot, loopback, skin):
+    in_contact(robot, skin)
+    before = at_rest(loopback)["pose"]
+    with pytest.raises(SafetyLimitError, match="slide speed 0.2 m/s exceeds max_speed 0.1"):
+        robot.slide(0.1, 0.2, 0.1, (1.0, 0.0), skin)
+    with pytest.raises(SafetyLimitError, match="slide force 6.0 N exceeds max_normal_force"):
+        robot.slide(6.0, 0.01, 0.1, (1.0, 0.0), skin)
+    with pytest.raises(SafetyLimitError, match="press depth 6.00 mm exceeds max_depth 5.00 mm"):
+        robot.press(0.006, 0.1)
+    with pytest.raises(SafetyLimitError, match="contact threshold 5.0 N is not below"):
+        robot.approach_contact(skin, 5.0)
+    state = loopback.state()
+    assert state["pose"] == before and not state["moving"] and not state["force_mode"]
+
+
+# ----------------------------------------------------------------------------- workspace
+def test_a_slide_that_would_leave_the_box_is_refused(robot, loopback, skin):
+    in_contact(robot, skin)
+    before = at_rest(loopback)["pose"]
+    with pytest.raises(SafetyLimitError, match="slide would leave the workspace box of 'sponge'"):
+        robot.slide(0.1, 0.05, 1.0, (1.0, 0.0), skin)  # 5 cm from the centre of an 8 cm box
+    assert loopback.state()["pose"] == before
+
+
+def test_a_target_outside_the_box_is_refused(robot, loopback):
+    with pytest.raises(SafetyLimitError, match="outside its workspace box"):
+        robot.move_above(PLACEMENT, 0.05)  # the box ends 4 cm above the surface
+    assert not loopback.state()["moving"]
+
+
+def test_leaving_the_box_mid_action(robot, loopback, skin):
+    narrow = Placement("coin", 0.0, -0.5, 0.0, (-0.003, -0.503, -0.01), (0.003, -0.497, 0.02))
+    robot.move_above(narrow, 0.004)
+    z = robot.approach_contact(skin, 0.05)
+    # Drift sideways within the speed and acceleration limits until the 3 mm margin is gone.
+    fire_after(0.1, lambda: loopback.disturb([0.01, 0.0, 0.0], duration=3.0, acceleration=0.2))
+    with pytest.raises(SafetyLimitError, match="left the workspace box of 'coin'") as raised:
+        robot.press(0.001, 3.0)
+    state = assert_stopped_and_retracted(loopback, z - 0.001, raised)
+    assert 0.003 < state["pose"][0] < 0.0045
+
+
+# ----------------------------------------------------------------------------- controller faults
+def test_protective_stop_mid_slide(robot, loopback, skin):
+    in_contact(robot, skin)
+    fire_after(0.8, loopback.protective_stop)
+    with pytest.raises(ProtectiveStopError):
+        robot.slide(0.2, 0.01, 2.0, (1.0, 0.0), skin)
+    state = at_rest(loopback)
+    assert state["protective_stopped"] and not state["moving"] and not state["program_running"]
+    # Nothing more moves until the operator recovers the arm.
+    with pytest.raises(ProtectiveStopError):
+        robot.lift(0.01)
+    assert not at_rest(loopback)["moving"]
+
+
+def test_recover_after_a_protective_stop(robot, loopback, skin):
+    in_contact(robot, skin)
+    loopback.protective_stop()
+    with pytest.raises(ProtectiveStopError):
+        robot.press(0.001, 0.5)
+    robot.recover()  # unlock through the dashboard, re-upload the control script
+    state = loopback.state()
+    assert state["program_running"] and not state["protective_stopped"]
+    robot.move_above(PLACEMENT, 0.01)
+    assert at_rest(loopback)["pose"][2] == pytest.approx(0.01, abs=1e-6)
+
+
+def test_program_stopped_mid_press(robot, loopback, skin):
+    in_contact(robot, skin)
+    fire_after(0.3, lambda: loopback.stop_program("operator pressed stop"))
+    with pytest.raises(ProgramStoppedError):
+        robot.press(0.001, 2.0)
+    state = at_rest(loopback)
+    assert not state["program_running"] and not state["moving"]
+
+
+# ----------------------------------------------------------------------------- lost link
+def test_dropped_connection_mid_slide(make_robot, loopback, skin):
+    robot = make_robot()
+    in_contact(robot, skin)
+    fire_after(0.8, lambda: loopback.drop_connections(refuse_for=None))
+    t0 = time.monotonic()
+    with pytest.raises(RobotConnectionError, match="lost the link"):
+        robot.slide(0.2, 0.01, 3.0, (1.0, 0.0), skin)
+    assert time.monotonic() - t0 < 2.0  # noticed at once, not after ur_rtde's timeouts
+    # The controller's RTDE watchdog (2 Hz) stops the program that was still sliding.
+    time.sleep(0.6)
+    state = loopback.state()
+    assert not state["program_running"] and not state["moving"]
+    assert "RTDE input watchdog" in state["stop_reason"]
+    # Later commands fail fast instead of blocking on ur_rtde's stale state.
+    t0 = time.monotonic()
+    with pytest.raises(RobotConnectionError, match="call recover"):
+        robot.lift(0.01)
+    assert time.monotonic() - t0 < 0.1
+
+
+def test_frozen_network_mid_press(make_robot, loopback, skin):
+    robot = make_robot()
+    z = in_contact(robot, skin)
+    fire_after(0.5, loopback.freeze)
+    t0 = time.monotonic()
+    with pytest.raises(RobotConnectionError, match="no fresh robot data"):
+        robot.press(0.001, 3.0)
+    assert time.monotonic() - t0 < 0.5 + 0.5 + 0.3  # the 0.5 s watchdog, plus slack
+    time.sleep(0.6)
+    state = loopback.state()
+    assert not state["program_running"] and not state["moving"]
+    assert state["pose"][2] == pytest.approx(z - 0.001, abs=1e-6)
+    loopback.freeze(False)
+
+
+def test_lost_link_is_reported_when_connecting_fails(loopback, make_robot):
+    from aptkt.robot import UR10
+
+    make_robot()  # closes the shared client; then nobody listens on a free loopback address
+    with pytest.raises(RobotConnectionError, match="cannot connect to the UR controller at 127.0.0.250"):
+        UR10("127.0.0.250")
+
+
+# ----------------------------------------------------------------------------- stale or broken skin
+def test_stale_skin_mid_press(robot, loopback, skin):
+    z = in_contact(robot, skin)
+    skin.stale_after = 0.2
+    skin.arm()
+    t0 = time.monotonic()
+    with pytest.raises(SkinDisconnectedError, match="no fresh skin data"):
+        robot.press(0.001, 3.0)
+    # Stale after 0.2 s, noticed 0.5 s later (the watchdog), then a 1 cm retract (~0.35 s).
+    assert time.monotonic() - t0 < 0.2 + 0.5 + 0.35 + 0.3
+    assert_stopped_and_retracted(loopback, z - 0.001)
+
+
+def test_skin_failure_mid_slide_is_reraised_after_retracting(robot, loopback, skin):
+    z = in_contact(robot, skin)
+    skin.raise_after = (0.7, SkinDisconnectedError("/dev/ttyUSB0 unplugged"))
+    skin.arm()
+    with pytest.raises(SkinDisconnectedError, match="unplugged") as raised:
+        robot.slide(0.2, 0.01, 2.0, (1.0, 0.0), skin)
+    assert_stopped_and_retracted(loopback, z - 0.002, raised)
+
+
+def test_force_that_cannot_be_established_is_an_error(make_robot, loopback, skin):
+    robot = make_robot()
+    robot.establish_timeout = 0.4
+    in_contact(robot, skin)
+    skin.scale = 0.1  # the skin under-reads: 0.2 N is never seen within the timeout
+    with pytest.raises(RobotError, match="establishing 0.2 N did not finish"):
+        robot.slide(0.2, 0.01, 1.0, (1.0, 0.0), skin)
+    state = at_rest(loopback, 0.1)
+    assert not state["moving"] and not state["force_mode"] and state["program_running"]
+
+
+def test_misuse_is_a_clear_error(robot, skin):
+    with pytest.raises(RobotError, match="needs move_above"):
+        robot.approach_contact(skin, 0.05)
+    robot.move_above(PLACEMENT, 0.004)
+    with pytest.raises(RobotError, match="needs approach_contact"):
+        robot.press(0.001, 0.1)
+    with pytest.raises(ValueError, match="clearance must be a finite number > 0"):
+        robot.move_above(PLACEMENT, float("nan"))
+    with pytest.raises(ValueError, match="slide direction must not be zero"):
+        in_contact(robot, skin)
+        robot.slide(0.1, 0.01, 0.1, (0.0, 0.0), skin)
+    assert np.isfinite(robot.now_ns())
+
+
+def test_close_destroys_the_clients_even_while_a_fault_is_kept(make_robot, skin):
+    # ur_rtde's destructor sleeps 0.5 s holding the GIL; if a kept traceback delayed it to
+    # some later garbage collection, it would stall another connection's supervision loop.
+    import weakref
+
+    robot = make_robot()
+    in_contact(robot, skin)
+    skin.nan_after = 0.0
+    skin.arm()
+    with pytest.raises(SafetyLimitError) as kept:
+        robot.press(0.001, 1.0)
+    clients = [weakref.ref(robot._control), weakref.ref(robot._receive)]
+    robot.close()
+    assert kept.value.__traceback__ is not None
+    assert [c() for c in clients] == [None, None]
+
+
+def test_recover_after_a_stopped_program(robot, loopback, skin):
+    in_contact(robot, skin)
+    loopback.stop_program("operator pressed stop")
+    time.sleep(0.05)  # see test_a_command_racing_a_program_stop_fails_fast for the race
+    with pytest.raises(ProgramStoppedError):
+        robot.press(0.001, 0.5)
+    robot.recover()
+    assert loopback.state()["program_running"]
+    robot.move_above(PLACEMENT, 0.01)
+    assert at_rest(loopback)["pose"][2] == pytest.approx(0.01, abs=1e-6)
+
+
+def test_recover_after_a_lost_link(make_robot, loopback, skin):
+    robot = make_robot()
+    in_contact(robot, skin)
+    loopback.drop_connections(refuse_for=None)
+    # A command racing the drop: ur_rtde would wait for its stale state (up to 300 s).
+    t0 = time.monotonic()
+    with pytest.raises(RobotConnectionError):
+        robot.press(0.001, 1.0)
+    assert time.monotonic() - t0 < robot.limits.watchdog_timeout + 0.3
+    with pytest.raises(RobotConnectionError, match="cannot connect"):
+        robot.recover()  # the controller is still unreachable
+    loopback.restore()
+    robot.recover()
+    state = loopback.state()
+    assert state["program_running"] and state["connections"].get("rtde") == 2
+    robot.move_above(PLACEMENT, 0.01)
+    assert at_rest(loopback)["pose"][2] == pytest.approx(0.01, abs=1e-6)
+
+
+def test_a_command_racing_a_program_stop_fails_fast(make_robot, loopback, skin):
+    robot = make_robot()
+    in_contact(robot, skin)
+    # Stopped before the script answered "ready" to the approach's last command: ur_rtde's
+    # next command then spins up to 4 s for that "ready" (as with a real controller).
+    loopback.stop_program("operator pressed stop")
+    t0 = time.monotonic()
+    with pytest.raises(ProgramStoppedError):
+        robot.press(0.001, 0.5)
+    assert time.monotonic() - t0 < 0.5
+    assert not at_rest(loopback)["moving"]
+    robot.close()  # lets the spinning call end, so the connection really closes
+    deadline = time.monotonic() + 2.0
+    while loopback.state()["connections"].get("rtde") and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert not loopback.state()["connections"].get("rtde")
+
+
+def test_abandoned_clients_are_destroyed_only_when_their_call_has_ended():
+    import threading
+
+    from aptkt.robot import ur10
+
+    destroyed = []
+
+    class Client:
+        def __del__(self):
+            destroyed.append(threading.current_thread().name)
+
+    release = threading.Event()
+    stuck = threading.Thread(target=release.wait, name="stuck-call", daemon=True)
+    stuck.start()
+    ur10._bury(stuck, Client())
+    assert ur10._sweep_graveyard() == 0 and destroyed == []  # still in use: kept alive
+    release.set()
+    stuck.join()
+    assert destroyed == []  # the call ended, but nothing is destroyed behind our back ...
+    assert ur10._sweep_graveyard() == 1
+    assert destroyed == [threading.current_thread().name]  # ... only when swept, here

@@ -1,0 +1,179 @@
+"""Every motion primitive of the UR10 backend, through the real ur_rtde client and the loopback."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rtde_control", reason="the UR10 tests need the ur_rtde package (test extra)")
+
+from loopback_helpers import PLACEMENT, STIFFNESS, SURFACE_Z, FakeSkin, at_rest, free_loopback_host, in_contact  # noqa: E402
+
+from aptkt.robot import UR10, Robot, SafetyLimits  # noqa: E402
+from aptkt.robot.loopback import Loopback  # noqa: E402
+
+
+def test_connects_uploads_the_control_script_and_arms_the_controller_watchdog(robot, loopback):
+    assert isinstance(robot, Robot)
+    assert robot.frequency == 125.0  # CB3 controller version
+    state = loopback.state()
+    assert state["program"] == "rtde_control" and state["program_running"]
+    assert state["watchdog"] == {"variable": "input_int_register_0", "min_frequency": 2.0, "action": "stop"}
+    assert "def rtde_control():" in loopback.scripts()[-1]
+
+
+def test_move_above_reaches_the_point_above_the_object(robot, loopback):
+    robot.move_above(PLACEMENT, 0.01)
+    state = at_rest(loopback)
+    np.testing.assert_allclose(state["pose"][:3], [PLACEMENT.x, PLACEMENT.y, SURFACE_Z + 0.01], atol=1e-6)
+    assert not state["moving"]
+
+
+def test_move_above_leaves_an_object_vertically_first(make_robot, loopback):
+    robot = make_robot(pose=(0.02, -0.5, 0.002, np.pi, 0.0, 0.0))  # low, beside the target
+    start = time.monotonic_ns()
+    robot.move_above(PLACEMENT, 0.01)
+    poses = robot.trace(start)["tcp_pose"]
+    rising = poses[:, 2] < SURFACE_Z + 0.01 - 1e-4
+    # While still below the travel height the arm only goes up: x stays where it was.
+    np.testing.assert_allclose(poses[rising, 0], 0.02, atol=1e-9)
+    np.testing.assert_allclose(loopback.state()["pose"][:3], [0.0, -0.5, 0.01], atol=1e-6)
+
+
+def test_approach_stops_at_light_contact(robot, loopback, skin):
+    robot.move_above(PLACEMENT, 0.004)
+    z = robot.approach_contact(skin, 0.05)
+    state = at_rest(loopback)
+    # Light contact = the first reading above 0.05 N: 0.25 mm into a 200 N/m surface. The
+    # skin and the RTDE pose arrive with different latencies; at 10 mm/s two control periods
+    # of skew are 0.16 mm.
+    assert z == pytest.approx(SURFACE_Z - 0.05 / STIFFNESS, abs=1.6e-4)
+    assert not state["moving"] and state["motion"] is None
+    # It stopped right there: the stopping ramp adds v^2/2a = 0.1 mm, plus the skew.
+    assert z - 2.6e-4 < state["pose"][2] <= z
+    assert 0.05 < state["normal_force"] < 0.15
+
+
+def test_press_indents_to_the_depth_and_holds_still(robot, loopback, skin):
+    z = in_contact(robot, skin)
+    start = time.monotonic_ns()
+    robot.press(0.002, 0.4)
+    end = time.monotonic_ns()
+    state = at_rest(loopback)
+    assert state["pose"][2] == pytest.approx(z - 0.002, abs=1e-6)
+    assert state["normal_force"] == pytest.approx(STIFFNESS * (SURFACE_Z - (z - 0.002)), rel=1e-6)
+    trace = robot.trace(start, end)
+    still = np.abs(trace["tcp_pose"][:, 2] - (z - 0.002)) < 1e-9
+    held = (trace["host_t_ns"][still][-1] - trace["host_t_ns"][still][0]) * 1e-9
+    assert held >= 0.4 - 0.02
+    start_ns, stop_ns = robot.action_window_ns
+    assert (stop_ns - start_ns) * 1e-9 == pytest.approx(0.4, abs=0.02)
+    in_window = (trace["host_t_ns"] >= start_ns) & (trace["host_t_ns"] < stop_ns)
+    assert np.all(still[in_window])  # the window is the hold
+    # From the control cycle after landing on, the arm does not move at all.
+    landed = trace["robot_timestamp"][still][0]
+    after = trace["robot_timestamp"] > landed + 1e-6
+    assert after.sum() > 30
+    assert np.all(np.linalg.norm(trace["tcp_speed"][after, :3], axis=1) == 0.0)
+
+
+def test_slide_keeps_the_normal_force_at_constant_tangential_speed(robot, loopback, skin):
+    in_contact(robot, skin)
+    x0 = loopback.state()["pose"][0]
+    start = time.monotonic_ns()
+    robot.slide(0.2, 0.02, 0.6, (1.0, 0.0), skin)
+    trace = robot.trace(start)
+    state = at_rest(loopback)
+    vx = trace["tcp_speed"][:, 0]
+    cruising = vx > 0.02 - 1e-9
+    # At full speed for the whole slide duration, and that is the reported action window.
+    start_ns, stop_ns = robot.action_window_ns
+    assert (stop_ns - start_ns) * 1e-9 == pytest.approx(0.6)
+    window = (trace["host_t_ns"] >= start_ns + 20_000_000) & (trace["host_t_ns"] < stop_ns)
+    assert window.sum() > 50 and np.all(cruising[window])
+    np.testing.assert_allclose(trace["tcp_speed"][cruising, 1], 0.0, atol=1e-12)  # no sideways drift
+    np.testing.assert_allclose(trace["skin_force"][cruising], 0.2, rtol=0.15)  # the settle band
+    # Force control keeps working during the slide: the end is closer to 0.2 N than the start.
+    assert abs(trace["skin_force"][cruising][-1] - 0.2) < 0.005
+    travelled = state["pose"][0] - x0
+    # 0.6 s at full speed plus the two ramps (v^2/a = 0.8 mm).
+    assert travelled == pytest.approx(0.02 * 0.6 + 0.02**2 / 0.5, abs=0.0005)
+    assert not state["force_mode"] and not state["moving"]
+
+
+def test_slide_follows_the_given_direction(robot, loopback, skin):
+    in_contact(robot, skin)
+    p0 = np.array(loopback.state()["pose"][:2])
+    robot.slide(0.1, 0.01, 0.5, (0.0, -2.0), skin)
+    moved = np.array(at_rest(loopback)["pose"][:2]) - p0
+    assert moved[1] < -0.004 and abs(moved[0]) < 1e-6
+
+
+def test_lift_then_wait_out_of_contact(robot, loopback, skin):
+    z = in_contact(robot, skin)
+    robot.press(0.001, 0.0)
+    robot.lift(0.01)
+    state = at_rest(loopback)
+    assert state["pose"][2] == pytest.approx(z - 0.001 + 0.01, abs=1e-6)
+    assert state["normal_force"] == 0.0
+    t0 = time.monotonic()
+    robot.wait(0.3)
+    assert time.monotonic() - t0 >= 0.3
+    assert loopback.state()["pose"][2] == pytest.approx(z - 0.001 + 0.01, abs=1e-9)
+
+
+def test_lift_is_capped_at_the_top_of_the_workspace_box(robot, loopback, skin):
+    in_contact(robot, skin)
+    robot.lift(1.0)
+    assert at_rest(loopback)["pose"][2] == pytest.approx(PLACEMENT.workspace_max[2], abs=1e-5)
+
+
+def test_a_whole_exploratory_action_keeps_the_controller_running(robot, loopback, skin):
+    for _ in range(2):
+        in_contact(robot, skin)
+        robot.press(0.001, 0.1)
+        robot.lift(0.005)
+        robot.wait(0.05)
+    state = loopback.state()
+    assert state["program_running"] and not state["protective_stopped"]
+
+
+def test_recording_metadata_relates_host_and_robot_clocks(robot, loopback, skin):
+    in_contact(robot, skin)
+    start = robot.now_ns()
+    robot.press(0.001, 0.3)
+    stop = robot.now_ns()
+    meta = robot.recording_metadata(start, stop)
+    trace = meta["robot_trace"]
+    host = np.array(trace["host_t_ns"])
+    robot_t = np.array(trace["robot_timestamp"])
+    assert len(host) > 20 and np.all((host >= start) & (host < stop))
+    assert np.all(np.diff(robot_t) >= 0) and robot_t[-1] > robot_t[0]
+    # host - robot clock is one offset, up to the read latency of a few control periods.
+    spread = (host - robot_t * 1e9) - meta["robot_clock_offset_ns"]
+    assert np.max(np.abs(spread)) < 30e6
+    assert meta["robot_frequency_hz"] == 125.0
+    assert np.array(trace["skin_force"]).max() > 0.1
+
+
+def test_the_clock_is_the_one_given(loopback):
+    ticks = iter(range(10**6))
+    robot = UR10(loopback.host, connect=False, clock=lambda: next(ticks))
+    assert robot.now_ns() == 0 and robot.now_ns() == 1
+
+
+def test_e_series_controller_runs_at_500_hz():
+    with Loopback(free_loopback_host(), series="e-series",
+                  contact={"type": "spring", "surface_z": SURFACE_Z, "stiffness": STIFFNESS},
+                  start_pose=(0.0, -0.5, 0.006, np.pi, 0.0, 0.0)) as lb:
+        robot = UR10(lb.host, [PLACEMENT], SafetyLimits(approach_speed=0.01))
+        try:
+            assert robot.frequency == 500.0
+            z = in_contact(robot, FakeSkin(lb))
+            robot.press(0.001, 0.1)
+            assert lb.state()["pose"][2] == pytest.approx(z - 0.001, abs=1e-6)
+            robot.lift(0.005)
+        finally:
+            robot.close()
