@@ -143,3 +143,14 @@ def test_learner_runs_on_plain_arrays_without_the_simulator(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "ok"
+
+
+def test_single_modality_models(related_world):
+    cfg = LearnerConfig(budget=0, modalities=("thermal",))
+    learner = APTKT(cfg, related_world["prior"])
+    learner.run(PoolEnvironment(related_world["pool"]), list(ACTIONS), related_world["news"], related_world["test"])
+    for action in ACTIONS:
+        assert learner.learners[action].model.modality_names_ == ["thermal"]
+    with pytest.raises(ValueError, match="has none of the modalities"):
+        APTKT(LearnerConfig(budget=0, modalities=("force",)), related_world["prior"]).run(
+            PoolEnvironment(related_world["pool"]), ["S1"], related_world["news"])

@@ -8,6 +8,7 @@ written in plan order, so the same plan and seed give the same file content bit 
 from __future__ import annotations
 
 import concurrent.futures as cf
+import multiprocessing
 import json
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -18,6 +19,10 @@ from typing import Any
 from aptkt.actions import PAPER_ACTIONS, ExploratoryAction
 from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, repair
 from aptkt.skin.samples import Recording
+
+# Workers are spawned, never forked: a fork copies the parent's thread pools (rayon in the
+# compiled core) without their threads, and the first parallel call in the child then hangs.
+_SPAWN = multiprocessing.get_context("spawn")
 
 __all__ = ["GenerationPlan", "generate", "paper_plan"]
 
@@ -151,7 +156,7 @@ def _run(plan: GenerationPlan, todo: Sequence[tuple[str, ExploratoryAction, int]
             yield _simulate(job)
         return
     # Results come back in plan order, whichever process computed them.
-    with cf.ProcessPoolExecutor(max_workers=jobs, initializer=_init_world, initargs=args) as pool:
+    with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=_SPAWN, initializer=_init_world, initargs=args) as pool:
         yield from pool.map(_simulate, work, chunksize=4)
 
 

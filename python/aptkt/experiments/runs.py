@@ -5,6 +5,7 @@ JSON-able values and file paths, so runs can go to other processes or machines),
 from __future__ import annotations
 
 import concurrent.futures as cf
+import multiprocessing
 import os
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, field
@@ -13,6 +14,10 @@ from typing import Any
 
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.dataset import load_observations
+
+# Workers are spawned, never forked: a fork copies the parent's thread pools (rayon in the
+# compiled core) without their threads, and the first parallel call in the child then hangs.
+_SPAWN = multiprocessing.get_context("spawn")
 
 __all__ = ["RunSpec", "execute", "run_many"]
 
@@ -93,7 +98,7 @@ def run_many(
                 progress(1)
         return out
     results: list[list[dict[str, Any]] | None] = [None] * len(specs)
-    with cf.ProcessPoolExecutor(max_workers=jobs) as pool:
+    with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=_SPAWN) as pool:
         futures = {pool.submit(execute, s): i for i, s in enumerate(specs)}
         for fut in cf.as_completed(futures):
             results[futures[fut]] = fut.result()

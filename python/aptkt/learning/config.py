@@ -49,6 +49,9 @@ class LearnerConfig:
     patience : stop early when the mean uncertainty over all pairs has not decreased for this
         many consecutive observations (None: always spend the budget).
     seed : seeds exploration and the GP optimiser starts.
+    modalities : use only these modalities in the new objects' models (e.g. ``("force",)`` for a
+        single-modality model as in Fig. 6); None: every modality of each action. The prior
+        models always see all of theirs.
     """
 
     eps_neg: float = 0.4
@@ -58,6 +61,7 @@ class LearnerConfig:
     auxiliary: bool = False
     patience: int | None = None
     seed: int = 0
+    modalities: tuple[str, ...] | None = None
     gp: GPSettings = field(default_factory=GPSettings)
 
     def __post_init__(self) -> None:
@@ -69,6 +73,10 @@ class LearnerConfig:
                 raise ValueError(f"{name} must lie in [0, 1], got {v}")
         if self.budget < 0:
             raise ValueError(f"budget must be >= 0, got {self.budget}")
+        if self.modalities is not None:
+            object.__setattr__(self, "modalities", tuple(str(m) for m in self.modalities))
+            if not self.modalities:
+                raise ValueError("modalities must name at least one modality (or be None)")
         if self.patience is not None and self.patience < 1:
             raise ValueError(f"patience must be None or >= 1, got {self.patience}")
 

@@ -79,21 +79,32 @@ class ActionLearner:
         return FeaturePipeline().fit(self.observations)
 
     def _features(self, obs: Observations, pipeline: FeaturePipeline) -> tuple[np.ndarray, dict[str, list[int]]]:
-        X, groups = pipeline.transform(obs)
-        return self._augment(X, groups)
+        return self._model_input(*pipeline.transform(obs))
 
-    def _augment(self, X: np.ndarray, groups: dict[str, list[int]]) -> tuple[np.ndarray, dict[str, list[int]]]:
-        if not (self.config.auxiliary and self.prior is not None):
-            return X, groups
-        aux = self.prior.posteriors(X)
-        groups = dict(groups)
-        groups[AUXILIARY] = list(range(X.shape[1], X.shape[1] + aux.shape[1]))
-        return np.hstack([X, aux]), groups
+    def _model_input(self, X_full: np.ndarray, groups: dict[str, list[int]]) -> tuple[np.ndarray, dict[str, list[int]]]:
+        """The new objects' model input from features of every modality: the selected
+        modalities, then (Eq. 5) the prior model's posteriors, which need every modality."""
+        wanted = self.config.modalities
+        names = [m for m in groups if wanted is None or m in wanted]
+        if not names:
+            raise ValueError(f"action {self.action!r} has none of the modalities {list(wanted or [])}; "
+                             f"it has {list(groups)}")
+        cols = [c for m in names for c in groups[m]]
+        X = X_full[:, cols]
+        out_groups, start = {}, 0
+        for m in names:
+            out_groups[m] = list(range(start, start + len(groups[m])))
+            start += len(groups[m])
+        if self.config.auxiliary and self.prior is not None:
+            aux = self.prior.posteriors(X_full)
+            out_groups[AUXILIARY] = list(range(start, start + aux.shape[1]))
+            X = np.hstack([X, aux])
+        return X, out_groups
 
     def _source_features(self, old_object: str) -> np.ndarray:
         if old_object not in self._source_cache:
-            X = self.prior.features_of(old_object)
-            self._source_cache[old_object] = self._augment(X, {})[0]
+            obs = self.prior.observations.of_objects([old_object])
+            self._source_cache[old_object] = self._features(obs, self.prior.pipeline)[0]
         return self._source_cache[old_object]
 
     # -- model -------------------------------------------------------------------------------
@@ -104,12 +115,12 @@ class ActionLearner:
         if missing:
             raise RuntimeError(f"action {self.action!r}: no observation yet of {missing}")
         pipeline = self._pipeline()
-        X_plain, groups_plain = pipeline.transform(obs)
-        X, groups = self._augment(X_plain, groups_plain)
+        X_full, groups_full = pipeline.transform(obs)
+        X, groups = self._model_input(X_full, groups_full)
         sources: dict[str, TransferSource] = {}
         self.decisions = {}
         if self.prior is not None and self.config.transfer != "none":
-            old_post = self.prior.posteriors(X_plain)
+            old_post = self.prior.posteriors(X_full)
             for obj in self.new_objects:
                 decision = decide_transfer(
                     obj, self.prior.objects, old_post[obs.objects == obj], self.config.eps_neg, self.config.transfer
