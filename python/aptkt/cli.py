@@ -15,6 +15,8 @@ COMMAND_MODULES: tuple[str, ...] = (
     "aptkt.commands.demo",
     "aptkt.commands.skin",
     "aptkt.commands.dataset",
+    "aptkt.commands.collect",
+    "aptkt.commands.learn",
 )
 
 

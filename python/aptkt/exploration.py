@@ -6,6 +6,12 @@ recover (30 s). The recording is cropped to the action's window — the hold of 
 contact, the constant-speed part of a slide — which the robot reports in its optional
 ``action_window_ns`` attribute (``(start_ns, stop_ns)`` on the skin's clock); robots without it
 get the last ``action.duration`` seconds of the movement.
+
+On a robot or skin error the error carries what was recorded: ``exc.recording`` is the partial
+recording of a movement that failed (uncropped, with the skin's calibration, the robot's trace
+if it keeps one and ``metadata["aborted"]`` naming the error), or the complete, cropped
+recording when the fault came afterwards, while lifting or waiting
+(``exc.recording_complete`` is then True).
 """
 
 from __future__ import annotations
@@ -111,7 +117,14 @@ def explore(robot: Robot, skin: SkinSource, placement: Placement, action: Explor
             robot.press(action.depth, action.hold_time)
     except AptktError as exc:
         rec = skin.stop_recording()
+        # Everything needed to store and understand the partial recording travels with it.
+        rec.metadata["calibration"] = _calibration(skin)
+        rec.metadata["aborted"] = f"{type(exc).__name__}: {exc}"
+        robot_metadata = getattr(robot, "recording_metadata", None)
+        if callable(robot_metadata):
+            rec.metadata.update(robot_metadata(int(rec.start_ns), int(rec.stop_ns)))
         exc.recording = rec  # type: ignore[attr-defined]
+        exc.recording_complete = False  # type: ignore[attr-defined]
         try:
             robot.stop()
             robot.lift(settings.lift_height)
@@ -129,6 +142,12 @@ def explore(robot: Robot, skin: SkinSource, placement: Placement, action: Explor
     if callable(robot_metadata):  # e.g. the UR10's own trace and clock (robot timestamps)
         rec.metadata.update(robot_metadata(int(rec.start_ns), int(rec.stop_ns)))
     out = crop_recording(rec, int(window[0]), int(window[1]))
-    robot.lift(settings.lift_height)
-    robot.wait(settings.thermal_wait)
+    try:
+        robot.lift(settings.lift_height)
+        robot.wait(settings.thermal_wait)
+    except AptktError as exc:
+        # The action itself completed: its recording is whole and must not be lost.
+        exc.recording = out  # type: ignore[attr-defined]
+        exc.recording_complete = True  # type: ignore[attr-defined]
+        raise
     return out

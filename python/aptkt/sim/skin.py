@@ -81,7 +81,14 @@ class PtySkinLink:
     def deliver(self, frames: Frames) -> None:
         if not len(frames) or self.master < 0:
             return
-        data = memoryview(encode_frames(frames))
+        self.write(encode_frames(frames))
+
+    def write(self, data: bytes) -> None:
+        """Send wire bytes to the reader; what does not fit in the pty's buffer is dropped and
+        counted (used directly by the loopback controller's skin)."""
+        if self.master < 0:
+            return
+        data = memoryview(data)
         while data:
             try:
                 n = os.write(self.master, data)

@@ -1,7 +1,9 @@
 """``python -m aptkt.robot.loopback``: run a loopback UR controller in this terminal.
 
 Then connect anything that speaks to a UR controller (ur_rtde, ``aptkt.robot.UR10``) to the
-host it prints. ``--stdio`` is the mode :class:`~aptkt.robot.loopback.Loopback` uses for its
+host it prints. With ``--skin-pty`` a simulated skin patch on the TCP streams the skin's wire
+protocol through a pty whose path it prints (``aptkt skin monitor PATH`` shows it). With
+``--workspace FILE`` the objects of a workspace file lie where the file says. ``--stdio`` is the mode :class:`~aptkt.robot.loopback.Loopback` uses for its
 child process (JSON commands on stdin, answers on stdout).
 """
 
@@ -27,8 +29,18 @@ def main(argv: list[str] | None = None) -> int:
                         help="press a simulated-world object (aptkt.sim library) lying at --object-xy "
                              "instead of the spring surface")
     parser.add_argument("--object-xy", type=float, nargs=2, default=(0.0, -0.5), metavar=("X", "Y"))
+    parser.add_argument("--workspace", default=None, metavar="FILE",
+                        help="put an object at every placement of this workspace file: objects of the "
+                             "simulated world's library by name, spring surfaces for other names")
     parser.add_argument("--start-pose", type=float, nargs=6, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
                         default=None, help="initial TCP pose")
+    parser.add_argument("--skin-pty", action="store_true",
+                        help="simulate the skin patch on the TCP and stream it through a pty (path printed)")
+    parser.add_argument("--skin-rate", type=float, default=250.0, metavar="HZ",
+                        help="packets per cell and second of the simulated skin (default %(default)s)")
+    parser.add_argument("--patch", default=None, metavar="FILE",
+                        help="patch file the skin's reader uses (cell ids, force calibration); default: "
+                             "the 7-cell patch")
     parser.add_argument("--stdio", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--config-json", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--ports-json", default=None, help=argparse.SUPPRESS)
@@ -43,8 +55,27 @@ def main(argv: list[str] | None = None) -> int:
         extra = {} if args.start_pose is None else {"start_pose": tuple(args.start_pose)}
         contact: dict = {"type": "spring", "surface_z": args.surface_z, "stiffness": args.stiffness,
                          "friction": args.friction}
+        if args.object and args.workspace:
+            parser.error("--object and --workspace exclude each other")
         if args.object:
             contact = {"type": "sim_object", "object": args.object, "x": args.object_xy[0], "y": args.object_xy[1]}
+        if args.workspace:
+            from aptkt.errors import ConfigError
+            from aptkt.robot.loopback.contact import scene_from_workspace
+
+            try:
+                contact = scene_from_workspace(args.workspace, stiffness=args.stiffness, friction=args.friction)
+            except (ConfigError, ValueError) as exc:
+                print(f"--workspace: {exc}", file=sys.stderr)
+                return 1
+        if args.skin_pty:
+            from aptkt.robot.loopback.skin import SkinConfig
+
+            try:
+                extra["skin"] = SkinConfig(rate_hz=args.skin_rate, patch=args.patch).to_dict()
+            except ValueError as exc:
+                print(f"--skin-rate: {exc}", file=sys.stderr)
+                return 1
         config = ControllerConfig(
             version=CB3_VERSION if args.series == "cb3" else E_SERIES_VERSION,
             contact=contact,
@@ -60,7 +91,11 @@ def main(argv: list[str] | None = None) -> int:
     from aptkt.robot.loopback.controller import SimulatedController
     from aptkt.robot.loopback.servers import LoopbackServer
 
-    controller = SimulatedController(config)
+    try:
+        controller = SimulatedController(config)
+    except (OSError, ValueError) as exc:  # a bad contact spec or patch file, no pty
+        print(f"cannot start the loopback: {exc}", file=sys.stderr)
+        return 1
     try:
         server = LoopbackServer(controller, host=args.host, rtde_port=ports["rtde"],
                                 dashboard_port=ports["dashboard"], script_ports=ports["script"]).start()
@@ -70,6 +105,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"loopback UR controller (PolyScope {config.polyscope_version}, {config.frequency:.0f} Hz) "
           f"on {args.host}: RTDE {ports['rtde']}, dashboard {ports['dashboard']}, script {ports['script']}. "
           "Ctrl-C stops.")
+    if controller.skin is not None:
+        print(f"simulated skin ({controller.skin.patch.name}, {config.skin['rate_hz']:g} Hz per cell) "
+              f"on {controller.skin.port}", flush=True)
     try:
         while True:
             time.sleep(1.0)
@@ -82,6 +120,8 @@ def main(argv: list[str] | None = None) -> int:
         pass
     finally:
         server.close()
+        if controller.skin is not None:
+            controller.skin.close()
     return 0
 
 

@@ -99,6 +99,9 @@ class ControllerConfig:
     serial_number: str = "2017300000"
     robot_model: str = "UR10"
     seed: int = 0
+    #: The simulated skin patch on the TCP, streamed through a pty (None: no skin). ``{}``
+    #: for the defaults, or fields of :class:`aptkt.robot.loopback.skin.SkinConfig`.
+    skin: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
         self.version = tuple(int(v) for v in self.version)  # type: ignore[assignment]
@@ -191,6 +194,12 @@ class SimulatedController:
         self.output_bits = [False] * 128
         self.external_force_torque = [0.0] * 6
         self._input_owner: dict[str, int] = {}
+        self.skin: Any = None
+        if self.config.skin is not None:
+            from aptkt.robot.loopback.skin import SimulatedSkin, SkinConfig
+
+            self.skin = SimulatedSkin(SkinConfig.from_spec(self.config.skin))
+        self._skin_errors = 0
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -256,6 +265,7 @@ class SimulatedController:
                     "action": self.watchdog.action,
                 },
                 "moving": bool(np.any(np.abs(self.velocity) > 1e-9)),
+                "skin": None if self.skin is None else self.skin.stats(),
                 "text_log": [m for _, m in list(self.text_log)[-40:]],
             }
 
@@ -776,6 +786,16 @@ class SimulatedController:
                     f"{self.config.protective_force_limit:.1f} N limit"
                 )
                 self._update_wrench()
+            if self.skin is not None:
+                self._step_skin()
+
+    def _step_skin(self) -> None:
+        try:
+            self.skin.step(self)
+        except Exception as exc:  # a skin bug must not stop the arm's clock; say so in the log
+            self._skin_errors += 1
+            if self._skin_errors <= 3:
+                self.log(f"simulated skin failed: {type(exc).__name__}: {exc}")
 
     def _disturbance(self) -> np.ndarray:
         target = self.disturbance_target if self.time < self.disturbance_until else np.zeros(3)

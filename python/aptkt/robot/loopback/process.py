@@ -83,6 +83,17 @@ def serve_stdio(config: ControllerConfig, host: str, ports: Mapping[str, Any], s
         if op == "scripts":
             with controller.lock:
                 return list(controller.received_scripts)
+        if op == "skin":
+            with controller.lock:
+                return None if controller.skin is None else controller.skin.stats()
+        if op == "skin_silence":
+            with controller.lock:
+                _need_skin(controller).silence(args.get("cells"))
+            return None
+        if op == "skin_restore":
+            with controller.lock:
+                _need_skin(controller).restore()
+            return None
         if op == "ping":
             return "pong"
         raise ValueError(f"unknown loopback command {op!r}")
@@ -102,6 +113,14 @@ def serve_stdio(config: ControllerConfig, host: str, ports: Mapping[str, Any], s
             answer(reply)
     finally:  # the parent closed the pipe or asked to stop
         server.close()
+        if controller.skin is not None:
+            controller.skin.close()
+
+
+def _need_skin(controller: Any) -> Any:
+    if controller.skin is None:
+        raise ValueError("this loopback has no simulated skin (start it with skin=True / --skin-pty)")
+    return controller.skin
 
 
 class Loopback:
@@ -112,12 +131,21 @@ class Loopback:
     ...     lb.state()["pose"]
 
     ``series="cb3"`` (125 Hz, PolyScope 3.15) or ``"e-series"`` (500 Hz, PolyScope 5.11), or an
-    explicit ``version`` tuple. Other keyword arguments are :class:`ControllerConfig` fields.
+    explicit ``version`` tuple. ``skin=True`` (or a mapping of
+    :class:`~aptkt.robot.loopback.skin.SkinConfig` fields) puts a simulated skin patch on the
+    TCP that streams the skin's wire protocol through a pty: open ``SerialSkin(lb.skin_port)``.
+    Other keyword arguments are :class:`ControllerConfig` fields.
     """
 
     def __init__(self, host: str = "127.0.0.1", *, series: str = "cb3",
                  contact: Mapping[str, Any] | None = None,
+                 skin: bool | Mapping[str, Any] | None = None,
                  ports: Mapping[str, Any] | None = None, start_timeout: float = 30.0, **config: Any):
+        if skin is not None and skin is not False:
+            from aptkt.robot.loopback.skin import SkinConfig
+
+            config["skin"] = SkinConfig.from_spec(skin).to_dict()  # validated here, in the parent
+        self._skin_port: str | None = None
         if "version" not in config:
             if series not in ("cb3", "e-series"):
                 raise ValueError(f"series must be 'cb3' or 'e-series', got {series!r}")
@@ -150,6 +178,8 @@ class Loopback:
         if not reply["ok"]:
             self._kill()
             raise LoopbackError(f"loopback on {self.host} failed to start: {reply['error']}")
+        if self.config.skin is not None:
+            self._skin_port = self.skin_stats()["port"]
         return self
 
     def __enter__(self) -> Loopback:
@@ -253,6 +283,24 @@ class Loopback:
 
     def restore(self) -> None:
         self.call("restore")
+
+    # The simulated skin ------------------------------------------------------------------
+    @property
+    def skin_port(self) -> str | None:
+        """The pty the simulated skin streams to (None without a skin)."""
+        return self._skin_port
+
+    def skin_stats(self) -> dict[str, Any] | None:
+        """Packets written and dropped, silent cells, the object the cells last touched."""
+        return self.call("skin")
+
+    def silence_skin(self, cells: Sequence[int] | None = None) -> None:
+        """Mute skin cells (ids; None: all of them, as if the patch were unplugged)."""
+        self.call("skin_silence", cells=None if cells is None else [int(c) for c in cells])
+
+    def restore_skin(self) -> None:
+        """Every skin cell sends again."""
+        self.call("skin_restore")
 
     def scripts(self) -> list[str]:
         """The last programs received on the script ports (newest last)."""

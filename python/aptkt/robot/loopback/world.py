@@ -7,9 +7,14 @@ Each of the 21 force sensors carries the pressure of the world's indentation law
 at its local depth below the object's face (:class:`aptkt.sim.mechanics.SurfaceShape`: crown,
 waviness, footprint); the normal force is their sum times the sensor area, as in the world.
 
+For the loopback's simulated skin it also gives the object's thermal description (its layers
+and contact conductance, :meth:`SimObjectSurface.thermal_contact`) and the vibration its
+texture excites in the cells while sliding (:meth:`SimObjectSurface.texture_acceleration`, the
+world's texture model without its stick-slip).
+
 What the loopback leaves out, because its contact model sees only the current pose: the
-viscoelastic relaxation (it needs the indentation history), the texture and stick-slip, the
-per-trial variations and the patch's imperfections. Those stay in :mod:`aptkt.sim`.
+viscoelastic relaxation (it needs the indentation history), the stick-slip, the per-trial
+variations and the patch's imperfections. Those stay in :mod:`aptkt.sim`.
 """
 
 from __future__ import annotations
@@ -21,7 +26,8 @@ import numpy as np
 from aptkt.sim.mechanics import IndentationLaw, SurfaceShape
 from aptkt.sim.objects import default_library, load_library
 from aptkt.sim.patch import PatchGeometry, SkinConstants
-from aptkt.sim.texture import waviness_waves
+from aptkt.robot.loopback.contact import ThermalContact
+from aptkt.sim.texture import texture_acceleration, texture_field, waviness_waves
 
 __all__ = ["SimObjectSurface"]
 
@@ -54,6 +60,9 @@ class SimObjectSurface:
         self.sensor_offsets = PatchGeometry(constants=constants).sensor_positions  # (7, 3, 2)
         self.sensor_area = constants.sensor_area
         self.friction = spec.surface.friction_kinetic
+        self.constants = constants
+        self.spec = spec
+        self.texture = texture_field(spec)
 
     def sensor_forces(self, pose: Sequence[float]) -> np.ndarray:
         """(7, 3) newtons on each force sensor with the skin plane at ``pose``."""
@@ -63,3 +72,25 @@ class SimObjectSurface:
 
     def normal_force(self, pose: Sequence[float]) -> float:
         return float(self.sensor_forces(pose).sum())
+
+    def thermal_contact(self, pose: Sequence[float]) -> ThermalContact:
+        """The object's layers and surface, for the skin's heat exchange."""
+        return ThermalContact(self.spec.name, tuple(self.spec.layers), float(self.spec.surface.contact_conductance),
+                              float(self.spec.temperature_offset))
+
+    def texture_acceleration(self, cell_xy: np.ndarray, velocity: np.ndarray, pressure: np.ndarray) -> np.ndarray:
+        """Texture vibration (n, 3) in m/s^2, base frame, of cells at ``cell_xy`` (n, 2) moving
+        at ``velocity`` (base frame, m/s) under mean contact pressure ``pressure`` (n,) Pa."""
+        xy = np.asarray(cell_xy, dtype=np.float64)
+        v = np.asarray(velocity, dtype=np.float64)[:2]
+        u = self.shape.to_object(xy)
+        w = np.broadcast_to(self.shape.to_object_direction(v), u.shape)
+        tex = texture_acceleration(self.texture, self.constants, u, w, np.asarray(pressure, dtype=np.float64),
+                                   self.spec.top.modulus, self.spec.surface.friction_kinetic)
+        speed = float(np.hypot(v[0], v[1]))
+        direction = v / speed if speed > 1e-9 else np.array([1.0, 0.0])
+        lateral = np.array([-direction[1], direction[0]])
+        out = np.zeros_like(tex)
+        out[:, :2] = tex[:, 0:1] * direction + tex[:, 1:2] * lateral
+        out[:, 2] = tex[:, 2]
+        return out

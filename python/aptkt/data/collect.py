@@ -1,0 +1,227 @@
+"""Collect a data set on a live session (the UR10 with its skin, or the simulated world).
+
+Trial by trial, into the crash-safe store (:class:`~aptkt.data.DatasetWriter`): each
+recording is flushed before the next action starts, so a process killed at any moment leaves
+every completed trial readable. ``resume`` skips the trials already stored.
+
+A robot or skin fault mid-action stops the collection: the backend has stopped the arm; the
+partial recording goes to the side file ``<name>.aborted<suffix>`` (``data.h5`` →
+``data.aborted.h5``; a second abort of the same trial goes to ``data.aborted-2.h5``, ...), its
+metadata flagged ``aborted`` with the error; and :class:`CollectionAborted` names the object,
+action and trial. A fault *after* a complete action (while lifting off or waiting) keeps that
+trial in the data set itself, with the error in its metadata.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from aptkt.actions import ExploratoryAction
+from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, recording_key, repair
+from aptkt.errors import AptktError, ConfigError
+from aptkt.skin.samples import Recording
+
+__all__ = ["CollectionPlan", "CollectionAborted", "collect", "aborted_path", "save_aborted"]
+
+
+@dataclass(frozen=True)
+class CollectionPlan:
+    """Every action ``repetitions`` times on every object, trial numbers from ``first_trial``."""
+
+    objects: tuple[str, ...]
+    actions: tuple[ExploratoryAction, ...]
+    repetitions: int
+    first_trial: int = 0
+
+    def __post_init__(self) -> None:
+        if not self.objects or not self.actions:
+            raise ConfigError("a collection needs at least one object and one action")
+        if self.repetitions < 1 or self.first_trial < 0:
+            raise ConfigError("-n must be >= 1 and --first-trial >= 0")
+        for kind, names in (("object", list(self.objects)), ("action", [a.name for a in self.actions])):
+            if len(set(names)) != len(names):
+                raise ConfigError(f"each {kind} may appear once, got {names}")
+
+    def trials(self) -> Iterator[tuple[str, ExploratoryAction, int]]:
+        """(object, action, trial) in collection order: trial by trial, so that the objects can
+        be re-placed between trials (paper §5.2) and a partial file holds all pairs alike."""
+        for t in range(self.first_trial, self.first_trial + self.repetitions):
+            for obj in self.objects:
+                for act in self.actions:
+                    yield obj, act, t
+
+    def __len__(self) -> int:
+        return len(self.objects) * len(self.actions) * self.repetitions
+
+    def describe(self) -> dict[str, Any]:
+        return {"objects": list(self.objects), "actions": [a.to_dict() for a in self.actions],
+                "repetitions": self.repetitions, "first_trial": self.first_trial}
+
+
+class CollectionAborted(AptktError):
+    """A fault stopped the collection in the middle of a trial (the arm is stopped).
+
+    ``object``, ``action``, ``trial``: the trial; ``cause``: the robot or skin error;
+    ``saved``: where its recording went (None if nothing was being recorded);
+    ``completed``: recordings in the data set now.
+    """
+
+    def __init__(self, message: str, *, object: str, action: str, trial: int, cause: BaseException,  # noqa: A002
+                 saved: Path | None, completed: int):
+        super().__init__(message)
+        self.object, self.action, self.trial = object, action, trial
+        self.cause, self.saved, self.completed = cause, saved, completed
+
+
+def aborted_path(path: str | Path, attempt: int = 1) -> Path:
+    """Side file for partial recordings: ``data.h5`` → ``data.aborted.h5`` (``-2``, ... after)."""
+    path = Path(path)
+    tag = ".aborted" if attempt <= 1 else f".aborted-{attempt}"
+    return path.with_name(path.stem + tag + path.suffix)
+
+
+def save_aborted(path: str | Path, rec: Recording, error: BaseException) -> Path:
+    """Store a partial recording in the side file of data set ``path``; returns the file used."""
+    rec.metadata.setdefault("aborted", f"{type(error).__name__}: {error}")
+    rec.metadata["error_type"] = type(error).__name__
+    key = recording_key(rec)
+    for attempt in range(1, 1000):
+        target = aborted_path(path, attempt)
+        try:
+            with DatasetWriter(target, "a", description={"aborted_recordings_of": str(path)}) as w:
+                if key in w.keys():
+                    continue
+                w.append(rec)
+                return target
+        except DatasetError:
+            continue  # a side file whose writer died: leave it for inspection, use the next
+    raise DatasetError(f"no free side file for the partial recording of {key} next to {path}")
+
+
+def _check_resumable(path: Path, plan: CollectionPlan, session: Mapping[str, Any]) -> None:
+    with DatasetReader(path) as rd:
+        desc = rd.description
+    stored = desc.get("session", {})
+    if stored.get("robot") and stored.get("robot") != session.get("robot"):
+        raise ConfigError(f"{path} was collected with --robot {stored['robot']}, not {session.get('robot')}: "
+                          "use another output file")
+    if session.get("robot") == "sim" and stored.get("seed") not in (None, session.get("seed")):
+        raise ConfigError(f"{path} was simulated with --seed {stored['seed']}, not {session.get('seed')}")
+    before = {a["name"]: a for a in desc.get("actions", [])}
+    for action in plan.actions:
+        old = before.get(action.name)
+        if old is not None and old != action.to_dict():
+            raise ConfigError(f"{path}: action {action.name!r} was recorded with other parameters "
+                              f"({json.dumps(old)}); resume with the same definition or rename it")
+
+
+def collect(
+    path: str | Path,
+    plan: CollectionPlan,
+    session: Any,
+    *,
+    resume: bool = False,
+    overwrite: bool = False,
+    progress: bool | Callable[[str], None] = True,
+    between_trials: Callable[[int], None] | None = None,
+) -> dict[str, Any]:
+    """Run ``plan`` on ``session`` (an entered :mod:`aptkt.live` session) into ``path``.
+
+    ``progress``: True for a progress bar on stderr, or a callable that receives one line per
+    recording. ``between_trials(trial)`` is called before each new trial round but the first
+    (e.g. to let an operator re-place the objects). Returns a summary of the file. Raises
+    :class:`CollectionAborted` on a fault mid-trial.
+    """
+    path = Path(path)
+    t0 = time.perf_counter()
+    session_desc = session.describe()
+    description = {"collector": "aptkt collect", "session": session_desc, **plan.describe()}
+    repaired = None
+    if resume and path.exists():
+        _check_resumable(path, plan, session_desc)
+        try:
+            writer = DatasetWriter(path, "a")
+        except DatasetError:
+            repaired = repair(path)  # its writer died: keep every complete recording
+            writer = DatasetWriter(path, "a")
+    else:
+        if path.exists() and not overwrite:
+            raise DatasetError(f"{path} exists: use --resume to complete it or --overwrite to replace it")
+        writer = DatasetWriter(path, "w", description=description, overwrite=overwrite)
+    done = writer.keys()
+    todo = [(o, a, t) for o, a, t in plan.trials() if (o, a.name, t) not in done]
+    bar = None
+    if progress is True:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(plan), initial=len(plan) - len(todo), unit="trial", desc=path.name, file=sys.stderr)
+    collected = 0
+    current_round: int | None = None
+    try:
+        for obj, action, trial in todo:
+            if trial != current_round:
+                if current_round is not None and between_trials is not None:
+                    if bar is not None:
+                        bar.clear()
+                    between_trials(trial)
+                current_round = trial
+            if bar is not None:
+                bar.set_postfix_str(f"{obj} {action.name} trial {trial}")
+            try:
+                rec = session.explore(obj, action, trial)
+            except KeyboardInterrupt as exc:
+                _aborted(path, writer, obj, action, trial, exc)
+                raise
+            except AptktError as exc:
+                raise _aborted(path, writer, obj, action, trial, exc) from exc
+            writer.append(rec)
+            collected += 1
+            if bar is not None:
+                bar.update(1)
+            elif callable(progress):
+                progress(f"[{len(writer)}/{len(plan)}] {obj} {action.name} trial {trial}: "
+                         f"{len(rec.samples)} samples, {rec.duration:.2f} s")
+    finally:
+        if bar is not None:
+            bar.close()
+        writer.close()
+    with DatasetReader(path) as rd:
+        info = rd.info()
+    info.update(collected=collected, skipped=len(plan) - len(todo), planned=len(plan),
+                wall_seconds=time.perf_counter() - t0, repaired=repaired)
+    return info
+
+
+def _aborted(path: Path, writer: DatasetWriter, obj: str, action: ExploratoryAction, trial: int,
+             exc: BaseException) -> BaseException:
+    """Save what the failed trial recorded; the error to raise in its place."""
+    rec: Recording | None = getattr(exc, "recording", None)
+    saved: Path | None = None
+    what = "nothing was being recorded"
+    if rec is not None and getattr(exc, "recording_complete", False):
+        # The action completed; the fault came while lifting off or waiting: keep the trial.
+        rec.metadata["fault_after_recording"] = f"{type(exc).__name__}: {exc}"
+        writer.append(rec)
+        saved = path
+        what = f"the trial's recording was complete and is stored in {path}"
+    elif rec is not None:
+        try:
+            saved = save_aborted(path, rec, exc)
+            what = (f"its partial recording ({len(rec.samples)} samples, {rec.duration:.2f} s) is in {saved}"
+                    f" (flagged 'aborted')")
+        except (AptktError, OSError, ValueError) as save_exc:
+            what = f"its partial recording could not be saved: {save_exc}"
+    if isinstance(exc, KeyboardInterrupt):
+        exc.add_note(f"interrupted at {obj} / {action.name} / trial {trial}; {what}")
+        return exc
+    message = (f"{obj} / {action.name} / trial {trial}: {type(exc).__name__}: {exc}. The robot was stopped; "
+               f"{what}. {len(writer)} complete recordings are in {path}; run the same command with --resume "
+               "to continue (after clearing the fault).")
+    return CollectionAborted(message, object=obj, action=action.name, trial=trial, cause=exc, saved=saved,
+                             completed=len(writer))

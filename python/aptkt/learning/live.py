@@ -1,0 +1,255 @@
+"""Learning live: APTKT (or the baseline) on a robot that explores on request.
+
+The environment is a :class:`~aptkt.learning.environment.RecordingEnvironment` over a live
+session (:mod:`aptkt.live`: the UR10 with its skin, or the simulated world). Every observation
+the learner asks for runs the exploratory action and its recording is stored at once in a data
+set (the crash-safe store), so nothing observed is lost, even if the run is not finished.
+
+A live run has no test set: the accuracy the paper reports needs held-out observations of the
+same objects, which only a data set given with ``test=`` provides. Without it the run reports
+the models' own uncertainty and the transfer decisions, and no accuracy.
+
+The output directory receives ``run.json`` (configuration, objects, actions, every step with
+its transfer decisions, the status), ``steps.csv`` (one row per step), ``transfer.csv`` (one
+row per step, action and new object) and ``learned_prior.npz``: the new objects' observations
+with their fitted models, a :class:`~aptkt.learning.PriorKnowledge` that later runs can load
+as prior knowledge.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from aptkt import __version__
+from aptkt.actions import ExploratoryAction
+from aptkt.data.collect import save_aborted
+from aptkt.data.store import DatasetReader, DatasetWriter
+from aptkt.errors import AptktError
+from aptkt.learning.config import LearnerConfig
+from aptkt.learning.environment import RecordingEnvironment
+from aptkt.learning.learner import APTKT, StepRecord
+from aptkt.learning.observations import ObservationTable
+from aptkt.learning.prior import PriorKnowledge
+
+__all__ = ["LiveLearningAborted", "learn_live", "describe_step", "NO_TEST_NOTE"]
+
+NO_TEST_NOTE = ("no test set: accuracy is not reported (a live run has no held-out observations; "
+                "pass a data set of the same objects as test data to measure it)")
+
+
+class LiveLearningAborted(AptktError):
+    """A robot or skin fault stopped a live learning run; ``cause`` is the error, ``saved``
+    where the failed action's recording went, ``output`` the directory with the run so far."""
+
+    def __init__(self, message: str, *, cause: BaseException, saved: Path | None, output: Path):
+        super().__init__(message)
+        self.cause, self.saved, self.output = cause, saved, output
+
+
+def _fmt_decision(d: Mapping[str, Any], eps_neg: float) -> str:
+    if d.get("source"):
+        return f"{d['new_object']} <- {d['source']} (lambda {d['lambda']:.2f})"
+    best = max(d.get("mean_posterior", {}).values(), default=float("nan"))
+    return f"{d['new_object']}: none (max p {best:.2f} < eps_neg {eps_neg:g})"
+
+
+def describe_step(rec: StepRecord, config: LearnerConfig, n_pairs: int) -> str:
+    """One progress line: what was chosen and why, what transfers, and accuracy if known."""
+    if rec.action is None:
+        head = f"step   0: initial round done ({rec.n_observations} observations, every action on every object)"
+    else:
+        why = ("random pick (eps-exploration)" if rec.explored
+               else f"highest uncertainty of {n_pairs} pairs")
+        head = (f"step {rec.step:3d}/{config.budget}: {rec.action} on {rec.object}, uncertainty "
+                f"{rec.uncertainty:.3f} ({why})")
+    parts = [head]
+    for action, decisions in rec.transfer.items():
+        if config.transfer == "none":
+            continue
+        text = "; ".join(_fmt_decision(d, config.eps_neg) for d in decisions.values())
+        parts.append(f"    transfer {action}: {text}")
+    if not math.isnan(rec.mean_accuracy):
+        parts.append(f"    test accuracy {rec.mean_accuracy:.3f} (fused {rec.fused_accuracy:.3f})")
+    return "\n".join(parts)
+
+
+def _next_trial(path: Path) -> int:
+    """Trial numbers continue after the largest one already in the record file."""
+    if not path.exists():
+        return 0
+    with DatasetReader(path) as rd:
+        trials = [t for _, _, t in rd.keys()]
+    return max(trials) + 1 if trials else 0
+
+
+def learn_live(
+    session: Any,
+    prior: PriorKnowledge | None,
+    config: LearnerConfig,
+    actions: Mapping[str, ExploratoryAction],
+    new_objects: Sequence[str],
+    *,
+    record: str | Path,
+    output: str | Path,
+    test: ObservationTable | None = None,
+    report: Callable[[str], None] = print,
+    extra: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Run APTKT on an entered live ``session``; write the run to ``output``; return the summary.
+
+    Every recording is appended to the data set ``record`` (created if missing; trial numbers
+    continue after the ones it holds). Raises :class:`LiveLearningAborted` after a fault, once
+    the run so far is written.
+    """
+    t0 = time.perf_counter()
+    output, record = Path(output), Path(record)
+    output.mkdir(parents=True, exist_ok=True)
+    first_trial = _next_trial(record)
+    steps: list[StepRecord] = []
+    n_pairs = len(actions) * len(new_objects)
+    summary: dict[str, Any] = {
+        "software_version": __version__,
+        "session": session.describe(),
+        "prior": {"objects": prior.objects if prior else [], "actions": list(prior.actions) if prior else [],
+                  **dict((extra or {}).get("prior", {}))},
+        "config": config.to_dict(),
+        "actions": {name: a.to_dict() for name, a in actions.items()},
+        "new_objects": list(new_objects),
+        "record_file": str(record),
+        "first_trial": first_trial,
+        "test": dict((extra or {}).get("test", {})) if test is not None else None,
+        "accuracy_reported": test is not None,
+    }
+    if test is None:
+        summary["note"] = NO_TEST_NOTE
+
+    writer = DatasetWriter(record, "a", description={"collector": "aptkt learn", "session": summary["session"],
+                                                      "actions": list(summary["actions"].values())})
+    failure: dict[str, Any] = {}
+
+    def explore(obj: str, action: ExploratoryAction, trial: int) -> Any:
+        report(f"  exploring {obj} with {action.name} (trial {trial})")
+        try:
+            return session.explore(obj, action, trial)
+        except (AptktError, KeyboardInterrupt) as exc:
+            failure.update(object=obj, action=action.name, trial=trial, error=exc)
+            rec = getattr(exc, "recording", None)
+            if rec is not None and getattr(exc, "recording_complete", False):
+                rec.metadata["fault_after_recording"] = f"{type(exc).__name__}: {exc}"
+                writer.append(rec)
+                failure["saved"] = record
+            elif rec is not None:
+                failure["saved"] = save_aborted(record, rec, exc)
+            raise
+
+    def on_step(rec: StepRecord) -> None:
+        steps.append(rec)
+        report(describe_step(rec, config, n_pairs))
+
+    env = RecordingEnvironment(explore, actions, first_trial=first_trial, on_recording=writer.append)
+    learner = APTKT(config, prior)
+    if test is None:
+        report(f"note: {NO_TEST_NOTE}")
+    status = "completed"
+    try:
+        run = learner.run(env, list(actions), list(new_objects), test=test, on_step=on_step)
+        summary["stopped_early"] = run.stopped_early
+    except (AptktError, KeyboardInterrupt) as exc:
+        if not failure:
+            raise  # not a fault of the robot or skin (e.g. a learning error): nothing to add
+        status = f"aborted: {type(exc).__name__}: {exc}"
+        summary["stopped_early"] = True
+        summary["fault"] = {"object": failure["object"], "action": failure["action"], "trial": failure["trial"],
+                            "error": f"{type(exc).__name__}: {exc}",
+                            "recording_saved_to": str(failure["saved"]) if failure.get("saved") else None}
+        _finish(summary, steps, learner, config, output, status, t0, report)
+        if isinstance(exc, KeyboardInterrupt):
+            raise
+        saved = failure.get("saved")
+        where = f"the failed action's recording is in {saved}" if saved else "nothing was being recorded"
+        raise LiveLearningAborted(
+            f"{failure['object']} / {failure['action']} / trial {failure['trial']}: {type(exc).__name__}: {exc}. "
+            f"The robot was stopped; {where}; every completed recording is in {record}; the run so far "
+            f"({len(steps)} steps) is in {output}.",
+            cause=exc, saved=saved, output=output) from exc
+    finally:
+        writer.close()
+    _finish(summary, steps, learner, config, output, status, t0, report)
+    return summary
+
+
+def _finish(summary: dict[str, Any], steps: list[StepRecord], learner: APTKT, config: LearnerConfig,
+            output: Path, status: str, t0: float, report: Callable[[str], None]) -> None:
+    summary["status"] = status
+    summary["steps"] = [{**s.as_row(), "accuracy": s.accuracy, "transfer": s.transfer} for s in steps]
+    summary["observations"] = {a: {o: l.count(o) for o in l.new_objects} for a, l in learner.learners.items()}
+    learned = output / "learned_prior.npz"
+    table = {a: l.observations for a, l in learner.learners.items() if l.observations is not None}
+    summary["learned_prior"] = None
+    if table:
+        try:
+            PriorKnowledge.build(table, gp=config.gp, seed=config.seed).save(learned)
+            summary["learned_prior"] = str(learned)
+        except ValueError as exc:  # e.g. an action observed on one object only (an early fault)
+            summary["learned_prior_error"] = str(exc)
+    summary["seconds"] = time.perf_counter() - t0
+    (output / "run.json").write_text(json.dumps(_finite(summary), indent=2, default=_json))
+    _write_steps(output / "steps.csv", steps)
+    _write_transfer(output / "transfer.csv", steps)
+    report(f"{status}: {len(steps)} steps in {summary['seconds']:.1f} s; run written to {output / 'run.json'}, "
+           f"{output / 'steps.csv'}, {output / 'transfer.csv'}"
+           + (f"; the new objects' observations and models in {learned}" if summary.get("learned_prior") else ""))
+
+
+def _finite(obj: Any) -> Any:
+    """NaN (accuracy without a test set) and infinities become null: strict JSON."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+def _json(obj: Any) -> Any:
+    try:
+        import numpy as np
+
+        if isinstance(obj, np.generic):
+            return obj.item()
+        if isinstance(obj, np.ndarray):
+            return obj.tolist()
+    except ImportError:  # pragma: no cover
+        pass
+    if isinstance(obj, (set, tuple)):
+        return list(obj)
+    return str(obj)
+
+
+def _write_steps(path: Path, steps: Sequence[StepRecord]) -> None:
+    rows = [s.as_row() for s in steps]
+    keys: list[str] = []
+    for r in rows:
+        keys.extend(k for k in r if k not in keys)
+    with path.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=keys or ["step"])
+        w.writeheader()
+        w.writerows(rows)
+
+
+def _write_transfer(path: Path, steps: Sequence[StepRecord]) -> None:
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["step", "action", "new_object", "source", "lambda", "mean_posterior"])
+        for s in steps:
+            for action, decisions in s.transfer.items():
+                for obj, d in decisions.items():
+                    w.writerow([s.step, action, obj, d.get("source") or "", d.get("lambda"),
+                                json.dumps(d.get("mean_posterior", {}), sort_keys=True)])
