@@ -5,6 +5,7 @@ A session is a context manager with ``explore(object, action, trial) -> Recordin
 executor, :func:`aptkt.exploration.explore`), ``check_objects(names)`` and ``describe()``. On a
 robot or skin fault ``explore`` raises the typed error with what was recorded in its
 ``recording`` attribute (see :mod:`aptkt.exploration`); the robot is stopped by its backend.
+A recording in which a cell fell silent counts as a skin fault (:class:`~aptkt.errors.SilentCellError`).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from aptkt.actions import ExploratoryAction
-from aptkt.errors import ConfigError
+from aptkt.errors import ConfigError, SilentCellError
 from aptkt.exploration import ExplorationSettings, _calibration, explore
 from aptkt.skin.samples import Recording
 
@@ -34,6 +35,17 @@ class LiveSession(Protocol):
     def check_objects(self, names: Iterable[str]) -> None: ...
 
     def describe(self) -> dict[str, Any]: ...
+
+
+def _require_complete(rec: Recording) -> Recording:
+    """A recording in which a cell fell silent is a skin fault, not a trial: its features would
+    silently differ from complete ones. Raised with the recording attached, like any fault."""
+    if rec.silent_cells:
+        err = SilentCellError(f"cell(s) {list(rec.silent_cells)} fell silent during the recording")
+        err.recording = rec  # type: ignore[attr-defined]
+        err.recording_complete = False  # type: ignore[attr-defined]
+        raise err
+    return rec
 
 
 class SimSession:
@@ -68,7 +80,7 @@ class SimSession:
                               f"known: {', '.join(self.world.objects)}")
 
     def explore(self, obj: str, action: ExploratoryAction, trial: int) -> Recording:
-        return self.world.explore(obj, action, trial)
+        return _require_complete(self.world.explore(obj, action, trial))
 
     def describe(self) -> dict[str, Any]:
         return {"robot": "sim", "world": "aptkt.sim.SimWorld", "seed": self.seed,
@@ -138,8 +150,8 @@ class RobotSession:
         if self.robot is None:
             raise RuntimeError("RobotSession.explore outside 'with session:'")
         try:
-            return explore(self.robot, self.skin, self.robot.placement(obj), action, trial=trial,
-                           settings=self.settings)
+            return _require_complete(explore(self.robot, self.skin, self.robot.placement(obj), action,
+                                             trial=trial, settings=self.settings))
         except KeyboardInterrupt as exc:
             # Ctrl-C mid-action: the backend stopped the arm; keep what the skin recorded.
             if getattr(self.skin, "recording", False):

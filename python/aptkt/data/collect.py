@@ -204,7 +204,7 @@ def _aborted(path: Path, writer: DatasetWriter, obj: str, action: ExploratoryAct
     rec: Recording | None = getattr(exc, "recording", None)
     saved: Path | None = None
     what = "nothing was being recorded"
-    if rec is not None and getattr(exc, "recording_complete", False):
+    if rec is not None and getattr(exc, "recording_complete", False) and not rec.silent_cells:
         # The action completed; the fault came while lifting off or waiting: keep the trial.
         rec.metadata["fault_after_recording"] = f"{type(exc).__name__}: {exc}"
         writer.append(rec)

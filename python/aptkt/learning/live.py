@@ -140,7 +140,7 @@ def learn_live(
         except (AptktError, KeyboardInterrupt) as exc:
             failure.update(object=obj, action=action.name, trial=trial, error=exc)
             rec = getattr(exc, "recording", None)
-            if rec is not None and getattr(exc, "recording_complete", False):
+            if rec is not None and getattr(exc, "recording_complete", False) and not rec.silent_cells:
                 rec.metadata["fault_after_recording"] = f"{type(exc).__name__}: {exc}"
                 writer.append(rec)
                 failure["saved"] = record

@@ -1,0 +1,249 @@
+"""``aptkt collect`` and ``aptkt learn`` with ``--robot sim``: the robot-independent plumbing
+(plans, resume, the data set, the live learner's outputs) without ur_rtde."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from aptkt.actions import actions_from_toml
+from aptkt.cli import main
+from aptkt.data import DatasetReader
+from aptkt.errors import ProtectiveStopError
+from aptkt.learning import LearnerConfig, PriorKnowledge
+from aptkt.learning.dataset import load_observations
+from aptkt.learning.live import LiveLearningAborted, learn_live
+from aptkt.live import SimSession
+
+ACTIONS_TOML = """
+[[action]]
+name = "Pq"
+movement = "press"
+depth = 0.001
+hold_time = 0.5
+
+[[action]]
+name = "Sq"
+movement = "slide"
+normal_force = 0.2
+speed = 0.02
+slide_time = 0.5
+"""
+PRIORS = "rough_sponge,paper_box,metal_toolbox"
+NEW = "smooth_sponge,hard_box"
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("cli_sim")
+    (d / "actions.toml").write_text(ACTIONS_TOML)
+    return d
+
+
+def collect(workdir: Path, *args: str) -> int:
+    return main(["collect", "--robot", "sim", "--actions-file", str(workdir / "actions.toml"),
+                 "--thermal-wait", "0", "--no-progress", *args])
+
+
+@pytest.fixture(scope="module")
+def prior(workdir: Path) -> Path:
+    data = workdir / "prior.h5"
+    assert collect(workdir, "--objects", PRIORS, "--actions", "Pq,Sq", "-n", "4", "-o", str(data)) == 0
+    path = workdir / "prior.npz"
+    PriorKnowledge.build(load_observations(data)).save(path)
+    return path
+
+
+def learn(workdir: Path, prior: Path, out: Path, *args: str) -> int:
+    return main(["learn", "--robot", "sim", "--prior", str(prior), "--actions-file", str(workdir / "actions.toml"),
+                 "--thermal-wait", "0", "-o", str(out), *args])
+
+
+def test_collect_writes_every_trial_and_resume_adds_only_the_missing_ones(workdir: Path, capsys):
+    out = workdir / "a.h5"
+    assert collect(workdir, "--objects", "towel,cork_board", "--actions", "Pq", "-n", "2", "-o", str(out)) == 0
+    with DatasetReader(out) as rd:
+        assert sorted(rd.keys()) == [(o, "Pq", t) for o in ("cork_board", "towel") for t in (0, 1)]
+        first = {rd.key(i): rd.raw(i) for i in range(len(rd))}
+        assert rd.description["session"]["robot"] == "sim"
+    capsys.readouterr()
+    assert collect(workdir, "--objects", "towel,cork_board", "--actions", "Pq", "-n", "3", "-o", str(out),
+                   "--resume") == 0
+    assert "2 recordings collected now, 4 already there; 6 in the file" in capsys.readouterr().out
+    # Each trial is simulated from its own seed: a file made in one go holds the same data.
+    whole = workdir / "b.h5"
+    assert collect(workdir, "--objects", "towel,cork_board", "--actions", "Pq", "-n", "3", "-o", str(whole)) == 0
+    with DatasetReader(out) as a, DatasetReader(whole) as b:
+        assert sorted(a.keys()) == sorted(b.keys())
+        for i in range(len(b)):
+            key = b.key(i)
+            raw = a.raw(a.keys().index(key))
+            for name, values in b.raw(i).items():
+                np.testing.assert_array_equal(raw[name], values)
+            if key in first:
+                np.testing.assert_array_equal(first[key]["force"], raw["force"])
+
+
+def test_collect_refuses_what_would_mix_or_lose_data(workdir: Path, capsys):
+    out = workdir / "c.h5"
+    assert collect(workdir, "--objects", "towel", "--actions", "Pq", "-n", "1", "-o", str(out)) == 0
+    capsys.readouterr()
+    assert collect(workdir, "--objects", "towel", "--actions", "Pq", "-n", "1", "-o", str(out)) == 1
+    assert "exists: use --resume" in capsys.readouterr().err
+    other = workdir / "other_actions.toml"
+    other.write_text(ACTIONS_TOML.replace("hold_time = 0.5", "hold_time = 0.7"))
+    assert main(["collect", "--robot", "sim", "--actions-file", str(other), "--objects", "towel", "--actions", "Pq",
+                 "-n", "2", "-o", str(out), "--resume", "--no-progress", "--thermal-wait", "0"]) == 1
+    assert "action 'Pq' was recorded with other parameters" in capsys.readouterr().err
+    assert collect(workdir, "--objects", "towel", "--actions", "Pq", "-n", "2", "-o", str(out), "--resume",
+                   "--seed", "5") == 1
+    assert "simulated with --seed 0, not 5" in capsys.readouterr().err
+    assert collect(workdir, "--objects", "towel,no_such_thing", "--actions", "Pq", "-n", "1", "-o",
+                   str(workdir / "d.h5")) == 1
+    assert "no object(s) no_such_thing" in capsys.readouterr().err
+    assert collect(workdir, "--objects", "towel", "--actions", "Pq", "-n", "1", "-o", str(workdir / "d.h5"),
+                   "--workspace", "cell.toml") == 1
+    assert "only for --robot ur10" in capsys.readouterr().err
+    assert not (workdir / "d.h5").exists()
+    with DatasetReader(out) as rd:
+        assert len(rd) == 1
+
+
+def test_learn_without_a_test_set_reports_choices_and_transfer_but_no_accuracy(workdir: Path, prior: Path, capsys):
+    out = workdir / "run1"
+    assert learn(workdir, prior, out, "--objects", NEW, "--budget", "3", "--seed", "1") == 0
+    text = capsys.readouterr().out
+    assert "no test set: accuracy is not reported" in text
+    assert "exploring smooth_sponge with Pq (trial 0)" in text
+    assert "step   0: initial round done (4 observations" in text
+    assert "transfer Pq: smooth_sponge" in text and "step   3/3:" in text
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "completed" and run["accuracy_reported"] is False
+    assert [s["step"] for s in run["steps"]] == [0, 1, 2, 3]
+    assert all(s["mean_accuracy"] is None for s in run["steps"])
+    assert run["config"]["budget"] == 3 and run["config"]["transfer"] == "paper" and run["config"]["seed"] == 1
+    # The decisions follow Eq. 3: a source exactly when its mean posterior reaches eps_neg.
+    for step in run["steps"]:
+        for decisions in step["transfer"].values():
+            for d in decisions.values():
+                best = max(d["mean_posterior"], key=d["mean_posterior"].get)
+                if d["mean_posterior"][best] >= 0.4:
+                    assert d["source"] == best and d["lambda"] == d["mean_posterior"][best]
+                else:
+                    assert d["source"] is None and d["lambda"] == 0.0
+    with open(out / "steps.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["action"] for r in rows[1:]] == [s["action"] for s in run["steps"][1:]]
+    with open(out / "transfer.csv") as fh:
+        assert len(list(csv.DictReader(fh))) == 2 * 2 + 3 * 2  # step 0: both actions; then the updated one
+    # Every observation is a stored recording; what was learned can become prior knowledge.
+    with DatasetReader(out / "recordings.h5") as rd:
+        assert len(rd) == 4 + 3
+        assert {rd.key(i)[0] for i in range(len(rd))} == set(NEW.split(","))
+    learned = PriorKnowledge.load(out / "learned_prior.npz")
+    assert learned.objects == sorted(NEW.split(",")) and set(learned.actions) == {"Pq", "Sq"}
+    counts = run["observations"]
+    for action, ap in learned.actions.items():
+        for obj in NEW.split(","):
+            assert int(np.sum(ap.observations.objects == obj)) == counts[action][obj]
+    # ... for instance as the prior of the next objects.
+    assert learn(workdir, out / "learned_prior.npz", workdir / "run2", "--objects", "towel,cork_board",
+                 "--budget", "1", "--actions", "Pq") == 0
+
+
+def test_learn_with_a_test_set_reports_accuracy(workdir: Path, prior: Path, capsys):
+    test = workdir / "test.h5"
+    assert collect(workdir, "--objects", NEW, "--actions", "Pq", "-n", "3", "--first-trial", "100", "-o",
+                   str(test)) == 0
+    out = workdir / "run3"
+    record = workdir / "shared_record.h5"
+    assert learn(workdir, prior, out, "--objects", NEW, "--actions", "Pq", "--budget", "2", "--test", str(test),
+                 "--record", str(record), "--transfer", "none") == 0
+    text = capsys.readouterr().out
+    assert "no test set" not in text and "test accuracy" in text and "transfer Pq" not in text
+    run = json.loads((out / "run.json").read_text())
+    assert run["accuracy_reported"] is True and run["test"]["path"] == str(test)
+    accuracies = [s["mean_accuracy"] for s in run["steps"]]
+    assert all(0.0 <= a <= 1.0 for a in accuracies)
+    assert all(d == {} for s in run["steps"] for d in s["transfer"].values())
+    # A second run appends to the same record file; its trial numbers continue.
+    with DatasetReader(record) as rd:
+        before = rd.keys()
+    assert len(before) == 2 + 2
+    assert learn(workdir, prior, workdir / "run4", "--objects", NEW, "--actions", "Pq", "--budget", "0",
+                 "--record", str(record)) == 0
+    first = max(t for _, _, t in before) + 1
+    assert json.loads((workdir / "run4" / "run.json").read_text())["first_trial"] == first
+    with DatasetReader(record) as rd:
+        assert sorted(rd.keys()) == sorted(before + [(o, "Pq", first) for o in NEW.split(",")])
+
+
+def test_learn_rejects_inconsistent_objects_and_actions(workdir: Path, prior: Path, capsys):
+    assert learn(workdir, prior, workdir / "bad", "--objects", "rough_sponge,hard_box") == 1
+    assert "already in the prior knowledge" in capsys.readouterr().err
+    assert learn(workdir, prior, workdir / "bad", "--objects", NEW, "--actions", "P1") == 1
+    assert "no experience of P1" in capsys.readouterr().err
+    assert learn(workdir, prior, workdir / "bad", "--objects", "hard_box") == 1
+    assert "at least two new objects" in capsys.readouterr().err
+    assert learn(workdir, workdir / "missing.npz", workdir / "bad", "--objects", NEW) == 1
+    assert "cannot load prior knowledge" in capsys.readouterr().err
+    assert not (workdir / "bad").exists()
+
+
+def test_prompt_between_trials_waits_for_the_operator(workdir: Path, capsys, monkeypatch):
+    monkeypatch.setattr(sys, "stdin", io.StringIO("\n\n"))
+    out = workdir / "prompted.h5"
+    assert collect(workdir, "--objects", "towel", "--actions", "Pq", "-n", "3", "-o", str(out),
+                   "--prompt-between-trials") == 0
+    err = capsys.readouterr().err
+    assert err.count("re-place the objects") == 2 and "Trial 1:" in err and "Trial 2:" in err
+    monkeypatch.setattr(sys, "stdin", io.StringIO(""))  # the operator is gone: stop, keep the data
+    out = workdir / "prompted2.h5"
+    assert collect(workdir, "--objects", "towel", "--actions", "Pq", "-n", "3", "-o", str(out),
+                   "--prompt-between-trials") == 1
+    with DatasetReader(out) as rd:
+        assert rd.keys() == [("towel", "Pq", 0)]
+
+
+class FaultySession(SimSession):
+    """The simulated world, with a protective stop in the middle of the ``fail_at``-th action
+    (what was recorded so far travels with the error, as from the UR10)."""
+
+    def __init__(self, fail_at: int):
+        super().__init__(seed=0)
+        self.calls, self.fail_at = 0, fail_at
+
+    def explore(self, obj, action, trial):
+        rec = super().explore(obj, action, trial)
+        self.calls += 1
+        if self.calls < self.fail_at:
+            return rec
+        rec.metadata["aborted"] = "ProtectiveStopError: injected"
+        err = ProtectiveStopError("injected")
+        err.recording, err.recording_complete = rec, False
+        raise err
+
+
+def test_a_fault_during_live_learning_keeps_every_observation_and_the_run_so_far(workdir: Path, prior: Path):
+    actions = actions_from_toml(workdir / "actions.toml")
+    out, record = workdir / "faulty", workdir / "faulty" / "rec.h5"
+    lines: list[str] = []
+    with pytest.raises(LiveLearningAborted) as err:
+        learn_live(FaultySession(fail_at=6), PriorKnowledge.load(prior), LearnerConfig(budget=5), actions,
+                   NEW.split(","), record=record, output=out, report=lines.append)
+    assert "trial" in str(err.value) and isinstance(err.value.cause, ProtectiveStopError)
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"].startswith("aborted: ProtectiveStopError")
+    assert [s["step"] for s in run["steps"]] == [0, 1]  # 4 initial observations, then step 1; 6th failed
+    assert run["fault"]["recording_saved_to"] == str(err.value.saved)
+    with DatasetReader(record) as rd:
+        assert len(rd) == 5
+    with DatasetReader(err.value.saved) as rd:
+        assert len(rd) == 1 and "ProtectiveStopError" in rd.recording(0).metadata["aborted"]
+    assert PriorKnowledge.load(out / "learned_prior.npz").objects == sorted(NEW.split(","))
