@@ -64,7 +64,7 @@ def describe_step(rec: StepRecord, config: LearnerConfig, n_pairs: int) -> str:
     if rec.action is None:
         head = f"step   0: initial round done ({rec.n_observations} observations, every action on every object)"
     else:
-        why = ("random pick (eps-exploration)" if rec.explored
+        why = ("random pick, eps-exploration" if rec.explored
                else f"highest uncertainty of {n_pairs} pairs")
         head = (f"step {rec.step:3d}/{config.budget}: {rec.action} on {rec.object}, uncertainty "
                 f"{rec.uncertainty:.3f} ({why})")

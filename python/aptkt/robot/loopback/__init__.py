@@ -3,14 +3,16 @@
 It speaks enough of the real protocols for the real ``ur_rtde`` client — RTDE (30004), the
 dashboard server (29999), the script ports (30001-30003) and the register handshake of
 ur_rtde's control script — and integrates the TCP kinematically against a pluggable contact
-model. See ``docs/ur10.md`` for what it covers and what it does not.
+model. With ``skin=True`` (``--skin-pty``) a simulated skin patch on the TCP streams the skin's
+wire protocol through a pty for the real :class:`~aptkt.skin.SerialSkin`
+(:mod:`aptkt.robot.loopback.skin`). See ``docs/ur10.md`` for what it covers and what it does not.
 
 Run one in a terminal with ``python -m aptkt.robot.loopback``; in code use :class:`Loopback`
 (a child process: ur_rtde's constructors hold the GIL, so the controller cannot share the
 client's interpreter).
 """
 
-from aptkt.robot.loopback.contact import ContactModel, NoContact, SpringSurface
+from aptkt.robot.loopback.contact import ContactModel, NoContact, Scene, SpringSurface
 from aptkt.robot.loopback.controller import (
     CB3_VERSION,
     E_SERIES_VERSION,
@@ -30,6 +32,7 @@ __all__ = [
     "ContactModel",
     "SpringSurface",
     "NoContact",
+    "Scene",
     "SUPPORTED_COMMANDS",
     "CB3_VERSION",
     "E_SERIES_VERSION",
