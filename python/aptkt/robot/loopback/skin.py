@@ -229,11 +229,7 @@ class SimulatedSkin:
 
     def _update_thermal_object(self, contact: Any, pose: np.ndarray, t: float) -> None:
         method = getattr(contact, "thermal_contact", None)
-        touched = method(pose) if callable(method) else None
-        if touched is None:
-            if self._thermal is not None:
-                return  # keep whatever the cells last touched (or the default block)
-            touched = GENERIC_BLOCK
+        touched = (method(pose) if callable(method) else None) or GENERIC_BLOCK
         if touched == self._thermal_key:
             return
         thermal = CellThermal(self.constants, touched.layers, touched.contact_conductance,
