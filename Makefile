@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 PYTEST_ARGS ?=
 
-.PHONY: install demo test test-rust test-python bench clean
+.PHONY: install demo test test-rust test-python clean
 
 install:
 	@test -x $(PY) || python3 -m venv $(VENV)
@@ -22,9 +22,6 @@ test-python: install
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 test: test-rust test-python
-
-bench: install
-	$(PY) benches/run_all.py
 
 clean:
 	rm -rf target $(VENV) python/aptkt/_core*.so

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import zipfile
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -464,6 +465,8 @@ class LaplaceGPC:
 
     @classmethod
     def load(cls, path: str | Path) -> LaplaceGPC:
+        if not zipfile.is_zipfile(path):
+            raise ValueError(f"{path}: not a saved LaplaceGPC (not an .npz archive)")
         with np.load(Path(path), allow_pickle=False) as data:
             return cls.from_state({k: data[k] for k in data.files})
 

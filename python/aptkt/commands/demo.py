@@ -20,7 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("-j", "--jobs", type=int, default=os.cpu_count() or 1, help="processes (default: all cores)")
     p.add_argument("--trials", type=int, default=3, help="learning runs per method (default %(default)s)")
-    p.add_argument("--budget", type=int, default=20, help="actively chosen observations (default %(default)s)")
+    p.add_argument("--budget", type=int, default=40, help="actively chosen observations (default %(default)s)")
     p.add_argument("--quick", action="store_true", help="a reduced size that runs in well under a minute")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run)

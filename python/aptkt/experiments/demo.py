@@ -4,7 +4,8 @@
    trials each (resumed if the file exists);
 2. extract the feature observations;
 3. build the prior knowledge on the prior objects' first ``train_reps`` trials;
-4. learn the new objects with APTKT and with the baseline, ``trials`` runs each, drawing
+4. learn the new objects with APTKT, APTKT with auxiliary features and the baseline,
+   ``trials`` runs each, drawing
    observations from the first ``train_reps`` trials and testing on the rest;
 5. print a table, plot the learning curves, write every number to the output directory.
 """
@@ -43,7 +44,7 @@ class DemoSettings:
     seed: int = 0
     jobs: int = field(default_factory=lambda: os.cpu_count() or 1)
     trials: int = 3
-    budget: int = 20
+    budget: int = 40
     train_reps: int = 10
     test_reps: int = 10
     actions: tuple[str, ...] = tuple(PAPER_ACTIONS)
@@ -98,10 +99,13 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
         w = ", ".join(f"{m} {v:.2f}" for m, v in zip(row["modalities"], row["weights_mean"]))
         _say(f"      {row['action']}: {row['observations']} observations, modality weights {w}")
 
-    _say(f"[4/5] learning {len(s.new_objects)} new objects: APTKT vs baseline, {s.trials} runs each, "
+    _say(f"[4/5] learning {len(s.new_objects)} new objects: APTKT (with and without auxiliary features) "
+         f"vs baseline, {s.trials} runs each, "
          f"budget {s.budget}, on {s.jobs} process(es)")
     methods = {
         "APTKT": LearnerConfig(transfer="paper", eps_neg=s.eps_neg, eps_explor=s.eps_explor, budget=s.budget, gp=gp),
+        "APTKT+aux": LearnerConfig(transfer="paper", auxiliary=True, eps_neg=s.eps_neg, eps_explor=s.eps_explor,
+                                   budget=s.budget, gp=gp),
         "baseline": LearnerConfig(transfer="none", eps_explor=s.eps_explor, budget=s.budget, gp=gp),
     }
     specs = [

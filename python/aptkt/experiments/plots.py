@@ -43,6 +43,9 @@ def learning_curves(
         ax.plot(x, mean, label=f"{method} (n={values.shape[0]})", color=colour, lw=2)
         ax.fill_between(x, mean - sd, mean + sd, color=colour, alpha=0.18, lw=0)
     ax.set_ylim(0, 1.02)
+    from matplotlib.ticker import MaxNLocator
+
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     if title:

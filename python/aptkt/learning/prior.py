@@ -9,6 +9,7 @@ Saved as one ``.npz`` file of plain arrays plus JSON metadata; loading executes 
 from __future__ import annotations
 
 import json
+import zipfile
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -126,6 +127,8 @@ class PriorKnowledge:
     @classmethod
     def load(cls, path: str | Path) -> PriorKnowledge:
         path = Path(path)
+        if not zipfile.is_zipfile(path):
+            raise ValueError(f"{path}: not a prior-knowledge file (not an .npz archive)")
         with np.load(path, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
         if "meta" not in arrays:

@@ -92,7 +92,9 @@ class SimWorld:
                 )
                 for i, (cid, (x, y)) in enumerate(zip(self.geometry.cell_ids, self.geometry.centres))
             ),
-            silence_timeout_s=0.1,
+            # Arrival times are stamped by the reading thread: on a busy CPU the real-time pty
+            # reader can stall for a few hundred ms and would report live cells as silent.
+            silence_timeout_s=0.5,
             source="aptkt.sim",
         )
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import errno
-import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -12,7 +11,7 @@ import serial
 
 from aptkt.errors import SkinDisconnectedError
 from aptkt.skin.config import PatchConfig
-from aptkt.skin.source import Clock, SkinSourceBase
+from aptkt.skin.source import Clock, ThreadedSkinSource
 
 __all__ = ["SerialSkin", "BAUDRATE"]
 
@@ -35,7 +34,7 @@ def _open_error(port: str, exc: Exception) -> SkinDisconnectedError:
     return SkinDisconnectedError(f"serial skin {port}: cannot open: {why}")
 
 
-class SerialSkin(SkinSourceBase):
+class SerialSkin(ThreadedSkinSource):
     """Skin source on a serial port, read by a background thread.
 
     Each read's bytes are stamped with the arrival time (``clock``, ns) when the read
@@ -62,13 +61,7 @@ class SerialSkin(SkinSourceBase):
         self.read_timeout_s = read_timeout_s
         self.max_read = max_read
         self._serial: serial.Serial | None = None
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
         self._reads = 0
-
-    @property
-    def is_open(self) -> bool:
-        return self._thread is not None and self._thread.is_alive()
 
     def open(self) -> None:
         if self._serial is not None:
@@ -81,15 +74,10 @@ class SerialSkin(SkinSourceBase):
             raise _open_error(self.port, exc) from exc
         self._serial = ser
         self._mark_opened()
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._reader, name=f"SerialSkin({self.port})", daemon=True)
-        self._thread.start()
+        self._start_reader(f"SerialSkin({self.port})")
 
     def close(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+        self._stop_reader()
         if self._serial is not None:
             try:
                 self._serial.close()
@@ -101,7 +89,7 @@ class SerialSkin(SkinSourceBase):
         ser = self._serial
         if ser is None:
             return
-        while not self._stop.is_set():
+        while not self._stopping():
             try:
                 # Wait for at least one byte (or the timeout), then take all that is there.
                 waiting = ser.in_waiting
@@ -109,7 +97,7 @@ class SerialSkin(SkinSourceBase):
             except (serial.SerialException, OSError, TypeError) as exc:
                 # pyserial raises SerialException on EIO / "returned no data" when the device
                 # disappears; TypeError/OSError come from reads racing a close.
-                if not self._stop.is_set():
+                if not self._stopping():
                     self._fail(SkinDisconnectedError(f"serial skin {self.port}: link lost mid-stream: {exc}"))
                 return
             if data:

@@ -330,3 +330,33 @@ class SkinSourceBase:
             )
             out.update(self._extra_stats())
             return out
+
+
+class ThreadedSkinSource(SkinSourceBase):
+    """A source whose link is read by one background thread (``_reader``, to be provided):
+    starting and stopping that thread is the same for every link."""
+
+    _thread: threading.Thread | None = None
+
+    def _start_reader(self, name: str) -> None:
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._reader, name=name, daemon=True)
+        self._thread.start()
+
+    def _stop_reader(self) -> None:
+        stop = getattr(self, "_stop", None)
+        if stop is not None:
+            stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+
+    def _stopping(self) -> bool:
+        return self._stop.is_set()
+
+    @property
+    def is_open(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def _reader(self) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError

@@ -8,7 +8,6 @@ is one byte, the TSU port number (1..32), followed by one skin packet *without* 
 from __future__ import annotations
 
 import socket
-import threading
 import time
 from collections import Counter
 from pathlib import Path
@@ -17,7 +16,7 @@ from typing import Any
 from aptkt.errors import SkinDisconnectedError
 from aptkt.skin.config import PatchConfig
 from aptkt.skin.protocol import PACKET_LEN
-from aptkt.skin.source import Clock, SkinSourceBase
+from aptkt.skin.source import Clock, ThreadedSkinSource
 
 __all__ = ["TsuSkin", "TSU_ADDRESS", "LISTEN_ADDRESS", "ALIVE_INTERVAL_S", "DATAGRAM_LEN"]
 
@@ -31,7 +30,7 @@ _END = b"\xaa"
 _BATCH = 256
 
 
-class TsuSkin(SkinSourceBase):
+class TsuSkin(ThreadedSkinSource):
     """Skin source on UDP from a TSU.
 
     ``tsu_address`` is where the alive datagrams go and whose datagrams are accepted (others
@@ -60,8 +59,6 @@ class TsuSkin(SkinSourceBase):
         self.alive_interval_s = alive_interval_s
         self.alive_payload = bytes(alive_payload)
         self._sock: socket.socket | None = None
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
         self._tsu_ip = ""
         self._counts: Counter[str] = Counter()
         self._per_port: Counter[int] = Counter()
@@ -70,10 +67,6 @@ class TsuSkin(SkinSourceBase):
     def local_address(self) -> tuple[str, int] | None:
         """The bound local (host, port), once open."""
         return None if self._sock is None else self._sock.getsockname()[:2]
-
-    @property
-    def is_open(self) -> bool:
-        return self._thread is not None and self._thread.is_alive()
 
     def open(self) -> None:
         if self._sock is not None:
@@ -92,15 +85,10 @@ class TsuSkin(SkinSourceBase):
             raise SkinDisconnectedError(f"TSU skin: cannot listen on udp {where}: {exc.strerror or exc}") from exc
         self._sock = sock
         self._mark_opened()
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._reader, name="TsuSkin", daemon=True)
-        self._thread.start()
+        self._start_reader("TsuSkin")
 
     def close(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+        self._stop_reader()
         if self._sock is not None:
             self._sock.close()
             self._sock = None
@@ -114,7 +102,7 @@ class TsuSkin(SkinSourceBase):
         if sock is None:
             return
         next_alive = time.monotonic()
-        while not self._stop.is_set():
+        while not self._stopping():
             try:
                 now = time.monotonic()
                 if now >= next_alive:
@@ -123,7 +111,7 @@ class TsuSkin(SkinSourceBase):
                 # Sleep in recvfrom no longer than until the next alive datagram is due.
                 batch = self._receive(sock, max(next_alive - time.monotonic(), 0.001))
             except OSError as exc:
-                if not self._stop.is_set():
+                if not self._stopping():
                     self._fail(SkinDisconnectedError(f"TSU skin {self.tsu_address[0]}: link failed: {exc}"))
                 return
             if batch:

@@ -1,0 +1,100 @@
+"""``aptkt prior``: build prior tactile knowledge from a data set, and inspect a saved one."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from aptkt.errors import ConfigError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("prior", help="build or inspect prior tactile knowledge")
+    ps = p.add_subparsers(dest="prior_command", required=True, metavar="PRIOR_COMMAND")
+
+    b = ps.add_parser(
+        "build",
+        help="fit the observation models of the prior (old) objects from a data set",
+        description="Extracts the features of the given objects' recordings (if not stored yet), "
+        "fits one feature pipeline and one multi-modal Laplace GPC per action, and saves them with "
+        "the observations to an .npz file (loads without executing code).",
+    )
+    b.add_argument("data", type=Path, help="HDF5 data set (aptkt dataset generate / aptkt collect)")
+    b.add_argument("-o", "--output", type=Path, required=True, help="prior-knowledge file to write (.npz)")
+    b.add_argument("--objects", metavar="A,B,...", help="the prior objects (default: every object in the file)")
+    b.add_argument("--actions", metavar="P1,S1,...", help="actions (default: every recorded action)")
+    b.add_argument("--trials", metavar="FIRST:STOP", help="only these trial numbers, e.g. 0:20")
+    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--restarts", type=int, default=1, help="extra optimiser starts per model (default %(default)s)")
+    b.set_defaults(func=run_build)
+
+    i = ps.add_parser("inspect", help="summarise a prior-knowledge file")
+    i.add_argument("file", type=Path)
+    i.add_argument("--json", action="store_true")
+    i.set_defaults(func=run_inspect)
+
+
+def _split(text: str | None) -> list[str] | None:
+    return None if text is None else [t.strip() for t in text.split(",") if t.strip()]
+
+
+def _trials(text: str | None) -> range | None:
+    if text is None:
+        return None
+    try:
+        first, stop = (int(v) for v in text.split(":"))
+    except ValueError:
+        raise ConfigError(f"--trials must look like FIRST:STOP (e.g. 0:20), got {text!r}") from None
+    if not 0 <= first < stop:
+        raise ConfigError(f"--trials: need 0 <= FIRST < STOP, got {text!r}")
+    return range(first, stop)
+
+
+def run_build(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from aptkt.learning import GPSettings, PriorKnowledge
+    from aptkt.learning.dataset import load_observations
+
+    if not args.data.exists():
+        raise ConfigError(f"{args.data}: no such data set")
+    table = load_observations(args.data, actions=_split(args.actions), objects=_split(args.objects),
+                              trials=_trials(args.trials), progress=sys.stderr.isatty())
+    empty = [a for a, obs in table.items() if len(obs) == 0]
+    if empty:
+        raise ConfigError(f"no observations of {empty} for the chosen objects/trials")
+    with tqdm(total=len(table), unit="action", desc="fitting", disable=not sys.stderr.isatty()) as bar:
+        prior = PriorKnowledge.build(table, gp=GPSettings(n_restarts=args.restarts), seed=args.seed, progress=bar)
+    prior.metadata.update(data=str(args.data), trials=args.trials)
+    prior.save(args.output)
+    print(f"{args.output}: prior knowledge of {len(prior.objects)} objects ({', '.join(prior.objects)}) "
+          f"for {len(prior.actions)} actions")
+    return 0
+
+
+def run_inspect(args: argparse.Namespace) -> int:
+    from aptkt.learning import PriorKnowledge
+
+    if not args.file.exists():
+        raise ConfigError(f"{args.file}: no such file")
+    try:
+        prior = PriorKnowledge.load(args.file)
+    except (ValueError, KeyError, OSError) as exc:
+        raise ConfigError(str(exc) if str(args.file) in str(exc) else f"{args.file}: {exc}") from None
+    rows = prior.summary()
+    if args.json:
+        print(json.dumps({"objects": prior.objects, "metadata": prior.metadata, "actions": rows}, indent=2))
+        return 0
+    print(f"{args.file}: {len(prior.objects)} prior objects: {', '.join(prior.objects)}")
+    if prior.metadata:
+        print("  " + ", ".join(f"{k}={v}" for k, v in prior.metadata.items() if not isinstance(v, dict)))
+    for r in rows:
+        mods = ", ".join(
+            f"{m} (weight {w:.2f}, length-scale {ls:.3g})"
+            for m, w, ls in zip(r["modalities"], r["weights_mean"], r["length_scales_mean"])
+        )
+        print(f"  {r['action']}: {r['observations']} observations; {mods}; "
+              f"log marginal likelihood per object {r['log_marginal_likelihood']}")
+    return 0

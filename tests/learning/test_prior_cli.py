@@ -1,0 +1,43 @@
+"""`aptkt prior build` and `aptkt prior inspect` on a small simulated data set."""
+
+import json
+
+import numpy as np
+import pytest
+
+from aptkt.actions import PAPER_ACTIONS
+from aptkt.cli import main
+from aptkt.data.generate import GenerationPlan, generate
+from aptkt.learning import PriorKnowledge
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    path = tmp_path_factory.mktemp("prior") / "d.h5"
+    generate(path, GenerationPlan(("rough_sponge", "metal_toolbox"), (PAPER_ACTIONS["P1"],), 4, seed=3), progress=False)
+    return path
+
+
+def test_build_then_inspect(data, tmp_path, capsys):
+    out = tmp_path / "prior.npz"
+    assert main(["prior", "build", str(data), "-o", str(out), "--trials", "0:3"]) == 0
+    prior = PriorKnowledge.load(out)
+    assert prior.objects == ["metal_toolbox", "rough_sponge"]
+    assert len(prior["P1"].observations) == 6
+    capsys.readouterr()
+    assert main(["prior", "inspect", str(out), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["objects"] == ["metal_toolbox", "rough_sponge"]
+    assert summary["actions"][0]["modalities"] == ["force", "thermal"]
+    assert np.isclose(sum(summary["actions"][0]["weights_mean"]), 1.0, atol=1e-3)
+
+
+def test_errors_are_clear(data, tmp_path, capsys):
+    assert main(["prior", "build", str(data), "-o", str(tmp_path / "p.npz"), "--trials", "5"]) == 1
+    assert "--trials must look like FIRST:STOP" in capsys.readouterr().err
+    bad = tmp_path / "bad.npz"
+    bad.write_text("not a prior")
+    assert main(["prior", "inspect", str(bad)]) == 1
+    assert "not a prior-knowledge file" in capsys.readouterr().err
+    assert main(["prior", "build", str(tmp_path / "missing.h5"), "-o", str(bad)]) == 1
+    assert "no such data set" in capsys.readouterr().err
