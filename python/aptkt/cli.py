@@ -15,6 +15,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "aptkt.commands.demo",
     "aptkt.commands.skin",
     "aptkt.commands.dataset",
+    "aptkt.commands.reproduce",
 )
 
 
