@@ -191,7 +191,8 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
         "figures": list(s.figures),
         "seconds": seconds,
         "timings": timings,
-        "runs": {"total": len(specs), "distinct": len(batch.steps), "computed": batch.computed, "reused": batch.reused},
+        "runs": {"total": len(specs), "distinct": len(batch.steps), "computed": batch.computed, "reused": batch.reused,
+                 "run_seconds_summed": run_info["settings"]["run seconds, summed over runs"]},
         "headlines": [h.__dict__ for sec in sections for h in sec.headlines],
         "numbers": {sec.figure: sec.numbers for sec in sections},
         "files": {sec.figure: sec.files for sec in sections},
@@ -218,6 +219,10 @@ def _flat_settings(scale: Scale, s: ReproduceSettings, timings: dict[str, float]
     flat["root seed"] = s.seed
     flat["methods"] = "; ".join(f"{m}: {v}" for m, v in METHODS.items())
     flat["runs computed now / reused"] = f"{batch.computed} / {batch.reused}"
+    # The runs' own time (their steps' wall time in the workers), kept with each stored run, so
+    # it is known even when every run was read back from the store.
+    flat["run seconds, summed over runs"] = round(sum(float(r.get("seconds") or 0) for rows in batch.steps.values()
+                                                      for r in rows), 1)
     flat.update({f"seconds.{k}": round(v, 1) for k, v in timings.items()})
     return flat
 

@@ -74,7 +74,10 @@ def transfer_rate(rows: Iterable[Mapping[str, Any]], where: Mapping[str, Any]) -
 
 def plot_panel(ax, curves: Mapping[str, Curves], title: str, *, xlabel: str = XLABEL, legend: bool = True) -> None:
     x = next(iter(curves.values())).x
+    from matplotlib.ticker import MaxNLocator
+
     learning_curves(ax, {m: c.values for m, c in curves.items()}, x, title=title, xlabel=xlabel)
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     if not legend and ax.get_legend() is not None:
         ax.get_legend().remove()
 

@@ -74,7 +74,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     curve_rows = []
     for i, a in enumerate(actions):
         curves = {k: collect(rows, {"panel": a, "method": k}, x="n_observations") for k in kinds(a)}
-        plot_panel(axes[i], curves, a, xlabel=XLABEL, legend=(i == 0))
+        plot_panel(axes[i], curves, a, xlabel=XLABEL, legend=False)
         curve_rows += [r for k, c in curves.items() for r in curves_rows({"panel": a, "method": k}, c)]
         singles = [k for k in curves if k != "Multi"]
         overall = {k: float(np.nanmean(c.run_means())) for k, c in curves.items()}
@@ -93,7 +93,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         have = [per_action[a]["curves"][k] for a in actions if k in per_action[a]["curves"]]
         if have:
             avg[k] = mean_over_panels(have)
-    plot_panel(axes[len(actions)], avg, "averaged over actions", xlabel=XLABEL, legend=False)
+    plot_panel(axes[len(actions)], avg, "averaged over actions", xlabel=XLABEL)  # every model: the legend
     curve_rows += [r for k, c in avg.items() for r in curves_rows({"panel": "average", "method": k}, c)]
     for ax in axes[n:]:
         ax.set_visible(False)
