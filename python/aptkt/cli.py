@@ -18,6 +18,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "aptkt.commands.prior",
     "aptkt.commands.collect",
     "aptkt.commands.learn",
+    "aptkt.commands.reproduce",
 )
 
 

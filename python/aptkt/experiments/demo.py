@@ -12,7 +12,6 @@
 
 from __future__ import annotations
 
-import csv
 import json
 import os
 import platform
@@ -27,6 +26,7 @@ from aptkt import __version__
 from aptkt.actions import PAPER_ACTIONS
 from aptkt.experiments.plots import figure, learning_curves, save_figure
 from aptkt.experiments.runs import RunSpec, flatten, run_many
+from aptkt.experiments.tables import write_csv
 from aptkt.learning import GPSettings, LearnerConfig, PriorKnowledge
 from aptkt.learning.dataset import load_observations
 
@@ -134,7 +134,7 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
                     title="all actions fused")
     fig.suptitle(f"{len(s.new_objects)} new objects, priors: {', '.join(s.priors)}")
     plots = save_figure(fig, out / "learning_curves")
-    _write_csv(out / "results.csv", rows)
+    write_csv(out / "results.csv", rows)
     summary = {
         "software_version": __version__,
         "python": platform.python_version(),
@@ -179,13 +179,3 @@ def _table(curves: dict[str, np.ndarray], fused: dict[str, np.ndarray], x: np.nd
         cells = "".join(f"{np.nanmean(c[:, m]):>8.3f}±{np.nanstd(c[:, m]):<5.3f}" for m in marks)
         lines.append(f"{name:<10}{cells}{np.nanmean(fused[name][:, n - 1]):>14.3f}")
     return lines
-
-
-def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
-    keys: list[str] = []
-    for r in rows:
-        keys.extend(k for k in r if k not in keys)
-    with path.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys)
-        w.writeheader()
-        w.writerows(rows)

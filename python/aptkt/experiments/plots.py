@@ -7,10 +7,12 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["learning_curves", "save_figure", "METHOD_COLOURS"]
+__all__ = ["learning_curves", "save_figure", "figure", "canvas", "METHOD_COLOURS"]
 
 #: The paper's colours (Fig. 9): baseline red, APTKT blue, APTKT with auxiliary features green.
-METHOD_COLOURS = {"baseline": "tab:red", "APTKT": "tab:blue", "APTKT+aux": "tab:green"}
+METHOD_COLOURS = {"baseline": "tab:red", "APTKT": "tab:blue", "APTKT+aux": "tab:green",
+                  # Fig. 6: the multi-modal kernel and the single modalities (the paper's names).
+                  "Multi": "tab:purple", "STIF": "tab:brown", "Texture": "tab:olive", "Thermal-C": "tab:orange"}
 
 
 def _pyplot():
@@ -68,3 +70,8 @@ def save_figure(fig, path_stem: str | Path, formats: Sequence[str] = ("png", "sv
 
 def figure(nrows: int = 1, ncols: int = 1, **kw):
     return _pyplot().subplots(nrows, ncols, **kw)
+
+
+def canvas(**kw):
+    """An empty figure, for layouts that ``subplots`` cannot express (grid specs)."""
+    return _pyplot().figure(**kw)

@@ -4,9 +4,6 @@ JSON-able values and file paths, so runs can go to other processes or machines),
 
 from __future__ import annotations
 
-import concurrent.futures as cf
-import multiprocessing
-import os
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from functools import lru_cache
@@ -15,11 +12,7 @@ from typing import Any
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.dataset import load_observations
 
-# Workers are spawned, never forked: a fork copies the parent's thread pools (rayon in the
-# compiled core) without their threads, and the first parallel call in the child then hangs.
-_SPAWN = multiprocessing.get_context("spawn")
-
-__all__ = ["RunSpec", "execute", "run_many"]
+__all__ = ["RunSpec", "execute", "flatten", "label", "run_many", "run_steps"]
 
 
 @dataclass(frozen=True)
@@ -57,7 +50,8 @@ class RunSpec:
         return cls(**d)
 
 
-@lru_cache(maxsize=8)
+# Workers keep the tables of the runs they did: a figure's runs share a few of them.
+@lru_cache(maxsize=64)
 def _table(data: str, objects: tuple[str, ...], trials: tuple[int, ...], actions: tuple[str, ...]):
     return load_observations(data, actions=actions, objects=objects, trials=trials)
 
@@ -67,8 +61,14 @@ def _prior(path: str) -> PriorKnowledge:
     return PriorKnowledge.load(path)
 
 
-def execute(spec: RunSpec) -> list[dict[str, Any]]:
-    """Perform one run; one row per step with the spec's method and tags."""
+def run_steps(spec: RunSpec) -> list[dict[str, Any]]:
+    """Perform one run; one row per step, without the spec's labels (method, tags).
+
+    Besides the step record, each row counts the transfer decisions made at that step
+    (``decisions``: every action's new objects at step 0, the updated action's afterwards),
+    how many of them transferred a prior object (``transfers``) and their mean λ
+    (``mean_lambda``, NaN without a transfer).
+    """
     pool = _table(spec.data, spec.new_objects, spec.pool_trials, spec.actions)
     test = _table(spec.data, spec.new_objects, spec.test_trials, spec.actions)
     prior = _prior(spec.prior) if spec.prior else None
@@ -76,10 +76,24 @@ def execute(spec: RunSpec) -> list[dict[str, Any]]:
     run = learner.run(PoolEnvironment(pool, seed=spec.pool_seed), spec.actions, spec.new_objects, test)
     rows = []
     for step in run.steps:
-        row = {"method": spec.method, **spec.tags, **step.as_row()}
-        row["transfers"] = sum(1 for d in step.transfer.values() for v in d.values() if v["source"])
+        row = step.as_row()
+        decisions = [v for d in step.transfer.values() for v in d.values()]
+        lambdas = [v["lambda"] for v in decisions if v["source"]]
+        row["decisions"] = len(decisions)
+        row["transfers"] = len(lambdas)
+        row["mean_lambda"] = sum(lambdas) / len(lambdas) if lambdas else float("nan")
         rows.append(row)
     return rows
+
+
+def label(spec: RunSpec, steps: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Step rows labelled with the spec's method and tags."""
+    return [{"method": spec.method, **spec.tags, **row} for row in steps]
+
+
+def execute(spec: RunSpec) -> list[dict[str, Any]]:
+    """Perform one run; one row per step with the spec's method and tags."""
+    return label(spec, run_steps(spec))
 
 
 def run_many(
@@ -89,21 +103,17 @@ def run_many(
     progress: Callable[[int], None] | None = None,
 ) -> list[list[dict[str, Any]]]:
     """Execute runs on local processes (results in the order of ``specs``)."""
-    jobs = jobs or os.cpu_count() or 1
-    if jobs <= 1 or len(specs) <= 1:
-        out = []
-        for spec in specs:
-            out.append(execute(spec))
-            if progress:
-                progress(1)
-        return out
+    from aptkt.experiments.executors import LocalExecutor
+
     results: list[list[dict[str, Any]] | None] = [None] * len(specs)
-    with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=_SPAWN) as pool:
-        futures = {pool.submit(execute, s): i for i, s in enumerate(specs)}
-        for fut in cf.as_completed(futures):
-            results[futures[fut]] = fut.result()
+    executor = LocalExecutor(jobs)
+    try:
+        for i, rows in executor.imap_unordered(execute, list(specs)):
+            results[i] = rows
             if progress:
                 progress(1)
+    finally:
+        executor.close()
     return [r for r in results if r is not None]
 
 

@@ -1,0 +1,112 @@
+"""Where experiment tasks run: local processes (default) or a Dask distributed cluster.
+
+Both hand back results as they complete, as ``(index, result)`` pairs, so the caller can store
+each one at once. Tasks are top-level functions of plain data (run specs, prior-building
+tasks); with Dask, the data set and the output directory must be on a file system the workers
+share (their paths travel inside the tasks).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import multiprocessing
+import os
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any, Protocol
+
+from aptkt.errors import ConfigError
+
+__all__ = ["Executor", "LocalExecutor", "DaskExecutor", "make_executor"]
+
+# Spawned, never forked: a fork copies the compiled core's thread pool without its threads.
+_SPAWN = multiprocessing.get_context("spawn")
+
+
+class Executor(Protocol):
+    description: str
+
+    def imap_unordered(self, fn: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[tuple[int, Any]]:
+        """Apply ``fn`` to every item; yield ``(index, result)`` in completion order."""
+        ...
+
+    def close(self) -> None: ...
+
+
+class LocalExecutor:
+    """``jobs`` spawned worker processes (``jobs == 1``: in this process, one task at a time).
+
+    The worker pool lives as long as the executor, so workers keep their caches (loaded
+    observation tables, prior knowledge) from one batch of tasks to the next.
+    """
+
+    def __init__(self, jobs: int | None = None) -> None:
+        self.jobs = int(jobs or os.cpu_count() or 1)
+        if self.jobs < 1:
+            raise ConfigError(f"jobs must be >= 1, got {jobs}")
+        self.description = f"{self.jobs} local process(es)"
+        self._pool: cf.ProcessPoolExecutor | None = None
+
+    def imap_unordered(self, fn: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[tuple[int, Any]]:
+        if self.jobs == 1 or len(items) <= 1:
+            for i, item in enumerate(items):
+                yield i, fn(item)
+            return
+        if self._pool is None:
+            self._pool = cf.ProcessPoolExecutor(max_workers=self.jobs, mp_context=_SPAWN)
+        futures = {self._pool.submit(fn, item): i for i, item in enumerate(items)}
+        try:
+            for fut in cf.as_completed(futures):
+                yield futures[fut], fut.result()
+        finally:
+            # On an interruption or a failed task: drop what has not started.
+            for fut in futures:
+                fut.cancel()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+
+class DaskExecutor:
+    """Tasks on a Dask distributed cluster reached at ``address`` (``tcp://host:8786``, or an
+    existing :class:`dask.distributed.Client` for tests and notebooks)."""
+
+    def __init__(self, address: Any) -> None:
+        try:
+            from dask.distributed import Client
+        except ImportError as exc:  # dask is an optional dependency
+            raise ConfigError("--scheduler needs dask[distributed]: pip install 'aptkt[dask]'") from exc
+        if isinstance(address, Client):
+            self.client, self._own = address, False
+        else:
+            try:
+                self.client, self._own = Client(address, timeout="20s"), True
+            except (OSError, TimeoutError) as exc:
+                raise ConfigError(f"cannot reach the Dask scheduler at {address!r}: {exc}") from exc
+        workers = len(self.client.scheduler_info().get("workers", {}))
+        self.description = f"Dask cluster at {self.client.scheduler.address} ({workers} worker(s))"
+
+    def imap_unordered(self, fn: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[tuple[int, Any]]:
+        from dask.distributed import as_completed
+
+        if not items:
+            return
+        futures = [self.client.submit(fn, item, pure=False) for item in items]
+        index = {f.key: i for i, f in enumerate(futures)}
+        try:
+            for fut in as_completed(futures):
+                yield index[fut.key], fut.result()
+        finally:
+            self.client.cancel([f for f in futures if not f.done()])
+
+    def close(self) -> None:
+        if self._own:
+            self.client.close()
+
+
+def make_executor(jobs: int | None = None, scheduler: Any = None) -> Executor:
+    """A Dask executor if ``scheduler`` is given, else local processes."""
+    if scheduler is not None:
+        return DaskExecutor(scheduler)
+    return LocalExecutor(jobs)

@@ -1,0 +1,137 @@
+"""What every figure of the reproduction shares: the context of a reproduction (scale, seed,
+data, output directory), the learning methods, and how runs and prior knowledge are named."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from aptkt.experiments.priors import PriorTask
+from aptkt.experiments.runs import RunSpec
+from aptkt.experiments.sampling import derive_seed
+from aptkt.experiments.scale import Scale
+from aptkt.learning import GPSettings, LearnerConfig
+
+__all__ = ["Context", "Plan", "METHODS", "Section", "Headline"]
+
+#: The compared learners (paper Fig. 9's names and colours): the baseline (multi-modal kernel,
+#: no transfer), APTKT (Eq. 2–3), APTKT with the prior models' posteriors as auxiliary features
+#: (Eq. 5).
+METHODS: Mapping[str, Mapping[str, Any]] = {
+    "baseline": {"transfer": "none"},
+    "APTKT": {"transfer": "paper"},
+    "APTKT+aux": {"transfer": "paper", "auxiliary": True},
+}
+
+
+@dataclass
+class Context:
+    """One reproduction: its sizes, root seed, data set and output directory."""
+
+    scale: Scale
+    seed: int
+    data: str
+    fingerprint: str
+    output: Path
+    index: Mapping[str, int]  # each object's number in the paper (1-10 priors, 11-15 new)
+    gp: GPSettings = field(default_factory=GPSettings)
+    cache: dict[str, Any] = field(default_factory=dict)  # results one figure computes for another
+
+    def figure_dir(self, name: str) -> Path:
+        d = self.output / name
+        d.mkdir(parents=True, exist_ok=True)
+        return d
+
+    def seed_for(self, *keys: int | str) -> int:
+        return derive_seed(self.seed, *keys)
+
+    def prior_task(self, objects: Sequence[str]) -> PriorTask:
+        """Prior knowledge of these objects from their pool trials, every action."""
+        ordered = tuple(o for o in self.scale.objects if o in set(objects))
+        return PriorTask(
+            data=self.data,
+            fingerprint=self.fingerprint,
+            objects=ordered,
+            actions=tuple(self.scale.actions),
+            trials=self.scale.pool_trials,
+            seed=self.seed,
+            directory=str(self.output / "priors"),
+            gp=dict(self.gp.__dict__),
+        )
+
+    def learner(self, method: str, *, budget: int | None = None, seed: int = 0, **overrides: Any) -> LearnerConfig:
+        settings = {
+            "eps_neg": self.scale.eps_neg,
+            "eps_explor": self.scale.eps_explor,
+            "budget": self.scale.budget if budget is None else budget,
+            "seed": seed,
+            "gp": self.gp,
+            **METHODS.get(method, {}),
+            **overrides,
+        }
+        return LearnerConfig(**settings)
+
+    def spec(
+        self,
+        method: str,
+        config: LearnerConfig,
+        actions: Sequence[str],
+        new_objects: Sequence[str],
+        prior: PriorTask | None,
+        seed: int,
+        tags: Mapping[str, Any],
+    ) -> RunSpec:
+        return RunSpec(
+            method=method,
+            config=config,
+            data=self.data,
+            actions=tuple(actions),
+            new_objects=tuple(new_objects),
+            pool_trials=self.scale.pool_trials,
+            test_trials=self.scale.test_trials,
+            prior=None if prior is None else prior.path,
+            pool_seed=seed,
+            tags=dict(tags),
+        )
+
+    def numbers(self, objects: Sequence[str]) -> str:
+        """Objects as the paper's numbers, in increasing order, e.g. ``{1, 5, 10}``."""
+        return "{" + ", ".join(str(n) for n in sorted(self.index[o] for o in objects)) + "}"
+
+
+@dataclass
+class Plan:
+    """The prior knowledge a figure needs and its runs."""
+
+    priors: list[PriorTask] = field(default_factory=list)
+    specs: list[RunSpec] = field(default_factory=list)
+
+
+@dataclass
+class Headline:
+    """One of the paper's claims beside our number and a verdict."""
+
+    figure: str
+    claim: str
+    paper: str
+    ours: str
+    verdict: str
+
+    @property
+    def agrees(self) -> bool:
+        return self.verdict.startswith("agrees")
+
+
+@dataclass
+class Section:
+    """A figure's part of the report: headline comparisons, Markdown body, files written, and
+    the computed numbers (for summary.json and tests)."""
+
+    figure: str
+    title: str
+    headlines: list[Headline]
+    body: str
+    files: list[str]
+    numbers: dict[str, Any]

@@ -1,0 +1,129 @@
+"""Analysis pieces the transfer figures (7, 8, 9, 11) share: curves per method, paired gains
+over the baseline with intervals, transfer rates, and the learning-curve panels."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from aptkt.experiments.aggregate import Curves, Estimate, collect, difference, estimate
+from aptkt.experiments.plots import learning_curves
+
+__all__ = ["GainSummary", "method_curves", "gain_summary", "transfer_rate", "plot_panel"]
+
+XLABEL = "observations after the initial round"
+
+
+def method_curves(
+    rows: Sequence[Mapping[str, Any]], where: Mapping[str, Any], methods: Iterable[str], value: str = "mean_accuracy"
+) -> dict[str, Curves]:
+    return {m: collect(rows, {**where, "method": m}, value=value) for m in methods}
+
+
+@dataclass
+class GainSummary:
+    """``method - baseline``, run by run: over the whole curve, at chosen steps, at its peak."""
+
+    gain: Curves
+    overall: Estimate  # per-run mean over every step
+    at: dict[int, Estimate]  # at step s
+    peak_step: int
+    peak: Estimate  # at the step where the mean gain is largest
+    positive_steps: float  # fraction of steps with a positive mean gain
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "overall": self.overall.as_dict(),
+            "at_step": {int(s): e.as_dict() for s, e in self.at.items()},
+            "peak_step": self.peak_step,
+            "peak": self.peak.as_dict(),
+            "positive_steps": self.positive_steps,
+            "mean_gain_per_step": [float(v) for v in self.gain.mean()],
+        }
+
+
+def gain_summary(curves: Mapping[str, Curves], method: str, base: str = "baseline",
+                 steps: Sequence[int] = ()) -> GainSummary:
+    g = difference(curves[method], curves[base])
+    units = g.units(0)  # the first element of the run identity: the group
+    at = {int(s): estimate(g.column(s), units) for s in steps if s in set(g.x.tolist())}
+    mean = g.mean()
+    k = int(np.nanargmax(mean))
+    return GainSummary(
+        gain=g,
+        overall=estimate(g.run_means(), units),
+        at=at,
+        peak_step=int(g.x[k]),
+        peak=estimate(g.values[:, k], units),
+        positive_steps=float(np.mean(mean > 0)),
+    )
+
+
+def transfer_rate(rows: Iterable[Mapping[str, Any]], where: Mapping[str, Any]) -> float:
+    """Share of the transfer decisions (Eq. 3, every step) that transferred a prior object."""
+    made = taken = 0
+    for r in rows:
+        if all(r.get(k) == v for k, v in where.items()):
+            made += int(r.get("decisions", 0) or 0)
+            taken += int(r.get("transfers", 0) or 0)
+    return taken / made if made else float("nan")
+
+
+def plot_panel(ax, curves: Mapping[str, Curves], title: str, *, xlabel: str = XLABEL, legend: bool = True) -> None:
+    x = next(iter(curves.values())).x
+    from matplotlib.ticker import MaxNLocator
+
+    learning_curves(ax, {m: c.values for m, c in curves.items()}, x, title=title, xlabel=xlabel)
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    if not legend and ax.get_legend() is not None:
+        ax.get_legend().remove()
+
+
+def prior_groups(ctx, n_priors: int) -> list[tuple[str, ...]]:
+    """The random groups of ``n_priors`` prior objects (the same for every figure that asks)."""
+    from aptkt.experiments.sampling import draw_groups
+
+    return draw_groups(ctx.scale.priors, n_priors, ctx.scale.groups, ctx.seed_for("prior-groups", n_priors))
+
+
+def prior_group_plan(ctx, figure: str, n_priors: int, methods: Sequence[str],
+                     panels: Mapping[str, Sequence[str]]):
+    """Runs of ``methods`` for every group of ``n_priors`` priors × ``trials`` trials × panel
+    (a panel names the actions learned). A trial's seed depends on (n_priors, group, trial)
+    only, so all methods and panels of a trial see the same pool order and exploration draws,
+    and figures sharing a design share its runs."""
+    from aptkt.experiments.figures.base import Plan
+
+    plan = Plan()
+    for g, group in enumerate(prior_groups(ctx, n_priors)):
+        task = ctx.prior_task(group)
+        plan.priors.append(task)
+        for t in range(ctx.scale.trials):
+            seed = ctx.seed_for("trial", n_priors, g, t)
+            for panel, actions in panels.items():
+                for m in methods:
+                    tags = {"figure": figure, "panel": panel, "n_priors": n_priors, "group": g, "trial": t,
+                            "priors": ",".join(group)}
+                    plan.specs.append(ctx.spec(m, ctx.learner(m, seed=seed), actions, ctx.scale.new_objects,
+                                               task, seed, tags))
+    return plan
+
+
+def accuracy_table(curves: Mapping[str, Curves], steps: Sequence[int]) -> str:
+    """Markdown: mean ± sd accuracy per method at chosen steps."""
+    from aptkt.experiments.report import markdown_table
+
+    steps = [s for s in steps if s in set(next(iter(curves.values())).x.tolist())]
+    rows = []
+    for m, c in curves.items():
+        mean, sd = c.mean(), c.sd()
+        idx = [int(np.flatnonzero(c.x == s)[0]) for s in steps]
+        rows.append([m, c.n_runs] + [f"{mean[i]:.3f} ± {sd[i]:.3f}" for i in idx])
+    return markdown_table(["method", "runs"] + [f"step {s}" for s in steps], rows)
+
+
+def key_steps(budget: int) -> list[int]:
+    return sorted({0, 1, budget // 4, budget // 2, budget} & set(range(budget + 1)))

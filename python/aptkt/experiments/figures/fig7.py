@@ -1,0 +1,99 @@
+"""Fig. 7: transfer from 3 prior objects, all actions (paper §5.4).
+
+``groups`` random groups of ``n_priors`` prior objects × ``trials`` trials; APTKT vs the
+baseline on the same pool order and exploration draws. Small panels: each group's mean curves;
+large panel: every run.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from aptkt.experiments.figures.base import Context, Headline, Plan, Section
+from aptkt.experiments.figures.common import (
+    accuracy_table, gain_summary, key_steps, method_curves, plot_panel, prior_group_plan, prior_groups,
+    transfer_rate,
+)
+from aptkt.experiments.plots import canvas, save_figure
+from aptkt.experiments.report import PAPER, ci, gain_verdict, markdown_table, pp
+from aptkt.experiments.tables import curves_rows, write_csv
+
+NAME = "fig7"
+TITLE = "transfer from 3 prior objects, all actions"
+METHODS = ("baseline", "APTKT")
+
+
+def plan(ctx: Context) -> Plan:
+    return prior_group_plan(ctx, NAME, ctx.scale.n_priors, METHODS, {"all": ctx.scale.actions})
+
+
+def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
+    out = ctx.figure_dir(NAME)
+    budget = ctx.scale.budget
+    where = {"panel": "all"}
+    curves = method_curves(rows, where, METHODS)
+    fused = method_curves(rows, where, METHODS, value="fused_accuracy")
+    steps = key_steps(budget)
+    gain = gain_summary(curves, "APTKT", steps=steps)
+    fused_gain = gain_summary(fused, "APTKT", steps=steps)
+    rate = transfer_rate(rows, {"method": "APTKT"})
+    groups = prior_groups(ctx, ctx.scale.n_priors)
+
+    # Paper layout: one small panel per group (mean of its trials), a large panel of all runs.
+    ncols = math.ceil(len(groups) / 2)
+    fig = canvas(figsize=(4.0 * ncols + 7, 6.4), layout="constrained")
+    grid = fig.add_gridspec(2, ncols + 2)
+    per_group = []
+    for g, group in enumerate(groups):
+        ax = fig.add_subplot(grid[g // ncols, g % ncols])
+        gc = method_curves(rows, {**where, "group": g}, METHODS)
+        per_group.append((g, group, gain_summary(gc, "APTKT")))
+        plot_panel(ax, gc, f"priors {ctx.numbers(group)}", xlabel="", legend=False)
+        ax.set_ylabel("")
+    big = fig.add_subplot(grid[:, ncols:])
+    plot_panel(big, curves, f"average of {curves['APTKT'].n_runs} runs")
+    fig.suptitle(f"Fig. 7 — transfer from {ctx.scale.n_priors} prior objects, {len(ctx.scale.actions)} actions")
+    files = [str(p.relative_to(ctx.output)) for p in save_figure(fig, out / NAME)]
+
+    write_csv(out / "results.csv", rows)
+    write_csv(out / "curves.csv", [r for m, c in curves.items() for r in curves_rows({"panel": "all", "method": m}, c)]
+              + [r for m, c in fused.items() for r in curves_rows({"panel": "all (fused)", "method": m}, c)])
+    files += [f"{NAME}/results.csv", f"{NAME}/curves.csv"]
+
+    mean_gain = gain.gain.mean()
+    headlines = [
+        Headline(NAME, f"transfer from {ctx.scale.n_priors} priors: gain over the baseline throughout learning",
+                 pp(PAPER["fig7_gain"]), ci(gain.overall) + " (mean over steps)",
+                 gain_verdict(gain.overall, PAPER["fig7_gain"])),
+        Headline(NAME, "APTKT above the baseline at every step", "yes (Fig. 7)",
+                 f"mean gain > 0 at {round(gain.positive_steps * len(mean_gain))} of {len(mean_gain)} steps "
+                 f"(smallest {pp(float(mean_gain.min()))}, largest {pp(float(mean_gain.max()))})",
+                 "agrees" if gain.positive_steps == 1.0 else "differs: the mean gain is not positive at every step"),
+    ]
+    body = [
+        f"{len(groups)} groups of {ctx.scale.n_priors} priors × {ctx.scale.trials} trials; budget {budget} "
+        f"observations after the initial round of {len(ctx.scale.actions) * len(ctx.scale.new_objects)} "
+        "(every action once on every new object). Accuracy: each action's model on its test observations, "
+        "averaged over actions.",
+        "",
+        accuracy_table(curves, steps),
+        "",
+        "Gain (APTKT − baseline), paired by run:",
+        "",
+        markdown_table(["step", "gain", "fused over actions"],
+                       [[s, ci(gain.at[s]), ci(fused_gain.at[s])] for s in steps if s in gain.at]
+                       + [["mean over all steps", ci(gain.overall), ci(fused_gain.overall)],
+                          [f"peak (step {gain.peak_step})", ci(gain.peak), ""]]),
+        "",
+        f"APTKT transferred a prior object in {100 * rate:.1f} % of its transfer decisions (ε_neg = {ctx.scale.eps_neg}).",
+        "",
+        "Per group (gain = mean over steps of APTKT − baseline):",
+        "",
+        markdown_table(["group", "priors", "gain"],
+                       [[g, ctx.numbers(group), ci(s.overall)] for g, group, s in per_group]),
+    ]
+    numbers = {"gain": gain.as_dict(), "fused_gain": fused_gain.as_dict(), "transfer_rate": rate,
+               "per_group": {g: s.overall.as_dict() for g, _, s in per_group}}
+    return Section(NAME, TITLE, headlines, "\n".join(body), files, numbers)

@@ -1,0 +1,262 @@
+"""``aptkt reproduce``: the paper's experiments (§5.3–5.6) on the simulated world.
+
+1. data: the given data set, or one generated for the chosen size (cached in the output
+   directory, resumed if interrupted); features extracted once;
+2. plan every requested figure: its prior-knowledge groups and its learning runs;
+3. build the prior knowledge, then perform the runs — on local processes or a Dask cluster —
+   storing each finished run at once (``runs/``), so a rerun resumes where it stopped;
+4. per figure: plots (PNG, SVG), raw per-step results and curves (CSV), a report section;
+5. ``report.md`` (our numbers beside the paper's), ``summary.json`` (every computed number),
+   ``config.json`` (everything that makes the run repeat exactly).
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import os
+import platform
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from aptkt import __version__
+from aptkt.errors import ConfigError
+from aptkt.experiments.batch import build_priors, run_batch
+from aptkt.experiments.executors import make_executor
+from aptkt.experiments.figures import FIGURES
+from aptkt.experiments.figures.base import METHODS, Context
+from aptkt.experiments.report import markdown_table, render_report
+from aptkt.experiments.runs import label
+from aptkt.experiments.scale import Scale
+from aptkt.experiments.store import RunStore, data_fingerprint, run_key
+
+__all__ = ["ReproduceSettings", "reproduce", "FIGURE_NAMES"]
+
+FIGURE_NAMES = tuple(FIGURES)
+
+
+@dataclass
+class ReproduceSettings:
+    """What ``aptkt reproduce`` was asked to do."""
+
+    figures: tuple[str, ...] = FIGURE_NAMES
+    output: Path = Path("aptkt-reproduce")
+    data: Path | None = None
+    quick: bool = False
+    jobs: int = field(default_factory=lambda: os.cpu_count() or 1)
+    scheduler: Any = None
+    seed: int = 0
+    progress: bool = True
+    scale: Scale | None = None  # overrides the full / quick size (tests, custom studies)
+    command: str = ""
+
+    def resolved_scale(self) -> Scale:
+        if self.scale is not None:
+            return self.scale
+        return Scale.quick() if self.quick else Scale.full()
+
+
+def _say(msg: str) -> None:
+    print(msg, flush=True)
+
+
+def _paper_numbers(objects: Sequence[str]) -> dict[str, int]:
+    """Each object's number in the paper (the library index); others numbered after them."""
+    from aptkt.sim.objects import default_library
+
+    lib = default_library()
+    out, extra = {}, 100
+    for o in objects:
+        if o in lib:
+            out[o] = lib[o].index
+        else:
+            extra += 1
+            out[o] = extra
+    return out
+
+
+def prepare_data(s: ReproduceSettings, scale: Scale) -> tuple[Path, dict[str, Any]]:
+    """The data set to learn from (generated if none was given) with its features extracted."""
+    from aptkt.actions import PAPER_ACTIONS
+    from aptkt.data import DatasetReader
+    from aptkt.data.generate import GenerationPlan, generate
+    from aptkt.learning.dataset import extract_features
+
+    info: dict[str, Any] = {}
+    if s.data is not None:
+        path = Path(s.data)
+        if not path.is_file():
+            raise ConfigError(f"--data {path}: no such file")
+        info["source"] = "given"
+    else:
+        path = s.output / f"data-{scale.name}-seed{s.seed}.h5"
+        plan = GenerationPlan(scale.objects, tuple(PAPER_ACTIONS[a] for a in scale.actions), scale.repetitions, s.seed)
+        _say(f"simulating the data set: {len(scale.objects)} objects × {len(scale.actions)} actions × "
+             f"{scale.repetitions} trials -> {path}" + (" (resuming)" if path.exists() else ""))
+        gen = generate(path, plan, jobs=s.jobs, resume=path.exists(), progress=s.progress)
+        info.update(source="generated", generation_seconds=gen["wall_seconds"], simulated_now=gen["simulated"])
+    with DatasetReader(path) as rd:
+        keys = set(rd.keys())
+        stored = rd.feature_names()
+        info["description"] = rd.description
+    missing = [(o, a, t) for o in scale.objects for a in scale.actions
+               for t in range(scale.repetitions) if (o, a, t) not in keys]
+    if missing:
+        raise ConfigError(
+            f"{path} lacks {len(missing)} recording(s) this size needs (objects {list(scale.objects)}, actions "
+            f"{list(scale.actions)}, trials 0..{scale.repetitions - 1}); first missing: {missing[:3]}")
+    todo = [a for a in scale.actions if a not in stored]
+    if todo:
+        _say(f"extracting features of {', '.join(todo)} into {path}")
+        t0 = time.perf_counter()
+        extract_features(path, actions=todo, progress=s.progress)
+        info["feature_seconds"] = time.perf_counter() - t0
+    return path, info
+
+
+def reproduce(s: ReproduceSettings) -> dict[str, Any]:
+    """Run the requested figures; returns the summary also written to ``summary.json``."""
+    unknown = [f for f in s.figures if f not in FIGURES]
+    if unknown:
+        raise ConfigError(f"unknown figure(s) {unknown}; choose from {list(FIGURES)} or 'all'")
+    if s.seed < 0:
+        raise ConfigError("--seed must be >= 0")
+    t_start = time.perf_counter()
+    timings: dict[str, float] = {}
+    scale = s.resolved_scale()
+    out = Path(s.output)
+    out.mkdir(parents=True, exist_ok=True)
+
+    t0 = time.perf_counter()
+    data, data_info = prepare_data(s, scale)
+    fingerprint = data_fingerprint(data)
+    timings["data"] = time.perf_counter() - t0
+    ctx = Context(scale=scale, seed=s.seed, data=str(data.resolve()), fingerprint=fingerprint, output=out.resolve(),
+                  index=_paper_numbers(scale.objects))
+    executor = make_executor(s.jobs, s.scheduler)
+    try:
+        _say(f"planning {', '.join(s.figures)} ({scale.name} size) on {executor.description}")
+        plans = {name: FIGURES[name].plan(ctx) for name in s.figures}
+        tasks = {t.key: t for p in plans.values() for t in p.priors}
+        t0 = time.perf_counter()
+        build_priors(list(tasks.values()), executor, progress=s.progress)
+        timings["prior_knowledge"] = time.perf_counter() - t0
+        specs = [sp for p in plans.values() for sp in p.specs]
+        t0 = time.perf_counter()
+        batch = run_batch(specs, RunStore(out / "runs"), executor, fingerprint, progress=s.progress)
+        timings["runs"] = time.perf_counter() - t0
+        _say(f"{len(specs)} runs ({len(batch.steps)} distinct): {batch.computed} computed now, {batch.reused} from "
+             f"{out / 'runs'}")
+    finally:
+        executor.close()
+
+    t0 = time.perf_counter()
+    sections = []
+    for name in s.figures:
+        plan = plans[name]
+        rows = [r for sp in plan.specs for r in label(sp, batch.steps[run_key(sp, fingerprint)])]
+        section = FIGURES[name].analyse(ctx, rows)
+        sections.append(section)
+        fig_dir = ctx.figure_dir(name)
+        with (fig_dir / "specs.jsonl").open("w") as fh:
+            for sp in plan.specs:
+                fh.write(json.dumps({"key": run_key(sp, fingerprint), **sp.to_dict()}) + "\n")
+    timings["analysis"] = time.perf_counter() - t0
+    seconds = time.perf_counter() - t_start
+
+    config = _config(s, scale, ctx, data_info, plans)
+    (out / "config.json").write_text(json.dumps(config, indent=2, default=str))
+    run_info = {
+        "command": s.command or f"aptkt reproduce {' '.join(s.figures)}",
+        "software_version": __version__,
+        "date": datetime.datetime.now().isoformat(timespec="seconds"),
+        "seconds": seconds,
+        "executor": executor.description,
+        "data": str(data),
+        "fingerprint": fingerprint,
+        "seed": s.seed,
+        "scale": scale.name,
+        "settings": _flat_settings(scale, s, timings, batch),
+    }
+    report = render_report(sections, run_info)
+    (out / "report.md").write_text(report)
+    for section in sections:
+        (ctx.figure_dir(section.figure) / "report.md").write_text(render_report([section], run_info))
+    summary = {
+        "software_version": __version__,
+        "figures": list(s.figures),
+        "seconds": seconds,
+        "timings": timings,
+        "runs": {"total": len(specs), "distinct": len(batch.steps), "computed": batch.computed, "reused": batch.reused,
+                 "run_seconds_summed": run_info["settings"]["run seconds, summed over runs"]},
+        "headlines": [h.__dict__ for sec in sections for h in sec.headlines],
+        "numbers": {sec.figure: sec.numbers for sec in sections},
+        "files": {sec.figure: sec.files for sec in sections},
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
+    _say(f"report: {out / 'report.md'}  ({seconds:.0f} s)")
+    return summary
+
+
+def _json_default(v: Any) -> Any:
+    import numpy as np
+
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    return str(v)
+
+
+def _flat_settings(scale: Scale, s: ReproduceSettings, timings: dict[str, float], batch: Any) -> dict[str, Any]:
+    flat = {f"size.{k}": v for k, v in scale.to_dict().items() if k not in ("pool_trials", "test_trials")}
+    flat["pool trials"] = f"{scale.pool_trials[0]}..{scale.pool_trials[-1]}"
+    flat["test trials"] = f"{scale.test_trials[0]}..{scale.test_trials[-1]}"
+    flat["root seed"] = s.seed
+    flat["methods"] = "; ".join(f"{m}: {v}" for m, v in METHODS.items())
+    flat["runs computed now / reused"] = f"{batch.computed} / {batch.reused}"
+    # The runs' own time (their steps' wall time in the workers), kept with each stored run, so
+    # it is known even when every run was read back from the store.
+    flat["run seconds, summed over runs"] = round(sum(float(r.get("seconds") or 0) for rows in batch.steps.values()
+                                                      for r in rows), 1)
+    flat.update({f"seconds.{k}": round(v, 1) for k, v in timings.items()})
+    return flat
+
+
+def _config(s: ReproduceSettings, scale: Scale, ctx: Context, data_info: dict[str, Any], plans: dict[str, Any]) -> dict[str, Any]:
+    import numpy as np
+
+    return {
+        "command": s.command,
+        "repeat_with": f"aptkt reproduce {' '.join(s.figures) if len(s.figures) < len(FIGURES) else 'all'}"
+                       f"{' --quick' if s.quick else ''} --seed {s.seed} --data {ctx.data}",
+        "software_version": __version__,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "platform": platform.platform(),
+        "argv": sys.argv,
+        "figures": list(s.figures),
+        "seed": s.seed,
+        "quick": s.quick,
+        "jobs": s.jobs,
+        "scheduler": None if s.scheduler is None else str(s.scheduler),
+        "output": str(ctx.output),
+        "data": {"path": ctx.data, "fingerprint": ctx.fingerprint, **data_info},
+        "scale": scale.to_dict(),
+        "gp": ctx.gp.__dict__,
+        "methods": {m: dict(v) for m, v in METHODS.items()},
+        "object_numbers": dict(ctx.index),
+        "figures_plan": {
+            name: {"runs": len(p.specs), "specs": f"{name}/specs.jsonl",
+                   "prior_knowledge": [{**t.to_dict(), "path": t.path} for t in p.priors]}
+            for name, p in plans.items()
+        },
+    }
+
+
+def describe_figures() -> str:
+    return markdown_table(["name", "what"], [[n, m.TITLE] for n, m in FIGURES.items()])

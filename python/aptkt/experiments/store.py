@@ -1,0 +1,127 @@
+"""Finished runs on disk, so an interrupted experiment resumes where it stopped.
+
+Each finished run's step rows are written to ``<directory>/<key>.json`` the moment the run
+completes (to a temporary name first, then renamed: a file under its real name is always
+complete). The key is a hash of everything that determines the run's result — the learner's
+configuration, the actions, objects and trials, the pool seed, the prior knowledge's content
+key and the data set's content (:func:`data_fingerprint`) — and of nothing else: labels
+(method name, tags) and file locations do not enter it, so a run shared by two figures is
+computed once and a moved output directory keeps its results.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Iterable
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aptkt import __version__
+from aptkt.experiments.runs import RunSpec
+
+__all__ = ["RunStore", "data_fingerprint", "run_key", "canonical_json"]
+
+_FORMAT = "aptkt.RunResult/1"
+
+
+def canonical_json(value: Any) -> str:
+    """JSON with sorted keys and no whitespace: equal values give equal text."""
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), default=str)
+
+
+def _digest(value: Any) -> str:
+    return hashlib.sha256(canonical_json(value).encode()).hexdigest()
+
+
+@lru_cache(maxsize=16)
+def _fingerprint(path: str, size: int, mtime_ns: int) -> str:
+    from aptkt.data import DatasetReader
+
+    h = hashlib.sha256()
+    with DatasetReader(path) as rd:
+        h.update(canonical_json(rd.keys()).encode())
+        for action, modalities in sorted(rd.feature_names().items()):
+            for modality in sorted(modalities):
+                recs, values = rd.features(action, modality)
+                h.update(f"{action}/{modality}".encode())
+                h.update(np.ascontiguousarray(recs, dtype=np.int64).tobytes())
+                h.update(np.ascontiguousarray(values, dtype=np.float64).tobytes())
+    return h.hexdigest()[:16]
+
+
+def data_fingerprint(path: str | Path) -> str:
+    """Content hash of a data set as the learner sees it: its recordings' keys (object, action,
+    trial) and every stored feature observation. Extract features before calling this."""
+    st = os.stat(path)
+    return _fingerprint(str(Path(path).resolve()), st.st_size, st.st_mtime_ns)
+
+
+def run_key(spec: RunSpec, fingerprint: str) -> str:
+    """The hash naming a run's result (see the module docstring for what enters it)."""
+    content = {
+        "version": __version__,
+        "data": fingerprint,
+        "config": spec.config.to_dict(),
+        "actions": list(spec.actions),
+        "new_objects": list(spec.new_objects),
+        "pool_trials": list(spec.pool_trials),
+        "test_trials": list(spec.test_trials),
+        "pool_seed": spec.pool_seed,
+        # Prior files are content-addressed (aptkt.experiments.priors): the name is the content.
+        "prior": None if spec.prior is None else Path(spec.prior).name,
+    }
+    return _digest(content)[:24]
+
+
+class RunStore:
+    """A directory of finished runs, one JSON file per run key."""
+
+    def __init__(self, directory: str | Path) -> None:
+        self.directory = Path(directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+
+    def path(self, key: str) -> Path:
+        return self.directory / f"{key}.json"
+
+    def __contains__(self, key: object) -> bool:
+        return isinstance(key, str) and self.path(key).exists()
+
+    def load(self, key: str) -> list[dict[str, Any]] | None:
+        """The stored step rows of a run, or None if it has not finished (or its file is not a
+        run result, which is then ignored and recomputed)."""
+        p = self.path(key)
+        try:
+            doc = json.loads(p.read_text())
+        except FileNotFoundError:
+            return None
+        except (OSError, ValueError):
+            return None
+        if not isinstance(doc, dict) or doc.get("format") != _FORMAT or doc.get("key") != key:
+            return None
+        steps = doc.get("steps")
+        return steps if isinstance(steps, list) else None
+
+    def save(self, key: str, spec: RunSpec, steps: Iterable[dict[str, Any]]) -> Path:
+        doc = {
+            "format": _FORMAT,
+            "key": key,
+            "software_version": __version__,
+            "spec": spec.to_dict(),
+            "steps": list(steps),
+        }
+        final = self.path(key)
+        tmp = final.with_name(f".{final.name}.{os.getpid()}.tmp")
+        with tmp.open("w") as fh:
+            json.dump(doc, fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        tmp.replace(final)
+        return final
+
+    def keys(self) -> list[str]:
+        return sorted(p.stem for p in self.directory.glob("*.json"))

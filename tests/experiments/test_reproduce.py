@@ -1,0 +1,127 @@
+"""``aptkt reproduce`` end to end at the quick size, and the report's numbers come from results."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from aptkt.cli import main
+from aptkt.experiments.figures import FIGURES, fig7
+from aptkt.experiments.figures.base import Context
+from aptkt.experiments.reproduce import _paper_numbers
+from aptkt.experiments.scale import Scale
+
+FILES = {
+    "fig6": ["fig6.png", "fig6.svg", "results.csv", "curves.csv", "specs.jsonl", "report.md"],
+    "fig7": ["fig7.png", "fig7.svg", "results.csv", "curves.csv", "specs.jsonl", "report.md"],
+    "fig8": ["fig8.png", "fig8.svg", "results.csv", "curves.csv"],
+    "fig9": ["fig9.png", "fig9.svg", "results.csv", "curves.csv"],
+    "fig10": ["fig10.png", "fig10.svg", "confusion.csv", "dissimilar.json"],
+    "fig11": ["fig11.png", "fig11.svg", "results.csv", "curves.csv"],
+}
+
+
+def read(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_every_figure_writes_its_files_and_report(quick_run):
+    for fig, names in FILES.items():
+        for name in names:
+            assert (quick_run / fig / name).stat().st_size > 0, f"{fig}/{name}"
+    report = (quick_run / "report.md").read_text()
+    for fig in FIGURES:
+        assert f"## {fig}:" in report
+    assert "## Where this run differs from the paper" in report
+    config = json.loads((quick_run / "config.json").read_text())
+    assert config["seed"] == 0 and config["quick"] is True
+    assert config["scale"]["name"] == "quick" and config["software_version"]
+    assert "--seed 0" in config["repeat_with"]
+    # The paper's layout: Fig. 11 has one panel per action and one for all actions.
+    curves = read(quick_run / "fig11" / "curves.csv")
+    assert {r["panel"] for r in curves} == set(Scale.quick().actions) | {"all"}
+
+
+def test_per_trial_bookkeeping_in_the_results(quick_run):
+    s = Scale.quick()
+    rows = read(quick_run / "fig7" / "results.csv")
+    runs = defaultdict(list)
+    for r in rows:
+        runs[(r["method"], r["group"], r["trial"])].append(int(r["step"]))
+    assert len(runs) == 2 * s.groups * s.trials
+    assert all(sorted(v) == list(range(s.budget + 1)) for v in runs.values())
+    specs = [json.loads(line) for line in (quick_run / "fig7" / "specs.jsonl").read_text().splitlines()]
+    assert len(specs) == len(runs)
+    # A trial's baseline and APTKT runs share the pool order and the exploration seed.
+    by_trial = defaultdict(set)
+    for sp in specs:
+        by_trial[(sp["tags"]["group"], sp["tags"]["trial"])].add(sp["pool_seed"])
+    assert all(len(v) == 1 for v in by_trial.values()) and len(by_trial) == s.groups * s.trials
+    # Fig. 6: every model of a trial saw the same observations (random order, same seed).
+    rows6 = read(quick_run / "fig6" / "results.csv")
+    seen = defaultdict(set)
+    for r in rows6:
+        if r["step"] != "0":
+            seen[(r["panel"], r["group"], r["trial"], r["step"])].add((r["action"], r["object"]))
+    assert seen and all(len(v) == 1 for v in seen.values())
+
+
+def test_report_gain_is_computed_from_the_results_file(quick_run):
+    """Recompute Fig. 7's headline gain from results.csv independently and find it in the report."""
+    rows = read(quick_run / "fig7" / "results.csv")
+    acc = {(r["method"], int(r["group"]), int(r["trial"]), int(r["step"])): float(r["mean_accuracy"]) for r in rows}
+    per_group = defaultdict(list)
+    for (m, g, t, step), v in acc.items():
+        if m == "APTKT":
+            per_group[g].append(v - acc[("baseline", g, t, step)])
+    gain = np.mean([np.mean(v) for v in per_group.values()])  # equal trials x steps per group
+    summary = json.loads((quick_run / "summary.json").read_text())
+    assert summary["numbers"]["fig7"]["gain"]["overall"]["mean"] == pytest.approx(gain, abs=1e-12)
+    report = (quick_run / "report.md").read_text()
+    assert f"{100 * gain:+.1f} pp [" in report
+
+
+def test_rerun_resumes_everything_and_gives_the_same_results(quick_run, capsys):
+    before = (quick_run / "fig9" / "results.csv").read_text()
+    assert main(["reproduce", "fig9", "--quick", "--output", str(quick_run), "--jobs", "2", "--no-progress"]) == 0
+    assert "0 computed now" in capsys.readouterr().out
+    assert (quick_run / "fig9" / "results.csv").read_text() == before
+
+
+def hand_made_rows(gain: float, noise: float = 0.0):
+    s = Scale.quick()
+    rng = np.random.default_rng(0)
+    rows = []
+    for g in range(s.groups):
+        for t in range(s.trials):
+            for step in range(s.budget + 1):
+                base = 0.5 + 0.02 * step
+                eps = noise * rng.normal()
+                for m, v in (("baseline", base), ("APTKT", base + gain + eps)):
+                    rows.append({"method": m, "panel": "all", "group": g, "trial": t, "step": step,
+                                 "mean_accuracy": v, "fused_accuracy": v, "decisions": 9 if step == 0 else 3,
+                                 "transfers": 3 if m == "APTKT" else 0})
+    return rows
+
+
+@pytest.mark.parametrize("gain, expected", [(0.10, "agrees"), (0.30, "more than twice"), (-0.10, "worse")])
+def test_report_numbers_follow_hand_made_results(tmp_path, gain, expected):
+    scale = Scale.quick()
+    ctx = Context(scale=scale, seed=0, data="", fingerprint="", output=tmp_path, index=_paper_numbers(scale.objects))
+    section = fig7.analyse(ctx, hand_made_rows(gain, noise=0.01))
+    head = section.headlines[0]
+    measured = section.numbers["gain"]["overall"]["mean"]
+    assert measured == pytest.approx(gain, abs=0.01)
+    assert f"{100 * measured:+.1f} pp" in head.ours
+    assert expected in head.verdict
+    # Per run: 3 transfers at each of budget + 1 steps, out of 9 decisions at step 0 and 3 later.
+    assert section.numbers["transfer_rate"] == pytest.approx(3 * (scale.budget + 1) / (9 + 3 * scale.budget))
+    assert (tmp_path / "fig7" / "fig7.svg").exists()
+    assert not math.isnan(section.numbers["fused_gain"]["overall"]["mean"])
