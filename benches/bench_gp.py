@@ -1,6 +1,11 @@
 """LaplaceGPC vs scikit-learn's GaussianProcessClassifier, side by side on the same data.
 
-Usage: python benches/bench_gp.py [--quick] [--skip-sklearn-opt-above N]
+Usage: python benches/bench_gp.py [--quick] [--skip-sklearn-opt-above N] [--single-thread]
+
+By default each side runs as a user gets it: ours fits the one-vs-all classifiers in parallel on
+all cores, scikit-learn fits them one after the other with a multi-threaded BLAS. With
+--single-thread both run on one thread (ours n_jobs=1, BLAS limited by threadpoolctl), which
+compares the numerics alone.
 
 For each n (and d), one data set with 5 classes; reports for
   fixed-kernel fit, optimised fit with the same number of starts (1 + 2 restarts),
@@ -21,6 +26,8 @@ from sklearn.gaussian_process import GaussianProcessClassifier
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel
 
 from _common import best_of, median_of, save, table
+from threadpoolctl import threadpool_limits
+
 from aptkt.gp import LaplaceGPC
 
 RESTARTS = 2
@@ -39,14 +46,14 @@ def per_class_lml(model: GaussianProcessClassifier) -> np.ndarray:
     return np.array([e.log_marginal_likelihood_value_ for e in model.base_estimator_.estimators_])
 
 
-def run(n: int, d: int, sklearn_opt: bool) -> dict:
+def run(n: int, d: int, sklearn_opt: bool, n_jobs: int | None = None) -> dict:
     X, y, Xt, yt = data(n, d)
     Xp = np.random.default_rng(1).normal(size=(1000, d))
     row: dict = {"n": n, "d": d}
 
     fixed_kernel = ConstantKernel(2.0, "fixed") * RBF(np.sqrt(d), "fixed")
     sk_fixed = lambda: GaussianProcessClassifier(fixed_kernel, optimizer=None).fit(X, y)  # noqa: E731
-    ours_fixed = lambda: LaplaceGPC(np.sqrt(d), 2.0, optimize=False).fit(X, y)  # noqa: E731
+    ours_fixed = lambda: LaplaceGPC(np.sqrt(d), 2.0, optimize=False, n_jobs=n_jobs).fit(X, y)  # noqa: E731
     row["fixed sklearn s"] = median_of(sk_fixed)
     row["fixed aptkt s"] = median_of(ours_fixed)
     row["fixed ratio"] = row["fixed sklearn s"] / row["fixed aptkt s"]
@@ -57,7 +64,7 @@ def run(n: int, d: int, sklearn_opt: bool) -> dict:
     row["predict aptkt s"] = best_of(lambda: our_model.predict_proba(Xp))
     row["predict ratio"] = row["predict sklearn s"] / row["predict aptkt s"]
 
-    ours = LaplaceGPC(n_restarts=RESTARTS, random_state=0)
+    ours = LaplaceGPC(n_restarts=RESTARTS, random_state=0, n_jobs=n_jobs)
     row["opt aptkt s"] = median_of(lambda: ours.fit(X, y), repeat=3 if n <= 400 else 1)
     row["aptkt LML (sum)"] = float(ours.log_marginal_likelihood_.sum())
     row["aptkt acc"] = ours.score(Xt, yt)
@@ -79,21 +86,28 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="n = 50, 100 only")
     parser.add_argument("--skip-sklearn-opt-above", type=int, default=10**9,
                         help="skip scikit-learn's (slow) optimised fit for n above this")
+    parser.add_argument("--single-thread", action="store_true",
+                        help="both sides on one thread (saved as gp-single-thread.json)")
     args = parser.parse_args()
+    n_jobs = 1 if args.single_thread else None
+    limits = threadpool_limits(1) if args.single_thread else None
     sizes = [50, 100] if args.quick else [50, 100, 200, 400, 800]
     rows = []
     for d in (8, 22):
         for n in sizes:
-            row = run(n, d, sklearn_opt=n <= args.skip_sklearn_opt_above)
+            row = run(n, d, sklearn_opt=n <= args.skip_sklearn_opt_above, n_jobs=n_jobs)
             rows.append(row)
             print(row, flush=True)
     if not args.quick:
-        rows.append(run(200, 15, sklearn_opt=True))
+        rows.append(run(200, 15, sklearn_opt=True, n_jobs=n_jobs))
     cols = ["n", "d", "fixed ratio", "predict ratio", "opt ratio", "opt aptkt s", "opt sklearn s",
             "aptkt LML (sum)", "sklearn LML (sum)", "classes with LML >= sklearn", "aptkt acc", "sklearn acc",
             "fixed aptkt s", "fixed sklearn s", "predict aptkt s", "predict sklearn s"]
     print(table(rows, cols))
-    print("saved", save("gp", {"rows": rows, "restarts": RESTARTS}))
+    name = "gp-single-thread" if args.single_thread else "gp"
+    print("saved", save(name, {"rows": rows, "restarts": RESTARTS, "single_thread": args.single_thread}))
+    if limits is not None:
+        limits.restore_original_limits()
 
 
 if __name__ == "__main__":

@@ -148,7 +148,6 @@ def test_silenced_cells_send_nothing_until_restored():
 
 
 def test_the_real_serial_skin_reads_the_loopbacks_pty():
-    pytest.importorskip("serial")
     with Loopback(free_loopback_host(), contact={"type": "spring", "surface_z": 0.0, "stiffness": 200.0},
                   start_pose=(0.0, -0.5, 0.01, *DOWN), skin=True) as lb:
         assert lb.skin_port and lb.skin_port.startswith("/dev/")

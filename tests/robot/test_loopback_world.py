@@ -102,7 +102,6 @@ def test_unknown_object_is_a_clear_error():
 
 
 def test_the_ur10_presses_a_simulated_world_object_through_ur_rtde(robot, loopback):
-    pytest.importorskip("rtde_control")
     from loopback_helpers import FakeSkin
 
     spec = {"type": "sim_object", "object": "rough_sponge", "x": 0.0, "y": -0.5}

@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-pytest.importorskip("rtde_control", reason="the UR10 tests need the ur_rtde package (test extra)")
+import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a missing one must fail, not skip
 
 from loopback_helpers import PLACEMENT, STIFFNESS, SURFACE_Z, FakeSkin, at_rest, free_loopback_host, in_contact  # noqa: E402
 
