@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -16,6 +17,8 @@ from aptkt.experiments.reproduce import _paper_numbers
 from aptkt.experiments.runs import run_steps
 from aptkt.experiments.scale import Scale
 from aptkt.experiments.store import RunStore, data_fingerprint
+
+THREAD_VARIABLES = ["RAYON_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"]
 
 
 @pytest.fixture(scope="module")
@@ -106,3 +109,27 @@ def test_the_package_does_not_import_dask():
     code = ("import sys, aptkt.cli, aptkt.experiments.reproduce, aptkt.experiments.executors; "
             "sys.exit(any(m == 'dask' or m.startswith('dask.') for m in sys.modules))")
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
+
+
+
+def _in_workers(executor: LocalExecutor, variables: list[str]) -> dict[str, str | None]:
+    # os.getenv pickles by reference, so the spawned workers can run it (a test-module function
+    # could not be imported there).
+    try:
+        return {variables[i]: value for i, value in executor.imap_unordered(os.getenv, variables)}
+    finally:
+        executor.close()
+
+
+def test_local_workers_share_the_cores(monkeypatch):
+    # Two workers on a 4-core machine get 2 threads each, not 4 (8 threads on 4 cores).
+    for name in THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setattr("os.cpu_count", lambda: 4)
+    assert _in_workers(LocalExecutor(2), THREAD_VARIABLES) == dict.fromkeys(THREAD_VARIABLES, "2")
+
+
+def test_a_thread_count_the_user_set_wins(monkeypatch):
+    monkeypatch.setenv("RAYON_NUM_THREADS", "3")
+    monkeypatch.setattr("os.cpu_count", lambda: 4)
+    assert _in_workers(LocalExecutor(2), ["RAYON_NUM_THREADS", "OMP_NUM_THREADS"])["RAYON_NUM_THREADS"] == "3"

@@ -21,6 +21,18 @@ __all__ = ["Executor", "LocalExecutor", "DaskExecutor", "make_executor"]
 # Spawned, never forked: a fork copies the compiled core's thread pool without its threads.
 _SPAWN = multiprocessing.get_context("spawn")
 
+# Thread pools a worker may start: the compiled core's (rayon) and the BLAS libraries'.
+_THREAD_POOL_VARIABLES = ("RAYON_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def _share_cores(threads: int) -> None:
+    """Worker initializer: each of ``jobs`` processes gets its share of the cores, so that
+    ``jobs`` workers, each fitting its one-vs-all classifiers in parallel, do not run
+    ``jobs × cores`` threads on ``cores`` cores. Runs before the first task, i.e. before any
+    thread pool exists; a value the user set in the environment wins."""
+    for name in _THREAD_POOL_VARIABLES:
+        os.environ.setdefault(name, str(threads))
+
 
 class Executor(Protocol):
     description: str
@@ -52,7 +64,9 @@ class LocalExecutor:
                 yield i, fn(item)
             return
         if self._pool is None:
-            self._pool = cf.ProcessPoolExecutor(max_workers=self.jobs, mp_context=_SPAWN)
+            threads = max(1, (os.cpu_count() or 1) // self.jobs)
+            self._pool = cf.ProcessPoolExecutor(
+                max_workers=self.jobs, mp_context=_SPAWN, initializer=_share_cores, initargs=(threads,))
         futures = {self._pool.submit(fn, item): i for i, item in enumerate(items)}
         try:
             for fut in cf.as_completed(futures):
