@@ -3,6 +3,7 @@ real SIGKILL, and bit-for-bit reproducible generation."""
 
 from __future__ import annotations
 
+import dataclasses
 import signal
 import subprocess
 import sys
@@ -104,6 +105,77 @@ def test_schema_checks(tmp_path):
         DatasetReader(tmp_path / "missing.h5")
     with pytest.raises(DatasetError, match="exists"):
         DatasetWriter(newer)
+
+
+def write_version_1(path: Path, recordings) -> None:
+    """A data set as aptkt wrote it before schema version 2: metadata as variable-length
+    strings, an index without metadata ranges (built by hand, as no writer makes it now)."""
+    import json
+
+    from aptkt.data.store import samples_to_raw
+
+    index_v1 = np.dtype([("object", "S64"), ("action", "S32"), ("trial", "<i4"), ("start_ns", "<i8"),
+                         ("stop_ns", "<i8"), ("row_start", "<i8"), ("row_stop", "<i8")])
+    rows, metas, raws, start = [], [], [], 0
+    for r in recordings:
+        meta = {**r.metadata, "cells": list(r.cells), "silent_cells": list(r.silent_cells)}
+        raw = samples_to_raw(r.samples, meta)
+        n = len(raw["cell_id"])
+        rows.append((meta["object"].encode(), meta["action"]["name"].encode(), meta["trial"],
+                     r.start_ns, r.stop_ns, start, start + n))
+        metas.append(json.dumps(meta, sort_keys=True))
+        raws.append(raw)
+        start += n
+    with h5py.File(path, "w") as f:
+        f.attrs.update(schema="aptkt.dataset", schema_version=1, software_version="0.0.1", description="{}")
+        f["recordings/index"] = np.array(rows, dtype=index_v1)
+        f.create_dataset("recordings/metadata", data=metas, dtype=h5py.string_dtype("utf-8"))
+        for name in FIELDS:
+            f[f"recordings/samples/{name}"] = np.concatenate([raw[name] for raw in raws])
+
+
+def test_version_1_files_are_read_and_repair_rewrites_them_in_version_2(tmp_path, recordings):
+    old = tmp_path / "v1.h5"
+    write_version_1(old, recordings)
+    with DatasetReader(old) as rd:
+        assert rd.version == 1 and len(rd) == 2
+        assert all(same_samples(rd.recording(i), recordings[i]) for i in range(2))
+        assert rd.metadata(1)["object"] == recordings[1].metadata["object"]
+    with pytest.raises(DatasetError, match="version 1 is read-only.*repair"):
+        DatasetWriter(old, "a")
+    assert repair(old) == 2
+    with DatasetReader(old) as rd:
+        assert rd.version == 2 and len(rd) == 2
+        assert all(same_samples(rd.recording(i), recordings[i]) for i in range(2))
+    with DatasetWriter(old, "a") as w:  # appendable now
+        w.append(dataclasses.replace(recordings[0], metadata={**recordings[0].metadata, "trial": 7}))
+    with DatasetReader(old) as rd:
+        assert len(rd) == 3 and rd.key(2)[2] == 7
+
+
+@pytest.mark.parametrize("tear", ["metadata past the end", "samples past the end", "empty row"])
+def test_a_torn_last_append_is_left_out_and_nothing_before_it(tmp_path, recordings, tear):
+    # What a writer killed mid-append can leave, since SWMR orders the writes of one dataset
+    # but not those of different datasets: the new index row on disk before its data.
+    path = tmp_path / "torn.h5"
+    with DatasetWriter(path) as w:
+        for r in recordings:
+            w.append(r)
+    with h5py.File(path, "a") as f:
+        index = f["recordings/index"]
+        row = index[1].copy()
+        if tear == "metadata past the end":
+            row["meta_start"], row["meta_stop"] = f["recordings/metadata"].shape[0] + 4096, f["recordings/metadata"].shape[0] + 8192
+        elif tear == "samples past the end":
+            row["row_stop"] = f["recordings/samples/cell_id"].shape[0] + 1
+        else:
+            row = np.zeros((), dtype=index.dtype)
+        index.resize(3, axis=0)
+        index[2] = row
+    with DatasetReader(path) as rd:
+        assert len(rd) == 2 and rd.incomplete == 1
+        assert all(same_samples(rd.recording(i), recordings[i]) for i in range(2))
+    assert repair(path, backup=False) == 2
 
 
 def test_features_are_stored_per_action(tmp_path, recordings):

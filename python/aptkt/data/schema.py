@@ -1,13 +1,15 @@
-"""The on-disk layout of aptkt data sets (HDF5), version 1.
+"""The on-disk layout of aptkt data sets (HDF5), version 2.
 
 ::
 
-    /                                attrs: schema = "aptkt.dataset", schema_version = 1,
+    /                                attrs: schema = "aptkt.dataset", schema_version = 2,
                                             software_version, description (JSON)
     /recordings/index                (N,) compound: object, action, trial, start_ns, stop_ns,
-                                            row_start, row_stop — one row per recording
-    /recordings/metadata             (N,) JSON text per recording (action parameters, trial,
-                                            calibration, placement, timestamps, ...)
+                                            row_start, row_stop, meta_start, meta_stop — one
+                                            row per recording
+    /recordings/metadata             (B,) uint8  UTF-8 JSON of every recording (action
+                                            parameters, trial, calibration, placement, ...),
+                                            byte ranges from the index
     /recordings/samples/cell_id      (M,)   uint16   all samples of all recordings, row ranges
     /recordings/samples/t_ns         (M,)   int64    from the index; raw integers as the wire
     /recordings/samples/proximity    (M,)   uint16   carries them (physical = raw * scale +
@@ -18,17 +20,25 @@
     /features/<action>/recording     (K,)   int64    ... given by these recording numbers
 
 A recording exists once its index row exists: samples and metadata are written first, the
-index row last, then the file is flushed. Readers trust only the index.
+index row last, then the file is flushed. Every recording's samples and metadata start on a
+fresh chunk, so appending never rewrites a chunk that holds an earlier recording.
+
+Version 1 stored the metadata as variable-length strings, one per recording. Those live in
+HDF5's global heap, which single-writer/multiple-reader mode does not protect: a writer killed
+mid-append could leave the heap extending past the end of the file. Version 1 files are still
+read; ``aptkt dataset repair`` rewrites one in version 2 before anything is appended to it.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SCHEMA", "SCHEMA_VERSION", "INDEX_DTYPE", "SAMPLE_FIELDS", "RAW_SCALE"]
+__all__ = ["SCHEMA", "SCHEMA_VERSION", "READABLE_VERSIONS", "INDEX_DTYPE", "SAMPLE_FIELDS", "RAW_SCALE"]
 
 SCHEMA = "aptkt.dataset"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+#: Versions this aptkt reads (it writes only SCHEMA_VERSION).
+READABLE_VERSIONS = (1, 2)
 
 INDEX_DTYPE = np.dtype([
     ("object", "S64"),
@@ -38,6 +48,8 @@ INDEX_DTYPE = np.dtype([
     ("stop_ns", "<i8"),
     ("row_start", "<i8"),
     ("row_stop", "<i8"),
+    ("meta_start", "<i8"),
+    ("meta_stop", "<i8"),
 ])
 
 #: Stored per-sample fields: trailing shape and dtype.

@@ -5,12 +5,15 @@ force before calibration, with the calibration kept in each recording's metadata
 exact, about a fifth of float64 and compresses well.
 
 Crash safety: the writer runs in HDF5's single-writer/multiple-reader (SWMR) mode, in which
-the library keeps the file consistent on disk at every moment: every dataset is created
-before the first recording, a recording is appended as samples → metadata → index row, and the
-file is flushed after each one. A writer killed at any point (even mid-write) leaves a file in
-which every recording whose index row was flushed is readable; a half-written recording has
-no index row and is ignored. :class:`DatasetReader` opens files in SWMR-read mode, which also
-works while a writer is running or after it died. To *append* to a file whose writer died,
+the library keeps each dataset's structure consistent on disk at every moment: every dataset
+is created before the first recording, a recording is appended as samples → metadata → index
+row, each on fresh chunks (no chunk holding an earlier recording is ever rewritten), and the
+file is flushed after each one. Every recording whose append returned is therefore intact
+whatever happens later. SWMR does not order the writes of *different* datasets during a
+flush, so a writer killed mid-append can leave the new index row on disk before its samples or
+metadata; the reader checks the last row against the other datasets and drops it if it is
+incomplete (at most one append is ever in flight). :class:`DatasetReader` opens files in
+SWMR-read mode, which also works while a writer is running or after it died. To *append* to a file whose writer died,
 :func:`repair` first copies its complete recordings into a fresh file (the HDF5 library refuses
 to reopen a crashed SWMR file for writing until that is done).
 """
@@ -27,7 +30,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from aptkt.data.schema import INDEX_DTYPE, RAW_SCALE, SAMPLE_FIELDS, SCHEMA, SCHEMA_VERSION
+from aptkt.data.schema import INDEX_DTYPE, RAW_SCALE, READABLE_VERSIONS, SAMPLE_FIELDS, SCHEMA, SCHEMA_VERSION
 from aptkt.errors import AptktError
 from aptkt.skin.samples import Recording, SkinSamples
 
@@ -35,6 +38,7 @@ __all__ = ["DatasetError", "DatasetWriter", "DatasetReader", "repair", "write_fe
            "samples_to_raw", "raw_to_samples"]
 
 _CHUNK_ROWS = 16384
+_META_CHUNK_BYTES = 4096  # a recording's metadata is ≈ 3 KB of JSON
 _COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
 
 
@@ -151,7 +155,7 @@ class DatasetWriter:
                     raise DatasetError(f"{self.path}: a writer of this file did not close it (crashed or "
                                        f"still running); run 'aptkt dataset repair {self.path}' first") from exc
                 raise DatasetError(f"{self.path}: cannot open for appending: {exc}") from exc
-            _check_schema(self._f, self.path)
+            _check_schema(self._f, self.path, for_writing=True)
         else:
             if self.path.exists() and not overwrite:
                 raise DatasetError(f"{self.path} exists (use overwrite=True / --overwrite, or append)")
@@ -165,8 +169,8 @@ class DatasetWriter:
             g = f.create_group("recordings")
             g.create_dataset("index", shape=(0,), maxshape=(None,), dtype=INDEX_DTYPE, chunks=(256,),
                              track_times=False)
-            g.create_dataset("metadata", shape=(0,), maxshape=(None,), dtype=h5py.string_dtype("utf-8"),
-                             chunks=(64,), track_times=False, **_COMPRESSION)
+            g.create_dataset("metadata", shape=(0,), maxshape=(None,), dtype=np.uint8,
+                             chunks=(_META_CHUNK_BYTES,), track_times=False, **_COMPRESSION)
             s = g.create_group("samples")
             for name, (tail, dtype) in SAMPLE_FIELDS.items():
                 s.create_dataset(name, shape=(0, *tail), maxshape=(None, *tail), dtype=dtype,
@@ -209,20 +213,23 @@ class DatasetWriter:
         if len(obj.encode()) > 64 or len(action.encode()) > 32:
             raise ValueError("object names are limited to 64 bytes and action names to 32")
         n = int(raw["cell_id"].shape[0])
-        # Each recording starts on a fresh chunk: chunks are then written once, never rewritten
-        # by the next recording's flush (which would leak file space); the zero padding between
-        # recordings compresses to almost nothing and no index row points at it.
-        end = int(self._samples["cell_id"].shape[0])
-        row0 = -(-end // _CHUNK_ROWS) * _CHUNK_ROWS
+        # Each recording starts on a fresh chunk of every dataset: chunks are then written once,
+        # never rewritten by a later append — a rewritten compressed chunk moves, and a writer
+        # killed before the move is on disk must not take an earlier recording with it. The
+        # zero padding between recordings compresses to almost nothing; no index row points at it.
+        row0 = _next_chunk_start(self._samples["cell_id"].shape[0], _CHUNK_ROWS)
         # Samples first, then the metadata, the index row last: the index defines what exists.
         for name, ds in self._samples.items():
             ds.resize(row0 + n, axis=0)
             if n:
                 ds[row0:row0 + n] = raw[name]
+        meta_bytes = np.frombuffer(meta_json.encode("utf-8"), dtype=np.uint8)
+        meta0 = _next_chunk_start(self._meta.shape[0], _META_CHUNK_BYTES)
+        self._meta.resize(meta0 + meta_bytes.size, axis=0)
+        self._meta[meta0:meta0 + meta_bytes.size] = meta_bytes
         i = len(self)
-        self._meta.resize(i + 1, axis=0)
-        self._meta[i] = meta_json
-        row = np.array([(obj.encode(), action.encode(), trial, start_ns, stop_ns, row0, row0 + n)], dtype=INDEX_DTYPE)
+        row = np.array([(obj.encode(), action.encode(), trial, start_ns, stop_ns, row0, row0 + n,
+                         meta0, meta0 + meta_bytes.size)], dtype=INDEX_DTYPE)
         self._index.resize(i + 1, axis=0)
         self._index[i:i + 1] = row
         self._f.flush()
@@ -235,15 +242,25 @@ class DatasetWriter:
             self._f.close()
 
 
-def _check_schema(f: h5py.File, path: Path) -> None:
+def _next_chunk_start(length: int, chunk: int) -> int:
+    return -(-int(length) // chunk) * chunk
+
+
+def _check_schema(f: h5py.File, path: Path, *, for_writing: bool = False) -> int:
+    """The file's schema version; a DatasetError if this aptkt cannot read (or append to) it."""
     schema = f.attrs.get("schema")
     version = f.attrs.get("schema_version")
     if isinstance(schema, bytes):
         schema = schema.decode()
     if schema != SCHEMA:
         raise DatasetError(f"{path}: not an aptkt data set (schema attribute {schema!r})")
-    if version != SCHEMA_VERSION:
-        raise DatasetError(f"{path}: schema version {version}, this aptkt reads version {SCHEMA_VERSION}")
+    if version not in READABLE_VERSIONS:
+        readable = ", ".join(map(str, READABLE_VERSIONS))
+        raise DatasetError(f"{path}: schema version {version}, this aptkt reads versions {readable}")
+    if for_writing and version != SCHEMA_VERSION:
+        raise DatasetError(f"{path}: schema version {version} is read-only for this aptkt; run "
+                           f"'aptkt dataset repair {path}' to rewrite it in version {SCHEMA_VERSION} first")
+    return int(version)
 
 
 class DatasetReader:
@@ -257,11 +274,44 @@ class DatasetReader:
             self._f = h5py.File(self.path, "r", swmr=True)
         except OSError as exc:
             raise DatasetError(f"{self.path}: not a readable HDF5 data set: {exc}") from exc
-        _check_schema(self._f, self.path)
-        # A snapshot: recordings appended after opening are not seen (reopen to see them).
-        self.index = self._f["recordings/index"][...]
+        self.version = _check_schema(self._f, self.path)
         self._meta = self._f["recordings/metadata"]
         self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
+        # A snapshot: recordings appended after opening are not seen (reopen to see them).
+        index = _readable_prefix(self._f["recordings/index"])
+        self.index = index[:self._complete(index)]
+        #: Index rows of an append that was cut short (a writer killed mid-append, or one
+        #: still running), left out: 0 or 1.
+        self.incomplete = len(index) - len(self.index)
+
+    def _complete(self, index: np.ndarray) -> int:
+        """How many leading rows of ``index`` are complete recordings. Only the last can be
+        incomplete (appends are flushed one at a time), so only it is read back in full."""
+        n = len(index)
+        if n == 0:
+            return 0
+        last = index[n - 1]
+        samples_end = min(ds.shape[0] for ds in self._samples.values())
+        if not last["object"] or not 0 <= last["row_start"] <= last["row_stop"] <= samples_end:
+            return n - 1
+        if self.version >= 2 and not 0 <= last["meta_start"] < last["meta_stop"] <= self._meta.shape[0]:
+            return n - 1
+        if self.version == 1 and self._meta.shape[0] < n:
+            return n - 1
+        try:
+            self._read_metadata(last, n - 1)
+            for ds in self._samples.values():
+                ds[int(last["row_start"]):int(last["row_stop"])]
+        except (OSError, ValueError):  # data past the end of the file, or torn metadata
+            return n - 1
+        return n
+
+    def _read_metadata(self, row: np.void, i: int) -> dict[str, Any]:
+        if self.version >= 2:
+            raw = self._meta[int(row["meta_start"]):int(row["meta_stop"])].tobytes()
+        else:
+            raw = self._meta[i]
+        return json.loads(raw.decode("utf-8") if isinstance(raw, bytes) else raw)
 
     def __enter__(self) -> DatasetReader:
         return self
@@ -301,8 +351,9 @@ class DatasetReader:
         return out
 
     def metadata(self, i: int) -> dict[str, Any]:
-        value = self._meta[i]
-        return json.loads(value.decode() if isinstance(value, bytes) else value)
+        if not (0 <= i < len(self)):
+            raise IndexError(f"recording {i} out of range (0..{len(self) - 1})")
+        return self._read_metadata(self.index[i], i)
 
     def raw(self, i: int) -> dict[str, np.ndarray]:
         """The stored raw integers of recording ``i``."""
@@ -388,10 +439,21 @@ def write_features(path: str | Path, action: str, modality: str, recordings: Seq
         g.create_dataset(modality, data=values, track_times=False)
 
 
+def _readable_prefix(ds: h5py.Dataset) -> np.ndarray:
+    """All of a dataset, or, when its last chunk lies past the end of a file whose writer was
+    killed (that chunk belongs to the append in flight), everything before that chunk."""
+    try:
+        return ds[...]
+    except OSError:
+        chunk = ds.chunks[0] if ds.chunks else 1
+        return ds[:max(0, (ds.shape[0] - 1) // chunk * chunk)]
+
+
 def repair(path: str | Path, *, backup: bool = True) -> int:
     """Make a file whose writer died appendable again: copy its complete recordings into a
     fresh file and put that in its place (the original is kept as ``<name>.crashed`` when
-    ``backup``). Returns the number of recordings kept."""
+    ``backup``). Returns the number of recordings kept. Also rewrites a file of an older
+    schema version in the current one."""
     path = Path(path)
     tmp = path.with_name(path.name + ".repairing")
     with DatasetReader(path) as src:
@@ -399,8 +461,8 @@ def repair(path: str | Path, *, backup: bool = True) -> int:
         with DatasetWriter(tmp, "w", description=desc, overwrite=True) as dst:
             for i in range(len(src)):
                 r = src.index[i]
-                dst._append_raw(src.key(i), int(r["start_ns"]), int(r["stop_ns"]), src.raw(i),
-                                src._meta[i].decode() if isinstance(src._meta[i], bytes) else src._meta[i])
+                meta_json = json.dumps(src.metadata(i), sort_keys=True, default=_json_default)
+                dst._append_raw(src.key(i), int(r["start_ns"]), int(r["stop_ns"]), src.raw(i), meta_json)
         n = len(src)
     if backup:
         os.replace(path, path.with_name(path.name + ".crashed"))
