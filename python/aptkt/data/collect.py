@@ -17,12 +17,13 @@ from __future__ import annotations
 import json
 import sys
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from aptkt.actions import ExploratoryAction
+from aptkt.data.plan import TrialGrid
 from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, recording_key, repair
 from aptkt.errors import AptktError, ConfigError
 from aptkt.skin.samples import Recording
@@ -31,7 +32,7 @@ __all__ = ["CollectionPlan", "CollectionAborted", "collect", "aborted_path", "sa
 
 
 @dataclass(frozen=True)
-class CollectionPlan:
+class CollectionPlan(TrialGrid):
     """Every action ``repetitions`` times on every object, trial numbers from ``first_trial``."""
 
     objects: tuple[str, ...]
@@ -47,17 +48,6 @@ class CollectionPlan:
         for kind, names in (("object", list(self.objects)), ("action", [a.name for a in self.actions])):
             if len(set(names)) != len(names):
                 raise ConfigError(f"each {kind} may appear once, got {names}")
-
-    def trials(self) -> Iterator[tuple[str, ExploratoryAction, int]]:
-        """(object, action, trial) in collection order: trial by trial, so that the objects can
-        be re-placed between trials (paper §5.2) and a partial file holds all pairs alike."""
-        for t in range(self.first_trial, self.first_trial + self.repetitions):
-            for obj in self.objects:
-                for act in self.actions:
-                    yield obj, act, t
-
-    def __len__(self) -> int:
-        return len(self.objects) * len(self.actions) * self.repetitions
 
     def describe(self) -> dict[str, Any]:
         return {"objects": list(self.objects), "actions": [a.to_dict() for a in self.actions],

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from aptkt.actions import PAPER_ACTIONS, ExploratoryAction
+from aptkt.data.plan import TrialGrid
 from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, repair
 from aptkt.skin.samples import Recording
 
@@ -28,7 +29,7 @@ __all__ = ["GenerationPlan", "generate", "paper_plan"]
 
 
 @dataclass(frozen=True)
-class GenerationPlan:
+class GenerationPlan(TrialGrid):
     """Which trials to simulate: every action ``repetitions`` times on every object."""
 
     objects: tuple[str, ...]
@@ -47,17 +48,6 @@ class GenerationPlan:
         names = [a.name for a in self.actions]
         if len(set(names)) != len(names):
             raise ValueError(f"action names must be unique, got {names}")
-
-    def trials(self) -> Iterator[tuple[str, ExploratoryAction, int]]:
-        """All (object, action, trial) in the order they are written: trial by trial, so that a
-        partial file holds some of every object and action."""
-        for t in range(self.first_trial, self.first_trial + self.repetitions):
-            for obj in self.objects:
-                for act in self.actions:
-                    yield obj, act, t
-
-    def __len__(self) -> int:
-        return len(self.objects) * len(self.actions) * self.repetitions
 
     def describe(self) -> dict[str, Any]:
         return {
