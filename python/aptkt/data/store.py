@@ -13,9 +13,9 @@ whatever happens later. SWMR does not order the writes of *different* datasets d
 flush, so a writer killed mid-append can leave the new index row on disk before its samples or
 metadata; the reader checks the last row against the other datasets and drops it if it is
 incomplete (at most one append is ever in flight). :class:`DatasetReader` opens files in
-SWMR-read mode, which also works while a writer is running or after it died. To *append* to a file whose writer died,
-:func:`repair` first copies its complete recordings into a fresh file (the HDF5 library refuses
-to reopen a crashed SWMR file for writing until that is done).
+SWMR-read mode, which also works while a writer is running or after it died. To *append* to a
+file whose writer died, :func:`repair` first copies its complete recordings into a fresh file
+(the HDF5 library refuses to reopen a crashed SWMR file for writing until that is done).
 """
 
 from __future__ import annotations
@@ -282,6 +282,8 @@ class DatasetReader:
         self.index = index[:self._complete(index)]
         #: Index rows of an append that was cut short (a writer killed mid-append, or one
         #: still running), left out: 0 or 1.
+        # (A last index chunk past the end of the file is dropped by _readable_prefix and not
+        # counted: it can only hold that same in-flight row.)
         self.incomplete = len(index) - len(self.index)
 
     def _complete(self, index: np.ndarray) -> int:
