@@ -287,3 +287,34 @@ def test_same_seed_same_dataset_bit_for_bit(tmp_path):
     generate(c, other, progress=False)
     with DatasetReader(a) as ra, DatasetReader(c) as rc:
         assert not same_samples(ra.recording(0), rc.recording(0))
+
+
+STARTER = """
+import sys
+from aptkt.data import DatasetWriter, DatasetReader
+src, dst = sys.argv[1], sys.argv[2]
+with DatasetReader(src) as rd:
+    rec = rd.recording(0)
+with DatasetWriter(dst) as w:
+    w.append(rec)
+"""
+
+
+def test_a_reader_polling_as_the_writer_starts_does_not_stop_it(tmp_path, recordings):
+    # A reader opening the file takes its lock for a moment; the writer's switch to SWMR mode
+    # used to fail then (errno 11) — in 3 of 60 starts with a reader polling like this one.
+    src = tmp_path / "src.h5"
+    with DatasetWriter(src) as w:
+        w.append(recordings[0])
+    for attempt in range(40):
+        dst = tmp_path / f"started{attempt}.h5"
+        proc = subprocess.Popen([sys.executable, "-c", STARTER, str(src), str(dst)], stderr=subprocess.PIPE)
+        while proc.poll() is None:
+            try:
+                with DatasetReader(dst) as rd:
+                    len(rd)
+            except DatasetError:  # not created yet
+                pass
+        assert proc.returncode == 0, proc.stderr.read().decode()[-800:]
+        with DatasetReader(dst) as rd:
+            assert len(rd) == 1
