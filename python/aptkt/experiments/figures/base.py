@@ -8,10 +8,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from aptkt.experiments.plots import save_figure
 from aptkt.experiments.priors import PriorTask
 from aptkt.experiments.runs import RunSpec
 from aptkt.experiments.sampling import derive_seed
 from aptkt.experiments.scale import Scale
+from aptkt.experiments.tables import write_csv
 from aptkt.learning import GPSettings, LearnerConfig
 
 __all__ = ["Context", "Plan", "METHODS", "Section", "Headline"]
@@ -43,6 +45,16 @@ class Context:
         d = self.output / name
         d.mkdir(parents=True, exist_ok=True)
         return d
+
+    def write_figure(self, name: str, fig: Any, rows: Sequence[Mapping[str, Any]],
+                     curve_rows: Sequence[Mapping[str, Any]]) -> list[str]:
+        """A figure's plot (PNG, SVG), every step of every run (``results.csv``) and its curves
+        (``curves.csv``) in its directory; returns the files, relative to the output."""
+        out = self.figure_dir(name)
+        files = [str(p.relative_to(self.output)) for p in save_figure(fig, out / name)]
+        write_csv(out / "results.csv", rows)
+        write_csv(out / "curves.csv", curve_rows)
+        return files + [f"{name}/results.csv", f"{name}/curves.csv"]
 
     def seed_for(self, *keys: int | str) -> int:
         return derive_seed(self.seed, *keys)

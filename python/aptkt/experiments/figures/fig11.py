@@ -16,9 +16,9 @@ from aptkt.experiments.figures.base import Context, Headline, Plan, Section
 from aptkt.experiments.figures.common import (
     accuracy_table, gain_summary, key_steps, method_curves, plot_panel, transfer_rate,
 )
-from aptkt.experiments.plots import figure, save_figure
+from aptkt.experiments.plots import figure
 from aptkt.experiments.report import ci, markdown_table, no_harm_verdict
-from aptkt.experiments.tables import curves_rows, write_csv
+from aptkt.experiments.tables import curves_rows
 
 NAME = "fig11"
 TITLE = "negative-transfer test with dissimilar priors"
@@ -49,7 +49,6 @@ def plan(ctx: Context) -> Plan:
 
 
 def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    out = ctx.figure_dir(NAME)
     design = panels(ctx)
     steps = key_steps(ctx.scale.budget)
     keys = list(design)
@@ -69,10 +68,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         ax.set_visible(False)
     fig.suptitle("Fig. 11 — negative-transfer test: priors dissimilar to the new objects")
     fig.tight_layout()
-    files = [str(p.relative_to(ctx.output)) for p in save_figure(fig, out / NAME)]
-    write_csv(out / "results.csv", rows)
-    write_csv(out / "curves.csv", curve_rows)
-    files += [f"{NAME}/results.csv", f"{NAME}/curves.csv"]
+    files = ctx.write_figure(NAME, fig, rows, curve_rows)
 
     harmed = [k for k in keys if gains[k].overall.significant_negative]
     harmed_early = [k for k in keys if 0 in gains[k].at and gains[k].at[0].significant_negative]

@@ -19,10 +19,10 @@ from aptkt.actions import PAPER_ACTIONS
 from aptkt.experiments.aggregate import collect, difference, estimate, mean_over_panels
 from aptkt.experiments.figures.base import Context, Headline, Plan, Section
 from aptkt.experiments.figures.common import plot_panel
-from aptkt.experiments.plots import figure, save_figure
+from aptkt.experiments.plots import figure
 from aptkt.experiments.report import PAPER, ci, markdown_table
 from aptkt.experiments.sampling import draw_groups
-from aptkt.experiments.tables import curves_rows, write_csv
+from aptkt.experiments.tables import curves_rows
 
 NAME = "fig6"
 TITLE = "multi-modal kernel vs single modalities"
@@ -64,7 +64,6 @@ def _category(e) -> str:
 
 
 def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    out = ctx.figure_dir(NAME)
     actions = list(ctx.scale.actions)
     per_action: dict[str, dict[str, Any]] = {}
     n = len(actions) + 1
@@ -99,10 +98,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         ax.set_visible(False)
     fig.suptitle("Fig. 6 — multi-modal combination (Multi) vs single modalities, no transfer")
     fig.tight_layout()
-    files = [str(p.relative_to(ctx.output)) for p in save_figure(fig, out / NAME)]
-    write_csv(out / "results.csv", rows)
-    write_csv(out / "curves.csv", curve_rows)
-    files += [f"{NAME}/results.csv", f"{NAME}/curves.csv"]
+    files = ctx.write_figure(NAME, fig, rows, curve_rows)
 
     cats = {a: _category(per_action[a]["vs_best"]) for a in actions}
     worse = [a for a in actions if cats[a] == "worse"]

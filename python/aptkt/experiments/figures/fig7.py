@@ -16,9 +16,9 @@ from aptkt.experiments.figures.common import (
     accuracy_table, gain_summary, key_steps, method_curves, plot_panel, prior_group_plan, prior_groups,
     transfer_rate,
 )
-from aptkt.experiments.plots import canvas, save_figure
+from aptkt.experiments.plots import canvas
 from aptkt.experiments.report import PAPER, ci, gain_verdict, markdown_table, pp
-from aptkt.experiments.tables import curves_rows, write_csv
+from aptkt.experiments.tables import curves_rows
 
 NAME = "fig7"
 TITLE = "transfer from 3 prior objects, all actions"
@@ -30,7 +30,6 @@ def plan(ctx: Context) -> Plan:
 
 
 def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    out = ctx.figure_dir(NAME)
     budget = ctx.scale.budget
     where = {"panel": "all"}
     curves = method_curves(rows, where, METHODS)
@@ -55,12 +54,9 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     big = fig.add_subplot(grid[:, ncols:])
     plot_panel(big, curves, f"average of {curves['APTKT'].n_runs} runs")
     fig.suptitle(f"Fig. 7 — transfer from {ctx.scale.n_priors} prior objects, {len(ctx.scale.actions)} actions")
-    files = [str(p.relative_to(ctx.output)) for p in save_figure(fig, out / NAME)]
-
-    write_csv(out / "results.csv", rows)
-    write_csv(out / "curves.csv", [r for m, c in curves.items() for r in curves_rows({"panel": "all", "method": m}, c)]
-              + [r for m, c in fused.items() for r in curves_rows({"panel": "all (fused)", "method": m}, c)])
-    files += [f"{NAME}/results.csv", f"{NAME}/curves.csv"]
+    curve_rows = ([r for m, c in curves.items() for r in curves_rows({"panel": "all", "method": m}, c)]
+                  + [r for m, c in fused.items() for r in curves_rows({"panel": "all (fused)", "method": m}, c)])
+    files = ctx.write_figure(NAME, fig, rows, curve_rows)
 
     mean_gain = gain.gain.mean()
     headlines = [

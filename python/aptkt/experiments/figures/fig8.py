@@ -16,9 +16,9 @@ from aptkt.experiments.figures.base import Context, Headline, Plan, Section
 from aptkt.experiments.figures.common import (
     accuracy_table, gain_summary, key_steps, method_curves, plot_panel, prior_group_plan, transfer_rate,
 )
-from aptkt.experiments.plots import figure, save_figure
+from aptkt.experiments.plots import figure
 from aptkt.experiments.report import PAPER, ci, gain_verdict, markdown_table, pp
-from aptkt.experiments.tables import curves_rows, write_csv
+from aptkt.experiments.tables import curves_rows
 
 NAME = "fig8"
 TITLE = "transfer with one exploratory action at a time"
@@ -32,7 +32,6 @@ def plan(ctx: Context) -> Plan:
 
 
 def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    out = ctx.figure_dir(NAME)
     actions = list(ctx.scale.actions)
     steps = key_steps(ctx.scale.budget)
     n = len(actions) + 1
@@ -64,10 +63,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         extra.set_visible(False)
     fig.suptitle(f"Fig. 8 — transfer from {ctx.scale.n_priors} priors with one action at a time")
     fig.tight_layout()
-    files = [str(p.relative_to(ctx.output)) for p in save_figure(fig, out / NAME)]
-    write_csv(out / "results.csv", rows)
-    write_csv(out / "curves.csv", curve_rows)
-    files += [f"{NAME}/results.csv", f"{NAME}/curves.csv"]
+    files = ctx.write_figure(NAME, fig, rows, curve_rows)
 
     rates = {a: transfer_rate(rows, {"method": "APTKT", "panel": a}) for a in actions}
     headlines = []

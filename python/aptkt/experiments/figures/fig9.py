@@ -16,9 +16,9 @@ from aptkt.experiments.figures.common import (
     accuracy_table, gain_summary, key_steps, method_curves, plot_panel, prior_group_plan, prior_groups,
     transfer_rate,
 )
-from aptkt.experiments.plots import figure, save_figure
+from aptkt.experiments.plots import figure
 from aptkt.experiments.report import PAPER, ci, gain_verdict, markdown_table, pp
-from aptkt.experiments.tables import curves_rows, write_csv
+from aptkt.experiments.tables import curves_rows
 
 NAME = "fig9"
 TITLE = "increasing the number of prior objects; auxiliary features"
@@ -35,7 +35,6 @@ def plan(ctx: Context) -> Plan:
 
 
 def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    out = ctx.figure_dir(NAME)
     counts = list(ctx.scale.prior_counts)
     steps = key_steps(ctx.scale.budget)
     fig, axes = figure(1, len(counts), figsize=(4.6 * len(counts), 4.2), squeeze=False)
@@ -52,10 +51,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         tables.append(f"**{n} priors**\n\n" + accuracy_table(curves, steps))
     fig.suptitle("Fig. 9 — more prior objects: baseline (red), APTKT (blue), APTKT with auxiliary features (green)")
     fig.tight_layout()
-    files = [str(p.relative_to(ctx.output)) for p in save_figure(fig, out / NAME)]
-    write_csv(out / "results.csv", rows)
-    write_csv(out / "curves.csv", curve_rows)
-    files += [f"{NAME}/results.csv", f"{NAME}/curves.csv"]
+    files = ctx.write_figure(NAME, fig, rows, curve_rows)
 
     most, fewest = max(counts), min(counts)
     one = 1 if 1 in aux[most].at else 0
