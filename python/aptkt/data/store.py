@@ -47,8 +47,8 @@ _T = TypeVar("_T")
 
 
 def _while_locked(step: Callable[[], _T]) -> _T:
-    """Run an HDF5 open (or the switch to SWMR writing), retrying while another process holds
-    the file's lock for a moment. A reader opening the file as the writer starts takes the lock
+    """Run an HDF5 open or create (or the switch to SWMR writing), retrying while another process
+    holds the file's lock for a moment. A reader opening the file as the writer starts takes the lock
     briefly, and the writer's switch to SWMR mode would otherwise fail with errno 11 and end a
     collection before its first trial (measured: 3 of 60 starts with a reader polling)."""
     deadline = time.monotonic() + _LOCK_PATIENCE_S
@@ -181,7 +181,7 @@ class DatasetWriter:
             if self.path.exists() and not overwrite:
                 raise DatasetError(f"{self.path} exists (use overwrite=True / --overwrite, or append)")
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._f = h5py.File(self.path, "w", libver="latest", track_order=False)
+            self._f = _while_locked(lambda: h5py.File(self.path, "w", libver="latest", track_order=False))
             f = self._f
             f.attrs["schema"] = SCHEMA
             f.attrs["schema_version"] = SCHEMA_VERSION
@@ -197,15 +197,17 @@ class DatasetWriter:
                 s.create_dataset(name, shape=(0, *tail), maxshape=(None, *tail), dtype=dtype,
                                  chunks=(_CHUNK_ROWS, *tail), track_times=False, **_COMPRESSION)
             f.flush()
-        self._index = self._f["recordings/index"]
-        self._meta = self._f["recordings/metadata"]
-        self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
-        self._keys = {(r["object"].decode(), r["action"].decode(), int(r["trial"])) for r in self._index[...]}
         try:
             _while_locked(self._start_swmr)
         except RuntimeError as exc:
             self._f.close()
             raise DatasetError(f"{self.path}: cannot start writing: another process keeps the file locked ({exc})") from exc
+        # Handles are taken only now: a failed attempt to start SWMR writing invalidates the
+        # handles open at the time, so a retry would leave the writer with dead ones.
+        self._index = self._f["recordings/index"]
+        self._meta = self._f["recordings/metadata"]
+        self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
+        self._keys = {(r["object"].decode(), r["action"].decode(), int(r["trial"])) for r in self._index[...]}
 
     def _start_swmr(self) -> None:
         self._f.swmr_mode = True
