@@ -38,13 +38,13 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")  # one thread each: BLAS for sciki
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
-
 from _common import save, table  # noqa: E402
+
 from aptkt.experiments.figures.base import Context  # noqa: E402
 from aptkt.experiments.figures.common import prior_groups  # noqa: E402
 from aptkt.experiments.reproduce import _paper_numbers  # noqa: E402
+from aptkt.experiments.run_store import data_fingerprint  # noqa: E402
 from aptkt.experiments.scale import Scale  # noqa: E402
-from aptkt.experiments.store import data_fingerprint  # noqa: E402
 from aptkt.learning import APTKT, GPSettings, PoolEnvironment, PriorKnowledge  # noqa: E402
 from aptkt.learning.dataset import load_observations  # noqa: E402
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from aptkt.errors import AptktError
 from aptkt.robot import UR10, Placement, SafetyLimits
-from aptkt.robot.loopback import Loopback
+from aptkt.sim.loopback import Loopback
 
 PLACEMENT = Placement("surface", 0.0, -0.5, 0.0, (-0.04, -0.54, -0.01), (0.04, -0.46, 0.04))
 START = (0.0, -0.5, 0.006, math.pi, 0.0, 0.0)

@@ -14,9 +14,9 @@ from aptkt.experiments.executors import LocalExecutor, make_executor
 from aptkt.experiments.figures import fig7, fig8
 from aptkt.experiments.figures.base import Context
 from aptkt.experiments.reproduce import _paper_numbers
+from aptkt.experiments.run_store import RunStore, data_fingerprint
 from aptkt.experiments.runs import run_steps
 from aptkt.experiments.scale import Scale
-from aptkt.experiments.store import RunStore, data_fingerprint
 
 THREAD_VARIABLES = ["RAYON_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"]
 

@@ -8,9 +8,9 @@ from dataclasses import replace
 
 import pytest
 
+from aptkt.experiments.run_store import RunStore, run_key
 from aptkt.experiments.runs import RunSpec
 from aptkt.experiments.sampling import derive_seed, draw_groups
-from aptkt.experiments.store import RunStore, run_key
 from aptkt.learning import LearnerConfig
 
 

@@ -7,8 +7,8 @@ import pytest
 
 from aptkt.actions import PAPER_ACTIONS
 from aptkt.cli import main
-from aptkt.data.generate import GenerationPlan, generate
 from aptkt.learning import PriorKnowledge
+from aptkt.runtime.generation import GenerationPlan, generate
 
 
 @pytest.fixture(scope="module")

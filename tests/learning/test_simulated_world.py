@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from aptkt.actions import PAPER_ACTIONS
-from aptkt.data.generate import GenerationPlan, generate
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.dataset import load_observations
+from aptkt.runtime.generation import GenerationPlan, generate
 
 pytestmark = pytest.mark.slow
 

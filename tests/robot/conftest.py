@@ -2,17 +2,10 @@
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable, Iterator
-from pathlib import Path
 
 import pytest
-
-# The test modules import their helpers by name (``loopback_helpers``); with pytest's
-# importlib import mode the test directory is not on sys.path by itself.
-sys.path.insert(0, str(Path(__file__).parent))
-
-from loopback_helpers import (  # noqa: E402
+from loopback_helpers import (  # tests/helpers (see tests/conftest.py)
     DEFAULT_CONTACT,
     FAST,
     PLACEMENT,
@@ -21,8 +14,8 @@ from loopback_helpers import (  # noqa: E402
     free_loopback_host,
 )
 
-from aptkt.robot import UR10, SafetyLimits  # noqa: E402
-from aptkt.robot.loopback import Loopback  # noqa: E402
+from aptkt.robot import UR10, SafetyLimits
+from aptkt.sim.loopback import Loopback
 
 
 @pytest.fixture(scope="module")

@@ -9,9 +9,8 @@ import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a miss
 
 from loopback_helpers import PLACEMENT, STIFFNESS, LoopbackSkin, at_rest  # noqa: E402
 
-from aptkt.actions import ExploratoryAction, Movement  # noqa: E402
+from aptkt.actions import ExplorationSettings, ExploratoryAction, Movement, explore  # noqa: E402
 from aptkt.errors import ProtectiveStopError  # noqa: E402
-from aptkt.exploration import ExplorationSettings, explore  # noqa: E402
 
 SETTINGS = ExplorationSettings(clearance=0.003, lift_height=0.005, thermal_wait=0.2, stamp_wall_clock=False)
 

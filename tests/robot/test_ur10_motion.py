@@ -12,7 +12,7 @@ import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a miss
 from loopback_helpers import PLACEMENT, STIFFNESS, SURFACE_Z, FakeSkin, at_rest, free_loopback_host, in_contact  # noqa: E402
 
 from aptkt.robot import UR10, Robot, SafetyLimits  # noqa: E402
-from aptkt.robot.loopback import Loopback  # noqa: E402
+from aptkt.sim.loopback import Loopback  # noqa: E402
 
 
 def test_connects_uploads_the_control_script_and_arms_the_controller_watchdog(robot, loopback):

@@ -8,8 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from aptkt.actions import PAPER_ACTIONS
-from aptkt.exploration import ExplorationSettings, explore
+from aptkt.actions import PAPER_ACTIONS, ExplorationSettings, explore
 from aptkt.skin import SerialSkin
 
 pytestmark = pytest.mark.slow

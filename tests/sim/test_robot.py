@@ -9,9 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from aptkt.actions import PAPER_ACTIONS, ExploratoryAction, Movement
+from aptkt.actions import PAPER_ACTIONS, ExplorationSettings, ExploratoryAction, Movement, explore
 from aptkt.errors import RobotError, SafetyLimitError
-from aptkt.exploration import ExplorationSettings, explore
 from aptkt.robot.base import Robot, SafetyLimits
 from aptkt.sim import SimWorld
 

@@ -141,7 +141,7 @@ def test_same_trial_same_data_whatever_the_order():
 
 def test_thermal_recovery_while_lifted(world):
     """After a static contact on metal the lifted skin warms back up during the thermal wait."""
-    from aptkt.exploration import ExplorationSettings, explore
+    from aptkt.actions import ExplorationSettings, explore
 
     act = PAPER_ACTIONS["C1"]
     with world.session("metal_toolbox", "C1", 0, action=act) as s:

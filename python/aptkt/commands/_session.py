@@ -1,5 +1,5 @@
 """Command-line options shared by ``aptkt collect`` and ``aptkt learn``: which robot, which
-skin, which actions — and the live session they make (:mod:`aptkt.live`)."""
+skin, which actions — and the live session they make (:mod:`aptkt.runtime.sessions`)."""
 
 from __future__ import annotations
 
@@ -73,13 +73,13 @@ def _host_port(text: str, option: str) -> tuple[str, int]:
 
 def make_session(args: argparse.Namespace, *, seed: int = 0) -> Any:
     """The (not yet entered) live session the options describe."""
-    from aptkt.exploration import ExplorationSettings
+    from aptkt.actions import ExplorationSettings
 
     if not args.thermal_wait >= 0:
         raise ConfigError("--thermal-wait must be >= 0")
     settings = ExplorationSettings(thermal_wait=args.thermal_wait)
     if args.robot == "sim":
-        from aptkt.live import SimSession
+        from aptkt.runtime.sessions import SimSession
 
         ignored = [o for o, v in (("--host", args.host), ("--workspace", args.workspace), ("--skin", args.skin),
                                   ("--tsu", args.tsu), ("--patch", args.patch)) if v]
@@ -88,7 +88,7 @@ def make_session(args: argparse.Namespace, *, seed: int = 0) -> Any:
                               "placements and skin)")
         return SimSession(seed=seed, settings=settings, object_files=args.objects_file)
 
-    from aptkt.live import RobotSession
+    from aptkt.runtime.sessions import RobotSession
 
     if args.objects_file:
         raise ConfigError("--objects-file: only for --robot sim")

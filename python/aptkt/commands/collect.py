@@ -52,7 +52,7 @@ def _prompt(trial: int) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from aptkt.data.collect import CollectionAborted, CollectionPlan, collect
+    from aptkt.runtime.collection import CollectionAborted, CollectionPlan, collect
 
     objects = split_names(args.objects, "--objects")
     available = available_actions(args)

@@ -65,7 +65,7 @@ def _split(text: str | None) -> list[str] | None:
 
 def build_plan(args: argparse.Namespace):  # -> GenerationPlan
     from aptkt.actions import PAPER_ACTIONS, actions_from_toml
-    from aptkt.data.generate import GenerationPlan
+    from aptkt.runtime.generation import GenerationPlan
     from aptkt.sim.objects import load_library
 
     library = load_library(*args.objects_file)
@@ -93,7 +93,7 @@ def build_plan(args: argparse.Namespace):  # -> GenerationPlan
 
 
 def run_generate(args: argparse.Namespace) -> int:
-    from aptkt.data.generate import describe_summary, dumps, generate
+    from aptkt.runtime.generation import describe_summary, dumps, generate
 
     plan = build_plan(args)
     info = generate(args.output, plan, jobs=args.jobs, resume=args.resume, overwrite=args.overwrite,

@@ -55,7 +55,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from aptkt.learning import LearnerConfig, PriorKnowledge
-    from aptkt.learning.live import LiveLearningAborted, learn_live
+    from aptkt.runtime.live_learning import LiveLearningAborted, learn_live
 
     try:
         prior = PriorKnowledge.load(args.prior)

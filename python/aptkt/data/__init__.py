@@ -1,5 +1,6 @@
 """Data sets: recordings and features in HDF5 (:mod:`aptkt.data.store`, layout in
-:mod:`aptkt.data.schema`) and their generation on the simulated world (:mod:`aptkt.data.generate`)."""
+:mod:`aptkt.data.schema`). Storage only: generating data sets on the simulated world and
+collecting them on a robot are in :mod:`aptkt.runtime`."""
 
 from aptkt.data.schema import SCHEMA, SCHEMA_VERSION
 from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, repair, write_features

@@ -1,5 +1,5 @@
 """Running a batch of experiment runs with resume: finished runs are read back from the
-:class:`~aptkt.experiments.store.RunStore`, the others are computed (on an executor) and stored
+:class:`~aptkt.experiments.run_store.RunStore`, the others are computed (on an executor) and stored
 as each one completes, so an interrupted batch loses at most the runs in flight."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ from typing import Any
 
 from aptkt.experiments.executors import Executor
 from aptkt.experiments.priors import PriorTask, build_prior
+from aptkt.experiments.run_store import RunStore, run_key
 from aptkt.experiments.runs import RunSpec, run_steps
-from aptkt.experiments.store import RunStore, run_key
 
 __all__ = ["BatchResult", "run_batch", "build_priors"]
 

@@ -68,7 +68,7 @@ def _say(msg: str) -> None:
 def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
     from tqdm import tqdm
 
-    from aptkt.data.generate import GenerationPlan, generate
+    from aptkt.runtime.generation import GenerationPlan, generate
 
     t_start = time.perf_counter()
     out = Path(s.output)

@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from aptkt.experiments.store import canonical_json
+from aptkt.experiments.run_store import canonical_json
 from aptkt.learning import GPSettings, PriorKnowledge
 from aptkt.learning.dataset import load_observations
 

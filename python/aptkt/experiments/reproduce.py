@@ -30,9 +30,9 @@ from aptkt.experiments.executors import make_executor
 from aptkt.experiments.figures import FIGURES
 from aptkt.experiments.figures.base import METHODS, Context
 from aptkt.experiments.report import markdown_table, render_report
+from aptkt.experiments.run_store import RunStore, data_fingerprint, run_key
 from aptkt.experiments.runs import label
 from aptkt.experiments.scale import Scale
-from aptkt.experiments.store import RunStore, data_fingerprint, run_key
 
 __all__ = ["ReproduceSettings", "reproduce", "FIGURE_NAMES"]
 
@@ -83,8 +83,8 @@ def prepare_data(s: ReproduceSettings, scale: Scale) -> tuple[Path, dict[str, An
     """The data set to learn from (generated if none was given) with its features extracted."""
     from aptkt.actions import PAPER_ACTIONS
     from aptkt.data import DatasetReader
-    from aptkt.data.generate import GenerationPlan, generate
     from aptkt.learning.dataset import extract_features
+    from aptkt.runtime.generation import GenerationPlan, generate
 
     info: dict[str, Any] = {}
     if s.data is not None:

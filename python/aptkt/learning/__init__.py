@@ -7,7 +7,7 @@ prior                  prior knowledge: old objects' observations, pipelines, mo
 transfer               from where and how much to transfer (Eq. 3)
 active                 uncertainty and next (action, object) selection (Eq. 4)
 learner                the APTKT process and the baseline
-environment            where observations come from (pools; robots through aptkt.exploration)
+environment            where observations come from (pools; robots through aptkt.actions.executor)
 evaluation             accuracy on held-out test observations, fused over actions
 =====================  =====================================================================
 """

@@ -1,4 +1,7 @@
-"""Robots that carry the skin: the interface, the simulated arm and the UR10 backend."""
+"""Robots that carry the skin: the interface every backend implements and the UR10 backend.
+
+The simulated arm and the loopback UR controller, which stand in for the hardware, are in
+:mod:`aptkt.sim`."""
 
 from aptkt.robot.base import ForceReading, Placement, Robot, SafetyLimits, TimedForceReading
 from aptkt.robot.ur10 import UR10

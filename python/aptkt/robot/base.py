@@ -1,6 +1,6 @@
 """The robot interface every backend implements (simulated world, UR10).
 
-The exploratory-action executor (:mod:`aptkt.exploration`) only talks to this protocol, so the
+The exploratory-action executor (:mod:`aptkt.actions.executor`) only talks to this protocol, so the
 learning code never knows whether the arm is real. Coordinates are metres in the robot base
 frame with +z pointing away from the table; the skin faces -z.
 """

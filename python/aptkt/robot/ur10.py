@@ -237,7 +237,7 @@ class UR10:
         self._mode: str | None = None  # "speed" | "force+speed" | "force" | "move"
         self._hold: tuple[str, tuple[Any, ...]] | None = None
         #: ``(start_ns, stop_ns)`` of the last hold (press) or constant-speed part of a slide,
-        #: on :meth:`now_ns`'s clock; :func:`aptkt.exploration.explore` crops recordings to it.
+        #: on :meth:`now_ns`'s clock; :func:`aptkt.actions.executor.explore` crops recordings to it.
         self.action_window_ns: tuple[int, int] | None = None
         self._in_motion = False
         self._keepalive: threading.Thread | None = None

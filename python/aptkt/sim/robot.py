@@ -42,7 +42,7 @@ class SimRobot:
         self.lean_force_control = lean_force_control
         self._placement: Placement | None = None
         self._contact_z: float | None = None
-        #: ``(start_ns, stop_ns)`` of the last hold or constant-speed slide (see aptkt.exploration).
+        #: ``(start_ns, stop_ns)`` of the last hold or constant-speed slide (see aptkt.actions.executor).
         self.action_window_ns: tuple[int, int] | None = None
 
     # ------------------------------------------------------------------ helpers

@@ -4,7 +4,7 @@
 >>> rec = world.explore("rough_sponge", "P2", trial=3)      # a Recording, as from hardware
 
 Each call to :meth:`SimWorld.explore` builds the trial from its own seed (object, action, trial)
-and runs the shared executor (:func:`aptkt.exploration.explore`) with the simulated robot and
+and runs the shared executor (:func:`aptkt.actions.executor.explore`) with the simulated robot and
 the in-process simulated skin, so results do not depend on the order of calls or on the
 process that makes them. :meth:`SimWorld.session` gives the robot and skin for your own loop;
 ``realtime=True`` streams the bytes through a pty for :class:`~aptkt.skin.SerialSkin`.
@@ -20,8 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.actions import PAPER_ACTIONS, ExploratoryAction, Movement
-from aptkt.exploration import ExplorationSettings, explore
+from aptkt.actions import PAPER_ACTIONS, ExplorationSettings, ExploratoryAction, Movement, explore
 from aptkt.robot.base import Placement, SafetyLimits
 from aptkt.sim.engine import FastDriver, RealTimeDriver, SimEngine
 from aptkt.sim.objects import ObjectLibrary, ObjectSpec, default_library
@@ -29,7 +28,7 @@ from aptkt.sim.patch import DEFAULT_CELL_IDS, PatchGeometry, PatchImperfections,
 from aptkt.sim.physics import ContactPhysics, ObjectPose
 from aptkt.sim.robot import SimRobot
 from aptkt.sim.seeding import stable_words, trial_seed_sequence
-from aptkt.sim.skin import PtySkinLink, SimSkin
+from aptkt.sim.skin_stream import PtySkinLink, SimSkin
 from aptkt.sim.trial import TrialConditions, TrialVariation
 from aptkt.skin import CellConfig, PatchConfig
 from aptkt.skin.samples import Recording

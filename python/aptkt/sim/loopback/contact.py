@@ -9,7 +9,7 @@ mode regulates). A model is any object with
 * ``normal`` — unit vector (base frame) the surface pushes the TCP along (default +z);
 * ``friction`` — optional Coulomb coefficient for the tangential force while sliding.
 
-The loopback's simulated skin (:mod:`aptkt.robot.loopback.skin`) also uses, when a model has
+The loopback's simulated skin (:mod:`aptkt.sim.loopback.tcp_skin`) also uses, when a model has
 them:
 
 * ``sensor_forces(pose) -> (7, 3)`` — newtons on each force sensor of the nominal 7-cell patch
@@ -202,7 +202,7 @@ def build(spec: Mapping[str, Any] | None) -> Any:
 
     ``None`` or ``{"type": "none"}`` → :class:`NoContact`; ``{"type": "spring", ...fields}`` →
     :class:`SpringSurface`; ``{"type": "sim_object", "object": name, "x": .., "y": ..}`` → an
-    object of the simulated world (:class:`aptkt.robot.loopback.world.SimObjectSurface`);
+    object of the simulated world (:class:`aptkt.sim.loopback.object_surface.SimObjectSurface`);
     ``{"factory": "module:attr", "params": {...}}`` → ``attr(**params)`` for any model
     importable in the controller process.
     """
@@ -232,7 +232,7 @@ def build(spec: Mapping[str, Any] | None) -> Any:
             return build(scene_from_workspace(spec.pop("file"), **spec))
         if kind == "sim_object":
             # The simulated world's contact physics (imported only when asked for).
-            from aptkt.robot.loopback.world import SimObjectSurface
+            from aptkt.sim.loopback.object_surface import SimObjectSurface
 
             return SimObjectSurface(**spec)
         if kind not in _BUILTIN:

@@ -21,7 +21,7 @@ from aptkt.cli import main  # noqa: E402
 from aptkt.data import DatasetReader  # noqa: E402
 from aptkt.learning import PriorKnowledge  # noqa: E402
 from aptkt.learning.dataset import load_observations  # noqa: E402
-from aptkt.robot.loopback import Loopback  # noqa: E402
+from aptkt.sim.loopback import Loopback  # noqa: E402
 
 DOWN = (math.pi, 0.0, 0.0)
 START = (0.0, -0.5, 0.02, *DOWN)

@@ -15,8 +15,8 @@ from collections.abc import Iterator
 import pytest
 from loopback_helpers import free_loopback_host
 
-from aptkt.robot.loopback import ControllerConfig, Loopback, LoopbackError, LoopbackServer, SimulatedController
-from aptkt.robot.loopback.servers import _split_program
+from aptkt.sim.loopback import ControllerConfig, Loopback, LoopbackError, LoopbackServer, SimulatedController
+from aptkt.sim.loopback.servers import _split_program
 
 
 class RawRtde:

@@ -2,9 +2,9 @@
 hardware skin source, or the simulated world. ``aptkt collect`` and ``aptkt learn`` run on them.
 
 A session is a context manager with ``explore(object, action, trial) -> Recording`` (the shared
-executor, :func:`aptkt.exploration.explore`), ``check_objects(names)`` and ``describe()``. On a
+executor, :func:`aptkt.actions.executor.explore`), ``check_objects(names)`` and ``describe()``. On a
 robot or skin fault ``explore`` raises the typed error with what was recorded in its
-``recording`` attribute (see :mod:`aptkt.exploration`); the robot is stopped by its backend.
+``recording`` attribute (see :mod:`aptkt.actions.executor`); the robot is stopped by its backend.
 A recording in which a cell fell silent counts as a skin fault (:class:`~aptkt.errors.SilentCellError`).
 """
 
@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from aptkt.actions import ExploratoryAction
+from aptkt.actions.executor import ExplorationSettings, _calibration, explore
 from aptkt.errors import ConfigError, SilentCellError
-from aptkt.exploration import ExplorationSettings, _calibration, explore
 from aptkt.skin.samples import Recording
 
 __all__ = ["LiveSession", "RobotSession", "SimSession"]

@@ -18,8 +18,8 @@ from aptkt.data import DatasetReader
 from aptkt.errors import ProtectiveStopError
 from aptkt.learning import LearnerConfig, PriorKnowledge
 from aptkt.learning.dataset import load_observations
-from aptkt.learning.live import LiveLearningAborted, learn_live
-from aptkt.live import SimSession
+from aptkt.runtime.live_learning import LiveLearningAborted, learn_live
+from aptkt.runtime.sessions import SimSession
 
 ACTIONS_TOML = """
 [[action]]

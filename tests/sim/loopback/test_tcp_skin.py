@@ -15,9 +15,9 @@ import pytest
 from loopback_helpers import free_loopback_host
 from scipy.spatial.transform import Rotation
 
-from aptkt.robot.loopback import Loopback
-from aptkt.robot.loopback.controller import CB3_VERSION, E_SERIES_VERSION, ControllerConfig, SimulatedController
-from aptkt.robot.loopback.world import SimObjectSurface
+from aptkt.sim.loopback import Loopback
+from aptkt.sim.loopback.controller import CB3_VERSION, E_SERIES_VERSION, ControllerConfig, SimulatedController
+from aptkt.sim.loopback.object_surface import SimObjectSurface
 from aptkt.skin import SerialSkin, StreamParser
 
 DOWN = (math.pi, 0.0, 0.0)
@@ -170,7 +170,7 @@ def test_the_real_serial_skin_reads_the_loopbacks_pty():
 
 def test_the_command_line_prints_the_skin_pty():
     host = free_loopback_host()
-    proc = subprocess.Popen([sys.executable, "-m", "aptkt.robot.loopback", "--host", host, "--skin-pty",
+    proc = subprocess.Popen([sys.executable, "-m", "aptkt.sim.loopback", "--host", host, "--skin-pty",
                              "--skin-rate", "125"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         port = None

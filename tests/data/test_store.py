@@ -16,7 +16,7 @@ import pytest
 
 from aptkt.actions import PAPER_ACTIONS
 from aptkt.data import DatasetError, DatasetReader, DatasetWriter, repair, write_features
-from aptkt.data.generate import GenerationPlan, generate
+from aptkt.runtime.generation import GenerationPlan, generate
 from aptkt.sim import SimWorld
 
 FIELDS = ("cell_id", "t_ns", "proximity", "acc", "temp", "force")

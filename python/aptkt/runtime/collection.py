@@ -23,9 +23,9 @@ from pathlib import Path
 from typing import Any
 
 from aptkt.actions import ExploratoryAction
-from aptkt.data.plan import TrialGrid
 from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, recording_key, repair
 from aptkt.errors import AptktError, ConfigError
+from aptkt.runtime.grid import TrialGrid
 from aptkt.skin.samples import Recording
 
 __all__ = ["CollectionPlan", "CollectionAborted", "collect", "aborted_path", "save_aborted"]
@@ -121,7 +121,7 @@ def collect(
     progress: bool | Callable[[str], None] = True,
     between_trials: Callable[[int], None] | None = None,
 ) -> dict[str, Any]:
-    """Run ``plan`` on ``session`` (an entered :mod:`aptkt.live` session) into ``path``.
+    """Run ``plan`` on ``session`` (an entered :mod:`aptkt.runtime.sessions` session) into ``path``.
 
     ``progress``: True for a progress bar on stderr, or a callable that receives one line per
     recording. ``between_trials(trial)`` is called before each new trial round but the first

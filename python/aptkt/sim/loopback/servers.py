@@ -15,8 +15,8 @@ import threading
 import time
 from collections.abc import Sequence
 
-from aptkt.robot.loopback import rtde
-from aptkt.robot.loopback.controller import SimulatedController
+from aptkt.sim.loopback import rtde
+from aptkt.sim.loopback.controller import SimulatedController
 
 __all__ = ["LoopbackServer", "DEFAULT_PORTS"]
 

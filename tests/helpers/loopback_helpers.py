@@ -1,4 +1,5 @@
-"""Helpers for the UR10 tests: loopback addresses, a fake skin with injectable faults, timers.
+"""Helpers for the tests that run a loopback controller (the UR10 backend, the loopback itself,
+live sessions): loopback addresses, a fake skin with injectable faults, timers.
 
 ur_rtde's RTDE (30004) and script (30003) ports are fixed in the client, so each loopback
 needs a loopback address of its own; the first 127.0.0.x with free ports is used (127.0.0.1
@@ -16,7 +17,7 @@ from collections.abc import Callable
 import numpy as np
 
 from aptkt.robot import UR10, Placement
-from aptkt.robot.loopback import Loopback
+from aptkt.sim.loopback import Loopback
 from aptkt.skin import encode_sensor_packets, quantize
 from aptkt.skin.config import default_patch
 from aptkt.skin.source import SkinSourceBase

@@ -28,14 +28,14 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.robot.loopback import contact as contact_models
-from aptkt.robot.loopback.kinematics import (
+from aptkt.sim.loopback import contact as contact_models
+from aptkt.sim.loopback.rotvec import (
     integrate_rotvec,
     interpolate_rotvec,
     limit_norm,
     rotvec_to_matrix,
 )
-from aptkt.robot.loopback.rtde import input_type, output_type
+from aptkt.sim.loopback.rtde import input_type, output_type
 
 __all__ = ["ControllerConfig", "SimulatedController", "SUPPORTED_COMMANDS", "CB3_VERSION", "E_SERIES_VERSION"]
 
@@ -100,7 +100,7 @@ class ControllerConfig:
     robot_model: str = "UR10"
     seed: int = 0
     #: The simulated skin patch on the TCP, streamed through a pty (None: no skin). ``{}``
-    #: for the defaults, or fields of :class:`aptkt.robot.loopback.skin.SkinConfig`.
+    #: for the defaults, or fields of :class:`aptkt.sim.loopback.tcp_skin.SkinConfig`.
     skin: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
@@ -196,7 +196,7 @@ class SimulatedController:
         self._input_owner: dict[str, int] = {}
         self.skin: Any = None
         if self.config.skin is not None:
-            from aptkt.robot.loopback.skin import SimulatedSkin, SkinConfig
+            from aptkt.sim.loopback.tcp_skin import SimulatedSkin, SkinConfig
 
             self.skin = SimulatedSkin(SkinConfig.from_spec(self.config.skin))
         self._skin_errors = 0

@@ -8,8 +8,8 @@ written in plan order, so the same plan and seed give the same file content bit 
 from __future__ import annotations
 
 import concurrent.futures as cf
-import multiprocessing
 import json
+import multiprocessing
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -17,8 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from aptkt.actions import PAPER_ACTIONS, ExploratoryAction
-from aptkt.data.plan import TrialGrid
 from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, repair
+from aptkt.runtime.grid import TrialGrid
 from aptkt.skin.samples import Recording
 
 # Workers are spawned, never forked: a fork copies the parent's thread pools (rayon in the
@@ -51,7 +51,7 @@ class GenerationPlan(TrialGrid):
 
     def describe(self) -> dict[str, Any]:
         return {
-            "generator": "aptkt.data.generate",
+            "generator": "aptkt.runtime.generation",
             "world": "aptkt.sim.SimWorld",
             "seed": self.seed,
             "objects": list(self.objects),

@@ -10,8 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from aptkt.robot import Placement
-from aptkt.robot.loopback import contact as contact_models
+from aptkt.sim.loopback import contact as contact_models
 from aptkt.sim.patch import SkinConstants
 
 FLAT = """
@@ -99,23 +98,3 @@ def test_harder_objects_push_back_harder():
 def test_unknown_object_is_a_clear_error():
     with pytest.raises(Exception, match="glass_of_water"):
         contact_models.build({"type": "sim_object", "object": "glass_of_water", "x": 0.0, "y": 0.0})
-
-
-def test_the_ur10_presses_a_simulated_world_object_through_ur_rtde(robot, loopback):
-    from loopback_helpers import FakeSkin
-
-    spec = {"type": "sim_object", "object": "rough_sponge", "x": 0.0, "y": -0.5}
-    model = contact_models.build(spec)
-    top = model.shape.surface_z
-    loopback.set_contact(spec)
-    loopback.reset(pose=(0.0, -0.5, top + 0.006, math.pi, 0.0, 0.0), keep_program=True)
-    sponge = Placement("rough_sponge", 0.0, -0.5, top, (-0.06, -0.54, top - 0.01), (0.06, -0.46, top + 0.04))
-    robot.move_above(sponge, 0.004)
-    skin = FakeSkin(loopback)
-    z = robot.approach_contact(skin, 0.05)
-    robot.press(0.001, 0.2)
-    state = loopback.state()
-    assert state["pose"][2] == pytest.approx(z - 0.001, abs=1e-6)
-    assert state["normal_force"] == pytest.approx(model.normal_force(state["pose"]), rel=1e-9)
-    assert 0.3 < state["normal_force"] < 1.5
-    robot.lift(0.005)

@@ -1,9 +1,9 @@
-"""``python -m aptkt.robot.loopback``: run a loopback UR controller in this terminal.
+"""``python -m aptkt.sim.loopback``: run a loopback UR controller in this terminal.
 
 Then connect anything that speaks to a UR controller (ur_rtde, ``aptkt.robot.UR10``) to the
 host it prints. With ``--skin-pty`` a simulated skin patch on the TCP streams the skin's wire
 protocol through a pty whose path it prints (``aptkt skin monitor PATH`` shows it). With
-``--workspace FILE`` the objects of a workspace file lie where the file says. ``--stdio`` is the mode :class:`~aptkt.robot.loopback.Loopback` uses for its
+``--workspace FILE`` the objects of a workspace file lie where the file says. ``--stdio`` is the mode :class:`~aptkt.sim.loopback.Loopback` uses for its
 child process (JSON commands on stdin, answers on stdout).
 """
 
@@ -14,11 +14,11 @@ import json
 import sys
 import time
 
-from aptkt.robot.loopback.controller import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
+from aptkt.sim.loopback.controller import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m aptkt.robot.loopback", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m aptkt.sim.loopback", description=__doc__.split("\n")[0])
     parser.add_argument("--host", default="127.0.0.1", help="loopback address to serve on (default 127.0.0.1)")
     parser.add_argument("--series", choices=("cb3", "e-series"), default="cb3",
                         help="cb3: PolyScope 3.15, RTDE at 125 Hz; e-series: PolyScope 5.11, 500 Hz")
@@ -61,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
             contact = {"type": "sim_object", "object": args.object, "x": args.object_xy[0], "y": args.object_xy[1]}
         if args.workspace:
             from aptkt.errors import ConfigError
-            from aptkt.robot.loopback.contact import scene_from_workspace
+            from aptkt.sim.loopback.contact import scene_from_workspace
 
             try:
                 contact = scene_from_workspace(args.workspace, stiffness=args.stiffness, friction=args.friction)
@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"--workspace: {exc}", file=sys.stderr)
                 return 1
         if args.skin_pty:
-            from aptkt.robot.loopback.skin import SkinConfig
+            from aptkt.sim.loopback.tcp_skin import SkinConfig
 
             try:
                 extra["skin"] = SkinConfig(rate_hz=args.skin_rate, patch=args.patch).to_dict()
@@ -83,13 +83,13 @@ def main(argv: list[str] | None = None) -> int:
         )
 
     if args.stdio:
-        from aptkt.robot.loopback.process import serve_stdio
+        from aptkt.sim.loopback.process import serve_stdio
 
         serve_stdio(config, args.host, ports, sys.stdin, sys.stdout)
         return 0
 
-    from aptkt.robot.loopback.controller import SimulatedController
-    from aptkt.robot.loopback.servers import LoopbackServer
+    from aptkt.sim.loopback.controller import SimulatedController
+    from aptkt.sim.loopback.servers import LoopbackServer
 
     try:
         controller = SimulatedController(config)

@@ -39,8 +39,8 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.robot.loopback.contact import ThermalContact
-from aptkt.robot.loopback.kinematics import rotvec_to_matrix
+from aptkt.sim.loopback.contact import ThermalContact
+from aptkt.sim.loopback.rotvec import rotvec_to_matrix
 from aptkt.sim.objects import Layer
 from aptkt.sim.patch import SkinConstants
 from aptkt.sim.thermal import CellThermal, speed_bins
@@ -104,7 +104,7 @@ class SkinConfig:
 class SimulatedSkin:
     """The patch on the loopback's TCP. :meth:`step` runs once per control cycle (the
     controller calls it at the end of its tick, lock held) and writes the packets due since
-    the previous cycle to ``link`` (a :class:`aptkt.sim.skin.PtySkinLink` unless given)."""
+    the previous cycle to ``link`` (a :class:`aptkt.sim.skin_stream.PtySkinLink` unless given)."""
 
     def __init__(self, config: SkinConfig | None = None, link: Any = None):
         self.config = config or SkinConfig()
@@ -116,7 +116,7 @@ class SimulatedSkin:
         self._centres = patch.positions_mm[:, :2] * 1e-3  # (n, 2) m
         self.constants = SkinConstants()
         if link is None:
-            from aptkt.sim.skin import PtySkinLink
+            from aptkt.sim.skin_stream import PtySkinLink
 
             link = PtySkinLink()
         self.link = link

@@ -5,23 +5,23 @@ dashboard server (29999), the script ports (30001-30003) and the register handsh
 ur_rtde's control script — and integrates the TCP kinematically against a pluggable contact
 model. With ``skin=True`` (``--skin-pty``) a simulated skin patch on the TCP streams the skin's
 wire protocol through a pty for the real :class:`~aptkt.skin.SerialSkin`
-(:mod:`aptkt.robot.loopback.skin`). See ``docs/ur10.md`` for what it covers and what it does not.
+(:mod:`aptkt.sim.loopback.tcp_skin`). See ``docs/ur10.md`` for what it covers and what it does not.
 
-Run one in a terminal with ``python -m aptkt.robot.loopback``; in code use :class:`Loopback`
+Run one in a terminal with ``python -m aptkt.sim.loopback``; in code use :class:`Loopback`
 (a child process: ur_rtde's constructors hold the GIL, so the controller cannot share the
 client's interpreter).
 """
 
-from aptkt.robot.loopback.contact import ContactModel, NoContact, Scene, SpringSurface
-from aptkt.robot.loopback.controller import (
+from aptkt.sim.loopback.contact import ContactModel, NoContact, Scene, SpringSurface
+from aptkt.sim.loopback.controller import (
     CB3_VERSION,
     E_SERIES_VERSION,
     SUPPORTED_COMMANDS,
     ControllerConfig,
     SimulatedController,
 )
-from aptkt.robot.loopback.process import Loopback, LoopbackError
-from aptkt.robot.loopback.servers import LoopbackServer
+from aptkt.sim.loopback.process import Loopback, LoopbackError
+from aptkt.sim.loopback.servers import LoopbackServer
 
 __all__ = [
     "Loopback",

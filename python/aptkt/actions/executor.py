@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.actions import ExploratoryAction, Movement
+from aptkt.actions.definition import ExploratoryAction, Movement
 from aptkt.errors import AptktError
 from aptkt.robot.base import Placement, Robot
 from aptkt.skin.base import SkinSource

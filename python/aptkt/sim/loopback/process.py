@@ -3,7 +3,7 @@
 ur_rtde's constructors (``RTDEControlInterface(...)``, ``RTDEReceiveInterface(...)``) keep the
 Python GIL while they wait for the controller's answers, so a controller served by threads of
 the *same* interpreter can never answer them: the client would deadlock. The loopback
-therefore always runs in a child process (``python -m aptkt.robot.loopback --stdio``);
+therefore always runs in a child process (``python -m aptkt.sim.loopback --stdio``);
 :class:`Loopback` is the parent's handle. Commands cross the child's stdin/stdout as JSON lines.
 """
 
@@ -20,7 +20,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from typing import Any
 
-from aptkt.robot.loopback.controller import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
+from aptkt.sim.loopback.controller import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
 
 __all__ = ["Loopback", "LoopbackError"]
 
@@ -32,8 +32,8 @@ class LoopbackError(RuntimeError):
 def serve_stdio(config: ControllerConfig, host: str, ports: Mapping[str, Any], stdin: Any, stdout: Any) -> None:
     """Child side: serve the controller, read JSON commands from ``stdin``, answer on ``stdout``."""
     # Imported here so importing this module never builds a controller.
-    from aptkt.robot.loopback.controller import SimulatedController
-    from aptkt.robot.loopback.servers import LoopbackServer
+    from aptkt.sim.loopback.controller import SimulatedController
+    from aptkt.sim.loopback.servers import LoopbackServer
 
     def answer(reply: dict[str, Any]) -> None:
         stdout.write(json.dumps(reply) + "\n")
@@ -132,7 +132,7 @@ class Loopback:
 
     ``series="cb3"`` (125 Hz, PolyScope 3.15) or ``"e-series"`` (500 Hz, PolyScope 5.11), or an
     explicit ``version`` tuple. ``skin=True`` (or a mapping of
-    :class:`~aptkt.robot.loopback.skin.SkinConfig` fields) puts a simulated skin patch on the
+    :class:`~aptkt.sim.loopback.tcp_skin.SkinConfig` fields) puts a simulated skin patch on the
     TCP that streams the skin's wire protocol through a pty: open ``SerialSkin(lb.skin_port)``.
     Other keyword arguments are :class:`ControllerConfig` fields.
     """
@@ -142,7 +142,7 @@ class Loopback:
                  skin: bool | Mapping[str, Any] | None = None,
                  ports: Mapping[str, Any] | None = None, start_timeout: float = 30.0, **config: Any):
         if skin is not None and skin is not False:
-            from aptkt.robot.loopback.skin import SkinConfig
+            from aptkt.sim.loopback.tcp_skin import SkinConfig
 
             config["skin"] = SkinConfig.from_spec(skin).to_dict()  # validated here, in the parent
         self._skin_port: str | None = None
@@ -165,7 +165,7 @@ class Loopback:
         return self.config.frequency
 
     def start(self) -> Loopback:
-        cmd = [sys.executable, "-m", "aptkt.robot.loopback", "--stdio", "--host", self.host,
+        cmd = [sys.executable, "-m", "aptkt.sim.loopback", "--stdio", "--host", self.host,
                "--config-json", json.dumps(asdict(self.config)), "--ports-json", json.dumps(self.ports)]
         self._stderr = tempfile.TemporaryFile(mode="w+")
         self._proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr,

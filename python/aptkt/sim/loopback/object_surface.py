@@ -23,10 +23,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from aptkt.sim.loopback.contact import ThermalContact
 from aptkt.sim.mechanics import IndentationLaw, SurfaceShape
 from aptkt.sim.objects import default_library, load_library
 from aptkt.sim.patch import PatchGeometry, SkinConstants
-from aptkt.robot.loopback.contact import ThermalContact
 from aptkt.sim.texture import texture_acceleration, texture_field, waviness_waves
 
 __all__ = ["SimObjectSurface"]

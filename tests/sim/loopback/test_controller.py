@@ -14,10 +14,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from aptkt.robot.loopback import ControllerConfig, SimulatedController, SpringSurface
-from aptkt.robot.loopback import contact as contact_models
-from aptkt.robot.loopback.controller import DONE_WITH_CMD, PAUSED, PLAYING, RDY_FOR_CMD, STOPPED
-from aptkt.robot.loopback.kinematics import (
+from aptkt.sim.loopback import ControllerConfig, SimulatedController, SpringSurface
+from aptkt.sim.loopback import contact as contact_models
+from aptkt.sim.loopback.controller import DONE_WITH_CMD, PAUSED, PLAYING, RDY_FOR_CMD, STOPPED
+from aptkt.sim.loopback.rotvec import (
     integrate_rotvec,
     interpolate_rotvec,
     matrix_to_rotvec,
@@ -259,7 +259,7 @@ def test_spring_surface_and_contact_specs():
     assert s.normal_force((0.0, 0.0, 0.009)) == pytest.approx(0.3)
     assert s.normal_force((0.0, 0.0, 0.011)) == 0.0
     assert s.normal_force((0.2, 0.0, 0.0)) == 0.0  # off the footprint
-    built = contact_models.build({"factory": "aptkt.robot.loopback.contact:SpringSurface",
+    built = contact_models.build({"factory": "aptkt.sim.loopback.contact:SpringSurface",
                                   "params": {"surface_z": 0.01, "stiffness": 300.0, "x_range": [-0.1, 0.1]}})
     assert built == s
     assert contact_models.build(None).normal_force((0, 0, -1)) == 0.0

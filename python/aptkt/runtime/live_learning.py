@@ -1,7 +1,7 @@
 """Learning live: APTKT (or the baseline) on a robot that explores on request.
 
 The environment is a :class:`~aptkt.learning.environment.RecordingEnvironment` over a live
-session (:mod:`aptkt.live`: the UR10 with its skin, or the simulated world). Every observation
+session (:mod:`aptkt.runtime.sessions`: the UR10 with its skin, or the simulated world). Every observation
 the learner asks for runs the exploratory action and its recording is stored at once in a data
 set (the crash-safe store), so nothing observed is lost, even if the run is not finished.
 
@@ -28,7 +28,6 @@ from typing import Any
 
 from aptkt import __version__
 from aptkt.actions import ExploratoryAction
-from aptkt.data.collect import save_aborted
 from aptkt.data.store import DatasetReader, DatasetWriter
 from aptkt.errors import AptktError
 from aptkt.learning.config import LearnerConfig
@@ -36,6 +35,7 @@ from aptkt.learning.environment import RecordingEnvironment
 from aptkt.learning.learner import APTKT, StepRecord
 from aptkt.learning.observations import ObservationTable
 from aptkt.learning.prior import PriorKnowledge
+from aptkt.runtime.collection import save_aborted
 
 __all__ = ["LiveLearningAborted", "learn_live", "describe_step", "NO_TEST_NOTE"]
 
