@@ -62,9 +62,13 @@ class SklearnOneVsAll:
         from sklearn.gaussian_process.kernels import RBF, ConstantKernel
 
         d = np.sqrt(((X[:, None, :] - X[None, :, :]) ** 2).sum(-1))
-        scale = float(np.median(d[d > 0])) if np.any(d > 0) else 1.0  # start scaled to the data, as ours
+        scale = (
+            float(np.median(d[d > 0])) if np.any(d > 0) else 1.0
+        )  # start scaled to the data, as ours
         kernel = ConstantKernel(1.0, (1e-3, 1e3)) * RBF(scale, (1e-3, 1e3))
-        return GaussianProcessClassifier(kernel, n_restarts_optimizer=self.n_restarts, random_state=self.random_state)
+        return GaussianProcessClassifier(
+            kernel, n_restarts_optimizer=self.n_restarts, random_state=self.random_state
+        )
 
     def fit(self, X, y, sources=None):
         from sklearn.exceptions import ConvergenceWarning
@@ -108,12 +112,18 @@ def experiment(ctx: Context, gp: GPSettings, groups: list[int], trials: list[int
     and trial seeds are the ones ``aptkt reproduce fig7`` uses (``prior_group_plan``)."""
     s = ctx.scale
     all_groups = prior_groups(ctx, s.n_priors)
-    pool = load_observations(ctx.data, actions=s.actions, objects=s.new_objects, trials=s.pool_trials)
-    test = load_observations(ctx.data, actions=s.actions, objects=s.new_objects, trials=s.test_trials)
+    pool = load_observations(
+        ctx.data, actions=s.actions, objects=s.new_objects, trials=s.pool_trials
+    )
+    test = load_observations(
+        ctx.data, actions=s.actions, objects=s.new_objects, trials=s.test_trials
+    )
     prior_s, run_s, final = [], {"baseline": [], "APTKT": []}, {"baseline": [], "APTKT": []}
     t_all = time.perf_counter()
     for g in groups:
-        table_ = load_observations(ctx.data, actions=s.actions, objects=all_groups[g], trials=s.pool_trials)
+        table_ = load_observations(
+            ctx.data, actions=s.actions, objects=all_groups[g], trials=s.pool_trials
+        )
         t0 = time.perf_counter()
         prior = PriorKnowledge.build(table_, gp=gp, seed=ctx.seed)
         prior_s.append(time.perf_counter() - t0)
@@ -122,11 +132,15 @@ def experiment(ctx: Context, gp: GPSettings, groups: list[int], trials: list[int
             for m in ("baseline", "APTKT"):
                 cfg = ctx.learner(m, seed=seed, gp=gp)
                 t0 = time.perf_counter()
-                run = APTKT(cfg, prior).run(PoolEnvironment(pool, seed=seed), s.actions, s.new_objects, test)
+                run = APTKT(cfg, prior).run(
+                    PoolEnvironment(pool, seed=seed), s.actions, s.new_objects, test
+                )
                 run_s[m].append(time.perf_counter() - t0)
                 final[m].append(run.steps[-1].mean_accuracy)
     return {
-        "groups": len(groups), "trials": len(trials), "runs": sum(len(v) for v in run_s.values()),
+        "groups": len(groups),
+        "trials": len(trials),
+        "runs": sum(len(v) for v in run_s.values()),
         "seconds": time.perf_counter() - t_all,
         "prior_build_mean_s": float(np.mean(prior_s)),
         "run_mean_s": {m: float(np.mean(v)) for m, v in run_s.items()},
@@ -135,16 +149,33 @@ def experiment(ctx: Context, gp: GPSettings, groups: list[int], trials: list[int
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--data", required=True, help="the full data set (e.g. /work/data/sim40.h5)")
-    parser.add_argument("--sk-groups", type=int, default=2, help="groups run on scikit-learn (default %(default)s)")
-    parser.add_argument("--sk-trials", type=int, default=1, help="trials per group on scikit-learn (default %(default)s)")
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--data", required=True, help="the full data set (e.g. /work/data/sim40.h5)"
+    )
+    parser.add_argument(
+        "--sk-groups", type=int, default=2, help="groups run on scikit-learn (default %(default)s)"
+    )
+    parser.add_argument(
+        "--sk-trials",
+        type=int,
+        default=1,
+        help="trials per group on scikit-learn (default %(default)s)",
+    )
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
 
     scale = Scale.full()
-    ctx = Context(scale=scale, seed=args.seed, data=args.data, fingerprint=data_fingerprint(args.data),
-                  output=None, index=_paper_numbers(scale.objects))  # type: ignore[arg-type]
+    ctx = Context(
+        scale=scale,
+        seed=args.seed,
+        data=args.data,
+        fingerprint=data_fingerprint(args.data),
+        output=None,
+        index=_paper_numbers(scale.objects),
+    )  # type: ignore[arg-type]
     ours_gp = GPSettings(n_jobs=1)
     sk_gp = SklearnGPSettings(n_jobs=1)
     groups = list(range(min(args.sk_groups, scale.groups)))
@@ -159,34 +190,77 @@ def main() -> None:
     print(f"  {sk_sub['seconds']:.1f} s", flush=True)
     n_runs_full = scale.groups * scale.trials * 2
     sk_by_ratio = sk_sub["seconds"] * ours_full["seconds"] / ours_sub["seconds"]
-    sk_by_count = (sk_sub["prior_build_mean_s"] * scale.groups
-                   + np.mean(list(sk_sub["run_mean_s"].values())) * n_runs_full)
+    sk_by_count = (
+        sk_sub["prior_build_mean_s"] * scale.groups
+        + np.mean(list(sk_sub["run_mean_s"].values())) * n_runs_full
+    )
     rows = [
-        {"side": "aptkt core", "what": f"full: {scale.groups} groups × {scale.trials} trials × 2 methods", "seconds": ours_full["seconds"],
-         "prior build s": ours_full["prior_build_mean_s"], "run s (baseline / APTKT)":
-             f"{ours_full['run_mean_s']['baseline']:.2f} / {ours_full['run_mean_s']['APTKT']:.2f}",
-         "final accuracy (baseline / APTKT)": f"{ours_full['final_accuracy']['baseline']:.3f} / {ours_full['final_accuracy']['APTKT']:.3f}"},
-        {"side": "aptkt core", "what": f"subset: {len(groups)} groups × {len(trials)} trials × 2", "seconds": ours_sub["seconds"],
-         "prior build s": ours_sub["prior_build_mean_s"], "run s (baseline / APTKT)":
-             f"{ours_sub['run_mean_s']['baseline']:.2f} / {ours_sub['run_mean_s']['APTKT']:.2f}",
-         "final accuracy (baseline / APTKT)": f"{ours_sub['final_accuracy']['baseline']:.3f} / {ours_sub['final_accuracy']['APTKT']:.3f}"},
-        {"side": "scikit-learn", "what": f"subset: {len(groups)} groups × {len(trials)} trials × 2", "seconds": sk_sub["seconds"],
-         "prior build s": sk_sub["prior_build_mean_s"], "run s (baseline / APTKT)":
-             f"{sk_sub['run_mean_s']['baseline']:.2f} / {sk_sub['run_mean_s']['APTKT']:.2f}",
-         "final accuracy (baseline / APTKT)": f"{sk_sub['final_accuracy']['baseline']:.3f} / {sk_sub['final_accuracy']['APTKT']:.3f}"},
-        {"side": "scikit-learn", "what": "full, extrapolated (× ours' full/subset ratio)", "seconds": sk_by_ratio},
-        {"side": "scikit-learn", "what": "full, extrapolated (counting builds and runs)", "seconds": sk_by_count},
+        {
+            "side": "aptkt core",
+            "what": f"full: {scale.groups} groups × {scale.trials} trials × 2 methods",
+            "seconds": ours_full["seconds"],
+            "prior build s": ours_full["prior_build_mean_s"],
+            "run s (baseline / APTKT)": f"{ours_full['run_mean_s']['baseline']:.2f} / {ours_full['run_mean_s']['APTKT']:.2f}",
+            "final accuracy (baseline / APTKT)": f"{ours_full['final_accuracy']['baseline']:.3f} / {ours_full['final_accuracy']['APTKT']:.3f}",
+        },
+        {
+            "side": "aptkt core",
+            "what": f"subset: {len(groups)} groups × {len(trials)} trials × 2",
+            "seconds": ours_sub["seconds"],
+            "prior build s": ours_sub["prior_build_mean_s"],
+            "run s (baseline / APTKT)": f"{ours_sub['run_mean_s']['baseline']:.2f} / {ours_sub['run_mean_s']['APTKT']:.2f}",
+            "final accuracy (baseline / APTKT)": f"{ours_sub['final_accuracy']['baseline']:.3f} / {ours_sub['final_accuracy']['APTKT']:.3f}",
+        },
+        {
+            "side": "scikit-learn",
+            "what": f"subset: {len(groups)} groups × {len(trials)} trials × 2",
+            "seconds": sk_sub["seconds"],
+            "prior build s": sk_sub["prior_build_mean_s"],
+            "run s (baseline / APTKT)": f"{sk_sub['run_mean_s']['baseline']:.2f} / {sk_sub['run_mean_s']['APTKT']:.2f}",
+            "final accuracy (baseline / APTKT)": f"{sk_sub['final_accuracy']['baseline']:.3f} / {sk_sub['final_accuracy']['APTKT']:.3f}",
+        },
+        {
+            "side": "scikit-learn",
+            "what": "full, extrapolated (× ours' full/subset ratio)",
+            "seconds": sk_by_ratio,
+        },
+        {
+            "side": "scikit-learn",
+            "what": "full, extrapolated (counting builds and runs)",
+            "seconds": sk_by_count,
+        },
     ]
-    print(table(rows, ["side", "what", "seconds", "prior build s", "run s (baseline / APTKT)",
-                       "final accuracy (baseline / APTKT)"]))
-    print(f"ratio on the same subset (scikit-learn / ours): {sk_sub['seconds'] / ours_sub['seconds']:.1f}×; "
-          f"full experiment, extrapolated: {sk_by_ratio / ours_full['seconds']:.1f}× "
-          f"(by counting: {sk_by_count / ours_full['seconds']:.1f}×)")
-    path = save("experiments", {"load_average": load, "ours_full": ours_full, "ours_subset": ours_sub,
-                                "sklearn_subset": sk_sub, "sklearn_full_extrapolated_ratio_method": sk_by_ratio,
-                                "sklearn_full_extrapolated_count_method": sk_by_count,
-                                "ratio_subset": sk_sub["seconds"] / ours_sub["seconds"],
-                                "ratio_full_extrapolated": sk_by_ratio / ours_full["seconds"]})
+    print(
+        table(
+            rows,
+            [
+                "side",
+                "what",
+                "seconds",
+                "prior build s",
+                "run s (baseline / APTKT)",
+                "final accuracy (baseline / APTKT)",
+            ],
+        )
+    )
+    print(
+        f"ratio on the same subset (scikit-learn / ours): {sk_sub['seconds'] / ours_sub['seconds']:.1f}×; "
+        f"full experiment, extrapolated: {sk_by_ratio / ours_full['seconds']:.1f}× "
+        f"(by counting: {sk_by_count / ours_full['seconds']:.1f}×)"
+    )
+    path = save(
+        "experiments",
+        {
+            "load_average": load,
+            "ours_full": ours_full,
+            "ours_subset": ours_sub,
+            "sklearn_subset": sk_sub,
+            "sklearn_full_extrapolated_ratio_method": sk_by_ratio,
+            "sklearn_full_extrapolated_count_method": sk_by_count,
+            "ratio_subset": sk_sub["seconds"] / ours_sub["seconds"],
+            "ratio_full_extrapolated": sk_by_ratio / ours_full["seconds"],
+        },
+    )
     print(f"saved {path}")
 
 

@@ -18,7 +18,9 @@ from aptkt import features
 
 def numpy_texture(acc: np.ndarray) -> np.ndarray:
     mob, com = antropy.hjorth_params(acc, axis=-1)
-    corr = np.array([[np.corrcoef(c)[0, 1], np.corrcoef(c)[1, 2], np.corrcoef(c)[0, 2]] for c in acc])
+    corr = np.array(
+        [[np.corrcoef(c)[0, 1], np.corrcoef(c)[1, 2], np.corrcoef(c)[0, 2]] for c in acc]
+    )
     return np.concatenate([np.var(acc, axis=-1).mean(0), mob.mean(0), com.mean(0), corr.mean(0)])
 
 
@@ -30,19 +32,36 @@ def main() -> None:
         mb = x.nbytes / 1e6
         t_ours = best_of(lambda: features.hjorth(x), repeat=5, min_time=0.2)
         t_ref = best_of(lambda: antropy.hjorth_params(x, axis=-1), repeat=5, min_time=0.2)
-        rows.append({
-            "kernel": "hjorth", "shape": "x".join(map(str, shape)),
-            "aptkt MB/s": mb / t_ours, "antropy MB/s": mb / t_ref, "ratio": t_ref / t_ours,
-            "aptkt us": t_ours * 1e6, "reference us": t_ref * 1e6,
-        })
+        rows.append(
+            {
+                "kernel": "hjorth",
+                "shape": "x".join(map(str, shape)),
+                "aptkt MB/s": mb / t_ours,
+                "antropy MB/s": mb / t_ref,
+                "ratio": t_ref / t_ours,
+                "aptkt us": t_ours * 1e6,
+                "reference us": t_ref * 1e6,
+            }
+        )
         t_ours = best_of(lambda: features.texture_descriptor(x), repeat=5, min_time=0.2)
         t_ref = best_of(lambda: numpy_texture(x), repeat=5, min_time=0.2)
-        rows.append({
-            "kernel": "texture_descriptor", "shape": "x".join(map(str, shape)),
-            "aptkt MB/s": mb / t_ours, "antropy MB/s": mb / t_ref, "ratio": t_ref / t_ours,
-            "aptkt us": t_ours * 1e6, "reference us": t_ref * 1e6,
-        })
-    print(table(rows, ["kernel", "shape", "ratio", "aptkt MB/s", "antropy MB/s", "aptkt us", "reference us"]))
+        rows.append(
+            {
+                "kernel": "texture_descriptor",
+                "shape": "x".join(map(str, shape)),
+                "aptkt MB/s": mb / t_ours,
+                "antropy MB/s": mb / t_ref,
+                "ratio": t_ref / t_ours,
+                "aptkt us": t_ours * 1e6,
+                "reference us": t_ref * 1e6,
+            }
+        )
+    print(
+        table(
+            rows,
+            ["kernel", "shape", "ratio", "aptkt MB/s", "antropy MB/s", "aptkt us", "reference us"],
+        )
+    )
     print("saved", save("features", {"rows": rows}))
 
 

@@ -35,8 +35,14 @@ RESTARTS = 2
 
 def data(n: int, d: int, seed: int = 0):
     X, y = make_classification(
-        n_samples=n + 500, n_features=d, n_informative=min(d, 6), n_redundant=0,
-        n_classes=5, n_clusters_per_class=1, class_sep=1.5, random_state=seed,
+        n_samples=n + 500,
+        n_features=d,
+        n_informative=min(d, 6),
+        n_redundant=0,
+        n_classes=5,
+        n_clusters_per_class=1,
+        class_sep=1.5,
+        random_state=seed,
     )
     X = (X - X.mean(0)) / X.std(0)
     return X[:n], y[:n], X[n:], y[n:]
@@ -69,25 +75,38 @@ def run(n: int, d: int, sklearn_opt: bool, n_jobs: int | None = None) -> dict:
     row["aptkt LML (sum)"] = float(ours.log_marginal_likelihood_.sum())
     row["aptkt acc"] = ours.score(Xt, yt)
     if sklearn_opt:
-        sk = GaussianProcessClassifier(ConstantKernel(1.0) * RBF(1.0), n_restarts_optimizer=RESTARTS, random_state=0)
+        sk = GaussianProcessClassifier(
+            ConstantKernel(1.0) * RBF(1.0), n_restarts_optimizer=RESTARTS, random_state=0
+        )
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
             row["opt sklearn s"] = median_of(lambda: sk.fit(X, y), repeat=1)
         row["opt ratio"] = row["opt sklearn s"] / row["opt aptkt s"]
         sk_lml = per_class_lml(sk)
         row["sklearn LML (sum)"] = float(sk_lml.sum())
-        row["classes with LML >= sklearn"] = int(np.sum(ours.log_marginal_likelihood_ >= sk_lml - 1e-6 * np.abs(sk_lml)))
+        row["classes with LML >= sklearn"] = int(
+            np.sum(ours.log_marginal_likelihood_ >= sk_lml - 1e-6 * np.abs(sk_lml))
+        )
         row["sklearn acc"] = sk.score(Xt, yt)
     return row
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--quick", action="store_true", help="n = 50, 100 only")
-    parser.add_argument("--skip-sklearn-opt-above", type=int, default=10**9,
-                        help="skip scikit-learn's (slow) optimised fit for n above this")
-    parser.add_argument("--single-thread", action="store_true",
-                        help="both sides on one thread (saved as gp-single-thread.json)")
+    parser.add_argument(
+        "--skip-sklearn-opt-above",
+        type=int,
+        default=10**9,
+        help="skip scikit-learn's (slow) optimised fit for n above this",
+    )
+    parser.add_argument(
+        "--single-thread",
+        action="store_true",
+        help="both sides on one thread (saved as gp-single-thread.json)",
+    )
     args = parser.parse_args()
     n_jobs = 1 if args.single_thread else None
     limits = threadpool_limits(1) if args.single_thread else None
@@ -100,12 +119,30 @@ def main() -> None:
             print(row, flush=True)
     if not args.quick:
         rows.append(run(200, 15, sklearn_opt=True, n_jobs=n_jobs))
-    cols = ["n", "d", "fixed ratio", "predict ratio", "opt ratio", "opt aptkt s", "opt sklearn s",
-            "aptkt LML (sum)", "sklearn LML (sum)", "classes with LML >= sklearn", "aptkt acc", "sklearn acc",
-            "fixed aptkt s", "fixed sklearn s", "predict aptkt s", "predict sklearn s"]
+    cols = [
+        "n",
+        "d",
+        "fixed ratio",
+        "predict ratio",
+        "opt ratio",
+        "opt aptkt s",
+        "opt sklearn s",
+        "aptkt LML (sum)",
+        "sklearn LML (sum)",
+        "classes with LML >= sklearn",
+        "aptkt acc",
+        "sklearn acc",
+        "fixed aptkt s",
+        "fixed sklearn s",
+        "predict aptkt s",
+        "predict sklearn s",
+    ]
     print(table(rows, cols))
     name = "gp-single-thread" if args.single_thread else "gp"
-    print("saved", save(name, {"rows": rows, "restarts": RESTARTS, "single_thread": args.single_thread}))
+    print(
+        "saved",
+        save(name, {"rows": rows, "restarts": RESTARTS, "single_thread": args.single_thread}),
+    )
     if limits is not None:
         limits.restore_original_limits()
 

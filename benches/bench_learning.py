@@ -38,7 +38,9 @@ PARTS = [
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--data", required=True)
     parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args()
@@ -53,7 +55,11 @@ def main() -> None:
 
     rows = []
     profile_rows = []
-    for name, kw in {"APTKT": {}, "baseline": {"transfer": "none"}, "APTKT+aux": {"auxiliary": True}}.items():
+    for name, kw in {
+        "APTKT": {},
+        "baseline": {"transfer": "none"},
+        "APTKT+aux": {"auxiliary": True},
+    }.items():
         times = []
         for r in range(args.repeat):
             cfg = LearnerConfig(budget=40, seed=r, **kw)
@@ -67,16 +73,46 @@ def main() -> None:
             times.append(time.perf_counter() - start)
             if prof:
                 stats = pstats.Stats(prof)
-                total = sum(v[3] for k, v in stats.stats.items() if k[2] == "run" and k[0].endswith("learner.py"))
+                total = sum(
+                    v[3]
+                    for k, v in stats.stats.items()
+                    if k[2] == "run" and k[0].endswith("learner.py")
+                )
                 for label, file, func in PARTS:
-                    cum = sum(v[3] for k, v in stats.stats.items() if k[0].endswith(file) and k[2] == func)
-                    profile_rows.append({"part": label, "seconds": cum, "share": cum / total if total else float("nan")})
-        rows.append({"method": name, "runs": args.repeat, "median s (profiled run excluded)": sorted(times[1:] or times)[len(times[1:] or times) // 2],
-                     "min s": min(times), "updates": len(run.steps), "final accuracy": run.steps[-1].mean_accuracy})
-    print(f"loading features: {t_load:.2f} s; building prior knowledge (7 actions): {t_prior:.2f} s")
+                    cum = sum(
+                        v[3] for k, v in stats.stats.items() if k[0].endswith(file) and k[2] == func
+                    )
+                    profile_rows.append(
+                        {
+                            "part": label,
+                            "seconds": cum,
+                            "share": cum / total if total else float("nan"),
+                        }
+                    )
+        rows.append(
+            {
+                "method": name,
+                "runs": args.repeat,
+                "median s (profiled run excluded)": sorted(times[1:] or times)[
+                    len(times[1:] or times) // 2
+                ],
+                "min s": min(times),
+                "updates": len(run.steps),
+                "final accuracy": run.steps[-1].mean_accuracy,
+            }
+        )
+    print(
+        f"loading features: {t_load:.2f} s; building prior knowledge (7 actions): {t_prior:.2f} s"
+    )
     print(table(rows, list(rows[0])))
     print(table(profile_rows, ["part", "seconds", "share"]))
-    print("saved", save("learning", {"rows": rows, "profile": profile_rows, "load_s": t_load, "prior_s": t_prior}))
+    print(
+        "saved",
+        save(
+            "learning",
+            {"rows": rows, "profile": profile_rows, "load_s": t_load, "prior_s": t_prior},
+        ),
+    )
 
 
 if __name__ == "__main__":

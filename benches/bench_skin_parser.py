@@ -55,7 +55,11 @@ def damaged(stream: bytes, fraction: float, seed: int = 1) -> bytes:
         p = stream[20 * i : 20 * i + 20]
         if hit[i]:
             out.append(p[: rng.integers(1, 20)])
-            out.append(encode_packet("ping") if rng.random() < 0.5 else bytes(rng.integers(0, 0x80, 7, dtype=np.uint8)))
+            out.append(
+                encode_packet("ping")
+                if rng.random() < 0.5
+                else bytes(rng.integers(0, 0x80, 7, dtype=np.uint8))
+            )
         else:
             out.append(p)
     return b"".join(out)
@@ -63,18 +67,27 @@ def damaged(stream: bytes, fraction: float, seed: int = 1) -> bytes:
 
 def numpy_peer(chunk: bytes) -> dict[str, np.ndarray]:
     """Aligned, unvalidated vectorised decode of whole packets (the generous peer)."""
-    b = np.frombuffer(chunk, dtype=np.uint8)[: len(chunk) // 20 * 20].reshape(-1, 20).astype(np.int32)
+    b = (
+        np.frombuffer(chunk, dtype=np.uint8)[: len(chunk) // 20 * 20]
+        .reshape(-1, 20)
+        .astype(np.int32)
+    )
 
     def signed(v: np.ndarray, bits: int) -> np.ndarray:
         return v - ((v >> (bits - 1)) << bits)
 
-    acc = np.stack([signed(((b[:, 5 + i] & 0x7F) << 3) | (b[:, 8 + i] & 7), 10) for i in range(3)], axis=1)
+    acc = np.stack(
+        [signed(((b[:, 5 + i] & 0x7F) << 3) | (b[:, 8 + i] & 7), 10) for i in range(3)], axis=1
+    )
     t0 = signed(((b[:, 8] << 1) & 0xF0) | ((b[:, 9] >> 3) & 0xF), 8)
     t1 = signed(((b[:, 17] & 0x7F) << 7) | (b[:, 18] & 0x7F), 14)
-    force = np.stack([((b[:, 11 + 2 * i] & 0x7F) << 5) | (b[:, 12 + 2 * i] & 0x1F) for i in range(3)], axis=1)
+    force = np.stack(
+        [((b[:, 11 + 2 * i] & 0x7F) << 5) | (b[:, 12 + 2 * i] & 0x1F) for i in range(3)], axis=1
+    )
     return {
         "cell_id": (((b[:, 1] & 0x7F) << 7) | (b[:, 2] & 0x7F)).astype(np.uint16),
-        "proximity": (((b[:, 3] & 0x7F) << 9) | ((b[:, 4] & 0x7F) << 2) | ((b[:, 10] >> 3) & 3)) / 65536,
+        "proximity": (((b[:, 3] & 0x7F) << 9) | ((b[:, 4] & 0x7F) << 2) | ((b[:, 10] >> 3) & 3))
+        / 65536,
         "acc": acc / 256,
         "temp": np.stack([t0 * 0.5 + 24, t1 * 0.03125], axis=1),
         "force": force / 1024,
@@ -130,12 +143,20 @@ def frame_latency(n: int = 20_000) -> dict[str, float]:
         out = parser.feed(frame)
         times[i] = time.perf_counter_ns() - t
     assert len(out["cell_id"]) == 7
-    return {"median_us": float(np.median(times) / 1e3), "p99_us": float(np.percentile(times, 99) / 1e3)}
+    return {
+        "median_us": float(np.median(times) / 1e3),
+        "p99_us": float(np.percentile(times, 99) / 1e3),
+    }
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--packets", type=int, default=1_000_000, help="sensor packets in the stream (default 1e6 = 20 MB)")
+    ap.add_argument(
+        "--packets",
+        type=int,
+        default=1_000_000,
+        help="sensor packets in the stream (default 1e6 = 20 MB)",
+    )
     ap.add_argument("--repeat", type=int, default=5)
     args = ap.parse_args()
     if hasattr(os, "sched_setaffinity"):
@@ -150,7 +171,11 @@ def main() -> None:
         np.testing.assert_array_equal(check[k], peer[k])
 
     rows = []
-    for label, stream, raw in [("clean", clean, False), ("clean, raw=True", clean, True), ("1 % damaged", noisy, False)]:
+    for label, stream, raw in [
+        ("clean", clean, False),
+        ("clean, raw=True", clean, True),
+        ("1 % damaged", noisy, False),
+    ]:
         for chunk in (4096, 65536, 1 << 20, len(stream)):
             wall, cpu = throughput(stream, chunk, args.repeat, raw)
             n = StreamParser().feed(stream, raw=True)["cell_id"].shape[0]
@@ -167,19 +192,33 @@ def main() -> None:
             rows.append(row)
     latency = frame_latency()
 
-    cols = ["stream", "chunk_bytes", "MB_per_cpu_s", "Mpackets_per_cpu_s", "MB_per_wall_s", "x_link_limit", "x_numpy_peer"]
+    cols = [
+        "stream",
+        "chunk_bytes",
+        "MB_per_cpu_s",
+        "Mpackets_per_cpu_s",
+        "MB_per_wall_s",
+        "x_link_limit",
+        "x_numpy_peer",
+    ]
     print("| " + " | ".join(cols) + " |\n|" + "---|" * len(cols))
     for r in rows:
         print("| " + " | ".join(_fmt(r.get(c, "")) for c in cols) + " |")
-    print(f"\nlatency, one 7-cell frame (140 B) → dict of numpy arrays: median {latency['median_us']:.2f} µs, "
-          f"p99 {latency['p99_us']:.2f} µs")
+    print(
+        f"\nlatency, one 7-cell frame (140 B) → dict of numpy arrays: median {latency['median_us']:.2f} µs, "
+        f"p99 {latency['p99_us']:.2f} µs"
+    )
 
     out = Path(__file__).parent / "results" / "skin_parser.json"
     out.parent.mkdir(exist_ok=True)
     out.write_text(
         json.dumps(
             {
-                "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()},
+                "machine": {
+                    "cpus": os.cpu_count(),
+                    "python": platform.python_version(),
+                    "platform": platform.platform(),
+                },
                 "date": time.strftime("%Y-%m-%d %H:%M"),
                 "packets": args.packets,
                 "throughput": rows,

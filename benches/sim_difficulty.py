@@ -58,8 +58,10 @@ def load(path: str) -> dict[str, dict]:
             d["objects"].append(obj)
             for m, v in feats.items():
                 d["X"][m].append(v)
-    return {a: {"objects": np.array(d["objects"]), "X": {m: np.array(v) for m, v in d["X"].items()}}
-            for a, d in data.items()}
+    return {
+        a: {"objects": np.array(d["objects"]), "X": {m: np.array(v) for m, v in d["X"].items()}}
+        for a, d in data.items()
+    }
 
 
 def _prepare(X: dict[str, np.ndarray], train: np.ndarray, test: np.ndarray, modalities: list[str]):
@@ -90,14 +92,23 @@ def _classifier(name: str, k: int):
         from sklearn.gaussian_process import GaussianProcessClassifier
         from sklearn.gaussian_process.kernels import RBF, ConstantKernel
 
-        return GaussianProcessClassifier(ConstantKernel(1.0) * RBF(1.0), n_restarts_optimizer=0, random_state=0)
+        return GaussianProcessClassifier(
+            ConstantKernel(1.0) * RBF(1.0), n_restarts_optimizer=0, random_state=0
+        )
     from sklearn.neighbors import KNeighborsClassifier
 
     return KNeighborsClassifier(n_neighbors=k)
 
 
-def evaluate(data: dict, objects: list[str], per_object: int, splits: int, k: int, seed: int,
-             classifier: str = "knn") -> dict:
+def evaluate(
+    data: dict,
+    objects: list[str],
+    per_object: int,
+    splits: int,
+    k: int,
+    seed: int,
+    classifier: str = "knn",
+) -> dict:
     rng = np.random.default_rng(seed)
     results = {}
     for action, d in sorted(data.items()):
@@ -123,7 +134,9 @@ def evaluate(data: dict, objects: list[str], per_object: int, splits: int, k: in
     return results
 
 
-def confusion(data: dict, action: str, objects: list[str], per_object: int, seed: int) -> np.ndarray:
+def confusion(
+    data: dict, action: str, objects: list[str], per_object: int, seed: int
+) -> np.ndarray:
     from sklearn.neighbors import KNeighborsClassifier
 
     rng = np.random.default_rng(seed)
@@ -146,13 +159,19 @@ def confusion(data: dict, action: str, objects: list[str], per_object: int, seed
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("data")
     ap.add_argument("--splits", type=int, default=20)
     ap.add_argument("--train", type=int, default=10, help="training observations per object")
     ap.add_argument("-k", type=int, default=3)
-    ap.add_argument("--classifier", choices=("knn", "gpc"), default="knn",
-                    help="k-NN, or scikit-learn's GaussianProcessClassifier (RBF, one-vs-rest, fitted hyper-parameters)")
+    ap.add_argument(
+        "--classifier",
+        choices=("knn", "gpc"),
+        default="knn",
+        help="k-NN, or scikit-learn's GaussianProcessClassifier (RBF, one-vs-rest, fitted hyper-parameters)",
+    )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", metavar="OUT")
     ap.add_argument("--confusion", metavar="ACTION", action="append", default=[])
@@ -163,18 +182,33 @@ def main(argv: list[str] | None = None) -> int:
     lib = default_library()
     everything = [o for o in lib if any(o in d["objects"] for d in data.values())]
     new = [o for o in lib.with_role("new") if o in everything]
-    res_all = evaluate(data, everything, args.train, args.splits, args.k, args.seed, args.classifier)
+    res_all = evaluate(
+        data, everything, args.train, args.splits, args.k, args.seed, args.classifier
+    )
     res_new = evaluate(data, new, args.train, args.splits, args.k, args.seed, args.classifier)
     clf = f"k-NN (k={args.k})" if args.classifier == "knn" else "GPC (RBF, one-vs-rest)"
-    print(f"features of {sum(len(d['objects']) for d in data.values())} recordings, {time.perf_counter() - t0:.1f} s; "
-          f"{clf}, {args.train} training observations per object, {args.splits} random splits")
-    for label, res, n in (("all objects", res_all, len(everything)), ("new objects", res_new, len(new))):
+    print(
+        f"features of {sum(len(d['objects']) for d in data.values())} recordings, {time.perf_counter() - t0:.1f} s; "
+        f"{clf}, {args.train} training observations per object, {args.splits} random splits"
+    )
+    for label, res, n in (
+        ("all objects", res_all, len(everything)),
+        ("new objects", res_new, len(new)),
+    ):
         print(f"\n{label} ({n}, chance {100 / n:.0f} %)")
         names = sorted({m for r in res.values() for m in r})
         print("action  " + "".join(f"{m:>9}" for m in names))
         for action, r in res.items():
-            print(f"{action:6s}  " + "".join(f"{100 * r[m]:8.1f}%" if m in r else f"{'':9}" for m in names))
-        print("mean    " + "".join(f"{100 * np.mean([r[m] for r in res.values() if m in r]):8.1f}%" for m in names))
+            print(
+                f"{action:6s}  "
+                + "".join(f"{100 * r[m]:8.1f}%" if m in r else f"{'':9}" for m in names)
+            )
+        print(
+            "mean    "
+            + "".join(
+                f"{100 * np.mean([r[m] for r in res.values() if m in r]):8.1f}%" for m in names
+            )
+        )
     for action in args.confusion:
         cm = confusion(data, action, everything, args.train, args.seed)
         print(f"\nconfusion {action} (rows true, columns predicted):")

@@ -31,7 +31,13 @@ class Skin:
     """The loopback's contact force as a skin reading, with a stale/over-limit switch."""
 
     def __init__(self, lb: Loopback):
-        self.lb, self.scale, self.stale, self.value, self.t = lb, 1.0, False, 0.0, time.monotonic_ns()
+        self.lb, self.scale, self.stale, self.value, self.t = (
+            lb,
+            1.0,
+            False,
+            0.0,
+            time.monotonic_ns(),
+        )
 
     def __call__(self) -> float:
         if not self.stale:
@@ -72,8 +78,12 @@ def main() -> None:
     args = ap.parse_args()
     results: dict[str, dict[str, float]] = {}
     connects, closes = [], []
-    with Loopback(free_host(), contact={"type": "spring", "surface_z": 0.0, "stiffness": 200.0},
-                  start_pose=START, unlock_delay=0.0) as lb:
+    with Loopback(
+        free_host(),
+        contact={"type": "spring", "surface_z": 0.0, "stiffness": 200.0},
+        start_pose=START,
+        unlock_delay=0.0,
+    ) as lb:
         for name, inject in FAULTS.items():
             total, kinds, retracted = [], set(), set()
             for _ in range(args.repeat):
@@ -87,6 +97,7 @@ def main() -> None:
                 robot.approach_contact(skin, 0.05)
                 fired: list[int] = []
                 z_fault = lb.state()["pose"][2] - 0.001
+
                 def fire(fired=fired, inject=inject, skin=skin) -> None:
                     fired.append(time.monotonic_ns())
                     inject(lb, skin)

@@ -25,12 +25,16 @@ def axis_pair_correlations(
 def texture_descriptor(
     acc: NDArray[np.float64] | NDArray[np.float32] | NDArray[np.int16], name: str = "acc"
 ) -> NDArray[np.float64]: ...
-def mean_all(x: NDArray[np.float64] | NDArray[np.float32] | NDArray[np.int16], name: str = "x") -> float: ...
+def mean_all(
+    x: NDArray[np.float64] | NDArray[np.float32] | NDArray[np.int16], name: str = "x"
+) -> float: ...
 def gradient(
     x: NDArray[np.float64] | NDArray[np.float32] | NDArray[np.int16], axis: int, name: str = "x"
 ) -> NDArray[np.float64]: ...
 def thermal_curve(
-    temp: NDArray[np.float64] | NDArray[np.float32] | NDArray[np.int16], axis: int, name: str = "temp"
+    temp: NDArray[np.float64] | NDArray[np.float32] | NDArray[np.int16],
+    axis: int,
+    name: str = "temp",
 ) -> NDArray[np.float64]: ...
 
 # -- Laplace GPC ------------------------------------------------------------------------------
@@ -81,7 +85,10 @@ def fit_gpc(
     thetas: NDArray[np.float64] | None = None,
 ) -> GpcModel: ...
 def kernel_matrix(
-    x: NDArray[np.float64], theta: Sequence[float], modalities: Sequence[Sequence[int]], n_source: int = 0
+    x: NDArray[np.float64],
+    theta: Sequence[float],
+    modalities: Sequence[Sequence[int]],
+    n_source: int = 0,
 ) -> NDArray[np.float64]: ...
 
 # -- skin protocol ----------------------------------------------------------------------------
@@ -90,7 +97,9 @@ PACKET_TYPES: dict[str, int]
 
 class StreamParser:
     def __init__(self) -> None: ...
-    def feed(self, data: bytes | bytearray | memoryview, *, raw: bool = False) -> dict[str, NDArray]: ...
+    def feed(
+        self, data: bytes | bytearray | memoryview, *, raw: bool = False
+    ) -> dict[str, NDArray]: ...
     @property
     def stats(self) -> dict[str, int | dict[str, int]]: ...
     @property

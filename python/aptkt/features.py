@@ -36,10 +36,18 @@ __all__ = [
 TEXTURE_DIM: int = _core.TEXTURE_DIM
 #: Names of the texture descriptor's entries, in order.
 TEXTURE_NAMES: tuple[str, ...] = (
-    "activity_x", "activity_y", "activity_z",
-    "mobility_x", "mobility_y", "mobility_z",
-    "complexity_x", "complexity_y", "complexity_z",
-    "correlation_xy", "correlation_yz", "correlation_xz",
+    "activity_x",
+    "activity_y",
+    "activity_z",
+    "mobility_x",
+    "mobility_y",
+    "mobility_z",
+    "complexity_x",
+    "complexity_y",
+    "complexity_z",
+    "correlation_xy",
+    "correlation_yz",
+    "correlation_xz",
 )
 
 _NATIVE = (np.dtype(np.float64), np.dtype(np.float32), np.dtype(np.int16))

@@ -54,7 +54,9 @@ def _as_matrix(X: Any, name: str, n_features: int | None = None) -> np.ndarray:
     if arr.dtype.kind not in "biuf":
         raise TypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
     if arr.ndim != 2:
-        raise ValueError(f"{name} must be a 2-D array (n_samples, n_features), got shape {arr.shape}")
+        raise ValueError(
+            f"{name} must be a 2-D array (n_samples, n_features), got shape {arr.shape}"
+        )
     if arr.shape[0] == 0:
         raise ValueError(f"{name} has no rows")
     if n_features is not None and arr.shape[1] != n_features:
@@ -97,7 +99,9 @@ def _seed(random_state: Any) -> int:
         return int(random_state.integers(0, 2**63))
     if isinstance(random_state, np.random.RandomState):
         return int(random_state.randint(0, 2**31 - 1))
-    raise TypeError(f"random_state must be None, an int or a numpy Generator, got {type(random_state).__name__}")
+    raise TypeError(
+        f"random_state must be None, an int or a numpy Generator, got {type(random_state).__name__}"
+    )
 
 
 class LaplaceGPC:
@@ -206,16 +210,22 @@ class LaplaceGPC:
         valid = set(self._param_names())
         for key, value in params.items():
             if key not in valid:
-                raise ValueError(f"invalid parameter {key!r} for LaplaceGPC; valid: {sorted(valid)}")
+                raise ValueError(
+                    f"invalid parameter {key!r} for LaplaceGPC; valid: {sorted(valid)}"
+                )
             setattr(self, key, value)
         return self
 
     def __repr__(self) -> str:
         defaults = {
-            name: p.default for name, p in inspect.signature(type(self).__init__).parameters.items() if name != "self"
+            name: p.default
+            for name, p in inspect.signature(type(self).__init__).parameters.items()
+            if name != "self"
         }
         changed = [
-            f"{k}={v!r}" for k, v in self.get_params().items() if not _same(defaults.get(k, inspect.Parameter.empty), v)
+            f"{k}={v!r}"
+            for k, v in self.get_params().items()
+            if not _same(defaults.get(k, inspect.Parameter.empty), v)
         ]
         return f"LaplaceGPC({', '.join(changed)})"
 
@@ -225,7 +235,9 @@ class LaplaceGPC:
         m = len(groups)
         if isinstance(self.length_scale, str):
             if self.length_scale != "auto":
-                raise ValueError(f"length_scale must be a number, a sequence or 'auto', got {self.length_scale!r}")
+                raise ValueError(
+                    f"length_scale must be a number, a sequence or 'auto', got {self.length_scale!r}"
+                )
             length_scales = [float("nan")] * m
         else:
             ls = np.atleast_1d(np.asarray(self.length_scale, dtype=np.float64))
@@ -243,14 +255,20 @@ class LaplaceGPC:
         fixed = set(self.fixed)
         unknown = fixed - set(_FIXABLE)
         if unknown:
-            raise ValueError(f"fixed: unknown hyper-parameter(s) {sorted(unknown)}; choose from {list(_FIXABLE)}")
+            raise ValueError(
+                f"fixed: unknown hyper-parameter(s) {sorted(unknown)}; choose from {list(_FIXABLE)}"
+            )
         if self.approximation not in _APPROXIMATIONS:
-            raise ValueError(f"approximation must be one of {_APPROXIMATIONS}, got {self.approximation!r}")
+            raise ValueError(
+                f"approximation must be one of {_APPROXIMATIONS}, got {self.approximation!r}"
+            )
         for name in ("n_restarts", "max_iter", "newton_max_iter"):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < 0:
                 raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
-        if self.n_jobs is not None and (not isinstance(self.n_jobs, (int, np.integer)) or self.n_jobs < 1):
+        if self.n_jobs is not None and (
+            not isinstance(self.n_jobs, (int, np.integer)) or self.n_jobs < 1
+        ):
             raise ValueError(f"n_jobs must be None or a positive integer, got {self.n_jobs!r}")
         return dict(
             modality_names=names,
@@ -297,10 +315,14 @@ class LaplaceGPC:
                 src = TransferSource(*src)
             where = np.flatnonzero(classes == label)
             if where.size != 1:
-                raise ValueError(f"sources: class {label!r} does not occur in y (classes: {classes.tolist()})")
+                raise ValueError(
+                    f"sources: class {label!r} does not occur in y (classes: {classes.tolist()})"
+                )
             lam = float(src.transfer_lambda)
             if not 0.0 <= lam <= 1.0:
-                raise ValueError(f"sources[{label!r}]: transfer_lambda must lie in [0, 1], got {lam}")
+                raise ValueError(
+                    f"sources[{label!r}]: transfer_lambda must lie in [0, 1], got {lam}"
+                )
             xs = _as_matrix(src.X, f"sources[{label!r}].X", X.shape[1])
             source_list[int(where[0])] = (xs, lam)
             used[label] = TransferSource(xs, lam)
@@ -416,8 +438,12 @@ class LaplaceGPC:
         if t.ndim == 1:
             t = np.tile(t, (self.theta_.shape[0], 1))
         if t.shape != self.theta_.shape:
-            raise ValueError(f"theta must have shape {self.theta_.shape[1:]} or {self.theta_.shape}, got {t.shape}")
-        lml, grad = self._model.log_marginal_likelihood(np.ascontiguousarray(t), bool(eval_gradient))
+            raise ValueError(
+                f"theta must have shape {self.theta_.shape[1:]} or {self.theta_.shape}, got {t.shape}"
+            )
+        lml, grad = self._model.log_marginal_likelihood(
+            np.ascontiguousarray(t), bool(eval_gradient)
+        )
         return (np.asarray(lml), np.asarray(grad)) if eval_gradient else np.asarray(lml)
 
     # -- persistence (no pickle) --------------------------------------------------------------
@@ -426,7 +452,9 @@ class LaplaceGPC:
         self._check_fitted()
         meta = {
             "format": _SAVE_FORMAT,
-            "params": {k: _jsonable(v) for k, v in self.get_params().items() if k != "random_state"},
+            "params": {
+                k: _jsonable(v) for k, v in self.get_params().items() if k != "random_state"
+            },
             "classes": self.classes_.tolist(),
             "source_classes": [_jsonable(k) for k in self.sources_],
         }
@@ -454,7 +482,9 @@ class LaplaceGPC:
         classes = np.asarray(meta["classes"])
         y = classes[np.asarray(arrays["y"])]
         sources = {
-            label: TransferSource(np.asarray(arrays[f"source_X_{i}"]), float(arrays[f"source_lambda_{i}"]))
+            label: TransferSource(
+                np.asarray(arrays[f"source_X_{i}"]), float(arrays[f"source_lambda_{i}"])
+            )
             for i, label in enumerate(meta["source_classes"])
         }
         return model._fit(np.asarray(arrays["X"]), y, sources, thetas=np.asarray(arrays["theta"]))
@@ -506,4 +536,6 @@ def kernel_matrix(
     """
     X = _as_matrix(X, "X")
     _, groups = _normalise_modalities(modalities, X.shape[1])
-    return np.asarray(_core.kernel_matrix(X, [float(v) for v in np.ravel(theta)], groups, int(n_source)))
+    return np.asarray(
+        _core.kernel_matrix(X, [float(v) for v in np.ravel(theta)], groups, int(n_source))
+    )

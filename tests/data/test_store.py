@@ -20,7 +20,9 @@ from aptkt.runtime.generation import GenerationPlan, generate
 from aptkt.sim import SimWorld
 
 FIELDS = ("cell_id", "t_ns", "proximity", "acc", "temp", "force")
-PLAN = GenerationPlan(("towel", "metal_toolbox"), (PAPER_ACTIONS["P1"], PAPER_ACTIONS["S2"]), repetitions=3, seed=2)
+PLAN = GenerationPlan(
+    ("towel", "metal_toolbox"), (PAPER_ACTIONS["P1"], PAPER_ACTIONS["S2"]), repetitions=3, seed=2
+)
 
 
 def same_samples(a, b) -> bool:
@@ -36,6 +38,7 @@ def contents(path: Path) -> dict:
         def visit(name, obj):
             if isinstance(obj, h5py.Dataset):
                 out[name] = obj[...]
+
         f.visititems(visit)
     return out
 
@@ -78,13 +81,20 @@ def test_round_trip_is_exact_and_compact(tmp_path, recordings):
     assert info["samples"] == n and info["recordings"] == 2
     with h5py.File(path, "r", swmr=True) as f:
         stored = sum(d.id.get_storage_size() for d in f["recordings/samples"].values())
-    assert stored < 12 * n  # raw integers, compressed: vs 28 bytes raw and 112 bytes of float64 per row
+    assert (
+        stored < 12 * n
+    )  # raw integers, compressed: vs 28 bytes raw and 112 bytes of float64 per row
 
 
 def test_values_off_the_wire_grid_are_refused(tmp_path, recordings):
     rec = recordings[0]
-    bad = type(rec)(samples=type(rec.samples)(**{**rec.samples.as_dict(), "acc": rec.samples.acc + 1e-3}),
-                    start_ns=rec.start_ns, stop_ns=rec.stop_ns, cells=rec.cells, metadata=rec.metadata)
+    bad = type(rec)(
+        samples=type(rec.samples)(**{**rec.samples.as_dict(), "acc": rec.samples.acc + 1e-3}),
+        start_ns=rec.start_ns,
+        stop_ns=rec.stop_ns,
+        cells=rec.cells,
+        metadata=rec.metadata,
+    )
     with DatasetWriter(tmp_path / "d.h5") as w, pytest.raises(ValueError, match="grid"):
         w.append(bad)
 
@@ -114,20 +124,40 @@ def write_version_1(path: Path, recordings) -> None:
 
     from aptkt.data.store import samples_to_raw
 
-    index_v1 = np.dtype([("object", "S64"), ("action", "S32"), ("trial", "<i4"), ("start_ns", "<i8"),
-                         ("stop_ns", "<i8"), ("row_start", "<i8"), ("row_stop", "<i8")])
+    index_v1 = np.dtype(
+        [
+            ("object", "S64"),
+            ("action", "S32"),
+            ("trial", "<i4"),
+            ("start_ns", "<i8"),
+            ("stop_ns", "<i8"),
+            ("row_start", "<i8"),
+            ("row_stop", "<i8"),
+        ]
+    )
     rows, metas, raws, start = [], [], [], 0
     for r in recordings:
         meta = {**r.metadata, "cells": list(r.cells), "silent_cells": list(r.silent_cells)}
         raw = samples_to_raw(r.samples, meta)
         n = len(raw["cell_id"])
-        rows.append((meta["object"].encode(), meta["action"]["name"].encode(), meta["trial"],
-                     r.start_ns, r.stop_ns, start, start + n))
+        rows.append(
+            (
+                meta["object"].encode(),
+                meta["action"]["name"].encode(),
+                meta["trial"],
+                r.start_ns,
+                r.stop_ns,
+                start,
+                start + n,
+            )
+        )
         metas.append(json.dumps(meta, sort_keys=True))
         raws.append(raw)
         start += n
     with h5py.File(path, "w") as f:
-        f.attrs.update(schema="aptkt.dataset", schema_version=1, software_version="0.0.1", description="{}")
+        f.attrs.update(
+            schema="aptkt.dataset", schema_version=1, software_version="0.0.1", description="{}"
+        )
         f["recordings/index"] = np.array(rows, dtype=index_v1)
         f.create_dataset("recordings/metadata", data=metas, dtype=h5py.string_dtype("utf-8"))
         for name in FIELDS:
@@ -148,7 +178,9 @@ def test_version_1_files_are_read_and_repair_rewrites_them_in_version_2(tmp_path
         assert rd.version == 2 and len(rd) == 2
         assert all(same_samples(rd.recording(i), recordings[i]) for i in range(2))
     with DatasetWriter(old, "a") as w:  # appendable now
-        w.append(dataclasses.replace(recordings[0], metadata={**recordings[0].metadata, "trial": 7}))
+        w.append(
+            dataclasses.replace(recordings[0], metadata={**recordings[0].metadata, "trial": 7})
+        )
     with DatasetReader(old) as rd:
         assert len(rd) == 3 and rd.key(2)[2] == 7
 
@@ -165,7 +197,10 @@ def test_a_torn_last_append_is_left_out_and_nothing_before_it(tmp_path, recordin
         index = f["recordings/index"]
         row = index[1].copy()
         if tear == "metadata past the end":
-            row["meta_start"], row["meta_stop"] = f["recordings/metadata"].shape[0] + 4096, f["recordings/metadata"].shape[0] + 8192
+            row["meta_start"], row["meta_stop"] = (
+                f["recordings/metadata"].shape[0] + 4096,
+                f["recordings/metadata"].shape[0] + 8192,
+            )
         elif tear == "samples past the end":
             row["row_stop"] = f["recordings/samples/cell_id"].shape[0] + 1
         else:
@@ -212,8 +247,24 @@ def _wait_for(path: Path, n: int, proc: subprocess.Popen, timeout: float = 120.0
 
 def test_killed_generator_leaves_every_completed_trial_readable(tmp_path):
     path = tmp_path / "killed.h5"
-    cmd = [sys.executable, "-m", "aptkt.cli", "dataset", "generate", "-o", str(path), "--objects", "towel,metal_toolbox",
-           "--actions", "P1,S2", "-n", "3", "--seed", "2", "--no-progress"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "aptkt.cli",
+        "dataset",
+        "generate",
+        "-o",
+        str(path),
+        "--objects",
+        "towel,metal_toolbox",
+        "--actions",
+        "P1,S2",
+        "-n",
+        "3",
+        "--seed",
+        "2",
+        "--no-progress",
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         _wait_for(path, 3, proc)
@@ -263,7 +314,9 @@ def test_writer_killed_mid_write_leaves_a_valid_file(tmp_path, recordings):
     rng = np.random.default_rng(0)
     for attempt in range(3):
         dst = tmp_path / f"hammer{attempt}.h5"
-        proc = subprocess.Popen([sys.executable, "-c", WRITER, str(src), str(dst)], stderr=subprocess.PIPE)
+        proc = subprocess.Popen(
+            [sys.executable, "-c", WRITER, str(src), str(dst)], stderr=subprocess.PIPE
+        )
         try:
             _wait_for(dst, 4, proc)
             time.sleep(float(rng.uniform(0.0, 0.3)))
@@ -308,7 +361,9 @@ def test_a_reader_polling_as_the_writer_starts_does_not_stop_it(tmp_path, record
         w.append(recordings[0])
     for attempt in range(40):
         dst = tmp_path / f"started{attempt}.h5"
-        proc = subprocess.Popen([sys.executable, "-c", STARTER, str(src), str(dst)], stderr=subprocess.PIPE)
+        proc = subprocess.Popen(
+            [sys.executable, "-c", STARTER, str(src), str(dst)], stderr=subprocess.PIPE
+        )
         while proc.poll() is None:
             try:
                 with DatasetReader(dst) as rd:

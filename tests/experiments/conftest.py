@@ -11,7 +11,10 @@ from aptkt.cli import main
 @pytest.fixture(scope="session")
 def quick_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("reproduce-quick")
-    assert main(["reproduce", "all", "--quick", "--output", str(out), "--jobs", "2", "--no-progress"]) == 0
+    assert (
+        main(["reproduce", "all", "--quick", "--output", str(out), "--jobs", "2", "--no-progress"])
+        == 0
+    )
     return out
 
 

@@ -11,7 +11,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from aptkt.experiments.aggregate import (
-    Curves, collect, difference, estimate, mean_over_panels, t_quantile,
+    Curves,
+    collect,
+    difference,
+    estimate,
+    mean_over_panels,
+    t_quantile,
 )
 from aptkt.experiments.figures.common import gain_summary, transfer_rate
 
@@ -23,8 +28,16 @@ def rows_from(matrix, method="m", start_group=0, trials_per_group=2, **tags):
         for step, v in enumerate(values):
             if v is None:
                 continue  # the run has no such step (stopped early)
-            out.append({"method": method, "group": start_group + r // trials_per_group,
-                        "trial": r % trials_per_group, "step": step, "mean_accuracy": v, **tags})
+            out.append(
+                {
+                    "method": method,
+                    "group": start_group + r // trials_per_group,
+                    "trial": r % trials_per_group,
+                    "step": step,
+                    "mean_accuracy": v,
+                    **tags,
+                }
+            )
     return out
 
 
@@ -42,7 +55,9 @@ def test_means_spreads_and_counts_by_hand():
 
 
 def test_filtering_and_bookkeeping_errors():
-    rows = rows_from([[0.1, 0.2]], method="a", panel="P1") + rows_from([[0.9, 0.8]], method="b", panel="P1")
+    rows = rows_from([[0.1, 0.2]], method="a", panel="P1") + rows_from(
+        [[0.9, 0.8]], method="b", panel="P1"
+    )
     assert collect(rows, {"method": "b"}).values.tolist() == [[0.9, 0.8]]
     assert collect(rows, {"method": ("a", "b")}, run_by=("method", "group", "trial")).n_runs == 2
     with pytest.raises(ValueError, match="two rows at step"):
@@ -83,6 +98,7 @@ def test_estimate_over_groups_and_over_runs():
 
 def test_t_quantile_against_scipy():
     from scipy import stats  # a scikit-learn dependency, so always there when the suite runs
+
     for df in (1, 2, 5, 9, 19, 22, 33, 49, 75, 200, 10_000):
         assert t_quantile(df) == pytest.approx(stats.t.ppf(0.975, df), abs=2e-3)
 
@@ -108,8 +124,11 @@ def test_gain_summary_by_hand():
 
 
 def test_transfer_rate_counts_decisions():
-    rows = [{"method": "APTKT", "decisions": 35, "transfers": 7}, {"method": "APTKT", "decisions": 5, "transfers": 5},
-            {"method": "baseline", "decisions": 0, "transfers": 0}]
+    rows = [
+        {"method": "APTKT", "decisions": 35, "transfers": 7},
+        {"method": "APTKT", "decisions": 5, "transfers": 5},
+        {"method": "baseline", "decisions": 0, "transfers": 0},
+    ]
     assert transfer_rate(rows, {"method": "APTKT"}) == pytest.approx(12 / 40)
     assert math.isnan(transfer_rate(rows, {"method": "baseline"}))
 

@@ -18,7 +18,12 @@ from aptkt.experiments.run_store import RunStore, data_fingerprint
 from aptkt.experiments.runs import run_steps
 from aptkt.experiments.scale import Scale
 
-THREAD_VARIABLES = ["RAYON_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"]
+THREAD_VARIABLES = [
+    "RAYON_NUM_THREADS",
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+]
 
 
 @pytest.fixture(scope="module")
@@ -27,8 +32,14 @@ def design(quick_data, tmp_path_factory):
     scale = Scale.quick()
     out = tmp_path_factory.mktemp("batch")
     fp = data_fingerprint(quick_data)
-    ctx = Context(scale=scale, seed=0, data=str(quick_data), fingerprint=fp, output=out,
-                  index=_paper_numbers(scale.objects))
+    ctx = Context(
+        scale=scale,
+        seed=0,
+        data=str(quick_data),
+        fingerprint=fp,
+        output=out,
+        index=_paper_numbers(scale.objects),
+    )
     p7, p8 = fig7.plan(ctx), fig8.plan(ctx)
     build_priors(p7.priors, LocalExecutor(1), progress=False)
     specs = p7.specs[:4] + p8.specs[:2]
@@ -37,14 +48,21 @@ def design(quick_data, tmp_path_factory):
 
 def canonical(steps):
     """Results as text, without the wall-clock column (NaN written as NaN, so it compares)."""
-    return json.dumps({k: [{c: v for c, v in r.items() if c != "seconds"} for r in rows]
-                       for k, rows in sorted(steps.items())}, sort_keys=True)
+    return json.dumps(
+        {
+            k: [{c: v for c, v in r.items() if c != "seconds"} for r in rows]
+            for k, rows in sorted(steps.items())
+        },
+        sort_keys=True,
+    )
 
 
 @pytest.fixture(scope="module")
 def uninterrupted(design, tmp_path_factory):
     specs, fp, _, _ = design
-    return run_batch(specs, RunStore(tmp_path_factory.mktemp("one-go")), LocalExecutor(1), fp, progress=False)
+    return run_batch(
+        specs, RunStore(tmp_path_factory.mktemp("one-go")), LocalExecutor(1), fp, progress=False
+    )
 
 
 def test_resume_after_interruption_equals_one_uninterrupted_run(design, uninterrupted, tmp_path):
@@ -92,7 +110,9 @@ def test_dask_cluster_gives_the_same_results(design, uninterrupted, tmp_path):
     specs, fp, _, priors = design
     # Prior knowledge built on the cluster too, into a fresh directory.
     fresh = [type(t)(**{**t.to_dict(), "directory": str(tmp_path / "priors")}) for t in priors]
-    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as cluster:
+    with LocalCluster(
+        n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None
+    ) as cluster:
         executor = make_executor(scheduler=cluster.scheduler_address)
         try:
             assert "Dask cluster" in executor.description
@@ -106,10 +126,11 @@ def test_dask_cluster_gives_the_same_results(design, uninterrupted, tmp_path):
 
 
 def test_the_package_does_not_import_dask():
-    code = ("import sys, aptkt.cli, aptkt.experiments.reproduce, aptkt.experiments.executors; "
-            "sys.exit(any(m == 'dask' or m.startswith('dask.') for m in sys.modules))")
+    code = (
+        "import sys, aptkt.cli, aptkt.experiments.reproduce, aptkt.experiments.executors; "
+        "sys.exit(any(m == 'dask' or m.startswith('dask.') for m in sys.modules))"
+    )
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
-
 
 
 def _in_workers(executor: LocalExecutor, variables: list[str]) -> dict[str, str | None]:
@@ -132,4 +153,7 @@ def test_local_workers_share_the_cores(monkeypatch):
 def test_a_thread_count_the_user_set_wins(monkeypatch):
     monkeypatch.setenv("RAYON_NUM_THREADS", "3")
     monkeypatch.setattr("os.cpu_count", lambda: 4)
-    assert _in_workers(LocalExecutor(2), ["RAYON_NUM_THREADS", "OMP_NUM_THREADS"])["RAYON_NUM_THREADS"] == "3"
+    assert (
+        _in_workers(LocalExecutor(2), ["RAYON_NUM_THREADS", "OMP_NUM_THREADS"])["RAYON_NUM_THREADS"]
+        == "3"
+    )

@@ -12,7 +12,14 @@ def test_quick_demo_writes_every_output(tmp_path, capsys):
     printed = capsys.readouterr().out
     for step in ("[1/5]", "[2/5]", "[3/5]", "[4/5]", "[5/5]"):
         assert step in printed
-    for name in ("data.h5", "prior.npz", "results.csv", "summary.json", "learning_curves.png", "learning_curves.svg"):
+    for name in (
+        "data.h5",
+        "prior.npz",
+        "results.csv",
+        "summary.json",
+        "learning_curves.png",
+        "learning_curves.svg",
+    ):
         assert (out / name).stat().st_size > 0, name
     summary = json.loads((out / "summary.json").read_text())
     assert set(summary["final_mean_accuracy"]) == {"APTKT", "APTKT+aux", "baseline"}

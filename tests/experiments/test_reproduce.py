@@ -57,7 +57,9 @@ def test_per_trial_bookkeeping_in_the_results(quick_run):
         runs[(r["method"], r["group"], r["trial"])].append(int(r["step"]))
     assert len(runs) == 2 * s.groups * s.trials
     assert all(sorted(v) == list(range(s.budget + 1)) for v in runs.values())
-    specs = [json.loads(line) for line in (quick_run / "fig7" / "specs.jsonl").read_text().splitlines()]
+    specs = [
+        json.loads(line) for line in (quick_run / "fig7" / "specs.jsonl").read_text().splitlines()
+    ]
     assert len(specs) == len(runs)
     # A trial's baseline and APTKT runs share the pool order and the exploration seed.
     by_trial = defaultdict(set)
@@ -76,7 +78,10 @@ def test_per_trial_bookkeeping_in_the_results(quick_run):
 def test_report_gain_is_computed_from_the_results_file(quick_run):
     """Recompute Fig. 7's headline gain from results.csv independently and find it in the report."""
     rows = read(quick_run / "fig7" / "results.csv")
-    acc = {(r["method"], int(r["group"]), int(r["trial"]), int(r["step"])): float(r["mean_accuracy"]) for r in rows}
+    acc = {
+        (r["method"], int(r["group"]), int(r["trial"]), int(r["step"])): float(r["mean_accuracy"])
+        for r in rows
+    }
     per_group = defaultdict(list)
     for (m, g, t, step), v in acc.items():
         if m == "APTKT":
@@ -90,7 +95,21 @@ def test_report_gain_is_computed_from_the_results_file(quick_run):
 
 def test_rerun_resumes_everything_and_gives_the_same_results(quick_run, capsys):
     before = (quick_run / "fig9" / "results.csv").read_text()
-    assert main(["reproduce", "fig9", "--quick", "--output", str(quick_run), "--jobs", "2", "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "reproduce",
+                "fig9",
+                "--quick",
+                "--output",
+                str(quick_run),
+                "--jobs",
+                "2",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     assert "0 computed now" in capsys.readouterr().out
     assert (quick_run / "fig9" / "results.csv").read_text() == before
 
@@ -105,16 +124,35 @@ def hand_made_rows(gain: float, noise: float = 0.0):
                 base = 0.5 + 0.02 * step
                 eps = noise * rng.normal()
                 for m, v in (("baseline", base), ("APTKT", base + gain + eps)):
-                    rows.append({"method": m, "panel": "all", "group": g, "trial": t, "step": step,
-                                 "mean_accuracy": v, "fused_accuracy": v, "decisions": 9 if step == 0 else 3,
-                                 "transfers": 3 if m == "APTKT" else 0})
+                    rows.append(
+                        {
+                            "method": m,
+                            "panel": "all",
+                            "group": g,
+                            "trial": t,
+                            "step": step,
+                            "mean_accuracy": v,
+                            "fused_accuracy": v,
+                            "decisions": 9 if step == 0 else 3,
+                            "transfers": 3 if m == "APTKT" else 0,
+                        }
+                    )
     return rows
 
 
-@pytest.mark.parametrize("gain, expected", [(0.10, "agrees"), (0.30, "more than twice"), (-0.10, "worse")])
+@pytest.mark.parametrize(
+    "gain, expected", [(0.10, "agrees"), (0.30, "more than twice"), (-0.10, "worse")]
+)
 def test_report_numbers_follow_hand_made_results(tmp_path, gain, expected):
     scale = Scale.quick()
-    ctx = Context(scale=scale, seed=0, data="", fingerprint="", output=tmp_path, index=_paper_numbers(scale.objects))
+    ctx = Context(
+        scale=scale,
+        seed=0,
+        data="",
+        fingerprint="",
+        output=tmp_path,
+        index=_paper_numbers(scale.objects),
+    )
     section = fig7.analyse(ctx, hand_made_rows(gain, noise=0.01))
     head = section.headlines[0]
     measured = section.numbers["gain"]["overall"]["mean"]
@@ -122,6 +160,8 @@ def test_report_numbers_follow_hand_made_results(tmp_path, gain, expected):
     assert f"{100 * measured:+.1f} pp" in head.ours
     assert expected in head.verdict
     # Per run: 3 transfers at each of budget + 1 steps, out of 9 decisions at step 0 and 3 later.
-    assert section.numbers["transfer_rate"] == pytest.approx(3 * (scale.budget + 1) / (9 + 3 * scale.budget))
+    assert section.numbers["transfer_rate"] == pytest.approx(
+        3 * (scale.budget + 1) / (9 + 3 * scale.budget)
+    )
     assert (tmp_path / "fig7" / "fig7.svg").exists()
     assert not math.isnan(section.numbers["fused_gain"]["overall"]["mean"])

@@ -47,8 +47,18 @@ def test_groups_are_roughly_uniform():
 
 
 def spec(**changes):
-    base = RunSpec("APTKT", LearnerConfig(budget=3, seed=1), "/data/a.h5", ("P1",), ("x", "y"), (0, 1), (2,),
-                   prior="/out/priors/prior-3-abc.npz", pool_seed=1, tags={"figure": "fig7", "group": 0})
+    base = RunSpec(
+        "APTKT",
+        LearnerConfig(budget=3, seed=1),
+        "/data/a.h5",
+        ("P1",),
+        ("x", "y"),
+        (0, 1),
+        (2,),
+        prior="/out/priors/prior-3-abc.npz",
+        pool_seed=1,
+        tags={"figure": "fig7", "group": 0},
+    )
     return replace(base, **changes)
 
 
@@ -58,24 +68,43 @@ def test_run_key_covers_what_changes_the_result_and_nothing_else():
     assert run_key(spec(method="other", tags={"figure": "fig9"}), "fp") == k
     assert run_key(spec(data="/elsewhere/a.h5", prior="/moved/prior-3-abc.npz"), "fp") == k
     # Everything else does.
-    for changed in (spec(config=LearnerConfig(budget=4, seed=1)), spec(actions=("P2",)), spec(new_objects=("x", "z")),
-                    spec(pool_trials=(0,)), spec(test_trials=(3,)), spec(pool_seed=2), spec(prior=None),
-                    spec(prior="/out/priors/prior-3-abd.npz")):
+    for changed in (
+        spec(config=LearnerConfig(budget=4, seed=1)),
+        spec(actions=("P2",)),
+        spec(new_objects=("x", "z")),
+        spec(pool_trials=(0,)),
+        spec(test_trials=(3,)),
+        spec(pool_seed=2),
+        spec(prior=None),
+        spec(prior="/out/priors/prior-3-abd.npz"),
+    ):
         assert run_key(changed, "fp") != k
     assert run_key(spec(), "other data") != k
 
 
 def test_store_round_trip_and_damaged_files(tmp_path):
     store = RunStore(tmp_path / "runs")
-    rows = [{"step": 0, "mean_accuracy": 0.5, "uncertainty": float("nan"), "action": None, "explored": False}]
+    rows = [
+        {
+            "step": 0,
+            "mean_accuracy": 0.5,
+            "uncertainty": float("nan"),
+            "action": None,
+            "explored": False,
+        }
+    ]
     assert store.load("k1") is None and "k1" not in store
     store.save("k1", spec(), rows)
     back = store.load("k1")
     assert back[0]["step"] == 0 and math.isnan(back[0]["uncertainty"]) and back[0]["action"] is None
     assert "k1" in store and store.keys() == ["k1"]
-    assert not list((tmp_path / "runs").glob("*.tmp"))  # written under a temporary name, then renamed
+    assert not list(
+        (tmp_path / "runs").glob("*.tmp")
+    )  # written under a temporary name, then renamed
     # A truncated or foreign file is not a result: it is recomputed, never trusted.
     store.path("k2").write_text('{"format": "aptkt.RunResult/1", "key": "k2", "steps": [')
     assert store.load("k2") is None
-    store.path("k3").write_text(json.dumps({"format": "aptkt.RunResult/1", "key": "other", "steps": []}))
+    store.path("k3").write_text(
+        json.dumps({"format": "aptkt.RunResult/1", "key": "other", "steps": []})
+    )
     assert store.load("k3") is None

@@ -6,7 +6,11 @@ import numpy as np
 import pytest
 
 from aptkt.experiments.similarity import (
-    dissimilar_priors, fit_mixture, log_confusion, log_responsibilities, rescale,
+    dissimilar_priors,
+    fit_mixture,
+    log_confusion,
+    log_responsibilities,
+    rescale,
 )
 
 
@@ -21,6 +25,7 @@ def blobs(seed=0, n=25, d=3):
 @pytest.mark.parametrize("kind", ["tied", "full", "diag"])
 def test_em_matches_scikit_learn_from_the_same_start(kind):
     from sklearn import mixture
+
     X, labels = blobs()
     ours = fit_mixture(X, labels, 4, covariance_type=kind, tol=1e-3, max_iter=100)
     # The same initial parameters, given to scikit-learn explicitly.
@@ -31,16 +36,31 @@ def test_em_matches_scikit_learn_from_the_same_start(kind):
         resid = X - m0[labels]
         p0 = np.linalg.inv(resid.T @ resid / len(X) + 1e-6 * np.eye(d))
     elif kind == "full":
-        p0 = np.array([np.linalg.inv(np.cov(X[labels == k].T, bias=True) + 1e-6 * np.eye(d)) for k in range(4)])
+        p0 = np.array(
+            [
+                np.linalg.inv(np.cov(X[labels == k].T, bias=True) + 1e-6 * np.eye(d))
+                for k in range(4)
+            ]
+        )
     else:
         p0 = np.array([1 / (X[labels == k].var(0) + 1e-6) for k in range(4)])
-    ref = mixture.GaussianMixture(4, covariance_type=kind, tol=1e-3, max_iter=100, reg_covar=1e-6,
-                                  weights_init=w0, means_init=m0, precisions_init=p0).fit(X)
+    ref = mixture.GaussianMixture(
+        4,
+        covariance_type=kind,
+        tol=1e-3,
+        max_iter=100,
+        reg_covar=1e-6,
+        weights_init=w0,
+        means_init=m0,
+        precisions_init=p0,
+    ).fit(X)
     assert ours.n_iter == ref.n_iter_
     assert ours.converged == ref.converged_
     np.testing.assert_allclose(ours.means, ref.means_, atol=1e-8)
     np.testing.assert_allclose(ours.weights, ref.weights_, atol=1e-10)
-    np.testing.assert_allclose(np.exp(log_responsibilities(ours, X)), ref.predict_proba(X), atol=1e-8)
+    np.testing.assert_allclose(
+        np.exp(log_responsibilities(ours, X)), ref.predict_proba(X), atol=1e-8
+    )
     assert ours.lower_bound == pytest.approx(ref.lower_bound_, abs=1e-8)
 
 
@@ -68,17 +88,21 @@ def test_overlapping_objects_are_similar_and_far_ones_dissimilar():
 
 
 def test_dissimilar_priors_use_both_directions_and_break_ties_by_order():
-    S = np.array([
-        [1.0, 0.0, 0.4, 0.0],  # new object 0 is confused with prior 2 ...
-        [0.0, 1.0, 0.0, 0.0],
-        [0.0, 0.0, 1.0, 0.0],  # ... but prior 2 is never confused with it: the mean is 0.2
-        [0.1, 0.0, 0.0, 1.0],
-    ])
+    S = np.array(
+        [
+            [1.0, 0.0, 0.4, 0.0],  # new object 0 is confused with prior 2 ...
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],  # ... but prior 2 is never confused with it: the mean is 0.2
+            [0.1, 0.0, 0.0, 1.0],
+        ]
+    )
     with np.errstate(divide="ignore"):
         L = np.log(S)
     chosen, score = dissimilar_priors(L, ["n", "p1", "p2", "p3"], ["p1", "p2", "p3"], ["n"], 2)
     assert chosen == ["p1", "p3"]
-    assert score["p2"] == pytest.approx(np.log10(0.2)) and score["p3"] == pytest.approx(np.log10(0.05))
+    assert score["p2"] == pytest.approx(np.log10(0.2)) and score["p3"] == pytest.approx(
+        np.log10(0.05)
+    )
     chosen, _ = dissimilar_priors(np.zeros((3, 3)), ["n", "a", "b"], ["b", "a"], ["n"], 1)
     assert chosen == ["a"]  # a tie goes to the earlier object in the object order
     with pytest.raises(ValueError):

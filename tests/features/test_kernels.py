@@ -17,7 +17,9 @@ def rel(a, b):
     return np.max(np.abs(a - b) / np.maximum(np.abs(b), 1e-300))
 
 
-@pytest.mark.parametrize("shape,axis", [((5000,), -1), ((7, 3, 5000), -1), ((7, 400, 3), 1), ((50, 6), 0)])
+@pytest.mark.parametrize(
+    "shape,axis", [((5000,), -1), ((7, 3, 5000), -1), ((7, 400, 3), 1), ((50, 6), 0)]
+)
 def test_hjorth_matches_antropy(shape, axis):
     x = RNG.normal(size=shape) * 0.01 + 1.0  # an accelerometer axis: gravity plus vibration
     activity, mobility, complexity = features.hjorth(x, axis=axis)
@@ -98,7 +100,9 @@ def test_texture_descriptor_matches_reference():
     td = features.texture_descriptor(acc)
     assert td.shape == (features.TEXTURE_DIM,) == (len(features.TEXTURE_NAMES),)
     mob, com = antropy.hjorth_params(acc, axis=-1)
-    corr = np.array([[np.corrcoef(c)[0, 1], np.corrcoef(c)[1, 2], np.corrcoef(c)[0, 2]] for c in acc])
+    corr = np.array(
+        [[np.corrcoef(c)[0, 1], np.corrcoef(c)[1, 2], np.corrcoef(c)[0, 2]] for c in acc]
+    )
     want = np.concatenate([np.var(acc, axis=-1).mean(0), mob.mean(0), com.mean(0), corr.mean(0)])
     np.testing.assert_allclose(td, want, rtol=1e-10)
 
@@ -107,8 +111,12 @@ def test_mean_force_and_gradient_match_numpy():
     force = RNG.uniform(0, 3, size=(7, 3, 750))
     assert features.mean_force(force) == pytest.approx(np.mean(force), rel=1e-14)
     t = RNG.normal(size=(4, 300)).cumsum(axis=1)
-    np.testing.assert_allclose(features.temperature_gradient(t), np.gradient(t, axis=-1), rtol=1e-14, atol=1e-14)
-    np.testing.assert_allclose(features.temperature_gradient(t.T, axis=0), np.gradient(t.T, axis=0), atol=1e-14)
+    np.testing.assert_allclose(
+        features.temperature_gradient(t), np.gradient(t, axis=-1), rtol=1e-14, atol=1e-14
+    )
+    np.testing.assert_allclose(
+        features.temperature_gradient(t.T, axis=0), np.gradient(t.T, axis=0), atol=1e-14
+    )
 
 
 def test_thermal_curve_is_mean_and_gradient():

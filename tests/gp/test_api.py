@@ -10,7 +10,9 @@ from .conftest import make_blobs
 
 
 def test_params_round_trip_and_clone():
-    model = LaplaceGPC(length_scale="auto", n_restarts=4, modalities={"a": [0], "b": [1, 2]}, random_state=3)
+    model = LaplaceGPC(
+        length_scale="auto", n_restarts=4, modalities={"a": [0], "b": [1, 2]}, random_state=3
+    )
     params = model.get_params()
     assert params["n_restarts"] == 4 and params["length_scale"] == "auto"
     copy = clone(model)
@@ -93,20 +95,29 @@ def test_lambda_zero_transfer_equals_no_transfer():
     zero = LaplaceGPC(1.1, 2.0, optimize=False).fit(X, y, sources={0: (source, 0.0)})
     np.testing.assert_allclose(zero.predict_proba(Xt), plain.predict_proba(Xt), atol=1e-10)
     # The other classes' likelihoods are untouched; class 0's adds the source block's own.
-    np.testing.assert_allclose(zero.log_marginal_likelihood_[1:], plain.log_marginal_likelihood_[1:], rtol=1e-12)
+    np.testing.assert_allclose(
+        zero.log_marginal_likelihood_[1:], plain.log_marginal_likelihood_[1:], rtol=1e-12
+    )
     assert zero.log_marginal_likelihood_[0] < plain.log_marginal_likelihood_[0]
 
 
 def test_related_source_raises_its_class_probability_with_one_observation():
     rng = np.random.default_rng(8)
     centers = np.array([[0.0, 0.0], [3.0, 0.0], [0.0, 3.0]])
-    X = np.concatenate([centers[0] + 0.5 * rng.normal(size=(1, 2)), centers[1:].repeat(6, 0) + 0.5 * rng.normal(size=(12, 2))])
+    X = np.concatenate(
+        [
+            centers[0] + 0.5 * rng.normal(size=(1, 2)),
+            centers[1:].repeat(6, 0) + 0.5 * rng.normal(size=(12, 2)),
+        ]
+    )
     y = np.array([0] + [1] * 6 + [2] * 6)
     source = centers[0] + 0.5 * rng.normal(size=(20, 2))
     probe = centers[0] + 0.5 * rng.normal(size=(50, 2))
     plain = LaplaceGPC(1.0, 4.0, optimize=False).fit(X, y)
     related = LaplaceGPC(1.0, 4.0, optimize=False).fit(X, y, sources={0: (source, 0.9)})
-    assert related.predict_proba(probe)[:, 0].mean() > plain.predict_proba(probe)[:, 0].mean() + 0.05
+    assert (
+        related.predict_proba(probe)[:, 0].mean() > plain.predict_proba(probe)[:, 0].mean() + 0.05
+    )
     assert related.score(probe, np.zeros(50)) >= plain.score(probe, np.zeros(50))
 
 
@@ -133,5 +144,7 @@ def test_save_and_load_round_trip(tmp_path):
     Xt = np.random.default_rng(0).normal(size=(20, 4))
     np.testing.assert_array_equal(loaded.theta_, model.theta_)
     np.testing.assert_allclose(loaded.predict_proba(Xt), model.predict_proba(Xt), rtol=1e-12)
-    np.testing.assert_allclose(loaded.log_marginal_likelihood_, model.log_marginal_likelihood_, rtol=1e-12)
+    np.testing.assert_allclose(
+        loaded.log_marginal_likelihood_, model.log_marginal_likelihood_, rtol=1e-12
+    )
     assert loaded.get_params()["modalities"] == {"f": [0, 1], "t": [2, 3]}

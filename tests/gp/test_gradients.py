@@ -14,7 +14,9 @@ def finite_difference(model, theta, eps=1e-5):
         up, down = theta.copy(), theta.copy()
         up[:, p] += eps
         down[:, p] -= eps
-        grads[:, p] = (model.log_marginal_likelihood(up) - model.log_marginal_likelihood(down)) / (2 * eps)
+        grads[:, p] = (model.log_marginal_likelihood(up) - model.log_marginal_likelihood(down)) / (
+            2 * eps
+        )
     return grads
 
 
@@ -34,12 +36,18 @@ def test_multi_modal_weights_and_length_scales():
     X, y = make_blobs(12, 3, 5, seed=2)
     model = LaplaceGPC(
         modalities={"force": [0], "thermal": [1, 2], "texture": [3, 4]},
-        optimize=False, newton_tol=1e-14, newton_max_iter=200,
+        optimize=False,
+        newton_tol=1e-14,
+        newton_max_iter=200,
     ).fit(X, y)
     assert model.hyperparameter_names_ == [
         "log_signal_variance",
-        "log_length_scale[force]", "log_length_scale[thermal]", "log_length_scale[texture]",
-        "weight_logit[force]", "weight_logit[thermal]", "weight_logit[texture]",
+        "log_length_scale[force]",
+        "log_length_scale[thermal]",
+        "log_length_scale[texture]",
+        "weight_logit[force]",
+        "weight_logit[thermal]",
+        "weight_logit[texture]",
     ]
     check(model, np.tile([1.2, -0.3, 0.2, 0.5, 0.4, -0.8, 0.1], (3, 1)))
 

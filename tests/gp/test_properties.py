@@ -22,7 +22,9 @@ coords = st.floats(-5, 5, allow_nan=False, allow_infinity=False)
     log_ls=st.tuples(st.floats(-1.5, 1.5), st.floats(-1.5, 1.5)),
     logits=st.tuples(st.floats(-3, 3), st.floats(-3, 3)),
 )
-def test_kernels_are_symmetric_psd_for_lambda_in_unit_interval(X, n_source, lam, log_sf2, log_ls, logits):
+def test_kernels_are_symmetric_psd_for_lambda_in_unit_interval(
+    X, n_source, lam, log_sf2, log_ls, logits
+):
     n_source = min(n_source, X.shape[0] - 1)
     theta = [log_sf2, *log_ls, *logits] + ([lam] if n_source else [])
     K = kernel_matrix(X, theta, modalities=[[0, 1], [2, 3]], n_source=n_source)
@@ -38,7 +40,11 @@ def test_lambda_outside_unit_interval_is_rejected():
 
 
 @settings(max_examples=25, deadline=None)
-@given(seed=st.integers(0, 10_000), n_classes=st.integers(2, 4), approx=st.sampled_from(["erf", "quadrature"]))
+@given(
+    seed=st.integers(0, 10_000),
+    n_classes=st.integers(2, 4),
+    approx=st.sampled_from(["erf", "quadrature"]),
+)
 def test_probabilities_are_a_distribution(seed, n_classes, approx):
     X, y = make_blobs(6, n_classes, 3, spread=1.5, seed=seed)
     model = LaplaceGPC(optimize=False, signal_variance=5.0, approximation=approx).fit(X, y)

@@ -18,13 +18,20 @@ def sklearn_fixed(X, y, s, l):
 
 def sklearn_lmls(model):
     if hasattr(model.base_estimator_, "estimators_"):
-        return np.array([e.log_marginal_likelihood_value_ for e in model.base_estimator_.estimators_])
+        return np.array(
+            [e.log_marginal_likelihood_value_ for e in model.base_estimator_.estimators_]
+        )
     return np.array([model.base_estimator_.log_marginal_likelihood_value_])
 
 
 @pytest.mark.parametrize(
     "n_per,n_classes,d,s,l,seed",
-    [(20, 5, 8, 1.0, 1.0, 0), (30, 3, 12, 4.0, 2.5, 1), (40, 2, 5, 0.5, 0.7, 2), (15, 4, 22, 10.0, 6.0, 3)],
+    [
+        (20, 5, 8, 1.0, 1.0, 0),
+        (30, 3, 12, 4.0, 2.5, 1),
+        (40, 2, 5, 0.5, 0.7, 2),
+        (15, 4, 22, 10.0, 6.0, 3),
+    ],
 )
 def test_fixed_kernel_lml_and_probabilities_match_sklearn(n_per, n_classes, d, s, l, seed):
     X, y = make_blobs(n_per, n_classes, d, spread=1.5, seed=seed)
@@ -59,8 +66,14 @@ def test_quadrature_is_exact_against_scipy():
     for m, v, got in zip(mean[:, 0], var[:, 0], p):
         sd = np.sqrt(v)
         want, _ = integrate.quad(
-            lambda f: np.exp(-0.5 * ((f - m) / sd) ** 2) / (sd * np.sqrt(2 * np.pi)) / (1 + np.exp(-f)),
-            m - 12 * sd, m + 12 * sd, epsabs=1e-13, epsrel=1e-12, limit=200,
+            lambda f: (
+                np.exp(-0.5 * ((f - m) / sd) ** 2) / (sd * np.sqrt(2 * np.pi)) / (1 + np.exp(-f))
+            ),
+            m - 12 * sd,
+            m + 12 * sd,
+            epsabs=1e-13,
+            epsrel=1e-12,
+            limit=200,
         )
         assert got == pytest.approx(want, abs=1e-9)
 
@@ -76,6 +89,8 @@ def test_optimised_fit_reaches_sklearn_likelihood_with_same_starts():
     ours = LaplaceGPC(n_restarts=2, random_state=0).fit(X, y)
     # Per class, our best start is at least as good as scikit-learn's (small tolerance for the
     # optimisers' stopping rules).
-    assert np.all(ours.log_marginal_likelihood_ >= sklearn_lmls(ref) - 1e-3 * np.abs(sklearn_lmls(ref)))
+    assert np.all(
+        ours.log_marginal_likelihood_ >= sklearn_lmls(ref) - 1e-3 * np.abs(sklearn_lmls(ref))
+    )
     Xt, yt = X_all[~train], y_all[~train]
     assert ours.score(Xt, yt) >= ref.score(Xt, yt) - 0.03

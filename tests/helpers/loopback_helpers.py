@@ -27,7 +27,12 @@ STIFFNESS = 200.0  # N/m
 DOWN = (math.pi, 0.0, 0.0)
 START_POSE = (0.0, -0.5, 0.006, *DOWN)
 PLACEMENT = Placement("sponge", 0.0, -0.5, SURFACE_Z, (-0.04, -0.54, -0.01), (0.04, -0.46, 0.04))
-DEFAULT_CONTACT = {"type": "spring", "surface_z": SURFACE_Z, "stiffness": STIFFNESS, "friction": 0.3}
+DEFAULT_CONTACT = {
+    "type": "spring",
+    "surface_z": SURFACE_Z,
+    "stiffness": STIFFNESS,
+    "friction": 0.3,
+}
 FAST = dict(approach_speed=0.01, max_approach_travel=0.03)
 
 _claimed: set[str] = set()
@@ -145,6 +150,11 @@ class LoopbackSkin(SkinSourceBase):
         while not self._stop.wait(self.period):
             per_sensor = self.loopback.normal_force() / (3 * n)
             force = self.calibration.to_normalised(self.cells, np.full((n, 3), per_sensor))
-            raw = quantize(self.cells, np.zeros(n), np.tile([0.0, 0.0, 1.0], (n, 1)),
-                           np.full((n, 2), 30.0), force)
+            raw = quantize(
+                self.cells,
+                np.zeros(n),
+                np.tile([0.0, 0.0, 1.0], (n, 1)),
+                np.full((n, 2), 30.0),
+                force,
+            )
             self._ingest_bytes(encode_sensor_packets(raw), self._now())

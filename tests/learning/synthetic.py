@@ -26,7 +26,9 @@ def make_world(n_prior=3, n_new=3, related=True, noise=1.0, separation=1.6, seed
                 base = means[(a, priors[j % n_prior])]
                 means[(a, o)] = {m: v + rng.normal(scale=0.3, size=v.size) for m, v in base.items()}
             else:
-                means[(a, o)] = {m: rng.normal(scale=separation * 3, size=d) + 40.0 for m, d in mods.items()}
+                means[(a, o)] = {
+                    m: rng.normal(scale=separation * 3, size=d) + 40.0 for m, d in mods.items()
+                }
     return priors, news, means
 
 
@@ -35,7 +37,11 @@ def draw(means, objects, n_per, noise=1.0, seed=0):
     table = {}
     for a, mods in ACTIONS.items():
         objs = np.repeat(objects, n_per)
-        data = {m: np.concatenate([means[(a, o)][m] + noise * rng.normal(size=(n_per, d)) for o in objects])
-                for m, d in mods.items()}
+        data = {
+            m: np.concatenate(
+                [means[(a, o)][m] + noise * rng.normal(size=(n_per, d)) for o in objects]
+            )
+            for m, d in mods.items()
+        }
         table[a] = Observations(a, data, objs)
     return table

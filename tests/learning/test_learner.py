@@ -14,7 +14,9 @@ from .synthetic import ACTIONS, draw, make_world
 
 @pytest.fixture(scope="module")
 def related_world():
-    priors, news, means = make_world(n_prior=3, n_new=3, noise=1.0, separation=0.6, related=True, seed=1)
+    priors, news, means = make_world(
+        n_prior=3, n_new=3, noise=1.0, separation=0.6, related=True, seed=1
+    )
     return dict(
         news=news,
         prior=PriorKnowledge.build(draw(means, priors, 20, seed=1), seed=0),
@@ -27,8 +29,9 @@ def mean_curves(world, transfer, auxiliary=False, seeds=range(4), budget=6):
     curves = []
     for seed in seeds:
         cfg = LearnerConfig(transfer=transfer, auxiliary=auxiliary, budget=budget, seed=seed)
-        run = APTKT(cfg, world["prior"]).run(PoolEnvironment(world["pool"], seed=seed), list(ACTIONS),
-                                            world["news"], world["test"])
+        run = APTKT(cfg, world["prior"]).run(
+            PoolEnvironment(world["pool"], seed=seed), list(ACTIONS), world["news"], world["test"]
+        )
         curves.append(run.curve()["mean_accuracy"])
     return np.mean(curves, axis=0)
 
@@ -41,9 +44,15 @@ def test_transfer_from_related_priors_beats_the_baseline_early(related_world):
 
 
 def test_unrelated_priors_do_not_hurt(related_world):
-    priors, news, means = make_world(n_prior=3, n_new=3, noise=1.0, separation=0.6, related=False, seed=1)
-    world = dict(news=news, prior=PriorKnowledge.build(draw(means, priors, 20, seed=1), seed=0),
-                 pool=draw(means, news, 30, seed=2), test=draw(means, news, 20, seed=3))
+    priors, news, means = make_world(
+        n_prior=3, n_new=3, noise=1.0, separation=0.6, related=False, seed=1
+    )
+    world = dict(
+        news=news,
+        prior=PriorKnowledge.build(draw(means, priors, 20, seed=1), seed=0),
+        pool=draw(means, news, 30, seed=2),
+        test=draw(means, news, 20, seed=3),
+    )
     aptkt = mean_curves(world, "paper")
     base = mean_curves(world, "none")
     assert np.all(aptkt >= base - 0.05)
@@ -52,7 +61,12 @@ def test_unrelated_priors_do_not_hurt(related_world):
 def test_transfer_decisions_follow_relatedness(related_world):
     cfg = LearnerConfig(budget=0)
     learner = APTKT(cfg, related_world["prior"])
-    run = learner.run(PoolEnvironment(related_world["pool"]), list(ACTIONS), related_world["news"], related_world["test"])
+    run = learner.run(
+        PoolEnvironment(related_world["pool"]),
+        list(ACTIONS),
+        related_world["news"],
+        related_world["test"],
+    )
     # make_world relates new{j} to old{j}.
     for action, decisions in run.steps[0].transfer.items():
         for obj, d in decisions.items():
@@ -65,7 +79,12 @@ def test_transfer_decisions_follow_relatedness(related_world):
 def test_auxiliary_features_are_an_extra_modality(related_world):
     cfg = LearnerConfig(auxiliary=True, budget=1)
     learner = APTKT(cfg, related_world["prior"])
-    learner.run(PoolEnvironment(related_world["pool"]), list(ACTIONS), related_world["news"], related_world["test"])
+    learner.run(
+        PoolEnvironment(related_world["pool"]),
+        list(ACTIONS),
+        related_world["news"],
+        related_world["test"],
+    )
     model = learner.learners["P1"].model
     assert model.modality_names_ == ["force", "thermal", "auxiliary"]
     n_old = len(related_world["prior"].objects)
@@ -80,18 +99,29 @@ def test_auxiliary_features_are_an_extra_modality(related_world):
 
 def test_budget_steps_and_reproducibility(related_world):
     cfg = LearnerConfig(budget=5, seed=3)
-    runs = [APTKT(cfg, related_world["prior"]).run(PoolEnvironment(related_world["pool"], seed=3), list(ACTIONS),
-                                                   related_world["news"], related_world["test"]) for _ in range(2)]
+    runs = [
+        APTKT(cfg, related_world["prior"]).run(
+            PoolEnvironment(related_world["pool"], seed=3),
+            list(ACTIONS),
+            related_world["news"],
+            related_world["test"],
+        )
+        for _ in range(2)
+    ]
     assert len(runs[0].steps) == 6
     assert runs[0].steps[-1].n_observations == len(ACTIONS) * 3 + 5
     assert [s.action for s in runs[0].steps] == [s.action for s in runs[1].steps]
-    np.testing.assert_array_equal(runs[0].curve()["mean_accuracy"], runs[1].curve()["mean_accuracy"])
+    np.testing.assert_array_equal(
+        runs[0].curve()["mean_accuracy"], runs[1].curve()["mean_accuracy"]
+    )
 
 
 def test_exhausted_pool_stops_the_run(related_world):
     priors, news, means = make_world(seed=5)
     small_pool = draw(means, news, 2, seed=4)
-    run = APTKT(LearnerConfig(transfer="none", budget=50)).run(PoolEnvironment(small_pool), list(ACTIONS), news)
+    run = APTKT(LearnerConfig(transfer="none", budget=50)).run(
+        PoolEnvironment(small_pool), list(ACTIONS), news
+    )
     assert run.stopped_early
     assert run.steps[-1].n_observations == 2 * len(ACTIONS) * len(news)
     env = PoolEnvironment(small_pool)
@@ -119,7 +149,9 @@ def test_prior_knowledge_round_trip(tmp_path, related_world):
     for action in prior.actions:
         X = prior[action].training_features()
         np.testing.assert_allclose(loaded[action].training_features(), X)
-        np.testing.assert_allclose(loaded[action].posteriors(X), prior[action].posteriors(X), rtol=1e-12)
+        np.testing.assert_allclose(
+            loaded[action].posteriors(X), prior[action].posteriors(X), rtol=1e-12
+        )
 
 
 def test_learner_runs_on_plain_arrays_without_the_simulator(tmp_path):
@@ -148,9 +180,15 @@ def test_learner_runs_on_plain_arrays_without_the_simulator(tmp_path):
 def test_single_modality_models(related_world):
     cfg = LearnerConfig(budget=0, modalities=("thermal",))
     learner = APTKT(cfg, related_world["prior"])
-    learner.run(PoolEnvironment(related_world["pool"]), list(ACTIONS), related_world["news"], related_world["test"])
+    learner.run(
+        PoolEnvironment(related_world["pool"]),
+        list(ACTIONS),
+        related_world["news"],
+        related_world["test"],
+    )
     for action in ACTIONS:
         assert learner.learners[action].model.modality_names_ == ["thermal"]
     with pytest.raises(ValueError, match="has none of the modalities"):
         APTKT(LearnerConfig(budget=0, modalities=("force",)), related_world["prior"]).run(
-            PoolEnvironment(related_world["pool"]), ["S1"], related_world["news"])
+            PoolEnvironment(related_world["pool"]), ["S1"], related_world["news"]
+        )

@@ -14,7 +14,11 @@ from aptkt.runtime.generation import GenerationPlan, generate
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
     path = tmp_path_factory.mktemp("prior") / "d.h5"
-    generate(path, GenerationPlan(("rough_sponge", "metal_toolbox"), (PAPER_ACTIONS["P1"],), 4, seed=3), progress=False)
+    generate(
+        path,
+        GenerationPlan(("rough_sponge", "metal_toolbox"), (PAPER_ACTIONS["P1"],), 4, seed=3),
+        progress=False,
+    )
     return path
 
 

@@ -15,7 +15,9 @@ def test_mean_posterior_and_lambda():
     np.testing.assert_allclose(mean_posteriors(post), [0.6, 0.2, 0.2])
     d = decide_transfer("n", ["a", "b", "c"], post, eps_neg=0.4)
     assert d.source == "a" and d.transfer_lambda == pytest.approx(0.6)
-    assert d.transfers and d.as_dict()["mean_posterior"] == pytest.approx({"a": 0.6, "b": 0.2, "c": 0.2})
+    assert d.transfers and d.as_dict()["mean_posterior"] == pytest.approx(
+        {"a": 0.6, "b": 0.2, "c": 0.2}
+    )
 
 
 def test_eps_neg_cut_off():
@@ -41,7 +43,9 @@ def test_selection_argmax_and_ties():
     rng = np.random.default_rng(0)
     sel = select_next(unc, ["P1", "S1"], ["x", "y"], eps_explor=0.0, rng=rng)
     assert (sel.action, sel.object, sel.explored) == ("P1", "y", False)  # first of the tied maxima
-    sel = select_next(unc, ["P1", "S1"], ["x", "y"], eps_explor=0.0, rng=rng, available=[("S1", "x"), ("S1", "y")])
+    sel = select_next(
+        unc, ["P1", "S1"], ["x", "y"], eps_explor=0.0, rng=rng, available=[("S1", "x"), ("S1", "y")]
+    )
     assert (sel.action, sel.object) == ("S1", "x")
 
 
@@ -57,14 +61,20 @@ def test_exploration_is_uniform_over_pairs():
     assert all(abs(c / 4000 - 0.25) < 0.03 for c in counts.values())
     # With ε = 0.3 about 30 % of picks explore.
     rng = np.random.default_rng(2)
-    frac = np.mean([select_next(unc, ["P1", "S1"], ["x", "y"], 0.3, rng).explored for _ in range(4000)])
+    frac = np.mean(
+        [select_next(unc, ["P1", "S1"], ["x", "y"], 0.3, rng).explored for _ in range(4000)]
+    )
     assert abs(frac - 0.3) < 0.03
 
 
 def test_pca_is_fitted_on_training_observations_only():
     rng = np.random.default_rng(0)
-    train = Observations("C1", {"thermal": rng.normal(size=(30, 40))}, np.repeat(["a", "b", "c"], 10))
-    test = Observations("C1", {"thermal": rng.normal(size=(20, 40)) * 50 + 9}, np.repeat(["a", "b"], 10))
+    train = Observations(
+        "C1", {"thermal": rng.normal(size=(30, 40))}, np.repeat(["a", "b", "c"], 10)
+    )
+    test = Observations(
+        "C1", {"thermal": rng.normal(size=(20, 40)) * 50 + 9}, np.repeat(["a", "b"], 10)
+    )
     pipe = FeaturePipeline({"thermal": ModalityTransform(pca_components=10)}).fit(train)
     t = pipe.transforms["thermal"]
     np.testing.assert_allclose(t.mean_, train.modalities["thermal"].mean(axis=0))
@@ -80,7 +90,9 @@ def test_pca_is_fitted_on_training_observations_only():
 
 
 def test_pca_keeps_at_most_rank_components():
-    obs = Observations("C1", {"thermal": np.random.default_rng(1).normal(size=(4, 40))}, ["a", "b", "c", "d"])
+    obs = Observations(
+        "C1", {"thermal": np.random.default_rng(1).normal(size=(4, 40))}, ["a", "b", "c", "d"]
+    )
     pipe = FeaturePipeline().fit(obs)
     assert pipe.transform(obs)[0].shape == (4, 3)
 
@@ -95,7 +107,9 @@ def test_log_columns_and_constant_columns():
 
 
 def test_observations_reject_nan_with_location():
-    with pytest.raises(ValueError, match=r"modality 'force': non-finite value nan in observation 1 \(object 'b'\)"):
+    with pytest.raises(
+        ValueError, match=r"modality 'force': non-finite value nan in observation 1 \(object 'b'\)"
+    ):
         Observations("P1", {"force": [[1.0], [np.nan]]}, ["a", "b"])
     with pytest.raises(ValueError, match="expected shape"):
         Observations("P1", {"force": np.zeros((3, 1))}, ["a", "b"])

@@ -52,7 +52,9 @@ def make_robot(loopback: Loopback, _shared_robot: dict) -> Iterator[Callable[...
         _shared_robot["robot"].close()
         _shared_robot["robot"] = None
 
-    def make(pose: tuple[float, ...] = START_POSE, contact: dict | None = None, **limits: float) -> UR10:
+    def make(
+        pose: tuple[float, ...] = START_POSE, contact: dict | None = None, **limits: float
+    ) -> UR10:
         loopback.reset(pose=pose)
         loopback.set_contact(contact or DEFAULT_CONTACT)
         robot = UR10(loopback.host, [PLACEMENT], SafetyLimits(**{**FAST, **limits}))

@@ -12,7 +12,9 @@ from loopback_helpers import PLACEMENT, STIFFNESS, LoopbackSkin, at_rest  # noqa
 from aptkt.actions import ExplorationSettings, ExploratoryAction, Movement, explore  # noqa: E402
 from aptkt.errors import ProtectiveStopError  # noqa: E402
 
-SETTINGS = ExplorationSettings(clearance=0.003, lift_height=0.005, thermal_wait=0.2, stamp_wall_clock=False)
+SETTINGS = ExplorationSettings(
+    clearance=0.003, lift_height=0.005, thermal_wait=0.2, stamp_wall_clock=False
+)
 
 
 @pytest.fixture
@@ -39,7 +41,9 @@ def test_a_press_action_records_the_hold_with_robot_timestamps(robot, loopback, 
     assert rec.metadata["robot"] == "UR10" and rec.metadata["robot_frequency_hz"] == 125.0
     host = np.array(trace["host_t_ns"])
     assert host.min() >= rec.metadata["movement_start_ns"] - 10_000_000
-    assert np.array(trace["tcp_pose"])[:, 2].min() == pytest.approx(rec.metadata["contact_z"] - 0.002, abs=1e-6)
+    assert np.array(trace["tcp_pose"])[:, 2].min() == pytest.approx(
+        rec.metadata["contact_z"] - 0.002, abs=1e-6
+    )
     assert isinstance(rec.metadata["robot_clock_offset_ns"], int)
     # Afterwards the arm is lifted off and at rest.
     state = at_rest(loopback)
@@ -47,7 +51,9 @@ def test_a_press_action_records_the_hold_with_robot_timestamps(robot, loopback, 
 
 
 def test_a_slide_action_is_cropped_to_its_constant_speed_part(robot, loopback, skin):
-    action = ExploratoryAction("S-short", Movement.SLIDE, normal_force=0.2, speed=0.02, slide_time=0.5)
+    action = ExploratoryAction(
+        "S-short", Movement.SLIDE, normal_force=0.2, speed=0.02, slide_time=0.5
+    )
     rec = explore(robot, skin, PLACEMENT, action, settings=SETTINGS)
     assert rec.duration == pytest.approx(0.5, abs=0.01)
     trace = rec.metadata["robot_trace"]

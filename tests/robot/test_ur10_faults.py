@@ -26,7 +26,9 @@ from aptkt.errors import (  # noqa: E402
 from aptkt.robot import Placement  # noqa: E402
 
 
-def assert_stopped_and_retracted(loopback, z_before: float, raised: pytest.ExceptionInfo | None = None) -> dict:
+def assert_stopped_and_retracted(
+    loopback, z_before: float, raised: pytest.ExceptionInfo | None = None
+) -> dict:
     """The arm is at rest, under program control, and above where the fault caught it."""
     state = at_rest(loopback, 0.1)
     why = f"{state}\nnotes: {getattr(raised.value, '__notes__', None) if raised else None}"
@@ -42,7 +44,9 @@ def assert_stopped_and_retracted(loopback, z_before: float, raised: pytest.Excep
 def test_skin_force_above_the_limit_mid_press(robot, loopback, skin):
     z = in_contact(robot, skin)
     skin.scale = 40.0  # the skin now reads 40x the contact force: 0.2 N looks like 8 N
-    with pytest.raises(SafetyLimitError, match="skin normal force .* exceeds max_normal_force 5.0") as raised:
+    with pytest.raises(
+        SafetyLimitError, match="skin normal force .* exceeds max_normal_force 5.0"
+    ) as raised:
         robot.press(0.002, 1.0)
     assert_stopped_and_retracted(loopback, z - 0.002, raised)
 
@@ -53,7 +57,9 @@ def test_tcp_wrench_above_the_limit_when_the_skin_feels_nothing(make_robot, loop
     robot = make_robot(contact={"type": "spring", "surface_z": 0.0, "stiffness": 5000.0})
     skin.dead = True
     robot.move_above(PLACEMENT, 0.004)
-    with pytest.raises(SafetyLimitError, match="TCP wrench along the normal .* exceeds max_normal_force") as raised:
+    with pytest.raises(
+        SafetyLimitError, match="TCP wrench along the normal .* exceeds max_normal_force"
+    ) as raised:
         robot.approach_contact(skin, 0.05)
     state = assert_stopped_and_retracted(loopback, -0.001, raised)
     assert state["pose"][2] < 0.04  # a retract, not a flight
@@ -61,7 +67,9 @@ def test_tcp_wrench_above_the_limit_when_the_skin_feels_nothing(make_robot, loop
 
 def test_no_contact_within_the_approach_travel(make_robot, loopback, skin):
     robot = make_robot(max_approach_travel=0.006)
-    loopback.set_contact({"type": "spring", "surface_z": -0.02})  # the object is lower than configured
+    loopback.set_contact(
+        {"type": "spring", "surface_z": -0.02}
+    )  # the object is lower than configured
     robot.move_above(PLACEMENT, 0.004)
     with pytest.raises(SafetyLimitError, match="no contact .* approach travel limit") as raised:
         robot.approach_contact(skin, 0.05)
@@ -86,7 +94,9 @@ def test_measured_speed_above_the_limit(make_robot, loopback, skin):
     # A trajectory fault: the controller accelerates the arm sideways within the acceleration
     # limit until the speed limit (x1.5 tolerance = 0.03 m/s) trips.
     fire_after(0.1, lambda: loopback.disturb([0.0, 0.1, 0.0], duration=2.0, acceleration=0.3))
-    with pytest.raises(SafetyLimitError, match="measured TCP speed .* exceeds the limit 0.02") as raised:
+    with pytest.raises(
+        SafetyLimitError, match="measured TCP speed .* exceeds the limit 0.02"
+    ) as raised:
         robot.wait(2.0)
     assert_stopped_and_retracted(loopback, z - 0.006, raised)
 
@@ -98,7 +108,9 @@ def test_measured_acceleration_above_the_limit(robot, loopback, skin):
     # A velocity step of 5 cm/s within one control period (about 1.7 m/s^2 over the 30 ms
     # the backend averages over), at a speed well below the speed limit.
     fire_after(0.1, lambda: loopback.disturb([0.05, 0.0, 0.0], duration=2.0))
-    with pytest.raises(SafetyLimitError, match="measured TCP acceleration .* exceeds the limit 0.5") as raised:
+    with pytest.raises(
+        SafetyLimitError, match="measured TCP acceleration .* exceeds the limit 0.5"
+    ) as raised:
         robot.wait(2.0)
     assert_stopped_and_retracted(loopback, z - 0.006, raised)
 
@@ -220,7 +232,9 @@ def test_lost_link_is_reported_when_connecting_fails(loopback, make_robot):
     from aptkt.robot import UR10
 
     make_robot()  # closes the shared client; then nobody listens on a free loopback address
-    with pytest.raises(RobotConnectionError, match="cannot connect to the UR controller at 127.0.0.250"):
+    with pytest.raises(
+        RobotConnectionError, match="cannot connect to the UR controller at 127.0.0.250"
+    ):
         UR10("127.0.0.250")
 
 

@@ -9,7 +9,15 @@ import pytest
 
 import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a missing one must fail, not skip
 
-from loopback_helpers import PLACEMENT, STIFFNESS, SURFACE_Z, FakeSkin, at_rest, free_loopback_host, in_contact  # noqa: E402
+from loopback_helpers import (
+    PLACEMENT,
+    STIFFNESS,
+    SURFACE_Z,
+    FakeSkin,
+    at_rest,
+    free_loopback_host,
+    in_contact,
+)  # noqa: E402
 
 from aptkt.robot import UR10, Robot, SafetyLimits  # noqa: E402
 from aptkt.sim.loopback import Loopback  # noqa: E402
@@ -20,14 +28,20 @@ def test_connects_uploads_the_control_script_and_arms_the_controller_watchdog(ro
     assert robot.frequency == 125.0  # CB3 controller version
     state = loopback.state()
     assert state["program"] == "rtde_control" and state["program_running"]
-    assert state["watchdog"] == {"variable": "input_int_register_0", "min_frequency": 2.0, "action": "stop"}
+    assert state["watchdog"] == {
+        "variable": "input_int_register_0",
+        "min_frequency": 2.0,
+        "action": "stop",
+    }
     assert "def rtde_control():" in loopback.scripts()[-1]
 
 
 def test_move_above_reaches_the_point_above_the_object(robot, loopback):
     robot.move_above(PLACEMENT, 0.01)
     state = at_rest(loopback)
-    np.testing.assert_allclose(state["pose"][:3], [PLACEMENT.x, PLACEMENT.y, SURFACE_Z + 0.01], atol=1e-6)
+    np.testing.assert_allclose(
+        state["pose"][:3], [PLACEMENT.x, PLACEMENT.y, SURFACE_Z + 0.01], atol=1e-6
+    )
     assert not state["moving"]
 
 
@@ -93,7 +107,9 @@ def test_slide_keeps_the_normal_force_at_constant_tangential_speed(robot, loopba
     assert (stop_ns - start_ns) * 1e-9 == pytest.approx(0.6)
     window = (trace["host_t_ns"] >= start_ns + 20_000_000) & (trace["host_t_ns"] < stop_ns)
     assert window.sum() > 50 and np.all(cruising[window])
-    np.testing.assert_allclose(trace["tcp_speed"][cruising, 1], 0.0, atol=1e-12)  # no sideways drift
+    np.testing.assert_allclose(
+        trace["tcp_speed"][cruising, 1], 0.0, atol=1e-12
+    )  # no sideways drift
     np.testing.assert_allclose(trace["skin_force"][cruising], 0.2, rtol=0.15)  # the settle band
     # Force control keeps working during the slide: the end is closer to 0.2 N than the start.
     assert abs(trace["skin_force"][cruising][-1] - 0.2) < 0.005
@@ -165,9 +181,12 @@ def test_the_clock_is_the_one_given(loopback):
 
 
 def test_e_series_controller_runs_at_500_hz():
-    with Loopback(free_loopback_host(), series="e-series",
-                  contact={"type": "spring", "surface_z": SURFACE_Z, "stiffness": STIFFNESS},
-                  start_pose=(0.0, -0.5, 0.006, np.pi, 0.0, 0.0)) as lb:
+    with Loopback(
+        free_loopback_host(),
+        series="e-series",
+        contact={"type": "spring", "surface_z": SURFACE_Z, "stiffness": STIFFNESS},
+        start_pose=(0.0, -0.5, 0.006, np.pi, 0.0, 0.0),
+    ) as lb:
         robot = UR10(lb.host, [PLACEMENT], SafetyLimits(approach_speed=0.01))
         try:
             assert robot.frequency == 500.0

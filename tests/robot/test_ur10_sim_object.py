@@ -21,7 +21,9 @@ def test_the_ur10_presses_a_simulated_world_object_through_ur_rtde(robot, loopba
     top = model.shape.surface_z
     loopback.set_contact(spec)
     loopback.reset(pose=(0.0, -0.5, top + 0.006, math.pi, 0.0, 0.0), keep_program=True)
-    sponge = Placement("rough_sponge", 0.0, -0.5, top, (-0.06, -0.54, top - 0.01), (0.06, -0.46, top + 0.04))
+    sponge = Placement(
+        "rough_sponge", 0.0, -0.5, top, (-0.06, -0.54, top - 0.01), (0.06, -0.46, top + 0.04)
+    )
     robot.move_above(sponge, 0.004)
     skin = FakeSkin(loopback)
     z = robot.approach_contact(skin, 0.05)

@@ -64,7 +64,10 @@ def test_example_file(tmp_path):
 
 
 def test_minimal_file_uses_defaults(tmp_path):
-    cfg = load_workspace(write(tmp_path, """
+    cfg = load_workspace(
+        write(
+            tmp_path,
+            """
         [[object]]
         name = "a"
         x = 0
@@ -72,7 +75,9 @@ def test_minimal_file_uses_defaults(tmp_path):
         surface_z = 0
         workspace_min = [-1, -1, -1]
         workspace_max = [1, 1, 1]
-    """))
+    """,
+        )
+    )
     assert cfg.host is None and cfg.workspace is None
     assert cfg.limits == SafetyLimits() and cfg.tool_orientation == DEFAULT_TOOL_ORIENTATION
 
@@ -88,28 +93,42 @@ workspace_max = [0.1, 0.1, 0.1]
 """
 
 
-@pytest.mark.parametrize("text, message", [
-    ("[robot]\nhost = 3\n", "robot.host must be a non-empty string"),
-    ("[robot]\nspeed = 3\n", r"\[robot\]: unknown key\(s\) \['speed'\]"),
-    ("[robots]\n", r"unknown top-level key\(s\) \['robots'\]"),
-    ("[robot.limits]\nmax_force = 1.0\n", r"robot.limits: unknown key\(s\) \['max_force'\]"),
-    ("[robot.limits]\nmax_speed = -1.0\n", "robot.limits: SafetyLimits.max_speed must be > 0"),
-    ("[robot.limits]\nmax_speed = true\n", "robot.limits.max_speed must be a finite number"),
-    ("[robot]\ntool_orientation = [1, 2]\n", "robot.tool_orientation must be a list of 3 numbers"),
-    ("[robot]\nworkspace_min = [0, 0, 0]\n", "workspace_min and workspace_max go together"),
-    ("[[object]]\nx = 1\n", "object #1: needs a non-empty 'name'"),
-    (OBJECT.replace("x = 0.0\n", ""), "object 'a': missing 'x'"),
-    (OBJECT.replace("y = 0.0", "y = nan"), "object 'a': y must be a finite number, got nan"),
-    (OBJECT.replace("y = 0.0", 'y = "0"'), "object 'a': y must be a finite number"),
-    (OBJECT + "colour = 'red'\n", r"object 'a': unknown key\(s\) \['colour'\]"),
-    (OBJECT + OBJECT, "object 'a': defined twice"),
-    (OBJECT.replace("[0.1, 0.1, 0.1]", "[0.1, -0.2, 0.1]"), "workspace_min.y .* must be below workspace_max.y"),
-    (OBJECT.replace("surface_z = 0.0", "surface_z = 0.5"), r"surface point \(0.0, 0.0, 0.5\) lies outside"),
-    (OBJECT + "slide_direction = [0, 0]\n", "slide_direction must not be zero"),
-    (OBJECT + "slide_direction = [1, 0, 0]\n", "slide_direction must be a list of 2 numbers"),
-    ("[robot]\nworkspace_min = [-0.05, -1, -1]\nworkspace_max = [1, 1, 1]\n" + OBJECT,
-     "its workspace box is not inside the robot workspace box"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("[robot]\nhost = 3\n", "robot.host must be a non-empty string"),
+        ("[robot]\nspeed = 3\n", r"\[robot\]: unknown key\(s\) \['speed'\]"),
+        ("[robots]\n", r"unknown top-level key\(s\) \['robots'\]"),
+        ("[robot.limits]\nmax_force = 1.0\n", r"robot.limits: unknown key\(s\) \['max_force'\]"),
+        ("[robot.limits]\nmax_speed = -1.0\n", "robot.limits: SafetyLimits.max_speed must be > 0"),
+        ("[robot.limits]\nmax_speed = true\n", "robot.limits.max_speed must be a finite number"),
+        (
+            "[robot]\ntool_orientation = [1, 2]\n",
+            "robot.tool_orientation must be a list of 3 numbers",
+        ),
+        ("[robot]\nworkspace_min = [0, 0, 0]\n", "workspace_min and workspace_max go together"),
+        ("[[object]]\nx = 1\n", "object #1: needs a non-empty 'name'"),
+        (OBJECT.replace("x = 0.0\n", ""), "object 'a': missing 'x'"),
+        (OBJECT.replace("y = 0.0", "y = nan"), "object 'a': y must be a finite number, got nan"),
+        (OBJECT.replace("y = 0.0", 'y = "0"'), "object 'a': y must be a finite number"),
+        (OBJECT + "colour = 'red'\n", r"object 'a': unknown key\(s\) \['colour'\]"),
+        (OBJECT + OBJECT, "object 'a': defined twice"),
+        (
+            OBJECT.replace("[0.1, 0.1, 0.1]", "[0.1, -0.2, 0.1]"),
+            "workspace_min.y .* must be below workspace_max.y",
+        ),
+        (
+            OBJECT.replace("surface_z = 0.0", "surface_z = 0.5"),
+            r"surface point \(0.0, 0.0, 0.5\) lies outside",
+        ),
+        (OBJECT + "slide_direction = [0, 0]\n", "slide_direction must not be zero"),
+        (OBJECT + "slide_direction = [1, 0, 0]\n", "slide_direction must be a list of 2 numbers"),
+        (
+            "[robot]\nworkspace_min = [-0.05, -1, -1]\nworkspace_max = [1, 1, 1]\n" + OBJECT,
+            "its workspace box is not inside the robot workspace box",
+        ),
+    ],
+)
 def test_every_problem_is_a_config_error_naming_file_and_field(tmp_path, text, message):
     path = write(tmp_path, text)
     with pytest.raises(ConfigError, match=message) as err:
@@ -145,13 +164,25 @@ def test_ur10_from_config_needs_a_host(tmp_path):
 coordinate = st.floats(-1.0, 1.0, allow_nan=False)
 
 
-@given(point=st.tuples(coordinate, coordinate, coordinate),
-       lo=st.tuples(coordinate, coordinate, coordinate),
-       size=st.tuples(*[st.floats(1e-3, 1.0)] * 3))
+@given(
+    point=st.tuples(coordinate, coordinate, coordinate),
+    lo=st.tuples(coordinate, coordinate, coordinate),
+    size=st.tuples(*[st.floats(1e-3, 1.0)] * 3),
+)
 def test_a_placement_is_accepted_exactly_when_its_point_is_in_its_box(point, lo, size):
     hi = tuple(a + s for a, s in zip(lo, size))
-    doc = {"object": [{"name": "o", "x": point[0], "y": point[1], "surface_z": point[2],
-                       "workspace_min": list(lo), "workspace_max": list(hi)}]}
+    doc = {
+        "object": [
+            {
+                "name": "o",
+                "x": point[0],
+                "y": point[1],
+                "surface_z": point[2],
+                "workspace_min": list(lo),
+                "workspace_max": list(hi),
+            }
+        ]
+    }
     inside = all(a <= p <= b for a, p, b in zip(lo, point, hi))
     if inside:
         placement = parse_workspace(doc).placements["o"]

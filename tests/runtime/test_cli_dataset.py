@@ -12,8 +12,22 @@ from aptkt.data import DatasetReader
 
 def test_generate_info_and_repair(tmp_path, capsys):
     out = tmp_path / "set.h5"
-    args = ["dataset", "generate", "-o", str(out), "--objects", "towel,cork_board", "--actions", "P1", "-n", "2",
-            "--seed", "4", "--no-progress", "--json"]
+    args = [
+        "dataset",
+        "generate",
+        "-o",
+        str(out),
+        "--objects",
+        "towel,cork_board",
+        "--actions",
+        "P1",
+        "-n",
+        "2",
+        "--seed",
+        "4",
+        "--no-progress",
+        "--json",
+    ]
     assert main(args) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["recordings"] == 4 and info["objects"] == {"towel": 2, "cork_board": 2}
@@ -21,8 +35,24 @@ def test_generate_info_and_repair(tmp_path, capsys):
     assert main(["dataset", "info", str(out)]) == 0
     text = capsys.readouterr().out
     assert "4 recordings" in text and "cork_board" in text and "seed 4" in text
-    assert main(["dataset", "generate", "-o", str(out), "--objects", "towel", "--actions", "P1", "-n", "1",
-                 "--no-progress"]) == 1
+    assert (
+        main(
+            [
+                "dataset",
+                "generate",
+                "-o",
+                str(out),
+                "--objects",
+                "towel",
+                "--actions",
+                "P1",
+                "-n",
+                "1",
+                "--no-progress",
+            ]
+        )
+        == 1
+    )
     assert "exists" in capsys.readouterr().err
     assert main(["dataset", "repair", str(out)]) == 0
     with DatasetReader(out) as rd:
@@ -67,8 +97,26 @@ depth = 0.0015
 hold_time = 1.0
 """)
     out = tmp_path / "custom.h5"
-    assert main(["dataset", "generate", "-o", str(out), "--objects-file", str(objects), "--objects", "felt_pad",
-                 "--actions-file", str(actions), "-n", "1", "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "dataset",
+                "generate",
+                "-o",
+                str(out),
+                "--objects-file",
+                str(objects),
+                "--objects",
+                "felt_pad",
+                "--actions-file",
+                str(actions),
+                "-n",
+                "1",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     with DatasetReader(out) as rd:
         rec = rd.recording(0)
         assert rd.keys() == [("felt_pad", "P3", 0)]

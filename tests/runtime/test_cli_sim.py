@@ -47,38 +47,88 @@ def workdir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def collect(workdir: Path, *args: str) -> int:
-    return main(["collect", "--robot", "sim", "--actions-file", str(workdir / "actions.toml"),
-                 "--thermal-wait", "0", "--no-progress", *args])
+    return main(
+        [
+            "collect",
+            "--robot",
+            "sim",
+            "--actions-file",
+            str(workdir / "actions.toml"),
+            "--thermal-wait",
+            "0",
+            "--no-progress",
+            *args,
+        ]
+    )
 
 
 @pytest.fixture(scope="module")
 def prior(workdir: Path) -> Path:
     data = workdir / "prior.h5"
-    assert collect(workdir, "--objects", PRIORS, "--actions", "Pq,Sq", "-n", "4", "-o", str(data)) == 0
+    assert (
+        collect(workdir, "--objects", PRIORS, "--actions", "Pq,Sq", "-n", "4", "-o", str(data)) == 0
+    )
     path = workdir / "prior.npz"
     PriorKnowledge.build(load_observations(data)).save(path)
     return path
 
 
 def learn(workdir: Path, prior: Path, out: Path, *args: str) -> int:
-    return main(["learn", "--robot", "sim", "--prior", str(prior), "--actions-file", str(workdir / "actions.toml"),
-                 "--thermal-wait", "0", "-o", str(out), *args])
+    return main(
+        [
+            "learn",
+            "--robot",
+            "sim",
+            "--prior",
+            str(prior),
+            "--actions-file",
+            str(workdir / "actions.toml"),
+            "--thermal-wait",
+            "0",
+            "-o",
+            str(out),
+            *args,
+        ]
+    )
 
 
 def test_collect_writes_every_trial_and_resume_adds_only_the_missing_ones(workdir: Path, capsys):
     out = workdir / "a.h5"
-    assert collect(workdir, "--objects", "towel,cork_board", "--actions", "Pq", "-n", "2", "-o", str(out)) == 0
+    assert (
+        collect(
+            workdir, "--objects", "towel,cork_board", "--actions", "Pq", "-n", "2", "-o", str(out)
+        )
+        == 0
+    )
     with DatasetReader(out) as rd:
         assert sorted(rd.keys()) == [(o, "Pq", t) for o in ("cork_board", "towel") for t in (0, 1)]
         first = {rd.key(i): rd.raw(i) for i in range(len(rd))}
         assert rd.description["session"]["robot"] == "sim"
     capsys.readouterr()
-    assert collect(workdir, "--objects", "towel,cork_board", "--actions", "Pq", "-n", "3", "-o", str(out),
-                   "--resume") == 0
+    assert (
+        collect(
+            workdir,
+            "--objects",
+            "towel,cork_board",
+            "--actions",
+            "Pq",
+            "-n",
+            "3",
+            "-o",
+            str(out),
+            "--resume",
+        )
+        == 0
+    )
     assert "2 recordings collected now, 4 already there; 6 in the file" in capsys.readouterr().out
     # Each trial is simulated from its own seed: a file made in one go holds the same data.
     whole = workdir / "b.h5"
-    assert collect(workdir, "--objects", "towel,cork_board", "--actions", "Pq", "-n", "3", "-o", str(whole)) == 0
+    assert (
+        collect(
+            workdir, "--objects", "towel,cork_board", "--actions", "Pq", "-n", "3", "-o", str(whole)
+        )
+        == 0
+    )
     with DatasetReader(out) as a, DatasetReader(whole) as b:
         assert sorted(a.keys()) == sorted(b.keys())
         for i in range(len(b)):
@@ -98,24 +148,89 @@ def test_collect_refuses_what_would_mix_or_lose_data(workdir: Path, capsys):
     assert "exists: use --resume" in capsys.readouterr().err
     other = workdir / "other_actions.toml"
     other.write_text(ACTIONS_TOML.replace("hold_time = 0.5", "hold_time = 0.7"))
-    assert main(["collect", "--robot", "sim", "--actions-file", str(other), "--objects", "towel", "--actions", "Pq",
-                 "-n", "2", "-o", str(out), "--resume", "--no-progress", "--thermal-wait", "0"]) == 1
+    assert (
+        main(
+            [
+                "collect",
+                "--robot",
+                "sim",
+                "--actions-file",
+                str(other),
+                "--objects",
+                "towel",
+                "--actions",
+                "Pq",
+                "-n",
+                "2",
+                "-o",
+                str(out),
+                "--resume",
+                "--no-progress",
+                "--thermal-wait",
+                "0",
+            ]
+        )
+        == 1
+    )
     assert "action 'Pq' was recorded with other parameters" in capsys.readouterr().err
-    assert collect(workdir, "--objects", "towel", "--actions", "Pq", "-n", "2", "-o", str(out), "--resume",
-                   "--seed", "5") == 1
+    assert (
+        collect(
+            workdir,
+            "--objects",
+            "towel",
+            "--actions",
+            "Pq",
+            "-n",
+            "2",
+            "-o",
+            str(out),
+            "--resume",
+            "--seed",
+            "5",
+        )
+        == 1
+    )
     assert "simulated with --seed 0, not 5" in capsys.readouterr().err
-    assert collect(workdir, "--objects", "towel,no_such_thing", "--actions", "Pq", "-n", "1", "-o",
-                   str(workdir / "d.h5")) == 1
+    assert (
+        collect(
+            workdir,
+            "--objects",
+            "towel,no_such_thing",
+            "--actions",
+            "Pq",
+            "-n",
+            "1",
+            "-o",
+            str(workdir / "d.h5"),
+        )
+        == 1
+    )
     assert "no object(s) no_such_thing" in capsys.readouterr().err
-    assert collect(workdir, "--objects", "towel", "--actions", "Pq", "-n", "1", "-o", str(workdir / "d.h5"),
-                   "--workspace", "cell.toml") == 1
+    assert (
+        collect(
+            workdir,
+            "--objects",
+            "towel",
+            "--actions",
+            "Pq",
+            "-n",
+            "1",
+            "-o",
+            str(workdir / "d.h5"),
+            "--workspace",
+            "cell.toml",
+        )
+        == 1
+    )
     assert "only for --robot ur10" in capsys.readouterr().err
     assert not (workdir / "d.h5").exists()
     with DatasetReader(out) as rd:
         assert len(rd) == 1
 
 
-def test_learn_without_a_test_set_reports_choices_and_transfer_but_no_accuracy(workdir: Path, prior: Path, capsys):
+def test_learn_without_a_test_set_reports_choices_and_transfer_but_no_accuracy(
+    workdir: Path, prior: Path, capsys
+):
     out = workdir / "run1"
     assert learn(workdir, prior, out, "--objects", NEW, "--budget", "3", "--seed", "1") == 0
     text = capsys.readouterr().out
@@ -127,7 +242,11 @@ def test_learn_without_a_test_set_reports_choices_and_transfer_but_no_accuracy(w
     assert run["status"] == "completed" and run["accuracy_reported"] is False
     assert [s["step"] for s in run["steps"]] == [0, 1, 2, 3]
     assert all(s["mean_accuracy"] is None for s in run["steps"])
-    assert run["config"]["budget"] == 3 and run["config"]["transfer"] == "paper" and run["config"]["seed"] == 1
+    assert (
+        run["config"]["budget"] == 3
+        and run["config"]["transfer"] == "paper"
+        and run["config"]["seed"] == 1
+    )
     # The decisions follow Eq. 3: a source exactly when its mean posterior reaches eps_neg.
     for step in run["steps"]:
         for decisions in step["transfer"].values():
@@ -141,7 +260,9 @@ def test_learn_without_a_test_set_reports_choices_and_transfer_but_no_accuracy(w
         rows = list(csv.DictReader(fh))
     assert [r["action"] for r in rows[1:]] == [s["action"] for s in run["steps"][1:]]
     with open(out / "transfer.csv") as fh:
-        assert len(list(csv.DictReader(fh))) == 2 * 2 + 3 * 2  # step 0: both actions; then the updated one
+        assert (
+            len(list(csv.DictReader(fh))) == 2 * 2 + 3 * 2
+        )  # step 0: both actions; then the updated one
     # Every observation is a stored recording; what was learned can become prior knowledge.
     with DatasetReader(out / "recordings.h5") as rd:
         assert len(rd) == 4 + 3
@@ -153,18 +274,62 @@ def test_learn_without_a_test_set_reports_choices_and_transfer_but_no_accuracy(w
         for obj in NEW.split(","):
             assert int(np.sum(ap.observations.objects == obj)) == counts[action][obj]
     # ... for instance as the prior of the next objects.
-    assert learn(workdir, out / "learned_prior.npz", workdir / "run2", "--objects", "towel,cork_board",
-                 "--budget", "1", "--actions", "Pq") == 0
+    assert (
+        learn(
+            workdir,
+            out / "learned_prior.npz",
+            workdir / "run2",
+            "--objects",
+            "towel,cork_board",
+            "--budget",
+            "1",
+            "--actions",
+            "Pq",
+        )
+        == 0
+    )
 
 
 def test_learn_with_a_test_set_reports_accuracy(workdir: Path, prior: Path, capsys):
     test = workdir / "test.h5"
-    assert collect(workdir, "--objects", NEW, "--actions", "Pq", "-n", "3", "--first-trial", "100", "-o",
-                   str(test)) == 0
+    assert (
+        collect(
+            workdir,
+            "--objects",
+            NEW,
+            "--actions",
+            "Pq",
+            "-n",
+            "3",
+            "--first-trial",
+            "100",
+            "-o",
+            str(test),
+        )
+        == 0
+    )
     out = workdir / "run3"
     record = workdir / "shared_record.h5"
-    assert learn(workdir, prior, out, "--objects", NEW, "--actions", "Pq", "--budget", "2", "--test", str(test),
-                 "--record", str(record), "--transfer", "none") == 0
+    assert (
+        learn(
+            workdir,
+            prior,
+            out,
+            "--objects",
+            NEW,
+            "--actions",
+            "Pq",
+            "--budget",
+            "2",
+            "--test",
+            str(test),
+            "--record",
+            str(record),
+            "--transfer",
+            "none",
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "no test set" not in text and "test accuracy" in text and "transfer Pq" not in text
     run = json.loads((out / "run.json").read_text())
@@ -176,8 +341,22 @@ def test_learn_with_a_test_set_reports_accuracy(workdir: Path, prior: Path, caps
     with DatasetReader(record) as rd:
         before = rd.keys()
     assert len(before) == 2 + 2
-    assert learn(workdir, prior, workdir / "run4", "--objects", NEW, "--actions", "Pq", "--budget", "0",
-                 "--record", str(record)) == 0
+    assert (
+        learn(
+            workdir,
+            prior,
+            workdir / "run4",
+            "--objects",
+            NEW,
+            "--actions",
+            "Pq",
+            "--budget",
+            "0",
+            "--record",
+            str(record),
+        )
+        == 0
+    )
     first = max(t for _, _, t in before) + 1
     assert json.loads((workdir / "run4" / "run.json").read_text())["first_trial"] == first
     with DatasetReader(record) as rd:
@@ -199,14 +378,40 @@ def test_learn_rejects_inconsistent_objects_and_actions(workdir: Path, prior: Pa
 def test_prompt_between_trials_waits_for_the_operator(workdir: Path, capsys, monkeypatch):
     monkeypatch.setattr(sys, "stdin", io.StringIO("\n\n"))
     out = workdir / "prompted.h5"
-    assert collect(workdir, "--objects", "towel", "--actions", "Pq", "-n", "3", "-o", str(out),
-                   "--prompt-between-trials") == 0
+    assert (
+        collect(
+            workdir,
+            "--objects",
+            "towel",
+            "--actions",
+            "Pq",
+            "-n",
+            "3",
+            "-o",
+            str(out),
+            "--prompt-between-trials",
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert err.count("re-place the objects") == 2 and "Trial 1:" in err and "Trial 2:" in err
     monkeypatch.setattr(sys, "stdin", io.StringIO(""))  # the operator is gone: stop, keep the data
     out = workdir / "prompted2.h5"
-    assert collect(workdir, "--objects", "towel", "--actions", "Pq", "-n", "3", "-o", str(out),
-                   "--prompt-between-trials") == 1
+    assert (
+        collect(
+            workdir,
+            "--objects",
+            "towel",
+            "--actions",
+            "Pq",
+            "-n",
+            "3",
+            "-o",
+            str(out),
+            "--prompt-between-trials",
+        )
+        == 1
+    )
     with DatasetReader(out) as rd:
         assert rd.keys() == [("towel", "Pq", 0)]
 
@@ -230,17 +435,30 @@ class FaultySession(SimSession):
         raise err
 
 
-def test_a_fault_during_live_learning_keeps_every_observation_and_the_run_so_far(workdir: Path, prior: Path):
+def test_a_fault_during_live_learning_keeps_every_observation_and_the_run_so_far(
+    workdir: Path, prior: Path
+):
     actions = actions_from_toml(workdir / "actions.toml")
     out, record = workdir / "faulty", workdir / "faulty" / "rec.h5"
     lines: list[str] = []
     with pytest.raises(LiveLearningAborted) as err:
-        learn_live(FaultySession(fail_at=6), PriorKnowledge.load(prior), LearnerConfig(budget=5), actions,
-                   NEW.split(","), record=record, output=out, report=lines.append)
+        learn_live(
+            FaultySession(fail_at=6),
+            PriorKnowledge.load(prior),
+            LearnerConfig(budget=5),
+            actions,
+            NEW.split(","),
+            record=record,
+            output=out,
+            report=lines.append,
+        )
     assert "trial" in str(err.value) and isinstance(err.value.cause, ProtectiveStopError)
     run = json.loads((out / "run.json").read_text())
     assert run["status"].startswith("aborted: ProtectiveStopError")
-    assert [s["step"] for s in run["steps"]] == [0, 1]  # 4 initial observations, then step 1; 6th failed
+    assert [s["step"] for s in run["steps"]] == [
+        0,
+        1,
+    ]  # 4 initial observations, then step 1; 6th failed
     assert run["fault"]["recording_saved_to"] == str(err.value.saved)
     with DatasetReader(record) as rd:
         assert len(rd) == 5

@@ -40,8 +40,10 @@ def cell_toml(host: str) -> str:
     # Slow approach and short approach travel keep the tests short; the rest are the defaults.
     text = f'[robot]\nhost = "{host}"\n\n[robot.limits]\napproach_speed = 0.01\nmax_approach_travel = 0.03\n'
     for name, x in (("block_a", -0.03), ("block_b", 0.03)):
-        text += (f'\n[[object]]\nname = "{name}"\nx = {x}\ny = -0.5\nsurface_z = 0.0\n'
-                 f"workspace_min = [{x - 0.02}, -0.52, -0.01]\nworkspace_max = [{x + 0.02}, -0.48, 0.04]\n")
+        text += (
+            f'\n[[object]]\nname = "{name}"\nx = {x}\ny = -0.5\nsurface_z = 0.0\n'
+            f"workspace_min = [{x - 0.02}, -0.52, -0.01]\nworkspace_max = [{x + 0.02}, -0.48, 0.04]\n"
+        )
     return text
 
 
@@ -49,8 +51,16 @@ def scene() -> dict:
     """Two spring blocks under the workspace file's placements, of different stiffness."""
     items = []
     for name, x in (("block_a", -0.03), ("block_b", 0.03)):
-        items.append({"type": "spring", "surface_z": 0.0, "stiffness": STIFFNESS[name], "friction": 0.3,
-                      "x_range": [x - 0.02, x + 0.02], "y_range": [-0.52, -0.48]})
+        items.append(
+            {
+                "type": "spring",
+                "surface_z": 0.0,
+                "stiffness": STIFFNESS[name],
+                "friction": 0.3,
+                "x_range": [x - 0.02, x + 0.02],
+                "y_range": [-0.52, -0.48],
+            }
+        )
     return {"type": "scene", "items": items}
 
 
@@ -66,7 +76,13 @@ def cell(tmp_path_factory: pytest.TempPathFactory):
 
     src = Path(default_patch().source).read_text()
     (d / "patch.toml").write_text(src.replace("silence_timeout_s = 0.1", "silence_timeout_s = 0.4"))
-    lb = Loopback(host, contact=scene(), skin={"patch": str(d / "patch.toml")}, start_pose=START, unlock_delay=0.0)
+    lb = Loopback(
+        host,
+        contact=scene(),
+        skin={"patch": str(d / "patch.toml")},
+        start_pose=START,
+        unlock_delay=0.0,
+    )
     with lb:
         yield d, lb
 
@@ -74,15 +90,33 @@ def cell(tmp_path_factory: pytest.TempPathFactory):
 def run_cli(cell, command: str, *args: str) -> int:
     d, lb = cell
     lb.reset(pose=START)
-    return main([command, "--robot", "ur10", "--workspace", str(d / "cell.toml"), "--skin", lb.skin_port,
-                 "--patch", str(d / "patch.toml"), "--actions-file", str(d / "actions.toml"), "--actions", "Pq",
-                 "--thermal-wait", "0", *args])
+    return main(
+        [
+            command,
+            "--robot",
+            "ur10",
+            "--workspace",
+            str(d / "cell.toml"),
+            "--skin",
+            lb.skin_port,
+            "--patch",
+            str(d / "patch.toml"),
+            "--actions-file",
+            str(d / "actions.toml"),
+            "--actions",
+            "Pq",
+            "--thermal-wait",
+            "0",
+            *args,
+        ]
+    )
 
 
 def on_press(lb: Loopback, nth: int, action: Callable[[], object]) -> threading.Thread:
     """Call ``action`` once the arm presses for the ``nth`` time from now: a fault in the middle
     of that trial's recording. Pressing = the TCP 0.7 mm below the surfaces, deeper than the
     guarded approach ever overshoots the light contact (0.3 mm at most on block_b)."""
+
     def watch() -> None:
         pressing, seen = True, 0  # a press going on already (after a fault) does not count
         deadline = time.monotonic() + 120.0
@@ -134,7 +168,11 @@ def test_collect_survives_faults_and_resumes_to_a_complete_data_set(cell, capsys
     assert "block_b / Pq / trial 1: ProtectiveStopError" in err and "--resume" in err
     assert not lb.state()["moving"]
     with DatasetReader(data) as rd:  # every completed trial is readable
-        assert sorted(rd.keys()) == [("block_a", "Pq", 0), ("block_a", "Pq", 1), ("block_b", "Pq", 0)]
+        assert sorted(rd.keys()) == [
+            ("block_a", "Pq", 0),
+            ("block_a", "Pq", 1),
+            ("block_b", "Pq", 0),
+        ]
     aborted = d / "data.aborted.h5"
     with DatasetReader(aborted) as rd:
         assert rd.keys() == [("block_b", "Pq", 1)]
@@ -165,14 +203,47 @@ def test_learn_runs_live_through_the_loopback(cell, capsys):
     d, lb = cell
     # Prior knowledge of the same action on objects of the simulated world.
     prior_data = d / "prior.h5"
-    assert main(["collect", "--robot", "sim", "--actions-file", str(d / "actions.toml"), "--actions", "Pq",
-                 "--objects", "rough_sponge,paper_box,metal_toolbox", "-n", "3", "-o", str(prior_data),
-                 "--thermal-wait", "0", "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "collect",
+                "--robot",
+                "sim",
+                "--actions-file",
+                str(d / "actions.toml"),
+                "--actions",
+                "Pq",
+                "--objects",
+                "rough_sponge,paper_box,metal_toolbox",
+                "-n",
+                "3",
+                "-o",
+                str(prior_data),
+                "--thermal-wait",
+                "0",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     PriorKnowledge.build(load_observations(prior_data)).save(d / "prior.npz")
     capsys.readouterr()
     out = d / "learn"
-    assert run_cli(cell, "learn", "--prior", str(d / "prior.npz"), "--objects", "block_a,block_b",
-                   "--budget", "1", "-o", str(out)) == 0
+    assert (
+        run_cli(
+            cell,
+            "learn",
+            "--prior",
+            str(d / "prior.npz"),
+            "--objects",
+            "block_a,block_b",
+            "--budget",
+            "1",
+            "-o",
+            str(out),
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "no test set" in text and "step   1/1: Pq on block_" in text
     with DatasetReader(out / "recordings.h5") as rd:

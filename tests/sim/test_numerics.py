@@ -47,7 +47,9 @@ def test_row_recurrence_matches_loop(n, rows, seed):
     got = linear_recurrence_rows(a, x, y0)
     for r in range(rows):
         for c in range(3):
-            np.testing.assert_allclose(got[r, :, c], naive(a[r], x[r, :, c], y0[r, c]), rtol=1e-9, atol=1e-8)
+            np.testing.assert_allclose(
+                got[r, :, c], naive(a[r], x[r, :, c], y0[r, c]), rtol=1e-9, atol=1e-8
+            )
 
 
 def test_counter_stream_is_chunking_independent_and_normal():
@@ -62,9 +64,19 @@ def test_counter_stream_is_chunking_independent_and_normal():
 
 def test_seed_keys_do_not_depend_on_the_process():
     # Python's hash() is salted per process; the keys must not be.
-    code = "from aptkt.sim.seeding import stable_words; print(stable_words('rough_sponge', 'P1', 3))"
-    outs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                           env={**os.environ, "PYTHONHASHSEED": str(h)}).stdout for h in (1, 2)}
+    code = (
+        "from aptkt.sim.seeding import stable_words; print(stable_words('rough_sponge', 'P1', 3))"
+    )
+    outs = {
+        subprocess.run(
+            [sys.executable, "-c", code],
+            capture_output=True,
+            text=True,
+            check=True,
+            env={**os.environ, "PYTHONHASHSEED": str(h)},
+        ).stdout
+        for h in (1, 2)
+    }
     assert outs == {f"{stable_words('rough_sponge', 'P1', 3)}\n"}
     assert stable_words("a", "bc") != stable_words("ab", "c")  # fields are delimited
 
@@ -88,7 +100,10 @@ def test_soft_over_hard_stiffens_faster_than_uniform_sponge():
     lib, k = default_library(), SkinConstants()
     soft_over_hard = IndentationLaw(lib["padded_case"].layers, k.skin_stiffness)
     sponge = IndentationLaw(lib["rough_sponge"].layers, k.skin_stiffness)
-    f = {name: law.stress(np.array([1e-3, 2e-3])) for name, law in (("soh", soft_over_hard), ("sponge", sponge))}
+    f = {
+        name: law.stress(np.array([1e-3, 2e-3]))
+        for name, law in (("soh", soft_over_hard), ("sponge", sponge))
+    }
     assert f["soh"][1] - f["soh"][0] > 1.3 * (f["sponge"][1] - f["sponge"][0])
     assert f["soh"][1] / f["soh"][0] > f["sponge"][1] / f["sponge"][0]
 
@@ -103,8 +118,13 @@ def test_relaxation_step_response():
     out, _ = relax(rel, elastic, dt, RelaxationState.rest(rel, (1,)))
     t = (np.arange(n) - 1) * dt
     # the ramp over one sample is exact for piecewise-linear input: compare after it
-    expected = 100.0 * (rel.long_term + sum(w * (tau / dt) * (1 - math.exp(-dt / tau)) * np.exp(-t / tau)
-                                            for w, tau in zip(rel.weights, rel.times)))
+    expected = 100.0 * (
+        rel.long_term
+        + sum(
+            w * (tau / dt) * (1 - math.exp(-dt / tau)) * np.exp(-t / tau)
+            for w, tau in zip(rel.weights, rel.times)
+        )
+    )
     np.testing.assert_allclose(out[1:, 0], expected[1:], rtol=1e-9)
     assert out[-1, 0] == pytest.approx(100.0 * rel.long_term, rel=0.01)
 

@@ -53,7 +53,9 @@ def test_user_file_adds_objects_with_next_index(tmp_path):
     lib = load_library(write(tmp_path, GOOD))
     assert len(lib) == 16 and lib["my_block"].index == 16 and lib["my_block"].role == "custom"
     assert lib["my_block"].source.endswith("objects.toml")
-    alone = load_library(write(tmp_path, GOOD.replace('related = ["rough_sponge"]', "")), include_default=False)
+    alone = load_library(
+        write(tmp_path, GOOD.replace('related = ["rough_sponge"]', "")), include_default=False
+    )
     assert list(alone) == ["my_block"] and alone["my_block"].index == 1
 
 
@@ -64,7 +66,11 @@ def test_user_file_adds_objects_with_next_index(tmp_path):
         ("modulus = 2e4", "", "layer[0].modulus"),
         ("modulus = 2e4", 'modulus = "soft"', "layer[0].modulus"),
         ("friction_static = 0.9", "friction_static = 0.5", "surface.friction_static"),
-        ("roughness_rms = 1e-5", "roughness_rms = 1e-5\n  roughnes_band = [1e-4, 1e-3]", "surface.roughnes_band"),
+        (
+            "roughness_rms = 1e-5",
+            "roughness_rms = 1e-5\n  roughnes_band = [1e-4, 1e-3]",
+            "surface.roughnes_band",
+        ),
         ('related = ["rough_sponge"]', 'related = ["no_such_thing"]', "related"),
         ('name = "my_block"', 'name = "My Block"', "name"),
         ("thickness = 0.02", "thickness = 2.0", "layer"),
@@ -84,7 +90,9 @@ def test_duplicates_and_broken_toml(tmp_path):
     with pytest.raises(ConfigError, match="defined twice"):
         load_library(write(tmp_path, GOOD.replace("my_block", "towel")))
     with pytest.raises(ConfigError, match="index"):
-        load_library(write(tmp_path, GOOD.replace('name = "my_block"', 'name = "my_block"\nindex = 3')))
+        load_library(
+            write(tmp_path, GOOD.replace('name = "my_block"', 'name = "my_block"\nindex = 3'))
+        )
     with pytest.raises(ConfigError, match="not valid TOML"):
         load_library(write(tmp_path, "[[object]\nname = 1"))
     with pytest.raises(ConfigError, match="not found"):

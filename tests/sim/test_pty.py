@@ -33,7 +33,10 @@ def test_serial_skin_reads_the_simulated_stream(world):
 def test_real_time_press_through_the_pty(world):
     act = PAPER_ACTIONS["P1"]
     settings = ExplorationSettings(thermal_wait=0.0, stamp_wall_clock=False)
-    with world.session("metal_toolbox", "P1", 0, realtime=True, action=act) as s, SerialSkin(s.port, s.patch) as skin:
+    with (
+        world.session("metal_toolbox", "P1", 0, realtime=True, action=act) as s,
+        SerialSkin(s.port, s.patch) as skin,
+    ):
         skin.wait_for_cells(timeout_s=5.0)
         t0 = time.monotonic()
         rec = explore(s.robot, skin, s.placement, act, settings=settings)

@@ -66,7 +66,9 @@ def test_requests_beyond_limits_are_refused_before_moving(world, call, match):
 
 def test_move_outside_the_workspace_is_refused(world):
     with world.session("towel") as s:
-        bad = replace(s.placement, workspace_max=(s.placement.x + 0.01, 1.0, s.placement.surface_z + 0.001))
+        bad = replace(
+            s.placement, workspace_max=(s.placement.x + 0.01, 1.0, s.placement.surface_z + 0.001)
+        )
         with pytest.raises(SafetyLimitError, match="workspace"):
             s.robot.move_above(bad, 0.01)
 
@@ -88,7 +90,9 @@ def test_force_limit_stops_the_press_at_the_crossing():
 
 def test_force_control_depth_limit():
     world = SimWorld(seed=5, limits=SafetyLimits(max_depth=0.0015))
-    act = ExploratoryAction("hard_slide", Movement.SLIDE, normal_force=3.0, speed=0.01, slide_time=1.0)
+    act = ExploratoryAction(
+        "hard_slide", Movement.SLIDE, normal_force=3.0, speed=0.01, slide_time=1.0
+    )
     with world.session("rough_sponge", "hard_slide", 0, action=act) as s:
         with pytest.raises(SafetyLimitError, match="max_depth"):
             explore(s.robot, s.skin, s.placement, act, settings=FAST)
@@ -97,8 +101,9 @@ def test_force_control_depth_limit():
 def test_no_contact_within_travel_is_an_error(world):
     with world.session("towel") as s:
         # The robot is told the surface is 8 cm higher than it is.
-        wrong = replace(s.placement, surface_z=s.placement.surface_z + 0.08,
-                        workspace_max=(1.0, 1.0, 1.0))
+        wrong = replace(
+            s.placement, surface_z=s.placement.surface_z + 0.08, workspace_max=(1.0, 1.0, 1.0)
+        )
         with pytest.raises(RobotError, match="no contact"):
             explore(s.robot, s.skin, wrong, PAPER_ACTIONS["P1"], settings=FAST)
 

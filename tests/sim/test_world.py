@@ -95,8 +95,10 @@ def test_related_objects_are_closer_than_unrelated(explore):
     """In the modality their relation names (paper §5.1), a new object's features lie nearer its
     related prior than the unrelated priors on average."""
     lib = default_library()
-    cases = [("smooth_sponge", "rough_sponge", "P1", "force"),
-             ("biscuit_box", "metal_toolbox", "C1", "thermal")]
+    cases = [
+        ("smooth_sponge", "rough_sponge", "P1", "force"),
+        ("biscuit_box", "metal_toolbox", "C1", "thermal"),
+    ]
     priors = lib.with_role("prior")
 
     def feat(obj, action, modality, trial):
@@ -146,7 +148,13 @@ def test_thermal_recovery_while_lifted(world):
     act = PAPER_ACTIONS["C1"]
     with world.session("metal_toolbox", "C1", 0, action=act) as s:
         start = s.skin.latest()["temp"][:, 1].mean()
-        explore(s.robot, s.skin, s.placement, act, settings=ExplorationSettings(thermal_wait=0.0, stamp_wall_clock=False))
+        explore(
+            s.robot,
+            s.skin,
+            s.placement,
+            act,
+            settings=ExplorationSettings(thermal_wait=0.0, stamp_wall_clock=False),
+        )
         cold = s.skin.latest()["temp"][:, 1].mean()
         s.robot.wait(30.0)
         warm = s.skin.latest()["temp"][:, 1].mean()
@@ -166,7 +174,9 @@ def test_configured_update_rate():
 def test_layout_from_a_skin_patch_file():
     from aptkt.skin import CellConfig, PatchConfig
 
-    cells = tuple(CellConfig(100 + i, (20.0 * i, 0.0, 0.0), (0.0,) * 3, (1.0,) * 3) for i in range(3))
+    cells = tuple(
+        CellConfig(100 + i, (20.0 * i, 0.0, 0.0), (0.0,) * 3, (1.0,) * 3) for i in range(3)
+    )
     world = SimWorld(seed=1, layout=PatchConfig("row", cells))
     rec = world.explore("towel", "P1", 0)
     assert rec.cells == (100, 101, 102) and set(np.unique(rec.samples.cell_id)) == {100, 101, 102}

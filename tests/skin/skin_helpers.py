@@ -15,13 +15,19 @@ from aptkt.skin import encode_sensor_packets
 RAW_KEYS = ("cell_id", "proximity", "acc", "temp", "force")
 
 
-def random_raw(rng: np.random.Generator, n: int, cells: np.ndarray | None = None) -> dict[str, np.ndarray]:
+def random_raw(
+    rng: np.random.Generator, n: int, cells: np.ndarray | None = None
+) -> dict[str, np.ndarray]:
     """n random sensor packets covering each field's whole representable range."""
     return {
-        "cell_id": (rng.integers(0, 0x4000, n) if cells is None else np.asarray(cells)).astype(np.uint16),
+        "cell_id": (rng.integers(0, 0x4000, n) if cells is None else np.asarray(cells)).astype(
+            np.uint16
+        ),
         "proximity": rng.integers(0, 0x10000, n).astype(np.uint16),
         "acc": rng.integers(-512, 512, (n, 3)).astype(np.int16),
-        "temp": np.stack([rng.integers(-128, 128, n), rng.integers(-8192, 8192, n)], axis=1).astype(np.int16),
+        "temp": np.stack([rng.integers(-128, 128, n), rng.integers(-8192, 8192, n)], axis=1).astype(
+            np.int16
+        ),
         "force": rng.integers(0, 4096, (n, 3)).astype(np.uint16),
     }
 
@@ -38,7 +44,8 @@ def reference_decode(stream: bytes) -> dict[str, np.ndarray]:
         "cell_id": ((b[:, 1] & 0x7F) << 7) | (b[:, 2] & 0x7F),
         "proximity": ((b[:, 3] & 0x7F) << 9) | ((b[:, 4] & 0x7F) << 2) | ((b[:, 10] >> 3) & 0x3),
         "acc": np.stack(
-            [signed(((b[:, 5 + i] & 0x7F) << 3) | (b[:, 8 + i] & 0x7), 10) for i in range(3)], axis=1
+            [signed(((b[:, 5 + i] & 0x7F) << 3) | (b[:, 8 + i] & 0x7), 10) for i in range(3)],
+            axis=1,
         ),
         "temp": np.stack(
             [
@@ -47,7 +54,9 @@ def reference_decode(stream: bytes) -> dict[str, np.ndarray]:
             ],
             axis=1,
         ),
-        "force": np.stack([((b[:, 11 + 2 * i] & 0x7F) << 5) | (b[:, 12 + 2 * i] & 0x1F) for i in range(3)], axis=1),
+        "force": np.stack(
+            [((b[:, 11 + 2 * i] & 0x7F) << 5) | (b[:, 12 + 2 * i] & 0x1F) for i in range(3)], axis=1
+        ),
     }
 
 

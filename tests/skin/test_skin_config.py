@@ -48,7 +48,9 @@ def test_default_patch_has_seven_distinct_cells_in_a_hexagon():
 
 def test_loading_with_defaults_and_overrides(tmp_path):
     patch = load_patch(write(tmp_path, GOOD))
-    assert patch.name == "test-patch" and patch.cell_ids == (10, 20) and patch.silence_timeout_s == 0.2
+    assert (
+        patch.name == "test-patch" and patch.cell_ids == (10, 20) and patch.silence_timeout_s == 0.2
+    )
     cal = patch.calibration()
     np.testing.assert_array_equal(cal.offset, [[0.1, 0.1, 0.1], [0.0, 0.5, 1.0]])
     np.testing.assert_array_equal(cal.gain, [[1.0, 2.0, 4.0], [3.0, 3.0, 3.0]])
@@ -70,13 +72,33 @@ def test_loading_with_defaults_and_overrides(tmp_path):
         (GOOD.replace("id = 20", "id = 16383"), r"cell\[1\]\.id"),
         (GOOD.replace("id = 20", "id = 0"), r"cell\[1\]\.id"),
         (GOOD.replace("id = 20", 'id = "20"'), r"cell\[1\]\.id"),
-        (GOOD.replace("force_gain = 3.0", "force_gain = 0.0"), r"cell\[1\]\.force_gain: gains must be > 0"),
-        (GOOD.replace("force_gain = 3.0", "force_gain = [1.0, 2.0]"), r"cell\[1\]\.force_gain: expected"),
-        (GOOD.replace("force_offset = [0.0, 0.5, 1.0]", 'force_offset = [0.0, "x", 1.0]'), r"cell\[1\]\.force_offset\[1\]"),
-        (GOOD.replace("position_mm = [15.0, 0.0, 0.0]", "position_mm = 15.0"), r"cell\[1\]\.position_mm"),
+        (
+            GOOD.replace("force_gain = 3.0", "force_gain = 0.0"),
+            r"cell\[1\]\.force_gain: gains must be > 0",
+        ),
+        (
+            GOOD.replace("force_gain = 3.0", "force_gain = [1.0, 2.0]"),
+            r"cell\[1\]\.force_gain: expected",
+        ),
+        (
+            GOOD.replace("force_offset = [0.0, 0.5, 1.0]", 'force_offset = [0.0, "x", 1.0]'),
+            r"cell\[1\]\.force_offset\[1\]",
+        ),
+        (
+            GOOD.replace("position_mm = [15.0, 0.0, 0.0]", "position_mm = 15.0"),
+            r"cell\[1\]\.position_mm",
+        ),
         (GOOD.replace("position_mm = [15.0, 0.0, 0.0]", ""), r"cell\[1\]\.position_mm: missing"),
-        (GOOD.replace("position_mm = [15.0, 0.0, 0.0]", "position_mm = [15.0, 0.0, 0.0]\ngian = 2"), r"cell\[1\]: unknown key\(s\) gian"),
-        (GOOD.replace("silence_timeout_s = 0.2", "silence_timeout_s = -1"), r"patch\.silence_timeout_s"),
+        (
+            GOOD.replace(
+                "position_mm = [15.0, 0.0, 0.0]", "position_mm = [15.0, 0.0, 0.0]\ngian = 2"
+            ),
+            r"cell\[1\]: unknown key\(s\) gian",
+        ),
+        (
+            GOOD.replace("silence_timeout_s = 0.2", "silence_timeout_s = -1"),
+            r"patch\.silence_timeout_s",
+        ),
         (GOOD.replace("force_offset = 0.1", "force_offset = nan"), r"patch\.force_offset"),
         (GOOD.replace('name = "test-patch"', "name = 3"), r"patch\.name"),
         ("[patch]\nname = 'x'\n", r"cell: expected at least one \[\[cell\]\]"),

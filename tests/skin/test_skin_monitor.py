@@ -24,12 +24,16 @@ def test_monitor_serial_shows_rates_health_and_values(adapter, capsys):
 
     timer = threading.Timer(0.15, play)
     timer.start()
-    code = main(["skin", "monitor", adapter.port, "--duration", "0.9", "--interval", "0.45", "--plain"])
+    code = main(
+        ["skin", "monitor", adapter.port, "--duration", "0.9", "--interval", "0.45", "--plain"]
+    )
     timer.join()
     out = capsys.readouterr().out
     assert code == 0
     last = out.strip().split("\n\n")[-1]
-    rows = [line.split() for line in last.splitlines() if line.split() and line.split()[0].isdigit()]
+    rows = [
+        line.split() for line in last.splitlines() if line.split() and line.split()[0].isdigit()
+    ]
     assert [int(r[0]) for r in rows] == CELLS
     rates = [float(r[1]) for r in rows]
     assert all(150 < r < 350 for r in rates), rates  # 250 Hz per cell, loosely (shared machine)
@@ -58,7 +62,9 @@ def test_monitor_unplugged_mid_stream(adapter, capsys):
 
     timer = threading.Timer(0.15, play_then_unplug)
     timer.start()
-    code = main(["skin", "monitor", adapter.port, "--duration", "3", "--interval", "0.1", "--plain"])
+    code = main(
+        ["skin", "monitor", adapter.port, "--duration", "3", "--interval", "0.1", "--plain"]
+    )
     timer.join()
     captured = capsys.readouterr()
     assert code == 1
@@ -84,8 +90,20 @@ def test_monitor_tsu(capsys):
     t.start()
     try:
         code = main(
-            ["skin", "monitor", "--tsu", "--tsu-address", f"127.0.0.1:{fake.getsockname()[1]}",
-             "--listen", f"127.0.0.1:{listen[1]}", "--duration", "0.4", "--interval", "0.2", "--plain"]
+            [
+                "skin",
+                "monitor",
+                "--tsu",
+                "--tsu-address",
+                f"127.0.0.1:{fake.getsockname()[1]}",
+                "--listen",
+                f"127.0.0.1:{listen[1]}",
+                "--duration",
+                "0.4",
+                "--interval",
+                "0.2",
+                "--plain",
+            ]
         )
     finally:
         t.join()

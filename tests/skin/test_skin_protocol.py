@@ -42,7 +42,11 @@ def test_physical_units_follow_the_table():
     raw = random_raw(rng, 1000)
     out = StreamParser().feed(encode_sensor_packets(raw))
     assert set(out) == set(RAW_KEYS)
-    assert out["acc"].shape == (1000, 3) and out["temp"].shape == (1000, 2) and out["force"].shape == (1000, 3)
+    assert (
+        out["acc"].shape == (1000, 3)
+        and out["temp"].shape == (1000, 2)
+        and out["force"].shape == (1000, 3)
+    )
     np.testing.assert_array_equal(out["cell_id"], raw["cell_id"])
     np.testing.assert_array_equal(out["proximity"], raw["proximity"] / 65536)
     np.testing.assert_array_equal(out["acc"], raw["acc"] / 256)
@@ -57,7 +61,28 @@ def test_a_packet_written_by_hand():
     # cell 0x1234, proximity 0xBEEF, acc (-1, 5, -512), temp (-3 → 22.5 °C, -2 → -0.0625 °C),
     # force (4095, 1, 2048): bytes worked out from the table by hand.
     packet = bytes(
-        [0xFF, 0x24, 0x34, 0x5F, 0x3B, 0x7F, 0x00, 0x40, 0x7F, 0x6D, 0x18, 0x7F, 0x1F, 0x00, 0x01, 0x40, 0x00, 0x7F, 0x7E, 0xAA]
+        [
+            0xFF,
+            0x24,
+            0x34,
+            0x5F,
+            0x3B,
+            0x7F,
+            0x00,
+            0x40,
+            0x7F,
+            0x6D,
+            0x18,
+            0x7F,
+            0x1F,
+            0x00,
+            0x01,
+            0x40,
+            0x00,
+            0x7F,
+            0x7E,
+            0xAA,
+        ]
     )
     out = StreamParser().feed(packet)
     assert out["cell_id"].tolist() == [0x1234]
@@ -70,7 +95,13 @@ def test_a_packet_written_by_hand():
 
 
 def test_quantize_rounds_half_to_even_clips_and_broadcasts():
-    r = quantize([3, 4], 0.5, [[1.0, -3.0, 2.5 / 256], [0, 0, 0]], [[24.25, 20.0], [1e9, -1e9]], [[0.5, 10.0, -1.0], [0, 0, 0]])
+    r = quantize(
+        [3, 4],
+        0.5,
+        [[1.0, -3.0, 2.5 / 256], [0, 0, 0]],
+        [[24.25, 20.0], [1e9, -1e9]],
+        [[0.5, 10.0, -1.0], [0, 0, 0]],
+    )
     assert r["proximity"].tolist() == [32768, 32768]
     assert r["acc"].tolist() == [[256, -512, 2], [0, 0, 0]]
     assert r["temp"].tolist() == [[0, 640], [127, -8192]]
@@ -94,7 +125,9 @@ def test_quantize_rounds_half_to_even_clips_and_broadcasts():
 )
 def test_quantize_then_parse_is_the_nearest_representable_value(rows):
     cells, prox, acc, temp, force = (np.array(x, dtype=float) for x in zip(*rows))
-    out = StreamParser().feed(encode_sensor_packets(quantize(cells.astype(int), prox, acc, temp, force)))
+    out = StreamParser().feed(
+        encode_sensor_packets(quantize(cells.astype(int), prox, acc, temp, force))
+    )
 
     def nearest(x, scale, offset, lo, hi):
         return np.clip(np.round((x - offset) / scale), lo, hi) * scale + offset
@@ -110,9 +143,15 @@ def test_quantize_then_parse_is_the_nearest_representable_value(rows):
 
 
 def test_scale_table_matches_the_parser():
-    raw = {"cell_id": [1], "proximity": [1000], "acc": [[-7, 8, 9]], "temp": [[-10, 333]], "force": [[11, 12, 13]]}
+    raw = {
+        "cell_id": [1],
+        "proximity": [1000],
+        "acc": [[-7, 8, 9]],
+        "temp": [[-10, 333]],
+        "force": [[11, 12, 13]],
+    }
     out = StreamParser().feed(encode_sensor_packets({k: np.array(v) for k, v in raw.items()}))
-    (s_p, o_p), = SCALE["proximity"]
+    ((s_p, o_p),) = SCALE["proximity"]
     assert out["proximity"][0] == 1000 * s_p + o_p
     (s0, o0), (s1, o1) = SCALE["temp"]
     assert out["temp"][0].tolist() == [-10 * s0 + o0, 333 * s1 + o1]
@@ -174,9 +213,17 @@ def test_feed_accepts_bytes_like_and_rejects_other_types():
 
 
 def test_other_packet_types_are_counted_by_name():
-    assert PACKET_TYPES["sensor"] == 0xFF and PACKET_TYPES["ping"] == 0xCB and len(PACKET_TYPES) == 16
+    assert (
+        PACKET_TYPES["sensor"] == 0xFF and PACKET_TYPES["ping"] == 0xCB and len(PACKET_TYPES) == 16
+    )
     sensor = encode_sensor_packets(random_raw(np.random.default_rng(6), 1))
-    stream = sensor + encode_packet("ping") + encode_packet(0xC8, bytes([3] * 18)) + encode_packet("ping") + sensor
+    stream = (
+        sensor
+        + encode_packet("ping")
+        + encode_packet(0xC8, bytes([3] * 18))
+        + encode_packet("ping")
+        + sensor
+    )
     p = StreamParser()
     assert len(p.feed(stream)["cell_id"]) == 2
     st_ = p.stats

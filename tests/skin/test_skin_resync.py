@@ -35,7 +35,9 @@ piece = st.one_of(
     st.tuples(st.just("flip"), raw_row, st.integers(1, 18)),  # a payload byte's top bit set
     st.tuples(st.just("drop"), raw_row, st.integers(1, 19), st.integers(1, 19)),  # bytes lost
     st.tuples(st.just("truncate"), raw_row, st.integers(1, 19)),  # the rest never arrives
-    st.tuples(st.just("garbage"), st.binary(max_size=45).map(lambda b: b.replace(b"\xaa", b"\x2a"))),
+    st.tuples(
+        st.just("garbage"), st.binary(max_size=45).map(lambda b: b.replace(b"\xaa", b"\x2a"))
+    ),
 )
 
 
@@ -102,12 +104,17 @@ def test_every_intact_packet_and_nothing_else_whatever_the_chunking(pieces, cuts
     assert chunked_stats == whole_stats
     # Every byte is accounted for: packets, skipped, or held for the next feed.
     packets = whole_stats["packets"] + sum(whole_stats["other_packets"].values())
-    assert whole_stats["bytes"] == 20 * packets + whole_stats["bytes_skipped"] + whole_stats["pending_bytes"]
+    assert (
+        whole_stats["bytes"]
+        == 20 * packets + whole_stats["bytes_skipped"] + whole_stats["pending_bytes"]
+    )
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.lists(st.one_of(piece, st.tuples(st.just("garbage"), st.binary(max_size=45))), max_size=40),
-       st.lists(st.integers(0, 10**6), max_size=12))
+@given(
+    st.lists(st.one_of(piece, st.tuples(st.just("garbage"), st.binary(max_size=45))), max_size=40),
+    st.lists(st.integers(0, 10**6), max_size=12),
+)
 def test_intact_packets_survive_unrestricted_garbage(pieces, cuts):
     # Garbage may now contain 0xAA and whole packet-like byte runs; a packet the parser then
     # finds in the garbage is a genuine valid packet on the wire, but none of the intact
@@ -124,7 +131,13 @@ def test_resume_inside_a_rejected_candidate():
     # whole 20-byte candidate would lose the second packet.
     rows = [
         {"cell_id": 1, "proximity": 2, "acc": [3, 4, 5], "temp": (6, 7), "force": [8, 9, 10]},
-        {"cell_id": 11, "proximity": 12, "acc": [13, 14, 15], "temp": (16, 17), "force": [18, 19, 20]},
+        {
+            "cell_id": 11,
+            "proximity": 12,
+            "acc": [13, 14, 15],
+            "temp": (16, 17),
+            "force": [18, 19, 20],
+        },
     ]
     stream = packet(rows[0])[:7] + packet(rows[1])
     out, stats = parse(stream, [])
@@ -142,7 +155,11 @@ def test_random_noise_with_embedded_packets_byte_by_byte():
     ]
     pieces = []
     for r in rows:
-        pieces.append(rng.integers(0, 256, rng.integers(0, 30), dtype=np.uint8).tobytes().replace(b"\xaa", b"\x00"))
+        pieces.append(
+            rng.integers(0, 256, rng.integers(0, 30), dtype=np.uint8)
+            .tobytes()
+            .replace(b"\xaa", b"\x00")
+        )
         pieces.append(packet(r))
     stream = b"".join(pieces)
     p = StreamParser()

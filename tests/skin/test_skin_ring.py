@@ -35,7 +35,10 @@ def test_ring_matches_a_bounded_list(capacity, ops):
             got = ring.drain()
             assert got.t_ns.tolist() == model
             for name in FIELDS:
-                np.testing.assert_array_equal(getattr(got, name), getattr(batch(0, 10**4).take(np.array(model, dtype=int)), name))
+                np.testing.assert_array_equal(
+                    getattr(got, name),
+                    getattr(batch(0, 10**4).take(np.array(model, dtype=int)), name),
+                )
             model = []
         else:
             ring.push(batch(counter, op))

@@ -28,7 +28,9 @@ def test_streams_every_packet_in_order(adapter):
     np.testing.assert_array_equal(samples.cell_id, raw["cell_id"])
     np.testing.assert_array_equal(samples.acc, raw["acc"] / 256)
     np.testing.assert_array_equal(samples.temp[:, 1], raw["temp"][:, 1] * 0.03125)
-    np.testing.assert_allclose(samples.force, raw["force"] / 1024)  # default calibration: 1 N per unit
+    np.testing.assert_allclose(
+        samples.force, raw["force"] / 1024
+    )  # default calibration: 1 N per unit
     assert np.all(np.diff(samples.t_ns) >= 0)  # arrival timestamps, monotonic
     assert stats["packets"] == 420 and stats["bytes_skipped"] == 0 and stats["reads"] >= 1
     assert not skin.is_open

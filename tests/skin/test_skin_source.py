@@ -8,7 +8,14 @@ import pytest
 from skin_helpers import frames, take
 
 from aptkt.errors import SilentCellError, SkinDisconnectedError, SkinError
-from aptkt.skin import PatchConfig, SkinSource, SkinSourceBase, encode_packet, encode_sensor_packets, quantize
+from aptkt.skin import (
+    PatchConfig,
+    SkinSource,
+    SkinSourceBase,
+    encode_packet,
+    encode_sensor_packets,
+    quantize,
+)
 
 MS = 1_000_000
 
@@ -37,7 +44,12 @@ class FakeSkin(SkinSourceBase):
 
 PATCH = PatchConfig.from_mapping(
     {
-        "patch": {"name": "three", "silence_timeout_s": 0.1, "force_offset": 0.25, "force_gain": 2.0},
+        "patch": {
+            "name": "three",
+            "silence_timeout_s": 0.1,
+            "force_offset": 0.25,
+            "force_gain": 2.0,
+        },
         "cell": [{"id": i, "position_mm": [i, 0, 0]} for i in (1, 2, 3)],
     }
 )
@@ -52,7 +64,9 @@ def skin() -> FakeSkin:
 
 def frame(force: float = 0.5, cells=(1, 2, 3)) -> bytes:
     n = len(cells)
-    return encode_sensor_packets(quantize(list(cells), 0.1, [[0, 0, 1.0]] * n, [[30, 31]] * n, [[force] * 3] * n))
+    return encode_sensor_packets(
+        quantize(list(cells), 0.1, [[0, 0, 1.0]] * n, [[30, 31]] * n, [[force] * 3] * n)
+    )
 
 
 def test_is_a_skin_source(skin):

@@ -71,7 +71,9 @@ def test_datagrams_are_reframed_and_parsed(tsu):
 
 
 def test_alive_datagram_every_100_ms(tsu):
-    with TsuSkin(tsu_address=tsu.address, listen_address=("127.0.0.1", 0), alive_payload=b"\x01") as skin:
+    with TsuSkin(
+        tsu_address=tsu.address, listen_address=("127.0.0.1", 0), alive_payload=b"\x01"
+    ) as skin:
         got = tsu.received(0.55)
         sent = skin.stats["alive_sent"]
     assert [d for d, _ in got] == [b"\x01"] * len(got)

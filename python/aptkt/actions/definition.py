@@ -70,7 +70,9 @@ class ExploratoryAction:
         for key in ("depth", "hold_time", "normal_force", "speed", "slide_time"):
             value = getattr(self, key)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-                raise ValueError(f"action {self.name!r}: {key} must be a finite number >= 0, got {value!r}")
+                raise ValueError(
+                    f"action {self.name!r}: {key} must be a finite number >= 0, got {value!r}"
+                )
         for key in _REQUIRED[self.movement]:
             if getattr(self, key) <= 0:
                 raise ValueError(
@@ -104,18 +106,51 @@ class ExploratoryAction:
 PAPER_ACTIONS: Mapping[str, ExploratoryAction] = {
     a.name: a
     for a in (
-        ExploratoryAction("P1", Movement.PRESS, depth=0.001, hold_time=3.0, description="press 1 mm, hold 3 s"),
-        ExploratoryAction("P2", Movement.PRESS, depth=0.002, hold_time=3.0, description="press 2 mm, hold 3 s"),
-        ExploratoryAction("S1", Movement.SLIDE, normal_force=0.1, speed=0.01, slide_time=5.0,
-                          description="slide at 0.1 N, 1 cm/s for 5 s"),
-        ExploratoryAction("S2", Movement.SLIDE, normal_force=0.1, speed=0.05, slide_time=1.0,
-                          description="slide at 0.1 N, 5 cm/s for 1 s"),
-        ExploratoryAction("S3", Movement.SLIDE, normal_force=0.2, speed=0.01, slide_time=5.0,
-                          description="slide at 0.2 N, 1 cm/s for 5 s"),
-        ExploratoryAction("S4", Movement.SLIDE, normal_force=0.2, speed=0.05, slide_time=1.0,
-                          description="slide at 0.2 N, 5 cm/s for 1 s"),
-        ExploratoryAction("C1", Movement.STATIC_CONTACT, depth=0.002, hold_time=15.0,
-                          description="static contact 2 mm, hold 15 s"),
+        ExploratoryAction(
+            "P1", Movement.PRESS, depth=0.001, hold_time=3.0, description="press 1 mm, hold 3 s"
+        ),
+        ExploratoryAction(
+            "P2", Movement.PRESS, depth=0.002, hold_time=3.0, description="press 2 mm, hold 3 s"
+        ),
+        ExploratoryAction(
+            "S1",
+            Movement.SLIDE,
+            normal_force=0.1,
+            speed=0.01,
+            slide_time=5.0,
+            description="slide at 0.1 N, 1 cm/s for 5 s",
+        ),
+        ExploratoryAction(
+            "S2",
+            Movement.SLIDE,
+            normal_force=0.1,
+            speed=0.05,
+            slide_time=1.0,
+            description="slide at 0.1 N, 5 cm/s for 1 s",
+        ),
+        ExploratoryAction(
+            "S3",
+            Movement.SLIDE,
+            normal_force=0.2,
+            speed=0.01,
+            slide_time=5.0,
+            description="slide at 0.2 N, 1 cm/s for 5 s",
+        ),
+        ExploratoryAction(
+            "S4",
+            Movement.SLIDE,
+            normal_force=0.2,
+            speed=0.05,
+            slide_time=1.0,
+            description="slide at 0.2 N, 5 cm/s for 1 s",
+        ),
+        ExploratoryAction(
+            "C1",
+            Movement.STATIC_CONTACT,
+            depth=0.002,
+            hold_time=15.0,
+            description="static contact 2 mm, hold 15 s",
+        ),
     )
 }
 

@@ -77,9 +77,16 @@ def _calibration(skin: SkinSource) -> dict[str, Any] | None:
         return None
 
 
-def explore(robot: Robot, skin: SkinSource, placement: Placement, action: ExploratoryAction, *,
-            trial: int = 0, settings: ExplorationSettings | None = None,
-            metadata: dict[str, Any] | None = None) -> Recording:
+def explore(
+    robot: Robot,
+    skin: SkinSource,
+    placement: Placement,
+    action: ExploratoryAction,
+    *,
+    trial: int = 0,
+    settings: ExplorationSettings | None = None,
+    metadata: dict[str, Any] | None = None,
+) -> Recording:
     """Apply ``action`` once to the object at ``placement`` and return its :class:`Recording`.
 
     On a robot or skin error the arm is stopped and lifted if possible, and the error is
@@ -101,7 +108,9 @@ def explore(robot: Robot, skin: SkinSource, placement: Placement, action: Explor
         "software_version": __version__,
     }
     if settings.stamp_wall_clock:
-        meta["wall_time_utc"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
+        meta["wall_time_utc"] = _dt.datetime.now(_dt.timezone.utc).isoformat(
+            timespec="milliseconds"
+        )
     meta.update(metadata or {})
 
     robot.move_above(placement, settings.clearance)
@@ -111,8 +120,13 @@ def explore(robot: Robot, skin: SkinSource, placement: Placement, action: Explor
     skin.start_recording(meta)
     try:
         if action.movement is Movement.SLIDE:
-            robot.slide(action.normal_force, action.speed, action.slide_time, placement.slide_direction,
-                        skin.total_normal_force)
+            robot.slide(
+                action.normal_force,
+                action.speed,
+                action.slide_time,
+                placement.slide_direction,
+                skin.total_normal_force,
+            )
         else:
             robot.press(action.depth, action.hold_time)
     except AptktError as exc:

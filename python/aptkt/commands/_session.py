@@ -11,25 +11,70 @@ from aptkt.errors import ConfigError
 
 def add_session_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("robot and skin")
-    g.add_argument("--robot", choices=("ur10", "sim"), required=True,
-                   help="ur10: the arm through ur_rtde with a hardware skin; sim: the simulated world (fast)")
-    g.add_argument("--host", metavar="H", help="UR controller address (ur10; default: [robot] host of the workspace file)")
-    g.add_argument("--workspace", metavar="FILE", help="workspace file: where each object lies (ur10; required)")
-    g.add_argument("--skin", metavar="PORT", help="serial port of the skin adapter, e.g. /dev/ttyUSB0 (ur10)")
-    g.add_argument("--tsu", action="store_true", help="read the skin from a Tactile Section Unit over UDP instead (ur10)")
-    g.add_argument("--tsu-address", default="192.168.0.10:1336", metavar="HOST:PORT",
-                   help="TSU address (default %(default)s)")
-    g.add_argument("--listen", default="0.0.0.0:1337", metavar="HOST:PORT", help="local UDP address for --tsu (default %(default)s)")
-    g.add_argument("--patch", metavar="FILE", help="skin patch file (cells, force calibration); default: the 7-cell patch")
-    g.add_argument("--thermal-wait", type=float, default=30.0, metavar="S",
-                   help="seconds to let the temperature sensors recover after each action (default %(default)s, paper §5.2)")
-    g.add_argument("--objects-file", action="append", default=[], metavar="TOML",
-                   help="extra object library for --robot sim (repeatable)")
+    g.add_argument(
+        "--robot",
+        choices=("ur10", "sim"),
+        required=True,
+        help="ur10: the arm through ur_rtde with a hardware skin; sim: the simulated world (fast)",
+    )
+    g.add_argument(
+        "--host",
+        metavar="H",
+        help="UR controller address (ur10; default: [robot] host of the workspace file)",
+    )
+    g.add_argument(
+        "--workspace",
+        metavar="FILE",
+        help="workspace file: where each object lies (ur10; required)",
+    )
+    g.add_argument(
+        "--skin", metavar="PORT", help="serial port of the skin adapter, e.g. /dev/ttyUSB0 (ur10)"
+    )
+    g.add_argument(
+        "--tsu",
+        action="store_true",
+        help="read the skin from a Tactile Section Unit over UDP instead (ur10)",
+    )
+    g.add_argument(
+        "--tsu-address",
+        default="192.168.0.10:1336",
+        metavar="HOST:PORT",
+        help="TSU address (default %(default)s)",
+    )
+    g.add_argument(
+        "--listen",
+        default="0.0.0.0:1337",
+        metavar="HOST:PORT",
+        help="local UDP address for --tsu (default %(default)s)",
+    )
+    g.add_argument(
+        "--patch",
+        metavar="FILE",
+        help="skin patch file (cells, force calibration); default: the 7-cell patch",
+    )
+    g.add_argument(
+        "--thermal-wait",
+        type=float,
+        default=30.0,
+        metavar="S",
+        help="seconds to let the temperature sensors recover after each action (default %(default)s, paper §5.2)",
+    )
+    g.add_argument(
+        "--objects-file",
+        action="append",
+        default=[],
+        metavar="TOML",
+        help="extra object library for --robot sim (repeatable)",
+    )
 
 
 def add_action_arguments(p: argparse.ArgumentParser, *, default_help: str) -> None:
     p.add_argument("--actions", metavar="P1,S1,...", help=f"action names ({default_help})")
-    p.add_argument("--actions-file", metavar="TOML", help="your own actions ([[action]] tables); they join the paper's")
+    p.add_argument(
+        "--actions-file",
+        metavar="TOML",
+        help="your own actions ([[action]] tables); they join the paper's",
+    )
 
 
 def split_names(text: str | None, option: str) -> list[str] | None:
@@ -59,8 +104,10 @@ def available_actions(args: argparse.Namespace) -> dict[str, Any]:
 def pick_actions(names: list[str], available: dict[str, Any]) -> list[Any]:
     unknown = [a for a in names if a not in available]
     if unknown:
-        raise ConfigError(f"--actions: unknown action(s) {', '.join(unknown)}; known: {', '.join(available)} "
-                          "(define your own with --actions-file)")
+        raise ConfigError(
+            f"--actions: unknown action(s) {', '.join(unknown)}; known: {', '.join(available)} "
+            "(define your own with --actions-file)"
+        )
     return [available[a] for a in names]
 
 
@@ -81,11 +128,22 @@ def make_session(args: argparse.Namespace, *, seed: int = 0) -> Any:
     if args.robot == "sim":
         from aptkt.runtime.sessions import SimSession
 
-        ignored = [o for o, v in (("--host", args.host), ("--workspace", args.workspace), ("--skin", args.skin),
-                                  ("--tsu", args.tsu), ("--patch", args.patch)) if v]
+        ignored = [
+            o
+            for o, v in (
+                ("--host", args.host),
+                ("--workspace", args.workspace),
+                ("--skin", args.skin),
+                ("--tsu", args.tsu),
+                ("--patch", args.patch),
+            )
+            if v
+        ]
         if ignored:
-            raise ConfigError(f"{', '.join(ignored)}: only for --robot ur10 (the simulated world has its own "
-                              "placements and skin)")
+            raise ConfigError(
+                f"{', '.join(ignored)}: only for --robot ur10 (the simulated world has its own "
+                "placements and skin)"
+            )
         return SimSession(seed=seed, settings=settings, object_files=args.objects_file)
 
     from aptkt.runtime.sessions import RobotSession
@@ -95,7 +153,9 @@ def make_session(args: argparse.Namespace, *, seed: int = 0) -> Any:
     if not args.workspace:
         raise ConfigError("--robot ur10 needs --workspace FILE (where each object lies)")
     if bool(args.skin) == bool(args.tsu):
-        raise ConfigError("--robot ur10 needs the skin: --skin PORT (USB adapter) or --tsu (UDP), not both")
+        raise ConfigError(
+            "--robot ur10 needs the skin: --skin PORT (USB adapter) or --tsu (UDP), not both"
+        )
     if args.tsu:
         tsu_address = _host_port(args.tsu_address, "--tsu-address")
         listen = _host_port(args.listen, "--listen")
@@ -107,6 +167,7 @@ def make_session(args: argparse.Namespace, *, seed: int = 0) -> Any:
 
         skin_desc = {"source": "TsuSkin", "tsu_address": args.tsu_address, "listen": args.listen}
     else:
+
         def make_skin() -> Any:
             from aptkt.skin import SerialSkin
 
@@ -114,4 +175,6 @@ def make_session(args: argparse.Namespace, *, seed: int = 0) -> Any:
 
         skin_desc = {"source": "SerialSkin", "port": args.skin}
     skin_desc["patch"] = args.patch or "default (7 cells)"
-    return RobotSession(args.workspace, make_skin, host=args.host, settings=settings, skin_description=skin_desc)
+    return RobotSession(
+        args.workspace, make_skin, host=args.host, settings=settings, skin_description=skin_desc
+    )

@@ -30,23 +30,52 @@ def register(sub: argparse._SubParsersAction) -> None:
         "<output>.aborted.h5, and the command exits with code 3 naming the object, action and trial.",
     )
     add_session_arguments(p)
-    p.add_argument("--objects", required=True, metavar="A,B,...", help="objects to explore (workspace or world names)")
+    p.add_argument(
+        "--objects",
+        required=True,
+        metavar="A,B,...",
+        help="objects to explore (workspace or world names)",
+    )
     add_action_arguments(p, default_help="default: the paper's seven")
-    p.add_argument("-n", "--repetitions", type=int, required=True, metavar="N", help="trials per object and action")
-    p.add_argument("--first-trial", type=int, default=0, metavar="K", help="number of the first trial (default %(default)s)")
+    p.add_argument(
+        "-n",
+        "--repetitions",
+        type=int,
+        required=True,
+        metavar="N",
+        help="trials per object and action",
+    )
+    p.add_argument(
+        "--first-trial",
+        type=int,
+        default=0,
+        metavar="K",
+        help="number of the first trial (default %(default)s)",
+    )
     p.add_argument("-o", "--output", required=True, metavar="FILE", help="HDF5 data set to write")
-    p.add_argument("--resume", action="store_true", help="complete an existing file: skip the trials it holds")
+    p.add_argument(
+        "--resume", action="store_true", help="complete an existing file: skip the trials it holds"
+    )
     p.add_argument("--overwrite", action="store_true", help="replace an existing file")
-    p.add_argument("--prompt-between-trials", action="store_true",
-                   help="wait for Enter before each new trial round (re-place the objects by hand, paper §5.2)")
-    p.add_argument("--seed", type=int, default=0, help="world seed for --robot sim (default %(default)s)")
+    p.add_argument(
+        "--prompt-between-trials",
+        action="store_true",
+        help="wait for Enter before each new trial round (re-place the objects by hand, paper §5.2)",
+    )
+    p.add_argument(
+        "--seed", type=int, default=0, help="world seed for --robot sim (default %(default)s)"
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress output")
     p.set_defaults(func=run)
 
 
 def _prompt(trial: int) -> None:
-    print(f"\nTrial {trial}: re-place the objects as for a new trial, then press Enter (Ctrl-C stops) ",
-          end="", file=sys.stderr, flush=True)
+    print(
+        f"\nTrial {trial}: re-place the objects as for a new trial, then press Enter (Ctrl-C stops) ",
+        end="",
+        file=sys.stderr,
+        flush=True,
+    )
     if not sys.stdin.readline():
         raise ConfigError("--prompt-between-trials: standard input closed")
 
@@ -57,29 +86,47 @@ def run(args: argparse.Namespace) -> int:
     objects = split_names(args.objects, "--objects")
     available = available_actions(args)
     names = split_names(args.actions, "--actions") or list(available)
-    plan = CollectionPlan(tuple(objects), tuple(pick_actions(names, available)), args.repetitions, args.first_trial)
+    plan = CollectionPlan(
+        tuple(objects), tuple(pick_actions(names, available)), args.repetitions, args.first_trial
+    )
     session = make_session(args, seed=args.seed)
     session.check_objects(plan.objects)
     if Path(args.output).exists() and not (args.resume or args.overwrite):
         # Before the arm moves, not after.
-        raise ConfigError(f"{args.output} exists: use --resume to complete it or --overwrite to replace it")
+        raise ConfigError(
+            f"{args.output} exists: use --resume to complete it or --overwrite to replace it"
+        )
     if args.no_progress:
         progress: object = False
     elif sys.stderr.isatty():
         progress = True
     else:
+
         def progress(line: str) -> None:
             print(line, file=sys.stderr, flush=True)
 
     try:
         with session:
-            info = collect(args.output, plan, session, resume=args.resume, overwrite=args.overwrite,
-                           progress=progress, between_trials=_prompt if args.prompt_between_trials else None)
+            info = collect(
+                args.output,
+                plan,
+                session,
+                resume=args.resume,
+                overwrite=args.overwrite,
+                progress=progress,
+                between_trials=_prompt if args.prompt_between_trials else None,
+            )
     except CollectionAborted as exc:
         print(f"aptkt collect: fault: {exc}", file=sys.stderr)
         return EXIT_FAULT
-    print(f"{args.output}: {info['collected']} recordings collected now, {info['skipped']} already there; "
-          f"{info['recordings']} in the file ({info['samples']} samples, {info['recorded_seconds']:.1f} s recorded) "
-          f"in {info['wall_seconds']:.1f} s"
-          + (f"; repaired a crashed file first ({info['repaired']} recordings kept)" if info.get("repaired") else ""))
+    print(
+        f"{args.output}: {info['collected']} recordings collected now, {info['skipped']} already there; "
+        f"{info['recordings']} in the file ({info['samples']} samples, {info['recorded_seconds']:.1f} s recorded) "
+        f"in {info['wall_seconds']:.1f} s"
+        + (
+            f"; repaired a crashed file first ({info['repaired']} recordings kept)"
+            if info.get("repaired")
+            else ""
+        )
+    )
     return 0

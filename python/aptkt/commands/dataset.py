@@ -22,16 +22,47 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--jobs is.",
     )
     g.add_argument("-o", "--output", required=True, metavar="FILE", help="HDF5 file to write")
-    g.add_argument("--objects", metavar="A,B,...", help="object names (default: every object of the library)")
-    g.add_argument("--objects-file", action="append", default=[], metavar="TOML",
-                   help="extra object library (repeatable); its objects join the package's")
+    g.add_argument(
+        "--objects", metavar="A,B,...", help="object names (default: every object of the library)"
+    )
+    g.add_argument(
+        "--objects-file",
+        action="append",
+        default=[],
+        metavar="TOML",
+        help="extra object library (repeatable); its objects join the package's",
+    )
     g.add_argument("--actions", metavar="P1,S1,...", help="paper action names (default: all 7)")
     g.add_argument("--actions-file", metavar="TOML", help="your own actions ([[action]] tables)")
-    g.add_argument("-n", "--repetitions", type=int, default=20, metavar="N", help="trials per object and action (default %(default)s)")
-    g.add_argument("--first-trial", type=int, default=0, metavar="K", help="number of the first trial (default %(default)s)")
+    g.add_argument(
+        "-n",
+        "--repetitions",
+        type=int,
+        default=20,
+        metavar="N",
+        help="trials per object and action (default %(default)s)",
+    )
+    g.add_argument(
+        "--first-trial",
+        type=int,
+        default=0,
+        metavar="K",
+        help="number of the first trial (default %(default)s)",
+    )
     g.add_argument("--seed", type=int, default=0, help="world seed (default %(default)s)")
-    g.add_argument("-j", "--jobs", type=int, default=1, metavar="N", help="simulate in N processes (default %(default)s)")
-    g.add_argument("--resume", action="store_true", help="complete an existing file (repairs it if its writer died)")
+    g.add_argument(
+        "-j",
+        "--jobs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="simulate in N processes (default %(default)s)",
+    )
+    g.add_argument(
+        "--resume",
+        action="store_true",
+        help="complete an existing file (repairs it if its writer died)",
+    )
     g.add_argument("--overwrite", action="store_true", help="replace an existing file")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     g.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -42,15 +73,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     i.add_argument("--json", action="store_true", help="print JSON")
     i.set_defaults(func=run_info)
 
-    f = ds.add_parser("features", help="extract every recording's feature observation and store it in the file")
+    f = ds.add_parser(
+        "features", help="extract every recording's feature observation and store it in the file"
+    )
     f.add_argument("file")
-    f.add_argument("--actions", metavar="P1,S1,...", help="only these actions (default: all recorded)")
+    f.add_argument(
+        "--actions", metavar="P1,S1,...", help="only these actions (default: all recorded)"
+    )
     f.add_argument("--no-progress", action="store_true", help="no progress bar")
     f.set_defaults(func=run_features)
 
-    r = ds.add_parser("repair", help="make a file whose writer died appendable again (keeps every complete recording)")
+    r = ds.add_parser(
+        "repair",
+        help="make a file whose writer died appendable again (keeps every complete recording)",
+    )
     r.add_argument("file", metavar="FILE")
-    r.add_argument("--no-backup", action="store_true", help="do not keep the original as FILE.crashed")
+    r.add_argument(
+        "--no-backup", action="store_true", help="do not keep the original as FILE.crashed"
+    )
     r.set_defaults(func=run_repair)
 
 
@@ -72,7 +112,9 @@ def build_plan(args: argparse.Namespace):  # -> GenerationPlan
     objects = _split(args.objects) or list(library)
     unknown = [o for o in objects if o not in library]
     if unknown:
-        raise ConfigError(f"--objects: unknown object(s) {', '.join(unknown)}; known: {', '.join(library)}")
+        raise ConfigError(
+            f"--objects: unknown object(s) {', '.join(unknown)}; known: {', '.join(library)}"
+        )
     if args.actions_file:
         try:
             available = actions_from_toml(args.actions_file)
@@ -83,21 +125,35 @@ def build_plan(args: argparse.Namespace):  # -> GenerationPlan
     names = _split(args.actions) or list(available)
     unknown = [a for a in names if a not in available]
     if unknown:
-        raise ConfigError(f"--actions: unknown action(s) {', '.join(unknown)}; known: {', '.join(available)}")
+        raise ConfigError(
+            f"--actions: unknown action(s) {', '.join(unknown)}; known: {', '.join(available)}"
+        )
     if args.repetitions < 1:
         raise ConfigError("--repetitions must be >= 1")
     if args.jobs < 1:
         raise ConfigError("--jobs must be >= 1")
-    return GenerationPlan(tuple(objects), tuple(available[a] for a in names), args.repetitions, args.seed,
-                          args.first_trial, tuple(str(f) for f in args.objects_file))
+    return GenerationPlan(
+        tuple(objects),
+        tuple(available[a] for a in names),
+        args.repetitions,
+        args.seed,
+        args.first_trial,
+        tuple(str(f) for f in args.objects_file),
+    )
 
 
 def run_generate(args: argparse.Namespace) -> int:
     from aptkt.runtime.generation import describe_summary, dumps, generate
 
     plan = build_plan(args)
-    info = generate(args.output, plan, jobs=args.jobs, resume=args.resume, overwrite=args.overwrite,
-                    progress=not args.no_progress and sys.stderr.isatty())
+    info = generate(
+        args.output,
+        plan,
+        jobs=args.jobs,
+        resume=args.resume,
+        overwrite=args.overwrite,
+        progress=not args.no_progress and sys.stderr.isatty(),
+    )
     print(dumps(info) if args.json else describe_summary(info))
     return 0
 
@@ -111,8 +167,12 @@ def run_info(args: argparse.Namespace) -> int:
         print(json.dumps(info, indent=2, sort_keys=True, default=str))
         return 0
     print(f"{info['path']}: {info['schema']} (written by aptkt {info['software_version']})")
-    print(f"  {info['recordings']} recordings, {info['samples']} samples, {info['recorded_seconds']:.1f} s recorded")
-    print(f"  {info['file_bytes'] / 1e6:.2f} MB on disk, {info['bytes_per_sample']:.2f} bytes per sample")
+    print(
+        f"  {info['recordings']} recordings, {info['samples']} samples, {info['recorded_seconds']:.1f} s recorded"
+    )
+    print(
+        f"  {info['file_bytes'] / 1e6:.2f} MB on disk, {info['bytes_per_sample']:.2f} bytes per sample"
+    )
     if info["objects"]:
         width = max(map(len, info["objects"]))
         print("  objects:")
@@ -120,19 +180,28 @@ def run_info(args: argparse.Namespace) -> int:
             print(f"    {name:<{width}}  {n}")
         print("  actions: " + ", ".join(f"{a} {n}" for a, n in info["actions"].items()))
     if info["features"]:
-        print("  features: " + "; ".join(f"{a}: {', '.join(m)}" for a, m in info["features"].items()))
+        print(
+            "  features: " + "; ".join(f"{a}: {', '.join(m)}" for a, m in info["features"].items())
+        )
     desc = info.get("description") or {}
     if "seed" in desc:
-        print(f"  generated on the simulated world, seed {desc['seed']}, {desc.get('repetitions')} repetitions")
+        print(
+            f"  generated on the simulated world, seed {desc['seed']}, {desc.get('repetitions')} repetitions"
+        )
     return 0
 
 
 def run_features(args: argparse.Namespace) -> int:
     from aptkt.learning.dataset import extract_features
 
-    counts = extract_features(args.file, actions=_split(args.actions),
-                              progress=not args.no_progress and sys.stderr.isatty())
-    print(f"{args.file}: features of " + ", ".join(f"{a} ({n} recordings)" for a, n in counts.items()))
+    counts = extract_features(
+        args.file,
+        actions=_split(args.actions),
+        progress=not args.no_progress and sys.stderr.isatty(),
+    )
+    print(
+        f"{args.file}: features of " + ", ".join(f"{a} ({n} recordings)" for a, n in counts.items())
+    )
     return 0
 
 
@@ -140,6 +209,8 @@ def run_repair(args: argparse.Namespace) -> int:
     from aptkt.data.store import repair
 
     kept = repair(args.file, backup=not args.no_backup)
-    print(f"{args.file}: repaired, {kept} complete recordings kept"
-          + ("" if args.no_backup else f" (original kept as {args.file}.crashed)"))
+    print(
+        f"{args.file}: repaired, {kept} complete recordings kept"
+        + ("" if args.no_backup else f" (original kept as {args.file}.crashed)")
+    )
     return 0

@@ -16,12 +16,26 @@ def register(sub: argparse._SubParsersAction) -> None:
         "objects with APTKT and with the baseline, and writes a table, learning curves (PNG, SVG), "
         "every result and the settings to the output directory. Re-running reuses the simulated data.",
     )
-    p.add_argument("-o", "--output", type=Path, default=Path("aptkt-demo"), help="output directory (default %(default)s)")
+    p.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        default=Path("aptkt-demo"),
+        help="output directory (default %(default)s)",
+    )
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("-j", "--jobs", type=int, default=os.cpu_count() or 1, help="processes (default: all cores)")
-    p.add_argument("--trials", type=int, default=3, help="learning runs per method (default %(default)s)")
-    p.add_argument("--budget", type=int, default=40, help="actively chosen observations (default %(default)s)")
-    p.add_argument("--quick", action="store_true", help="a reduced size that runs in well under a minute")
+    p.add_argument(
+        "-j", "--jobs", type=int, default=os.cpu_count() or 1, help="processes (default: all cores)"
+    )
+    p.add_argument(
+        "--trials", type=int, default=3, help="learning runs per method (default %(default)s)"
+    )
+    p.add_argument(
+        "--budget", type=int, default=40, help="actively chosen observations (default %(default)s)"
+    )
+    p.add_argument(
+        "--quick", action="store_true", help="a reduced size that runs in well under a minute"
+    )
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run)
 
@@ -34,7 +48,10 @@ def run(args: argparse.Namespace) -> int:
 
         raise ConfigError("--jobs and --trials must be >= 1 and --budget >= 0")
     common = dict(output=args.output, seed=args.seed, jobs=args.jobs)
-    settings = DemoSettings.quick(**common) if args.quick else DemoSettings(
-        **common, trials=args.trials, budget=args.budget)
+    settings = (
+        DemoSettings.quick(**common)
+        if args.quick
+        else DemoSettings(**common, trials=args.trials, budget=args.budget)
+    )
     run_demo(settings, progress=not args.no_progress and sys.stderr.isatty())
     return 0

@@ -31,25 +31,82 @@ def register(sub: argparse._SubParsersAction) -> None:
         "run has no test set: accuracy is reported only with --test FILE.",
     )
     add_session_arguments(p)
-    p.add_argument("--prior", required=True, metavar="PRIOR.npz", help="prior knowledge (aptkt.learning.PriorKnowledge file)")
-    p.add_argument("--objects", required=True, metavar="A,B,...", help="the new objects to learn (at least two)")
+    p.add_argument(
+        "--prior",
+        required=True,
+        metavar="PRIOR.npz",
+        help="prior knowledge (aptkt.learning.PriorKnowledge file)",
+    )
+    p.add_argument(
+        "--objects",
+        required=True,
+        metavar="A,B,...",
+        help="the new objects to learn (at least two)",
+    )
     add_action_arguments(p, default_help="default: every action of the prior knowledge")
-    p.add_argument("--budget", type=int, default=40, metavar="N",
-                   help="observations chosen actively after the initial round (default %(default)s)")
-    p.add_argument("--eps-neg", type=float, default=0.4, metavar="E", help="transfer cut-off ε_neg (default %(default)s)")
-    p.add_argument("--eps-explor", type=float, default=0.1, metavar="E",
-                   help="probability of a random (action, object) pick, ε_explor (default %(default)s)")
-    p.add_argument("--transfer", choices=("paper", "none"), default="paper",
-                   help="paper: APTKT's transfer (Eq. 2-3); none: the baseline (default %(default)s)")
-    p.add_argument("--auxiliary", action="store_true", help="add the prior models' posteriors as a modality (Eq. 5)")
-    p.add_argument("--patience", type=int, default=None, metavar="N",
-                   help="stop early after N observations without lower mean uncertainty (default: spend the budget)")
-    p.add_argument("--record", metavar="FILE",
-                   help="data set receiving every recording (default OUTPUT/recordings.h5; appended to if it exists)")
-    p.add_argument("-o", "--output", type=Path, default=Path("aptkt-learn"), metavar="DIR",
-                   help="output directory (default %(default)s)")
-    p.add_argument("--test", metavar="FILE", help="data set of the same objects and actions: report test accuracy")
-    p.add_argument("--seed", type=int, default=0, help="seed of the learner (and of the simulated world) (default %(default)s)")
+    p.add_argument(
+        "--budget",
+        type=int,
+        default=40,
+        metavar="N",
+        help="observations chosen actively after the initial round (default %(default)s)",
+    )
+    p.add_argument(
+        "--eps-neg",
+        type=float,
+        default=0.4,
+        metavar="E",
+        help="transfer cut-off ε_neg (default %(default)s)",
+    )
+    p.add_argument(
+        "--eps-explor",
+        type=float,
+        default=0.1,
+        metavar="E",
+        help="probability of a random (action, object) pick, ε_explor (default %(default)s)",
+    )
+    p.add_argument(
+        "--transfer",
+        choices=("paper", "none"),
+        default="paper",
+        help="paper: APTKT's transfer (Eq. 2-3); none: the baseline (default %(default)s)",
+    )
+    p.add_argument(
+        "--auxiliary",
+        action="store_true",
+        help="add the prior models' posteriors as a modality (Eq. 5)",
+    )
+    p.add_argument(
+        "--patience",
+        type=int,
+        default=None,
+        metavar="N",
+        help="stop early after N observations without lower mean uncertainty (default: spend the budget)",
+    )
+    p.add_argument(
+        "--record",
+        metavar="FILE",
+        help="data set receiving every recording (default OUTPUT/recordings.h5; appended to if it exists)",
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        default=Path("aptkt-learn"),
+        metavar="DIR",
+        help="output directory (default %(default)s)",
+    )
+    p.add_argument(
+        "--test",
+        metavar="FILE",
+        help="data set of the same objects and actions: report test accuracy",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the learner (and of the simulated world) (default %(default)s)",
+    )
     p.set_defaults(func=run)
 
 
@@ -66,17 +123,27 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--objects: learning needs at least two new objects")
     overlap = sorted(set(objects) & set(prior.objects))
     if overlap:
-        raise ConfigError(f"--objects: {', '.join(overlap)} already in the prior knowledge ({args.prior})")
+        raise ConfigError(
+            f"--objects: {', '.join(overlap)} already in the prior knowledge ({args.prior})"
+        )
     names = split_names(args.actions, "--actions") or list(prior.actions)
     missing = [a for a in names if a not in prior]
     if missing:
-        raise ConfigError(f"--actions: the prior knowledge has no experience of {', '.join(missing)}; "
-                          f"it has {', '.join(prior.actions)}")
+        raise ConfigError(
+            f"--actions: the prior knowledge has no experience of {', '.join(missing)}; "
+            f"it has {', '.join(prior.actions)}"
+        )
     actions = {a.name: a for a in pick_actions(names, available_actions(args))}
     try:
-        config = LearnerConfig(eps_neg=args.eps_neg, eps_explor=args.eps_explor, budget=args.budget,
-                               transfer=args.transfer, auxiliary=args.auxiliary, patience=args.patience,
-                               seed=args.seed)
+        config = LearnerConfig(
+            eps_neg=args.eps_neg,
+            eps_explor=args.eps_explor,
+            budget=args.budget,
+            transfer=args.transfer,
+            auxiliary=args.auxiliary,
+            patience=args.patience,
+            seed=args.seed,
+        )
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     test = None
@@ -89,15 +156,29 @@ def run(args: argparse.Namespace) -> int:
     def report(line: str) -> None:
         print(line, flush=True)
 
-    report(f"learning {', '.join(objects)} with {', '.join(actions)} on {args.robot}; prior objects: "
-           f"{', '.join(prior.objects)}; transfer {args.transfer}"
-           + (" + auxiliary features" if args.auxiliary else "")
-           + f"; budget {args.budget}, eps_neg {args.eps_neg}, eps_explor {args.eps_explor}, seed {args.seed}")
+    report(
+        f"learning {', '.join(objects)} with {', '.join(actions)} on {args.robot}; prior objects: "
+        f"{', '.join(prior.objects)}; transfer {args.transfer}"
+        + (" + auxiliary features" if args.auxiliary else "")
+        + f"; budget {args.budget}, eps_neg {args.eps_neg}, eps_explor {args.eps_explor}, seed {args.seed}"
+    )
     try:
         with session:
-            learn_live(session, prior, config, actions, objects, record=record, output=args.output, test=test,
-                       report=report, extra={"prior": {"path": str(args.prior)},
-                                             "test": {"path": args.test} if args.test else {}})
+            learn_live(
+                session,
+                prior,
+                config,
+                actions,
+                objects,
+                record=record,
+                output=args.output,
+                test=test,
+                report=report,
+                extra={
+                    "prior": {"path": str(args.prior)},
+                    "test": {"path": args.test} if args.test else {},
+                },
+            )
     except LiveLearningAborted as exc:
         print(f"aptkt learn: fault: {exc}", file=sys.stderr)
         return EXIT_FAULT
@@ -115,5 +196,7 @@ def _load_test(path: str, actions: list[str], objects: list[str]):  # -> Observa
     for action, obs in table.items():
         missing = [o for o in objects if o not in set(obs.objects.tolist())]
         if missing:
-            raise ConfigError(f"--test {path}: no observations of action {action} on {', '.join(missing)}")
+            raise ConfigError(
+                f"--test {path}: no observations of action {action} on {', '.join(missing)}"
+            )
     return table

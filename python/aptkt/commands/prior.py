@@ -22,12 +22,23 @@ def register(sub: argparse._SubParsersAction) -> None:
         "the observations to an .npz file (loads without executing code).",
     )
     b.add_argument("data", type=Path, help="HDF5 data set (aptkt dataset generate / aptkt collect)")
-    b.add_argument("-o", "--output", type=Path, required=True, help="prior-knowledge file to write (.npz)")
-    b.add_argument("--objects", metavar="A,B,...", help="the prior objects (default: every object in the file)")
-    b.add_argument("--actions", metavar="P1,S1,...", help="actions (default: every recorded action)")
+    b.add_argument(
+        "-o", "--output", type=Path, required=True, help="prior-knowledge file to write (.npz)"
+    )
+    b.add_argument(
+        "--objects", metavar="A,B,...", help="the prior objects (default: every object in the file)"
+    )
+    b.add_argument(
+        "--actions", metavar="P1,S1,...", help="actions (default: every recorded action)"
+    )
     b.add_argument("--trials", metavar="FIRST:STOP", help="only these trial numbers, e.g. 0:20")
     b.add_argument("--seed", type=int, default=0)
-    b.add_argument("--restarts", type=int, default=1, help="extra optimiser starts per model (default %(default)s)")
+    b.add_argument(
+        "--restarts",
+        type=int,
+        default=1,
+        help="extra optimiser starts per model (default %(default)s)",
+    )
     b.set_defaults(func=run_build)
 
     i = ps.add_parser("inspect", help="summarise a prior-knowledge file")
@@ -60,17 +71,28 @@ def run_build(args: argparse.Namespace) -> int:
 
     if not args.data.exists():
         raise ConfigError(f"{args.data}: no such data set")
-    table = load_observations(args.data, actions=_split(args.actions), objects=_split(args.objects),
-                              trials=_trials(args.trials), progress=sys.stderr.isatty())
+    table = load_observations(
+        args.data,
+        actions=_split(args.actions),
+        objects=_split(args.objects),
+        trials=_trials(args.trials),
+        progress=sys.stderr.isatty(),
+    )
     empty = [a for a, obs in table.items() if len(obs) == 0]
     if empty:
         raise ConfigError(f"no observations of {empty} for the chosen objects/trials")
-    with tqdm(total=len(table), unit="action", desc="fitting", disable=not sys.stderr.isatty()) as bar:
-        prior = PriorKnowledge.build(table, gp=GPSettings(n_restarts=args.restarts), seed=args.seed, progress=bar)
+    with tqdm(
+        total=len(table), unit="action", desc="fitting", disable=not sys.stderr.isatty()
+    ) as bar:
+        prior = PriorKnowledge.build(
+            table, gp=GPSettings(n_restarts=args.restarts), seed=args.seed, progress=bar
+        )
     prior.metadata.update(data=str(args.data), trials=args.trials)
     prior.save(args.output)
-    print(f"{args.output}: prior knowledge of {len(prior.objects)} objects ({', '.join(prior.objects)}) "
-          f"for {len(prior.actions)} actions")
+    print(
+        f"{args.output}: prior knowledge of {len(prior.objects)} objects ({', '.join(prior.objects)}) "
+        f"for {len(prior.actions)} actions"
+    )
     return 0
 
 
@@ -82,19 +104,30 @@ def run_inspect(args: argparse.Namespace) -> int:
     try:
         prior = PriorKnowledge.load(args.file)
     except (ValueError, KeyError, OSError) as exc:
-        raise ConfigError(str(exc) if str(args.file) in str(exc) else f"{args.file}: {exc}") from None
+        raise ConfigError(
+            str(exc) if str(args.file) in str(exc) else f"{args.file}: {exc}"
+        ) from None
     rows = prior.summary()
     if args.json:
-        print(json.dumps({"objects": prior.objects, "metadata": prior.metadata, "actions": rows}, indent=2))
+        print(
+            json.dumps(
+                {"objects": prior.objects, "metadata": prior.metadata, "actions": rows}, indent=2
+            )
+        )
         return 0
     print(f"{args.file}: {len(prior.objects)} prior objects: {', '.join(prior.objects)}")
     if prior.metadata:
-        print("  " + ", ".join(f"{k}={v}" for k, v in prior.metadata.items() if not isinstance(v, dict)))
+        print(
+            "  "
+            + ", ".join(f"{k}={v}" for k, v in prior.metadata.items() if not isinstance(v, dict))
+        )
     for r in rows:
         mods = ", ".join(
             f"{m} (weight {w:.2f}, length-scale {ls:.3g})"
             for m, w, ls in zip(r["modalities"], r["weights_mean"], r["length_scales_mean"])
         )
-        print(f"  {r['action']}: {r['observations']} observations; {mods}; "
-              f"log marginal likelihood per object {r['log_marginal_likelihood']}")
+        print(
+            f"  {r['action']}: {r['observations']} observations; {mods}; "
+            f"log marginal likelihood per object {r['log_marginal_likelihood']}"
+        )
     return 0

@@ -21,16 +21,43 @@ def register(sub: argparse._SubParsersAction) -> None:
         "after an interruption and it resumes. See docs/experiments.md.",
     )
     p.add_argument("name", choices=NAMES, help="the figure to reproduce, or all of them")
-    p.add_argument("-o", "--output", type=Path, default=Path("aptkt-reproduce"),
-                   help="output directory (default %(default)s)")
-    p.add_argument("--data", type=Path, metavar="FILE",
-                   help="data set (HDF5) to use instead of simulating one; features are extracted into it if missing")
-    p.add_argument("--quick", action="store_true", help="a reduced size (4 priors, 3 new objects, 3 actions) for tests and CI")
-    p.add_argument("-j", "--jobs", type=int, default=os.cpu_count() or 1, help="local processes (default: all cores)")
-    p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="run on a Dask distributed cluster (e.g. tcp://host:8786); the data and the output "
-                   "directory must be on a file system the workers share")
-    p.add_argument("--seed", type=int, default=0, help="root seed of the data, the groups and the trials (default %(default)s)")
+    p.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        default=Path("aptkt-reproduce"),
+        help="output directory (default %(default)s)",
+    )
+    p.add_argument(
+        "--data",
+        type=Path,
+        metavar="FILE",
+        help="data set (HDF5) to use instead of simulating one; features are extracted into it if missing",
+    )
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="a reduced size (4 priors, 3 new objects, 3 actions) for tests and CI",
+    )
+    p.add_argument(
+        "-j",
+        "--jobs",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="local processes (default: all cores)",
+    )
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run on a Dask distributed cluster (e.g. tcp://host:8786); the data and the output "
+        "directory must be on a file system the workers share",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="root seed of the data, the groups and the trials (default %(default)s)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
@@ -45,15 +72,23 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--seed must be >= 0")
     figures = FIGURE_NAMES if args.name == "all" else (args.name,)
     settings = ReproduceSettings(
-        figures=figures, output=args.output, data=args.data, quick=args.quick, jobs=args.jobs,
-        scheduler=args.scheduler, seed=args.seed, progress=not args.no_progress and sys.stderr.isatty(),
+        figures=figures,
+        output=args.output,
+        data=args.data,
+        quick=args.quick,
+        jobs=args.jobs,
+        scheduler=args.scheduler,
+        seed=args.seed,
+        progress=not args.no_progress and sys.stderr.isatty(),
         command=_command(args),
     )
     try:
         reproduce(settings)
     except KeyboardInterrupt:
-        print(f"interrupted: finished runs are kept in {args.output / 'runs'}; run the same command again to resume",
-              file=sys.stderr)
+        print(
+            f"interrupted: finished runs are kept in {args.output / 'runs'}; run the same command again to resume",
+            file=sys.stderr,
+        )
         raise
     return 0
 

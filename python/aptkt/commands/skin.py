@@ -23,13 +23,45 @@ def register(sub: argparse._SubParsersAction) -> None:
         "rejected packets, buffer overflows) and the current sensor values, refreshed live.",
     )
     m.add_argument("port", nargs="?", help="serial port of the skin adapter, e.g. /dev/ttyUSB0")
-    m.add_argument("--tsu", action="store_true", help="read from a Tactile Section Unit over UDP instead")
-    m.add_argument("--tsu-address", default="192.168.0.10:1336", metavar="HOST:PORT", help="TSU address (default %(default)s)")
-    m.add_argument("--listen", default="0.0.0.0:1337", metavar="HOST:PORT", help="local UDP address (default %(default)s)")
-    m.add_argument("--patch", metavar="FILE", help="patch TOML (cells and force calibration); default: the 7-cell patch")
-    m.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S seconds (default: until Ctrl-C)")
-    m.add_argument("--interval", type=float, default=0.5, metavar="S", help="refresh period (default %(default)s s)")
-    m.add_argument("--plain", action="store_true", help="append snapshots instead of redrawing (default when not a terminal)")
+    m.add_argument(
+        "--tsu", action="store_true", help="read from a Tactile Section Unit over UDP instead"
+    )
+    m.add_argument(
+        "--tsu-address",
+        default="192.168.0.10:1336",
+        metavar="HOST:PORT",
+        help="TSU address (default %(default)s)",
+    )
+    m.add_argument(
+        "--listen",
+        default="0.0.0.0:1337",
+        metavar="HOST:PORT",
+        help="local UDP address (default %(default)s)",
+    )
+    m.add_argument(
+        "--patch",
+        metavar="FILE",
+        help="patch TOML (cells and force calibration); default: the 7-cell patch",
+    )
+    m.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="stop after S seconds (default: until Ctrl-C)",
+    )
+    m.add_argument(
+        "--interval",
+        type=float,
+        default=0.5,
+        metavar="S",
+        help="refresh period (default %(default)s s)",
+    )
+    m.add_argument(
+        "--plain",
+        action="store_true",
+        help="append snapshots instead of redrawing (default when not a terminal)",
+    )
     m.set_defaults(func=run)
 
 
@@ -62,7 +94,9 @@ def _fmt(x: float, spec: str) -> str:
     return "-".rjust(int(width) if width.isdigit() else 1)
 
 
-def render(stats: dict[str, Any], latest: dict[str, np.ndarray], elapsed_s: float, title: str) -> str:
+def render(
+    stats: dict[str, Any], latest: dict[str, np.ndarray], elapsed_s: float, title: str
+) -> str:
     """One screen of the monitor, as text."""
     lines = [f"{title}   {elapsed_s:6.1f} s"]
     silent = set(stats["silent_cells"])
@@ -90,7 +124,10 @@ def render(stats: dict[str, Any], latest: dict[str, np.ndarray], elapsed_s: floa
     if others:
         lines.append("other packets: " + ", ".join(f"{k} {v}" for k, v in sorted(others.items())))
     if stats["unknown_cells"]:
-        lines.append("cells not in the patch: " + ", ".join(f"{k} ({v})" for k, v in sorted(stats["unknown_cells"].items())))
+        lines.append(
+            "cells not in the patch: "
+            + ", ".join(f"{k} ({v})" for k, v in sorted(stats["unknown_cells"].items()))
+        )
     if "datagrams" in stats:
         lines.append(
             f"udp: {stats['datagrams']} datagrams, {stats['bad_datagrams']} bad, "
@@ -101,11 +138,17 @@ def render(stats: dict[str, Any], latest: dict[str, np.ndarray], elapsed_s: floa
     return "\n".join(lines)
 
 
-def monitor(source: Any, duration: float | None, interval: float, out: TextIO, redraw: bool, title: str) -> int:
+def monitor(
+    source: Any, duration: float | None, interval: float, out: TextIO, redraw: bool, title: str
+) -> int:
     """Run the live view on an open source until ``duration`` (or Ctrl-C)."""
     start = time.monotonic()
     while True:
-        time.sleep(interval if duration is None else max(0.0, min(interval, start + duration - time.monotonic())))
+        time.sleep(
+            interval
+            if duration is None
+            else max(0.0, min(interval, start + duration - time.monotonic()))
+        )
         try:
             source.read()  # keep the buffer drained: overflows then mean the link outruns us
         except SkinError:

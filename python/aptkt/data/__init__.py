@@ -5,4 +5,12 @@ collecting them on a robot are in :mod:`aptkt.runtime`."""
 from aptkt.data.schema import SCHEMA, SCHEMA_VERSION
 from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, repair, write_features
 
-__all__ = ["SCHEMA", "SCHEMA_VERSION", "DatasetError", "DatasetReader", "DatasetWriter", "repair", "write_features"]
+__all__ = [
+    "SCHEMA",
+    "SCHEMA_VERSION",
+    "DatasetError",
+    "DatasetReader",
+    "DatasetWriter",
+    "repair",
+    "write_features",
+]

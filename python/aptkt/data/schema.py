@@ -33,24 +33,33 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SCHEMA", "SCHEMA_VERSION", "READABLE_VERSIONS", "INDEX_DTYPE", "SAMPLE_FIELDS", "RAW_SCALE"]
+__all__ = [
+    "SCHEMA",
+    "SCHEMA_VERSION",
+    "READABLE_VERSIONS",
+    "INDEX_DTYPE",
+    "SAMPLE_FIELDS",
+    "RAW_SCALE",
+]
 
 SCHEMA = "aptkt.dataset"
 SCHEMA_VERSION = 2
 #: Versions this aptkt reads (it writes only SCHEMA_VERSION).
 READABLE_VERSIONS = (1, 2)
 
-INDEX_DTYPE = np.dtype([
-    ("object", "S64"),
-    ("action", "S32"),
-    ("trial", "<i4"),
-    ("start_ns", "<i8"),
-    ("stop_ns", "<i8"),
-    ("row_start", "<i8"),
-    ("row_stop", "<i8"),
-    ("meta_start", "<i8"),
-    ("meta_stop", "<i8"),
-])
+INDEX_DTYPE = np.dtype(
+    [
+        ("object", "S64"),
+        ("action", "S32"),
+        ("trial", "<i4"),
+        ("start_ns", "<i8"),
+        ("stop_ns", "<i8"),
+        ("row_start", "<i8"),
+        ("row_stop", "<i8"),
+        ("meta_start", "<i8"),
+        ("meta_stop", "<i8"),
+    ]
+)
 
 #: Stored per-sample fields: trailing shape and dtype.
 SAMPLE_FIELDS: dict[str, tuple[tuple[int, ...], np.dtype]] = {

@@ -31,12 +31,27 @@ from typing import Any, TypeVar
 import h5py
 import numpy as np
 
-from aptkt.data.schema import INDEX_DTYPE, RAW_SCALE, READABLE_VERSIONS, SAMPLE_FIELDS, SCHEMA, SCHEMA_VERSION
+from aptkt.data.schema import (
+    INDEX_DTYPE,
+    RAW_SCALE,
+    READABLE_VERSIONS,
+    SAMPLE_FIELDS,
+    SCHEMA,
+    SCHEMA_VERSION,
+)
 from aptkt.errors import AptktError
 from aptkt.skin.samples import Recording, SkinSamples
 
-__all__ = ["DatasetError", "DatasetWriter", "DatasetReader", "repair", "write_features", "recording_key",
-           "samples_to_raw", "raw_to_samples"]
+__all__ = [
+    "DatasetError",
+    "DatasetWriter",
+    "DatasetReader",
+    "repair",
+    "write_features",
+    "recording_key",
+    "samples_to_raw",
+    "raw_to_samples",
+]
 
 _CHUNK_ROWS = 16384
 _META_CHUNK_BYTES = 4096  # a recording's metadata is ≈ 3 KB of JSON
@@ -73,8 +88,14 @@ def recording_key(rec: Recording) -> tuple[str, str, int]:
     meta = rec.metadata
     action = meta.get("action")
     name = action.get("name") if isinstance(action, Mapping) else action
-    if not isinstance(meta.get("object"), str) or not isinstance(name, str) or not isinstance(meta.get("trial"), int):
-        raise ValueError("recording metadata needs 'object' (str), 'action' (name or dict with 'name') and 'trial' (int)")
+    if (
+        not isinstance(meta.get("object"), str)
+        or not isinstance(name, str)
+        or not isinstance(meta.get("trial"), int)
+    ):
+        raise ValueError(
+            "recording metadata needs 'object' (str), 'action' (name or dict with 'name') and 'trial' (int)"
+        )
     return meta["object"], name, int(meta["trial"])
 
 
@@ -94,7 +115,9 @@ def _calibration(meta: Mapping[str, Any], cells: np.ndarray) -> tuple[np.ndarray
     """Per-sample (gain, offset) rows from the calibration in a recording's metadata."""
     cal = meta.get("calibration")
     if not cal:
-        raise ValueError("the recording's metadata has no 'calibration' (needed to store raw forces)")
+        raise ValueError(
+            "the recording's metadata has no 'calibration' (needed to store raw forces)"
+        )
     ids = np.asarray(cal["cell_ids"], dtype=np.int64)
     gain = np.asarray(cal["gain"], dtype=np.float64).reshape(len(ids), 3)
     offset = np.asarray(cal["offset"], dtype=np.float64).reshape(len(ids), 3)
@@ -112,25 +135,34 @@ def _to_raw(name: str, values: np.ndarray, column: int = 0) -> np.ndarray:
     off_grid = (raw * scale + offset) != values
     if np.any(off_grid):
         bad = int(np.flatnonzero(off_grid.reshape(off_grid.shape[0], -1).any(axis=1))[0])
-        raise ValueError(f"{name}: values are not on the protocol's grid (row {bad}); only skin data can be stored raw")
+        raise ValueError(
+            f"{name}: values are not on the protocol's grid (row {bad}); only skin data can be stored raw"
+        )
     return raw
 
 
 def samples_to_raw(samples: SkinSamples, metadata: Mapping[str, Any]) -> dict[str, np.ndarray]:
     """Physical samples → the raw integers of the wire (exact; raises if they are not)."""
-    gain, offset = _calibration(metadata, samples.cell_id) if len(samples) else (np.ones((0, 3)), np.zeros((0, 3)))
+    gain, offset = (
+        _calibration(metadata, samples.cell_id)
+        if len(samples)
+        else (np.ones((0, 3)), np.zeros((0, 3)))
+    )
     force_norm = samples.force / gain + offset
     force = np.rint(force_norm * 1024.0)
     back = gain * (force * (1.0 / 1024.0) - offset)
     if not np.allclose(back, samples.force, rtol=1e-9, atol=1e-12):
-        raise ValueError("force: calibrated values do not come from 12-bit readings with this calibration")
+        raise ValueError(
+            "force: calibrated values do not come from 12-bit readings with this calibration"
+        )
     out = {
         "cell_id": samples.cell_id.astype("<u2"),
         "t_ns": samples.t_ns.astype("<i8"),
         "proximity": _to_raw("proximity", samples.proximity).astype("<u2"),
         "acc": _to_raw("acc", samples.acc).astype("<i2"),
-        "temp": np.stack([_to_raw("temp", samples.temp[:, 0], 0), _to_raw("temp", samples.temp[:, 1], 1)],
-                         axis=1).astype("<i2"),
+        "temp": np.stack(
+            [_to_raw("temp", samples.temp[:, 0], 0), _to_raw("temp", samples.temp[:, 1], 1)], axis=1
+        ).astype("<i2"),
         "force": force.astype("<u2"),
     }
     return out
@@ -161,8 +193,14 @@ class DatasetWriter:
     ``mode="a"`` appends to an existing data set (create it if missing).
     """
 
-    def __init__(self, path: str | Path, mode: str = "w", *, description: Mapping[str, Any] | None = None,
-                 overwrite: bool = False):
+    def __init__(
+        self,
+        path: str | Path,
+        mode: str = "w",
+        *,
+        description: Mapping[str, Any] | None = None,
+        overwrite: bool = False,
+    ):
         from aptkt import __version__
 
         self.path = Path(path)
@@ -173,41 +211,73 @@ class DatasetWriter:
                 self._f = _while_locked(lambda: h5py.File(self.path, "a", libver="latest"))
             except OSError as exc:
                 if "already open" in str(exc) or "consistency flags" in str(exc):
-                    raise DatasetError(f"{self.path}: a writer of this file did not close it (crashed or "
-                                       f"still running); run 'aptkt dataset repair {self.path}' first") from exc
+                    raise DatasetError(
+                        f"{self.path}: a writer of this file did not close it (crashed or "
+                        f"still running); run 'aptkt dataset repair {self.path}' first"
+                    ) from exc
                 raise DatasetError(f"{self.path}: cannot open for appending: {exc}") from exc
             _check_schema(self._f, self.path, for_writing=True)
         else:
             if self.path.exists() and not overwrite:
-                raise DatasetError(f"{self.path} exists (use overwrite=True / --overwrite, or append)")
+                raise DatasetError(
+                    f"{self.path} exists (use overwrite=True / --overwrite, or append)"
+                )
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._f = _while_locked(lambda: h5py.File(self.path, "w", libver="latest", track_order=False))
+            self._f = _while_locked(
+                lambda: h5py.File(self.path, "w", libver="latest", track_order=False)
+            )
             f = self._f
             f.attrs["schema"] = SCHEMA
             f.attrs["schema_version"] = SCHEMA_VERSION
             f.attrs["software_version"] = __version__
-            f.attrs["description"] = json.dumps(dict(description or {}), sort_keys=True, default=_json_default)
+            f.attrs["description"] = json.dumps(
+                dict(description or {}), sort_keys=True, default=_json_default
+            )
             g = f.create_group("recordings")
-            g.create_dataset("index", shape=(0,), maxshape=(None,), dtype=INDEX_DTYPE, chunks=(256,),
-                             track_times=False)
-            g.create_dataset("metadata", shape=(0,), maxshape=(None,), dtype=np.uint8,
-                             chunks=(_META_CHUNK_BYTES,), track_times=False, **_COMPRESSION)
+            g.create_dataset(
+                "index",
+                shape=(0,),
+                maxshape=(None,),
+                dtype=INDEX_DTYPE,
+                chunks=(256,),
+                track_times=False,
+            )
+            g.create_dataset(
+                "metadata",
+                shape=(0,),
+                maxshape=(None,),
+                dtype=np.uint8,
+                chunks=(_META_CHUNK_BYTES,),
+                track_times=False,
+                **_COMPRESSION,
+            )
             s = g.create_group("samples")
             for name, (tail, dtype) in SAMPLE_FIELDS.items():
-                s.create_dataset(name, shape=(0, *tail), maxshape=(None, *tail), dtype=dtype,
-                                 chunks=(_CHUNK_ROWS, *tail), track_times=False, **_COMPRESSION)
+                s.create_dataset(
+                    name,
+                    shape=(0, *tail),
+                    maxshape=(None, *tail),
+                    dtype=dtype,
+                    chunks=(_CHUNK_ROWS, *tail),
+                    track_times=False,
+                    **_COMPRESSION,
+                )
             f.flush()
         try:
             _while_locked(self._start_swmr)
         except RuntimeError as exc:
             self._f.close()
-            raise DatasetError(f"{self.path}: cannot start writing: another process keeps the file locked ({exc})") from exc
+            raise DatasetError(
+                f"{self.path}: cannot start writing: another process keeps the file locked ({exc})"
+            ) from exc
         # Handles are taken only now: a failed attempt to start SWMR writing invalidates the
         # handles open at the time, so a retry would leave the writer with dead ones.
         self._index = self._f["recordings/index"]
         self._meta = self._f["recordings/metadata"]
         self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
-        self._keys = {(r["object"].decode(), r["action"].decode(), int(r["trial"])) for r in self._index[...]}
+        self._keys = {
+            (r["object"].decode(), r["action"].decode(), int(r["trial"])) for r in self._index[...]
+        }
 
     def _start_swmr(self) -> None:
         self._f.swmr_mode = True
@@ -232,11 +302,22 @@ class DatasetWriter:
         meta.setdefault("cells", list(rec.cells))
         meta["silent_cells"] = list(rec.silent_cells)
         raw = samples_to_raw(rec.samples, meta)
-        return self._append_raw(key, rec.start_ns, rec.stop_ns, raw,
-                                json.dumps(meta, sort_keys=True, default=_json_default))
+        return self._append_raw(
+            key,
+            rec.start_ns,
+            rec.stop_ns,
+            raw,
+            json.dumps(meta, sort_keys=True, default=_json_default),
+        )
 
-    def _append_raw(self, key: tuple[str, str, int], start_ns: int, stop_ns: int, raw: Mapping[str, np.ndarray],
-                    meta_json: str) -> int:
+    def _append_raw(
+        self,
+        key: tuple[str, str, int],
+        start_ns: int,
+        stop_ns: int,
+        raw: Mapping[str, np.ndarray],
+        meta_json: str,
+    ) -> int:
         obj, action, trial = key
         if key in self._keys:
             raise DatasetError(f"{self.path}: {obj}/{action}/trial {trial} is already stored")
@@ -252,16 +333,30 @@ class DatasetWriter:
         for name, ds in self._samples.items():
             ds.resize(row0 + n, axis=0)
             if n:
-                ds[row0:row0 + n] = raw[name]
+                ds[row0 : row0 + n] = raw[name]
         meta_bytes = np.frombuffer(meta_json.encode("utf-8"), dtype=np.uint8)
         meta0 = _next_chunk_start(self._meta.shape[0], _META_CHUNK_BYTES)
         self._meta.resize(meta0 + meta_bytes.size, axis=0)
-        self._meta[meta0:meta0 + meta_bytes.size] = meta_bytes
+        self._meta[meta0 : meta0 + meta_bytes.size] = meta_bytes
         i = len(self)
-        row = np.array([(obj.encode(), action.encode(), trial, start_ns, stop_ns, row0, row0 + n,
-                         meta0, meta0 + meta_bytes.size)], dtype=INDEX_DTYPE)
+        row = np.array(
+            [
+                (
+                    obj.encode(),
+                    action.encode(),
+                    trial,
+                    start_ns,
+                    stop_ns,
+                    row0,
+                    row0 + n,
+                    meta0,
+                    meta0 + meta_bytes.size,
+                )
+            ],
+            dtype=INDEX_DTYPE,
+        )
         self._index.resize(i + 1, axis=0)
-        self._index[i:i + 1] = row
+        self._index[i : i + 1] = row
         self._f.flush()
         self._keys.add(key)
         return i
@@ -286,10 +381,14 @@ def _check_schema(f: h5py.File, path: Path, *, for_writing: bool = False) -> int
         raise DatasetError(f"{path}: not an aptkt data set (schema attribute {schema!r})")
     if version not in READABLE_VERSIONS:
         readable = ", ".join(map(str, READABLE_VERSIONS))
-        raise DatasetError(f"{path}: schema version {version}, this aptkt reads versions {readable}")
+        raise DatasetError(
+            f"{path}: schema version {version}, this aptkt reads versions {readable}"
+        )
     if for_writing and version != SCHEMA_VERSION:
-        raise DatasetError(f"{path}: schema version {version} is read-only for this aptkt; run "
-                           f"'aptkt dataset repair {path}' to rewrite it in version {SCHEMA_VERSION} first")
+        raise DatasetError(
+            f"{path}: schema version {version} is read-only for this aptkt; run "
+            f"'aptkt dataset repair {path}' to rewrite it in version {SCHEMA_VERSION} first"
+        )
     return int(version)
 
 
@@ -309,7 +408,7 @@ class DatasetReader:
         self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
         # A snapshot: recordings appended after opening are not seen (reopen to see them).
         index = _readable_prefix(self._f["recordings/index"])
-        self.index = index[:self._complete(index)]
+        self.index = index[: self._complete(index)]
         #: Index rows of an append that was cut short (a writer killed mid-append, or one
         #: still running), left out: 0 or 1.
         # (A last index chunk past the end of the file is dropped by _readable_prefix and not
@@ -326,21 +425,24 @@ class DatasetReader:
         samples_end = min(ds.shape[0] for ds in self._samples.values())
         if not last["object"] or not 0 <= last["row_start"] <= last["row_stop"] <= samples_end:
             return n - 1
-        if self.version >= 2 and not 0 <= last["meta_start"] < last["meta_stop"] <= self._meta.shape[0]:
+        if (
+            self.version >= 2
+            and not 0 <= last["meta_start"] < last["meta_stop"] <= self._meta.shape[0]
+        ):
             return n - 1
         if self.version == 1 and self._meta.shape[0] < n:
             return n - 1
         try:
             self._read_metadata(last, n - 1)
             for ds in self._samples.values():
-                ds[int(last["row_start"]):int(last["row_stop"])]
+                ds[int(last["row_start"]) : int(last["row_stop"])]
         except (OSError, ValueError):  # data past the end of the file, or torn metadata
             return n - 1
         return n
 
     def _read_metadata(self, row: np.void, i: int) -> dict[str, Any]:
         if self.version >= 2:
-            raw = self._meta[int(row["meta_start"]):int(row["meta_stop"])].tobytes()
+            raw = self._meta[int(row["meta_start"]) : int(row["meta_stop"])].tobytes()
         else:
             raw = self._meta[i]
         return json.loads(raw.decode("utf-8") if isinstance(raw, bytes) else raw)
@@ -446,8 +548,9 @@ class DatasetReader:
         }
 
 
-def write_features(path: str | Path, action: str, modality: str, recordings: Sequence[int],
-                   values: np.ndarray) -> None:
+def write_features(
+    path: str | Path, action: str, modality: str, recordings: Sequence[int], values: np.ndarray
+) -> None:
     """Store a feature matrix (one row per recording number) under ``/features/<action>``.
 
     Opens the file for ordinary (non-SWMR) writing: no writer may be running.
@@ -463,7 +566,9 @@ def write_features(path: str | Path, action: str, modality: str, recordings: Seq
             raise ValueError(f"recording numbers must be in 0..{n - 1}")
         g = f.require_group(f"features/{action}")
         if "recording" in g and not np.array_equal(g["recording"][...], recordings):
-            raise ValueError(f"features of {action!r} exist for other recordings; write all modalities together")
+            raise ValueError(
+                f"features of {action!r} exist for other recordings; write all modalities together"
+            )
         if "recording" not in g:
             g.create_dataset("recording", data=recordings, track_times=False)
         if modality in g:
@@ -478,7 +583,7 @@ def _readable_prefix(ds: h5py.Dataset) -> np.ndarray:
         return ds[...]
     except OSError:
         chunk = ds.chunks[0] if ds.chunks else 1
-        return ds[:max(0, (ds.shape[0] - 1) // chunk * chunk)]
+        return ds[: max(0, (ds.shape[0] - 1) // chunk * chunk)]
 
 
 def repair(path: str | Path, *, backup: bool = True) -> int:
@@ -494,7 +599,9 @@ def repair(path: str | Path, *, backup: bool = True) -> int:
             for i in range(len(src)):
                 r = src.index[i]
                 meta_json = json.dumps(src.metadata(i), sort_keys=True, default=_json_default)
-                dst._append_raw(src.key(i), int(r["start_ns"]), int(r["stop_ns"]), src.raw(i), meta_json)
+                dst._append_raw(
+                    src.key(i), int(r["start_ns"]), int(r["stop_ns"]), src.raw(i), meta_json
+                )
         n = len(src)
     if backup:
         os.replace(path, path.with_name(path.name + ".crashed"))

@@ -22,13 +22,45 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Curves", "Estimate", "collect", "difference", "mean_over_panels", "estimate", "t_quantile"]
+__all__ = [
+    "Curves",
+    "Estimate",
+    "collect",
+    "difference",
+    "mean_over_panels",
+    "estimate",
+    "t_quantile",
+]
 
 # Two-sided 95 % quantiles of Student's t (df -> t_0.975); between table entries the quantile
 # is interpolated linearly in 1/df, which is exact to 3 decimals here.
-_T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262,
-         10: 2.228, 11: 2.201, 12: 2.179, 13: 2.160, 14: 2.145, 15: 2.131, 16: 2.120, 17: 2.110,
-         18: 2.101, 19: 2.093, 20: 2.086, 25: 2.060, 30: 2.042, 40: 2.021, 60: 2.000, 120: 1.980}
+_T975 = {
+    1: 12.706,
+    2: 4.303,
+    3: 3.182,
+    4: 2.776,
+    5: 2.571,
+    6: 2.447,
+    7: 2.365,
+    8: 2.306,
+    9: 2.262,
+    10: 2.228,
+    11: 2.201,
+    12: 2.179,
+    13: 2.160,
+    14: 2.145,
+    15: 2.131,
+    16: 2.120,
+    17: 2.110,
+    18: 2.101,
+    19: 2.093,
+    20: 2.086,
+    25: 2.060,
+    30: 2.042,
+    40: 2.021,
+    60: 2.000,
+    120: 1.980,
+}
 
 
 def t_quantile(df: int) -> float:
@@ -66,7 +98,9 @@ class Curves:
         self.x = np.asarray(self.x)
         self.values = np.asarray(self.values, dtype=float)
         if self.values.shape != (len(self.runs), len(self.x)):
-            raise ValueError(f"values have shape {self.values.shape}, expected ({len(self.runs)}, {len(self.x)})")
+            raise ValueError(
+                f"values have shape {self.values.shape}, expected ({len(self.runs)}, {len(self.x)})"
+            )
         if len(set(self.runs)) != len(self.runs):
             raise ValueError("a run occurs twice")
 
@@ -141,7 +175,9 @@ def collect(
         run = tuple(row[k] for k in run_by)
         per = cells.setdefault(run, {})
         if row[x] in per:
-            raise ValueError(f"run {dict(zip(run_by, run))} has two rows at {x} = {row[x]} (filter {where})")
+            raise ValueError(
+                f"run {dict(zip(run_by, run))} has two rows at {x} = {row[x]} (filter {where})"
+            )
         v = row.get(value)
         per[row[x]] = float("nan") if v is None or v == "" else float(v)
         xs.add(row[x])
@@ -179,7 +215,9 @@ def mean_over_panels(panels: Sequence[Curves]) -> Curves:
     for p in panels[1:]:
         if p.runs != first.runs or not np.array_equal(p.x, first.x):
             raise ValueError("panels to average must have the same runs and x axis")
-    return Curves(first.x, _quiet(np.nanmean, np.stack([p.values for p in panels]), axis=0), list(first.runs))
+    return Curves(
+        first.x, _quiet(np.nanmean, np.stack([p.values for p in panels]), axis=0), list(first.runs)
+    )
 
 
 @dataclass(frozen=True)
@@ -201,10 +239,18 @@ class Estimate:
         return self.high < 0
 
     def as_dict(self) -> dict[str, Any]:
-        return {"mean": self.mean, "low": self.low, "high": self.high, "n": self.n, "unit": self.unit}
+        return {
+            "mean": self.mean,
+            "low": self.low,
+            "high": self.high,
+            "n": self.n,
+            "unit": self.unit,
+        }
 
 
-def estimate(values: Sequence[float], units: Sequence[Any] | None = None, *, unit_name: str = "group") -> Estimate:
+def estimate(
+    values: Sequence[float], units: Sequence[Any] | None = None, *, unit_name: str = "group"
+) -> Estimate:
     """Mean of ``values`` with a 95 % t interval. With ``units`` (one per value) and at least
     two distinct units, values are first averaged within each unit and the interval is over
     units; otherwise over the values ("runs")."""

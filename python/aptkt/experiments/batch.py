@@ -28,7 +28,9 @@ class BatchResult:
 def _bar(progress: bool, total: int, initial: int, desc: str):
     from tqdm import tqdm
 
-    return tqdm(total=total, initial=initial, unit="run", desc=desc, disable=not progress, smoothing=0.05)
+    return tqdm(
+        total=total, initial=initial, unit="run", desc=desc, disable=not progress, smoothing=0.05
+    )
 
 
 def build_priors(tasks: Sequence[PriorTask], executor: Executor, *, progress: bool = True) -> None:
@@ -80,7 +82,9 @@ def run_batch(
             # Read back what was stored, so fresh and resumed results are the same values.
             stored = store.load(key)
             if stored is None:
-                raise RuntimeError(f"run {key}: its result file {store.path(key)} cannot be read back")
+                raise RuntimeError(
+                    f"run {key}: its result file {store.path(key)} cannot be read back"
+                )
             steps[key] = stored
             bar.update(1)
     finally:

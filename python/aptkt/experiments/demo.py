@@ -56,8 +56,14 @@ class DemoSettings:
     @classmethod
     def quick(cls, **overrides: Any) -> DemoSettings:
         """A reduced size for tests: runs in well under a minute."""
-        base = cls(trials=1, budget=4, train_reps=4, test_reps=3, actions=("P2", "S3", "C1"),
-                   new_objects=DEMO_NEW[:3])
+        base = cls(
+            trials=1,
+            budget=4,
+            train_reps=4,
+            test_reps=3,
+            actions=("P2", "S3", "C1"),
+            new_objects=DEMO_NEW[:3],
+        )
         return replace(base, **overrides)
 
 
@@ -79,17 +85,22 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
     objects = tuple(s.priors) + tuple(s.new_objects)
     actions = tuple(PAPER_ACTIONS[a] for a in s.actions)
 
-    _say(f"[1/5] simulating {len(objects)} objects x {len(actions)} actions x {reps} trials -> {data}")
+    _say(
+        f"[1/5] simulating {len(objects)} objects x {len(actions)} actions x {reps} trials -> {data}"
+    )
     plan = GenerationPlan(objects, actions, reps, s.seed)
     info = generate(data, plan, jobs=s.jobs, resume=data.exists(), progress=progress)
-    _say(f"      {info['recordings']} recordings, {info['file_bytes'] / 1e6:.1f} MB "
-         f"({info['simulated']} simulated now, {info['wall_seconds']:.0f} s)")
+    _say(
+        f"      {info['recordings']} recordings, {info['file_bytes'] / 1e6:.1f} MB "
+        f"({info['simulated']} simulated now, {info['wall_seconds']:.0f} s)"
+    )
 
     _say("[2/5] extracting features")
     train_trials = tuple(range(s.train_reps))
     test_trials = tuple(range(s.train_reps, reps))
-    prior_table = load_observations(data, actions=s.actions, objects=s.priors, trials=train_trials,
-                                    progress=progress)
+    prior_table = load_observations(
+        data, actions=s.actions, objects=s.priors, trials=train_trials, progress=progress
+    )
 
     _say(f"[3/5] building prior knowledge on {', '.join(s.priors)} -> {prior_path}")
     gp = GPSettings()
@@ -99,19 +110,38 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
         w = ", ".join(f"{m} {v:.2f}" for m, v in zip(row["modalities"], row["weights_mean"]))
         _say(f"      {row['action']}: {row['observations']} observations, modality weights {w}")
 
-    _say(f"[4/5] learning {len(s.new_objects)} new objects: APTKT (with and without auxiliary features) "
-         f"vs baseline, {s.trials} runs each, "
-         f"budget {s.budget}, on {s.jobs} process(es)")
+    _say(
+        f"[4/5] learning {len(s.new_objects)} new objects: APTKT (with and without auxiliary features) "
+        f"vs baseline, {s.trials} runs each, "
+        f"budget {s.budget}, on {s.jobs} process(es)"
+    )
     methods = {
-        "APTKT": LearnerConfig(transfer="paper", eps_neg=s.eps_neg, eps_explor=s.eps_explor, budget=s.budget, gp=gp),
-        "APTKT+aux": LearnerConfig(transfer="paper", auxiliary=True, eps_neg=s.eps_neg, eps_explor=s.eps_explor,
-                                   budget=s.budget, gp=gp),
+        "APTKT": LearnerConfig(
+            transfer="paper", eps_neg=s.eps_neg, eps_explor=s.eps_explor, budget=s.budget, gp=gp
+        ),
+        "APTKT+aux": LearnerConfig(
+            transfer="paper",
+            auxiliary=True,
+            eps_neg=s.eps_neg,
+            eps_explor=s.eps_explor,
+            budget=s.budget,
+            gp=gp,
+        ),
         "baseline": LearnerConfig(transfer="none", eps_explor=s.eps_explor, budget=s.budget, gp=gp),
     }
     specs = [
-        RunSpec(method=name, config=replace(cfg, seed=s.seed + t), data=str(data), actions=s.actions,
-                new_objects=s.new_objects, pool_trials=train_trials, test_trials=test_trials,
-                prior=str(prior_path), pool_seed=s.seed + t, tags={"trial": t})
+        RunSpec(
+            method=name,
+            config=replace(cfg, seed=s.seed + t),
+            data=str(data),
+            actions=s.actions,
+            new_objects=s.new_objects,
+            pool_trials=train_trials,
+            test_trials=test_trials,
+            prior=str(prior_path),
+            pool_seed=s.seed + t,
+            tags={"trial": t},
+        )
         for t in range(s.trials)
         for name, cfg in methods.items()
     ]
@@ -128,10 +158,10 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
     for line in table:
         _say("      " + line)
     fig, axes = figure(1, 2, figsize=(11, 4.2))
-    learning_curves(axes[0], curves, x[: curves["APTKT"].shape[1]],
-                    title="mean accuracy of the actions' models")
-    learning_curves(axes[1], fused, x[: fused["APTKT"].shape[1]],
-                    title="all actions fused")
+    learning_curves(
+        axes[0], curves, x[: curves["APTKT"].shape[1]], title="mean accuracy of the actions' models"
+    )
+    learning_curves(axes[1], fused, x[: fused["APTKT"].shape[1]], title="all actions fused")
     fig.suptitle(f"{len(s.new_objects)} new objects, priors: {', '.join(s.priors)}")
     plots = save_figure(fig, out / "learning_curves")
     write_csv(out / "results.csv", rows)
@@ -144,17 +174,25 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
         "final_mean_accuracy": {m: float(np.nanmean(c[:, -1])) for m, c in curves.items()},
         "initial_mean_accuracy": {m: float(np.nanmean(c[:, 0])) for m, c in curves.items()},
         "seconds": time.perf_counter() - t_start,
-        "files": {"data": str(data), "prior": str(prior_path), "results": str(out / "results.csv"),
-                  "plots": [str(p) for p in plots]},
+        "files": {
+            "data": str(data),
+            "prior": str(prior_path),
+            "results": str(out / "results.csv"),
+            "plots": [str(p) for p in plots],
+        },
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     _say(f"      plots: {', '.join(str(p) for p in plots)}")
-    _say(f"      every step of every run: {out / 'results.csv'}; settings and table: {out / 'summary.json'}")
+    _say(
+        f"      every step of every run: {out / 'results.csv'}; settings and table: {out / 'summary.json'}"
+    )
     _say(f"      done in {summary['seconds']:.0f} s")
     return summary
 
 
-def _curves(rows: list[dict[str, Any]], methods: dict[str, Any], key: str = "mean_accuracy") -> dict[str, np.ndarray]:
+def _curves(
+    rows: list[dict[str, Any]], methods: dict[str, Any], key: str = "mean_accuracy"
+) -> dict[str, np.ndarray]:
     curves = {}
     for name in methods:
         per_trial: dict[int, list[tuple[int, float]]] = {}
@@ -173,7 +211,9 @@ def _curves(rows: list[dict[str, Any]], methods: dict[str, Any], key: str = "mea
 def _table(curves: dict[str, np.ndarray], fused: dict[str, np.ndarray], x: np.ndarray) -> list[str]:
     n = min(c.shape[1] for c in curves.values())
     marks = sorted({0, n // 4, n // 2, n - 1})
-    head = f"{'method':<10}" + "".join(f"{f'+{x[m]} obs':>14}" for m in marks) + f"{'fused (end)':>14}"
+    head = (
+        f"{'method':<10}" + "".join(f"{f'+{x[m]} obs':>14}" for m in marks) + f"{'fused (end)':>14}"
+    )
     lines = [head, "-" * len(head)]
     for name, c in curves.items():
         cells = "".join(f"{np.nanmean(c[:, m]):>8.3f}±{np.nanstd(c[:, m]):<5.3f}" for m in marks)

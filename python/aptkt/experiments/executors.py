@@ -22,7 +22,12 @@ __all__ = ["Executor", "LocalExecutor", "DaskExecutor", "make_executor"]
 _SPAWN = multiprocessing.get_context("spawn")
 
 # Thread pools a worker may start: the compiled core's (rayon) and the BLAS libraries'.
-_THREAD_POOL_VARIABLES = ("RAYON_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+_THREAD_POOL_VARIABLES = (
+    "RAYON_NUM_THREADS",
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+)
 
 
 def _share_cores(threads: int) -> None:
@@ -37,7 +42,9 @@ def _share_cores(threads: int) -> None:
 class Executor(Protocol):
     description: str
 
-    def imap_unordered(self, fn: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[tuple[int, Any]]:
+    def imap_unordered(
+        self, fn: Callable[[Any], Any], items: Sequence[Any]
+    ) -> Iterator[tuple[int, Any]]:
         """Apply ``fn`` to every item; yield ``(index, result)`` in completion order."""
         ...
 
@@ -58,7 +65,9 @@ class LocalExecutor:
         self.description = f"{self.jobs} local process(es)"
         self._pool: cf.ProcessPoolExecutor | None = None
 
-    def imap_unordered(self, fn: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[tuple[int, Any]]:
+    def imap_unordered(
+        self, fn: Callable[[Any], Any], items: Sequence[Any]
+    ) -> Iterator[tuple[int, Any]]:
         if self.jobs == 1 or len(items) <= 1:
             for i, item in enumerate(items):
                 yield i, fn(item)
@@ -66,7 +75,11 @@ class LocalExecutor:
         if self._pool is None:
             threads = max(1, (os.cpu_count() or 1) // self.jobs)
             self._pool = cf.ProcessPoolExecutor(
-                max_workers=self.jobs, mp_context=_SPAWN, initializer=_share_cores, initargs=(threads,))
+                max_workers=self.jobs,
+                mp_context=_SPAWN,
+                initializer=_share_cores,
+                initargs=(threads,),
+            )
         futures = {self._pool.submit(fn, item): i for i, item in enumerate(items)}
         try:
             for fut in cf.as_completed(futures):
@@ -90,7 +103,9 @@ class DaskExecutor:
         try:
             from dask.distributed import Client
         except ImportError as exc:  # dask is an optional dependency
-            raise ConfigError("--scheduler needs dask[distributed]: pip install 'aptkt[dask]'") from exc
+            raise ConfigError(
+                "--scheduler needs dask[distributed]: pip install 'aptkt[dask]'"
+            ) from exc
         if isinstance(address, Client):
             self.client, self._own = address, False
         else:
@@ -101,7 +116,9 @@ class DaskExecutor:
         workers = len(self.client.scheduler_info().get("workers", {}))
         self.description = f"Dask cluster at {self.client.scheduler.address} ({workers} worker(s))"
 
-    def imap_unordered(self, fn: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[tuple[int, Any]]:
+    def imap_unordered(
+        self, fn: Callable[[Any], Any], items: Sequence[Any]
+    ) -> Iterator[tuple[int, Any]]:
         from dask.distributed import as_completed
 
         if not items:

@@ -10,9 +10,16 @@ import numpy as np
 __all__ = ["learning_curves", "save_figure", "figure", "canvas", "METHOD_COLOURS"]
 
 #: The paper's colours (Fig. 9): baseline red, APTKT blue, APTKT with auxiliary features green.
-METHOD_COLOURS = {"baseline": "tab:red", "APTKT": "tab:blue", "APTKT+aux": "tab:green",
-                  # Fig. 6: the multi-modal kernel and the single modalities (the paper's names).
-                  "Multi": "tab:purple", "STIF": "tab:brown", "Texture": "tab:olive", "Thermal-C": "tab:orange"}
+METHOD_COLOURS = {
+    "baseline": "tab:red",
+    "APTKT": "tab:blue",
+    "APTKT+aux": "tab:green",
+    # Fig. 6: the multi-modal kernel and the single modalities (the paper's names).
+    "Multi": "tab:purple",
+    "STIF": "tab:brown",
+    "Texture": "tab:olive",
+    "Thermal-C": "tab:orange",
+}
 
 
 def _pyplot():

@@ -64,7 +64,9 @@ def build_prior(task: PriorTask) -> str:
     if path.exists():
         return str(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    table = load_observations(task.data, actions=task.actions, objects=task.objects, trials=task.trials)
+    table = load_observations(
+        task.data, actions=task.actions, objects=task.objects, trials=task.trials
+    )
     prior = PriorKnowledge.build(table, task.objects, gp=task.gp_settings(), seed=task.seed)
     prior.metadata["objects"] = list(task.objects)
     prior.metadata["trials"] = list(task.trials)

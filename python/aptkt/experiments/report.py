@@ -12,7 +12,15 @@ from typing import Any
 
 from aptkt.experiments.aggregate import Estimate
 
-__all__ = ["PAPER", "pp", "ci", "gain_verdict", "no_harm_verdict", "render_report", "markdown_table"]
+__all__ = [
+    "PAPER",
+    "pp",
+    "ci",
+    "gain_verdict",
+    "no_harm_verdict",
+    "render_report",
+    "markdown_table",
+]
 
 #: The paper's headline figures (Sensors 2019, §5.3–5.6; DESIGN.md §6). Gains are fractions.
 PAPER: Mapping[str, Any] = {
@@ -24,8 +32,16 @@ PAPER: Mapping[str, Any] = {
     "fig8_larger": ("P1", "P2", "C1"),
     "fig9_aux_gain_10_priors": 0.20,
     # Fig. 10: the priors (by number) the paper found dissimilar to the new objects.
-    "fig10_dissimilar": {"P1": (1, 5, 7), "P2": (1, 4, 7), "C1": (4, 7, 10), "S1": (1, 6, 9),
-                         "S2": (1, 7, 10), "S3": (1, 3, 9), "S4": (1, 3, 8), "all": (1, 5, 10)},
+    "fig10_dissimilar": {
+        "P1": (1, 5, 7),
+        "P2": (1, 4, 7),
+        "C1": (4, 7, 10),
+        "S1": (1, 6, 9),
+        "S2": (1, 7, 10),
+        "S3": (1, 3, 9),
+        "S4": (1, 3, 8),
+        "all": (1, 5, 10),
+    },
 }
 
 
@@ -101,18 +117,30 @@ def render_report(sections: Sequence[Any], run_info: Mapping[str, Any]) -> str:
         "",
     ]
     heads = [h for s in sections for h in s.headlines]
-    out.append(markdown_table(["figure", "claim", "paper", "this run", "verdict"],
-                              [[h.figure, h.claim, h.paper, h.ours, h.verdict] for h in heads]))
+    out.append(
+        markdown_table(
+            ["figure", "claim", "paper", "this run", "verdict"],
+            [[h.figure, h.claim, h.paper, h.ours, h.verdict] for h in heads],
+        )
+    )
     differ = [h for h in heads if not h.agrees]
     out += ["", "## Where this run differs from the paper", ""]
     if differ:
-        out += [f"- **{h.figure}** — {h.claim}: paper {h.paper}; here {h.ours}. {h.verdict[0].upper()}{h.verdict[1:]}."
-                for h in differ]
+        out += [
+            f"- **{h.figure}** — {h.claim}: paper {h.paper}; here {h.ours}. {h.verdict[0].upper()}{h.verdict[1:]}."
+            for h in differ
+        ]
     else:
         out.append("Every headline claim above agrees in shape.")
     for s in sections:
         out += ["", f"## {s.figure}: {s.title}", "", s.body.strip(), ""]
         if s.files:
             out.append("Files: " + ", ".join(f"`{f}`" for f in s.files))
-    out += ["", "## Configuration", "", markdown_table(["setting", "value"], [[k, v] for k, v in run_info["settings"].items()]), ""]
+    out += [
+        "",
+        "## Configuration",
+        "",
+        markdown_table(["setting", "value"], [[k, v] for k, v in run_info["settings"].items()]),
+        "",
+    ]
     return "\n".join(out) + "\n"

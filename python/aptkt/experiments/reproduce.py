@@ -94,21 +94,35 @@ def prepare_data(s: ReproduceSettings, scale: Scale) -> tuple[Path, dict[str, An
         info["source"] = "given"
     else:
         path = s.output / f"data-{scale.name}-seed{s.seed}.h5"
-        plan = GenerationPlan(scale.objects, tuple(PAPER_ACTIONS[a] for a in scale.actions), scale.repetitions, s.seed)
-        _say(f"simulating the data set: {len(scale.objects)} objects × {len(scale.actions)} actions × "
-             f"{scale.repetitions} trials -> {path}" + (" (resuming)" if path.exists() else ""))
+        plan = GenerationPlan(
+            scale.objects, tuple(PAPER_ACTIONS[a] for a in scale.actions), scale.repetitions, s.seed
+        )
+        _say(
+            f"simulating the data set: {len(scale.objects)} objects × {len(scale.actions)} actions × "
+            f"{scale.repetitions} trials -> {path}" + (" (resuming)" if path.exists() else "")
+        )
         gen = generate(path, plan, jobs=s.jobs, resume=path.exists(), progress=s.progress)
-        info.update(source="generated", generation_seconds=gen["wall_seconds"], simulated_now=gen["simulated"])
+        info.update(
+            source="generated",
+            generation_seconds=gen["wall_seconds"],
+            simulated_now=gen["simulated"],
+        )
     with DatasetReader(path) as rd:
         keys = set(rd.keys())
         stored = rd.feature_names()
         info["description"] = rd.description
-    missing = [(o, a, t) for o in scale.objects for a in scale.actions
-               for t in range(scale.repetitions) if (o, a, t) not in keys]
+    missing = [
+        (o, a, t)
+        for o in scale.objects
+        for a in scale.actions
+        for t in range(scale.repetitions)
+        if (o, a, t) not in keys
+    ]
     if missing:
         raise ConfigError(
             f"{path} lacks {len(missing)} recording(s) this size needs (objects {list(scale.objects)}, actions "
-            f"{list(scale.actions)}, trials 0..{scale.repetitions - 1}); first missing: {missing[:3]}")
+            f"{list(scale.actions)}, trials 0..{scale.repetitions - 1}); first missing: {missing[:3]}"
+        )
     todo = [a for a in scale.actions if a not in stored]
     if todo:
         _say(f"extracting features of {', '.join(todo)} into {path}")
@@ -135,8 +149,14 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
     data, data_info = prepare_data(s, scale)
     fingerprint = data_fingerprint(data)
     timings["data"] = time.perf_counter() - t0
-    ctx = Context(scale=scale, seed=s.seed, data=str(data.resolve()), fingerprint=fingerprint, output=out.resolve(),
-                  index=_paper_numbers(scale.objects))
+    ctx = Context(
+        scale=scale,
+        seed=s.seed,
+        data=str(data.resolve()),
+        fingerprint=fingerprint,
+        output=out.resolve(),
+        index=_paper_numbers(scale.objects),
+    )
     executor = make_executor(s.jobs, s.scheduler)
     try:
         _say(f"planning {', '.join(s.figures)} ({scale.name} size) on {executor.description}")
@@ -149,8 +169,10 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
         t0 = time.perf_counter()
         batch = run_batch(specs, RunStore(out / "runs"), executor, fingerprint, progress=s.progress)
         timings["runs"] = time.perf_counter() - t0
-        _say(f"{len(specs)} runs ({len(batch.steps)} distinct): {batch.computed} computed now, {batch.reused} from "
-             f"{out / 'runs'}")
+        _say(
+            f"{len(specs)} runs ({len(batch.steps)} distinct): {batch.computed} computed now, {batch.reused} from "
+            f"{out / 'runs'}"
+        )
     finally:
         executor.close()
 
@@ -185,14 +207,21 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
     report = render_report(sections, run_info)
     (out / "report.md").write_text(report)
     for section in sections:
-        (ctx.figure_dir(section.figure) / "report.md").write_text(render_report([section], run_info))
+        (ctx.figure_dir(section.figure) / "report.md").write_text(
+            render_report([section], run_info)
+        )
     summary = {
         "software_version": __version__,
         "figures": list(s.figures),
         "seconds": seconds,
         "timings": timings,
-        "runs": {"total": len(specs), "distinct": len(batch.steps), "computed": batch.computed, "reused": batch.reused,
-                 "run_seconds_summed": run_info["settings"]["run seconds, summed over runs"]},
+        "runs": {
+            "total": len(specs),
+            "distinct": len(batch.steps),
+            "computed": batch.computed,
+            "reused": batch.reused,
+            "run_seconds_summed": run_info["settings"]["run seconds, summed over runs"],
+        },
         "headlines": [h.__dict__ for sec in sections for h in sec.headlines],
         "numbers": {sec.figure: sec.numbers for sec in sections},
         "files": {sec.figure: sec.files for sec in sections},
@@ -212,8 +241,14 @@ def _json_default(v: Any) -> Any:
     return str(v)
 
 
-def _flat_settings(scale: Scale, s: ReproduceSettings, timings: dict[str, float], batch: Any) -> dict[str, Any]:
-    flat = {f"size.{k}": v for k, v in scale.to_dict().items() if k not in ("pool_trials", "test_trials")}
+def _flat_settings(
+    scale: Scale, s: ReproduceSettings, timings: dict[str, float], batch: Any
+) -> dict[str, Any]:
+    flat = {
+        f"size.{k}": v
+        for k, v in scale.to_dict().items()
+        if k not in ("pool_trials", "test_trials")
+    }
     flat["pool trials"] = f"{scale.pool_trials[0]}..{scale.pool_trials[-1]}"
     flat["test trials"] = f"{scale.test_trials[0]}..{scale.test_trials[-1]}"
     flat["root seed"] = s.seed
@@ -221,19 +256,26 @@ def _flat_settings(scale: Scale, s: ReproduceSettings, timings: dict[str, float]
     flat["runs computed now / reused"] = f"{batch.computed} / {batch.reused}"
     # The runs' own time (their steps' wall time in the workers), kept with each stored run, so
     # it is known even when every run was read back from the store.
-    flat["run seconds, summed over runs"] = round(sum(float(r.get("seconds") or 0) for rows in batch.steps.values()
-                                                      for r in rows), 1)
+    flat["run seconds, summed over runs"] = round(
+        sum(float(r.get("seconds") or 0) for rows in batch.steps.values() for r in rows), 1
+    )
     flat.update({f"seconds.{k}": round(v, 1) for k, v in timings.items()})
     return flat
 
 
-def _config(s: ReproduceSettings, scale: Scale, ctx: Context, data_info: dict[str, Any], plans: dict[str, Any]) -> dict[str, Any]:
+def _config(
+    s: ReproduceSettings,
+    scale: Scale,
+    ctx: Context,
+    data_info: dict[str, Any],
+    plans: dict[str, Any],
+) -> dict[str, Any]:
     import numpy as np
 
     return {
         "command": s.command,
         "repeat_with": f"aptkt reproduce {' '.join(s.figures) if len(s.figures) < len(FIGURES) else 'all'}"
-                       f"{' --quick' if s.quick else ''} --seed {s.seed} --data {ctx.data}",
+        f"{' --quick' if s.quick else ''} --seed {s.seed} --data {ctx.data}",
         "software_version": __version__,
         "python": platform.python_version(),
         "numpy": np.__version__,
@@ -251,8 +293,11 @@ def _config(s: ReproduceSettings, scale: Scale, ctx: Context, data_info: dict[st
         "methods": {m: dict(v) for m, v in METHODS.items()},
         "object_numbers": dict(ctx.index),
         "figures_plan": {
-            name: {"runs": len(p.specs), "specs": f"{name}/specs.jsonl",
-                   "prior_knowledge": [{**t.to_dict(), "path": t.path} for t in p.priors]}
+            name: {
+                "runs": len(p.specs),
+                "specs": f"{name}/specs.jsonl",
+                "prior_knowledge": [{**t.to_dict(), "path": t.path} for t in p.priors],
+            }
             for name, p in plans.items()
         },
     }

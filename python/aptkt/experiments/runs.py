@@ -73,7 +73,9 @@ def run_steps(spec: RunSpec) -> list[dict[str, Any]]:
     test = _table(spec.data, spec.new_objects, spec.test_trials, spec.actions)
     prior = _prior(spec.prior) if spec.prior else None
     learner = APTKT(spec.config, prior)
-    run = learner.run(PoolEnvironment(pool, seed=spec.pool_seed), spec.actions, spec.new_objects, test)
+    run = learner.run(
+        PoolEnvironment(pool, seed=spec.pool_seed), spec.actions, spec.new_objects, test
+    )
     rows = []
     for step in run.steps:
         row = step.as_row()

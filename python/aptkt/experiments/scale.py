@@ -67,7 +67,9 @@ class Scale:
                 raise ValueError(f"{name} must be >= 1")
         unknown = [a for a in self.actions if a not in PAPER_ACTIONS]
         if unknown:
-            raise ValueError(f"unknown action(s) {unknown}; the experiments use the paper's {list(PAPER_ACTIONS)}")
+            raise ValueError(
+                f"unknown action(s) {unknown}; the experiments use the paper's {list(PAPER_ACTIONS)}"
+            )
 
     @property
     def objects(self) -> tuple[str, ...]:
@@ -82,7 +84,11 @@ class Scale:
         return tuple(range(self.repetitions // 2, self.repetitions))
 
     def to_dict(self) -> dict[str, Any]:
-        return {**asdict(self), "pool_trials": list(self.pool_trials), "test_trials": list(self.test_trials)}
+        return {
+            **asdict(self),
+            "pool_trials": list(self.pool_trials),
+            "test_trials": list(self.test_trials),
+        }
 
     @classmethod
     def full(cls) -> Scale:
@@ -90,7 +96,9 @@ class Scale:
         from aptkt.sim.objects import default_library
 
         lib = default_library()
-        return cls("full", tuple(lib.with_role("prior")), tuple(lib.with_role("new")), tuple(PAPER_ACTIONS))
+        return cls(
+            "full", tuple(lib.with_role("prior")), tuple(lib.with_role("new")), tuple(PAPER_ACTIONS)
+        )
 
     @classmethod
     def quick(cls) -> Scale:

@@ -30,8 +30,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["MixtureFit", "fit_mixture", "log_responsibilities", "log_confusion", "rescale", "dissimilar_priors",
-           "COVARIANCE_TYPES"]
+__all__ = [
+    "MixtureFit",
+    "fit_mixture",
+    "log_responsibilities",
+    "log_confusion",
+    "rescale",
+    "dissimilar_priors",
+    "COVARIANCE_TYPES",
+]
 
 _EPS = 10 * np.finfo(float).eps
 COVARIANCE_TYPES = ("tied", "full", "diag")
@@ -81,11 +88,15 @@ def _log_gaussian(X: np.ndarray, means: np.ndarray, cov: np.ndarray) -> np.ndarr
     for j in range(len(means)):
         L = np.linalg.cholesky(cov[j])
         z = np.linalg.solve(L, (X - means[j]).T)
-        out[:, j] = -0.5 * (d * np.log(2 * np.pi) + np.sum(z * z, axis=0)) - np.sum(np.log(np.diag(L)))
+        out[:, j] = -0.5 * (d * np.log(2 * np.pi) + np.sum(z * z, axis=0)) - np.sum(
+            np.log(np.diag(L))
+        )
     return out
 
 
-def _e_step(X: np.ndarray, weights: np.ndarray, means: np.ndarray, cov: np.ndarray) -> tuple[float, np.ndarray]:
+def _e_step(
+    X: np.ndarray, weights: np.ndarray, means: np.ndarray, cov: np.ndarray
+) -> tuple[float, np.ndarray]:
     weighted = _log_gaussian(X, means, cov) + np.log(weights)
     top = weighted.max(axis=1, keepdims=True)
     norm = top[:, 0] + np.log(np.exp(weighted - top).sum(axis=1))
@@ -106,7 +117,9 @@ def fit_mixture(
     ``init_labels == k`` (every component needs at least one). ``reg_covar`` is added to the
     covariances' diagonals (as scikit-learn does)."""
     if covariance_type not in COVARIANCE_TYPES:
-        raise ValueError(f"covariance_type must be one of {COVARIANCE_TYPES}, got {covariance_type!r}")
+        raise ValueError(
+            f"covariance_type must be one of {COVARIANCE_TYPES}, got {covariance_type!r}"
+        )
     X = np.asarray(X, dtype=float)
     labels = np.asarray(init_labels)
     if X.ndim != 2 or labels.shape != (X.shape[0],):
@@ -115,8 +128,12 @@ def fit_mixture(
         raise ValueError("X holds non-finite values")
     if max_iter < 1:
         raise ValueError("max_iter must be >= 1")
-    if labels.size == 0 or labels.min() < 0 or labels.max() >= n_components or \
-            np.any(np.bincount(labels, minlength=n_components) == 0):
+    if (
+        labels.size == 0
+        or labels.min() < 0
+        or labels.max() >= n_components
+        or np.any(np.bincount(labels, minlength=n_components) == 0)
+    ):
         raise ValueError(f"every component 0..{n_components - 1} needs at least one initial sample")
     resp = np.zeros((X.shape[0], n_components))
     resp[np.arange(X.shape[0]), labels] = 1.0
@@ -159,7 +176,11 @@ def rescale(matrix: np.ndarray) -> np.ndarray:
 
 
 def dissimilar_priors(
-    log_similarity: np.ndarray, objects: Sequence[str], priors: Sequence[str], new_objects: Sequence[str], count: int
+    log_similarity: np.ndarray,
+    objects: Sequence[str],
+    priors: Sequence[str],
+    new_objects: Sequence[str],
+    count: int,
 ) -> tuple[list[str], dict[str, float]]:
     """The ``count`` priors least similar to the new objects, and every prior's score: log10 of
     its largest similarity with any new object (mean of both directions). Ties go to the

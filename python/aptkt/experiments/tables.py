@@ -40,5 +40,13 @@ def read_csv(path: str | Path) -> list[dict[str, str]]:
 def curves_rows(label: Mapping[str, Any], curves: Curves) -> list[dict[str, Any]]:
     """One row per x: the label's fields, then mean, sd and number of runs."""
     mean, sd, n = curves.mean(), curves.sd(), curves.count()
-    return [{**label, "x": int(x) if float(x).is_integer() else x, "mean": float(m), "sd": float(s), "runs": int(c)}
-            for x, m, s, c in zip(curves.x.tolist(), mean, sd, n)]
+    return [
+        {
+            **label,
+            "x": int(x) if float(x).is_integer() else x,
+            "mean": float(m),
+            "sd": float(s),
+            "runs": int(c),
+        }
+        for x, m, s, c in zip(curves.x.tolist(), mean, sd, n)
+    ]

@@ -102,7 +102,9 @@ def load_observations(
     todo = [a for a in names if a not in stored]
     if todo:
         if not extract_missing:
-            raise KeyError(f"{path} has no stored features for {todo}; run `aptkt dataset features`")
+            raise KeyError(
+                f"{path} has no stored features for {todo}; run `aptkt dataset features`"
+            )
         extract_features(path, actions=todo, progress=progress)
     obj_filter = None if objects is None else {str(o) for o in objects}
     trial_filter = None if trials is None else {int(t) for t in trials}
@@ -123,5 +125,7 @@ def load_observations(
                 keep &= np.isin(objs, list(obj_filter))
             if trial_filter is not None:
                 keep &= np.isin(trs, list(trial_filter))
-            table[name] = Observations(name, {m: v[keep] for m, v in mods.items()}, objs[keep], trs[keep])
+            table[name] = Observations(
+                name, {m: v[keep] for m, v in mods.items()}, objs[keep], trs[keep]
+            )
     return table

@@ -53,7 +53,9 @@ class PoolEnvironment:
             raise KeyError(f"the pool has no observations of action {action!r} on object {obj!r}")
         queue = self._queues[(action, obj)]
         if not queue:
-            raise PoolExhaustedError(f"every pooled observation of {action!r} on {obj!r} has been used")
+            raise PoolExhaustedError(
+                f"every pooled observation of {action!r} on {obj!r} has been used"
+            )
         return self.table[action].row(int(queue.pop(0)))
 
 

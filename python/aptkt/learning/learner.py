@@ -66,7 +66,9 @@ class ActionLearner:
     # -- data --------------------------------------------------------------------------------
     def add(self, obj: str, observation: Mapping[str, np.ndarray], trial: int = 0) -> None:
         one = Observations.single(self.action, obj, observation, trial)
-        self.observations = one if self.observations is None else Observations.concat([self.observations, one])
+        self.observations = (
+            one if self.observations is None else Observations.concat([self.observations, one])
+        )
 
     def count(self, obj: str) -> int:
         return 0 if self.observations is None else int(np.sum(self.observations.objects == obj))
@@ -78,17 +80,23 @@ class ActionLearner:
             return self.prior.pipeline
         return FeaturePipeline().fit(self.observations)
 
-    def _features(self, obs: Observations, pipeline: FeaturePipeline) -> tuple[np.ndarray, dict[str, list[int]]]:
+    def _features(
+        self, obs: Observations, pipeline: FeaturePipeline
+    ) -> tuple[np.ndarray, dict[str, list[int]]]:
         return self._model_input(*pipeline.transform(obs))
 
-    def _model_input(self, X_full: np.ndarray, groups: dict[str, list[int]]) -> tuple[np.ndarray, dict[str, list[int]]]:
+    def _model_input(
+        self, X_full: np.ndarray, groups: dict[str, list[int]]
+    ) -> tuple[np.ndarray, dict[str, list[int]]]:
         """The new objects' model input from features of every modality: the selected
         modalities, then (Eq. 5) the prior model's posteriors, which need every modality."""
         wanted = self.config.modalities
         names = [m for m in groups if wanted is None or m in wanted]
         if not names:
-            raise ValueError(f"action {self.action!r} has none of the modalities {list(wanted or [])}; "
-                             f"it has {list(groups)}")
+            raise ValueError(
+                f"action {self.action!r} has none of the modalities {list(wanted or [])}; "
+                f"it has {list(groups)}"
+            )
         cols = [c for m in names for c in groups[m]]
         X = X_full[:, cols]
         out_groups, start = {}, 0
@@ -123,11 +131,17 @@ class ActionLearner:
             old_post = self.prior.posteriors(X_full)
             for obj in self.new_objects:
                 decision = decide_transfer(
-                    obj, self.prior.objects, old_post[obs.objects == obj], self.config.eps_neg, self.config.transfer
+                    obj,
+                    self.prior.objects,
+                    old_post[obs.objects == obj],
+                    self.config.eps_neg,
+                    self.config.transfer,
                 )
                 self.decisions[obj] = decision
                 if decision.transfers:
-                    sources[obj] = TransferSource(self._source_features(decision.source), decision.transfer_lambda)
+                    sources[obj] = TransferSource(
+                        self._source_features(decision.source), decision.transfer_lambda
+                    )
         seed = (self.config.seed * 1_000_003 + zlib.crc32(self.action.encode()) + step) % 2**32
         model = self.config.gp.make(groups, random_state=seed)
         self.model = model.fit(X, obs.objects, sources=sources or None)
@@ -152,7 +166,9 @@ class ActionLearner:
     def test_accuracy(self) -> float:
         if self._test is None or self.test_posteriors is None:
             raise RuntimeError("no test observations were given")
-        return accuracy(self.test_posteriors, [str(c) for c in self.model.classes_], self._test.objects)
+        return accuracy(
+            self.test_posteriors, [str(c) for c in self.model.classes_], self._test.objects
+        )
 
 
 @dataclass
@@ -172,8 +188,20 @@ class StepRecord:
     seconds: float
 
     def as_row(self) -> dict[str, Any]:
-        row = {k: getattr(self, k) for k in ("step", "n_observations", "action", "object", "explored",
-                                              "uncertainty", "mean_accuracy", "fused_accuracy", "seconds")}
+        row = {
+            k: getattr(self, k)
+            for k in (
+                "step",
+                "n_observations",
+                "action",
+                "object",
+                "explored",
+                "uncertainty",
+                "mean_accuracy",
+                "fused_accuracy",
+                "seconds",
+            )
+        }
         row.update({f"accuracy[{a}]": v for a, v in self.accuracy.items()})
         return row
 
@@ -209,11 +237,15 @@ class APTKT:
     alone.
     """
 
-    def __init__(self, config: LearnerConfig | None = None, prior: PriorKnowledge | None = None) -> None:
+    def __init__(
+        self, config: LearnerConfig | None = None, prior: PriorKnowledge | None = None
+    ) -> None:
         self.config = config or LearnerConfig()
         if self.config.uses_prior and prior is None:
-            raise ValueError("transfer and auxiliary features need prior knowledge; pass prior=... "
-                             "or use LearnerConfig(transfer='none') for the baseline")
+            raise ValueError(
+                "transfer and auxiliary features need prior knowledge; pass prior=... "
+                "or use LearnerConfig(transfer='none') for the baseline"
+            )
         self.prior = prior
         self.learners: dict[str, ActionLearner] = {}
 
@@ -239,8 +271,13 @@ class APTKT:
                 raise ValueError(f"objects {sorted(overlap)} are both prior and new")
         rng = np.random.default_rng(cfg.seed)
         self.learners = {
-            a: ActionLearner(a, new_objects, cfg, self.prior[a] if self.prior is not None else None,
-                             None if test is None else test[a])
+            a: ActionLearner(
+                a,
+                new_objects,
+                cfg,
+                self.prior[a] if self.prior is not None else None,
+                None if test is None else test[a],
+            )
             for a in actions
         }
         run = LearningRun(cfg, actions, new_objects, self.prior.objects if self.prior else [])
@@ -278,8 +315,15 @@ class APTKT:
                     break
         return run
 
-    def _record(self, run: LearningRun, step: int, n_obs: int, sel: Any, seconds: float,
-                on_step: Callable[[StepRecord], None] | None) -> None:
+    def _record(
+        self,
+        run: LearningRun,
+        step: int,
+        n_obs: int,
+        sel: Any,
+        seconds: float,
+        on_step: Callable[[StepRecord], None] | None,
+    ) -> None:
         has_test = all(l.test_posteriors is not None for l in self.learners.values())
         acc = {a: l.test_accuracy() for a, l in self.learners.items()} if has_test else {}
         fused = float("nan")
@@ -315,5 +359,7 @@ class APTKT:
 
 
 def _same_class_order(learners: Mapping[str, ActionLearner]) -> bool:
-    orders = {tuple(str(c) for c in l.model.classes_) for l in learners.values() if l.model is not None}
+    orders = {
+        tuple(str(c) for c in l.model.classes_) for l in learners.values() if l.model is not None
+    }
     return len(orders) == 1

@@ -57,10 +57,19 @@ class Observations:
 
     @classmethod
     def from_arrays(
-        cls, action: str, objects: Sequence[Any], trials: Sequence[int] | None = None, **modalities: Any
+        cls,
+        action: str,
+        objects: Sequence[Any],
+        trials: Sequence[int] | None = None,
+        **modalities: Any,
     ) -> Observations:
         """``Observations.from_arrays("P1", objects, force=f, thermal=t)``."""
-        return cls(action, dict(modalities), np.asarray(objects), np.asarray(trials if trials is not None else []))
+        return cls(
+            action,
+            dict(modalities),
+            np.asarray(objects),
+            np.asarray(trials if trials is not None else []),
+        )
 
     def __len__(self) -> int:
         return int(self.objects.shape[0])
@@ -75,7 +84,10 @@ class Observations:
 
     def take(self, index: Any) -> Observations:
         return Observations(
-            self.action, {k: v[index] for k, v in self.modalities.items()}, self.objects[index], self.trials[index]
+            self.action,
+            {k: v[index] for k, v in self.modalities.items()},
+            self.objects[index],
+            self.trials[index],
         )
 
     def of_objects(self, objects: Iterable[str]) -> Observations:
@@ -91,7 +103,9 @@ class Observations:
         names = parts[0].modality_names
         for p in parts[1:]:
             if p.action != parts[0].action or p.modality_names != names:
-                raise ValueError("can only concatenate observations of the same action and modalities")
+                raise ValueError(
+                    "can only concatenate observations of the same action and modalities"
+                )
         return cls(
             parts[0].action,
             {k: np.concatenate([p.modalities[k] for p in parts]) for k in names},
@@ -100,9 +114,15 @@ class Observations:
         )
 
     @classmethod
-    def single(cls, action: str, obj: str, observation: Mapping[str, np.ndarray], trial: int = 0) -> Observations:
-        return cls(action, {k: np.asarray(v, dtype=np.float64)[None, :] for k, v in observation.items()},
-                   np.array([obj]), np.array([trial]))
+    def single(
+        cls, action: str, obj: str, observation: Mapping[str, np.ndarray], trial: int = 0
+    ) -> Observations:
+        return cls(
+            action,
+            {k: np.asarray(v, dtype=np.float64)[None, :] for k, v in observation.items()},
+            np.array([obj]),
+            np.array([trial]),
+        )
 
     def to_npz(self, prefix: str) -> dict[str, np.ndarray]:
         out = {f"{prefix}/objects": self.objects.astype("U"), f"{prefix}/trials": self.trials}
@@ -113,11 +133,16 @@ class Observations:
     @classmethod
     def from_npz(cls, action: str, arrays: Mapping[str, np.ndarray], prefix: str) -> Observations:
         mods = {
-            key[len(f"{prefix}/modality/"):]: np.asarray(arrays[key])
+            key[len(f"{prefix}/modality/") :]: np.asarray(arrays[key])
             for key in arrays
             if key.startswith(f"{prefix}/modality/")
         }
-        return cls(action, mods, np.asarray(arrays[f"{prefix}/objects"]), np.asarray(arrays[f"{prefix}/trials"]))
+        return cls(
+            action,
+            mods,
+            np.asarray(arrays[f"{prefix}/objects"]),
+            np.asarray(arrays[f"{prefix}/trials"]),
+        )
 
 
 #: Observations of several actions, by action name.

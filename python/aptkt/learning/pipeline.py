@@ -68,7 +68,11 @@ class ModalityTransform:
     def n_features_out(self) -> int:
         if not self.fitted:
             raise RuntimeError("transform not fitted")
-        return int(self.components_.shape[0]) if self.components_ is not None else int(self.mean_.shape[0])
+        return (
+            int(self.components_.shape[0])
+            if self.components_ is not None
+            else int(self.mean_.shape[0])
+        )
 
     def transform(self, X: np.ndarray) -> np.ndarray:
         if not self.fitted:
@@ -81,7 +85,9 @@ class ModalityTransform:
     def state(self) -> dict[str, np.ndarray]:
         out = {
             "log_columns": np.asarray(self.log_columns, dtype=np.int64),
-            "pca_components": np.asarray(-1 if self.pca_components is None else self.pca_components),
+            "pca_components": np.asarray(
+                -1 if self.pca_components is None else self.pca_components
+            ),
         }
         if self.fitted:
             out.update(mean=self.mean_, scale=self.scale_, pca_scale=np.asarray(self.pca_scale_))
@@ -124,7 +130,9 @@ class FeaturePipeline:
         fitted = {}
         for name in obs.modality_names:
             template = self.transforms.get(name, ModalityTransform())
-            fitted[name] = replace(template, mean_=None, scale_=None, components_=None).fit(obs.modalities[name])
+            fitted[name] = replace(template, mean_=None, scale_=None, components_=None).fit(
+                obs.modalities[name]
+            )
         self.transforms = fitted
         self.modality_names_ = obs.modality_names
         return self
@@ -147,7 +155,9 @@ class FeaturePipeline:
         return np.hstack(blocks), groups
 
     def state(self, prefix: str) -> dict[str, np.ndarray]:
-        out: dict[str, np.ndarray] = {f"{prefix}/modalities": np.asarray(self.modality_names_, dtype="U")}
+        out: dict[str, np.ndarray] = {
+            f"{prefix}/modalities": np.asarray(self.modality_names_, dtype="U")
+        }
         for name in self.modality_names_:
             for key, value in self.transforms[name].state().items():
                 out[f"{prefix}/{name}/{key}"] = value
@@ -160,7 +170,7 @@ class FeaturePipeline:
         transforms = {}
         for name in names:
             sub = {
-                key[len(f"{prefix}/{name}/"):]: arrays[key]
+                key[len(f"{prefix}/{name}/") :]: arrays[key]
                 for key in arrays
                 if key.startswith(f"{prefix}/{name}/")
             }

@@ -59,7 +59,9 @@ class ActionPrior:
 class PriorKnowledge:
     """Prior experiences of several actions over the same old objects."""
 
-    def __init__(self, actions: Mapping[str, ActionPrior], metadata: Mapping[str, Any] | None = None) -> None:
+    def __init__(
+        self, actions: Mapping[str, ActionPrior], metadata: Mapping[str, Any] | None = None
+    ) -> None:
         if not actions:
             raise ValueError("prior knowledge needs at least one action")
         self.actions: dict[str, ActionPrior] = dict(actions)
@@ -69,7 +71,9 @@ class PriorKnowledge:
         try:
             return self.actions[action]
         except KeyError:
-            raise KeyError(f"no prior knowledge for action {action!r}; known: {sorted(self.actions)}") from None
+            raise KeyError(
+                f"no prior knowledge for action {action!r}; known: {sorted(self.actions)}"
+            ) from None
 
     def __contains__(self, action: object) -> bool:
         return action in self.actions
@@ -135,13 +139,17 @@ class PriorKnowledge:
             raise ValueError(f"{path}: not a prior-knowledge file")
         meta = json.loads(bytes(arrays["meta"]).decode())
         if meta.get("format") != _FORMAT:
-            raise ValueError(f"{path}: unsupported format {meta.get('format')!r} (expected {_FORMAT})")
+            raise ValueError(
+                f"{path}: unsupported format {meta.get('format')!r} (expected {_FORMAT})"
+            )
         actions = {}
         for i, name in enumerate(meta["actions"]):
             p = f"a{i}"
             obs = Observations.from_npz(name, arrays, f"{p}/obs")
             pipeline = FeaturePipeline.from_state(arrays, f"{p}/pipeline")
-            model_state = {k[len(f"{p}/model/"):]: v for k, v in arrays.items() if k.startswith(f"{p}/model/")}
+            model_state = {
+                k[len(f"{p}/model/") :]: v for k, v in arrays.items() if k.startswith(f"{p}/model/")
+            }
             model = LaplaceGPC.from_state(model_state)
             actions[name] = ActionPrior(name, obs, pipeline, model)
         return cls(actions, meta.get("metadata", {}))
@@ -151,18 +159,22 @@ class PriorKnowledge:
         rows = []
         for name, prior in self.actions.items():
             m = prior.model
-            rows.append({
-                "action": name,
-                "objects": prior.objects,
-                "observations": len(prior.observations),
-                "modalities": m.modality_names_,
-                "weights_mean": m.modality_weights_.mean(axis=0).round(3).tolist(),
-                "length_scales_mean": m.length_scales_.mean(axis=0).round(3).tolist(),
-                "log_marginal_likelihood": m.log_marginal_likelihood_.round(2).tolist(),
-            })
+            rows.append(
+                {
+                    "action": name,
+                    "objects": prior.objects,
+                    "observations": len(prior.observations),
+                    "modalities": m.modality_names_,
+                    "weights_mean": m.modality_weights_.mean(axis=0).round(3).tolist(),
+                    "length_scales_mean": m.length_scales_.mean(axis=0).round(3).tolist(),
+                    "log_marginal_likelihood": m.log_marginal_likelihood_.round(2).tolist(),
+                }
+            )
         return rows
 
-    def subset(self, objects: Sequence[str], *, gp: GPSettings | None = None, seed: int = 0) -> PriorKnowledge:
+    def subset(
+        self, objects: Sequence[str], *, gp: GPSettings | None = None, seed: int = 0
+    ) -> PriorKnowledge:
         """Prior knowledge rebuilt on a subset of the old objects (refits the models)."""
         table = {name: prior.observations for name, prior in self.actions.items()}
         return PriorKnowledge.build(table, objects, gp=gp, seed=seed)

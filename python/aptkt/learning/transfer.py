@@ -46,7 +46,9 @@ def mean_posteriors(old_posteriors: np.ndarray) -> np.ndarray:
     """``p̄_i``: the mean over a new object's observations (rows) of the old posteriors."""
     p = np.asarray(old_posteriors, dtype=np.float64)
     if p.ndim != 2 or p.shape[0] == 0:
-        raise ValueError(f"expected a (n_observations >= 1, n_old_objects) array, got shape {p.shape}")
+        raise ValueError(
+            f"expected a (n_observations >= 1, n_old_objects) array, got shape {p.shape}"
+        )
     return p.mean(axis=0)
 
 

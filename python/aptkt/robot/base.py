@@ -65,7 +65,9 @@ class Placement:
     slide_direction: tuple[float, float] = (1.0, 0.0)
 
     def contains(self, point: tuple[float, float, float]) -> bool:
-        return all(lo <= p <= hi for lo, p, hi in zip(self.workspace_min, point, self.workspace_max))
+        return all(
+            lo <= p <= hi for lo, p, hi in zip(self.workspace_min, point, self.workspace_max)
+        )
 
 
 @runtime_checkable
@@ -95,8 +97,14 @@ class Robot(Protocol):
         """From the contact point, indent by ``depth`` metres and hold for ``hold_time`` s."""
         ...
 
-    def slide(self, normal_force: float, speed: float, duration: float,
-              direction: tuple[float, float], total_force: ForceReading) -> None:
+    def slide(
+        self,
+        normal_force: float,
+        speed: float,
+        duration: float,
+        direction: tuple[float, float],
+        total_force: ForceReading,
+    ) -> None:
         """Establish ``normal_force`` (force control on the normal axis), then move tangentially
         at ``speed`` along ``direction`` for ``duration`` s keeping the force."""
         ...

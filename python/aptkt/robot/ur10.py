@@ -74,8 +74,15 @@ _REALTIME_COMMANDS = frozenset({"speedL", "forceMode"})
 class _Sample:
     __slots__ = ("host_ns", "timestamp", "pose", "speed", "force", "skin")
 
-    def __init__(self, host_ns: int, timestamp: float, pose: np.ndarray, speed: np.ndarray,
-                 force: np.ndarray, skin: float):
+    def __init__(
+        self,
+        host_ns: int,
+        timestamp: float,
+        pose: np.ndarray,
+        speed: np.ndarray,
+        force: np.ndarray,
+        skin: float,
+    ):
         self.host_ns = host_ns
         self.timestamp = timestamp
         self.pose = pose
@@ -248,7 +255,9 @@ class UR10:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_config(cls, config: WorkspaceConfig | str | Path, host: str | None = None, **kwargs: Any) -> UR10:
+    def from_config(
+        cls, config: WorkspaceConfig | str | Path, host: str | None = None, **kwargs: Any
+    ) -> UR10:
         """A UR10 for a workspace file (or parsed config); ``host`` overrides ``[robot] host``.
 
         This is what ``aptkt collect/learn --robot ur10`` build on.
@@ -257,9 +266,17 @@ class UR10:
             config = load_workspace(config)
         host = host or config.host
         if not host:
-            raise ConfigError(f"{config.source}: no robot host given (set [robot] host or pass --host)")
-        return cls(host, config.placements, config.limits, workspace=config.workspace,
-                   tool_orientation=config.tool_orientation, **kwargs)
+            raise ConfigError(
+                f"{config.source}: no robot host given (set [robot] host or pass --host)"
+            )
+        return cls(
+            host,
+            config.placements,
+            config.limits,
+            workspace=config.workspace,
+            tool_orientation=config.tool_orientation,
+            **kwargs,
+        )
 
     def connect(self) -> None:
         """Connect, upload ur_rtde's control script and arm the controller's RTDE watchdog."""
@@ -277,14 +294,18 @@ class UR10:
             self._control = rtde_control.RTDEControlInterface(self.host, freq)
         except RuntimeError as exc:
             self._drop_clients()
-            raise RobotConnectionError(f"cannot connect to the UR controller at {self.host}: {exc}") from None
+            raise RobotConnectionError(
+                f"cannot connect to the UR controller at {self.host}: {exc}"
+            ) from None
         self._lost = None
         self._worker = _Worker(f"ur10-rtde-control-{self.host}")
         self.frequency = self._detect_frequency()
         self._reset_supervision()
         self._command("setWatchdog", 1.0 / self.limits.watchdog_timeout)
         self._keepalive_stop.clear()
-        self._keepalive = threading.Thread(target=self._keep_alive, name=f"ur10-keepalive-{self.host}", daemon=True)
+        self._keepalive = threading.Thread(
+            target=self._keep_alive, name=f"ur10-keepalive-{self.host}", daemon=True
+        )
         self._keepalive.start()
 
     def _detect_frequency(self) -> float:
@@ -352,12 +373,16 @@ class UR10:
         try:
             return self.placements[name]
         except KeyError:
-            raise RobotError(f"no placement for object {name!r} (known: {sorted(self.placements)})") from None
+            raise RobotError(
+                f"no placement for object {name!r} (known: {sorted(self.placements)})"
+            ) from None
 
     # ------------------------------------------------------------------ Robot protocol
     def move_above(self, placement: Placement, clearance: float) -> None:
         _positive(clearance, "clearance")
-        target = np.array([placement.x, placement.y, placement.surface_z + clearance, *self.tool_orientation])
+        target = np.array(
+            [placement.x, placement.y, placement.surface_z + clearance, *self.tool_orientation]
+        )
         if not placement.contains(tuple(target[:3])):
             raise SafetyLimitError(
                 f"{clearance * 1000:.1f} mm above {placement.object_name!r} is outside its workspace box"
@@ -395,8 +420,12 @@ class UR10:
             floor = placement.workspace_min[2] + 0.0005
             bottom = max(start.pose[2] - self.limits.max_approach_travel, floor)
             self._mode = "speed"
-            self._command("speedL", [0.0, 0.0, -self.limits.approach_speed, 0.0, 0.0, 0.0],
-                          self.limits.max_acceleration, 0.0)
+            self._command(
+                "speedL",
+                [0.0, 0.0, -self.limits.approach_speed, 0.0, 0.0, 0.0],
+                self.limits.max_acceleration,
+                0.0,
+            )
 
             def reached(s: _Sample) -> bool:
                 if s.skin > threshold:
@@ -410,8 +439,11 @@ class UR10:
                 return False
 
             travel = start.pose[2] - bottom
-            contact = self._supervise(until=reached, timeout=travel / self.limits.approach_speed + 2.0,
-                                      what="the approach")
+            contact = self._supervise(
+                until=reached,
+                timeout=travel / self.limits.approach_speed + 2.0,
+                what="the approach",
+            )
             self._command("speedStop", self.limits.max_acceleration)
             self._mode = None
             self._contact_z = float(contact.pose[2])
@@ -435,8 +467,14 @@ class UR10:
             self._supervise(duration=hold_time, what="the hold")
             self.action_window_ns = (start, self.now_ns())
 
-    def slide(self, normal_force: float, speed: float, duration: float,
-              direction: tuple[float, float], total_force: ForceReading) -> None:
+    def slide(
+        self,
+        normal_force: float,
+        speed: float,
+        duration: float,
+        direction: tuple[float, float],
+        total_force: ForceReading,
+    ) -> None:
         self._require_contact("slide")
         _positive(normal_force, "normal_force")
         _positive(speed, "speed")
@@ -446,7 +484,9 @@ class UR10:
                 f"slide force {normal_force} N exceeds max_normal_force {self.limits.max_normal_force} N"
             )
         if speed > self.limits.max_speed:
-            raise SafetyLimitError(f"slide speed {speed} m/s exceeds max_speed {self.limits.max_speed} m/s")
+            raise SafetyLimitError(
+                f"slide speed {speed} m/s exceeds max_speed {self.limits.max_speed} m/s"
+            )
         dx, dy = float(direction[0]), float(direction[1])
         norm = math.hypot(dx, dy)
         if not norm > 1e-9:
@@ -456,8 +496,10 @@ class UR10:
         # Ramp up, `duration` at full speed, ramp down: all of it must stay in the box.
         ramp = speed / self.limits.max_acceleration
         reach = speed * duration + speed * ramp
-        self._check_box(np.array([pose[0] + dx * reach, pose[1] + dy * reach, pose[2]]),
-                        f"a {reach * 1000:.1f} mm slide")
+        self._check_box(
+            np.array([pose[0] + dx * reach, pose[1] + dy * reach, pose[2]]),
+            f"a {reach * 1000:.1f} mm slide",
+        )
         with self._motion("slide"):
             self._skin = total_force
             self._reset_supervision()
@@ -465,7 +507,11 @@ class UR10:
             # Compliant along base z only, pushing down with the target force (the wrench is
             # what the arm applies to the object); z speed capped at twice the approach speed.
             self._command(
-                "forceMode", [0.0] * 6, [0, 0, 1, 0, 0, 0], [0.0, 0.0, -normal_force, 0.0, 0.0, 0.0], 2,
+                "forceMode",
+                [0.0] * 6,
+                [0, 0, 1, 0, 0, 0],
+                [0.0, 0.0, -normal_force, 0.0, 0.0, 0.0],
+                2,
                 [0.005, 0.005, 2.0 * self.limits.approach_speed, 0.1, 0.1, 0.1],
             )
             settled = [0]
@@ -476,10 +522,18 @@ class UR10:
                 settled[0] = settled[0] + 1 if ok else 0
                 return settled[0] >= self.settle_samples
 
-            self._supervise(until=established, timeout=self.establish_timeout,
-                            what=f"establishing {normal_force} N")
+            self._supervise(
+                until=established,
+                timeout=self.establish_timeout,
+                what=f"establishing {normal_force} N",
+            )
             self._mode = "force+speed"
-            self._command("speedL", [dx * speed, dy * speed, 0.0, 0.0, 0.0, 0.0], self.limits.max_acceleration, 0.0)
+            self._command(
+                "speedL",
+                [dx * speed, dy * speed, 0.0, 0.0, 0.0, 0.0],
+                self.limits.max_acceleration,
+                0.0,
+            )
             # The controller takes the command at its next cycle and ramps at max_acceleration:
             # full speed one period + `ramp` s after sending (the planned window; the trace in
             # recording_metadata shows the measured speed).
@@ -553,14 +607,20 @@ class UR10:
         self.connect()
 
     # ------------------------------------------------------------------ recording metadata
-    def trace(self, start_ns: int | None = None, stop_ns: int | None = None) -> dict[str, np.ndarray]:
+    def trace(
+        self, start_ns: int | None = None, stop_ns: int | None = None
+    ) -> dict[str, np.ndarray]:
         """Robot samples seen by the supervision loop in ``[start_ns, stop_ns)`` (host clock).
 
         ``robot_timestamp`` is the controller's own clock (s since boot), so the skin's
         host timestamps and the robot's can be related sample by sample.
         """
-        samples = [s for s in list(self._trace)
-                   if (start_ns is None or s.host_ns >= start_ns) and (stop_ns is None or s.host_ns < stop_ns)]
+        samples = [
+            s
+            for s in list(self._trace)
+            if (start_ns is None or s.host_ns >= start_ns)
+            and (stop_ns is None or s.host_ns < stop_ns)
+        ]
         return {
             "host_t_ns": np.array([s.host_ns for s in samples], dtype=np.int64),
             "robot_timestamp": np.array([s.timestamp for s in samples], dtype=np.float64),
@@ -576,7 +636,9 @@ class UR10:
         tr = self.trace(start_ns, stop_ns)
         offset = None
         if len(tr["host_t_ns"]):
-            offset = int(np.median(tr["host_t_ns"] - np.round(tr["robot_timestamp"] * 1e9).astype(np.int64)))
+            offset = int(
+                np.median(tr["host_t_ns"] - np.round(tr["robot_timestamp"] * 1e9).astype(np.int64))
+            )
         return {
             "robot": "UR10",
             "robot_host": self.host,
@@ -600,7 +662,9 @@ class UR10:
         if self._control is None:
             raise RobotConnectionError(f"not connected to the UR controller at {self.host}")
         if self._lost is not None:
-            raise RobotConnectionError(f"the link to {self.host} was lost ({self._lost}); call recover()")
+            raise RobotConnectionError(
+                f"the link to {self.host} was lost ({self._lost}); call recover()"
+            )
 
     def _link_ok(self) -> bool:
         """Whether it is safe to send a command: one sent on a dead link blocks for minutes."""
@@ -665,9 +729,13 @@ class UR10:
             if waited > 0.2:
                 try:
                     if self._receive.isProtectiveStopped() or self._receive.isEmergencyStopped():
-                        raise ProtectiveStopError(f"the controller is in a protective/emergency stop ({name})")
+                        raise ProtectiveStopError(
+                            f"the controller is in a protective/emergency stop ({name})"
+                        )
                     if self._receive.getRuntimeState() != _PLAYING:
-                        raise ProgramStoppedError(f"the control program is not running on the controller ({name})")
+                        raise ProgramStoppedError(
+                            f"the control program is not running on the controller ({name})"
+                        )
                 except RuntimeError as exc:
                     raise self._lose(str(exc)) from None
             if waited > _COMMAND_TIMEOUT:
@@ -699,17 +767,24 @@ class UR10:
                 ts = float(self._receive.getTimestamp())
                 first_ts = ts if first_ts is None else first_ts
                 if self._receive.isProtectiveStopped() or self._receive.isEmergencyStopped():
-                    raise ProtectiveStopError(f"the controller is in a protective/emergency stop ({name} refused)")
+                    raise ProtectiveStopError(
+                        f"the controller is in a protective/emergency stop ({name} refused)"
+                    )
                 # A protective stop pauses the program too: only call it a stopped program if
                 # no protective stop shows up within the grace period.
-                stopped = self._receive.getRuntimeState() != _PLAYING or not self._control.isProgramRunning()
+                stopped = (
+                    self._receive.getRuntimeState() != _PLAYING
+                    or not self._control.isProgramRunning()
+                )
             except RuntimeError as exc:
                 raise self._lose(str(exc)) from None
             if time.monotonic() > deadline:
                 if ts == first_ts:
                     raise self._lose(f"no fresh robot data after {name} was refused")
                 if stopped:
-                    raise ProgramStoppedError(f"the control program is not running on the controller ({name} refused)")
+                    raise ProgramStoppedError(
+                        f"the control program is not running on the controller ({name} refused)"
+                    )
                 raise RobotError(f"the controller refused {name}")
             time.sleep(0.002)
 
@@ -735,11 +810,17 @@ class UR10:
             if fresh:
                 self._last_ts, self._last_fresh = ts, now
             elif now - self._last_fresh > self.limits.watchdog_timeout:
-                raise self._lose(f"no fresh robot data for {now - self._last_fresh:.2f} s (watchdog)")
+                raise self._lose(
+                    f"no fresh robot data for {now - self._last_fresh:.2f} s (watchdog)"
+                )
             if self._receive.isProtectiveStopped() or self._receive.isEmergencyStopped():
-                raise ProtectiveStopError("the controller entered a protective stop; the arm is stopped")
+                raise ProtectiveStopError(
+                    "the controller entered a protective stop; the arm is stopped"
+                )
             if self._receive.getRuntimeState() != _PLAYING:
-                raise ProgramStoppedError("the control program on the controller stopped; the arm is stopped")
+                raise ProgramStoppedError(
+                    "the control program on the controller stopped; the arm is stopped"
+                )
             pose = np.asarray(self._receive.getActualTCPPose(), dtype=float)
             speed = np.asarray(self._receive.getActualTCPSpeed(), dtype=float)
             force = np.asarray(self._receive.getActualTCPForce(), dtype=float)
@@ -752,7 +833,9 @@ class UR10:
         lim = self.limits
         v = float(np.linalg.norm(speed[:3]))
         if v > lim.max_speed * self.measured_tolerance:
-            raise SafetyLimitError(f"measured TCP speed {v:.3f} m/s exceeds the limit {lim.max_speed} m/s")
+            raise SafetyLimitError(
+                f"measured TCP speed {v:.3f} m/s exceeds the limit {lim.max_speed} m/s"
+            )
         if fresh:
             self._speeds.append((ts, speed[:3].copy()))
             # Acceleration over at least ACCEL_WINDOW s of controller time: over a single
@@ -778,7 +861,9 @@ class UR10:
                     f"TCP wrench along the normal {fn:.2f} N exceeds max_normal_force {lim.max_normal_force} N"
                 )
         if skin > lim.max_normal_force:
-            raise SafetyLimitError(f"skin normal force {skin:.3f} N exceeds max_normal_force {lim.max_normal_force} N")
+            raise SafetyLimitError(
+                f"skin normal force {skin:.3f} N exceeds max_normal_force {lim.max_normal_force} N"
+            )
         if self._active is not None and not self._active.contains(tuple(pose[:3])):
             raise SafetyLimitError(
                 f"TCP at ({pose[0]:.4f}, {pose[1]:.4f}, {pose[2]:.4f}) left the workspace box of "
@@ -803,8 +888,14 @@ class UR10:
                 )
         return value
 
-    def _supervise(self, *, until: Callable[[_Sample], bool] | None = None, duration: float | None = None,
-                   timeout: float | None = None, what: str) -> _Sample:
+    def _supervise(
+        self,
+        *,
+        until: Callable[[_Sample], bool] | None = None,
+        duration: float | None = None,
+        timeout: float | None = None,
+        what: str,
+    ) -> _Sample:
         """Supervision cycles at the RTDE rate until ``until(sample)`` or ``duration`` s."""
         period = 1.0 / min(self.frequency, self.max_supervision_hz)
         start = time.monotonic()
@@ -846,7 +937,11 @@ class UR10:
                 # Through the worker, so it never interleaves with a command; never waits
                 # long: a stuck worker is the supervision's business.
                 worker.submit(self._control.kickWatchdog).result(timeout=interval)
-            except (RuntimeError, AttributeError, FutureTimeout):  # AttributeError: closed meanwhile
+            except (
+                RuntimeError,
+                AttributeError,
+                FutureTimeout,
+            ):  # AttributeError: closed meanwhile
                 pass
 
     def _move_to(self, target: np.ndarray, speed: float) -> None:
@@ -856,7 +951,9 @@ class UR10:
         start = self._sample()
         before = self._async_status()
         self._mode = "move"
-        self._command("moveL", [float(v) for v in target], speed, self.limits.max_acceleration, True)
+        self._command(
+            "moveL", [float(v) for v in target], speed, self.limits.max_acceleration, True
+        )
         distance = float(np.linalg.norm(target[:3] - start.pose[:3]))
         timeout = 2.0 * (distance / speed + speed / self.limits.max_acceleration) + 1.0
 
@@ -868,7 +965,9 @@ class UR10:
         done = self._supervise(until=finished, timeout=timeout, what="the moveL")
         # The receive stream may trail the control stream by a package: read on until it
         # shows a cycle after the one that reported the move done, so the pose is final.
-        end = self._supervise(until=lambda s: s.timestamp > done.timestamp, timeout=1.0, what="the moveL")
+        end = self._supervise(
+            until=lambda s: s.timestamp > done.timestamp, timeout=1.0, what="the moveL"
+        )
         self._mode = None
         miss = float(np.linalg.norm(end.pose[:3] - target[:3]))
         if miss > 2e-4:
@@ -905,7 +1004,9 @@ class UR10:
     def _check_box(self, point: np.ndarray, what: str) -> None:
         placement = self._active
         if placement is not None and not placement.contains(tuple(point)):
-            raise SafetyLimitError(f"{what} would leave the workspace box of {placement.object_name!r}")
+            raise SafetyLimitError(
+                f"{what} would leave the workspace box of {placement.object_name!r}"
+            )
         self._check_global(point, what)
 
     def _check_global(self, point: Sequence[float], what: str) -> None:
@@ -956,7 +1057,9 @@ class _MotionGuard:
         self.robot._require_link()
         self.robot._in_motion = True
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: object) -> None:
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: object
+    ) -> None:
         try:
             if exc is not None:
                 self.robot._fail(exc)

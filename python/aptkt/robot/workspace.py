@@ -82,7 +82,9 @@ def parse_workspace(doc: Mapping[str, Any], source: str = "<memory>") -> Workspa
     """Validate an already parsed document (same layout as the TOML file)."""
     unknown = set(doc) - {"robot", "object"}
     if unknown:
-        raise ConfigError(f"{source}: unknown top-level key(s) {sorted(unknown)} (expected [robot] and [[object]])")
+        raise ConfigError(
+            f"{source}: unknown top-level key(s) {sorted(unknown)} (expected [robot] and [[object]])"
+        )
     robot = doc.get("robot", {})
     if not isinstance(robot, Mapping):
         raise ConfigError(f"{source}: [robot] must be a table")
@@ -134,12 +136,20 @@ def parse_workspace(doc: Mapping[str, Any], source: str = "<memory>") -> Workspa
             direction = (dx / norm, dy / norm)
         placement = Placement(name, x, y, z, lo, hi, direction)
         if not placement.contains((x, y, z)):
-            raise ConfigError(f"{where}: the surface point ({x}, {y}, {z}) lies outside its workspace box")
+            raise ConfigError(
+                f"{where}: the surface point ({x}, {y}, {z}) lies outside its workspace box"
+            )
         if workspace is not None and not (_inside(lo, workspace) and _inside(hi, workspace)):
             raise ConfigError(f"{where}: its workspace box is not inside the robot workspace box")
         placements[name] = placement
-    return WorkspaceConfig(placements=placements, limits=limits, host=host,
-                           tool_orientation=orientation, workspace=workspace, source=source)
+    return WorkspaceConfig(
+        placements=placements,
+        limits=limits,
+        host=host,
+        tool_orientation=orientation,
+        workspace=workspace,
+        source=source,
+    )
 
 
 def _inside(point: tuple[float, ...], box: tuple[tuple[float, ...], tuple[float, ...]]) -> bool:
@@ -158,14 +168,18 @@ def _vector(value: Any, n: int, where: str) -> tuple[float, ...]:
     return tuple(_number(v, f"{where}[{i}]") for i, v in enumerate(value))
 
 
-def _box(table: Mapping[str, Any], where: str) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+def _box(
+    table: Mapping[str, Any], where: str
+) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
     if "workspace_min" not in table or "workspace_max" not in table:
         raise ConfigError(f"{where}: workspace_min and workspace_max go together")
     lo = _vector(table["workspace_min"], 3, f"{where}: workspace_min")
     hi = _vector(table["workspace_max"], 3, f"{where}: workspace_max")
     for axis, a, b in zip("xyz", lo, hi):
         if not a < b:
-            raise ConfigError(f"{where}: workspace_min.{axis} ({a}) must be below workspace_max.{axis} ({b})")
+            raise ConfigError(
+                f"{where}: workspace_min.{axis} ({a}) must be below workspace_max.{axis} ({b})"
+            )
     return lo, hi  # type: ignore[return-value]
 
 
@@ -175,7 +189,9 @@ def _limits(table: Any, source: str) -> SafetyLimits:
     known = {f.name for f in fields(SafetyLimits)}
     unknown = set(table) - known
     if unknown:
-        raise ConfigError(f"{source}: robot.limits: unknown key(s) {sorted(unknown)} (known: {sorted(known)})")
+        raise ConfigError(
+            f"{source}: robot.limits: unknown key(s) {sorted(unknown)} (known: {sorted(known)})"
+        )
     values = {k: _number(v, f"{source}: robot.limits.{k}") for k, v in table.items()}
     try:
         return SafetyLimits(**values)

@@ -45,13 +45,20 @@ class CollectionPlan(TrialGrid):
             raise ConfigError("a collection needs at least one object and one action")
         if self.repetitions < 1 or self.first_trial < 0:
             raise ConfigError("-n must be >= 1 and --first-trial >= 0")
-        for kind, names in (("object", list(self.objects)), ("action", [a.name for a in self.actions])):
+        for kind, names in (
+            ("object", list(self.objects)),
+            ("action", [a.name for a in self.actions]),
+        ):
             if len(set(names)) != len(names):
                 raise ConfigError(f"each {kind} may appear once, got {names}")
 
     def describe(self) -> dict[str, Any]:
-        return {"objects": list(self.objects), "actions": [a.to_dict() for a in self.actions],
-                "repetitions": self.repetitions, "first_trial": self.first_trial}
+        return {
+            "objects": list(self.objects),
+            "actions": [a.to_dict() for a in self.actions],
+            "repetitions": self.repetitions,
+            "first_trial": self.first_trial,
+        }
 
 
 class CollectionAborted(AptktError):
@@ -62,8 +69,17 @@ class CollectionAborted(AptktError):
     ``completed``: recordings in the data set now.
     """
 
-    def __init__(self, message: str, *, object: str, action: str, trial: int, cause: BaseException,  # noqa: A002
-                 saved: Path | None, completed: int):
+    def __init__(
+        self,
+        message: str,
+        *,
+        object: str,
+        action: str,
+        trial: int,
+        cause: BaseException,  # noqa: A002
+        saved: Path | None,
+        completed: int,
+    ):
         super().__init__(message)
         self.object, self.action, self.trial = object, action, trial
         self.cause, self.saved, self.completed = cause, saved, completed
@@ -99,16 +115,22 @@ def _check_resumable(path: Path, plan: CollectionPlan, session: Mapping[str, Any
         desc = rd.description
     stored = desc.get("session", {})
     if stored.get("robot") and stored.get("robot") != session.get("robot"):
-        raise ConfigError(f"{path} was collected with --robot {stored['robot']}, not {session.get('robot')}: "
-                          "use another output file")
+        raise ConfigError(
+            f"{path} was collected with --robot {stored['robot']}, not {session.get('robot')}: "
+            "use another output file"
+        )
     if session.get("robot") == "sim" and stored.get("seed") not in (None, session.get("seed")):
-        raise ConfigError(f"{path} was simulated with --seed {stored['seed']}, not {session.get('seed')}")
+        raise ConfigError(
+            f"{path} was simulated with --seed {stored['seed']}, not {session.get('seed')}"
+        )
     before = {a["name"]: a for a in desc.get("actions", [])}
     for action in plan.actions:
         old = before.get(action.name)
         if old is not None and old != action.to_dict():
-            raise ConfigError(f"{path}: action {action.name!r} was recorded with other parameters "
-                              f"({json.dumps(old)}); resume with the same definition or rename it")
+            raise ConfigError(
+                f"{path}: action {action.name!r} was recorded with other parameters "
+                f"({json.dumps(old)}); resume with the same definition or rename it"
+            )
 
 
 def collect(
@@ -142,7 +164,9 @@ def collect(
             writer = DatasetWriter(path, "a")
     else:
         if path.exists() and not overwrite:
-            raise DatasetError(f"{path} exists: use --resume to complete it or --overwrite to replace it")
+            raise DatasetError(
+                f"{path} exists: use --resume to complete it or --overwrite to replace it"
+            )
         writer = DatasetWriter(path, "w", description=description, overwrite=overwrite)
     done = writer.keys()
     todo = [(o, a, t) for o, a, t in plan.trials() if (o, a.name, t) not in done]
@@ -150,7 +174,13 @@ def collect(
     if progress is True:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(plan), initial=len(plan) - len(todo), unit="trial", desc=path.name, file=sys.stderr)
+        bar = tqdm(
+            total=len(plan),
+            initial=len(plan) - len(todo),
+            unit="trial",
+            desc=path.name,
+            file=sys.stderr,
+        )
     collected = 0
     current_round: int | None = None
     try:
@@ -175,21 +205,34 @@ def collect(
             if bar is not None:
                 bar.update(1)
             elif callable(progress):
-                progress(f"[{len(writer)}/{len(plan)}] {obj} {action.name} trial {trial}: "
-                         f"{len(rec.samples)} samples, {rec.duration:.2f} s")
+                progress(
+                    f"[{len(writer)}/{len(plan)}] {obj} {action.name} trial {trial}: "
+                    f"{len(rec.samples)} samples, {rec.duration:.2f} s"
+                )
     finally:
         if bar is not None:
             bar.close()
         writer.close()
     with DatasetReader(path) as rd:
         info = rd.info()
-    info.update(collected=collected, skipped=len(plan) - len(todo), planned=len(plan),
-                wall_seconds=time.perf_counter() - t0, repaired=repaired)
+    info.update(
+        collected=collected,
+        skipped=len(plan) - len(todo),
+        planned=len(plan),
+        wall_seconds=time.perf_counter() - t0,
+        repaired=repaired,
+    )
     return info
 
 
-def _aborted(path: Path, writer: DatasetWriter, obj: str, action: ExploratoryAction, trial: int,
-             exc: BaseException) -> BaseException:
+def _aborted(
+    path: Path,
+    writer: DatasetWriter,
+    obj: str,
+    action: ExploratoryAction,
+    trial: int,
+    exc: BaseException,
+) -> BaseException:
     """Save what the failed trial recorded; the error to raise in its place."""
     rec: Recording | None = getattr(exc, "recording", None)
     saved: Path | None = None
@@ -203,15 +246,26 @@ def _aborted(path: Path, writer: DatasetWriter, obj: str, action: ExploratoryAct
     elif rec is not None:
         try:
             saved = save_aborted(path, rec, exc)
-            what = (f"its partial recording ({len(rec.samples)} samples, {rec.duration:.2f} s) is in {saved}"
-                    f" (flagged 'aborted')")
+            what = (
+                f"its partial recording ({len(rec.samples)} samples, {rec.duration:.2f} s) is in {saved}"
+                f" (flagged 'aborted')"
+            )
         except (AptktError, OSError, ValueError) as save_exc:
             what = f"its partial recording could not be saved: {save_exc}"
     if isinstance(exc, KeyboardInterrupt):
         exc.add_note(f"interrupted at {obj} / {action.name} / trial {trial}; {what}")
         return exc
-    message = (f"{obj} / {action.name} / trial {trial}: {type(exc).__name__}: {exc}. The robot was stopped; "
-               f"{what}. {len(writer)} complete recordings are in {path}; run the same command with --resume "
-               "to continue (after clearing the fault).")
-    return CollectionAborted(message, object=obj, action=action.name, trial=trial, cause=exc, saved=saved,
-                             completed=len(writer))
+    message = (
+        f"{obj} / {action.name} / trial {trial}: {type(exc).__name__}: {exc}. The robot was stopped; "
+        f"{what}. {len(writer)} complete recordings are in {path}; run the same command with --resume "
+        "to continue (after clearing the fault)."
+    )
+    return CollectionAborted(
+        message,
+        object=obj,
+        action=action.name,
+        trial=trial,
+        cause=exc,
+        saved=saved,
+        completed=len(writer),
+    )

@@ -67,7 +67,9 @@ def paper_plan(seed: int = 0, repetitions: int = 20) -> GenerationPlan:
     """The paper's test set (§5.2): each of the 7 actions 20 times on each of the 15 objects."""
     from aptkt.sim.objects import default_library
 
-    return GenerationPlan(tuple(default_library()), tuple(PAPER_ACTIONS.values()), repetitions, seed)
+    return GenerationPlan(
+        tuple(default_library()), tuple(PAPER_ACTIONS.values()), repetitions, seed
+    )
 
 
 # --------------------------------------------------------------------------- worker side
@@ -90,8 +92,15 @@ def _simulate(job: tuple[str, dict[str, Any], int]) -> Recording:
 
 
 # --------------------------------------------------------------------------- driver
-def generate(path: str | Path, plan: GenerationPlan, *, jobs: int = 1, resume: bool = False,
-             overwrite: bool = False, progress: bool | Callable[[int, int], None] = True) -> dict[str, Any]:
+def generate(
+    path: str | Path,
+    plan: GenerationPlan,
+    *,
+    jobs: int = 1,
+    resume: bool = False,
+    overwrite: bool = False,
+    progress: bool | Callable[[int, int], None] = True,
+) -> dict[str, Any]:
     """Simulate ``plan`` into ``path``. With ``resume`` an existing file is completed (trials
     already stored are skipped; a file whose writer died is repaired first). Returns a summary
     with the wall time and the file size."""
@@ -117,13 +126,21 @@ def generate(path: str | Path, plan: GenerationPlan, *, jobs: int = 1, resume: b
     if progress is True:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(plan), initial=len(plan) - len(todo), unit="trial", desc=path.name, smoothing=0.05)
+        bar = tqdm(
+            total=len(plan),
+            initial=len(plan) - len(todo),
+            unit="trial",
+            desc=path.name,
+            smoothing=0.05,
+        )
     try:
         for rec in _run(plan, todo, jobs):
             writer.append(rec)
             if bar is not None:
                 bar.update(1)
-                bar.set_postfix_str(f"{rec.metadata['object']} {rec.metadata['action']['name']}", refresh=False)
+                bar.set_postfix_str(
+                    f"{rec.metadata['object']} {rec.metadata['action']['name']}", refresh=False
+                )
             elif callable(progress):
                 progress(len(writer), len(plan))
     finally:
@@ -137,7 +154,9 @@ def generate(path: str | Path, plan: GenerationPlan, *, jobs: int = 1, resume: b
     return info
 
 
-def _run(plan: GenerationPlan, todo: Sequence[tuple[str, ExploratoryAction, int]], jobs: int) -> Iterator[Recording]:
+def _run(
+    plan: GenerationPlan, todo: Sequence[tuple[str, ExploratoryAction, int]], jobs: int
+) -> Iterator[Recording]:
     args = (plan.seed, plan.object_files, plan.world_options)
     work = [(o, a.to_dict(), t) for o, a, t in todo]
     if jobs <= 1:
@@ -146,16 +165,24 @@ def _run(plan: GenerationPlan, todo: Sequence[tuple[str, ExploratoryAction, int]
             yield _simulate(job)
         return
     # Results come back in plan order, whichever process computed them.
-    with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=_SPAWN, initializer=_init_world, initargs=args) as pool:
+    with cf.ProcessPoolExecutor(
+        max_workers=jobs, mp_context=_SPAWN, initializer=_init_world, initargs=args
+    ) as pool:
         yield from pool.map(_simulate, work, chunksize=4)
 
 
 def describe_summary(info: dict[str, Any]) -> str:
     """A short human-readable summary of :func:`generate`'s result."""
     mb = info["file_bytes"] / 1e6
-    return (f"{info['recordings']} recordings ({info['samples']} samples, {info['recorded_seconds']:.0f} s recorded) "
-            f"in {info['wall_seconds']:.1f} s; {mb:.1f} MB ({info['bytes_per_sample']:.2f} bytes/sample)"
-            + (f"; repaired a crashed file first ({info['repaired']} recordings kept)" if info.get("repaired") else ""))
+    return (
+        f"{info['recordings']} recordings ({info['samples']} samples, {info['recorded_seconds']:.0f} s recorded) "
+        f"in {info['wall_seconds']:.1f} s; {mb:.1f} MB ({info['bytes_per_sample']:.2f} bytes/sample)"
+        + (
+            f"; repaired a crashed file first ({info['repaired']} recordings kept)"
+            if info.get("repaired")
+            else ""
+        )
+    )
 
 
 def dumps(info: dict[str, Any]) -> str:

@@ -39,8 +39,10 @@ from aptkt.runtime.collection import save_aborted
 
 __all__ = ["LiveLearningAborted", "learn_live", "describe_step", "NO_TEST_NOTE"]
 
-NO_TEST_NOTE = ("no test set: accuracy is not reported (a live run has no held-out observations; "
-                "pass a data set of the same objects as test data to measure it)")
+NO_TEST_NOTE = (
+    "no test set: accuracy is not reported (a live run has no held-out observations; "
+    "pass a data set of the same objects as test data to measure it)"
+)
 
 
 class LiveLearningAborted(AptktError):
@@ -64,10 +66,15 @@ def describe_step(rec: StepRecord, config: LearnerConfig, n_pairs: int) -> str:
     if rec.action is None:
         head = f"step   0: initial round done ({rec.n_observations} observations, every action on every object)"
     else:
-        why = ("random pick, eps-exploration" if rec.explored
-               else f"highest uncertainty of {n_pairs} pairs")
-        head = (f"step {rec.step:3d}/{config.budget}: {rec.action} on {rec.object}, uncertainty "
-                f"{rec.uncertainty:.3f} ({why})")
+        why = (
+            "random pick, eps-exploration"
+            if rec.explored
+            else f"highest uncertainty of {n_pairs} pairs"
+        )
+        head = (
+            f"step {rec.step:3d}/{config.budget}: {rec.action} on {rec.object}, uncertainty "
+            f"{rec.uncertainty:.3f} ({why})"
+        )
     parts = [head]
     for action, decisions in rec.transfer.items():
         if config.transfer == "none":
@@ -116,8 +123,11 @@ def learn_live(
     summary: dict[str, Any] = {
         "software_version": __version__,
         "session": session.describe(),
-        "prior": {"objects": prior.objects if prior else [], "actions": list(prior.actions) if prior else [],
-                  **dict((extra or {}).get("prior", {}))},
+        "prior": {
+            "objects": prior.objects if prior else [],
+            "actions": list(prior.actions) if prior else [],
+            **dict((extra or {}).get("prior", {})),
+        },
         "config": config.to_dict(),
         "actions": {name: a.to_dict() for name, a in actions.items()},
         "new_objects": list(new_objects),
@@ -129,8 +139,15 @@ def learn_live(
     if test is None:
         summary["note"] = NO_TEST_NOTE
 
-    writer = DatasetWriter(record, "a", description={"collector": "aptkt learn", "session": summary["session"],
-                                                      "actions": list(summary["actions"].values())})
+    writer = DatasetWriter(
+        record,
+        "a",
+        description={
+            "collector": "aptkt learn",
+            "session": summary["session"],
+            "actions": list(summary["actions"].values()),
+        },
+    )
     failure: dict[str, Any] = {}
 
     def explore(obj: str, action: ExploratoryAction, trial: int) -> Any:
@@ -140,7 +157,11 @@ def learn_live(
         except (AptktError, KeyboardInterrupt) as exc:
             failure.update(object=obj, action=action.name, trial=trial, error=exc)
             rec = getattr(exc, "recording", None)
-            if rec is not None and getattr(exc, "recording_complete", False) and not rec.silent_cells:
+            if (
+                rec is not None
+                and getattr(exc, "recording_complete", False)
+                and not rec.silent_cells
+            ):
                 rec.metadata["fault_after_recording"] = f"{type(exc).__name__}: {exc}"
                 writer.append(rec)
                 failure["saved"] = record
@@ -152,7 +173,9 @@ def learn_live(
         steps.append(rec)
         report(describe_step(rec, config, n_pairs))
 
-    env = RecordingEnvironment(explore, actions, first_trial=first_trial, on_recording=writer.append)
+    env = RecordingEnvironment(
+        explore, actions, first_trial=first_trial, on_recording=writer.append
+    )
     learner = APTKT(config, prior)
     if test is None:
         report(f"note: {NO_TEST_NOTE}")
@@ -165,30 +188,53 @@ def learn_live(
             raise  # not a fault of the robot or skin (e.g. a learning error): nothing to add
         status = f"aborted: {type(exc).__name__}: {exc}"
         summary["stopped_early"] = True
-        summary["fault"] = {"object": failure["object"], "action": failure["action"], "trial": failure["trial"],
-                            "error": f"{type(exc).__name__}: {exc}",
-                            "recording_saved_to": str(failure["saved"]) if failure.get("saved") else None}
+        summary["fault"] = {
+            "object": failure["object"],
+            "action": failure["action"],
+            "trial": failure["trial"],
+            "error": f"{type(exc).__name__}: {exc}",
+            "recording_saved_to": str(failure["saved"]) if failure.get("saved") else None,
+        }
         _finish(summary, steps, learner, config, output, status, t0, report)
         if isinstance(exc, KeyboardInterrupt):
             raise
         saved = failure.get("saved")
-        where = f"the failed action's recording is in {saved}" if saved else "nothing was being recorded"
+        where = (
+            f"the failed action's recording is in {saved}"
+            if saved
+            else "nothing was being recorded"
+        )
         raise LiveLearningAborted(
             f"{failure['object']} / {failure['action']} / trial {failure['trial']}: {type(exc).__name__}: {exc}. "
             f"The robot was stopped; {where}; every completed recording is in {record}; the run so far "
             f"({len(steps)} steps) is in {output}.",
-            cause=exc, saved=saved, output=output) from exc
+            cause=exc,
+            saved=saved,
+            output=output,
+        ) from exc
     finally:
         writer.close()
     _finish(summary, steps, learner, config, output, status, t0, report)
     return summary
 
 
-def _finish(summary: dict[str, Any], steps: list[StepRecord], learner: APTKT, config: LearnerConfig,
-            output: Path, status: str, t0: float, report: Callable[[str], None]) -> None:
+def _finish(
+    summary: dict[str, Any],
+    steps: list[StepRecord],
+    learner: APTKT,
+    config: LearnerConfig,
+    output: Path,
+    status: str,
+    t0: float,
+    report: Callable[[str], None],
+) -> None:
     summary["status"] = status
-    summary["steps"] = [{**s.as_row(), "accuracy": s.accuracy, "transfer": s.transfer} for s in steps]
-    summary["observations"] = {a: {o: l.count(o) for o in l.new_objects} for a, l in learner.learners.items()}
+    summary["steps"] = [
+        {**s.as_row(), "accuracy": s.accuracy, "transfer": s.transfer} for s in steps
+    ]
+    summary["observations"] = {
+        a: {o: l.count(o) for o in l.new_objects} for a, l in learner.learners.items()
+    }
     learned = output / "learned_prior.npz"
     table = {a: l.observations for a, l in learner.learners.items() if l.observations is not None}
     summary["learned_prior"] = None
@@ -202,9 +248,15 @@ def _finish(summary: dict[str, Any], steps: list[StepRecord], learner: APTKT, co
     (output / "run.json").write_text(json.dumps(_finite(summary), indent=2, default=_json))
     _write_steps(output / "steps.csv", steps)
     _write_transfer(output / "transfer.csv", steps)
-    report(f"{status}: {len(steps)} steps in {summary['seconds']:.1f} s; run written to {output / 'run.json'}, "
-           f"{output / 'steps.csv'}, {output / 'transfer.csv'}"
-           + (f"; the new objects' observations and models in {learned}" if summary.get("learned_prior") else ""))
+    report(
+        f"{status}: {len(steps)} steps in {summary['seconds']:.1f} s; run written to {output / 'run.json'}, "
+        f"{output / 'steps.csv'}, {output / 'transfer.csv'}"
+        + (
+            f"; the new objects' observations and models in {learned}"
+            if summary.get("learned_prior")
+            else ""
+        )
+    )
 
 
 def _finite(obj: Any) -> Any:
@@ -251,5 +303,13 @@ def _write_transfer(path: Path, steps: Sequence[StepRecord]) -> None:
         for s in steps:
             for action, decisions in s.transfer.items():
                 for obj, d in decisions.items():
-                    w.writerow([s.step, action, obj, d.get("source") or "", d.get("lambda"),
-                                json.dumps(d.get("mean_posterior", {}), sort_keys=True)])
+                    w.writerow(
+                        [
+                            s.step,
+                            action,
+                            obj,
+                            d.get("source") or "",
+                            d.get("lambda"),
+                            json.dumps(d.get("mean_posterior", {}), sort_keys=True),
+                        ]
+                    )

@@ -54,8 +54,12 @@ class SimSession:
 
     name = "sim"
 
-    def __init__(self, seed: int = 0, settings: ExplorationSettings | None = None,
-                 object_files: Sequence[str] = ()):
+    def __init__(
+        self,
+        seed: int = 0,
+        settings: ExplorationSettings | None = None,
+        object_files: Sequence[str] = (),
+    ):
         from aptkt.sim.objects import default_library, load_library
         from aptkt.sim.world import SimWorld
 
@@ -76,15 +80,22 @@ class SimSession:
     def check_objects(self, names: Iterable[str]) -> None:
         unknown = [n for n in names if n not in self.world.objects]
         if unknown:
-            raise ConfigError(f"--objects: the simulated world has no object(s) {', '.join(unknown)}; "
-                              f"known: {', '.join(self.world.objects)}")
+            raise ConfigError(
+                f"--objects: the simulated world has no object(s) {', '.join(unknown)}; "
+                f"known: {', '.join(self.world.objects)}"
+            )
 
     def explore(self, obj: str, action: ExploratoryAction, trial: int) -> Recording:
         return _require_complete(self.world.explore(obj, action, trial))
 
     def describe(self) -> dict[str, Any]:
-        return {"robot": "sim", "world": "aptkt.sim.SimWorld", "seed": self.seed,
-                "object_files": list(self.object_files), "settings": asdict(self.settings)}
+        return {
+            "robot": "sim",
+            "world": "aptkt.sim.SimWorld",
+            "seed": self.seed,
+            "object_files": list(self.object_files),
+            "settings": asdict(self.settings),
+        }
 
 
 class RobotSession:
@@ -97,9 +108,17 @@ class RobotSession:
 
     name = "ur10"
 
-    def __init__(self, workspace: str | Path, make_skin: Callable[[], Any], *, host: str | None = None,
-                 settings: ExplorationSettings | None = None, skin_description: dict[str, Any] | None = None,
-                 cell_timeout: float = 2.0, **robot_options: Any):
+    def __init__(
+        self,
+        workspace: str | Path,
+        make_skin: Callable[[], Any],
+        *,
+        host: str | None = None,
+        settings: ExplorationSettings | None = None,
+        skin_description: dict[str, Any] | None = None,
+        cell_timeout: float = 2.0,
+        **robot_options: Any,
+    ):
         from aptkt.robot.workspace import load_workspace
 
         self.workspace = load_workspace(workspace)
@@ -119,8 +138,10 @@ class RobotSession:
         unknown = [n for n in names if n not in self.workspace.placements]
         if unknown:
             known = ", ".join(self.workspace.placements) or "none"
-            raise ConfigError(f"--objects: {self.workspace_file} places no object(s) {', '.join(unknown)}; "
-                              f"it places: {known}")
+            raise ConfigError(
+                f"--objects: {self.workspace_file} places no object(s) {', '.join(unknown)}; "
+                f"it places: {known}"
+            )
 
     def __enter__(self) -> RobotSession:
         from aptkt.robot import UR10
@@ -150,8 +171,16 @@ class RobotSession:
         if self.robot is None:
             raise RuntimeError("RobotSession.explore outside 'with session:'")
         try:
-            return _require_complete(explore(self.robot, self.skin, self.robot.placement(obj), action,
-                                             trial=trial, settings=self.settings))
+            return _require_complete(
+                explore(
+                    self.robot,
+                    self.skin,
+                    self.robot.placement(obj),
+                    action,
+                    trial=trial,
+                    settings=self.settings,
+                )
+            )
         except KeyboardInterrupt as exc:
             # Ctrl-C mid-action: the backend stopped the arm; keep what the skin recorded.
             if getattr(self.skin, "recording", False):

@@ -48,7 +48,9 @@ class SimEngine:
     """Physics state + trajectory + undelivered frames of one placed object. Not thread-safe on
     its own; drivers serialise access with :attr:`lock`."""
 
-    def __init__(self, physics: ContactPhysics, sink: FrameSink, start_position: np.ndarray, t0_ns: int = 0):
+    def __init__(
+        self, physics: ContactPhysics, sink: FrameSink, start_position: np.ndarray, t0_ns: int = 0
+    ):
         self.physics = physics
         self.sink = sink
         self.state = physics.initial_state(t0_ns, np.asarray(start_position, dtype=np.float64))
@@ -84,13 +86,22 @@ class SimEngine:
         if t_ns <= self.now_ns:
             return ForceTrace.empty()
         want = self.sink.wants_detail() if detail is None else detail
-        self.state, frames, trace = self.physics.step(self.state, self.trajectory, t_ns, detail=want)
+        self.state, frames, trace = self.physics.step(
+            self.state, self.trajectory, t_ns, detail=want
+        )
         self._deliver_until(frames, t_ns)
         self.trajectory.forget_before(t_ns)
         return trace
 
-    def run(self, t_end_ns: int, tick_ns: int, *, stop: Callable[[], bool] | None = None,
-            wrench_limit: float | None = None, window_ns: int | None = None) -> tuple[int, str]:
+    def run(
+        self,
+        t_end_ns: int,
+        tick_ns: int,
+        *,
+        stop: Callable[[], bool] | None = None,
+        wrench_limit: float | None = None,
+        window_ns: int | None = None,
+    ) -> tuple[int, str]:
         """Advance to ``t_end_ns`` checking every ``tick_ns``: ``stop()`` (which reads the skin, so
         frames are delivered tick by tick) and the true wrench against ``wrench_limit``. Returns
         the time reached and why it ended; after a stop the state is exactly that at the
@@ -104,7 +115,9 @@ class SimEngine:
             if ticks.size == 0 or ticks[-1] != w_end:
                 ticks = np.append(ticks, np.int64(w_end))
             detail = stop is not None or self.sink.wants_detail()
-            new, frames, trace = self.physics.step(start, self.trajectory, int(w_end), detail=detail)
+            new, frames, trace = self.physics.step(
+                start, self.trajectory, int(w_end), detail=detail
+            )
             hit: tuple[int, str] | None = None
             if wrench_limit is not None:
                 over = np.flatnonzero(trace.total_at(ticks, start.latest_force) > wrench_limit)
@@ -130,7 +143,9 @@ class SimEngine:
                     except BaseException:
                         # The reader failed (e.g. a silent cell): keep the state consistent with
                         # what was delivered, then let the robot handle the error.
-                        self.state, rest, _ = self.physics.step(start, self.trajectory, int(ticks[i]), detail=detail)
+                        self.state, rest, _ = self.physics.step(
+                            start, self.trajectory, int(ticks[i]), detail=detail
+                        )
                         self._pending = _merge(self._pending, rest.take(rest.t_ns > ticks[i]))
                         raise
                     if stopped:
@@ -152,10 +167,10 @@ class SimEngine:
             return t_hit, hit[1]
         return self.now_ns, StopReason.DONE
 
-
     # ------------------------------------------------------------------ lean force control
-    def lean_begin(self, calibration_gain: np.ndarray, calibration_offset: np.ndarray,
-                   latest_force: np.ndarray) -> None:
+    def lean_begin(
+        self, calibration_gain: np.ndarray, calibration_offset: np.ndarray, latest_force: np.ndarray
+    ) -> None:
         """Start a closed-loop stretch in which the controller reads the skin's total normal
         force every tick but the packets are computed once per window (:meth:`lean_flush`).
 
@@ -236,7 +251,9 @@ def _merge(a: Frames, b: Frames) -> Frames:
         return b
     if not len(b):
         return a
-    merged = Frames(**{k: np.concatenate([getattr(a, k), getattr(b, k)]) for k in Frames.__dataclass_fields__})
+    merged = Frames(
+        **{k: np.concatenate([getattr(a, k), getattr(b, k)]) for k in Frames.__dataclass_fields__}
+    )
     return merged.take(np.argsort(merged.t_ns, kind="stable"))
 
 
@@ -247,8 +264,14 @@ class Driver(Protocol):
 
     def now_ns(self) -> int: ...
 
-    def run(self, t_end_ns: int, tick_ns: int, *, stop: Callable[[], bool] | None = None,
-            wrench_limit: float | None = None) -> tuple[int, str]: ...
+    def run(
+        self,
+        t_end_ns: int,
+        tick_ns: int,
+        *,
+        stop: Callable[[], bool] | None = None,
+        wrench_limit: float | None = None,
+    ) -> tuple[int, str]: ...
 
     def set_motion(self, t_ns: int, p0: np.ndarray, v0: np.ndarray, a: np.ndarray) -> None: ...
 
@@ -267,8 +290,14 @@ class FastDriver:
     def set_motion(self, t_ns: int, p0: np.ndarray, v0: np.ndarray, a: np.ndarray) -> None:
         self.engine.trajectory.append(t_ns, p0, v0, a)
 
-    def run(self, t_end_ns: int, tick_ns: int, *, stop: Callable[[], bool] | None = None,
-            wrench_limit: float | None = None) -> tuple[int, str]:
+    def run(
+        self,
+        t_end_ns: int,
+        tick_ns: int,
+        *,
+        stop: Callable[[], bool] | None = None,
+        wrench_limit: float | None = None,
+    ) -> tuple[int, str]:
         if self.engine._lean is not None:
             if stop is not None:
                 raise RuntimeError("a guarded move inside a force-control loop")
@@ -345,8 +374,14 @@ class RealTimeDriver:
         with self.engine.lock:
             self.engine.trajectory.append(max(t_ns, self.engine.now_ns), p0, v0, a)
 
-    def run(self, t_end_ns: int, tick_ns: int, *, stop: Callable[[], bool] | None = None,
-            wrench_limit: float | None = None) -> tuple[int, str]:
+    def run(
+        self,
+        t_end_ns: int,
+        tick_ns: int,
+        *,
+        stop: Callable[[], bool] | None = None,
+        wrench_limit: float | None = None,
+    ) -> tuple[int, str]:
         next_tick = self.now_ns() + tick_ns
         while True:
             if self._error is not None:

@@ -53,7 +53,11 @@ class Trajectory:
             i = len(self.t0) - 1
             tau = np.maximum((t_ns - self.t0[i]) * 1e-9, 0.0)[:, None]
             p0, v0, a = self.p0[i], self.v0[i], self.a[i]
-            return p0 + v0 * tau + 0.5 * a * tau**2, v0 + a * tau, np.broadcast_to(a, (t_ns.size, 3)).copy()
+            return (
+                p0 + v0 * tau + 0.5 * a * tau**2,
+                v0 + a * tau,
+                np.broadcast_to(a, (t_ns.size, 3)).copy(),
+            )
         starts = np.asarray(self.t0, dtype=np.int64)
         idx = np.clip(np.searchsorted(starts, t_ns, side="right") - 1, 0, len(starts) - 1)
         tau = np.maximum((t_ns - starts[idx]) * 1e-9, 0.0)[:, None]

@@ -66,7 +66,9 @@ class IndentationLaw:
         out = np.interp(delta, self._delta, self._sigma, left=0.0)
         beyond = delta > self._delta[-1]
         if np.any(beyond):  # far beyond the table only the skin is left to compress
-            out = np.where(beyond, self._sigma[-1] + (delta - self._delta[-1]) * self.skin_stiffness, out)
+            out = np.where(
+                beyond, self._sigma[-1] + (delta - self._delta[-1]) * self.skin_stiffness, out
+            )
         return np.where(delta > 0.0, out, 0.0)
 
 
@@ -85,7 +87,9 @@ class RelaxationState:
         return RelaxationState(self.h.copy(), self.last_elastic.copy())
 
 
-def relax(relaxation: Relaxation, elastic: np.ndarray, dt: float, state: RelaxationState) -> tuple[np.ndarray, RelaxationState]:
+def relax(
+    relaxation: Relaxation, elastic: np.ndarray, dt: float, state: RelaxationState
+) -> tuple[np.ndarray, RelaxationState]:
     """Relaxed stress for elastic stresses ``elastic`` (n, ...) sampled every ``dt`` seconds.
 
     Each Prony term obeys ``h[k] = a h[k-1] + w (τ/dt)(1 - a)(σ_e[k] - σ_e[k-1])``,
@@ -143,7 +147,12 @@ class SurfaceShape:
         if self.crown_radius > 0:
             z = z - u[..., 1] ** 2 / (2.0 * self.crown_radius)
         if len(self.waves):
-            arg = 2 * np.pi * (u[..., 0, None] * self.waves[:, 0] + u[..., 1, None] * self.waves[:, 1]) + self.waves[:, 3]
+            arg = (
+                2
+                * np.pi
+                * (u[..., 0, None] * self.waves[:, 0] + u[..., 1, None] * self.waves[:, 1])
+                + self.waves[:, 3]
+            )
             z = z + np.sum(self.waves[:, 2] * np.sin(arg), axis=-1)
         inside = (np.abs(u[..., 0]) <= self.size[0] / 2) & (np.abs(u[..., 1]) <= self.size[1] / 2)
         return np.where(inside, z, -np.inf)

@@ -135,18 +135,24 @@ class ObjectLibrary(Mapping[str, ObjectSpec]):
         by_index: dict[int, str] = {}
         for obj in objects:
             if obj.name in by_name:
-                raise ConfigError(f"{obj.source}: object {obj.name!r} is defined twice "
-                                  f"(also in {by_name[obj.name].source})")
+                raise ConfigError(
+                    f"{obj.source}: object {obj.name!r} is defined twice "
+                    f"(also in {by_name[obj.name].source})"
+                )
             if obj.index in by_index:
-                raise ConfigError(f"{obj.source}: object {obj.name!r}: field 'index': "
-                                  f"{obj.index} is already used by {by_index[obj.index]!r}")
+                raise ConfigError(
+                    f"{obj.source}: object {obj.name!r}: field 'index': "
+                    f"{obj.index} is already used by {by_index[obj.index]!r}"
+                )
             by_name[obj.name] = obj
             by_index[obj.index] = obj.name
         for obj in by_name.values():
             for rel in obj.related:
                 if rel not in by_name:
-                    raise ConfigError(f"{obj.source}: object {obj.name!r}: field 'related': "
-                                      f"unknown object {rel!r}")
+                    raise ConfigError(
+                        f"{obj.source}: object {obj.name!r}: field 'related': "
+                        f"unknown object {rel!r}"
+                    )
         self._objects = dict(sorted(by_name.items(), key=lambda kv: kv[1].index))
 
     def __getitem__(self, name: str) -> ObjectSpec:
@@ -186,7 +192,9 @@ class _Reader:
         self.used: set[str] = set()
 
     def fail(self, key: str, msg: str) -> ConfigError:
-        return ConfigError(f"{self.source}: object {self.obj!r}: field {self.prefix + key!r}: {msg}")
+        return ConfigError(
+            f"{self.source}: object {self.obj!r}: field {self.prefix + key!r}: {msg}"
+        )
 
     def _get(self, key: str, default: Any) -> Any:
         self.used.add(key)
@@ -196,10 +204,22 @@ class _Reader:
             return default
         return self.table[key]
 
-    def number(self, key: str, default: Any = None, *, lo: float | None = None, hi: float | None = None,
-               lo_open: bool = False, hi_open: bool = False) -> float:
+    def number(
+        self,
+        key: str,
+        default: Any = None,
+        *,
+        lo: float | None = None,
+        hi: float | None = None,
+        lo_open: bool = False,
+        hi_open: bool = False,
+    ) -> float:
         value = self._get(key, _REQUIRED if default is None else default)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not math.isfinite(value)
+        ):
             raise self.fail(key, f"must be a finite number, got {value!r}")
         value = float(value)
         if lo is not None and (value < lo or (lo_open and value == lo)):
@@ -222,8 +242,15 @@ class _Reader:
             raise self.fail(key, f"must be a string, got {value!r}")
         return value
 
-    def numbers(self, key: str, default: Any = None, *, length: int | None = None, lo: float | None = None,
-                lo_open: bool = False) -> tuple[float, ...]:
+    def numbers(
+        self,
+        key: str,
+        default: Any = None,
+        *,
+        length: int | None = None,
+        lo: float | None = None,
+        lo_open: bool = False,
+    ) -> tuple[float, ...]:
         value = self._get(key, _REQUIRED if default is None else default)
         if not isinstance(value, list):
             raise self.fail(key, f"must be a list of numbers, got {value!r}")
@@ -234,7 +261,9 @@ class _Reader:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise self.fail(key, f"entry {i} must be a finite number, got {v!r}")
             if lo is not None and (v < lo or (lo_open and v == lo)):
-                raise self.fail(key, f"entry {i} must be {'>' if lo_open else '>='} {lo:g}, got {v:g}")
+                raise self.fail(
+                    key, f"entry {i} must be {'>' if lo_open else '>='} {lo:g}, got {v:g}"
+                )
             out.append(float(v))
         return tuple(out)
 
@@ -277,14 +306,18 @@ def _parse_object(table: Mapping[str, Any], source: str, auto_index: int) -> Obj
         raise r.fail("layer", "an object needs at least one [[object.layer]]")
     for i, lt in enumerate(layer_tables):
         lr = _Reader(source, name, lt, prefix=f"layer[{i}].")
-        layers.append(Layer(
-            material=lr.string("material", ""),
-            thickness=lr.number("thickness", lo=0.0, lo_open=True),
-            modulus=lr.number("modulus", lo=0.0, lo_open=True),
-            densification_strain=lr.number("densification_strain", 1.0, lo=0.0, hi=1.0, lo_open=True),
-            conductivity=lr.number("conductivity", lo=0.0, lo_open=True),
-            heat_capacity=lr.number("heat_capacity", lo=0.0, lo_open=True),
-        ))
+        layers.append(
+            Layer(
+                material=lr.string("material", ""),
+                thickness=lr.number("thickness", lo=0.0, lo_open=True),
+                modulus=lr.number("modulus", lo=0.0, lo_open=True),
+                densification_strain=lr.number(
+                    "densification_strain", 1.0, lo=0.0, hi=1.0, lo_open=True
+                ),
+                conductivity=lr.number("conductivity", lo=0.0, lo_open=True),
+                heat_capacity=lr.number("heat_capacity", lo=0.0, lo_open=True),
+            )
+        )
         lr.finish()
 
     rt = r.subtable("relaxation", required=False)
@@ -295,7 +328,10 @@ def _parse_object(table: Mapping[str, Any], source: str, auto_index: int) -> Obj
     if len(weights) != len(times):
         raise rr.fail("times", f"needs one entry per weight ({len(weights)}), got {len(times)}")
     if sum(weights) >= 1.0:
-        raise rr.fail("weights", f"must sum to < 1 (the long-term stiffness must stay > 0), got {sum(weights):g}")
+        raise rr.fail(
+            "weights",
+            f"must sum to < 1 (the long-term stiffness must stay > 0), got {sum(weights):g}",
+        )
 
     st = r.subtable("surface")
     sr = _Reader(source, name, st, prefix="surface.")
@@ -309,11 +345,13 @@ def _parse_object(table: Mapping[str, Any], source: str, auto_index: int) -> Obj
     ridges = []
     for i, rt_ in enumerate(sr.table_list("ridge")):
         rg = _Reader(source, name, rt_, prefix=f"surface.ridge[{i}].")
-        ridges.append(Ridge(
-            wavelength=rg.number("wavelength", lo=0.0, lo_open=True),
-            amplitude=rg.number("amplitude", lo=0.0),
-            angle=rg.number("angle", 0.0, lo=-360.0, hi=360.0),
-        ))
+        ridges.append(
+            Ridge(
+                wavelength=rg.number("wavelength", lo=0.0, lo_open=True),
+                amplitude=rg.number("amplitude", lo=0.0),
+                angle=rg.number("angle", 0.0, lo=-360.0, hi=360.0),
+            )
+        )
         rg.finish()
     surface = Surface(
         friction_static=mu_s,
@@ -352,18 +390,25 @@ def _parse_object(table: Mapping[str, Any], source: str, auto_index: int) -> Obj
     if name in spec.related:
         raise r.fail("related", "an object cannot be related to itself")
     if spec.total_thickness > spec.height + 1e-12:
-        raise r.fail("layer", f"layers are {spec.total_thickness:g} m thick but the object is only "
-                              f"{spec.height:g} m high")
+        raise r.fail(
+            "layer",
+            f"layers are {spec.total_thickness:g} m thick but the object is only "
+            f"{spec.height:g} m high",
+        )
     return spec
 
 
 def _parse_document(doc: Mapping[str, Any], source: str, first_auto_index: int) -> list[ObjectSpec]:
     version = doc.get("schema_version", SCHEMA_VERSION)
     if version != SCHEMA_VERSION:
-        raise ConfigError(f"{source}: field 'schema_version': this aptkt reads version {SCHEMA_VERSION}, got {version!r}")
+        raise ConfigError(
+            f"{source}: field 'schema_version': this aptkt reads version {SCHEMA_VERSION}, got {version!r}"
+        )
     unknown = sorted(set(doc) - {"schema_version", "object"})
     if unknown:
-        raise ConfigError(f"{source}: unknown top-level field {unknown[0]!r} (objects go in [[object]] tables)")
+        raise ConfigError(
+            f"{source}: unknown top-level field {unknown[0]!r} (objects go in [[object]] tables)"
+        )
     tables = doc.get("object", [])
     if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
         raise ConfigError(f"{source}: field 'object': expected [[object]] tables")

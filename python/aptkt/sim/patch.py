@@ -45,7 +45,9 @@ class SkinConstants:
     contact_damping: float = 0.35  # damping ratio of that resonance
     cover_contact_length: float = 0.25e-3  # m: wavelengths shorter than this are smoothed out
     coupling_pressure: float = 150.0  # Pa: texture coupling reaches half at this contact pressure
-    coupling_modulus: float = 0.5e6  # Pa: compliant surfaces transmit sqrt(E/(E+this)) of the motion
+    coupling_modulus: float = (
+        0.5e6  # Pa: compliant surfaces transmit sqrt(E/(E+this)) of the motion
+    )
     tangential_coupling: float = 1.2  # friction-driven tangential response relative to normal
     lateral_coupling: float = 0.35  # lateral response of obliquely oriented texture
     # --- stick-slip (spring-block with a friction drop)
@@ -108,7 +110,10 @@ class PatchGeometry:
             raise ValueError(f"cell ids must be distinct, in 1..16382, got {ids}")
         if not self.centres:
             p = self.constants.pitch
-            ring = [(p * math.cos(math.radians(60 * i)), p * math.sin(math.radians(60 * i))) for i in range(6)]
+            ring = [
+                (p * math.cos(math.radians(60 * i)), p * math.sin(math.radians(60 * i)))
+                for i in range(6)
+            ]
             nominal = [(0.0, 0.0), *ring]
             if len(ids) > len(nominal):
                 raise ValueError(f"give cell centres for a patch of {len(ids)} cells")
@@ -117,8 +122,12 @@ class PatchGeometry:
             raise ValueError(f"{len(ids)} cell ids but {len(self.centres)} centres")
 
     @classmethod
-    def from_patch(cls, cell_ids: tuple[int, ...], positions_mm: np.ndarray,
-                   constants: SkinConstants | None = None) -> PatchGeometry:
+    def from_patch(
+        cls,
+        cell_ids: tuple[int, ...],
+        positions_mm: np.ndarray,
+        constants: SkinConstants | None = None,
+    ) -> PatchGeometry:
         """From a skin patch description (ids and positions in millimetres)."""
         pos = np.asarray(positions_mm, dtype=np.float64).reshape(len(cell_ids), -1)[:, :2] * 1e-3
         return cls(tuple(cell_ids), constants or SkinConstants(), tuple(map(tuple, pos.tolist())))
@@ -166,7 +175,9 @@ class PatchImperfections:
     clock_phase: np.ndarray  # (7,) s, time of each cell's first sample after t = 0
 
     @classmethod
-    def generate(cls, constants: SkinConstants, n_cells: int = 7, seed: int = 0) -> PatchImperfections:
+    def generate(
+        cls, constants: SkinConstants, n_cells: int = 7, seed: int = 0
+    ) -> PatchImperfections:
         n = int(n_cells)
         g = spawn_generators(seed_sequence(seed, "patch"), ["force", "height", "acc", "clock"])
         rng = g["force"]
@@ -190,7 +201,14 @@ class PatchImperfections:
 
 def _rotation(rx: float, ry: float, rz: float) -> np.ndarray:
     """Rotation matrix for small tilts rx, ry and a yaw rz (radians), R = Rz Ry Rx."""
-    cx, sx, cy, sy, cz, sz = math.cos(rx), math.sin(rx), math.cos(ry), math.sin(ry), math.cos(rz), math.sin(rz)
+    cx, sx, cy, sy, cz, sz = (
+        math.cos(rx),
+        math.sin(rx),
+        math.cos(ry),
+        math.sin(ry),
+        math.cos(rz),
+        math.sin(rz),
+    )
     r_x = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
     r_y = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
     r_z = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])

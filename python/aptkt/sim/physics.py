@@ -23,11 +23,25 @@ from aptkt.sim.objects import ObjectSpec, Relaxation
 from aptkt.sim.patch import PatchGeometry, PatchImperfections
 from aptkt.sim.recurrence import linear_recurrence_rows
 from aptkt.sim.seeding import CounterStream
-from aptkt.sim.texture import StickSlip, StickSlipState, texture_acceleration, texture_field, waviness_waves
+from aptkt.sim.texture import (
+    StickSlip,
+    StickSlipState,
+    texture_acceleration,
+    texture_field,
+    waviness_waves,
+)
 from aptkt.sim.thermal import CellThermal, speed_bins
 from aptkt.sim.trial import TrialConditions
 
-__all__ = ["GRAVITY", "Frames", "ForceTrace", "MechChunk", "PhysicsState", "ContactPhysics", "ObjectPose"]
+__all__ = [
+    "GRAVITY",
+    "Frames",
+    "ForceTrace",
+    "MechChunk",
+    "PhysicsState",
+    "ContactPhysics",
+    "ObjectPose",
+]
 
 GRAVITY = 9.80665
 #: Cell accelerometer axes in the base frame for a skin facing down: x along base x, z out of
@@ -67,8 +81,17 @@ class Frames:
     @classmethod
     def empty(cls) -> Frames:
         z = np.zeros
-        return cls(z(0, np.int64), z(0, np.int64), z(0, np.int64), z(0, np.int64), z(0), z((0, 3)),
-                   z((0, 2)), z((0, 3)), z(0))
+        return cls(
+            z(0, np.int64),
+            z(0, np.int64),
+            z(0, np.int64),
+            z(0, np.int64),
+            z(0),
+            z((0, 3)),
+            z((0, 2)),
+            z((0, 3)),
+            z(0),
+        )
 
     def take(self, index: np.ndarray | slice) -> Frames:
         return Frames(**{k: getattr(self, k)[index] for k in self.__dataclass_fields__})
@@ -124,7 +147,16 @@ class MechChunk:
     @classmethod
     def empty(cls) -> MechChunk:
         z = np.zeros
-        return cls(z(0, np.int64), z(0, np.int64), z(0), z(0, np.int64), z((0, 3)), z((0, 3)), z((0, 3)), z((0, 3)))
+        return cls(
+            z(0, np.int64),
+            z(0, np.int64),
+            z(0),
+            z(0, np.int64),
+            z((0, 3)),
+            z((0, 3)),
+            z((0, 3)),
+            z((0, 3)),
+        )
 
     @classmethod
     def concat(cls, chunks: list[MechChunk]) -> MechChunk:
@@ -151,21 +183,37 @@ class PhysicsState:
     slip: StickSlipState
 
     def copy(self) -> PhysicsState:
-        return PhysicsState(self.t_ns, self.next_k.copy(), self.relax_h.copy(), self.relax_last.copy(),
-                            self.thermal.copy(), self.thermal_t.copy(), self.last_xy.copy(),
-                            self.latest_force.copy(), self.slip.copy())
+        return PhysicsState(
+            self.t_ns,
+            self.next_k.copy(),
+            self.relax_h.copy(),
+            self.relax_last.copy(),
+            self.thermal.copy(),
+            self.thermal_t.copy(),
+            self.last_xy.copy(),
+            self.latest_force.copy(),
+            self.slip.copy(),
+        )
 
 
 class ContactPhysics:
     """Physics of one object in one trial against the simulated patch."""
 
-    def __init__(self, obj: ObjectSpec, pose: ObjectPose, conditions: TrialConditions, geometry: PatchGeometry,
-                 imperfections: PatchImperfections, noise_seq: np.random.SeedSequence):
+    def __init__(
+        self,
+        obj: ObjectSpec,
+        pose: ObjectPose,
+        conditions: TrialConditions,
+        geometry: PatchGeometry,
+        imperfections: PatchImperfections,
+        noise_seq: np.random.SeedSequence,
+    ):
         self.obj, self.cond, self.geo, self.imp = obj, conditions, geometry, imperfections
         k = self.k = geometry.constants
         self.n = n = geometry.n_cells
-        self.law = IndentationLaw(obj.layers, k.skin_stiffness * conditions.skin_stiffness_scale,
-                                  conditions.modulus_scale)
+        self.law = IndentationLaw(
+            obj.layers, k.skin_stiffness * conditions.skin_stiffness_scale, conditions.modulus_scale
+        )
         weights = tuple(w * conditions.relaxation_scale for w in obj.relaxation.weights)
         if weights and sum(weights) > 0.95:  # keep the long-term stiffness positive
             weights = tuple(w * 0.95 / sum(weights) for w in weights)
@@ -182,27 +230,44 @@ class ContactPhysics:
         self.texture = texture_field(obj).scaled(conditions.roughness_scale)
         self.mu_k = obj.surface.friction_kinetic * conditions.friction_scale
         self.top_modulus = obj.top.modulus * conditions.modulus_scale
-        self.thermal = CellThermal(k, obj.layers, obj.surface.contact_conductance, conditions.ambient,
-                                   conditions.object_temperature, conditions.conductance_scale)
+        self.thermal = CellThermal(
+            k,
+            obj.layers,
+            obj.surface.contact_conductance,
+            conditions.ambient,
+            conditions.object_temperature,
+            conditions.conductance_scale,
+        )
         mu_s = obj.surface.friction_static * conditions.friction_scale
         self.slip = StickSlip(k, mu_s, self.mu_k, _child(noise_seq, 1), n)
         self._noise = CounterStream(_child(noise_seq, 2), _NOISE_SLOTS)
         self._sensor_xy = geometry.sensor_positions  # (C, 3, 2)
         self._centres = geometry.cell_centres  # (C, 2)
-        self._axes = np.stack([_FLIP @ imperfections.mount_rotation[c] for c in range(n)])  # cell axes in base
+        self._axes = np.stack(
+            [_FLIP @ imperfections.mount_rotation[c] for c in range(n)]
+        )  # cell axes in base
         self.cell_ids = np.asarray(geometry.cell_ids, dtype=np.int64)
         self._latency_ns = int(round(k.link_latency * 1e9))
-        self._gain_drift = np.asarray(conditions.force_gain_drift, dtype=np.float64)  # > 1: reads high
+        self._gain_drift = np.asarray(
+            conditions.force_gain_drift, dtype=np.float64
+        )  # > 1: reads high
         if self._gain_drift.shape != (n,):
-            raise ValueError(f"trial conditions are for {self._gain_drift.size} cells, the patch has {n}")
+            raise ValueError(
+                f"trial conditions are for {self._gain_drift.size} cells, the patch has {n}"
+            )
 
     # ---------------------------------------------------------------------------------------
     def initial_state(self, t_ns: int, position: np.ndarray) -> PhysicsState:
         """At rest at ``position`` (out of contact), skin in its steady state plus the trial's offset."""
         start = self.thermal.initial_state(self.cond.skin_offset)
         t_s = t_ns * 1e-9
-        next_k = np.array([max(0, math.floor((t_s - self.imp.clock_phase[c]) * self.imp.clock_rate[c]) + 1)
-                           for c in range(self.n)], dtype=np.int64)
+        next_k = np.array(
+            [
+                max(0, math.floor((t_s - self.imp.clock_phase[c]) * self.imp.clock_rate[c]) + 1)
+                for c in range(self.n)
+            ],
+            dtype=np.int64,
+        )
         terms = len(self.relaxation.weights)
         return PhysicsState(
             t_ns=int(t_ns),
@@ -229,8 +294,9 @@ class ContactPhysics:
         offsets = np.arange(cells.size) - np.repeat(np.cumsum(counts) - counts, counts)
         return cells, starts + offsets
 
-    def step(self, state: PhysicsState, traj: Trajectory, t_end_ns: int, *,
-             detail: bool = True) -> tuple[PhysicsState, Frames, ForceTrace]:
+    def step(
+        self, state: PhysicsState, traj: Trajectory, t_end_ns: int, *, detail: bool = True
+    ) -> tuple[PhysicsState, Frames, ForceTrace]:
         """Advance to ``t_end_ns``: the new state, the frames (arrival order) and the true force of
         every sample. With ``detail=False`` only each cell's newest sample becomes a frame (the
         state is integrated exactly all the same)."""
@@ -260,14 +326,24 @@ class ContactPhysics:
         st.latest_force[present] = f_true[last].sum(axis=1)
         return MechChunk(cells, ks, t_s, t_ns, pos, vel, acc, sigma)
 
-    def finish(self, st: PhysicsState, chunk: MechChunk, *, detail: bool = True) -> tuple[Frames, ForceTrace]:
+    def finish(
+        self, st: PhysicsState, chunk: MechChunk, *, detail: bool = True
+    ) -> tuple[Frames, ForceTrace]:
         """Second half of a step: heat, stick-slip, texture, sensor noise and readings for the
         samples of ``chunk`` (which must follow ``st``'s non-mechanical state)."""
         if chunk.size == 0:
             return Frames.empty(), ForceTrace.empty()
         k, imp = self.k, self.imp
-        cells, ks, t_s, t_ns, pos, vel, acc, sigma = (chunk.cells, chunk.ks, chunk.t_s, chunk.t_ns, chunk.pos,
-                                                      chunk.vel, chunk.acc, chunk.sigma)
+        cells, ks, t_s, t_ns, pos, vel, acc, sigma = (
+            chunk.cells,
+            chunk.ks,
+            chunk.t_s,
+            chunk.t_ns,
+            chunk.pos,
+            chunk.vel,
+            chunk.acc,
+            chunk.sigma,
+        )
         first, last, present = _runs(cells)
         f_true = sigma * k.sensor_area
         f_cell = f_true.sum(axis=1)
@@ -291,7 +367,9 @@ class ContactPhysics:
         slip = np.zeros(cells.size)
         if self.slip.may_slip(st.slip, f_cell, speed, path):
             for c, a0, b0 in zip(present, first, last + 1):
-                slip[a0:b0] = self.slip.run(st.slip, int(c), t_s[a0:b0], path[a0:b0], f_cell[a0:b0], speed[a0:b0])
+                slip[a0:b0] = self.slip.run(
+                    st.slip, int(c), t_s[a0:b0], path[a0:b0], f_cell[a0:b0], speed[a0:b0]
+                )
         else:
             self.slip.settle(st.slip, present, f_cell[last], path[last])
 
@@ -299,13 +377,19 @@ class ContactPhysics:
         c_e = cells[rows]
         u = self.shape.to_object(centre[rows])
         w = self.shape.to_object_direction(vel[rows, :2])
-        tex = texture_acceleration(self.texture, k, u, w, pressure[rows], self.top_modulus, self.mu_k)
+        tex = texture_acceleration(
+            self.texture, k, u, w, pressure[rows], self.top_modulus, self.mu_k
+        )
         tex[:, 0] += slip[rows]
         tex[:, 2] += 0.3 * slip[rows]
         sp = speed[rows]
-        direction = np.where(sp[:, None] > 1e-9, vel[rows, :2] / np.maximum(sp, 1e-12)[:, None], [1.0, 0.0])
+        direction = np.where(
+            sp[:, None] > 1e-9, vel[rows, :2] / np.maximum(sp, 1e-12)[:, None], [1.0, 0.0]
+        )
         world = acc[rows] + self._arm_vibration(t_s[rows], vel[rows])
-        world[:, :2] += tex[:, 0:1] * direction + tex[:, 1:2] * np.stack([-direction[:, 1], direction[:, 0]], axis=1)
+        world[:, :2] += tex[:, 0:1] * direction + tex[:, 1:2] * np.stack(
+            [-direction[:, 1], direction[:, 0]], axis=1
+        )
         world[:, 2] += tex[:, 2] + GRAVITY  # specific force: an accelerometer at rest reads +1 g up
         acc_cell = np.einsum("mi,mij->mj", world, self._axes[c_e]) / GRAVITY
 
@@ -313,13 +397,22 @@ class ContactPhysics:
         noise, arrival = self._noise_and_arrival(ks[rows], c_e, t_ns[rows])
         force = self._force_reading(f_true[rows], noise, c_e)
         acc_g = acc_cell + imp.acc_bias[c_e] + k.acc_noise * noise[:, 3:6]
-        temp = np.stack([temps[rows, 1] + k.die_self_heating + k.die_temp_noise * noise[:, 6],
-                         temps[rows, 0] + k.temp_noise * noise[:, 7]], axis=1)
+        temp = np.stack(
+            [
+                temps[rows, 1] + k.die_self_heating + k.die_temp_noise * noise[:, 6],
+                temps[rows, 0] + k.temp_noise * noise[:, 7],
+            ],
+            axis=1,
+        )
         below = self.shape.height(centre[rows])
         on_face = np.isfinite(below)
         gap = np.maximum(pos[rows, 2] - np.where(on_face, below, 0.0), 0.0)
         refl = np.where(on_face, self.obj.reflectivity, k.table_reflectivity)
-        prox = k.prox_dark + k.prox_gain * refl / (1.0 + (gap / k.prox_distance) ** 2) + k.prox_noise * noise[:, 8]
+        prox = (
+            k.prox_dark
+            + k.prox_gain * refl / (1.0 + (gap / k.prox_distance) ** 2)
+            + k.prox_noise * noise[:, 8]
+        )
         frames = Frames(
             cell_index=c_e,
             cell_id=self.cell_ids[c_e],
@@ -340,11 +433,20 @@ class ContactPhysics:
         if not np.any(speed > 1e-6) or self.cond.arm_vibration <= 0:
             return np.zeros((t_s.size, 3))
         modes = np.asarray(self.cond.arm_modes)  # (m, 5)
-        amp = self.cond.arm_vibration * GRAVITY * np.sqrt(2.0 / len(modes)) * np.minimum(speed / 0.05, 2.0)
-        wave = np.sin(2 * np.pi * modes[:, 0][None, :] * t_s[:, None] + modes[:, 1][None, :])  # (n, m)
+        amp = (
+            self.cond.arm_vibration
+            * GRAVITY
+            * np.sqrt(2.0 / len(modes))
+            * np.minimum(speed / 0.05, 2.0)
+        )
+        wave = np.sin(
+            2 * np.pi * modes[:, 0][None, :] * t_s[:, None] + modes[:, 1][None, :]
+        )  # (n, m)
         return amp[:, None] * (wave @ modes[:, 2:5])
 
-    def _noise_and_arrival(self, ks: np.ndarray, cells: np.ndarray, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _noise_and_arrival(
+        self, ks: np.ndarray, cells: np.ndarray, t_ns: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Normal deviates (n, 10) and arrival times of samples ``ks`` of ``cells``."""
         index = ks * self.n + cells
         lo = int(index.min())
@@ -354,10 +456,16 @@ class ContactPhysics:
         noise[:, 0::2] = r * np.cos(2 * np.pi * u01[:, 1:10:2])
         noise[:, 1::2] = r * np.sin(2 * np.pi * u01[:, 1:10:2])
         # The PC stamps arrivals with microsecond resolution.
-        arrival = t_ns + self._latency_ns + 1000 * np.rint(u01[:, 10] * self.k.link_jitter * 1e6).astype(np.int64)
+        arrival = (
+            t_ns
+            + self._latency_ns
+            + 1000 * np.rint(u01[:, 10] * self.k.link_jitter * 1e6).astype(np.int64)
+        )
         return noise, arrival
 
-    def _force_reading(self, f_true: np.ndarray, noise: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    def _force_reading(
+        self, f_true: np.ndarray, noise: np.ndarray, cells: np.ndarray
+    ) -> np.ndarray:
         """Normalised force readings (offset + (F + noise) / gain) of the sensors of ``cells``."""
         imp = self.imp
         gain = imp.force_gain[cells] / self._gain_drift[cells][:, None]
@@ -370,35 +478,62 @@ class ContactPhysics:
         noise, arrival = self._noise_and_arrival(chunk.ks, chunk.cells, chunk.t_ns)
         return arrival, self._force_reading(chunk.sigma * self.k.sensor_area, noise, chunk.cells)
 
-    def _heat(self, st: PhysicsState, t_s: np.ndarray, phi_bin: np.ndarray, v_bin: np.ndarray,
-              first: np.ndarray, last: np.ndarray, present: np.ndarray) -> np.ndarray:
+    def _heat(
+        self,
+        st: PhysicsState,
+        t_s: np.ndarray,
+        phi_bin: np.ndarray,
+        v_bin: np.ndarray,
+        first: np.ndarray,
+        last: np.ndarray,
+        present: np.ndarray,
+    ) -> np.ndarray:
         """[LM71, PCB] temperatures of every sample; updates the cells' thermal states.
 
         Each cell's samples split into runs of constant (contact, speed) configuration; the
         r-th runs of all cells are solved together (a batch of exact LTI solutions)."""
         runs: list[list[tuple[int, int]]] = []
         for a0, b0 in zip(first, last + 1):
-            change = np.flatnonzero((np.diff(phi_bin[a0:b0]) != 0) | (np.diff(v_bin[a0:b0]) != 0)) + 1 + a0
+            change = (
+                np.flatnonzero((np.diff(phi_bin[a0:b0]) != 0) | (np.diff(v_bin[a0:b0]) != 0))
+                + 1
+                + a0
+            )
             starts = np.concatenate([[a0], change])
             runs.append(list(zip(starts.tolist(), np.concatenate([change, [b0]]).tolist())))
         temps = np.empty((t_s.shape[0], 2))
         for r in range(max(len(x) for x in runs)):
-            items = [(int(present[ci]), *cell_runs[r]) for ci, cell_runs in enumerate(runs) if r < len(cell_runs)]
+            items = [
+                (int(present[ci]), *cell_runs[r])
+                for ci, cell_runs in enumerate(runs)
+                if r < len(cell_runs)
+            ]
             cells_g = np.array([c for c, _, _ in items])
             a_g = np.array([a for _, a, _ in items])
             b_g = np.array([b for _, _, b in items])
             lengths = b_g - a_g
-            idx = np.minimum(a_g[:, None] + np.arange(int(lengths.max()))[None, :], (b_g - 1)[:, None])
+            idx = np.minimum(
+                a_g[:, None] + np.arange(int(lengths.max()))[None, :], (b_g - 1)[:, None]
+            )
             dt = t_s[idx] - st.thermal_t[cells_g][:, None]
-            out, end = self.thermal.propagate_many(st.thermal[cells_g], dt, lengths - 1, phi_bin[a_g], v_bin[a_g])
+            out, end = self.thermal.propagate_many(
+                st.thermal[cells_g], dt, lengths - 1, phi_bin[a_g], v_bin[a_g]
+            )
             for g in range(len(items)):
-                temps[a_g[g]:b_g[g]] = out[g, : lengths[g]]
+                temps[a_g[g] : b_g[g]] = out[g, : lengths[g]]
             st.thermal[cells_g] = end
             st.thermal_t[cells_g] = t_s[b_g - 1]
         return temps
 
-    def _relax(self, st: PhysicsState, elastic: np.ndarray, cells: np.ndarray, first: np.ndarray,
-               last: np.ndarray, present: np.ndarray) -> np.ndarray:
+    def _relax(
+        self,
+        st: PhysicsState,
+        elastic: np.ndarray,
+        cells: np.ndarray,
+        first: np.ndarray,
+        last: np.ndarray,
+        present: np.ndarray,
+    ) -> np.ndarray:
         """Quasi-linear viscoelastic stress of every sample (see :mod:`aptkt.sim.mechanics`);
         updates the per-cell hereditary state in ``st``. Cells are laid out as rows of a padded
         grid so that all cells recur together."""
@@ -427,7 +562,9 @@ class ContactPhysics:
                 st.relax_h[i, present] = h
             st.relax_last[present] = elastic[last]
             return out.reshape(-1, 3)
-        pos = np.arange(cells.size) - np.repeat(first, lengths)  # position of each sample in its row
+        pos = np.arange(cells.size) - np.repeat(
+            first, lengths
+        )  # position of each sample in its row
         row = np.repeat(np.arange(present.size), lengths)
         grid = np.zeros((present.size, width, 3))
         grid[row, pos] = increments

@@ -30,13 +30,13 @@ def linear_recurrence(a: float, x: np.ndarray, y0: np.ndarray | float) -> np.nda
     block = max(1, min(n, int(600.0 / -math.log(a))))
     extra = (1,) * (x.ndim - 1)
     for start in range(0, n, block):
-        seg = x[start:start + block]
+        seg = x[start : start + block]
         m = seg.shape[0]
         k = np.arange(1, m + 1, dtype=np.float64)
         grow = np.power(a, -k).reshape(m, *extra)  # a^-k
         shrink = np.power(a, k).reshape(m, *extra)  # a^k
         # a^k * (y_prev + Σ_{j=1..k} a^-j x_j): the -j and k exponents meet inside the block.
-        out[start:start + m] = shrink * (y_prev + np.cumsum(seg * grow, axis=0))
+        out[start : start + m] = shrink * (y_prev + np.cumsum(seg * grow, axis=0))
         y_prev = out[start + m - 1]
     return out
 
@@ -64,12 +64,12 @@ def linear_recurrence_rows(a: np.ndarray, x: np.ndarray, y0: np.ndarray) -> np.n
     worst = float(np.min(a))
     block = length if worst == 1.0 else max(1, min(length, int(600.0 / -math.log(worst))))
     for start in range(0, length, block):
-        seg = x[:, start:start + block]
+        seg = x[:, start : start + block]
         m = seg.shape[1]
         k = np.arange(1, m + 1, dtype=np.float64)
         logs = np.log(a)[:, None] * k[None, :]  # (R, m)
         grow = np.exp(-logs).reshape(rows, m, *extra)
         shrink = np.exp(logs).reshape(rows, m, *extra)
-        out[:, start:start + m] = shrink * (y[:, None] + np.cumsum(seg * grow, axis=1))
+        out[:, start : start + m] = shrink * (y[:, None] + np.cumsum(seg * grow, axis=1))
         y = out[:, start + m - 1]
     return out

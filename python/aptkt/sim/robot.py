@@ -30,8 +30,16 @@ class SimRobot:
     (the arm's repeatability in this trial).
     """
 
-    def __init__(self, driver: Driver, limits: SafetyLimits | None = None, *, control_rate_hz: float = 125.0,
-                 depth_error: float = 0.0, force_gain: float = 0.02, lean_force_control: bool = True):
+    def __init__(
+        self,
+        driver: Driver,
+        limits: SafetyLimits | None = None,
+        *,
+        control_rate_hz: float = 125.0,
+        depth_error: float = 0.0,
+        force_gain: float = 0.02,
+        lean_force_control: bool = True,
+    ):
         self.driver = driver
         self.limits = limits or SafetyLimits()
         self.tick_ns = int(round(1e9 / control_rate_hz))
@@ -53,16 +61,22 @@ class SimRobot:
         return self.driver.engine.tcp()
 
     def _check_point(self, point: np.ndarray, what: str) -> None:
-        if self._placement is not None and not self._placement.contains(tuple(float(x) for x in point)):
-            raise SafetyLimitError(f"{what}: target {np.round(point, 4).tolist()} is outside the workspace of "
-                                   f"{self._placement.object_name!r}")
+        if self._placement is not None and not self._placement.contains(
+            tuple(float(x) for x in point)
+        ):
+            raise SafetyLimitError(
+                f"{what}: target {np.round(point, 4).tolist()} is outside the workspace of "
+                f"{self._placement.object_name!r}"
+            )
 
     def _safety_stop(self, message: str) -> SafetyLimitError:
         """Stop now, retract slowly, and return the error to raise."""
         self.stop()
         p, _ = self._pose()
         try:
-            self._linear(p + np.array([0.0, 0.0, _RETRACT]), self.limits.approach_speed, check=False)
+            self._linear(
+                p + np.array([0.0, 0.0, _RETRACT]), self.limits.approach_speed, check=False
+            )
         except RobotError:
             pass  # already stopped; the original error matters
         return SafetyLimitError(message)
@@ -79,14 +93,18 @@ class SimRobot:
         u = delta / dist
         t = self.now_ns()
         p = p0.copy()
-        for duration, v0, acc in trapezoid(dist, min(speed, self.limits.max_speed), self.limits.max_acceleration):
+        for duration, v0, acc in trapezoid(
+            dist, min(speed, self.limits.max_speed), self.limits.max_acceleration
+        ):
             self.driver.set_motion(t, p, u * v0, u * acc)
             p = p + u * (v0 * duration + 0.5 * acc * duration**2)
             t += int(round(duration * 1e9))
         self.driver.set_motion(t, target, np.zeros(3), np.zeros(3))
         reached, why = self.driver.run(t, self.tick_ns, wrench_limit=self.limits.max_normal_force)
         if why == StopReason.WRENCH:
-            raise self._safety_stop(f"contact force above {self.limits.max_normal_force} N during a move")
+            raise self._safety_stop(
+                f"contact force above {self.limits.max_normal_force} N during a move"
+            )
 
     # ------------------------------------------------------------------ Robot protocol
     def move_above(self, placement: Placement, clearance: float) -> None:
@@ -103,11 +121,15 @@ class SimRobot:
 
     def approach_contact(self, total_force: ForceReading, threshold: float) -> float:
         if threshold <= 0 or threshold >= self.limits.max_normal_force:
-            raise SafetyLimitError(f"contact threshold {threshold} N must be in (0, {self.limits.max_normal_force})")
+            raise SafetyLimitError(
+                f"contact threshold {threshold} N must be in (0, {self.limits.max_normal_force})"
+            )
         p0, _ = self._pose()
         speed = self.limits.approach_speed
         travel = self.limits.max_approach_travel
-        if self._placement is not None:  # the guarded move ends at the workspace floor at the latest
+        if (
+            self._placement is not None
+        ):  # the guarded move ends at the workspace floor at the latest
             travel = min(travel, p0[2] - self._placement.workspace_min[2])
         if travel <= 0:
             raise SafetyLimitError("approach: already at the workspace floor")
@@ -119,14 +141,22 @@ class SimRobot:
         t1 = t + int(round(t_acc * 1e9))
         self.driver.set_motion(t1, p1, down * speed, np.zeros(3))
         t_end = t1 + int(round((travel - (p0[2] - p1[2])) / speed * 1e9))
-        reached, why = self.driver.run(t_end, self.tick_ns, stop=lambda: total_force() > threshold,
-                                       wrench_limit=self.limits.max_normal_force)
+        reached, why = self.driver.run(
+            t_end,
+            self.tick_ns,
+            stop=lambda: total_force() > threshold,
+            wrench_limit=self.limits.max_normal_force,
+        )
         self.stop()
         if why == StopReason.WRENCH:
-            raise self._safety_stop(f"contact force above {self.limits.max_normal_force} N while approaching")
+            raise self._safety_stop(
+                f"contact force above {self.limits.max_normal_force} N while approaching"
+            )
         if why != StopReason.PREDICATE:
             self._linear(p0, self.limits.max_speed, check=False)
-            raise RobotError(f"no contact within {travel * 1e3:.1f} mm of approach (threshold {threshold} N)")
+            raise RobotError(
+                f"no contact within {travel * 1e3:.1f} mm of approach (threshold {threshold} N)"
+            )
         p, _ = self._pose()
         self._contact_z = float(p[2])
         return self._contact_z
@@ -135,7 +165,9 @@ class SimRobot:
         if self._contact_z is None:
             raise RobotError("press() needs a contact point: call approach_contact() first")
         if not (0 < depth <= self.limits.max_depth):
-            raise SafetyLimitError(f"press depth {depth * 1e3:.2f} mm is outside (0, {self.limits.max_depth * 1e3:.2f}] mm")
+            raise SafetyLimitError(
+                f"press depth {depth * 1e3:.2f} mm is outside (0, {self.limits.max_depth * 1e3:.2f}] mm"
+            )
         if hold_time < 0 or not math.isfinite(hold_time):
             raise ValueError("hold_time must be a finite number >= 0")
         p, _ = self._pose()
@@ -146,16 +178,26 @@ class SimRobot:
         t1 = t0 + int(round(hold_time * 1e9))
         _, why = self.driver.run(t1, self.tick_ns, wrench_limit=self.limits.max_normal_force)
         if why == StopReason.WRENCH:
-            raise self._safety_stop(f"contact force above {self.limits.max_normal_force} N during the hold")
+            raise self._safety_stop(
+                f"contact force above {self.limits.max_normal_force} N during the hold"
+            )
         self.action_window_ns = (t0, t1)
 
-    def slide(self, normal_force: float, speed: float, duration: float, direction: tuple[float, float],
-              total_force: ForceReading) -> None:
+    def slide(
+        self,
+        normal_force: float,
+        speed: float,
+        duration: float,
+        direction: tuple[float, float],
+        total_force: ForceReading,
+    ) -> None:
         lim = self.limits
         if self._contact_z is None:
             raise RobotError("slide() needs a contact point: call approach_contact() first")
         if not (0 < normal_force < lim.max_normal_force):
-            raise SafetyLimitError(f"slide force {normal_force} N is outside (0, {lim.max_normal_force}) N")
+            raise SafetyLimitError(
+                f"slide force {normal_force} N is outside (0, {lim.max_normal_force}) N"
+            )
         if not (0 < speed <= lim.max_speed):
             raise SafetyLimitError(f"slide speed {speed} m/s is outside (0, {lim.max_speed}] m/s")
         if duration <= 0 or not math.isfinite(duration):
@@ -178,24 +220,41 @@ class SimRobot:
                 settled = settled + 1 if abs(err) < 0.1 * normal_force else 0
                 if self.now_ns() > t_limit:
                     self.stop()
-                    raise RobotError(f"could not establish {normal_force} N within 3 s (reading off by {err:+.3f} N)")
+                    raise RobotError(
+                        f"could not establish {normal_force} N within 3 s (reading off by {err:+.3f} N)"
+                    )
             # 2. Accelerate, slide, decelerate, keeping the force.
-            phases = [(t_acc, lim.max_acceleration), (duration, 0.0), (t_acc, -lim.max_acceleration)]
+            phases = [
+                (t_acc, lim.max_acceleration),
+                (duration, 0.0),
+                (t_acc, -lim.max_acceleration),
+            ]
             v = 0.0
             for k, (span, acc) in enumerate(phases):
                 t_start = self.now_ns()
                 t_stop = t_start + int(round(span * 1e9))
                 while self.now_ns() < t_stop:
                     tau = (self.now_ns() - t_start) * 1e-9
-                    self._force_tick(normal_force, measure, p_xy_velocity=d * (v + acc * tau), acc=d * acc,
-                                     until=min(t_stop, self.now_ns() + self.tick_ns))
+                    self._force_tick(
+                        normal_force,
+                        measure,
+                        p_xy_velocity=d * (v + acc * tau),
+                        acc=d * acc,
+                        until=min(t_stop, self.now_ns() + self.tick_ns),
+                    )
                 v = max(v + acc * span, 0.0)
                 if k == 1:
                     self.action_window_ns = (t_start, t_stop)
             self.stop()
 
-    def _force_tick(self, target: float, total_force: ForceReading, p_xy_velocity: np.ndarray,
-                    acc: np.ndarray | None = None, until: int | None = None) -> float:
+    def _force_tick(
+        self,
+        target: float,
+        total_force: ForceReading,
+        p_xy_velocity: np.ndarray,
+        acc: np.ndarray | None = None,
+        until: int | None = None,
+    ) -> float:
         """One control tick of the force loop; returns the force error before the tick."""
         lim = self.limits
         measured = total_force()
@@ -203,8 +262,10 @@ class SimRobot:
         vz = -float(np.clip(self.force_gain * err, -lim.approach_speed, lim.approach_speed))
         p, _ = self._pose()
         if self._contact_z is not None and p[2] < self._contact_z - lim.max_depth:
-            raise self._safety_stop(f"force control pushed {(self._contact_z - p[2]) * 1e3:.2f} mm deep, "
-                                    f"beyond max_depth {lim.max_depth * 1e3:.2f} mm")
+            raise self._safety_stop(
+                f"force control pushed {(self._contact_z - p[2]) * 1e3:.2f} mm deep, "
+                f"beyond max_depth {lim.max_depth * 1e3:.2f} mm"
+            )
         v = np.array([p_xy_velocity[0], p_xy_velocity[1], vz])
         a = np.zeros(3) if acc is None else np.array([acc[0], acc[1], 0.0])
         now = self.now_ns()
@@ -212,7 +273,9 @@ class SimRobot:
         end = now + self.tick_ns if until is None else until
         _, why = self.driver.run(end, self.tick_ns, wrench_limit=lim.max_normal_force)
         if why == StopReason.WRENCH:
-            raise self._safety_stop(f"contact force above {lim.max_normal_force} N under force control")
+            raise self._safety_stop(
+                f"contact force above {lim.max_normal_force} N under force control"
+            )
         return err
 
     def lift(self, height: float) -> None:
@@ -229,7 +292,9 @@ class SimRobot:
         t_end = self.now_ns() + int(round(seconds * 1e9))
         _, why = self.driver.run(t_end, self.tick_ns, wrench_limit=self.limits.max_normal_force)
         if why == StopReason.WRENCH:
-            raise self._safety_stop(f"contact force above {self.limits.max_normal_force} N while waiting")
+            raise self._safety_stop(
+                f"contact force above {self.limits.max_normal_force} N while waiting"
+            )
 
     def stop(self) -> None:
         engine = self.driver.engine

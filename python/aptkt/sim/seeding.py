@@ -21,7 +21,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["stable_words", "seed_sequence", "trial_seed_sequence", "CounterStream", "spawn_generators"]
+__all__ = [
+    "stable_words",
+    "seed_sequence",
+    "trial_seed_sequence",
+    "CounterStream",
+    "spawn_generators",
+]
 
 _TWO53 = float(2**53)
 
@@ -51,7 +57,9 @@ def seed_sequence(seed: int, *key: object) -> np.random.SeedSequence:
     return np.random.SeedSequence([int(seed) & 0xFFFFFFFF, int(seed) >> 32, *stable_words(*key)])
 
 
-def trial_seed_sequence(seed: int, object_name: str, action_name: str, trial: int) -> np.random.SeedSequence:
+def trial_seed_sequence(
+    seed: int, object_name: str, action_name: str, trial: int
+) -> np.random.SeedSequence:
     """The root SeedSequence of one trial: everything random in that trial derives from it."""
     return seed_sequence(seed, "trial", object_name, action_name, int(trial))
 
@@ -105,9 +113,15 @@ class CounterStream:
         return out
 
 
-def spawn_generators(seq: np.random.SeedSequence, names: Sequence[str]) -> dict[str, np.random.Generator]:
+def spawn_generators(
+    seq: np.random.SeedSequence, names: Sequence[str]
+) -> dict[str, np.random.Generator]:
     """Independent generators for named purposes; adding a name later does not change the others."""
     return {
-        name: np.random.Generator(np.random.PCG64(np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, *stable_words(name)))))
+        name: np.random.Generator(
+            np.random.PCG64(
+                np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, *stable_words(name)))
+            )
+        )
         for name in names
     }

@@ -39,8 +39,14 @@ class SimSkin(SkinSourceBase):
     so latest values and the total force stay exact while a 30 s thermal wait costs little.
     """
 
-    def __init__(self, patch: PatchConfig, clock: Callable[[], int], *, stream_all: bool = False,
-                 buffer_rows: int = 1 << 16):
+    def __init__(
+        self,
+        patch: PatchConfig,
+        clock: Callable[[], int],
+        *,
+        stream_all: bool = False,
+        buffer_rows: int = 1 << 16,
+    ):
         super().__init__(patch, buffer_rows=buffer_rows, clock=clock)
         self.stream_all = stream_all
         self._open = False
@@ -131,4 +137,3 @@ class PtySkinLink:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-

@@ -70,7 +70,7 @@ def texture_field(obj: ObjectSpec) -> TextureField:
         q_lo, q_hi = 1.0 / s.roughness_band[1], 1.0 / s.roughness_band[0]
         edges = np.geomspace(q_lo, q_hi, _RANDOM_COMPONENTS + 1)
         q = edges[:-1] * (edges[1:] / edges[:-1]) ** rng.uniform(0, 1, _RANDOM_COMPONENTS)
-        amp = q ** -s.roughness_exponent
+        amp = q**-s.roughness_exponent
         amp *= s.roughness_rms / np.sqrt(np.sum(amp**2) / 2.0)
         theta = rng.uniform(0, np.pi, _RANDOM_COMPONENTS)
         for qi, ai, ti in zip(q, amp, theta):
@@ -91,11 +91,20 @@ def waviness_waves(obj: ObjectSpec, n: int = 4) -> np.ndarray:
     theta = rng.uniform(0, np.pi, n)
     amp = rng.uniform(0.5, 1.0, n)
     amp *= obj.waviness / np.sqrt(np.sum(amp**2) / 2.0)
-    return np.stack([np.cos(theta) / lam, np.sin(theta) / lam, amp, rng.uniform(0, 2 * np.pi, n)], axis=1)
+    return np.stack(
+        [np.cos(theta) / lam, np.sin(theta) / lam, amp, rng.uniform(0, 2 * np.pi, n)], axis=1
+    )
 
 
-def texture_acceleration(field_: TextureField, k: SkinConstants, u: np.ndarray, w: np.ndarray,
-                         pressure: np.ndarray, top_modulus: float, mu_kinetic: float) -> np.ndarray:
+def texture_acceleration(
+    field_: TextureField,
+    k: SkinConstants,
+    u: np.ndarray,
+    w: np.ndarray,
+    pressure: np.ndarray,
+    top_modulus: float,
+    mu_kinetic: float,
+) -> np.ndarray:
     """Texture-driven acceleration (n, 3) in m/s^2 as (along the motion, lateral, normal-up).
 
     ``u`` (n, 2) are the cell centre's object-frame positions, ``w`` (n, 2) its object-frame
@@ -111,19 +120,25 @@ def texture_acceleration(field_: TextureField, k: SkinConstants, u: np.ndarray, 
     kv = field_.kvec  # (M, 2)
     f = np.abs(wa @ kv.T)  # (n, M) temporal frequency of each component
     qnorm = np.hypot(kv[:, 0], kv[:, 1])
-    smooth = np.exp(-(np.pi * k.cover_contact_length * qnorm) ** 2)  # (M,)
+    smooth = np.exp(-((np.pi * k.cover_contact_length * qnorm) ** 2))  # (M,)
     r = f / k.contact_resonance
     h_t = (1 + 2j * k.contact_damping * r) / (1 - r**2 + 2j * k.contact_damping * r)
     h_l = 1.0 / (1 + 1j * f / k.acc_bandwidth)
     h = h_t * h_l
-    coupling = math.sqrt(top_modulus / (top_modulus + k.coupling_modulus)) * pa / (pa + k.coupling_pressure)
+    coupling = (
+        math.sqrt(top_modulus / (top_modulus + k.coupling_modulus))
+        * pa
+        / (pa + k.coupling_pressure)
+    )
     phase = 2 * np.pi * (ua @ kv.T) + field_.phase  # (n, M)
     base = -(field_.amplitude * smooth) * (2 * np.pi * f) ** 2 * np.abs(h)  # (n, M)
     arg = phase + np.angle(h)
     normal = base * np.sin(arg)
     tangential = k.tangential_coupling * mu_kinetic * normal / (1.0 + r**2)
     # Sine of the angle between the wave vector and the motion: oblique texture pushes sideways.
-    cross = (wa[:, 0:1] * kv[None, :, 1] - wa[:, 1:2] * kv[None, :, 0]) / (sa[:, None] * np.maximum(qnorm, 1e-12))
+    cross = (wa[:, 0:1] * kv[None, :, 1] - wa[:, 1:2] * kv[None, :, 0]) / (
+        sa[:, None] * np.maximum(qnorm, 1e-12)
+    )
     lateral = k.lateral_coupling * cross * base * np.cos(arg)
     out[active, 0] = coupling * tangential.sum(axis=1)
     out[active, 1] = coupling * lateral.sum(axis=1)
@@ -136,22 +151,38 @@ class StickSlipState:
     load: np.ndarray  # (7,) N, tangential spring force of each cell
     threshold: np.ndarray  # (7,) N, static friction to overcome for the next slip
     events: np.ndarray  # (7,) int, slips so far (the random stream's counter)
-    ringing: list[list[tuple[float, float]]] = field(default_factory=list)  # per cell: (t_s, peak m/s^2)
+    ringing: list[list[tuple[float, float]]] = field(
+        default_factory=list
+    )  # per cell: (t_s, peak m/s^2)
 
     def copy(self) -> StickSlipState:
-        return StickSlipState(self.load.copy(), self.threshold.copy(), self.events.copy(),
-                              [list(r) for r in self.ringing])
+        return StickSlipState(
+            self.load.copy(),
+            self.threshold.copy(),
+            self.events.copy(),
+            [list(r) for r in self.ringing],
+        )
 
 
 class StickSlip:
     """Spring-block stick-slip of each cell; see the module docstring."""
 
-    def __init__(self, k: SkinConstants, mu_static: float, mu_kinetic: float, seq: np.random.SeedSequence,
-                 n_cells: int = 7):
+    def __init__(
+        self,
+        k: SkinConstants,
+        mu_static: float,
+        mu_kinetic: float,
+        seq: np.random.SeedSequence,
+        n_cells: int = 7,
+    ):
         self.k = k
         self.mu_s, self.mu_k = mu_static, mu_kinetic
-        self._streams = [CounterStream(np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, 9000 + c)), 2)
-                         for c in range(n_cells)]
+        self._streams = [
+            CounterStream(
+                np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, 9000 + c)), 2
+            )
+            for c in range(n_cells)
+        ]
         self.n_cells = n_cells
         self._z_cache: dict[int, tuple[int, np.ndarray]] = {}
         self._omega = 2 * np.pi * k.slip_ring_frequency
@@ -161,16 +192,26 @@ class StickSlip:
 
     def rest(self) -> StickSlipState:
         n = self.n_cells
-        return StickSlipState(np.zeros(n), np.full(n, np.inf), np.zeros(n, dtype=np.int64), [[] for _ in range(n)])
+        return StickSlipState(
+            np.zeros(n), np.full(n, np.inf), np.zeros(n, dtype=np.int64), [[] for _ in range(n)]
+        )
 
-    def may_slip(self, state: StickSlipState, force: np.ndarray, speed: np.ndarray, path: np.ndarray) -> bool:
+    def may_slip(
+        self, state: StickSlipState, force: np.ndarray, speed: np.ndarray, path: np.ndarray
+    ) -> bool:
         """Whether any sample of this stretch can slip (or a past slip still rings)."""
         if any(state.ringing):
             return True
-        v_c = (self.mu_s - self.mu_k) * force / math.sqrt(self.k.tangential_stiffness * self.k.tangential_mass)
+        v_c = (
+            (self.mu_s - self.mu_k)
+            * force
+            / math.sqrt(self.k.tangential_stiffness * self.k.tangential_mass)
+        )
         return bool(np.any((speed < v_c) & (path > 0) & (force > 0)))
 
-    def settle(self, state: StickSlipState, cells: np.ndarray, force: np.ndarray, path: np.ndarray) -> None:
+    def settle(
+        self, state: StickSlipState, cells: np.ndarray, force: np.ndarray, path: np.ndarray
+    ) -> None:
         """No slip possible: the springs of ``cells`` carry the kinetic friction (or nothing)."""
         state.load[cells] = np.where((force > 0) & (path > 0), self.mu_k * force, 0.0)
         state.threshold[cells] = np.inf
@@ -187,8 +228,15 @@ class StickSlip:
     def _threshold(self, cell: int, event: int, force: float) -> float:
         return self.mu_s * force * max(0.5, 1.0 + self.k.slip_threshold_sd * self._z(cell, event))
 
-    def run(self, state: StickSlipState, cell: int, t: np.ndarray, path: np.ndarray, force: np.ndarray,
-            speed: np.ndarray) -> np.ndarray:
+    def run(
+        self,
+        state: StickSlipState,
+        cell: int,
+        t: np.ndarray,
+        path: np.ndarray,
+        force: np.ndarray,
+        speed: np.ndarray,
+    ) -> np.ndarray:
         """Tangential acceleration (n,) m/s^2 of ``cell`` at sample times ``t`` (s).
 
         ``path`` (n,) is the sliding distance covered since the previous sample, ``force`` (n,)
@@ -197,7 +245,9 @@ class StickSlip:
         k = self.k
         n = t.shape[0]
         dmu = self.mu_s - self.mu_k
-        v_c = np.where(force > 0, dmu * force / math.sqrt(k.tangential_stiffness * k.tangential_mass), 0.0)
+        v_c = np.where(
+            force > 0, dmu * force / math.sqrt(k.tangential_stiffness * k.tangential_mass), 0.0
+        )
         strength = np.where((v_c > 0) & (speed < v_c), 1.0 - speed / np.maximum(v_c, 1e-300), 0.0)
         active = (strength > 0) & (path > 0)
         ring = state.ringing[cell]
@@ -209,11 +259,15 @@ class StickSlip:
                 j += 1
             if not active[i]:
                 # Steady sliding (or none): the spring carries the kinetic friction.
-                state.load[cell] = self.mu_k * force[j - 1] if (force[j - 1] > 0 and path[j - 1] > 0) else 0.0
+                state.load[cell] = (
+                    self.mu_k * force[j - 1] if (force[j - 1] > 0 and path[j - 1] > 0) else 0.0
+                )
                 state.threshold[cell] = np.inf
             else:
                 if not np.isfinite(state.threshold[cell]):
-                    state.threshold[cell] = self._threshold(cell, int(state.events[cell]), float(force[i]))
+                    state.threshold[cell] = self._threshold(
+                        cell, int(state.events[cell]), float(force[i])
+                    )
                 load = state.load[cell] + k.tangential_stiffness * np.cumsum(path[i:j])
                 while True:
                     hit = int(np.searchsorted(load, state.threshold[cell], side="left"))
@@ -224,10 +278,17 @@ class StickSlip:
                     t0 = t[s - 1] if s > 0 else t_before
                     frac = (state.threshold[cell] - before) / max(load[hit] - before, 1e-15)
                     drop = 2.0 * dmu * float(force[s])
-                    ring.append((t0 + min(max(frac, 0.0), 1.0) * (t[s] - t0), strength[s] * k.slip_coupling * drop / k.tangential_mass))
+                    ring.append(
+                        (
+                            t0 + min(max(frac, 0.0), 1.0) * (t[s] - t0),
+                            strength[s] * k.slip_coupling * drop / k.tangential_mass,
+                        )
+                    )
                     load[hit:] -= drop
                     state.events[cell] += 1
-                    state.threshold[cell] = self._threshold(cell, int(state.events[cell]), float(force[s]))
+                    state.threshold[cell] = self._threshold(
+                        cell, int(state.events[cell]), float(force[s])
+                    )
                 state.load[cell] = float(load[-1])
             i = j
         out = np.zeros(n)
@@ -235,8 +296,12 @@ class StickSlip:
             ev = np.array(ring)  # (E, 2): time, peak
             tau = t[:, None] - ev[None, :, 0]
             live = tau >= 0
-            wave = ev[None, :, 1] * self._gain * np.exp(-self._decay * np.where(live, tau, 0.0)) \
+            wave = (
+                ev[None, :, 1]
+                * self._gain
+                * np.exp(-self._decay * np.where(live, tau, 0.0))
                 * np.sin(self._omega * tau + self._lag)
+            )
             out = np.sum(np.where(live, wave, 0.0), axis=1)
             # Forget slips that have rung out (< 0.1 % of their peak).
             state.ringing[cell] = [e for e in ring if (t[-1] - e[0]) * self._decay <= 7.0]

@@ -29,7 +29,14 @@ import numpy as np
 from aptkt.sim.objects import Layer
 from aptkt.sim.patch import SkinConstants
 
-__all__ = ["TABLE_LAYER", "ThermalNetwork", "CellThermal", "contact_bins", "speed_bins", "thermal_network"]
+__all__ = [
+    "TABLE_LAYER",
+    "ThermalNetwork",
+    "CellThermal",
+    "contact_bins",
+    "speed_bins",
+    "thermal_network",
+]
 
 #: What every object stands on (thermally): a wooden table top.
 TABLE_LAYER = Layer("table top (wood)", 0.03, 1e9, 1.0, 0.15, 1.0e6)
@@ -95,21 +102,27 @@ class ThermalNetwork:
     its solution operators cached per (contact step, sliding speed). Shared by all trials of an
     object: trial temperatures only enter the steady state, which is linear in them."""
 
-    def __init__(self, constants: SkinConstants, layers: tuple[Layer, ...], contact_conductance: float):
+    def __init__(
+        self, constants: SkinConstants, layers: tuple[Layer, ...], contact_conductance: float
+    ):
         self.k = constants
         self.contact_conductance = float(contact_conductance)
         self.d, self.kc, self.rc = _discretise([*layers, TABLE_LAYER])
         self.n = _SKIN_NODES + len(self.d)
         a = constants.cell_area
         cov_c = constants.cover_heat_capacity * constants.cover_thickness * a
-        self.cap = np.concatenate([[0.02, constants.pcb_capacity, cov_c / 2, cov_c / 2], self.rc * self.d * a])
+        self.cap = np.concatenate(
+            [[0.02, constants.pcb_capacity, cov_c / 2, cov_c / 2], self.rc * self.d * a]
+        )
         self._g_sens = 0.02 / constants.lm71_lag  # W/K: a 0.02 J/K sensor lagging by lm71_lag
         self._g_cov_half = constants.cover_conductivity * a / (constants.cover_thickness / 4)
         self._g_cov_mid = constants.cover_conductivity * a / (constants.cover_thickness / 2)
         self._g_obj_half = self.kc * a / (self.d / 2)  # node centre to its faces
         self._cache: dict[tuple[int, int], _System] = {}
 
-    def _build(self, phi: float, speed: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _build(
+        self, phi: float, speed: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Conductance matrix K (symmetric) and the source vectors per watt of heater, per kelvin
         of room and per kelvin of object temperature."""
         k, n, a = self.k, self.n, self.k.cell_area
@@ -138,10 +151,18 @@ class ThermalNetwork:
             ground(3, 1.0 / (1.0 / self._g_cov_half + 1.0 / g_air), q_amb)
             ground(top, 1.0 / (1.0 / self._g_obj_half[0] + 1.0 / g_air), q_amb)
         if phi > 0:
-            g_c = 1.0 / (1.0 / self._g_cov_half + 1.0 / (self.contact_conductance * a * phi) + 1.0 / self._g_obj_half[0])
+            g_c = 1.0 / (
+                1.0 / self._g_cov_half
+                + 1.0 / (self.contact_conductance * a * phi)
+                + 1.0 / self._g_obj_half[0]
+            )
             link(3, top, g_c)
         for i in range(len(self.d) - 1):
-            link(top + i, top + i + 1, 1.0 / (1.0 / self._g_obj_half[i] + 1.0 / self._g_obj_half[i + 1]))
+            link(
+                top + i,
+                top + i + 1,
+                1.0 / (1.0 / self._g_obj_half[i] + 1.0 / self._g_obj_half[i + 1]),
+            )
         ground(n - 1, self._g_obj_half[-1], q_obj)
         if speed > 0:
             rate = speed / k.pitch  # fresh material under the cell
@@ -163,7 +184,9 @@ class ThermalNetwork:
 
 
 @functools.lru_cache(maxsize=64)
-def thermal_network(constants: SkinConstants, layers: tuple[Layer, ...], contact_conductance: float) -> ThermalNetwork:
+def thermal_network(
+    constants: SkinConstants, layers: tuple[Layer, ...], contact_conductance: float
+) -> ThermalNetwork:
     """The (cached) network of an object: built once per process, shared by all its trials."""
     return ThermalNetwork(constants, layers, contact_conductance)
 
@@ -176,8 +199,15 @@ def speed_bins(speed: np.ndarray) -> np.ndarray:
 class CellThermal:
     """The thermal network of a cell against an object under one trial's temperatures."""
 
-    def __init__(self, constants: SkinConstants, layers: Sequence[Layer], contact_conductance: float,
-                 ambient: float, object_temperature: float, conductance_scale: float = 1.0):
+    def __init__(
+        self,
+        constants: SkinConstants,
+        layers: Sequence[Layer],
+        contact_conductance: float,
+        ambient: float,
+        object_temperature: float,
+        conductance_scale: float = 1.0,
+    ):
         self.k = constants
         self.net = thermal_network(constants, tuple(layers), float(contact_conductance))
         self.n = self.net.n
@@ -195,8 +225,11 @@ class CellThermal:
         return contact_bins(np.minimum(np.asarray(phi) * self.conductance_scale, 1.0))
 
     def _t_ss(self, sys_: _System) -> np.ndarray:
-        return (self.k.heater_power * sys_.ss_heater + self.ambient * sys_.ss_ambient
-                + self.object_temperature * sys_.ss_object)
+        return (
+            self.k.heater_power * sys_.ss_heater
+            + self.ambient * sys_.ss_ambient
+            + self.object_temperature * sys_.ss_object
+        )
 
     def initial_state(self, skin_offset: float = 0.0) -> np.ndarray:
         """Steady state in free air (skin warm, object at its bulk temperature) plus an offset."""
@@ -205,7 +238,9 @@ class CellThermal:
         t[_SKIN_NODES:] = self.object_temperature
         return t
 
-    def propagate(self, state: np.ndarray, dt: np.ndarray, phi_bin: int, speed_bin: int) -> tuple[np.ndarray, np.ndarray]:
+    def propagate(
+        self, state: np.ndarray, dt: np.ndarray, phi_bin: int, speed_bin: int
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Temperatures of [LM71, PCB] after each elapsed time ``dt`` (s, increasing) and the full
         state after the last one, starting from ``state`` in configuration ``(phi_bin, speed_bin)``."""
         sys_ = self.net.system(phi_bin, speed_bin)
@@ -217,8 +252,14 @@ class CellThermal:
         end = t_ss + (sys_.u @ (decay[-1] * z0)) / sys_.sqrt_c
         return out, end
 
-    def propagate_many(self, states: np.ndarray, dt: np.ndarray, last: np.ndarray, phi_bins: np.ndarray,
-                       speed_bins_: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def propagate_many(
+        self,
+        states: np.ndarray,
+        dt: np.ndarray,
+        last: np.ndarray,
+        phi_bins: np.ndarray,
+        speed_bins_: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`propagate` for several cells at once, each in its own configuration.
 
         ``states`` (g, N); ``dt`` (g, L) elapsed times per cell (rows padded beyond ``last``);
@@ -228,7 +269,12 @@ class CellThermal:
         u = np.stack([x.u for x in systems])  # (g, N, N)
         mu = np.stack([x.mu for x in systems])  # (g, N)
         sqrt_c = systems[0].sqrt_c
-        t_ss = np.stack([self._t_ss_cached(int(p), int(v), x) for p, v, x in zip(phi_bins, speed_bins_, systems)])
+        t_ss = np.stack(
+            [
+                self._t_ss_cached(int(p), int(v), x)
+                for p, v, x in zip(phi_bins, speed_bins_, systems)
+            ]
+        )
         z0 = np.einsum("gn,gnm->gm", (states - t_ss) * sqrt_c, u)
         decay = np.exp(-dt[:, :, None] * mu[:, None, :])  # (g, L, N)
         rows = u[:, :2, :] / sqrt_c[:2, None]  # (g, 2, N)

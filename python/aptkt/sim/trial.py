@@ -36,7 +36,9 @@ class TrialVariation:
     contact_sd: float = 0.12  # relative variation of the thermal contact (area, cleanliness)
     arm_vibration: float = 0.0025  # g rms of the arm's own vibration when moving at 5 cm/s
     arm_vibration_sd: float = 0.4  # log-normal spread of that amplitude between trials
-    skin_stiffness_sd: float = 0.05  # relative drift of the skin cover's stiffness (temperature, wear)
+    skin_stiffness_sd: float = (
+        0.05  # relative drift of the skin cover's stiffness (temperature, wear)
+    )
     force_gain_sd: float = 0.04  # relative drift of the force sensors' gain, common to the patch
     cell_gain_sd: float = 0.03  # ... and per cell
 
@@ -68,31 +70,56 @@ class TrialConditions:
     depth_error: float  # m
 
     @classmethod
-    def draw(cls, obj: ObjectSpec, variation: TrialVariation, seq: np.random.SeedSequence,
-             n_cells: int = 7) -> TrialConditions:
+    def draw(
+        cls,
+        obj: ObjectSpec,
+        variation: TrialVariation,
+        seq: np.random.SeedSequence,
+        n_cells: int = 7,
+    ) -> TrialConditions:
         g = spawn_generators(seq, ["pose", "material", "thermal", "robot", "arm", "sensors"])
         pose, mat, th, arm = g["pose"], g["material"], g["thermal"], g["arm"]
         tilt = np.tan(np.deg2rad(variation.tilt_sd) * pose.standard_normal(2))
         cv = obj.variability
         ambient = variation.ambient + variation.ambient_sd * th.standard_normal()
         return cls(
-            shift=(float(pose.uniform(-variation.shift, variation.shift)),
-                   float(pose.uniform(-variation.shift, variation.shift))),
+            shift=(
+                float(pose.uniform(-variation.shift, variation.shift)),
+                float(pose.uniform(-variation.shift, variation.shift)),
+            ),
             rotation=float(np.deg2rad(pose.uniform(-variation.rotation, variation.rotation))),
             tilt=(float(tilt[0]), float(tilt[1])),
             modulus_scale=float(np.exp(cv * mat.standard_normal())),
             relaxation_scale=float(np.exp(cv * mat.standard_normal())),
-            friction_scale=float(np.exp(math.hypot(0.5 * cv, variation.friction_sd) * mat.standard_normal())),
-            roughness_scale=float(np.exp(math.hypot(cv, variation.texture_sd) * mat.standard_normal())),
-            conductance_scale=float(np.exp(math.hypot(cv, variation.contact_sd) * mat.standard_normal())),
-            skin_stiffness_scale=float(np.exp(variation.skin_stiffness_sd * g["sensors"].standard_normal())),
-            force_gain_drift=tuple(float(x) for x in np.exp(variation.force_gain_sd * g["sensors"].standard_normal()
-                                                             + variation.cell_gain_sd * g["sensors"].standard_normal(n_cells))),
-            arm_vibration=float(variation.arm_vibration * np.exp(variation.arm_vibration_sd * arm.standard_normal())),
+            friction_scale=float(
+                np.exp(math.hypot(0.5 * cv, variation.friction_sd) * mat.standard_normal())
+            ),
+            roughness_scale=float(
+                np.exp(math.hypot(cv, variation.texture_sd) * mat.standard_normal())
+            ),
+            conductance_scale=float(
+                np.exp(math.hypot(cv, variation.contact_sd) * mat.standard_normal())
+            ),
+            skin_stiffness_scale=float(
+                np.exp(variation.skin_stiffness_sd * g["sensors"].standard_normal())
+            ),
+            force_gain_drift=tuple(
+                float(x)
+                for x in np.exp(
+                    variation.force_gain_sd * g["sensors"].standard_normal()
+                    + variation.cell_gain_sd * g["sensors"].standard_normal(n_cells)
+                )
+            ),
+            arm_vibration=float(
+                variation.arm_vibration * np.exp(variation.arm_vibration_sd * arm.standard_normal())
+            ),
             arm_modes=tuple(_arm_mode(arm) for _ in range(3)),
             ambient=float(ambient),
-            object_temperature=float(ambient + obj.temperature_offset
-                                     + variation.object_temperature_sd * th.standard_normal()),
+            object_temperature=float(
+                ambient
+                + obj.temperature_offset
+                + variation.object_temperature_sd * th.standard_normal()
+            ),
             skin_offset=float(variation.skin_offset_sd * th.standard_normal()),
             depth_error=float(variation.depth_error_sd * g["robot"].standard_normal()),
         )
@@ -105,5 +132,10 @@ def _arm_mode(rng: np.random.Generator) -> tuple[float, float, float, float, flo
     """One vibration mode of the moving arm: frequency, phase and a unit direction."""
     d = rng.standard_normal(3)
     d /= np.linalg.norm(d)
-    return (float(rng.uniform(18.0, 110.0)), float(rng.uniform(0, 2 * np.pi)), float(d[0]), float(d[1]), float(d[2]))
-
+    return (
+        float(rng.uniform(18.0, 110.0)),
+        float(rng.uniform(0, 2 * np.pi)),
+        float(d[0]),
+        float(d[1]),
+        float(d[2]),
+    )

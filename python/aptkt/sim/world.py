@@ -63,11 +63,19 @@ class SimWorld:
     own (:attr:`patch`, the one to give a skin source reading this world).
     """
 
-    def __init__(self, objects: ObjectLibrary | None = None, *, seed: int = 0,
-                 variation: TrialVariation | None = None, limits: SafetyLimits | None = None,
-                 constants: SkinConstants | None = None, patch_seed: int = 0,
-                 cell_ids: tuple[int, ...] = DEFAULT_CELL_IDS, layout: PatchConfig | None = None,
-                 settings: ExplorationSettings | None = None):
+    def __init__(
+        self,
+        objects: ObjectLibrary | None = None,
+        *,
+        seed: int = 0,
+        variation: TrialVariation | None = None,
+        limits: SafetyLimits | None = None,
+        constants: SkinConstants | None = None,
+        patch_seed: int = 0,
+        cell_ids: tuple[int, ...] = DEFAULT_CELL_IDS,
+        layout: PatchConfig | None = None,
+        settings: ExplorationSettings | None = None,
+    ):
         if not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
         self.objects = objects if objects is not None else default_library()
@@ -75,10 +83,14 @@ class SimWorld:
         self.variation = variation or TrialVariation()
         self.limits = limits or SafetyLimits()
         if layout is not None:  # cell ids and positions from a skin patch file
-            self.geometry = PatchGeometry.from_patch(layout.cell_ids, layout.positions_mm, constants or SkinConstants())
+            self.geometry = PatchGeometry.from_patch(
+                layout.cell_ids, layout.positions_mm, constants or SkinConstants()
+            )
         else:
             self.geometry = PatchGeometry(cell_ids, constants or SkinConstants())
-        self.imperfections = PatchImperfections.generate(self.geometry.constants, self.geometry.n_cells, patch_seed)
+        self.imperfections = PatchImperfections.generate(
+            self.geometry.constants, self.geometry.n_cells, patch_seed
+        )
         self.settings = settings or ExplorationSettings(stamp_wall_clock=False)
         self.patch = PatchConfig(
             name=f"simulated-{self.geometry.n_cells}",
@@ -89,7 +101,9 @@ class SimWorld:
                     force_offset=tuple(float(v) for v in self.imperfections.believed_offset[i]),
                     force_gain=tuple(float(v) for v in self.imperfections.believed_gain[i]),
                 )
-                for i, (cid, (x, y)) in enumerate(zip(self.geometry.cell_ids, self.geometry.centres))
+                for i, (cid, (x, y)) in enumerate(
+                    zip(self.geometry.cell_ids, self.geometry.centres)
+                )
             ),
             # Arrival times are stamped by the reading thread: on a busy CPU the real-time pty
             # reader can stall for a few hundred ms and would report live cells as silent.
@@ -115,15 +129,23 @@ class SimWorld:
             x=x,
             y=y,
             surface_z=obj.height,
-            workspace_min=(OBJECT_SPOT[0] - half, OBJECT_SPOT[1] - half, max(obj.height - 0.01, 0.0)),
+            workspace_min=(
+                OBJECT_SPOT[0] - half,
+                OBJECT_SPOT[1] - half,
+                max(obj.height - 0.01, 0.0),
+            ),
             workspace_max=(OBJECT_SPOT[0] + half, OBJECT_SPOT[1] + half, obj.height + 0.25),
             slide_direction=(1.0, 0.0),
         )
 
     def conditions(self, object_name: str, action_name: str, trial: int) -> TrialConditions:
         obj = self.objects[object_name]
-        return TrialConditions.draw(obj, self.variation, trial_seed_sequence(self.seed, obj.name, action_name, trial),
-                                    self.geometry.n_cells)
+        return TrialConditions.draw(
+            obj,
+            self.variation,
+            trial_seed_sequence(self.seed, obj.name, action_name, trial),
+            self.geometry.n_cells,
+        )
 
     def _action(self, action: ExploratoryAction | str) -> ExploratoryAction:
         if isinstance(action, ExploratoryAction):
@@ -131,12 +153,21 @@ class SimWorld:
         try:
             return PAPER_ACTIONS[action]
         except KeyError:
-            raise KeyError(f"unknown action {action!r}; paper actions: {', '.join(PAPER_ACTIONS)}") from None
+            raise KeyError(
+                f"unknown action {action!r}; paper actions: {', '.join(PAPER_ACTIONS)}"
+            ) from None
 
     # ------------------------------------------------------------------ sessions
     @contextmanager
-    def session(self, object_name: str, action_name: str = "session", trial: int = 0, *,
-                realtime: bool = False, action: ExploratoryAction | None = None) -> Iterator[SimSession]:
+    def session(
+        self,
+        object_name: str,
+        action_name: str = "session",
+        trial: int = 0,
+        *,
+        realtime: bool = False,
+        action: ExploratoryAction | None = None,
+    ) -> Iterator[SimSession]:
         """The object placed for one trial, with the arm hovering above it.
 
         Fast sessions (default) run on simulated time and carry an in-process :class:`SimSkin`.
@@ -145,7 +176,9 @@ class SimWorld:
         obj = self.objects[object_name]
         seq = trial_seed_sequence(self.seed, obj.name, action_name, trial)
         cond = TrialConditions.draw(obj, self.variation, seq, self.geometry.n_cells)
-        noise = np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, *stable_words("noise")))
+        noise = np.random.SeedSequence(
+            seq.entropy, spawn_key=(*seq.spawn_key, *stable_words("noise"))
+        )
         placement = self.placement(obj.name, action)
         pose = ObjectPose(OBJECT_SPOT, obj.height, 0.0)
         physics = ContactPhysics(obj, pose, cond, self.geometry, self.imperfections, noise)
@@ -157,7 +190,9 @@ class SimWorld:
             driver = RealTimeDriver(engine)
             robot = SimRobot(driver, self.limits, depth_error=cond.depth_error)
             try:
-                yield SimSession(robot, placement, engine, self.patch, port=link.port, conditions=cond)
+                yield SimSession(
+                    robot, placement, engine, self.patch, port=link.port, conditions=cond
+                )
             finally:
                 driver.close()
                 link.close()
@@ -175,17 +210,29 @@ class SimWorld:
         finally:
             skin.close()
 
-    def explore(self, object_name: str, action: ExploratoryAction | str, trial: int = 0) -> Recording:
+    def explore(
+        self, object_name: str, action: ExploratoryAction | str, trial: int = 0
+    ) -> Recording:
         """Apply one action once (fast, simulated time) and return the recording."""
         act = self._action(action)
         with self.session(object_name, act.name, trial, action=act) as s:
             assert s.skin is not None
-            rec = explore(s.robot, s.skin, s.placement, act, trial=trial, settings=self.settings,
-                          metadata={"simulation": self.describe_trial(object_name, act.name, trial, s.conditions)})
+            rec = explore(
+                s.robot,
+                s.skin,
+                s.placement,
+                act,
+                trial=trial,
+                settings=self.settings,
+                metadata={
+                    "simulation": self.describe_trial(object_name, act.name, trial, s.conditions)
+                },
+            )
         return rec
 
-    def describe_trial(self, object_name: str, action_name: str, trial: int,
-                       cond: TrialConditions | None = None) -> dict[str, Any]:
+    def describe_trial(
+        self, object_name: str, action_name: str, trial: int, cond: TrialConditions | None = None
+    ) -> dict[str, Any]:
         """What the simulator did in a trial (stored with the recording; never used by learning)."""
         obj = self.objects[object_name]
         cond = cond or self.conditions(object_name, action_name, trial)

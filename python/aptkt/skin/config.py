@@ -38,7 +38,14 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
-__all__ = ["CellConfig", "PatchConfig", "ForceCalibration", "load_patch", "default_patch", "DEFAULT_PATCH_FILE"]
+__all__ = [
+    "CellConfig",
+    "PatchConfig",
+    "ForceCalibration",
+    "load_patch",
+    "default_patch",
+    "DEFAULT_PATCH_FILE",
+]
 
 #: Name of the default patch file shipped in the package (``aptkt/skin/data``).
 DEFAULT_PATCH_FILE = "patch_7cells.toml"
@@ -154,7 +161,11 @@ class _Parser:
         return ConfigError(f"{self.source}: {field}: {message}")
 
     def number(self, field: str, value: Any) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not math.isfinite(value)
+        ):
             raise self.fail(field, f"expected a finite number, got {value!r}")
         return float(value)
 
@@ -171,20 +182,26 @@ class _Parser:
     def gain(self, field: str, value: Any) -> tuple[float, float, float]:
         g = self.triple(field, value, allow_scalar=True)
         if min(g) <= 0:
-            raise self.fail(field, f"gains must be > 0 (newtons per normalised unit), got {value!r}")
+            raise self.fail(
+                field, f"gains must be > 0 (newtons per normalised unit), got {value!r}"
+            )
         return g
 
     def no_unknown_keys(self, field: str, table: Mapping[str, Any], allowed: set[str]) -> None:
         extra = sorted(set(table) - allowed)
         if extra:
-            raise self.fail(field, f"unknown key(s) {', '.join(extra)} (allowed: {', '.join(sorted(allowed))})")
+            raise self.fail(
+                field, f"unknown key(s) {', '.join(extra)} (allowed: {', '.join(sorted(allowed))})"
+            )
 
     def patch(self, data: Mapping[str, Any]) -> PatchConfig:
         self.no_unknown_keys("(top level)", data, {"patch", "cell"})
         head = data.get("patch", {})
         if not isinstance(head, Mapping):
             raise self.fail("patch", "expected a table [patch]")
-        self.no_unknown_keys("patch", head, {"name", "silence_timeout_s", "force_offset", "force_gain"})
+        self.no_unknown_keys(
+            "patch", head, {"name", "silence_timeout_s", "force_offset", "force_gain"}
+        )
         name = head.get("name", Path(self.source).stem)
         if not isinstance(name, str) or not name:
             raise self.fail("patch.name", f"expected a non-empty string, got {name!r}")
@@ -205,8 +222,14 @@ class _Parser:
                 raise self.fail(where, "expected a table")
             self.no_unknown_keys(where, cell, {"id", "position_mm", "force_offset", "force_gain"})
             cid = cell.get("id")
-            if isinstance(cid, bool) or not isinstance(cid, int) or not 1 <= cid <= _MAX_CELL_ID - 1:
-                raise self.fail(f"{where}.id", f"expected an integer in 1..{_MAX_CELL_ID - 1}, got {cid!r}")
+            if (
+                isinstance(cid, bool)
+                or not isinstance(cid, int)
+                or not 1 <= cid <= _MAX_CELL_ID - 1
+            ):
+                raise self.fail(
+                    f"{where}.id", f"expected an integer in 1..{_MAX_CELL_ID - 1}, got {cid!r}"
+                )
             if cid in seen:
                 raise self.fail(f"{where}.id", f"cell id {cid} appears twice")
             seen.add(cid)
@@ -215,9 +238,15 @@ class _Parser:
             cells.append(
                 CellConfig(
                     cell_id=cid,
-                    position_mm=self.triple(f"{where}.position_mm", cell["position_mm"], allow_scalar=False),
-                    force_offset=self.triple(f"{where}.force_offset", cell.get("force_offset", offset), True),
+                    position_mm=self.triple(
+                        f"{where}.position_mm", cell["position_mm"], allow_scalar=False
+                    ),
+                    force_offset=self.triple(
+                        f"{where}.force_offset", cell.get("force_offset", offset), True
+                    ),
                     force_gain=self.gain(f"{where}.force_gain", cell.get("force_gain", gain)),
                 )
             )
-        return PatchConfig(name=name, cells=tuple(cells), silence_timeout_s=timeout, source=self.source)
+        return PatchConfig(
+            name=name, cells=tuple(cells), silence_timeout_s=timeout, source=self.source
+        )

@@ -137,7 +137,9 @@ def encode_sensor_packets(raw: Mapping[str, np.ndarray]) -> bytes:
         elif arr.shape[0] != n:
             raise ValueError(f"{name} has {arr.shape[0]} rows, cell_id has {n}")
         cols[name] = arr
-    return _encode_core(cols["cell_id"], cols["proximity"], cols["acc"], cols["temp"], cols["force"])
+    return _encode_core(
+        cols["cell_id"], cols["proximity"], cols["acc"], cols["temp"], cols["force"]
+    )
 
 
 def encode_packet(kind: str | int, payload: bytes = bytes(18)) -> bytes:

@@ -18,7 +18,9 @@ class SampleRing:
         if capacity < 1:
             raise ValueError(f"ring capacity must be >= 1, got {capacity}")
         self.capacity = int(capacity)
-        self._cols = {name: np.zeros((self.capacity, *tail), dtype) for name, (tail, dtype) in FIELDS.items()}
+        self._cols = {
+            name: np.zeros((self.capacity, *tail), dtype) for name, (tail, dtype) in FIELDS.items()
+        }
         self._head = 0  # index of the oldest row
         self._count = 0
         self.overflows = 0

@@ -25,7 +25,9 @@ def _open_error(port: str, exc: Exception) -> SkinDisconnectedError:
     text = str(exc)
     if code == errno.ENOENT or "No such file" in text:
         why = "port not found (is the skin adapter plugged in? is the name right?)"
-    elif code in (errno.EBUSY, errno.EAGAIN) or "exclusively lock" in text or "Resource busy" in text:
+    elif (
+        code in (errno.EBUSY, errno.EAGAIN) or "exclusively lock" in text or "Resource busy" in text
+    ):
         why = "port is busy (another program, or another aptkt source, has it open)"
     elif code == errno.EACCES or "Permission denied" in text:
         why = "permission denied (is your user in the 'dialout' group?)"
@@ -69,7 +71,9 @@ class SerialSkin(ThreadedSkinSource):
         try:
             # exclusive=True takes an advisory lock, so a second reader fails loudly ("busy")
             # instead of silently stealing half the bytes.
-            ser = serial.Serial(self.port, self.baudrate, timeout=self.read_timeout_s, exclusive=True)
+            ser = serial.Serial(
+                self.port, self.baudrate, timeout=self.read_timeout_s, exclusive=True
+            )
         except (serial.SerialException, OSError, ValueError) as exc:
             raise _open_error(self.port, exc) from exc
         self._serial = ser
@@ -98,7 +102,11 @@ class SerialSkin(ThreadedSkinSource):
                 # pyserial raises SerialException on EIO / "returned no data" when the device
                 # disappears; TypeError/OSError come from reads racing a close.
                 if not self._stopping():
-                    self._fail(SkinDisconnectedError(f"serial skin {self.port}: link lost mid-stream: {exc}"))
+                    self._fail(
+                        SkinDisconnectedError(
+                            f"serial skin {self.port}: link lost mid-stream: {exc}"
+                        )
+                    )
                 return
             if data:
                 self._reads += 1

@@ -213,7 +213,9 @@ class SkinSourceBase:
             if not silent:
                 return
             if time.monotonic() >= deadline:
-                raise SilentCellError(f"{type(self).__name__}: no data from cell(s) {list(silent)} within {timeout_s} s")
+                raise SilentCellError(
+                    f"{type(self).__name__}: no data from cell(s) {list(silent)} within {timeout_s} s"
+                )
             time.sleep(poll_s)
 
     def total_normal_force(self) -> float:
@@ -258,7 +260,9 @@ class SkinSourceBase:
         """
         with self._lock:
             if self._recording is None:
-                raise SkinError(f"{type(self).__name__}: stop_recording() without start_recording()")
+                raise SkinError(
+                    f"{type(self).__name__}: stop_recording() without start_recording()"
+                )
             stop = self._now()
             parts, start = self._recording, self._rec_start
             self._recording = None
@@ -282,7 +286,9 @@ class SkinSourceBase:
             metadata=metadata,
         )
         if strict and silent:
-            err = SilentCellError(f"{type(self).__name__}: cell(s) {list(silent)} silent during the recording")
+            err = SilentCellError(
+                f"{type(self).__name__}: cell(s) {list(silent)} silent during the recording"
+            )
             err.recording = rec  # type: ignore[attr-defined]
             raise err
         return rec

@@ -76,13 +76,17 @@ class TsuSkin(ThreadedSkinSource):
             self._tsu_ip = socket.gethostbyname(self.tsu_address[0])
             sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         except OSError as exc:
-            raise SkinDisconnectedError(f"TSU skin: cannot resolve {self.tsu_address[0]!r}: {exc}") from exc
+            raise SkinDisconnectedError(
+                f"TSU skin: cannot resolve {self.tsu_address[0]!r}: {exc}"
+            ) from exc
         try:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
             sock.bind(self.listen_address)
         except OSError as exc:
             sock.close()
-            raise SkinDisconnectedError(f"TSU skin: cannot listen on udp {where}: {exc.strerror or exc}") from exc
+            raise SkinDisconnectedError(
+                f"TSU skin: cannot listen on udp {where}: {exc.strerror or exc}"
+            ) from exc
         self._sock = sock
         self._mark_opened()
         self._start_reader("TsuSkin")
@@ -112,7 +116,9 @@ class TsuSkin(ThreadedSkinSource):
                 batch = self._receive(sock, max(next_alive - time.monotonic(), 0.001))
             except OSError as exc:
                 if not self._stopping():
-                    self._fail(SkinDisconnectedError(f"TSU skin {self.tsu_address[0]}: link failed: {exc}"))
+                    self._fail(
+                        SkinDisconnectedError(f"TSU skin {self.tsu_address[0]}: link failed: {exc}")
+                    )
                 return
             if batch:
                 self._ingest_bytes(b"".join(batch), self._now())

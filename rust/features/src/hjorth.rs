@@ -186,14 +186,25 @@ mod tests {
         let x: Vec<f64> = (0..5000).map(|k| (w * k as f64).sin()).collect();
         let h = hjorth(Array1::from(x).view());
         let expected = (2.0 * (1.0 - w.cos())).sqrt();
-        assert!(close(h.mobility, expected, 1e-3), "{} vs {}", h.mobility, expected);
-        assert!(close(h.complexity, 1.0, 1e-3), "complexity of a pure tone is 1: {}", h.complexity);
+        assert!(
+            close(h.mobility, expected, 1e-3),
+            "{} vs {}",
+            h.mobility,
+            expected
+        );
+        assert!(
+            close(h.complexity, 1.0, 1e-3),
+            "complexity of a pure tone is 1: {}",
+            h.complexity
+        );
         assert!(close(h.activity, 0.5, 1e-3));
     }
 
     #[test]
     fn strided_lane_equals_contiguous() {
-        let a = Array3::from_shape_fn((2, 3, 50), |(i, j, k)| ((i * 7 + j * 3 + k) as f64).sin() * 3.0 + k as f64 * 0.01);
+        let a = Array3::from_shape_fn((2, 3, 50), |(i, j, k)| {
+            ((i * 7 + j * 3 + k) as f64).sin() * 3.0 + k as f64 * 0.01
+        });
         let t = a.view().permuted_axes([2, 1, 0]).into_dyn();
         let r1 = hjorth_along("a", a.view().into_dyn(), -1).unwrap();
         let r2 = hjorth_along("t", t, 0).unwrap();
@@ -217,8 +228,14 @@ mod tests {
     #[test]
     fn too_short_is_a_shape_error() {
         let a = Array1::<f64>::zeros(2);
-        assert!(matches!(hjorth_along("x", a.view().into_dyn(), 0), Err(FeatureError::Shape { .. })));
-        assert!(matches!(hjorth_along("x", a.view().into_dyn(), 3), Err(FeatureError::Shape { .. })));
+        assert!(matches!(
+            hjorth_along("x", a.view().into_dyn(), 0),
+            Err(FeatureError::Shape { .. })
+        ));
+        assert!(matches!(
+            hjorth_along("x", a.view().into_dyn(), 3),
+            Err(FeatureError::Shape { .. })
+        ));
     }
 
     proptest! {

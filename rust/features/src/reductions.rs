@@ -52,11 +52,18 @@ pub fn gradient_along<T: Sample>(
 ) -> Result<ArrayD<f64>, FeatureError> {
     let axis = resolve_axis(name, axis, x.ndim())?;
     if x.len_of(Axis(axis)) < 2 {
-        return Err(FeatureError::shape(name, format!("a gradient needs at least 2 samples along axis {axis}")));
+        return Err(FeatureError::shape(
+            name,
+            format!("a gradient needs at least 2 samples along axis {axis}"),
+        ));
     }
     check_finite(name, &x)?;
     let mut out = ArrayD::<f64>::zeros(x.raw_dim());
-    for (src, mut dst) in x.lanes(Axis(axis)).into_iter().zip(out.lanes_mut(Axis(axis))) {
+    for (src, mut dst) in x
+        .lanes(Axis(axis))
+        .into_iter()
+        .zip(out.lanes_mut(Axis(axis)))
+    {
         dst.assign(&gradient(src));
     }
     Ok(out)
@@ -73,7 +80,10 @@ pub fn thermal_curve<T: Sample>(
     let axis = resolve_axis(name, axis, temp.ndim())?;
     let steps = temp.len_of(Axis(axis));
     if steps < 2 {
-        return Err(FeatureError::shape(name, format!("a temperature curve needs at least 2 time steps, got {steps}")));
+        return Err(FeatureError::shape(
+            name,
+            format!("a temperature curve needs at least 2 time steps, got {steps}"),
+        ));
     }
     if temp.len() == 0 {
         return Err(FeatureError::shape(name, "no temperature sensors"));
@@ -105,7 +115,9 @@ mod tests {
 
     #[test]
     fn mean_is_exact_for_large_offsets() {
-        let x = Array3::from_shape_fn((7, 3, 1000), |(i, j, k)| 1e8 + ((i + j + k) % 3) as f64 - 1.0);
+        let x = Array3::from_shape_fn((7, 3, 1000), |(i, j, k)| {
+            1e8 + ((i + j + k) % 3) as f64 - 1.0
+        });
         let m = mean_all("force", x.view().into_dyn()).unwrap();
         let exact = x.iter().map(|v| v - 1e8).sum::<f64>() / x.len() as f64 + 1e8;
         assert!((m - exact).abs() < 1e-7);

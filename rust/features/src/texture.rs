@@ -40,16 +40,25 @@ pub fn axis_pair_correlations<T: Sample>(
     let ch = resolve_axis(name, channel_axis, ndim)?;
     let ti = resolve_axis(name, time_axis, ndim)?;
     if ch == ti {
-        return Err(FeatureError::shape(name, "channel_axis and time_axis must differ"));
+        return Err(FeatureError::shape(
+            name,
+            "channel_axis and time_axis must differ",
+        ));
     }
     if acc.len_of(Axis(ch)) != 3 {
         return Err(FeatureError::shape(
             name,
-            format!("axis {ch} must hold the 3 acceleration axes, it has length {}", acc.len_of(Axis(ch))),
+            format!(
+                "axis {ch} must hold the 3 acceleration axes, it has length {}",
+                acc.len_of(Axis(ch))
+            ),
         ));
     }
     if acc.len_of(Axis(ti)) < 2 {
-        return Err(FeatureError::shape(name, "a correlation needs at least 2 samples"));
+        return Err(FeatureError::shape(
+            name,
+            "a correlation needs at least 2 samples",
+        ));
     }
     check_finite(name, &acc)?;
     // Put channels and time last so each outer index yields one (3, T) block.
@@ -71,7 +80,8 @@ pub fn axis_pair_correlations<T: Sample>(
     }
     let mut shape = outer_shape;
     shape.push(3);
-    ArrayD::from_shape_vec(IxDyn(&shape), out).map_err(|e| FeatureError::shape(name, format!("internal shape error: {e}")))
+    ArrayD::from_shape_vec(IxDyn(&shape), out)
+        .map_err(|e| FeatureError::shape(name, format!("internal shape error: {e}")))
 }
 
 fn push_pairs<T: Sample>(out: &mut Vec<f64>, block: ArrayView2<'_, T>) {
@@ -85,7 +95,10 @@ fn push_pairs<T: Sample>(out: &mut Vec<f64>, block: ArrayView2<'_, T>) {
 /// shape (cells, 3 axes, time): Hjorth activity, mobility, complexity of each axis and the
 /// axis-pair correlations, each averaged over cells. Layout:
 /// `[A_x, A_y, A_z, M_x, M_y, M_z, C_x, C_y, C_z, L_xy, L_yz, L_xz]`.
-pub fn texture_descriptor<T: Sample>(name: &str, acc: ArrayViewD<'_, T>) -> Result<Array1<f64>, FeatureError> {
+pub fn texture_descriptor<T: Sample>(
+    name: &str,
+    acc: ArrayViewD<'_, T>,
+) -> Result<Array1<f64>, FeatureError> {
     if acc.ndim() != 3 || acc.shape()[1] != 3 {
         return Err(FeatureError::shape(
             name,
@@ -97,7 +110,10 @@ pub fn texture_descriptor<T: Sample>(name: &str, acc: ArrayViewD<'_, T>) -> Resu
         return Err(FeatureError::shape(name, "no cells"));
     }
     if steps < 3 {
-        return Err(FeatureError::shape(name, format!("need at least 3 time steps, got {steps}")));
+        return Err(FeatureError::shape(
+            name,
+            format!("need at least 3 time steps, got {steps}"),
+        ));
     }
     let mut td = Array1::<f64>::zeros(TEXTURE_DIM);
     for cell in acc.outer_iter() {
@@ -155,10 +171,14 @@ mod tests {
 
     #[test]
     fn descriptor_averages_cells() {
-        let acc = Array3::from_shape_fn((2, 3, 64), |(c, a, k)| ((k * (a + 1)) as f64 * 0.3).sin() * (c + 1) as f64);
+        let acc = Array3::from_shape_fn((2, 3, 64), |(c, a, k)| {
+            ((k * (a + 1)) as f64 * 0.3).sin() * (c + 1) as f64
+        });
         let td = texture_descriptor("acc", acc.view().into_dyn()).unwrap();
-        let c0 = texture_descriptor("acc", acc.slice(ndarray::s![0..1, .., ..]).into_dyn()).unwrap();
-        let c1 = texture_descriptor("acc", acc.slice(ndarray::s![1..2, .., ..]).into_dyn()).unwrap();
+        let c0 =
+            texture_descriptor("acc", acc.slice(ndarray::s![0..1, .., ..]).into_dyn()).unwrap();
+        let c1 =
+            texture_descriptor("acc", acc.slice(ndarray::s![1..2, .., ..]).into_dyn()).unwrap();
         for k in 0..TEXTURE_DIM {
             assert!((td[k] - (c0[k] + c1[k]) / 2.0).abs() < 1e-12);
         }

@@ -13,7 +13,8 @@ pub fn exp_nonpositive_in_place(xs: &mut [f64]) {
             unsafe { exp_avx512(xs) };
             return;
         }
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
             // SAFETY: as above.
             unsafe { exp_avx2(xs) };
             return;
@@ -54,7 +55,7 @@ pub fn exp_nonpositive(x: f64) -> f64 {
     let shifted = xc * LOG2E + SHIFTER;
     let k = shifted - SHIFTER;
     let r = (xc - k * LN2_HI) - k * LN2_LO; // |r| <= ln2 / 2
-    // Taylor series to r^13: truncation error below 2^-60 relative on |r| <= 0.347.
+                                            // Taylor series to r^13: truncation error below 2^-60 relative on |r| <= 0.347.
     let mut p = 1.0 / 6_227_020_800.0;
     p = p * r + 1.0 / 479_001_600.0;
     p = p * r + 1.0 / 39_916_800.0;

@@ -81,7 +81,13 @@ impl Layout {
         self.n_modalities > 1
     }
     pub fn len(&self) -> usize {
-        1 + self.n_modalities + if self.has_weights() { self.n_modalities } else { 0 } + usize::from(self.transfer)
+        1 + self.n_modalities
+            + if self.has_weights() {
+                self.n_modalities
+            } else {
+                0
+            }
+            + usize::from(self.transfer)
     }
     pub fn is_empty(&self) -> bool {
         false
@@ -123,7 +129,10 @@ impl Layout {
             )));
         }
         if let Some(bad) = theta.iter().position(|v| !v.is_finite()) {
-            return Err(GpError::NonFinite(format!("theta[{bad}] is not finite ({})", theta[bad])));
+            return Err(GpError::NonFinite(format!(
+                "theta[{bad}] is not finite ({})",
+                theta[bad]
+            )));
         }
         let m = self.n_modalities;
         let signal_variance = theta[0].exp();
@@ -193,11 +202,15 @@ pub struct Modalities {
 impl Modalities {
     pub fn new(groups: Vec<Vec<usize>>, d: usize) -> GpResult<Self> {
         if groups.is_empty() {
-            return Err(GpError::InvalidInput("at least one modality is needed".into()));
+            return Err(GpError::InvalidInput(
+                "at least one modality is needed".into(),
+            ));
         }
         for (m, g) in groups.iter().enumerate() {
             if g.is_empty() {
-                return Err(GpError::InvalidInput(format!("modality {m} has no feature columns")));
+                return Err(GpError::InvalidInput(format!(
+                    "modality {m} has no feature columns"
+                )));
             }
             if let Some(c) = g.iter().find(|&&c| c >= d) {
                 return Err(GpError::InvalidInput(format!(
@@ -229,14 +242,27 @@ impl Modalities {
     /// distances do not change, and the expansion then loses no precision to large offsets.
     pub fn sq_distances(&self, m: usize, a: &Data, b: &Data, center: &[f64]) -> Mat<f64> {
         let cols = &self.groups[m];
-        let block = |x: &Data| Mat::<f64>::from_fn(x.n, cols.len(), |i, k| x.values[i * x.d + cols[k]] - center[cols[k]]);
+        let block = |x: &Data| {
+            Mat::<f64>::from_fn(x.n, cols.len(), |i, k| {
+                x.values[i * x.d + cols[k]] - center[cols[k]]
+            })
+        };
         let (ab, bb) = (block(a), block(b));
         let norms = |x: &Mat<f64>| -> Vec<f64> {
-            (0..x.nrows()).map(|i| (0..x.ncols()).map(|k| x[(i, k)] * x[(i, k)]).sum()).collect()
+            (0..x.nrows())
+                .map(|i| (0..x.ncols()).map(|k| x[(i, k)] * x[(i, k)]).sum())
+                .collect()
         };
         let (na, nb) = (norms(&ab), norms(&bb));
         let mut d = Mat::<f64>::zeros(a.n, b.n);
-        matmul(d.as_mut(), Accum::Replace, ab.as_ref(), bb.as_ref().transpose(), -2.0, Par::Seq);
+        matmul(
+            d.as_mut(),
+            Accum::Replace,
+            ab.as_ref(),
+            bb.as_ref().transpose(),
+            -2.0,
+            Par::Seq,
+        );
         for j in 0..b.n {
             let col = d.col_as_slice_mut(j);
             for (i, v) in col.iter_mut().enumerate() {
@@ -298,7 +324,11 @@ impl PairDistances {
     /// Median of the non-zero pairwise distances of modality m among the target rows (all rows
     /// when there are too few): the data-scaled starting length-scale.
     pub fn median_distance(&self, m: usize) -> f64 {
-        let start = if self.n - self.n_source >= 2 { self.n_source } else { 0 };
+        let start = if self.n - self.n_source >= 2 {
+            self.n_source
+        } else {
+            0
+        };
         let d = &self.per_modality[m];
         let mut v: Vec<f64> = Vec::new();
         for j in start..self.n {
@@ -338,7 +368,11 @@ impl KernelEval {
             .collect();
         let mut k = Mat::<f64>::zeros(n, n);
         combine_parts(&mut k, &parts, h, dist.n_source, true);
-        KernelEval { k, parts, jitter: 0.0 }
+        KernelEval {
+            k,
+            parts,
+            jitter: 0.0,
+        }
     }
 
     pub fn with_jitter(mut self, relative: f64, signal_variance: f64) -> Self {
@@ -415,7 +449,13 @@ pub fn rbf_from_sq_distances(d: &Mat<f64>, length_scale: f64) -> Mat<f64> {
 
 /// `out = σ² Σ_m γ_m parts_m`, with the rows before `n_source` scaled by λ against the target
 /// columns (`symmetric`: columns are the same rows, so the source columns are scaled too).
-pub fn combine_parts(out: &mut Mat<f64>, parts: &[Mat<f64>], h: &Hyper, n_source: usize, symmetric: bool) {
+pub fn combine_parts(
+    out: &mut Mat<f64>,
+    parts: &[Mat<f64>],
+    h: &Hyper,
+    n_source: usize,
+    symmetric: bool,
+) {
     for j in 0..out.ncols() {
         let col = out.col_as_slice_mut(j);
         col.iter_mut().for_each(|v| *v = 0.0);
@@ -426,7 +466,11 @@ pub fn combine_parts(out: &mut Mat<f64>, parts: &[Mat<f64>], h: &Hyper, n_source
             }
         }
         let column_is_source = symmetric && j < n_source;
-        let (lo, hi) = if column_is_source { (n_source, col.len()) } else { (0, n_source) };
+        let (lo, hi) = if column_is_source {
+            (n_source, col.len())
+        } else {
+            (0, n_source)
+        };
         col[lo..hi].iter_mut().for_each(|v| *v *= h.lambda);
     }
 }
@@ -434,7 +478,11 @@ pub fn combine_parts(out: &mut Mat<f64>, parts: &[Mat<f64>], h: &Hyper, n_source
 /// Cross-kernel `K(X_train, X*)` (n_train × m) for test rows that belong to the target task,
 /// given the per-modality squared distances between the training rows and the test rows.
 pub fn cross_kernel_from_distances(dists: &[Mat<f64>], n_source: usize, h: &Hyper) -> Mat<f64> {
-    let parts: Vec<Mat<f64>> = dists.iter().zip(&h.length_scales).map(|(d, &l)| rbf_from_sq_distances(d, l)).collect();
+    let parts: Vec<Mat<f64>> = dists
+        .iter()
+        .zip(&h.length_scales)
+        .map(|(d, &l)| rbf_from_sq_distances(d, l))
+        .collect();
     let (n, m) = (dists[0].nrows(), dists[0].ncols());
     let mut out = Mat::<f64>::zeros(n, m);
     combine_parts(&mut out, &parts, h, n_source, false);
@@ -450,7 +498,9 @@ pub fn cross_kernel(
     h: &Hyper,
     center: &[f64],
 ) -> Mat<f64> {
-    let dists: Vec<Mat<f64>> = (0..modalities.len()).map(|m| modalities.sq_distances(m, train, test, center)).collect();
+    let dists: Vec<Mat<f64>> = (0..modalities.len())
+        .map(|m| modalities.sq_distances(m, train, test, center))
+        .collect();
     cross_kernel_from_distances(&dists, n_source, h)
 }
 
@@ -469,7 +519,10 @@ mod tests {
 
     #[test]
     fn theta_round_trip() {
-        let layout = Layout { n_modalities: 2, transfer: true };
+        let layout = Layout {
+            n_modalities: 2,
+            transfer: true,
+        };
         let h = Hyper {
             signal_variance: 2.5,
             length_scales: vec![0.3, 4.0],

@@ -4,7 +4,7 @@
 use faer::{Mat, MatRef};
 
 use crate::error::{GpError, GpResult};
-use crate::kernel::{KernelEval, Layout, PairDistances, Hyper};
+use crate::kernel::{Hyper, KernelEval, Layout, PairDistances};
 use crate::likelihood::{log_sigmoid, sigmoid};
 use crate::linalg;
 
@@ -18,7 +18,10 @@ pub struct NewtonConfig {
 
 impl Default for NewtonConfig {
     fn default() -> Self {
-        NewtonConfig { max_iter: 100, tol: 1e-10 }
+        NewtonConfig {
+            max_iter: 100,
+            tol: 1e-10,
+        }
     }
 }
 
@@ -63,7 +66,12 @@ fn factor_b(k: MatRef<'_, f64>, f: &[f64]) -> Result<(Vec<f64>, Vec<f64>, Mat<f6
 /// Algorithm 3.1 with a step-halving safeguard (the plain Newton step can overshoot when the
 /// kernel is large), warm-started from `warm_a` when given and better than f = 0.
 /// Err carries the failing Cholesky pivot.
-pub fn find_mode(k: MatRef<'_, f64>, y: &[f64], warm_a: Option<&[f64]>, cfg: &NewtonConfig) -> Result<Mode, usize> {
+pub fn find_mode(
+    k: MatRef<'_, f64>,
+    y: &[f64],
+    warm_a: Option<&[f64]>,
+    cfg: &NewtonConfig,
+) -> Result<Mode, usize> {
     let n = y.len();
     let mut a = vec![0.0; n];
     let mut f = vec![0.0; n];
@@ -143,7 +151,12 @@ pub fn find_mode_with_jitter(
     cfg: &NewtonConfig,
     max_jitter: f64,
 ) -> GpResult<(KernelEval, Mode)> {
-    if let Some(bad) = eval.k.col_iter().flat_map(|c| c.iter()).find(|v| !v.is_finite()) {
+    if let Some(bad) = eval
+        .k
+        .col_iter()
+        .flat_map(|c| c.iter())
+        .find(|v| !v.is_finite())
+    {
         return Err(GpError::NonFinite(format!(
             "the kernel matrix contains a non-finite value ({bad}); the hyper-parameters are out of range"
         )));
@@ -167,7 +180,13 @@ pub fn find_mode_with_jitter(
 
 /// Gradient of the Laplace log marginal likelihood with respect to every entry of theta
 /// (Algorithm 5.1).
-pub fn lml_gradient(layout: &Layout, h: &Hyper, dist: &PairDistances, eval: &KernelEval, mode: &Mode) -> Vec<f64> {
+pub fn lml_gradient(
+    layout: &Layout,
+    h: &Hyper,
+    dist: &PairDistances,
+    eval: &KernelEval,
+    mode: &Mode,
+) -> Vec<f64> {
     let n = mode.f.len();
     let k = &eval.k;
     // Z = W½ B⁻¹ W½ (GPML's R).
@@ -209,11 +228,23 @@ mod tests {
     #[test]
     fn mode_satisfies_the_fixed_point() {
         // At the mode, f = K ∇log p(y|f).
-        let x = Data::new((0..20).map(|i| (i as f64 * 0.37).sin() * 2.0).collect(), 10, 2).unwrap();
-        let y: Vec<f64> = (0..10).map(|i| if i % 3 == 0 { 1.0 } else { -1.0 }).collect();
+        let x = Data::new(
+            (0..20).map(|i| (i as f64 * 0.37).sin() * 2.0).collect(),
+            10,
+            2,
+        )
+        .unwrap();
+        let y: Vec<f64> = (0..10)
+            .map(|i| if i % 3 == 0 { 1.0 } else { -1.0 })
+            .collect();
         let mods = Modalities::all_columns(2);
         let dist = PairDistances::new(&x, 0, &mods, &crate::kernel::column_means(&x));
-        let h = Hyper { signal_variance: 4.0, length_scales: vec![0.7], weights: vec![1.0], lambda: 1.0 };
+        let h = Hyper {
+            signal_variance: 4.0,
+            length_scales: vec![0.7],
+            weights: vec![1.0],
+            lambda: 1.0,
+        };
         let ev = KernelEval::new(&dist, &h);
         let mode = find_mode(ev.k.as_ref(), &y, None, &NewtonConfig::default()).unwrap();
         assert!(mode.converged);
@@ -221,26 +252,62 @@ mod tests {
         let mut kg = vec![0.0; 10];
         linalg::matvec(ev.k.as_ref(), &grad, &mut kg);
         for i in 0..10 {
-            assert!((kg[i] - mode.f[i]).abs() < 1e-6, "{} vs {}", kg[i], mode.f[i]);
+            assert!(
+                (kg[i] - mode.f[i]).abs() < 1e-6,
+                "{} vs {}",
+                kg[i],
+                mode.f[i]
+            );
         }
     }
 
     #[test]
     fn gradient_matches_finite_differences() {
-        let x = Data::new((0..36).map(|i| ((i * 7) as f64 * 0.31).cos() * 1.5).collect(), 12, 3).unwrap();
-        let y: Vec<f64> = (0..12).map(|i| if (i * 5) % 7 < 3 { 1.0 } else { -1.0 }).collect();
+        let x = Data::new(
+            (0..36)
+                .map(|i| ((i * 7) as f64 * 0.31).cos() * 1.5)
+                .collect(),
+            12,
+            3,
+        )
+        .unwrap();
+        let y: Vec<f64> = (0..12)
+            .map(|i| if (i * 5) % 7 < 3 { 1.0 } else { -1.0 })
+            .collect();
         let mods = Modalities::new(vec![vec![0, 1], vec![2]], 3).unwrap();
         let dist = PairDistances::new(&x, 4, &mods, &crate::kernel::column_means(&x));
-        let layout = Layout { n_modalities: 2, transfer: true };
+        let layout = Layout {
+            n_modalities: 2,
+            transfer: true,
+        };
         let theta = vec![1.1, -0.2, 0.4, 0.3, -0.5, 0.35];
         let lml = |t: &[f64]| {
             let h = layout.decode(t).unwrap();
             let ev = KernelEval::new(&dist, &h);
-            find_mode(ev.k.as_ref(), &y, None, &NewtonConfig { max_iter: 200, tol: 1e-14 }).unwrap().lml
+            find_mode(
+                ev.k.as_ref(),
+                &y,
+                None,
+                &NewtonConfig {
+                    max_iter: 200,
+                    tol: 1e-14,
+                },
+            )
+            .unwrap()
+            .lml
         };
         let h = layout.decode(&theta).unwrap();
         let ev = KernelEval::new(&dist, &h);
-        let mode = find_mode(ev.k.as_ref(), &y, None, &NewtonConfig { max_iter: 200, tol: 1e-14 }).unwrap();
+        let mode = find_mode(
+            ev.k.as_ref(),
+            &y,
+            None,
+            &NewtonConfig {
+                max_iter: 200,
+                tol: 1e-14,
+            },
+        )
+        .unwrap();
         let grad = lml_gradient(&layout, &h, &dist, &ev, &mode);
         for p in 0..theta.len() {
             let e = 1e-5;
@@ -249,7 +316,11 @@ mod tests {
             tp[p] += e;
             tm[p] -= e;
             let fd = (lml(&tp) - lml(&tm)) / (2.0 * e);
-            assert!((fd - grad[p]).abs() < 1e-6 * (1.0 + fd.abs()), "param {p}: fd {fd} vs analytic {}", grad[p]);
+            assert!(
+                (fd - grad[p]).abs() < 1e-6 * (1.0 + fd.abs()),
+                "param {p}: fd {fd} vs analytic {}",
+                grad[p]
+            );
         }
     }
 
@@ -257,9 +328,17 @@ mod tests {
     fn indefinite_kernel_raises_after_jitter() {
         // A kernel with a large negative eigenvalue cannot be rescued by small jitter.
         let k = Mat::<f64>::from_fn(2, 2, |i, j| if i == j { 1.0 } else { 30.0 });
-        let ev = KernelEval { k, parts: vec![], jitter: 0.0 };
+        let ev = KernelEval {
+            k,
+            parts: vec![],
+            jitter: 0.0,
+        };
         let r = find_mode_with_jitter(ev, 1.0, &[1.0, -1.0], None, &NewtonConfig::default(), 1e-6);
-        assert!(matches!(r, Err(GpError::NotPositiveDefinite { .. })), "{:?}", r.err());
+        assert!(
+            matches!(r, Err(GpError::NotPositiveDefinite { .. })),
+            "{:?}",
+            r.err()
+        );
     }
 
     #[test]
@@ -271,8 +350,22 @@ mod tests {
             (1, 1) => 1.0,
             _ => 0.0,
         });
-        let ev = KernelEval { k, parts: vec![], jitter: 0.0 };
-        let r = find_mode_with_jitter(ev, 1.0, &[1.0, -1.0], None, &NewtonConfig { max_iter: 1, tol: 1e-10 }, 1e-6);
+        let ev = KernelEval {
+            k,
+            parts: vec![],
+            jitter: 0.0,
+        };
+        let r = find_mode_with_jitter(
+            ev,
+            1.0,
+            &[1.0, -1.0],
+            None,
+            &NewtonConfig {
+                max_iter: 1,
+                tol: 1e-10,
+            },
+            1e-6,
+        );
         match r {
             Ok((ev, _)) => assert!(ev.jitter > 0.0 && ev.jitter <= 1e-6),
             Err(e) => panic!("expected jitter to rescue the factorisation: {e}"),

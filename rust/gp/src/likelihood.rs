@@ -162,7 +162,14 @@ mod tests {
 
     #[test]
     fn quadrature_matches_brute_force() {
-        for &(m, v) in &[(0.0, 1.0), (1.5, 0.2), (-3.0, 25.0), (10.0, 400.0), (0.7, 1e-6), (-45.0, 4.0)] {
+        for &(m, v) in &[
+            (0.0, 1.0),
+            (1.5, 0.2),
+            (-3.0, 25.0),
+            (10.0, 400.0),
+            (0.7, 1e-6),
+            (-45.0, 4.0),
+        ] {
             let q = predictive_probability(m, v, Predictive::Quadrature);
             let b = brute(m, v);
             assert!((q - b).abs() < 1e-9, "m={m} v={v}: {q} vs {b}");
@@ -171,7 +178,13 @@ mod tests {
 
     #[test]
     fn erf_mixture_is_a_close_approximation() {
-        for &(m, v) in &[(0.0, 1.0), (1.5, 0.2), (-3.0, 25.0), (2.0, 4.0), (0.3, 0.01)] {
+        for &(m, v) in &[
+            (0.0, 1.0),
+            (1.5, 0.2),
+            (-3.0, 25.0),
+            (2.0, 4.0),
+            (0.3, 0.01),
+        ] {
             let e = predictive_probability(m, v, Predictive::ErfMixture);
             let b = brute(m, v);
             assert!((e - b).abs() < 2e-4, "m={m} v={v}: {e} vs {b}");
@@ -181,7 +194,10 @@ mod tests {
     #[test]
     fn symmetric_in_the_mean() {
         // The mixture's weights sum to 1 - 1e-8, which bounds its asymmetry.
-        for (method, tol) in [(Predictive::ErfMixture, 2e-8), (Predictive::Quadrature, 1e-12)] {
+        for (method, tol) in [
+            (Predictive::ErfMixture, 2e-8),
+            (Predictive::Quadrature, 1e-12),
+        ] {
             let a = predictive_probability(0.8, 3.0, method);
             let b = predictive_probability(-0.8, 3.0, method);
             assert!((a + b - 1.0).abs() < tol, "{method:?}: {a} + {b}");

@@ -11,12 +11,22 @@ use faer::{Mat, MatMut, MatRef, Par};
 /// zeroed so the result is the factor itself.
 pub fn cholesky_lower(a: &mut Mat<f64>) -> Result<(), usize> {
     let n = a.nrows();
-    let mut buf = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(n, Par::Seq, Default::default()));
+    let mut buf = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(
+        n,
+        Par::Seq,
+        Default::default(),
+    ));
     let stack = MemStack::new(&mut buf);
-    llt::factor::cholesky_in_place(a.as_mut(), Default::default(), Par::Seq, stack, Default::default())
-        .map_err(|e| match e {
-            llt::factor::LltError::NonPositivePivot { index } => index,
-        })?;
+    llt::factor::cholesky_in_place(
+        a.as_mut(),
+        Default::default(),
+        Par::Seq,
+        stack,
+        Default::default(),
+    )
+    .map_err(|e| match e {
+        llt::factor::LltError::NonPositivePivot { index } => index,
+    })?;
     for j in 1..n {
         for i in 0..j {
             a[(i, j)] = 0.0;

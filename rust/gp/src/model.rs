@@ -89,24 +89,43 @@ impl ModelSpec {
         }
         let positive = |v: f64| v.is_finite() && v > 0.0;
         if !positive(self.signal_variance) {
-            return Err(GpError::InvalidInput(format!("signal_variance must be > 0, got {}", self.signal_variance)));
+            return Err(GpError::InvalidInput(format!(
+                "signal_variance must be > 0, got {}",
+                self.signal_variance
+            )));
         }
-        if let Some(l) = self.length_scales.iter().find(|l| !(l.is_nan() || positive(**l))) {
-            return Err(GpError::InvalidInput(format!("length-scales must be > 0, got {l}")));
+        if let Some(l) = self
+            .length_scales
+            .iter()
+            .find(|l| !(l.is_nan() || positive(**l)))
+        {
+            return Err(GpError::InvalidInput(format!(
+                "length-scales must be > 0, got {l}"
+            )));
         }
-        if self.weights.iter().any(|w| !w.is_finite() || *w < 0.0) || self.weights.iter().sum::<f64>() <= 0.0 {
+        if self.weights.iter().any(|w| !w.is_finite() || *w < 0.0)
+            || self.weights.iter().sum::<f64>() <= 0.0
+        {
             return Err(GpError::InvalidInput(format!(
                 "modality weights must be >= 0 with a positive sum, got {:?}",
                 self.weights
             )));
         }
-        for (name, (lo, hi)) in [("signal_variance", self.signal_variance_bounds), ("length_scale", self.length_scale_bounds)] {
+        for (name, (lo, hi)) in [
+            ("signal_variance", self.signal_variance_bounds),
+            ("length_scale", self.length_scale_bounds),
+        ] {
             if !(positive(lo) && positive(hi) && lo < hi) {
-                return Err(GpError::InvalidInput(format!("{name} bounds must satisfy 0 < low < high, got ({lo}, {hi})")));
+                return Err(GpError::InvalidInput(format!(
+                    "{name} bounds must satisfy 0 < low < high, got ({lo}, {hi})"
+                )));
             }
         }
         if !(self.max_jitter >= 0.0 && self.max_jitter.is_finite()) {
-            return Err(GpError::InvalidInput(format!("max_jitter must be >= 0, got {}", self.max_jitter)));
+            return Err(GpError::InvalidInput(format!(
+                "max_jitter must be >= 0, got {}",
+                self.max_jitter
+            )));
         }
         Ok(())
     }
@@ -154,7 +173,9 @@ impl BinaryProblem {
         modalities: &Modalities,
         center: &[f64],
     ) -> Self {
-        let y_target = labels.iter().map(|&c| if c == positive { 1.0 } else { -1.0 });
+        let y_target = labels
+            .iter()
+            .map(|&c| if c == positive { 1.0 } else { -1.0 });
         let (x, y, n_source) = match source {
             Some(s) => {
                 let y: Vec<f64> = std::iter::repeat_n(1.0, s.x.n).chain(y_target).collect();
@@ -163,20 +184,48 @@ impl BinaryProblem {
             None => (target.clone(), y_target.collect(), 0),
         };
         let dist = PairDistances::new(&x, n_source, modalities, center);
-        BinaryProblem { x, y, n_source, dist }
+        BinaryProblem {
+            x,
+            y,
+            n_source,
+            dist,
+        }
     }
 
-    fn evaluate(&self, layout: &Layout, spec: &ModelSpec, theta: &[f64], warm: Option<&[f64]>, gradient: bool) -> GpResult<(KernelEval, Mode, Hyper, Option<Vec<f64>>)> {
+    fn evaluate(
+        &self,
+        layout: &Layout,
+        spec: &ModelSpec,
+        theta: &[f64],
+        warm: Option<&[f64]>,
+        gradient: bool,
+    ) -> GpResult<(KernelEval, Mode, Hyper, Option<Vec<f64>>)> {
         let h = layout.decode(theta)?;
         let ev = KernelEval::new(&self.dist, &h);
-        let (ev, mode) = find_mode_with_jitter(ev, h.signal_variance, &self.y, warm, &spec.newton, spec.max_jitter)?;
+        let (ev, mode) = find_mode_with_jitter(
+            ev,
+            h.signal_variance,
+            &self.y,
+            warm,
+            &spec.newton,
+            spec.max_jitter,
+        )?;
         let grad = gradient.then(|| lml_gradient(layout, &h, &self.dist, &ev, &mode));
         Ok((ev, mode, h, grad))
     }
 
-    fn finish(self, layout: &Layout, spec: &ModelSpec, theta: Vec<f64>, optimizer_converged: bool, evaluations: usize) -> GpResult<BinaryFit> {
+    fn finish(
+        self,
+        layout: &Layout,
+        spec: &ModelSpec,
+        theta: Vec<f64>,
+        optimizer_converged: bool,
+        evaluations: usize,
+    ) -> GpResult<BinaryFit> {
         let (ev, mode, hyper, _) = self.evaluate(layout, spec, &theta, None, false)?;
-        let grad_log_lik: Vec<f64> = (0..self.y.len()).map(|i| 0.5 * (self.y[i] + 1.0) - mode.pi[i]).collect();
+        let grad_log_lik: Vec<f64> = (0..self.y.len())
+            .map(|i| 0.5 * (self.y[i] + 1.0) - mode.pi[i])
+            .collect();
         Ok(BinaryFit {
             x: self.x,
             y: self.y,
@@ -196,7 +245,11 @@ impl BinaryProblem {
 }
 
 /// Per-entry bounds and free flags of theta.
-fn theta_box(layout: &Layout, spec: &ModelSpec, has_source: bool) -> (Vec<f64>, Vec<f64>, Vec<bool>) {
+fn theta_box(
+    layout: &Layout,
+    spec: &ModelSpec,
+    has_source: bool,
+) -> (Vec<f64>, Vec<f64>, Vec<bool>) {
     let n = layout.len();
     let (mut lo, mut hi, mut free) = (vec![0.0; n], vec![0.0; n], vec![false; n]);
     lo[0] = spec.signal_variance_bounds.0.ln();
@@ -221,11 +274,30 @@ fn theta_box(layout: &Layout, spec: &ModelSpec, has_source: bool) -> (Vec<f64>, 
     (lo, hi, free)
 }
 
-fn fit_binary(problem: BinaryProblem, layout: &Layout, spec: &ModelSpec, lambda: f64, seed: u64) -> GpResult<BinaryFit> {
+fn fit_binary(
+    problem: BinaryProblem,
+    layout: &Layout,
+    spec: &ModelSpec,
+    lambda: f64,
+    seed: u64,
+) -> GpResult<BinaryFit> {
     let m = layout.n_modalities;
     let needs_scale = spec.optimize || spec.length_scales.iter().any(|l| l.is_nan());
-    let medians: Vec<f64> = (0..m).map(|k| if needs_scale { problem.dist.median_distance(k) } else { 1.0 }).collect();
-    let init_ls: Vec<f64> = spec.length_scales.iter().zip(&medians).map(|(&l, &med)| if l.is_nan() { med } else { l }).collect();
+    let medians: Vec<f64> = (0..m)
+        .map(|k| {
+            if needs_scale {
+                problem.dist.median_distance(k)
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let init_ls: Vec<f64> = spec
+        .length_scales
+        .iter()
+        .zip(&medians)
+        .map(|(&l, &med)| if l.is_nan() { med } else { l })
+        .collect();
     let init = Hyper {
         signal_variance: spec.signal_variance,
         length_scales: init_ls.clone(),
@@ -233,7 +305,11 @@ fn fit_binary(problem: BinaryProblem, layout: &Layout, spec: &ModelSpec, lambda:
         lambda,
     };
     let (lo, hi, free) = theta_box(layout, spec, problem.n_source > 0);
-    let clip = |t: &mut Vec<f64>| t.iter_mut().enumerate().for_each(|(i, v)| *v = v.clamp(lo[i], hi[i]));
+    let clip = |t: &mut Vec<f64>| {
+        t.iter_mut()
+            .enumerate()
+            .for_each(|(i, v)| *v = v.clamp(lo[i], hi[i]))
+    };
     let mut theta0 = layout.encode(&init);
     clip(&mut theta0);
     if !spec.optimize || !free.iter().any(|&f| f) {
@@ -250,7 +326,11 @@ fn fit_binary(problem: BinaryProblem, layout: &Layout, spec: &ModelSpec, lambda:
         for k in 0..m {
             let i = layout.length_scale(k);
             if free[i] {
-                let jitter = if r == 0 && !auto_given { 0.0 } else { rng.uniform_in(-(10f64.ln()), 10f64.ln()) };
+                let jitter = if r == 0 && !auto_given {
+                    0.0
+                } else {
+                    rng.uniform_in(-(10f64.ln()), 10f64.ln())
+                };
                 t[i] = medians[k].ln() + jitter;
             }
             if let Some(w) = layout.weight(k) {
@@ -298,7 +378,9 @@ fn fit_binary(problem: BinaryProblem, layout: &Layout, spec: &ModelSpec, lambda:
     }
     match best {
         Some((_, theta, converged)) => problem.finish(layout, spec, theta, converged, evaluations),
-        None => Err(last_error.unwrap_or_else(|| GpError::InvalidInput("no optimiser start could be evaluated".into()))),
+        None => Err(last_error.unwrap_or_else(|| {
+            GpError::InvalidInput("no optimiser start could be evaluated".into())
+        })),
     }
 }
 
@@ -308,7 +390,13 @@ impl BinaryFit {
     ///
     /// One pass per test column builds k*, its mean contribution and `W½ k*` in a buffer that
     /// stays in cache; one triangular solve then gives every variance.
-    fn latent(&self, test: &Data, target_dists: &[Mat<f64>], modalities: &Modalities, center: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    fn latent(
+        &self,
+        test: &Data,
+        target_dists: &[Mat<f64>],
+        modalities: &Modalities,
+        center: &[f64],
+    ) -> (Vec<f64>, Vec<f64>) {
         let (n, ns) = (self.x.n, self.n_source);
         let source_dists: Vec<Mat<f64>> = if ns == 0 {
             Vec::new()
@@ -318,7 +406,9 @@ impl BinaryFit {
                 n: ns,
                 d: self.x.d,
             };
-            (0..modalities.len()).map(|m| modalities.sq_distances(m, &source, test, center)).collect()
+            (0..modalities.len())
+                .map(|m| modalities.sq_distances(m, &source, test, center))
+                .collect()
         };
         let h = &self.hyper;
         let coef: Vec<f64> = h.length_scales.iter().map(|l| -0.5 / (l * l)).collect();
@@ -373,7 +463,13 @@ pub struct OneVsAll {
 
 /// Fits the model. `labels` are class indices in `0..n_classes`; with two classes and no
 /// sources a single binary classifier (class 1 positive) serves both classes.
-pub fn fit(x: &Data, labels: &[usize], n_classes: usize, sources: &[Option<Source>], spec: &ModelSpec) -> GpResult<OneVsAll> {
+pub fn fit(
+    x: &Data,
+    labels: &[usize],
+    n_classes: usize,
+    sources: &[Option<Source>],
+    spec: &ModelSpec,
+) -> GpResult<OneVsAll> {
     fit_impl(x, labels, n_classes, sources, spec, None)
 }
 
@@ -400,16 +496,27 @@ fn fit_impl(
 ) -> GpResult<OneVsAll> {
     spec.validate()?;
     if labels.len() != x.n {
-        return Err(GpError::InvalidInput(format!("X has {} rows but y has {} labels", x.n, labels.len())));
+        return Err(GpError::InvalidInput(format!(
+            "X has {} rows but y has {} labels",
+            x.n,
+            labels.len()
+        )));
     }
     if n_classes < 2 {
-        return Err(GpError::InvalidInput(format!("classification needs at least two classes, got {n_classes}")));
+        return Err(GpError::InvalidInput(format!(
+            "classification needs at least two classes, got {n_classes}"
+        )));
     }
     if let Some(bad) = labels.iter().find(|&&c| c >= n_classes) {
-        return Err(GpError::InvalidInput(format!("label index {bad} is out of range for {n_classes} classes")));
+        return Err(GpError::InvalidInput(format!(
+            "label index {bad} is out of range for {n_classes} classes"
+        )));
     }
     if sources.len() != n_classes {
-        return Err(GpError::InvalidInput(format!("expected one source entry per class ({n_classes}), got {}", sources.len())));
+        return Err(GpError::InvalidInput(format!(
+            "expected one source entry per class ({n_classes}), got {}",
+            sources.len()
+        )));
     }
     x.check_finite("X")?;
     for (c, s) in sources.iter().enumerate() {
@@ -431,8 +538,15 @@ fn fit_impl(
     }
     let transfer = sources.iter().any(|s| s.is_some());
     let center = column_means(x);
-    let layout = Layout { n_modalities: spec.modalities.len(), transfer };
-    let positives: Vec<usize> = if n_classes == 2 && !transfer { vec![1] } else { (0..n_classes).collect() };
+    let layout = Layout {
+        n_modalities: spec.modalities.len(),
+        transfer,
+    };
+    let positives: Vec<usize> = if n_classes == 2 && !transfer {
+        vec![1]
+    } else {
+        (0..n_classes).collect()
+    };
     if let Some(t) = thetas {
         if t.len() != positives.len() {
             return Err(GpError::InvalidInput(format!(
@@ -452,7 +566,13 @@ fn fit_impl(
                 Some(t) => problem.finish(&layout, spec, t[k].clone(), true, 1),
                 None => {
                     let lambda = source.map_or(0.0, |s| s.lambda);
-                    fit_binary(problem, &layout, spec, lambda, SplitMix64::derive(spec.seed, c as u64).next_u64())
+                    fit_binary(
+                        problem,
+                        &layout,
+                        spec,
+                        lambda,
+                        SplitMix64::derive(spec.seed, c as u64).next_u64(),
+                    )
                 }
             }
         })
@@ -471,7 +591,10 @@ impl OneVsAll {
     fn check_test(&self, x: &Data) -> GpResult<()> {
         let d = self.classifiers[0].x.d;
         if x.d != d {
-            return Err(GpError::InvalidInput(format!("X has {} columns, the model was fitted on {d}", x.d)));
+            return Err(GpError::InvalidInput(format!(
+                "X has {} columns, the model was fitted on {d}",
+                x.d
+            )));
         }
         x.check_finite("X")
     }
@@ -516,7 +639,11 @@ impl OneVsAll {
             } else {
                 let row = &mut out[i * c..(i + 1) * c];
                 for j in 0..c {
-                    row[j] = predictive_probability(mean[i * k + j], var[i * k + j], self.spec.predictive);
+                    row[j] = predictive_probability(
+                        mean[i * k + j],
+                        var[i * k + j],
+                        self.spec.predictive,
+                    );
                 }
                 let s: f64 = row.iter().sum();
                 if s > 0.0 {
@@ -530,7 +657,11 @@ impl OneVsAll {
     }
 
     /// Log marginal likelihood (and its gradient) of each classifier at the given theta rows.
-    pub fn log_marginal_likelihood(&self, thetas: &[Vec<f64>], gradient: bool) -> GpResult<Vec<(f64, Option<Vec<f64>>)>> {
+    pub fn log_marginal_likelihood(
+        &self,
+        thetas: &[Vec<f64>],
+        gradient: bool,
+    ) -> GpResult<Vec<(f64, Option<Vec<f64>>)>> {
         if thetas.len() != self.classifiers.len() {
             return Err(GpError::InvalidInput(format!(
                 "expected {} theta rows (one per classifier), got {}",
@@ -548,7 +679,8 @@ impl OneVsAll {
                     y: c.y.clone(),
                     n_source: c.n_source,
                 };
-                let (_, mode, _, g) = problem.evaluate(&self.layout, &self.spec, t, None, gradient)?;
+                let (_, mode, _, g) =
+                    problem.evaluate(&self.layout, &self.spec, t, None, gradient)?;
                 Ok((mode.lml, g))
             })
             .collect()
@@ -588,7 +720,11 @@ mod tests {
                 arg == yt[i]
             })
             .count();
-        assert!(correct as f64 / xt.n as f64 > 0.9, "accuracy {}", correct as f64 / xt.n as f64);
+        assert!(
+            correct as f64 / xt.n as f64 > 0.9,
+            "accuracy {}",
+            correct as f64 / xt.n as f64
+        );
         for i in 0..xt.n {
             let s: f64 = p[i * 3..i * 3 + 3].iter().sum();
             assert!((s - 1.0).abs() < 1e-12);
@@ -624,13 +760,28 @@ mod tests {
     fn bad_inputs_are_rejected() {
         let (x, y) = blobs(5, &[[0.0, 0.0], [2.0, 0.0]], 1);
         let spec = ModelSpec::new(Modalities::all_columns(2));
-        assert!(matches!(fit(&x, &y, 1, &[None], &spec), Err(GpError::InvalidInput(_))));
-        assert!(matches!(fit(&x, &y[1..], 2, &[None, None], &spec), Err(GpError::InvalidInput(_))));
+        assert!(matches!(
+            fit(&x, &y, 1, &[None], &spec),
+            Err(GpError::InvalidInput(_))
+        ));
+        assert!(matches!(
+            fit(&x, &y[1..], 2, &[None, None], &spec),
+            Err(GpError::InvalidInput(_))
+        ));
         let mut xn = x.clone();
         xn.values[3] = f64::NAN;
-        assert!(matches!(fit(&xn, &y, 2, &[None, None], &spec), Err(GpError::NonFinite(_))));
-        let src = Source { x: Data::new(vec![0.0, 0.0], 1, 2).unwrap(), lambda: 1.5 };
-        assert!(matches!(fit(&x, &y, 2, &[Some(src), None], &spec), Err(GpError::InvalidInput(_))));
+        assert!(matches!(
+            fit(&xn, &y, 2, &[None, None], &spec),
+            Err(GpError::NonFinite(_))
+        ));
+        let src = Source {
+            x: Data::new(vec![0.0, 0.0], 1, 2).unwrap(),
+            lambda: 1.5,
+        };
+        assert!(matches!(
+            fit(&x, &y, 2, &[Some(src), None], &spec),
+            Err(GpError::InvalidInput(_))
+        ));
     }
 
     #[test]
@@ -649,9 +800,23 @@ mod tests {
         spec.optimize = false;
         spec.signal_variance = 4.0;
         let probe = Data::new(vec![-1.0, 0.8], 1, 2).unwrap();
-        let plain = fit(&x, &y, 2, &[None, None], &spec).unwrap().predict_proba(&probe).unwrap();
-        let source = Source { x: src_x, lambda: 1.0 };
-        let with = fit(&x, &y, 2, &[Some(source), None], &spec).unwrap().predict_proba(&probe).unwrap();
-        assert!(with[0] > plain[0] + 0.05, "transfer {} vs plain {}", with[0], plain[0]);
+        let plain = fit(&x, &y, 2, &[None, None], &spec)
+            .unwrap()
+            .predict_proba(&probe)
+            .unwrap();
+        let source = Source {
+            x: src_x,
+            lambda: 1.0,
+        };
+        let with = fit(&x, &y, 2, &[Some(source), None], &spec)
+            .unwrap()
+            .predict_proba(&probe)
+            .unwrap();
+        assert!(
+            with[0] > plain[0] + 0.05,
+            "transfer {} vs plain {}",
+            with[0],
+            plain[0]
+        );
     }
 }

@@ -38,7 +38,14 @@ pub struct OptResult {
 
 /// Minimises `f` (value and gradient, `None` where it cannot be evaluated) over the box
 /// `[lo, hi]`, with variables where `free[i]` is false held fixed.
-pub fn minimize<F>(mut f: F, x0: &[f64], lo: &[f64], hi: &[f64], free: &[bool], cfg: &LbfgsConfig) -> Option<OptResult>
+pub fn minimize<F>(
+    mut f: F,
+    x0: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    free: &[bool],
+    cfg: &LbfgsConfig,
+) -> Option<OptResult>
 where
     F: FnMut(&[f64]) -> Option<(f64, Vec<f64>)>,
 {
@@ -63,7 +70,10 @@ where
         let active: Vec<bool> = (0..n)
             .map(|i| !free[i] || (x[i] <= lo[i] && g[i] > 0.0) || (x[i] >= hi[i] && g[i] < 0.0))
             .collect();
-        let pg_max = (0..n).filter(|&i| !active[i]).map(|i| g[i].abs()).fold(0.0, f64::max);
+        let pg_max = (0..n)
+            .filter(|&i| !active[i])
+            .map(|i| g[i].abs())
+            .fold(0.0, f64::max);
         if pg_max < cfg.pgtol {
             converged = true;
             break;
@@ -73,10 +83,16 @@ where
         if slope >= 0.0 || !slope.is_finite() {
             s_hist.clear();
             y_hist.clear();
-            d = (0..n).map(|i| if active[i] { 0.0 } else { -g[i] }).collect();
+            d = (0..n)
+                .map(|i| if active[i] { 0.0 } else { -g[i] })
+                .collect();
         }
         let dmax = d.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-        let mut t = if s_hist.is_empty() { (1.0 / dmax).min(1.0) } else { 1.0 };
+        let mut t = if s_hist.is_empty() {
+            (1.0 / dmax).min(1.0)
+        } else {
+            1.0
+        };
         if t * dmax > cfg.max_step {
             t = cfg.max_step / dmax;
         }
@@ -134,7 +150,8 @@ where
 /// L-BFGS two-loop recursion restricted to the free (inactive) variables.
 fn two_loop(g: &[f64], s_hist: &[Vec<f64>], y_hist: &[Vec<f64>], active: &[bool]) -> Vec<f64> {
     let n = g.len();
-    let dot = |a: &[f64], b: &[f64]| -> f64 { (0..n).filter(|&i| !active[i]).map(|i| a[i] * b[i]).sum() };
+    let dot =
+        |a: &[f64], b: &[f64]| -> f64 { (0..n).filter(|&i| !active[i]).map(|i| a[i] * b[i]).sum() };
     let mut q: Vec<f64> = (0..n).map(|i| if active[i] { 0.0 } else { g[i] }).collect();
     let k = s_hist.len();
     let mut alpha = vec![0.0; k];
@@ -175,21 +192,54 @@ mod tests {
     fn rosenbrock(x: &[f64]) -> Option<(f64, Vec<f64>)> {
         let (a, b) = (x[0], x[1]);
         let f = (1.0 - a).powi(2) + 100.0 * (b - a * a).powi(2);
-        let g = vec![-2.0 * (1.0 - a) - 400.0 * a * (b - a * a), 200.0 * (b - a * a)];
+        let g = vec![
+            -2.0 * (1.0 - a) - 400.0 * a * (b - a * a),
+            200.0 * (b - a * a),
+        ];
         Some((f, g))
     }
 
     #[test]
     fn finds_rosenbrock_minimum() {
-        let cfg = LbfgsConfig { max_iter: 500, ftol: 1e-16, pgtol: 1e-8, ..Default::default() };
-        let r = minimize(rosenbrock, &[-1.2, 1.0], &[-5.0, -5.0], &[5.0, 5.0], &[true, true], &cfg).unwrap();
-        assert!((r.x[0] - 1.0).abs() < 1e-4 && (r.x[1] - 1.0).abs() < 1e-4, "{:?}", r);
+        let cfg = LbfgsConfig {
+            max_iter: 500,
+            ftol: 1e-16,
+            pgtol: 1e-8,
+            ..Default::default()
+        };
+        let r = minimize(
+            rosenbrock,
+            &[-1.2, 1.0],
+            &[-5.0, -5.0],
+            &[5.0, 5.0],
+            &[true, true],
+            &cfg,
+        )
+        .unwrap();
+        assert!(
+            (r.x[0] - 1.0).abs() < 1e-4 && (r.x[1] - 1.0).abs() < 1e-4,
+            "{:?}",
+            r
+        );
     }
 
     #[test]
     fn respects_bounds_and_fixed_variables() {
-        let quad = |x: &[f64]| Some(((x[0] - 3.0).powi(2) + (x[1] + 2.0).powi(2), vec![2.0 * (x[0] - 3.0), 2.0 * (x[1] + 2.0)]));
-        let r = minimize(quad, &[0.0, 0.5], &[-1.0, -1.0], &[1.0, 1.0], &[true, false], &LbfgsConfig::default()).unwrap();
+        let quad = |x: &[f64]| {
+            Some((
+                (x[0] - 3.0).powi(2) + (x[1] + 2.0).powi(2),
+                vec![2.0 * (x[0] - 3.0), 2.0 * (x[1] + 2.0)],
+            ))
+        };
+        let r = minimize(
+            quad,
+            &[0.0, 0.5],
+            &[-1.0, -1.0],
+            &[1.0, 1.0],
+            &[true, false],
+            &LbfgsConfig::default(),
+        )
+        .unwrap();
         assert!((r.x[0] - 1.0).abs() < 1e-12, "bounded at 1: {:?}", r.x);
         assert_eq!(r.x[1], 0.5, "fixed variable must not move");
         assert!(r.converged);
@@ -198,8 +248,22 @@ mod tests {
     #[test]
     fn survives_regions_where_f_is_undefined() {
         // f undefined for x > 0.5: the line search must back off rather than fail.
-        let f = |x: &[f64]| if x[0] > 0.5 { None } else { Some(((x[0] - 2.0).powi(2), vec![2.0 * (x[0] - 2.0)])) };
-        let r = minimize(f, &[0.0], &[-10.0], &[10.0], &[true], &LbfgsConfig::default()).unwrap();
+        let f = |x: &[f64]| {
+            if x[0] > 0.5 {
+                None
+            } else {
+                Some(((x[0] - 2.0).powi(2), vec![2.0 * (x[0] - 2.0)]))
+            }
+        };
+        let r = minimize(
+            f,
+            &[0.0],
+            &[-10.0],
+            &[10.0],
+            &[true],
+            &LbfgsConfig::default(),
+        )
+        .unwrap();
         assert!(r.x[0] <= 0.5 && r.x[0] > 0.4, "{:?}", r.x);
     }
 }

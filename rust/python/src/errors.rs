@@ -19,14 +19,21 @@ create_exception!(
 /// hopeless kernel has its own type.
 pub fn gp_error(e: aptkt_gp::GpError) -> PyErr {
     match e {
-        aptkt_gp::GpError::InvalidInput(_) | aptkt_gp::GpError::NonFinite(_) => PyValueError::new_err(e.to_string()),
-        aptkt_gp::GpError::NotPositiveDefinite { .. } => KernelNotPositiveDefiniteError::new_err(e.to_string()),
+        aptkt_gp::GpError::InvalidInput(_) | aptkt_gp::GpError::NonFinite(_) => {
+            PyValueError::new_err(e.to_string())
+        }
+        aptkt_gp::GpError::NotPositiveDefinite { .. } => {
+            KernelNotPositiveDefiniteError::new_err(e.to_string())
+        }
     }
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add("AptktError", py.get_type::<AptktError>())?;
-    m.add("KernelNotPositiveDefiniteError", py.get_type::<KernelNotPositiveDefiniteError>())?;
+    m.add(
+        "KernelNotPositiveDefiniteError",
+        py.get_type::<KernelNotPositiveDefiniteError>(),
+    )?;
     Ok(())
 }

@@ -63,7 +63,12 @@ type ArrayTriple<'py> = (
 
 #[pyfunction]
 #[pyo3(signature = (x, axis, name = "x"))]
-fn hjorth<'py>(py: Python<'py>, x: &Bound<'py, PyAny>, axis: isize, name: &str) -> PyResult<ArrayTriple<'py>> {
+fn hjorth<'py>(
+    py: Python<'py>,
+    x: &Bound<'py, PyAny>,
+    axis: isize,
+    name: &str,
+) -> PyResult<ArrayTriple<'py>> {
     let arr = SampleArray::extract(x, name)?;
     let r = with_view!(py, arr, |v| core::hjorth_along(name, v, axis)).map_err(to_py_err)?;
     Ok((
@@ -83,14 +88,23 @@ fn axis_pair_correlations<'py>(
     name: &str,
 ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     let arr = SampleArray::extract(acc, name)?;
-    let r = with_view!(py, arr, |v| core::axis_pair_correlations(name, v, channel_axis, time_axis))
-        .map_err(to_py_err)?;
+    let r = with_view!(py, arr, |v| core::axis_pair_correlations(
+        name,
+        v,
+        channel_axis,
+        time_axis
+    ))
+    .map_err(to_py_err)?;
     Ok(r.into_pyarray(py))
 }
 
 #[pyfunction]
 #[pyo3(signature = (acc, name = "acc"))]
-fn texture_descriptor<'py>(py: Python<'py>, acc: &Bound<'py, PyAny>, name: &str) -> PyResult<Bound<'py, PyArray1<f64>>> {
+fn texture_descriptor<'py>(
+    py: Python<'py>,
+    acc: &Bound<'py, PyAny>,
+    name: &str,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
     let arr = SampleArray::extract(acc, name)?;
     let r = with_view!(py, arr, |v| core::texture_descriptor(name, v)).map_err(to_py_err)?;
     Ok(r.into_pyarray(py))
@@ -105,7 +119,12 @@ fn mean_all(py: Python<'_>, x: &Bound<'_, PyAny>, name: &str) -> PyResult<f64> {
 
 #[pyfunction]
 #[pyo3(signature = (x, axis, name = "x"))]
-fn gradient<'py>(py: Python<'py>, x: &Bound<'py, PyAny>, axis: isize, name: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+fn gradient<'py>(
+    py: Python<'py>,
+    x: &Bound<'py, PyAny>,
+    axis: isize,
+    name: &str,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     let arr = SampleArray::extract(x, name)?;
     let r = with_view!(py, arr, |v| core::gradient_along(name, v, axis)).map_err(to_py_err)?;
     Ok(r.into_pyarray(py))
@@ -113,7 +132,12 @@ fn gradient<'py>(py: Python<'py>, x: &Bound<'py, PyAny>, axis: isize, name: &str
 
 #[pyfunction]
 #[pyo3(signature = (temp, axis, name = "temp"))]
-fn thermal_curve<'py>(py: Python<'py>, temp: &Bound<'py, PyAny>, axis: isize, name: &str) -> PyResult<Bound<'py, PyArray1<f64>>> {
+fn thermal_curve<'py>(
+    py: Python<'py>,
+    temp: &Bound<'py, PyAny>,
+    axis: isize,
+    name: &str,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
     let arr = SampleArray::extract(temp, name)?;
     let r = with_view!(py, arr, |v| core::thermal_curve(name, v, axis)).map_err(to_py_err)?;
     Ok(r.into_pyarray(py))

@@ -4,7 +4,7 @@
 
 use aptkt_gp::kernel::{KernelEval, PairDistances};
 use aptkt_gp::{Data, Free, GpError, Layout, Modalities, ModelSpec, OneVsAll, Predictive, Source};
-use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyArrayMethods};
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
@@ -16,7 +16,12 @@ fn data_from(x: &PyReadonlyArray2<'_, f64>) -> Result<Data, GpError> {
     Data::new(view.iter().copied().collect(), n, d)
 }
 
-fn matrix<'py>(py: Python<'py>, values: Vec<f64>, rows: usize, cols: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
+fn matrix<'py>(
+    py: Python<'py>,
+    values: Vec<f64>,
+    rows: usize,
+    cols: usize,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
     PyArray1::from_vec(py, values)
         .reshape([rows, cols])
         .map_err(|e| PyValueError::new_err(format!("internal shape error: {e}")))
@@ -72,17 +77,24 @@ fn fit_gpc(
     n_threads: usize,
     thetas: Option<PyReadonlyArray2<'_, f64>>,
 ) -> PyResult<GpcModel> {
-    let thetas: Option<Vec<Vec<f64>>> = thetas.map(|t| t.as_array().outer_iter().map(|r| r.to_vec()).collect());
+    let thetas: Option<Vec<Vec<f64>>> =
+        thetas.map(|t| t.as_array().outer_iter().map(|r| r.to_vec()).collect());
     let data = data_from(&x).map_err(gp_error)?;
     let labels: Vec<usize> = labels
         .as_array()
         .iter()
-        .map(|&v| usize::try_from(v).map_err(|_| PyValueError::new_err(format!("negative label index {v}"))))
+        .map(|&v| {
+            usize::try_from(v)
+                .map_err(|_| PyValueError::new_err(format!("negative label index {v}")))
+        })
         .collect::<PyResult<_>>()?;
     let sources: Vec<Option<Source>> = sources
         .iter()
         .map(|s| match s {
-            Some((sx, lambda)) => Ok(Some(Source { x: data_from(sx)?, lambda: *lambda })),
+            Some((sx, lambda)) => Ok(Some(Source {
+                x: data_from(sx)?,
+                lambda: *lambda,
+            })),
             None => Ok(None),
         })
         .collect::<Result<_, GpError>>()
@@ -132,7 +144,11 @@ fn parse_predictive(name: &str) -> PyResult<Predictive> {
 #[pymethods]
 impl GpcModel {
     /// Class probabilities, shape (n, n_classes).
-    fn predict_proba<'py>(&self, py: Python<'py>, x: PyReadonlyArray2<'py, f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    fn predict_proba<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let data = data_from(&x).map_err(gp_error)?;
         let probs = py
             .detach(|| run_in_pool(self.n_threads, || self.model.predict_proba(&data)))
@@ -166,13 +182,20 @@ impl GpcModel {
     ) -> PyResult<(Bound<'py, PyArray1<f64>>, Option<Bound<'py, PyArray2<f64>>>)> {
         let rows: Vec<Vec<f64>> = theta.as_array().outer_iter().map(|r| r.to_vec()).collect();
         let results = py
-            .detach(|| run_in_pool(self.n_threads, || self.model.log_marginal_likelihood(&rows, gradient)))
+            .detach(|| {
+                run_in_pool(self.n_threads, || {
+                    self.model.log_marginal_likelihood(&rows, gradient)
+                })
+            })
             .and_then(|r| r)
             .map_err(gp_error)?;
         let lml: Vec<f64> = results.iter().map(|(v, _)| *v).collect();
         let grad = if gradient {
             let p = self.model.layout.len();
-            let flat: Vec<f64> = results.into_iter().flat_map(|(_, g)| g.unwrap_or_default()).collect();
+            let flat: Vec<f64> = results
+                .into_iter()
+                .flat_map(|(_, g)| g.unwrap_or_default())
+                .collect();
             Some(matrix(py, flat, lml.len(), p)?)
         } else {
             None
@@ -184,7 +207,12 @@ impl GpcModel {
     #[getter]
     fn theta<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let k = self.model.classifiers.len();
-        let flat: Vec<f64> = self.model.classifiers.iter().flat_map(|c| c.theta.clone()).collect();
+        let flat: Vec<f64> = self
+            .model
+            .classifiers
+            .iter()
+            .flat_map(|c| c.theta.clone())
+            .collect();
         matrix(py, flat, k, self.model.layout.len())
     }
 
@@ -195,22 +223,37 @@ impl GpcModel {
 
     #[getter]
     fn jitter<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_vec(py, self.model.classifiers.iter().map(|c| c.jitter).collect())
+        PyArray1::from_vec(
+            py,
+            self.model.classifiers.iter().map(|c| c.jitter).collect(),
+        )
     }
 
     #[getter]
     fn optimizer_converged(&self) -> Vec<bool> {
-        self.model.classifiers.iter().map(|c| c.optimizer_converged).collect()
+        self.model
+            .classifiers
+            .iter()
+            .map(|c| c.optimizer_converged)
+            .collect()
     }
 
     #[getter]
     fn newton_converged(&self) -> Vec<bool> {
-        self.model.classifiers.iter().map(|c| c.newton_converged).collect()
+        self.model
+            .classifiers
+            .iter()
+            .map(|c| c.newton_converged)
+            .collect()
     }
 
     #[getter]
     fn evaluations(&self) -> Vec<usize> {
-        self.model.classifiers.iter().map(|c| c.evaluations).collect()
+        self.model
+            .classifiers
+            .iter()
+            .map(|c| c.evaluations)
+            .collect()
     }
 
     #[getter]
@@ -238,14 +281,25 @@ fn kernel_matrix<'py>(
     let data = data_from(&x).map_err(gp_error)?;
     data.check_finite("X").map_err(gp_error)?;
     if n_source > data.n {
-        return Err(PyValueError::new_err(format!("n_source = {n_source} exceeds the {} rows of X", data.n)));
+        return Err(PyValueError::new_err(format!(
+            "n_source = {n_source} exceeds the {} rows of X",
+            data.n
+        )));
     }
     let mods = Modalities::new(modalities, data.d).map_err(gp_error)?;
-    let layout = Layout { n_modalities: mods.len(), transfer: n_source > 0 };
+    let layout = Layout {
+        n_modalities: mods.len(),
+        transfer: n_source > 0,
+    };
     let h = layout.decode(&theta).map_err(gp_error)?;
     let n = data.n;
     let k = py.detach(|| {
-        let dist = PairDistances::new(&data, n_source, &mods, &aptkt_gp::kernel::column_means(&data));
+        let dist = PairDistances::new(
+            &data,
+            n_source,
+            &mods,
+            &aptkt_gp::kernel::column_means(&data),
+        );
         let ev = KernelEval::new(&dist, &h);
         let mut flat = Vec::with_capacity(n * n);
         for i in 0..n {

@@ -26,9 +26,11 @@ from aptkt.sim.loopback.rotvec import (
 
 DOWN = (math.pi, 0.0, 0.0)
 # The lines of ur_rtde's uploaded script the loopback relies on (name, offsets injection).
-SCRIPT = ("def rtde_control():\n# HEADER_BEGIN\n    global reg_offset_float = # float register offset\n"
-          "{off}    global reg_offset_int = # int register offset\n{off}    global x = 0\n"
-          "    def signal_ready():\n        write_output_integer_reg(0, 1)\n    end\nend\n")
+SCRIPT = (
+    "def rtde_control():\n# HEADER_BEGIN\n    global reg_offset_float = # float register offset\n"
+    "{off}    global reg_offset_int = # int register offset\n{off}    global x = 0\n"
+    "    def signal_ready():\n        write_output_integer_reg(0, 1)\n    end\nend\n"
+)
 
 
 def controller(offset: int = 0, pose=(0.0, -0.5, 0.01, *DOWN), **config) -> SimulatedController:
@@ -75,8 +77,12 @@ def test_other_programs_do_not_run():
 
 
 @settings(max_examples=25, deadline=None)
-@given(length=st.floats(1e-4, 0.05), v=st.floats(0.005, 0.25), a=st.floats(0.1, 2.0),
-       direction=st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda d: np.linalg.norm(d) > 0.1))
+@given(
+    length=st.floats(1e-4, 0.05),
+    v=st.floats(0.005, 0.25),
+    a=st.floats(0.1, 2.0),
+    direction=st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda d: np.linalg.norm(d) > 0.1),
+)
 def test_synchronous_movel_follows_a_trapezoid_and_signals_done_on_arrival(length, v, a, direction):
     ctl = controller()
     d = np.asarray(direction) / np.linalg.norm(direction)
@@ -85,8 +91,13 @@ def test_synchronous_movel_follows_a_trapezoid_and_signals_done_on_arrival(lengt
     target[:3] += d * length
     movel(ctl, target, v, a)
     speeds = []
-    n = ticks_until(ctl, lambda: (speeds.append(np.linalg.norm(ctl.velocity[:3])) or True)
-                    and ctl.output_int[0] == DONE_WITH_CMD)
+    n = ticks_until(
+        ctl,
+        lambda: (
+            (speeds.append(np.linalg.norm(ctl.velocity[:3])) or True)
+            and ctl.output_int[0] == DONE_WITH_CMD
+        ),
+    )
     np.testing.assert_allclose(ctl.pose[:3], target[:3], atol=1e-12)
     speeds = np.array(speeds)
     assert speeds.max() <= v + 1e-12
@@ -146,11 +157,17 @@ def test_speedl_ramps_at_its_acceleration_and_speedstop_brings_it_to_rest():
 def test_force_mode_settles_on_the_requested_force(stiffness, target, gain):
     # Start in light contact, as the backend does after its approach.
     start_z = -0.05 / stiffness
-    ctl = controller(pose=(0.0, -0.5, start_z, *DOWN),
-                     contact={"type": "spring", "surface_z": 0.0, "stiffness": stiffness},
-                     version=(gain, 15, 8, 0))
-    send(ctl, 6, ints=[2, 0, 0, 1, 0, 0, 0],
-         doubles=[0, 0, 0, 0, 0, 0, 0, 0, -target, 0, 0, 0, 0.01, 0.01, 0.01, 0.1, 0.1, 0.1])
+    ctl = controller(
+        pose=(0.0, -0.5, start_z, *DOWN),
+        contact={"type": "spring", "surface_z": 0.0, "stiffness": stiffness},
+        version=(gain, 15, 8, 0),
+    )
+    send(
+        ctl,
+        6,
+        ints=[2, 0, 0, 1, 0, 0, 0],
+        doubles=[0, 0, 0, 0, 0, 0, 0, 0, -target, 0, 0, 0, 0.01, 0.01, 0.01, 0.1, 0.1, 0.1],
+    )
     # Long enough to travel the indentation at the 1 cm/s speed limit, then to settle for six
     # time constants of the admittance loop (gain scaling 0.5 from PolyScope 5 on).
     cfg = ctl.config
@@ -167,8 +184,10 @@ def test_force_mode_settles_on_the_requested_force(stiffness, target, gain):
 
 
 def test_friction_opposes_sliding_and_zero_ft_sensor_offsets_the_wrench():
-    ctl = controller(pose=(0.0, -0.5, -0.001, *DOWN),
-                     contact={"type": "spring", "surface_z": 0.0, "stiffness": 200.0, "friction": 0.5})
+    ctl = controller(
+        pose=(0.0, -0.5, -0.001, *DOWN),
+        contact={"type": "spring", "surface_z": 0.0, "stiffness": 200.0, "friction": 0.5},
+    )
     ctl.tick()
     np.testing.assert_allclose(ctl.tcp_force[:3], [0.0, 0.0, 0.2])
     send(ctl, 8)
@@ -243,7 +262,9 @@ def test_dashboard_answers_like_a_cb3_dashboard_server():
     assert ctl.dashboard("play") == "Starting program"
     ctl.trigger_protective_stop("test")
     assert ctl.dashboard("safetymode") == "Safetymode: PROTECTIVE_STOP"
-    assert ctl.dashboard("unlock protective stop").startswith("Cannot unlock protective stop until 5s")
+    assert ctl.dashboard("unlock protective stop").startswith(
+        "Cannot unlock protective stop until 5s"
+    )
     time.sleep(0.06)
     assert ctl.dashboard("unlock protective stop") == "Protective stop releasing"
     assert ctl.dashboard("safetymode") == "Safetymode: NORMAL"
@@ -259,8 +280,12 @@ def test_spring_surface_and_contact_specs():
     assert s.normal_force((0.0, 0.0, 0.009)) == pytest.approx(0.3)
     assert s.normal_force((0.0, 0.0, 0.011)) == 0.0
     assert s.normal_force((0.2, 0.0, 0.0)) == 0.0  # off the footprint
-    built = contact_models.build({"factory": "aptkt.sim.loopback.contact:SpringSurface",
-                                  "params": {"surface_z": 0.01, "stiffness": 300.0, "x_range": [-0.1, 0.1]}})
+    built = contact_models.build(
+        {
+            "factory": "aptkt.sim.loopback.contact:SpringSurface",
+            "params": {"surface_z": 0.01, "stiffness": 300.0, "x_range": [-0.1, 0.1]},
+        }
+    )
     assert built == s
     assert contact_models.build(None).normal_force((0, 0, -1)) == 0.0
     with pytest.raises(ValueError, match="unknown type 'jelly'"):
@@ -271,7 +296,9 @@ def test_spring_surface_and_contact_specs():
         SpringSurface(stiffness=0.0)
 
 
-rotvecs = st.tuples(*[st.floats(-3.0, 3.0)] * 3).filter(lambda r: np.linalg.norm(r) < math.pi - 1e-3)
+rotvecs = st.tuples(*[st.floats(-3.0, 3.0)] * 3).filter(
+    lambda r: np.linalg.norm(r) < math.pi - 1e-3
+)
 
 
 @given(rotvecs)
@@ -283,10 +310,16 @@ def test_rotation_vectors_round_trip(r):
 
 @given(rotvecs, rotvecs)
 def test_orientation_interpolation_hits_both_ends(r0, r1):
-    np.testing.assert_allclose(rotvec_to_matrix(interpolate_rotvec(np.array(r0), np.array(r1), 0.0)),
-                               rotvec_to_matrix(np.array(r0)), atol=1e-9)
-    np.testing.assert_allclose(rotvec_to_matrix(interpolate_rotvec(np.array(r0), np.array(r1), 1.0)),
-                               rotvec_to_matrix(np.array(r1)), atol=1e-9)
+    np.testing.assert_allclose(
+        rotvec_to_matrix(interpolate_rotvec(np.array(r0), np.array(r1), 0.0)),
+        rotvec_to_matrix(np.array(r0)),
+        atol=1e-9,
+    )
+    np.testing.assert_allclose(
+        rotvec_to_matrix(interpolate_rotvec(np.array(r0), np.array(r1), 1.0)),
+        rotvec_to_matrix(np.array(r1)),
+        atol=1e-9,
+    )
 
 
 def test_integrating_an_angular_velocity_rotates_about_the_base_axis():

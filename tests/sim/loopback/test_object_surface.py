@@ -44,8 +44,15 @@ reflectivity = 0.5
 def flat(tmp_path_factory):
     path = tmp_path_factory.mktemp("objects") / "flat.toml"
     path.write_text(textwrap.dedent(FLAT))
-    return contact_models.build({"type": "sim_object", "object": "flat_foam", "x": 0.0, "y": -0.5,
-                                 "library_files": [str(path)]})
+    return contact_models.build(
+        {
+            "type": "sim_object",
+            "object": "flat_foam",
+            "x": 0.0,
+            "y": -0.5,
+            "library_files": [str(path)],
+        }
+    )
 
 
 def reference_pressure(depth: float, k_skin: float, h: float, e: float, eps_d: float) -> float:
@@ -67,7 +74,9 @@ def reference_pressure(depth: float, k_skin: float, h: float, e: float, eps_d: f
 def test_flat_object_force_is_the_layer_law_on_all_21_sensors(flat, depth):
     k = SkinConstants()
     expected = 21 * k.sensor_area * reference_pressure(depth, k.skin_stiffness, 0.02, 50e3, 0.7)
-    assert flat.normal_force((0.0, -0.5, 0.02 - depth, math.pi, 0.0, 0.0)) == pytest.approx(expected, rel=1e-3)
+    assert flat.normal_force((0.0, -0.5, 0.02 - depth, math.pi, 0.0, 0.0)) == pytest.approx(
+        expected, rel=1e-3
+    )
 
 
 def test_no_force_above_the_face_or_beside_the_object(flat):
@@ -83,7 +92,10 @@ def test_no_force_above_the_face_or_beside_the_object(flat):
 def test_library_objects_stiffen_monotonically_with_depth(name):
     model = contact_models.build({"type": "sim_object", "object": name, "x": 0.0, "y": -0.5})
     z0 = model.shape.surface_z
-    forces = [model.normal_force((0.0, -0.5, z0 - d, math.pi, 0.0, 0.0)) for d in np.linspace(-1e-3, 3e-3, 41)]
+    forces = [
+        model.normal_force((0.0, -0.5, z0 - d, math.pi, 0.0, 0.0))
+        for d in np.linspace(-1e-3, 3e-3, 41)
+    ]
     assert forces[0] == 0.0 and np.all(np.diff(forces) >= 0) and forces[-1] > 1.0
 
 

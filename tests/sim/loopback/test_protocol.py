@@ -15,7 +15,13 @@ from collections.abc import Iterator
 import pytest
 from loopback_helpers import free_loopback_host
 
-from aptkt.sim.loopback import ControllerConfig, Loopback, LoopbackError, LoopbackServer, SimulatedController
+from aptkt.sim.loopback import (
+    ControllerConfig,
+    Loopback,
+    LoopbackError,
+    LoopbackServer,
+    SimulatedController,
+)
 from aptkt.sim.loopback.servers import _split_program
 
 
@@ -85,8 +91,9 @@ def test_protocol_version_and_controller_version(rtde):
 
 def test_output_recipe_streams_at_the_requested_rate(rtde, server):
     rtde.send("V", struct.pack(">H", 2)) or rtde.recv()
-    recipe, types = rtde.setup_outputs(["timestamp", "actual_TCP_pose", "runtime_state", "output_int_register_0"],
-                                       frequency=62.5)
+    recipe, types = rtde.setup_outputs(
+        ["timestamp", "actual_TCP_pose", "runtime_state", "output_int_register_0"], frequency=62.5
+    )
     assert recipe == 1 and types == ["DOUBLE", "VECTOR6D", "UINT32", "INT32"]
     rtde.send("S")
     assert rtde.recv_kind("S") == b"\x01"
@@ -109,8 +116,13 @@ def test_output_recipe_streams_at_the_requested_rate(rtde, server):
 def test_unknown_outputs_and_bad_frequencies_fail_the_recipe(rtde):
     assert rtde.setup_outputs(["timestamp", "warp_drive"]) == (0, ["DOUBLE", "NOT_FOUND"])
     assert rtde.setup_outputs(["timestamp"], frequency=1000.0)[0] == 0  # above 125 Hz on CB3
-    assert rtde.setup_outputs(["output_bit_register_3"])[1] == ["NOT_FOUND"]  # 0..63 are not general purpose
-    assert rtde.setup_outputs(["output_bit_register_64", "input_double_register_47"])[1] == ["BOOL", "DOUBLE"]
+    assert rtde.setup_outputs(["output_bit_register_3"])[1] == [
+        "NOT_FOUND"
+    ]  # 0..63 are not general purpose
+    assert rtde.setup_outputs(["output_bit_register_64", "input_double_register_47"])[1] == [
+        "BOOL",
+        "DOUBLE",
+    ]
 
 
 def test_inputs_belong_to_one_connection_at_a_time(rtde, server):
@@ -157,14 +169,16 @@ def test_dashboard_greets_and_answers_line_by_line(server):
 def test_script_ports_run_ur_rtde_programs_only(server):
     ctl = server.controller
     with socket.create_connection((server.host, 30002), timeout=2.0) as s:
-        s.sendall(b"def other():\n  textmsg(\"hi\")\nend\n")
+        s.sendall(b'def other():\n  textmsg("hi")\nend\n')
         deadline = time.monotonic() + 1.0
         while "other" not in ctl.stop_reason and time.monotonic() < deadline:
             time.sleep(0.01)
     assert "cannot run program 'other'" in ctl.stop_reason and not ctl.program_running
     with socket.create_connection((server.host, 30003), timeout=2.0) as s:
-        script = ("def rtde_control():\n# HEADER_BEGIN\n    global reg_offset_float = # float register offset\n"
-                  "24    global reg_offset_int = # int register offset\n24    x = 1\nend\n")
+        script = (
+            "def rtde_control():\n# HEADER_BEGIN\n    global reg_offset_float = # float register offset\n"
+            "24    global reg_offset_int = # int register offset\n24    x = 1\nend\n"
+        )
         s.sendall(script[:40].encode())
         time.sleep(0.05)  # a program split across TCP segments is assembled first
         assert not ctl.program_running

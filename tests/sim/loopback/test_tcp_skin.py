@@ -16,12 +16,23 @@ from loopback_helpers import free_loopback_host
 from scipy.spatial.transform import Rotation
 
 from aptkt.sim.loopback import Loopback
-from aptkt.sim.loopback.controller import CB3_VERSION, E_SERIES_VERSION, ControllerConfig, SimulatedController
+from aptkt.sim.loopback.controller import (
+    CB3_VERSION,
+    E_SERIES_VERSION,
+    ControllerConfig,
+    SimulatedController,
+)
 from aptkt.sim.loopback.object_surface import SimObjectSurface
 from aptkt.skin import SerialSkin, StreamParser
 
 DOWN = (math.pi, 0.0, 0.0)
-QUIET = {"force_noise": 0.0, "acc_noise": 0.0, "temp_noise": 0.0, "die_temp_noise": 0.0, "proximity_noise": 0.0}
+QUIET = {
+    "force_noise": 0.0,
+    "acc_noise": 0.0,
+    "temp_noise": 0.0,
+    "die_temp_noise": 0.0,
+    "proximity_noise": 0.0,
+}
 
 
 class CaptureLink:
@@ -34,8 +45,12 @@ class CaptureLink:
         self.data += data
 
 
-def controller(contact: dict, pose: tuple, *, series: tuple = CB3_VERSION, **skin: object) -> SimulatedController:
-    ctl = SimulatedController(ControllerConfig(version=series, contact=contact, start_pose=pose, skin={**QUIET, **skin}))
+def controller(
+    contact: dict, pose: tuple, *, series: tuple = CB3_VERSION, **skin: object
+) -> SimulatedController:
+    ctl = SimulatedController(
+        ControllerConfig(version=series, contact=contact, start_pose=pose, skin={**QUIET, **skin})
+    )
     ctl.skin.link.close()  # the pty is not needed here: capture the bytes instead
     ctl.skin.link = CaptureLink()
     return ctl
@@ -55,7 +70,9 @@ def run(ctl: SimulatedController, seconds: float) -> dict[str, np.ndarray]:
 def test_every_cell_streams_at_the_configured_rate_whatever_the_control_rate():
     for series in (CB3_VERSION, E_SERIES_VERSION):
         for rate in (250.0, 63.0):
-            ctl = controller({"type": "spring"}, (0.0, -0.5, 0.01, *DOWN), series=series, rate_hz=rate)
+            ctl = controller(
+                {"type": "spring"}, (0.0, -0.5, 0.01, *DOWN), series=series, rate_hz=rate
+            )
             run(ctl, 0.1)  # the first cycle only starts the clock
             out = run(ctl, 2.0)
             counts = np.bincount(out["cell_id"].astype(int), minlength=8)[1:]
@@ -64,7 +81,9 @@ def test_every_cell_streams_at_the_configured_rate_whatever_the_control_rate():
 
 def test_forces_are_the_contact_models_per_sensor_forces_in_newtons():
     # A spring surface has no per-sensor model: its force is shared by the 21 sensors.
-    ctl = controller({"type": "spring", "surface_z": 0.0, "stiffness": 200.0}, (0.0, -0.5, -0.0015, *DOWN))
+    ctl = controller(
+        {"type": "spring", "surface_z": 0.0, "stiffness": 200.0}, (0.0, -0.5, -0.0015, *DOWN)
+    )
     run(ctl, 0.05)
     out = run(ctl, 0.2)
     # Default patch calibration: gain 1 N per normalised unit, offset 0 -> the reading is newtons.
@@ -97,7 +116,7 @@ def test_the_accelerometers_feel_gravity_in_the_tool_frame_and_the_tcps_accelera
     run(ctl, 0.05)
     ctl.disturb([0.1, 0.0, 0.0], duration=1.0, acceleration=0.5)
     out = run(ctl, 0.1)
-    ramp = out["acc"][len(out["acc"]) // 4:]  # after the first control cycle of the ramp
+    ramp = out["acc"][len(out["acc"]) // 4 :]  # after the first control cycle of the ramp
     np.testing.assert_allclose(ramp[:, 0], 0.5 / 9.80665, atol=1 / 256)
 
 
@@ -105,7 +124,9 @@ def test_temperatures_fall_faster_on_metal_than_on_foam():
     lm71 = {}
     for name in ("metal_toolbox", "rough_sponge"):
         height = {"metal_toolbox": 0.09, "rough_sponge": 0.035}
-        ctl = controller({"type": "sim_object", "object": name, "x": 0.0, "y": -0.5}, (0.0, -0.5, 0.2, *DOWN))
+        ctl = controller(
+            {"type": "sim_object", "object": name, "x": 0.0, "y": -0.5}, (0.0, -0.5, 0.2, *DOWN)
+        )
         free = run(ctl, 0.5)["temp"]
         # Die 1.5 K above the LM71; the cells warm above the 24 °C room by their electronics.
         np.testing.assert_allclose(free[:, 0] - free[:, 1], 1.5, atol=0.5)
@@ -121,7 +142,9 @@ def test_temperatures_fall_faster_on_metal_than_on_foam():
 def test_sliding_on_a_textured_object_shakes_the_accelerometers():
     def vibration(texture: bool, speed: float) -> float:
         pose = (-0.03, -0.5, SimObjectSurface("towel", 0.0, -0.5).shape.surface_z - 0.0005, *DOWN)
-        ctl = controller({"type": "sim_object", "object": "towel", "x": 0.0, "y": -0.5}, pose, texture=texture)
+        ctl = controller(
+            {"type": "sim_object", "object": "towel", "x": 0.0, "y": -0.5}, pose, texture=texture
+        )
         run(ctl, 0.05)
         ctl.disturb([speed, 0.0, 0.0], duration=2.0)
         run(ctl, 0.1)
@@ -148,8 +171,12 @@ def test_silenced_cells_send_nothing_until_restored():
 
 
 def test_the_real_serial_skin_reads_the_loopbacks_pty():
-    with Loopback(free_loopback_host(), contact={"type": "spring", "surface_z": 0.0, "stiffness": 200.0},
-                  start_pose=(0.0, -0.5, 0.01, *DOWN), skin=True) as lb:
+    with Loopback(
+        free_loopback_host(),
+        contact={"type": "spring", "surface_z": 0.0, "stiffness": 200.0},
+        start_pose=(0.0, -0.5, 0.01, *DOWN),
+        skin=True,
+    ) as lb:
         assert lb.skin_port and lb.skin_port.startswith("/dev/")
         with SerialSkin(lb.skin_port) as skin:
             skin.wait_for_cells(5.0)
@@ -164,14 +191,31 @@ def test_the_real_serial_skin_reads_the_loopbacks_pty():
             assert skin.silent_cells() == (2,)
             lb.restore_skin()
             skin.wait_for_cells(5.0)
-            assert skin.stats["rejected"] == {"unknown_header": 0, "payload_high_bit": 0, "bad_end_marker": 0}
+            assert skin.stats["rejected"] == {
+                "unknown_header": 0,
+                "payload_high_bit": 0,
+                "bad_end_marker": 0,
+            }
         assert lb.skin_stats()["packets"] > 0
 
 
 def test_the_command_line_prints_the_skin_pty():
     host = free_loopback_host()
-    proc = subprocess.Popen([sys.executable, "-m", "aptkt.sim.loopback", "--host", host, "--skin-pty",
-                             "--skin-rate", "125"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "aptkt.sim.loopback",
+            "--host",
+            host,
+            "--skin-pty",
+            "--skin-rate",
+            "125",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         port = None
         deadline = time.monotonic() + 30.0

@@ -46,8 +46,13 @@ class Context:
         d.mkdir(parents=True, exist_ok=True)
         return d
 
-    def write_figure(self, name: str, fig: Any, rows: Sequence[Mapping[str, Any]],
-                     curve_rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    def write_figure(
+        self,
+        name: str,
+        fig: Any,
+        rows: Sequence[Mapping[str, Any]],
+        curve_rows: Sequence[Mapping[str, Any]],
+    ) -> list[str]:
         """A figure's plot (PNG, SVG), every step of every run (``results.csv``) and its curves
         (``curves.csv``) in its directory; returns the files, relative to the output."""
         out = self.figure_dir(name)
@@ -73,7 +78,9 @@ class Context:
             gp=dict(self.gp.__dict__),
         )
 
-    def learner(self, method: str, *, budget: int | None = None, seed: int = 0, **overrides: Any) -> LearnerConfig:
+    def learner(
+        self, method: str, *, budget: int | None = None, seed: int = 0, **overrides: Any
+    ) -> LearnerConfig:
         settings = {
             "eps_neg": self.scale.eps_neg,
             "eps_explor": self.scale.eps_explor,

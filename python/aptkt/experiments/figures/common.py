@@ -18,7 +18,10 @@ XLABEL = "observations after the initial round"
 
 
 def method_curves(
-    rows: Sequence[Mapping[str, Any]], where: Mapping[str, Any], methods: Iterable[str], value: str = "mean_accuracy"
+    rows: Sequence[Mapping[str, Any]],
+    where: Mapping[str, Any],
+    methods: Iterable[str],
+    value: str = "mean_accuracy",
 ) -> dict[str, Curves]:
     return {m: collect(rows, {**where, "method": m}, value=value) for m in methods}
 
@@ -45,8 +48,9 @@ class GainSummary:
         }
 
 
-def gain_summary(curves: Mapping[str, Curves], method: str, base: str = "baseline",
-                 steps: Sequence[int] = ()) -> GainSummary:
+def gain_summary(
+    curves: Mapping[str, Curves], method: str, base: str = "baseline", steps: Sequence[int] = ()
+) -> GainSummary:
     g = difference(curves[method], curves[base])
     units = g.units(0)  # the first element of the run identity: the group
     at = {int(s): estimate(g.column(s), units) for s in steps if s in set(g.x.tolist())}
@@ -72,7 +76,9 @@ def transfer_rate(rows: Iterable[Mapping[str, Any]], where: Mapping[str, Any]) -
     return taken / made if made else float("nan")
 
 
-def plot_panel(ax, curves: Mapping[str, Curves], title: str, *, xlabel: str = XLABEL, legend: bool = True) -> None:
+def plot_panel(
+    ax, curves: Mapping[str, Curves], title: str, *, xlabel: str = XLABEL, legend: bool = True
+) -> None:
     x = next(iter(curves.values())).x
     from matplotlib.ticker import MaxNLocator
 
@@ -86,11 +92,14 @@ def prior_groups(ctx, n_priors: int) -> list[tuple[str, ...]]:
     """The random groups of ``n_priors`` prior objects (the same for every figure that asks)."""
     from aptkt.experiments.sampling import draw_groups
 
-    return draw_groups(ctx.scale.priors, n_priors, ctx.scale.groups, ctx.seed_for("prior-groups", n_priors))
+    return draw_groups(
+        ctx.scale.priors, n_priors, ctx.scale.groups, ctx.seed_for("prior-groups", n_priors)
+    )
 
 
-def prior_group_plan(ctx, figure: str, n_priors: int, methods: Sequence[str],
-                     panels: Mapping[str, Sequence[str]]):
+def prior_group_plan(
+    ctx, figure: str, n_priors: int, methods: Sequence[str], panels: Mapping[str, Sequence[str]]
+):
     """Runs of ``methods`` for every group of ``n_priors`` priors × ``trials`` trials × panel
     (a panel names the actions learned). A trial's seed depends on (n_priors, group, trial)
     only, so all methods and panels of a trial see the same pool order and exploration draws,
@@ -105,10 +114,25 @@ def prior_group_plan(ctx, figure: str, n_priors: int, methods: Sequence[str],
             seed = ctx.seed_for("trial", n_priors, g, t)
             for panel, actions in panels.items():
                 for m in methods:
-                    tags = {"figure": figure, "panel": panel, "n_priors": n_priors, "group": g, "trial": t,
-                            "priors": ",".join(group)}
-                    plan.specs.append(ctx.spec(m, ctx.learner(m, seed=seed), actions, ctx.scale.new_objects,
-                                               task, seed, tags))
+                    tags = {
+                        "figure": figure,
+                        "panel": panel,
+                        "n_priors": n_priors,
+                        "group": g,
+                        "trial": t,
+                        "priors": ",".join(group),
+                    }
+                    plan.specs.append(
+                        ctx.spec(
+                            m,
+                            ctx.learner(m, seed=seed),
+                            actions,
+                            ctx.scale.new_objects,
+                            task,
+                            seed,
+                            tags,
+                        )
+                    )
     return plan
 
 

@@ -14,7 +14,12 @@ from typing import Any
 from aptkt.experiments.figures import fig10
 from aptkt.experiments.figures.base import Context, Headline, Plan, Section
 from aptkt.experiments.figures.common import (
-    accuracy_table, gain_summary, key_steps, method_curves, plot_panel, transfer_rate,
+    accuracy_table,
+    gain_summary,
+    key_steps,
+    method_curves,
+    plot_panel,
+    transfer_rate,
 )
 from aptkt.experiments.plots import figure
 from aptkt.experiments.report import ci, markdown_table, no_harm_verdict
@@ -43,8 +48,24 @@ def plan(ctx: Context) -> Plan:
         for t in range(ctx.scale.fig11_trials):
             seed = ctx.seed_for("fig11", panel, t)
             for m in METHODS:
-                tags = {"figure": NAME, "panel": panel, "group": 0, "trial": t, "priors": ",".join(task.objects)}
-                plan.specs.append(ctx.spec(m, ctx.learner(m, seed=seed), actions, ctx.scale.new_objects, task, seed, tags))
+                tags = {
+                    "figure": NAME,
+                    "panel": panel,
+                    "group": 0,
+                    "trial": t,
+                    "priors": ",".join(task.objects),
+                }
+                plan.specs.append(
+                    ctx.spec(
+                        m,
+                        ctx.learner(m, seed=seed),
+                        actions,
+                        ctx.scale.new_objects,
+                        task,
+                        seed,
+                        tags,
+                    )
+                )
     return plan
 
 
@@ -62,9 +83,11 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         rates[key] = transfer_rate(rows, {"method": "APTKT", "panel": key})
         label = "all actions" if key == fig10.ALL else key
         plot_panel(ax, curves, f"{label}, priors {ctx.numbers(design[key][1])}", legend=(i == 0))
-        curve_rows += [r for m, c in curves.items() for r in curves_rows({"panel": key, "method": m}, c)]
+        curve_rows += [
+            r for m, c in curves.items() for r in curves_rows({"panel": key, "method": m}, c)
+        ]
         tables.append(f"**{label}**\n\n" + accuracy_table(curves, steps))
-    for ax in axes.ravel()[len(keys):]:
+    for ax in axes.ravel()[len(keys) :]:
         ax.set_visible(False)
     fig.suptitle("Fig. 11 — negative-transfer test: priors dissimilar to the new objects")
     fig.tight_layout()
@@ -72,31 +95,64 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
 
     harmed = [k for k in keys if gains[k].overall.significant_negative]
     harmed_early = [k for k in keys if 0 in gains[k].at and gains[k].at[0].significant_negative]
-    headlines = [Headline(
-        NAME, f"dissimilar priors: APTKT ≈ baseline (no negative transfer) in all {len(keys)} settings", "yes",
-        f"significantly below the baseline over the curve in {len(harmed)} of {len(keys)} "
-        f"({', '.join(harmed) or 'none'}); at step 0 in {len(harmed_early)} ({', '.join(harmed_early) or 'none'})",
-        "agrees: no negative transfer" if not harmed else
-        "differs: negative transfer in " + ", ".join(harmed))]
+    headlines = [
+        Headline(
+            NAME,
+            f"dissimilar priors: APTKT ≈ baseline (no negative transfer) in all {len(keys)} settings",
+            "yes",
+            f"significantly below the baseline over the curve in {len(harmed)} of {len(keys)} "
+            f"({', '.join(harmed) or 'none'}); at step 0 in {len(harmed_early)} ({', '.join(harmed_early) or 'none'})",
+            "agrees: no negative transfer"
+            if not harmed
+            else "differs: negative transfer in " + ", ".join(harmed),
+        )
+    ]
     # The paper explains the absence of harm by the cut-off: "stopped transferring". We read
     # "stopped" as fewer than half of APTKT's transfer decisions choosing a prior.
     stopped = [k for k in keys if rates[k] < STOPPED]
-    headlines.append(Headline(
-        NAME, "with dissimilar priors APTKT stops transferring (λ under ε_neg)", "yes",
-        f"transfer rate {min(rates.values()) * 100:.0f}–{max(rates.values()) * 100:.0f} % of decisions "
-        f"(below {STOPPED * 100:.0f} % in {len(stopped)} of {len(keys)} settings)",
-        "agrees" if len(stopped) == len(keys) else
-        f"differs: APTKT kept transferring in {len(keys) - len(stopped)} of {len(keys)} settings — the absence of "
-        "harm is not the cut-off's doing"))
+    headlines.append(
+        Headline(
+            NAME,
+            "with dissimilar priors APTKT stops transferring (λ under ε_neg)",
+            "yes",
+            f"transfer rate {min(rates.values()) * 100:.0f}–{max(rates.values()) * 100:.0f} % of decisions "
+            f"(below {STOPPED * 100:.0f} % in {len(stopped)} of {len(keys)} settings)",
+            "agrees"
+            if len(stopped) == len(keys)
+            else f"differs: APTKT kept transferring in {len(keys) - len(stopped)} of {len(keys)} settings — the absence of "
+            "harm is not the cut-off's doing",
+        )
+    )
     body = [
         f"{ctx.scale.fig11_trials} trials per setting; budget {ctx.scale.budget}.",
         "",
-        markdown_table(["setting", "priors", "gain over all steps", "verdict", "gain at step 0", "transfer rate"],
-                       [[k, ctx.numbers(design[k][1]), ci(gains[k].overall), no_harm_verdict(gains[k].overall),
-                         ci(gains[k].at[0]) if 0 in gains[k].at else "", f"{100 * rates[k]:.0f} %"] for k in keys]),
+        markdown_table(
+            [
+                "setting",
+                "priors",
+                "gain over all steps",
+                "verdict",
+                "gain at step 0",
+                "transfer rate",
+            ],
+            [
+                [
+                    k,
+                    ctx.numbers(design[k][1]),
+                    ci(gains[k].overall),
+                    no_harm_verdict(gains[k].overall),
+                    ci(gains[k].at[0]) if 0 in gains[k].at else "",
+                    f"{100 * rates[k]:.0f} %",
+                ]
+                for k in keys
+            ],
+        ),
         "",
         "\n\n".join(tables),
     ]
-    numbers = {"gain": {k: g.as_dict() for k, g in gains.items()}, "transfer_rate": rates,
-               "priors": {k: list(v[1]) for k, v in design.items()}}
+    numbers = {
+        "gain": {k: g.as_dict() for k, g in gains.items()},
+        "transfer_rate": rates,
+        "priors": {k: list(v[1]) for k, v in design.items()},
+    }
     return Section(NAME, TITLE, headlines, "\n".join(body), files, numbers)

@@ -28,7 +28,10 @@ NAME = "fig6"
 TITLE = "multi-modal kernel vs single modalities"
 #: The paper's names of the models (Fig. 6) and the modalities each uses (None: all).
 KINDS: Mapping[str, tuple[str, ...] | None] = {
-    "Multi": None, "STIF": ("force",), "Texture": ("texture",), "Thermal-C": ("thermal",),
+    "Multi": None,
+    "STIF": ("force",),
+    "Texture": ("texture",),
+    "Thermal-C": ("thermal",),
 }
 XLABEL = "observations of the action (all objects)"
 
@@ -51,8 +54,20 @@ def plan(ctx: Context) -> Plan:
             seed = ctx.seed_for("fig6", g, t)
             for a in s.actions:
                 for k in kinds(a):
-                    cfg = ctx.learner("baseline", budget=s.fig6_budget, seed=seed, eps_explor=1.0, modalities=KINDS[k])
-                    tags = {"figure": NAME, "panel": a, "group": g, "trial": t, "objects": ",".join(group)}
+                    cfg = ctx.learner(
+                        "baseline",
+                        budget=s.fig6_budget,
+                        seed=seed,
+                        eps_explor=1.0,
+                        modalities=KINDS[k],
+                    )
+                    tags = {
+                        "figure": NAME,
+                        "panel": a,
+                        "group": g,
+                        "trial": t,
+                        "objects": ",".join(group),
+                    }
                     plan.specs.append(ctx.spec(k, cfg, (a,), group, None, seed, tags))
     return plan
 
@@ -68,20 +83,29 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     per_action: dict[str, dict[str, Any]] = {}
     n = len(actions) + 1
     ncols = min(4, n)
-    fig, axes = figure(math.ceil(n / ncols), ncols, figsize=(4.2 * ncols, 3.8 * math.ceil(n / ncols)), squeeze=False)
+    fig, axes = figure(
+        math.ceil(n / ncols),
+        ncols,
+        figsize=(4.2 * ncols, 3.8 * math.ceil(n / ncols)),
+        squeeze=False,
+    )
     axes = axes.ravel()
     curve_rows = []
     for i, a in enumerate(actions):
         curves = {k: collect(rows, {"panel": a, "method": k}, x="n_observations") for k in kinds(a)}
         plot_panel(axes[i], curves, a, xlabel=XLABEL, legend=False)
-        curve_rows += [r for k, c in curves.items() for r in curves_rows({"panel": a, "method": k}, c)]
+        curve_rows += [
+            r for k, c in curves.items() for r in curves_rows({"panel": a, "method": k}, c)
+        ]
         singles = [k for k in curves if k != "Multi"]
         overall = {k: float(np.nanmean(c.run_means())) for k, c in curves.items()}
         best = max(singles, key=lambda k: overall[k])
         diff = difference(curves["Multi"], curves[best])
         units = diff.units(0)
         per_action[a] = {
-            "curves": curves, "best_single": best, "overall": overall,
+            "curves": curves,
+            "best_single": best,
+            "overall": overall,
             "vs_best": estimate(diff.run_means(), units),
             "vs_best_final": estimate(diff.values[:, -1], units),
             "final": {k: float(np.nanmean(c.values[:, -1])) for k, c in curves.items()},
@@ -92,8 +116,12 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         have = [per_action[a]["curves"][k] for a in actions if k in per_action[a]["curves"]]
         if have:
             avg[k] = mean_over_panels(have)
-    plot_panel(axes[len(actions)], avg, "averaged over actions", xlabel=XLABEL)  # every model: the legend
-    curve_rows += [r for k, c in avg.items() for r in curves_rows({"panel": "average", "method": k}, c)]
+    plot_panel(
+        axes[len(actions)], avg, "averaged over actions", xlabel=XLABEL
+    )  # every model: the legend
+    curve_rows += [
+        r for k, c in avg.items() for r in curves_rows({"panel": "average", "method": k}, c)
+    ]
     for ax in axes[n:]:
         ax.set_visible(False)
     fig.suptitle("Fig. 6 — multi-modal combination (Multi) vs single modalities, no transfer")
@@ -102,32 +130,70 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
 
     cats = {a: _category(per_action[a]["vs_best"]) for a in actions}
     worse = [a for a in actions if cats[a] == "worse"]
-    paper_cat = {**{a: "beats" for a in PAPER["fig6_beats"]}, **{a: "matches" for a in PAPER["fig6_matches"]}}
+    paper_cat = {
+        **{a: "beats" for a in PAPER["fig6_beats"]},
+        **{a: "matches" for a in PAPER["fig6_matches"]},
+    }
     mismatched = [a for a in actions if a in paper_cat and cats[a] != paper_cat[a]]
     headlines = [
-        Headline(NAME, "the multi-modal kernel matches or beats the best single modality, every action", "yes, all 7",
-                 f"beats for {sum(c == 'beats' for c in cats.values())}, matches for "
-                 f"{sum(c == 'matches' for c in cats.values())}, worse for {len(worse)} of {len(actions)} "
-                 f"({', '.join(worse) or 'none'})",
-                 "agrees" if not worse else "differs: worse than the best single modality for " + ", ".join(worse)),
-        Headline(NAME, "which actions gain from combining (beats) and which only match",
-                 f"beats: {', '.join(PAPER['fig6_beats'])}; matches: {', '.join(PAPER['fig6_matches'])}",
-                 "; ".join(f"{a} {cats[a]}" for a in actions),
-                 "agrees: the same per action" if not mismatched else
-                 f"differs for {len(mismatched)} of {len([a for a in actions if a in paper_cat])}: {', '.join(mismatched)}"),
+        Headline(
+            NAME,
+            "the multi-modal kernel matches or beats the best single modality, every action",
+            "yes, all 7",
+            f"beats for {sum(c == 'beats' for c in cats.values())}, matches for "
+            f"{sum(c == 'matches' for c in cats.values())}, worse for {len(worse)} of {len(actions)} "
+            f"({', '.join(worse) or 'none'})",
+            "agrees"
+            if not worse
+            else "differs: worse than the best single modality for " + ", ".join(worse),
+        ),
+        Headline(
+            NAME,
+            "which actions gain from combining (beats) and which only match",
+            f"beats: {', '.join(PAPER['fig6_beats'])}; matches: {', '.join(PAPER['fig6_matches'])}",
+            "; ".join(f"{a} {cats[a]}" for a in actions),
+            "agrees: the same per action"
+            if not mismatched
+            else f"differs for {len(mismatched)} of {len([a for a in actions if a in paper_cat])}: {', '.join(mismatched)}",
+        ),
     ]
     body = [
         f"{len(groups(ctx))} groups of {ctx.scale.fig6_group_size} objects × {ctx.scale.fig6_trials} trials per action "
         f"and model; {ctx.scale.fig6_budget} observations after the initial round (one per object), in random order. "
-        "\"Multi − best single\": the accuracy difference to the single modality with the best mean curve, paired by "
+        '"Multi − best single": the accuracy difference to the single modality with the best mean curve, paired by '
         "run, averaged over the curve (95 % CI over groups); beats / matches / worse: the interval above / around / below 0.",
         "",
         markdown_table(
-            ["action", "final accuracy per model", "best single", "Multi − best single (curve)", "(last step)", "verdict"],
-            [[a, ", ".join(f"{k} {v:.3f}" for k, v in per_action[a]["final"].items()), per_action[a]["best_single"],
-              ci(per_action[a]["vs_best"]), ci(per_action[a]["vs_best_final"]), cats[a]] for a in actions]),
+            [
+                "action",
+                "final accuracy per model",
+                "best single",
+                "Multi − best single (curve)",
+                "(last step)",
+                "verdict",
+            ],
+            [
+                [
+                    a,
+                    ", ".join(f"{k} {v:.3f}" for k, v in per_action[a]["final"].items()),
+                    per_action[a]["best_single"],
+                    ci(per_action[a]["vs_best"]),
+                    ci(per_action[a]["vs_best_final"]),
+                    cats[a],
+                ]
+                for a in actions
+            ],
+        ),
     ]
-    numbers = {a: {"best_single": d["best_single"], "mean_over_curve": d["overall"], "final": d["final"],
-                   "multi_vs_best": d["vs_best"].as_dict(), "multi_vs_best_final": d["vs_best_final"].as_dict(),
-                   "verdict": cats[a]} for a, d in per_action.items()}
+    numbers = {
+        a: {
+            "best_single": d["best_single"],
+            "mean_over_curve": d["overall"],
+            "final": d["final"],
+            "multi_vs_best": d["vs_best"].as_dict(),
+            "multi_vs_best_final": d["vs_best_final"].as_dict(),
+            "verdict": cats[a],
+        }
+        for a, d in per_action.items()
+    }
     return Section(NAME, TITLE, headlines, "\n".join(body), files, numbers)

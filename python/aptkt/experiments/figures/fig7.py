@@ -13,7 +13,13 @@ from typing import Any
 
 from aptkt.experiments.figures.base import Context, Headline, Plan, Section
 from aptkt.experiments.figures.common import (
-    accuracy_table, gain_summary, key_steps, method_curves, plot_panel, prior_group_plan, prior_groups,
+    accuracy_table,
+    gain_summary,
+    key_steps,
+    method_curves,
+    plot_panel,
+    prior_group_plan,
+    prior_groups,
     transfer_rate,
 )
 from aptkt.experiments.plots import canvas
@@ -53,20 +59,33 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         ax.set_ylabel("")
     big = fig.add_subplot(grid[:, ncols:])
     plot_panel(big, curves, f"average of {curves['APTKT'].n_runs} runs")
-    fig.suptitle(f"Fig. 7 — transfer from {ctx.scale.n_priors} prior objects, {len(ctx.scale.actions)} actions")
-    curve_rows = ([r for m, c in curves.items() for r in curves_rows({"panel": "all", "method": m}, c)]
-                  + [r for m, c in fused.items() for r in curves_rows({"panel": "all (fused)", "method": m}, c)])
+    fig.suptitle(
+        f"Fig. 7 — transfer from {ctx.scale.n_priors} prior objects, {len(ctx.scale.actions)} actions"
+    )
+    curve_rows = [
+        r for m, c in curves.items() for r in curves_rows({"panel": "all", "method": m}, c)
+    ] + [r for m, c in fused.items() for r in curves_rows({"panel": "all (fused)", "method": m}, c)]
     files = ctx.write_figure(NAME, fig, rows, curve_rows)
 
     mean_gain = gain.gain.mean()
     headlines = [
-        Headline(NAME, f"transfer from {ctx.scale.n_priors} priors: gain over the baseline throughout learning",
-                 pp(PAPER["fig7_gain"]), ci(gain.overall) + " (mean over steps)",
-                 gain_verdict(gain.overall, PAPER["fig7_gain"])),
-        Headline(NAME, "APTKT above the baseline at every step", "yes (Fig. 7)",
-                 f"mean gain > 0 at {round(gain.positive_steps * len(mean_gain))} of {len(mean_gain)} steps "
-                 f"(smallest {pp(float(mean_gain.min()))}, largest {pp(float(mean_gain.max()))})",
-                 "agrees" if gain.positive_steps == 1.0 else "differs: the mean gain is not positive at every step"),
+        Headline(
+            NAME,
+            f"transfer from {ctx.scale.n_priors} priors: gain over the baseline throughout learning",
+            pp(PAPER["fig7_gain"]),
+            ci(gain.overall) + " (mean over steps)",
+            gain_verdict(gain.overall, PAPER["fig7_gain"]),
+        ),
+        Headline(
+            NAME,
+            "APTKT above the baseline at every step",
+            "yes (Fig. 7)",
+            f"mean gain > 0 at {round(gain.positive_steps * len(mean_gain))} of {len(mean_gain)} steps "
+            f"(smallest {pp(float(mean_gain.min()))}, largest {pp(float(mean_gain.max()))})",
+            "agrees"
+            if gain.positive_steps == 1.0
+            else "differs: the mean gain is not positive at every step",
+        ),
     ]
     body = [
         f"{len(groups)} groups of {ctx.scale.n_priors} priors × {ctx.scale.trials} trials; budget {budget} "
@@ -78,18 +97,28 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         "",
         "Gain (APTKT − baseline), paired by run:",
         "",
-        markdown_table(["step", "gain", "fused over actions"],
-                       [[s, ci(gain.at[s]), ci(fused_gain.at[s])] for s in steps if s in gain.at]
-                       + [["mean over all steps", ci(gain.overall), ci(fused_gain.overall)],
-                          [f"peak (step {gain.peak_step})", ci(gain.peak), ""]]),
+        markdown_table(
+            ["step", "gain", "fused over actions"],
+            [[s, ci(gain.at[s]), ci(fused_gain.at[s])] for s in steps if s in gain.at]
+            + [
+                ["mean over all steps", ci(gain.overall), ci(fused_gain.overall)],
+                [f"peak (step {gain.peak_step})", ci(gain.peak), ""],
+            ],
+        ),
         "",
         f"APTKT transferred a prior object in {100 * rate:.1f} % of its transfer decisions (ε_neg = {ctx.scale.eps_neg}).",
         "",
         "Per group (gain = mean over steps of APTKT − baseline):",
         "",
-        markdown_table(["group", "priors", "gain"],
-                       [[g, ctx.numbers(group), ci(s.overall)] for g, group, s in per_group]),
+        markdown_table(
+            ["group", "priors", "gain"],
+            [[g, ctx.numbers(group), ci(s.overall)] for g, group, s in per_group],
+        ),
     ]
-    numbers = {"gain": gain.as_dict(), "fused_gain": fused_gain.as_dict(), "transfer_rate": rate,
-               "per_group": {g: s.overall.as_dict() for g, _, s in per_group}}
+    numbers = {
+        "gain": gain.as_dict(),
+        "fused_gain": fused_gain.as_dict(),
+        "transfer_rate": rate,
+        "per_group": {g: s.overall.as_dict() for g, _, s in per_group},
+    }
     return Section(NAME, TITLE, headlines, "\n".join(body), files, numbers)

@@ -14,7 +14,13 @@ import numpy as np
 
 from aptkt.experiments.figures.base import Context, Headline, Plan, Section
 from aptkt.experiments.figures.common import (
-    accuracy_table, gain_summary, key_steps, method_curves, plot_panel, prior_group_plan, transfer_rate,
+    accuracy_table,
+    gain_summary,
+    key_steps,
+    method_curves,
+    plot_panel,
+    prior_group_plan,
+    transfer_rate,
 )
 from aptkt.experiments.plots import figure
 from aptkt.experiments.report import PAPER, ci, gain_verdict, markdown_table, pp
@@ -28,7 +34,9 @@ LITTLE = PAPER["fig7_gain"] / 2
 
 
 def plan(ctx: Context) -> Plan:
-    return prior_group_plan(ctx, NAME, ctx.scale.n_priors, METHODS, {a: (a,) for a in ctx.scale.actions})
+    return prior_group_plan(
+        ctx, NAME, ctx.scale.n_priors, METHODS, {a: (a,) for a in ctx.scale.actions}
+    )
 
 
 def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
@@ -36,14 +44,21 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     steps = key_steps(ctx.scale.budget)
     n = len(actions) + 1
     ncols = min(4, n)
-    fig, axes = figure(math.ceil(n / ncols), ncols, figsize=(4.2 * ncols, 3.8 * math.ceil(n / ncols)), squeeze=False)
+    fig, axes = figure(
+        math.ceil(n / ncols),
+        ncols,
+        figsize=(4.2 * ncols, 3.8 * math.ceil(n / ncols)),
+        squeeze=False,
+    )
     axes = axes.ravel()
     gains, curve_rows, tables = {}, [], []
     for i, a in enumerate(actions):
         curves = method_curves(rows, {"panel": a}, METHODS)
         gains[a] = gain_summary(curves, "APTKT", steps=steps)
         plot_panel(axes[i], curves, a, legend=(i == 0))
-        curve_rows += [r for m, c in curves.items() for r in curves_rows({"panel": a, "method": m}, c)]
+        curve_rows += [
+            r for m, c in curves.items() for r in curves_rows({"panel": a, "method": m}, c)
+        ]
         tables.append(f"**{a}**\n\n" + accuracy_table(curves, steps))
     ax = axes[len(actions)]
     x = np.arange(len(actions))
@@ -59,7 +74,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     ax.set_ylabel("APTKT − baseline (pp)")
     ax.set_title("gain per action")
     ax.legend(fontsize="small")
-    for extra in axes[len(actions) + 1:]:
+    for extra in axes[len(actions) + 1 :]:
         extra.set_visible(False)
     fig.suptitle(f"Fig. 8 — transfer from {ctx.scale.n_priors} priors with one action at a time")
     fig.tight_layout()
@@ -68,39 +83,84 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     rates = {a: transfer_rate(rows, {"method": "APTKT", "panel": a}) for a in actions}
     headlines = []
     if "P2" in gains:
-        headlines.append(Headline(NAME, "P2 alone: gain over the baseline", pp(PAPER["fig8_P2_gain"]) + " (at its best)",
-                                  f"{ci(gains['P2'].peak)} at step {gains['P2'].peak_step}; {ci(gains['P2'].overall)} over all steps",
-                                  gain_verdict(gains["P2"].peak, PAPER["fig8_P2_gain"])))
+        headlines.append(
+            Headline(
+                NAME,
+                "P2 alone: gain over the baseline",
+                pp(PAPER["fig8_P2_gain"]) + " (at its best)",
+                f"{ci(gains['P2'].peak)} at step {gains['P2'].peak_step}; {ci(gains['P2'].overall)} over all steps",
+                gain_verdict(gains["P2"].peak, PAPER["fig8_P2_gain"]),
+            )
+        )
     little = [a for a in PAPER["fig8_little"] if a in gains]
     if little:
         small = all(gains[a].overall.mean < LITTLE for a in little)
-        headlines.append(Headline(
-            NAME, f"{' and '.join(little)} alone: little gain (< {pp(LITTLE, sign=False)} over the curve)", "little",
-            "; ".join(f"{a} {ci(gains[a].overall)}" for a in little),
-            "agrees" if small else "differs: " + ", ".join(a for a in little if gains[a].overall.mean >= LITTLE)
-            + f" gain(s) {pp(LITTLE, sign=False)} or more"))
+        headlines.append(
+            Headline(
+                NAME,
+                f"{' and '.join(little)} alone: little gain (< {pp(LITTLE, sign=False)} over the curve)",
+                "little",
+                "; ".join(f"{a} {ci(gains[a].overall)}" for a in little),
+                "agrees"
+                if small
+                else "differs: "
+                + ", ".join(a for a in little if gains[a].overall.mean >= LITTLE)
+                + f" gain(s) {pp(LITTLE, sign=False)} or more",
+            )
+        )
     press = [a for a in PAPER["fig8_larger"] if a in gains]
     slide = [a for a in actions if a not in PAPER["fig8_larger"]]
     if press and slide:
         mp = float(np.mean([gains[a].overall.mean for a in press]))
         ms = float(np.mean([gains[a].overall.mean for a in slide]))
-        headlines.append(Headline(NAME, f"pressing/static actions ({', '.join(press)}) gain more than sliding ({', '.join(slide)})",
-                                  "yes", f"mean gain {pp(mp)} vs {pp(ms)}",
-                                  "agrees" if mp > ms else "differs: the sliding actions gain as much or more"))
+        headlines.append(
+            Headline(
+                NAME,
+                f"pressing/static actions ({', '.join(press)}) gain more than sliding ({', '.join(slide)})",
+                "yes",
+                f"mean gain {pp(mp)} vs {pp(ms)}",
+                "agrees" if mp > ms else "differs: the sliding actions gain as much or more",
+            )
+        )
     pos = [a for a in actions if gains[a].overall.significant_positive]
     neg = [a for a in actions if gains[a].overall.significant_negative]
-    headlines.append(Headline(NAME, "APTKT above the baseline with every single action", f"yes, all {len(actions)}",
-                              f"significantly above for {len(pos)} of {len(actions)} ({', '.join(pos) or 'none'}); "
-                              f"significantly below for {len(neg)} ({', '.join(neg) or 'none'})",
-                              "agrees" if len(pos) == len(actions) else
-                              f"differs: {len(actions) - len(pos)} action(s) without a significant gain"))
+    headlines.append(
+        Headline(
+            NAME,
+            "APTKT above the baseline with every single action",
+            f"yes, all {len(actions)}",
+            f"significantly above for {len(pos)} of {len(actions)} ({', '.join(pos) or 'none'}); "
+            f"significantly below for {len(neg)} ({', '.join(neg) or 'none'})",
+            "agrees"
+            if len(pos) == len(actions)
+            else f"differs: {len(actions) - len(pos)} action(s) without a significant gain",
+        )
+    )
     body = [
         f"Same prior groups and trial seeds as Fig. 7, one action per run; budget {ctx.scale.budget} observations "
         f"after the initial round of {len(ctx.scale.new_objects)}.",
         "",
-        markdown_table(["action", "gain over all steps", "gain at step 1", "best step", "gain there", "transfer rate"],
-                       [[a, ci(gains[a].overall), ci(gains[a].at[1]) if 1 in gains[a].at else "",
-                         gains[a].peak_step, ci(gains[a].peak), f"{100 * rates[a]:.0f} %"] for a in actions]),
+        markdown_table(
+            [
+                "action",
+                "gain over all steps",
+                "gain at step 1",
+                "best step",
+                "gain there",
+                "transfer rate",
+            ],
+            [
+                [
+                    a,
+                    ci(gains[a].overall),
+                    ci(gains[a].at[1]) if 1 in gains[a].at else "",
+                    gains[a].peak_step,
+                    ci(gains[a].peak),
+                    f"{100 * rates[a]:.0f} %",
+                ]
+                for a in actions
+            ],
+        ),
         "",
         "Accuracy per action (mean ± sd over runs):",
         "",

@@ -13,7 +13,13 @@ from typing import Any
 
 from aptkt.experiments.figures.base import Context, Headline, Plan, Section
 from aptkt.experiments.figures.common import (
-    accuracy_table, gain_summary, key_steps, method_curves, plot_panel, prior_group_plan, prior_groups,
+    accuracy_table,
+    gain_summary,
+    key_steps,
+    method_curves,
+    plot_panel,
+    prior_group_plan,
+    prior_groups,
     transfer_rate,
 )
 from aptkt.experiments.plots import figure
@@ -46,49 +52,94 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         aux_vs_plain[n] = gain_summary(curves, "APTKT+aux", base="APTKT", steps=steps)
         rates[n] = transfer_rate(rows, {"method": "APTKT", "n_priors": n})
         groups = len(prior_groups(ctx, n))
-        plot_panel(axes[0, i], curves, f"({'abcdefgh'[i % 8]}) {n} prior objects, {groups} group(s)", legend=(i == 0))
-        curve_rows += [r for m, c in curves.items() for r in curves_rows({"n_priors": n, "method": m}, c)]
+        plot_panel(
+            axes[0, i],
+            curves,
+            f"({'abcdefgh'[i % 8]}) {n} prior objects, {groups} group(s)",
+            legend=(i == 0),
+        )
+        curve_rows += [
+            r for m, c in curves.items() for r in curves_rows({"n_priors": n, "method": m}, c)
+        ]
         tables.append(f"**{n} priors**\n\n" + accuracy_table(curves, steps))
-    fig.suptitle("Fig. 9 — more prior objects: baseline (red), APTKT (blue), APTKT with auxiliary features (green)")
+    fig.suptitle(
+        "Fig. 9 — more prior objects: baseline (red), APTKT (blue), APTKT with auxiliary features (green)"
+    )
     fig.tight_layout()
     files = ctx.write_figure(NAME, fig, rows, curve_rows)
 
     most, fewest = max(counts), min(counts)
     one = 1 if 1 in aux[most].at else 0
-    headlines = [Headline(
-        NAME, f"auxiliary features with {most} priors: gain over the baseline after one new observation",
-        pp(PAPER["fig9_aux_gain_10_priors"]) + " (10 priors)", ci(aux[most].at[one]) + f" (step {one})",
-        gain_verdict(aux[most].at[one], PAPER["fig9_aux_gain_10_priors"]))]
+    headlines = [
+        Headline(
+            NAME,
+            f"auxiliary features with {most} priors: gain over the baseline after one new observation",
+            pp(PAPER["fig9_aux_gain_10_priors"]) + " (10 priors)",
+            ci(aux[most].at[one]) + f" (step {one})",
+            gain_verdict(aux[most].at[one], PAPER["fig9_aux_gain_10_priors"]),
+        )
+    ]
     if len(counts) > 1:
         fades = plain[most].overall.mean < plain[fewest].overall.mean
         fewer = rates[most] < rates[fewest]
-        headlines.append(Headline(
-            NAME, "plain transfer fades as priors are added (λ falls under ε_neg)", "yes",
-            f"gain {pp(plain[fewest].overall.mean)} with {fewest} → {pp(plain[most].overall.mean)} with {most} priors; "
-            f"transfer rate {100 * rates[fewest]:.0f} % → {100 * rates[most]:.0f} %",
-            "agrees" if fades and fewer else
-            "differs: " + ("the gain does not shrink" if not fades else "the transfer rate does not fall")))
+        headlines.append(
+            Headline(
+                NAME,
+                "plain transfer fades as priors are added (λ falls under ε_neg)",
+                "yes",
+                f"gain {pp(plain[fewest].overall.mean)} with {fewest} → {pp(plain[most].overall.mean)} with {most} priors; "
+                f"transfer rate {100 * rates[fewest]:.0f} % → {100 * rates[most]:.0f} %",
+                "agrees"
+                if fades and fewer
+                else "differs: "
+                + ("the gain does not shrink" if not fades else "the transfer rate does not fall"),
+            )
+        )
         more = [n for n in counts if n > fewest]
         restored = [n for n in more if aux_vs_plain[n].overall.significant_positive]
-        headlines.append(Headline(
-            NAME, f"auxiliary features beat plain APTKT with {', '.join(map(str, more))} priors", "yes",
-            "; ".join(f"{n}: {ci(aux_vs_plain[n].overall)}" for n in more),
-            "agrees" if len(restored) == len(more) else
-            f"differs: significantly better for {len(restored)} of {len(more)} prior counts"))
+        headlines.append(
+            Headline(
+                NAME,
+                f"auxiliary features beat plain APTKT with {', '.join(map(str, more))} priors",
+                "yes",
+                "; ".join(f"{n}: {ci(aux_vs_plain[n].overall)}" for n in more),
+                "agrees"
+                if len(restored) == len(more)
+                else f"differs: significantly better for {len(restored)} of {len(more)} prior counts",
+            )
+        )
     body = [
         f"Groups per count: {', '.join(f'{n}: {len(prior_groups(ctx, n))}' for n in counts)}; "
         f"{ctx.scale.trials} trials each; budget {ctx.scale.budget}.",
         "",
         markdown_table(
-            ["priors", "APTKT − baseline (all steps)", "APTKT+aux − baseline (all steps)",
-             "APTKT+aux − baseline (step 1)", "APTKT+aux − APTKT (all steps)", "APTKT transfer rate"],
-            [[n, ci(plain[n].overall), ci(aux[n].overall), ci(aux[n].at[one]), ci(aux_vs_plain[n].overall),
-              f"{100 * rates[n]:.0f} %"] for n in counts]),
+            [
+                "priors",
+                "APTKT − baseline (all steps)",
+                "APTKT+aux − baseline (all steps)",
+                "APTKT+aux − baseline (step 1)",
+                "APTKT+aux − APTKT (all steps)",
+                "APTKT transfer rate",
+            ],
+            [
+                [
+                    n,
+                    ci(plain[n].overall),
+                    ci(aux[n].overall),
+                    ci(aux[n].at[one]),
+                    ci(aux_vs_plain[n].overall),
+                    f"{100 * rates[n]:.0f} %",
+                ]
+                for n in counts
+            ],
+        ),
         "",
         "\n\n".join(tables),
     ]
-    numbers = {"APTKT": {n: g.as_dict() for n, g in plain.items()},
-               "APTKT+aux": {n: g.as_dict() for n, g in aux.items()},
-               "aux_vs_APTKT": {n: g.as_dict() for n, g in aux_vs_plain.items()},
-               "transfer_rate": rates}
+    numbers = {
+        "APTKT": {n: g.as_dict() for n, g in plain.items()},
+        "APTKT+aux": {n: g.as_dict() for n, g in aux.items()},
+        "aux_vs_APTKT": {n: g.as_dict() for n, g in aux_vs_plain.items()},
+        "transfer_rate": rates,
+    }
     return Section(NAME, TITLE, headlines, "\n".join(body), files, numbers)

@@ -37,7 +37,15 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["ContactModel", "NoContact", "SpringSurface", "Scene", "ThermalContact", "build", "scene_from_workspace"]
+__all__ = [
+    "ContactModel",
+    "NoContact",
+    "SpringSurface",
+    "Scene",
+    "ThermalContact",
+    "build",
+    "scene_from_workspace",
+]
 
 
 @runtime_checkable
@@ -76,7 +84,9 @@ class SpringSurface:
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.stiffness) and self.stiffness > 0):
-            raise ValueError(f"SpringSurface.stiffness must be a finite number > 0, got {self.stiffness!r}")
+            raise ValueError(
+                f"SpringSurface.stiffness must be a finite number > 0, got {self.stiffness!r}"
+            )
         if not (math.isfinite(self.friction) and self.friction >= 0):
             raise ValueError(f"SpringSurface.friction must be >= 0, got {self.friction!r}")
         # JSON brings ranges as lists; keep the dataclass hashable and comparable.
@@ -117,9 +127,13 @@ class Scene:
         self.items = list(items)
         if not self.items:
             raise ValueError("a scene needs at least one contact model")
-        normals = {tuple(float(v) for v in getattr(m, "normal", (0.0, 0.0, 1.0))) for m in self.items}
+        normals = {
+            tuple(float(v) for v in getattr(m, "normal", (0.0, 0.0, 1.0))) for m in self.items
+        }
         if len(normals) != 1:
-            raise ValueError(f"the items of a scene must share one surface normal, got {sorted(normals)}")
+            raise ValueError(
+                f"the items of a scene must share one surface normal, got {sorted(normals)}"
+            )
         self.normal = normals.pop()
         self._active = 0
 
@@ -158,15 +172,18 @@ class Scene:
         method = getattr(self.active, "thermal_contact", None)
         return method(pose) if callable(method) else None
 
-    def texture_acceleration(self, cell_xy: np.ndarray, velocity: np.ndarray, pressure: np.ndarray) -> np.ndarray:
+    def texture_acceleration(
+        self, cell_xy: np.ndarray, velocity: np.ndarray, pressure: np.ndarray
+    ) -> np.ndarray:
         method = getattr(self.active, "texture_acceleration", None)
         if not callable(method):
             return np.zeros((len(pressure), 3))
         return method(cell_xy, velocity, pressure)
 
 
-def scene_from_workspace(path: str, *, stiffness: float = 200.0, friction: float = 0.3,
-                         library_files: Sequence[str] = ()) -> dict[str, Any]:
+def scene_from_workspace(
+    path: str, *, stiffness: float = 200.0, friction: float = 0.3, library_files: Sequence[str] = ()
+) -> dict[str, Any]:
     """A scene spec that puts an object at every placement of a workspace file.
 
     An object whose name is in the simulated world's library becomes that object
@@ -183,12 +200,27 @@ def scene_from_workspace(path: str, *, stiffness: float = 200.0, friction: float
     items: list[dict[str, Any]] = []
     for name, p in config.placements.items():
         if name in library:
-            items.append({"type": "sim_object", "object": name, "x": p.x, "y": p.y, "surface_z": p.surface_z,
-                          "library_files": list(library_files)})
+            items.append(
+                {
+                    "type": "sim_object",
+                    "object": name,
+                    "x": p.x,
+                    "y": p.y,
+                    "surface_z": p.surface_z,
+                    "library_files": list(library_files),
+                }
+            )
         else:
-            items.append({"type": "spring", "surface_z": p.surface_z, "stiffness": stiffness, "friction": friction,
-                          "x_range": [p.workspace_min[0], p.workspace_max[0]],
-                          "y_range": [p.workspace_min[1], p.workspace_max[1]]})
+            items.append(
+                {
+                    "type": "spring",
+                    "surface_z": p.surface_z,
+                    "stiffness": stiffness,
+                    "friction": friction,
+                    "x_range": [p.workspace_min[0], p.workspace_max[0]],
+                    "y_range": [p.workspace_min[1], p.workspace_max[1]],
+                }
+            )
     if not items:
         raise ValueError(f"{path}: the workspace file places no objects")
     return {"type": "scene", "items": items}
@@ -236,8 +268,10 @@ def build(spec: Mapping[str, Any] | None) -> Any:
 
             return SimObjectSurface(**spec)
         if kind not in _BUILTIN:
-            raise ValueError(f"contact spec: unknown type {kind!r} "
-                             f"(known: {sorted([*_BUILTIN, 'sim_object', 'scene', 'workspace'])})")
+            raise ValueError(
+                f"contact spec: unknown type {kind!r} "
+                f"(known: {sorted([*_BUILTIN, 'sim_object', 'scene', 'workspace'])})"
+            )
         model = _BUILTIN[kind](**spec)
     if not callable(getattr(model, "normal_force", None)):
         raise ValueError(f"contact model {model!r} has no normal_force(pose) method")

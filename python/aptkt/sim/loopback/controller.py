@@ -37,7 +37,13 @@ from aptkt.sim.loopback.rotvec import (
 )
 from aptkt.sim.loopback.rtde import input_type, output_type
 
-__all__ = ["ControllerConfig", "SimulatedController", "SUPPORTED_COMMANDS", "CB3_VERSION", "E_SERIES_VERSION"]
+__all__ = [
+    "ControllerConfig",
+    "SimulatedController",
+    "SUPPORTED_COMMANDS",
+    "CB3_VERSION",
+    "E_SERIES_VERSION",
+]
 
 CB3_VERSION = (3, 15, 8, 106339)
 E_SERIES_VERSION = (5, 11, 6, 108249)
@@ -259,7 +265,9 @@ class SimulatedController:
                 "robot_mode": self.robot_mode,
                 "force_mode": self.force_mode is not None,
                 "motion": None if self.motion is None else self.motion.kind,
-                "watchdog": None if self.watchdog is None else {
+                "watchdog": None
+                if self.watchdog is None
+                else {
                     "variable": self.watchdog.variable,
                     "min_frequency": self.watchdog.min_frequency,
                     "action": self.watchdog.action,
@@ -318,12 +326,16 @@ class SimulatedController:
         self.disturbance_acceleration = math.inf
         self.disturbance_until = 0.0
 
-    def disturb(self, velocity: Sequence[float], duration: float, acceleration: float | None = None) -> None:
+    def disturb(
+        self, velocity: Sequence[float], duration: float, acceleration: float | None = None
+    ) -> None:
         """An external push (or a misbehaving controller): the TCP gets an extra base-frame
         velocity, reached at ``acceleration`` (None: at once), for ``duration`` seconds."""
         with self.lock:
             self.disturbance_target = np.asarray(velocity, dtype=float)[:3]
-            self.disturbance_acceleration = math.inf if acceleration is None else float(acceleration)
+            self.disturbance_acceleration = (
+                math.inf if acceleration is None else float(acceleration)
+            )
             self.disturbance_until = self.time + float(duration)
             self.log(f"disturbance {self.disturbance_target.tolist()} m/s for {duration} s")
 
@@ -417,8 +429,14 @@ class SimulatedController:
         if name in table:
             return table[name]
         t = output_type(name)
-        zero = {"VECTOR3D": [0.0] * 3, "VECTOR6D": [0.0] * 6, "VECTOR6INT32": [0] * 6,
-                "VECTOR6UINT32": [0] * 6, "DOUBLE": 0.0, "BOOL": False}
+        zero = {
+            "VECTOR3D": [0.0] * 3,
+            "VECTOR6D": [0.0] * 6,
+            "VECTOR6INT32": [0] * 6,
+            "VECTOR6UINT32": [0] * 6,
+            "DOUBLE": 0.0,
+            "BOOL": False,
+        }
         return zero.get(t or "", 0)
 
     # ------------------------------------------------------------------ programs
@@ -431,18 +449,28 @@ class SimulatedController:
             if self.program is not None or self.runtime_state != STOPPED:
                 self.stop_program(f"replaced by a new program from port {port}")
             if self.robot_mode != ROBOT_MODE_RUNNING:
-                self.log(f"program {name} not started: robot is not running (mode {self.robot_mode})")
+                self.log(
+                    f"program {name} not started: robot is not running (mode {self.robot_mode})"
+                )
                 return
             if self.protective_stopped:
                 self.log(f"program {name} not started: protective stop")
                 return
-            if name != "rtde_control" or "# HEADER_BEGIN" not in text and "signal_ready" not in text:
-                self.stop_reason = f"loopback cannot run program {name!r} (only ur_rtde's control script)"
+            if (
+                name != "rtde_control"
+                or "# HEADER_BEGIN" not in text
+                and "signal_ready" not in text
+            ):
+                self.stop_reason = (
+                    f"loopback cannot run program {name!r} (only ur_rtde's control script)"
+                )
                 self.log(self.stop_reason)
                 return
             int_offset = _injected_offset(text, "int")
             float_offset = _injected_offset(text, "float")
-            self.program = _ControlProgram(name=name, int_offset=int_offset, float_offset=float_offset)
+            self.program = _ControlProgram(
+                name=name, int_offset=int_offset, float_offset=float_offset
+            )
             # force_mode_set_gain_scaling(0.5) at start-up is a 5.0+ line of the script.
             if self.config.version[0] >= 5:
                 self.program.gain_scaling = 0.5
@@ -450,7 +478,9 @@ class SimulatedController:
             self.stop_reason = ""
             self._write_async(-1)
             self.output_int[int_offset] = RDY_FOR_CMD
-            self.log(f"program {name} started (register offsets int {int_offset}, float {float_offset})")
+            self.log(
+                f"program {name} started (register offsets int {int_offset}, float {float_offset})"
+            )
 
     def _in_int(self, i: int) -> int:
         assert self.program is not None
@@ -541,7 +571,9 @@ class SimulatedController:
                 type=self._in_int(1),
             )
             if self.force_mode.type != 2:
-                self.log(f"force mode type {self.force_mode.type} simulated as type 2 (frame not transformed)")
+                self.log(
+                    f"force mode type {self.force_mode.type} simulated as type 2 (frame not transformed)"
+                )
         elif cmd == 7:
             self.force_mode = None
             self._start_stop(10.0)
@@ -562,7 +594,10 @@ class SimulatedController:
             self._start_stop(self._in_float(0))
             p.waiting = "motion"
         elif cmd == 17:
-            self.payload = (self._in_float(0), [self._in_float(1), self._in_float(2), self._in_float(3)])
+            self.payload = (
+                self._in_float(0),
+                [self._in_float(1), self._in_float(2), self._in_float(3)],
+            )
         elif cmd == 20:
             p.damping = self._in_float(0)
         elif cmd == 21:
@@ -619,8 +654,12 @@ class SimulatedController:
         length = float(np.linalg.norm(self._free(pose[:3] - start[:3])))
         angle = float(np.linalg.norm(pose[3:] - start[3:]))
         self.motion = _Motion(
-            kind="movel", velocity=max(v, 1e-6), acceleration=max(a, 1e-6), target=pose.copy(),
-            start=start, length=length if length > 1e-9 else angle,
+            kind="movel",
+            velocity=max(v, 1e-6),
+            acceleration=max(a, 1e-6),
+            target=pose.copy(),
+            start=start,
+            length=length if length > 1e-9 else angle,
             speed=max(0.0, float(np.linalg.norm(self.velocity[:3]))) if length > 1e-9 else 0.0,
             asynchronous=asynchronous,
         )
@@ -656,13 +695,17 @@ class SimulatedController:
         if m.kind == "speedl":
             assert m.target is not None
             lin = lin + limit_norm(m.target[:3] - lin, m.acceleration * dt)
-            omega = self.velocity[3:] + limit_norm(m.target[3:] - self.velocity[3:], m.acceleration * dt)
+            omega = self.velocity[3:] + limit_norm(
+                m.target[3:] - self.velocity[3:], m.acceleration * dt
+            )
             self.velocity[3:] = omega
             return lin, None
         if m.kind == "stop":
             step = m.acceleration * dt
             lin = limit_norm(lin, max(0.0, float(np.linalg.norm(lin)) - step))
-            omega = limit_norm(self.velocity[3:], max(0.0, float(np.linalg.norm(self.velocity[3:])) - step))
+            omega = limit_norm(
+                self.velocity[3:], max(0.0, float(np.linalg.norm(self.velocity[3:])) - step)
+            )
             self.velocity[3:] = omega
             if not np.any(lin) and not np.any(omega):
                 self._finish_motion()
@@ -716,7 +759,9 @@ class SimulatedController:
         local = r.T @ lin
         applied = r.T @ (-self.external_force)  # the force the robot applies to the world
         current = r.T @ self.velocity[:3]
-        gain = self.config.force_mode_admittance * (self.program.gain_scaling if self.program else 1.0)
+        gain = self.config.force_mode_admittance * (
+            self.program.gain_scaling if self.program else 1.0
+        )
         normal = np.asarray(getattr(self.contact, "normal", (0.0, 0.0, 1.0)), dtype=float)
         stiffness = self._local_stiffness(normal)
         if stiffness > 0:
@@ -742,7 +787,11 @@ class SimulatedController:
         delta = 1e-5
         probe = self.pose.copy()
         probe[:3] -= normal * delta
-        return max(0.0, (float(self.contact.normal_force(probe)) - float(self.contact.normal_force(self.pose))) / delta)
+        return max(
+            0.0,
+            (float(self.contact.normal_force(probe)) - float(self.contact.normal_force(self.pose)))
+            / delta,
+        )
 
     def _update_wrench(self) -> None:
         normal = np.asarray(getattr(self.contact, "normal", (0.0, 0.0, 1.0)), dtype=float)
@@ -801,7 +850,9 @@ class SimulatedController:
         target = self.disturbance_target if self.time < self.disturbance_until else np.zeros(3)
         step = self.disturbance_acceleration * self.dt
         delta = target - self.disturbance_velocity
-        self.disturbance_velocity = self.disturbance_velocity + (delta if math.isinf(step) else limit_norm(delta, step))
+        self.disturbance_velocity = self.disturbance_velocity + (
+            delta if math.isinf(step) else limit_norm(delta, step)
+        )
         return self.disturbance_velocity
 
     def _check_watchdog(self) -> None:
@@ -843,7 +894,11 @@ class SimulatedController:
                 state = {PLAYING: "PLAYING", PAUSED: "PAUSED"}.get(self.runtime_state, "STOPPED")
                 return f"{state} {name}"
             if low == "robotmode":
-                names = {ROBOT_MODE_POWER_OFF: "POWER_OFF", ROBOT_MODE_IDLE: "IDLE", ROBOT_MODE_RUNNING: "RUNNING"}
+                names = {
+                    ROBOT_MODE_POWER_OFF: "POWER_OFF",
+                    ROBOT_MODE_IDLE: "IDLE",
+                    ROBOT_MODE_RUNNING: "RUNNING",
+                }
                 return f"Robotmode: {names.get(self.robot_mode, 'RUNNING')}"
             if low in ("safetymode", "safetystatus"):
                 mode = "PROTECTIVE_STOP" if self.protective_stopped else "NORMAL"
@@ -860,7 +915,11 @@ class SimulatedController:
                 self.runtime_state = PAUSED
                 return "Pausing program"
             if low == "play":
-                if self.runtime_state == PAUSED and self.program is not None and not self.protective_stopped:
+                if (
+                    self.runtime_state == PAUSED
+                    and self.program is not None
+                    and not self.protective_stopped
+                ):
                     self.runtime_state = PLAYING
                     return "Starting program"
                 return "Failed to execute: play"
@@ -868,8 +927,10 @@ class SimulatedController:
                 if self.protective_stopped:
                     elapsed = time.monotonic() - (self.protective_stop_time or 0.0)
                     if elapsed < self.config.unlock_delay:
-                        return ("Cannot unlock protective stop until 5s after occurrence. "
-                                "Always inspect cause of protective stop before unlocking")
+                        return (
+                            "Cannot unlock protective stop until 5s after occurrence. "
+                            "Always inspect cause of protective stop before unlocking"
+                        )
                     self.safety_mode = SAFETY_NORMAL
                     self.protective_stop_reason = ""
                     self.log("protective stop released")
@@ -897,7 +958,7 @@ class SimulatedController:
                 self.robot_mode = ROBOT_MODE_POWER_OFF
                 return "Restarting safety"
             if low.startswith("addtolog "):
-                self.log(cmd[len("addToLog "):])
+                self.log(cmd[len("addToLog ") :])
                 return "Added log message"
             if low == "get loaded program":
                 return "No program loaded"

@@ -41,8 +41,15 @@ class SimObjectSurface:
 
     normal = (0.0, 0.0, 1.0)
 
-    def __init__(self, object: str, x: float, y: float, surface_z: float | None = None,
-                 rotation: float = 0.0, library_files: Sequence[str] = ()):
+    def __init__(
+        self,
+        object: str,
+        x: float,
+        y: float,
+        surface_z: float | None = None,
+        rotation: float = 0.0,
+        library_files: Sequence[str] = (),
+    ):
         library = load_library(*library_files) if library_files else default_library()
         spec = library[object]
         constants = SkinConstants()
@@ -75,18 +82,31 @@ class SimObjectSurface:
 
     def thermal_contact(self, pose: Sequence[float]) -> ThermalContact:
         """The object's layers and surface, for the skin's heat exchange."""
-        return ThermalContact(self.spec.name, tuple(self.spec.layers), float(self.spec.surface.contact_conductance),
-                              float(self.spec.temperature_offset))
+        return ThermalContact(
+            self.spec.name,
+            tuple(self.spec.layers),
+            float(self.spec.surface.contact_conductance),
+            float(self.spec.temperature_offset),
+        )
 
-    def texture_acceleration(self, cell_xy: np.ndarray, velocity: np.ndarray, pressure: np.ndarray) -> np.ndarray:
+    def texture_acceleration(
+        self, cell_xy: np.ndarray, velocity: np.ndarray, pressure: np.ndarray
+    ) -> np.ndarray:
         """Texture vibration (n, 3) in m/s^2, base frame, of cells at ``cell_xy`` (n, 2) moving
         at ``velocity`` (base frame, m/s) under mean contact pressure ``pressure`` (n,) Pa."""
         xy = np.asarray(cell_xy, dtype=np.float64)
         v = np.asarray(velocity, dtype=np.float64)[:2]
         u = self.shape.to_object(xy)
         w = np.broadcast_to(self.shape.to_object_direction(v), u.shape)
-        tex = texture_acceleration(self.texture, self.constants, u, w, np.asarray(pressure, dtype=np.float64),
-                                   self.spec.top.modulus, self.spec.surface.friction_kinetic)
+        tex = texture_acceleration(
+            self.texture,
+            self.constants,
+            u,
+            w,
+            np.asarray(pressure, dtype=np.float64),
+            self.spec.top.modulus,
+            self.spec.surface.friction_kinetic,
+        )
         speed = float(np.hypot(v[0], v[1]))
         direction = v / speed if speed > 1e-9 else np.array([1.0, 0.0])
         lateral = np.array([-direction[1], direction[0]])

@@ -29,7 +29,9 @@ class LoopbackError(RuntimeError):
     """The loopback process failed to start or to execute a command."""
 
 
-def serve_stdio(config: ControllerConfig, host: str, ports: Mapping[str, Any], stdin: Any, stdout: Any) -> None:
+def serve_stdio(
+    config: ControllerConfig, host: str, ports: Mapping[str, Any], stdin: Any, stdout: Any
+) -> None:
     """Child side: serve the controller, read JSON commands from ``stdin``, answer on ``stdout``."""
     # Imported here so importing this module never builds a controller.
     from aptkt.sim.loopback.controller import SimulatedController
@@ -41,8 +43,13 @@ def serve_stdio(config: ControllerConfig, host: str, ports: Mapping[str, Any], s
 
     try:
         controller = SimulatedController(config)
-        server = LoopbackServer(controller, host=host, rtde_port=ports["rtde"],
-                                dashboard_port=ports["dashboard"], script_ports=ports["script"]).start()
+        server = LoopbackServer(
+            controller,
+            host=host,
+            rtde_port=ports["rtde"],
+            dashboard_port=ports["dashboard"],
+            script_ports=ports["script"],
+        ).start()
     except Exception as exc:  # report start-up failures (port busy, bad config) to the parent
         answer({"ok": False, "error": f"{type(exc).__name__}: {exc}"})
         return
@@ -57,7 +64,9 @@ def serve_stdio(config: ControllerConfig, host: str, ports: Mapping[str, Any], s
             with controller.lock:
                 return controller.normal_force()
         if op == "reset":
-            controller.reset(pose=args.get("pose"), keep_program=bool(args.get("keep_program", False)))
+            controller.reset(
+                pose=args.get("pose"), keep_program=bool(args.get("keep_program", False))
+            )
             server.restore()
             return None
         if op == "set_contact":
@@ -109,7 +118,11 @@ def serve_stdio(config: ControllerConfig, host: str, ports: Mapping[str, Any], s
             try:
                 reply = {"ok": True, "result": dispatch(msg["op"], msg.get("args", {}))}
             except Exception as exc:
-                reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}", "trace": traceback.format_exc()}
+                reply = {
+                    "ok": False,
+                    "error": f"{type(exc).__name__}: {exc}",
+                    "trace": traceback.format_exc(),
+                }
             answer(reply)
     finally:  # the parent closed the pipe or asked to stop
         server.close()
@@ -119,7 +132,9 @@ def serve_stdio(config: ControllerConfig, host: str, ports: Mapping[str, Any], s
 
 def _need_skin(controller: Any) -> Any:
     if controller.skin is None:
-        raise ValueError("this loopback has no simulated skin (start it with skin=True / --skin-pty)")
+        raise ValueError(
+            "this loopback has no simulated skin (start it with skin=True / --skin-pty)"
+        )
     return controller.skin
 
 
@@ -137,10 +152,17 @@ class Loopback:
     Other keyword arguments are :class:`ControllerConfig` fields.
     """
 
-    def __init__(self, host: str = "127.0.0.1", *, series: str = "cb3",
-                 contact: Mapping[str, Any] | None = None,
-                 skin: bool | Mapping[str, Any] | None = None,
-                 ports: Mapping[str, Any] | None = None, start_timeout: float = 30.0, **config: Any):
+    def __init__(
+        self,
+        host: str = "127.0.0.1",
+        *,
+        series: str = "cb3",
+        contact: Mapping[str, Any] | None = None,
+        skin: bool | Mapping[str, Any] | None = None,
+        ports: Mapping[str, Any] | None = None,
+        start_timeout: float = 30.0,
+        **config: Any,
+    ):
         if skin is not None and skin is not False:
             from aptkt.sim.loopback.tcp_skin import SkinConfig
 
@@ -165,11 +187,27 @@ class Loopback:
         return self.config.frequency
 
     def start(self) -> Loopback:
-        cmd = [sys.executable, "-m", "aptkt.sim.loopback", "--stdio", "--host", self.host,
-               "--config-json", json.dumps(asdict(self.config)), "--ports-json", json.dumps(self.ports)]
+        cmd = [
+            sys.executable,
+            "-m",
+            "aptkt.sim.loopback",
+            "--stdio",
+            "--host",
+            self.host,
+            "--config-json",
+            json.dumps(asdict(self.config)),
+            "--ports-json",
+            json.dumps(self.ports),
+        ]
         self._stderr = tempfile.TemporaryFile(mode="w+")
-        self._proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr,
-                                      text=True, bufsize=1)
+        self._proc = subprocess.Popen(
+            cmd,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=self._stderr,
+            text=True,
+            bufsize=1,
+        )
         try:
             reply = self._read_reply(self.start_timeout, "start")
         except LoopbackError:
@@ -243,7 +281,9 @@ class Loopback:
                 self._proc.stdin.write(json.dumps({"op": op, "args": args}) + "\n")
                 self._proc.stdin.flush()
             except (OSError, ValueError) as exc:
-                raise LoopbackError(f"loopback process is gone: {exc}: {self._stderr_tail()}") from None
+                raise LoopbackError(
+                    f"loopback process is gone: {exc}: {self._stderr_tail()}"
+                ) from None
             reply = self._read_reply(timeout, op)
         if not reply["ok"]:
             raise LoopbackError(f"loopback {op!r} failed: {reply['error']}")
@@ -270,7 +310,9 @@ class Loopback:
     def stop_program(self, reason: str = "injected by test") -> None:
         self.call("stop_program", reason=reason)
 
-    def disturb(self, velocity: Sequence[float], duration: float, acceleration: float | None = None) -> None:
+    def disturb(
+        self, velocity: Sequence[float], duration: float, acceleration: float | None = None
+    ) -> None:
         """Push the TCP with an extra base-frame velocity (see SimulatedController.disturb)."""
         self.call("disturb", velocity=list(velocity), duration=duration, acceleration=acceleration)
 

@@ -6,7 +6,13 @@ import math
 
 import numpy as np
 
-__all__ = ["rotvec_to_matrix", "matrix_to_rotvec", "interpolate_rotvec", "integrate_rotvec", "limit_norm"]
+__all__ = [
+    "rotvec_to_matrix",
+    "matrix_to_rotvec",
+    "interpolate_rotvec",
+    "integrate_rotvec",
+    "limit_norm",
+]
 
 
 def rotvec_to_matrix(r: np.ndarray) -> np.ndarray:

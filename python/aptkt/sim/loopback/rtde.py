@@ -174,7 +174,9 @@ def input_type(name: str) -> str | None:
 class Recipe:
     """An output or input recipe: names, wire types and the compiled struct of one package."""
 
-    def __init__(self, recipe_id: int, names: Sequence[str], types: Sequence[str], frequency: float = 0.0):
+    def __init__(
+        self, recipe_id: int, names: Sequence[str], types: Sequence[str], frequency: float = 0.0
+    ):
         self.id = recipe_id
         self.names = list(names)
         self.types = list(types)
@@ -199,7 +201,7 @@ class Recipe:
         i = 1
         for name, t in zip(self.names, self.types):
             n = {"VECTOR3D": 3, "VECTOR6D": 6, "VECTOR6INT32": 6, "VECTOR6UINT32": 6}.get(t, 1)
-            out[name] = flat[i] if n == 1 else list(flat[i:i + n])
+            out[name] = flat[i] if n == 1 else list(flat[i : i + n])
             i += n
         return out
 

@@ -46,7 +46,9 @@ class _Client:
         self.id = next(_ids)
         self.send_lock = threading.Lock()
         self.closed = False
-        self.thread = threading.Thread(target=self._run, name=f"loopback-{kind}-{self.id}", daemon=True)
+        self.thread = threading.Thread(
+            target=self._run, name=f"loopback-{kind}-{self.id}", daemon=True
+        )
 
     def send(self, data: bytes) -> None:
         if self.closed:
@@ -121,7 +123,9 @@ class _RtdeClient(_Client):
                     recipe = rtde.Recipe(recipe_id, names, types, frequency)
                     recipe.divisor = max(1, round(ctl.config.frequency / frequency))  # type: ignore[attr-defined]
                     self.outputs.append(recipe)
-                self.send(rtde.pack(kind, struct.pack(">B", recipe_id) + ",".join(types).encode("ascii")))
+                self.send(
+                    rtde.pack(kind, struct.pack(">B", recipe_id) + ",".join(types).encode("ascii"))
+                )
             elif kind == rtde.SETUP_INPUTS:
                 names = [n for n in payload.decode("ascii").split(",") if n]
                 types = ctl.claim_inputs(self.id, names)
@@ -129,7 +133,9 @@ class _RtdeClient(_Client):
                 recipe_id = len(self.inputs) + 1 if ok else 0
                 if ok:
                     self.inputs[recipe_id] = rtde.Recipe(recipe_id, names, types)
-                self.send(rtde.pack(kind, struct.pack(">B", recipe_id) + ",".join(types).encode("ascii")))
+                self.send(
+                    rtde.pack(kind, struct.pack(">B", recipe_id) + ",".join(types).encode("ascii"))
+                )
             elif kind == rtde.START:
                 self.started = bool(self.outputs) or bool(self.inputs)
                 self.send(rtde.pack(kind, struct.pack(">B", 1 if self.started else 0)))
@@ -143,7 +149,9 @@ class _RtdeClient(_Client):
                 else:
                     ctl.log(f"RTDE: data package for unknown input recipe {payload[:1]!r}")
             elif kind == rtde.TEXT_MESSAGE:
-                ctl.log(f"RTDE text from client: {payload[1:1 + payload[0]].decode('latin-1', 'replace')}")
+                ctl.log(
+                    f"RTDE text from client: {payload[1 : 1 + payload[0]].decode('latin-1', 'replace')}"
+                )
             else:
                 ctl.log(f"RTDE: unknown package type {kind}")
 
@@ -201,7 +209,7 @@ def _split_program(text: str) -> tuple[str | None, str]:
     if head.startswith(("def ", "sec ")):
         for i, line in enumerate(lines[1:], start=1):
             if line.rstrip() == "end" and i < len(lines) - 1:
-                return "\n".join(lines[: i + 1]) + "\n", "\n".join(lines[i + 1:])
+                return "\n".join(lines[: i + 1]) + "\n", "\n".join(lines[i + 1 :])
         return None, text
     if len(lines) > 1:
         return head + "\n", "\n".join(lines[1:])
@@ -215,9 +223,14 @@ class LoopbackServer:
     time: ur_rtde's timeouts and the backend's durations are wall-clock.
     """
 
-    def __init__(self, controller: SimulatedController, host: str = "127.0.0.1",
-                 rtde_port: int = 30004, dashboard_port: int = 29999,
-                 script_ports: Sequence[int] = (30001, 30002, 30003)):
+    def __init__(
+        self,
+        controller: SimulatedController,
+        host: str = "127.0.0.1",
+        rtde_port: int = 30004,
+        dashboard_port: int = 29999,
+        script_ports: Sequence[int] = (30001, 30002, 30003),
+    ):
         self.controller = controller
         self.host = host
         self.ports: dict[int, str] = {rtde_port: "rtde", dashboard_port: "dashboard"}
@@ -287,7 +300,9 @@ class LoopbackServer:
             raise
         self._listeners = opened
         for port, s in opened.items():
-            t = threading.Thread(target=self._accept, args=(s, port), name=f"loopback-accept-{port}", daemon=True)
+            t = threading.Thread(
+                target=self._accept, args=(s, port), name=f"loopback-accept-{port}", daemon=True
+            )
             t.start()
             self._threads.append(t)
 

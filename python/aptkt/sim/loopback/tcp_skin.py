@@ -169,8 +169,11 @@ class SimulatedSkin:
             "bytes_received": getattr(self.link, "bytes_received", None),
             "silent_cells": sorted(self._silent),
             "thermal_object": None if self._thermal_key is None else self._thermal_key.name,
-            "temperature_lm71": (float(np.mean(self.latest_temp[:, 1]))
-                                 if np.all(np.isfinite(self.latest_temp)) else None),
+            "temperature_lm71": (
+                float(np.mean(self.latest_temp[:, 1]))
+                if np.all(np.isfinite(self.latest_temp))
+                else None
+            ),
         }
 
     # ------------------------------------------------------------------ the control cycle
@@ -198,12 +201,16 @@ class SimulatedSkin:
         xyz = pose0[:3] + alpha[:, None] * (pose1[:3] - pose0[:3])  # (L, 3)
         acc_tcp = (vel1 - vel0) / (t1 - t0)
 
-        forces = np.stack([self._sensor_forces(contact, np.concatenate([p, pose1[3:]])) for p in xyz])  # (L, n, 3)
+        forces = np.stack(
+            [self._sensor_forces(contact, np.concatenate([p, pose1[3:]])) for p in xyz]
+        )  # (L, n, 3)
         pressure = forces.mean(axis=2) / self.constants.sensor_area  # (L, n) Pa
         temps = self._temperatures(contact, pose1, ts, pressure[-1], vel1)  # (n, L, 2) [LM71, PCB]
 
         rot = rotvec_to_matrix(pose1[3:])  # columns: tool axes in the base frame
-        specific = np.broadcast_to(acc_tcp + np.array([0.0, 0.0, GRAVITY]), forces.shape)  # (L, n, 3)
+        specific = np.broadcast_to(
+            acc_tcp + np.array([0.0, 0.0, GRAVITY]), forces.shape
+        )  # (L, n, 3)
         if self.config.texture and np.any(pressure > 0) and float(np.hypot(*vel1[:2])) > 1e-6:
             method = getattr(contact, "texture_acceleration", None)
             if callable(method):
@@ -232,8 +239,13 @@ class SimulatedSkin:
         touched = (method(pose) if callable(method) else None) or GENERIC_BLOCK
         if touched == self._thermal_key:
             return
-        thermal = CellThermal(self.constants, touched.layers, touched.contact_conductance,
-                              self.config.ambient, self.config.ambient + touched.temperature_offset)
+        thermal = CellThermal(
+            self.constants,
+            touched.layers,
+            touched.contact_conductance,
+            self.config.ambient,
+            self.config.ambient + touched.temperature_offset,
+        )
         state = np.tile(thermal.initial_state(), (self.n, 1))
         if self._thermal is not None:
             # A new object under the skin: the cells keep their own temperatures, the object
@@ -244,8 +256,14 @@ class SimulatedSkin:
             self._thermal_t = t
         self._thermal, self._thermal_key, self._thermal_state = thermal, touched, state
 
-    def _temperatures(self, contact: Any, pose: np.ndarray, ts: np.ndarray, pressure: np.ndarray,
-                      velocity: np.ndarray) -> np.ndarray:
+    def _temperatures(
+        self,
+        contact: Any,
+        pose: np.ndarray,
+        ts: np.ndarray,
+        pressure: np.ndarray,
+        velocity: np.ndarray,
+    ) -> np.ndarray:
         if np.any(pressure > 0):
             self._update_thermal_object(contact, pose, float(ts[0]))
         thermal = self._thermal
@@ -271,16 +289,23 @@ class SimulatedSkin:
         f = forces.reshape(-1, 3) + cfg.force_noise * rng.standard_normal((cells.size, 3))
         acc = acc_g.reshape(-1, 3) + cfg.acc_noise * rng.standard_normal((cells.size, 3))
         t = temps.transpose(1, 0, 2).reshape(-1, 2)  # (L*n, [LM71, PCB])
-        temp = np.stack([
-            t[:, 1] + self.constants.die_self_heating + cfg.die_temp_noise * rng.standard_normal(cells.size),
-            t[:, 0] + cfg.temp_noise * rng.standard_normal(cells.size),
-        ], axis=1)
+        temp = np.stack(
+            [
+                t[:, 1]
+                + self.constants.die_self_heating
+                + cfg.die_temp_noise * rng.standard_normal(cells.size),
+                t[:, 0] + cfg.temp_noise * rng.standard_normal(cells.size),
+            ],
+            axis=1,
+        )
         prox = cfg.proximity + cfg.proximity_noise * rng.standard_normal(cells.size)
         self.latest_force = forces[-1]
-        self.latest_temp = temp[-self.n:]
+        self.latest_temp = temp[-self.n :]
         if not mask.any():
             return
         cells, f, acc, temp, prox = cells[mask], f[mask], acc[mask], temp[mask], prox[mask]
-        raw = quantize(cells, np.clip(prox, 0.0, None), acc, temp, self._calibration.to_normalised(cells, f))
+        raw = quantize(
+            cells, np.clip(prox, 0.0, None), acc, temp, self._calibration.to_normalised(cells, f)
+        )
         self.link.write(encode_sensor_packets(raw))
         self.packets += int(cells.size)
