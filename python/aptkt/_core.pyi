@@ -61,27 +61,56 @@ class GpcModel:
     @property
     def transfer(self) -> bool: ...
 
+class FitSettings:
+    modalities: list[list[int]]
+    signal_variance: float
+    length_scales: list[float]
+    weights: list[float]
+    free_signal_variance: bool
+    free_length_scales: bool
+    free_weights: bool
+    free_lambda: bool
+    signal_variance_bounds: tuple[float, float]
+    length_scale_bounds: tuple[float, float]
+    optimize: bool
+    n_restarts: int
+    seed: int
+    max_iter: int
+    newton_max_iter: int
+    newton_tol: float
+    max_jitter: float
+    approximation: str
+    n_threads: int
+    def __init__(
+        self,
+        *,
+        modalities: Sequence[Sequence[int]],
+        signal_variance: float = 1.0,
+        length_scales: Sequence[float],
+        weights: Sequence[float],
+        free_signal_variance: bool = True,
+        free_length_scales: bool = True,
+        free_weights: bool = True,
+        free_lambda: bool = False,
+        signal_variance_bounds: tuple[float, float] = (1e-5, 1e5),
+        length_scale_bounds: tuple[float, float] = (1e-5, 1e5),
+        optimize: bool = True,
+        n_restarts: int = 2,
+        seed: int = 0,
+        max_iter: int = 200,
+        newton_max_iter: int = 100,
+        newton_tol: float = 1e-10,
+        max_jitter: float = 1e-6,
+        approximation: str = "erf",
+        n_threads: int = 0,
+    ) -> None: ...
+
 def fit_gpc(
     x: NDArray[np.float64],
     labels: NDArray[np.int64],
     n_classes: int,
     sources: Sequence[tuple[NDArray[np.float64], float] | None],
-    modalities: Sequence[Sequence[int]],
-    signal_variance: float,
-    length_scales: Sequence[float],
-    weights: Sequence[float],
-    free: tuple[bool, bool, bool, bool],
-    signal_variance_bounds: tuple[float, float],
-    length_scale_bounds: tuple[float, float],
-    optimize: bool,
-    n_restarts: int,
-    seed: int,
-    max_iter: int,
-    newton_max_iter: int,
-    newton_tol: float,
-    max_jitter: float,
-    predictive: str,
-    n_threads: int,
+    settings: FitSettings,
     thetas: NDArray[np.float64] | None = None,
 ) -> GpcModel: ...
 def kernel_matrix(

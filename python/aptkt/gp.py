@@ -276,9 +276,34 @@ class LaplaceGPC:
             signal_variance=float(self.signal_variance),
             length_scales=length_scales,
             weights=weights,
-            free=tuple(k not in fixed for k in _FIXABLE),
+            free={k: k not in fixed for k in _FIXABLE},
             signal_variance_bounds=tuple(float(v) for v in self.signal_variance_bounds),
             length_scale_bounds=tuple(float(v) for v in self.length_scale_bounds),
+        )
+
+    def _settings(self, spec: dict[str, Any]) -> _core.FitSettings:
+        """The binding's named settings object for this estimator's parameters."""
+        free = spec["free"]
+        return _core.FitSettings(
+            modalities=spec["modalities"],
+            signal_variance=spec["signal_variance"],
+            length_scales=spec["length_scales"],
+            weights=spec["weights"],
+            free_signal_variance=free["signal_variance"],
+            free_length_scales=free["length_scale"],
+            free_weights=free["modality_weights"],
+            free_lambda=free["transfer_lambda"],
+            signal_variance_bounds=spec["signal_variance_bounds"],
+            length_scale_bounds=spec["length_scale_bounds"],
+            optimize=bool(self.optimize),
+            n_restarts=int(self.n_restarts),
+            seed=_seed(self.random_state),
+            max_iter=int(self.max_iter),
+            newton_max_iter=int(self.newton_max_iter),
+            newton_tol=float(self.newton_tol),
+            max_jitter=float(self.max_jitter),
+            approximation=self.approximation,
+            n_threads=int(self.n_jobs or 0),
         )
 
     def fit(
@@ -331,22 +356,7 @@ class LaplaceGPC:
             labels.astype(np.int64),
             int(classes.size),
             source_list,
-            spec["modalities"],
-            spec["signal_variance"],
-            spec["length_scales"],
-            spec["weights"],
-            spec["free"],
-            spec["signal_variance_bounds"],
-            spec["length_scale_bounds"],
-            bool(self.optimize),
-            int(self.n_restarts),
-            _seed(self.random_state),
-            int(self.max_iter),
-            int(self.newton_max_iter),
-            float(self.newton_tol),
-            float(self.max_jitter),
-            self.approximation,
-            int(self.n_jobs or 0),
+            self._settings(spec),
             None if thetas is None else np.ascontiguousarray(thetas, dtype=np.float64),
         )
         self._model = model

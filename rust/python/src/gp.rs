@@ -46,24 +46,25 @@ pub struct GpcModel {
     n_threads: usize,
 }
 
-#[pyfunction]
-#[pyo3(signature = (
-    x, labels, n_classes, sources, modalities, signal_variance, length_scales, weights,
-    free, signal_variance_bounds, length_scale_bounds, optimize, n_restarts, seed, max_iter,
-    newton_max_iter, newton_tol, max_jitter, predictive, n_threads, thetas = None
-))]
-#[allow(clippy::too_many_arguments)]
-fn fit_gpc(
-    py: Python<'_>,
-    x: PyReadonlyArray2<'_, f64>,
-    labels: PyReadonlyArray1<'_, i64>,
-    n_classes: usize,
-    sources: Vec<Option<(PyReadonlyArray2<'_, f64>, f64)>>,
+/// Everything that defines a fit except the data: the hyper-parameters' starting values, which
+/// of them are free, their bounds, and the optimiser's and Newton iteration's limits. Built
+/// with keywords only (`FitSettings(modalities=[[0, 1]], n_restarts=2, ...)`); every field is
+/// a readable and writable attribute.
+#[pyclass(module = "aptkt._core", get_all, set_all)]
+#[derive(Clone)]
+pub struct FitSettings {
+    /// Feature columns of each modality.
     modalities: Vec<Vec<usize>>,
+    /// Initial signal variance σ².
     signal_variance: f64,
+    /// Initial length-scale per modality; NaN: scaled to the data (median pairwise distance).
     length_scales: Vec<f64>,
+    /// Initial modality weights γ (normalised).
     weights: Vec<f64>,
-    free: (bool, bool, bool, bool),
+    free_signal_variance: bool,
+    free_length_scales: bool,
+    free_weights: bool,
+    free_lambda: bool,
     signal_variance_bounds: (f64, f64),
     length_scale_bounds: (f64, f64),
     optimize: bool,
@@ -73,8 +74,139 @@ fn fit_gpc(
     newton_max_iter: usize,
     newton_tol: f64,
     max_jitter: f64,
-    predictive: &str,
+    /// Predictive integral: "erf" or "quadrature".
+    approximation: String,
+    /// Threads for the per-class fits; 0: rayon's default (all cores).
     n_threads: usize,
+}
+
+#[pymethods]
+impl FitSettings {
+    #[new]
+    #[pyo3(signature = (
+        *, modalities, signal_variance = 1.0, length_scales, weights,
+        free_signal_variance = true, free_length_scales = true, free_weights = true,
+        free_lambda = false, signal_variance_bounds = (1e-5, 1e5),
+        length_scale_bounds = (1e-5, 1e5), optimize = true, n_restarts = 2, seed = 0,
+        max_iter = 200, newton_max_iter = 100, newton_tol = 1e-10, max_jitter = 1e-6,
+        approximation = "erf".to_string(), n_threads = 0
+    ))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        modalities: Vec<Vec<usize>>,
+        signal_variance: f64,
+        length_scales: Vec<f64>,
+        weights: Vec<f64>,
+        free_signal_variance: bool,
+        free_length_scales: bool,
+        free_weights: bool,
+        free_lambda: bool,
+        signal_variance_bounds: (f64, f64),
+        length_scale_bounds: (f64, f64),
+        optimize: bool,
+        n_restarts: usize,
+        seed: u64,
+        max_iter: usize,
+        newton_max_iter: usize,
+        newton_tol: f64,
+        max_jitter: f64,
+        approximation: String,
+        n_threads: usize,
+    ) -> Self {
+        FitSettings {
+            modalities,
+            signal_variance,
+            length_scales,
+            weights,
+            free_signal_variance,
+            free_length_scales,
+            free_weights,
+            free_lambda,
+            signal_variance_bounds,
+            length_scale_bounds,
+            optimize,
+            n_restarts,
+            seed,
+            max_iter,
+            newton_max_iter,
+            newton_tol,
+            max_jitter,
+            approximation,
+            n_threads,
+        }
+    }
+
+    fn __repr__(&self) -> String {
+        let b = |v: bool| if v { "True" } else { "False" };
+        format!(
+            "FitSettings(modalities={:?}, signal_variance={:?}, length_scales={:?}, \
+             weights={:?}, free_signal_variance={}, free_length_scales={}, free_weights={}, \
+             free_lambda={}, signal_variance_bounds={:?}, length_scale_bounds={:?}, \
+             optimize={}, n_restarts={}, seed={}, max_iter={}, newton_max_iter={}, \
+             newton_tol={:?}, max_jitter={:?}, approximation={:?}, n_threads={})",
+            self.modalities,
+            self.signal_variance,
+            self.length_scales,
+            self.weights,
+            b(self.free_signal_variance),
+            b(self.free_length_scales),
+            b(self.free_weights),
+            b(self.free_lambda),
+            self.signal_variance_bounds,
+            self.length_scale_bounds,
+            b(self.optimize),
+            self.n_restarts,
+            self.seed,
+            self.max_iter,
+            self.newton_max_iter,
+            self.newton_tol,
+            self.max_jitter,
+            self.approximation,
+            self.n_threads
+        )
+    }
+}
+
+impl FitSettings {
+    /// The core's model specification for data with `d` columns.
+    fn spec(&self, d: usize) -> PyResult<ModelSpec> {
+        let mut spec =
+            ModelSpec::new(Modalities::new(self.modalities.clone(), d).map_err(gp_error)?);
+        spec.signal_variance = self.signal_variance;
+        spec.length_scales = self.length_scales.clone();
+        spec.weights = self.weights.clone();
+        spec.free = Free {
+            signal_variance: self.free_signal_variance,
+            length_scales: self.free_length_scales,
+            weights: self.free_weights,
+            lambda: self.free_lambda,
+        };
+        spec.signal_variance_bounds = self.signal_variance_bounds;
+        spec.length_scale_bounds = self.length_scale_bounds;
+        spec.optimize = self.optimize;
+        spec.n_restarts = self.n_restarts;
+        spec.seed = self.seed;
+        spec.lbfgs.max_iter = self.max_iter;
+        spec.newton.max_iter = self.newton_max_iter;
+        spec.newton.tol = self.newton_tol;
+        spec.max_jitter = self.max_jitter;
+        spec.predictive = parse_predictive(&self.approximation)?;
+        Ok(spec)
+    }
+}
+
+/// Fits a one-vs-all model: `labels` are class indices in `0..n_classes`, `sources` holds
+/// one entry per class (None: no transfer source), `settings` everything else. With `thetas`
+/// (one row per classifier) the model is built at those hyper-parameters without optimising.
+#[pyfunction]
+#[pyo3(signature = (x, labels, n_classes, sources, settings, thetas = None))]
+fn fit_gpc(
+    py: Python<'_>,
+    x: PyReadonlyArray2<'_, f64>,
+    labels: PyReadonlyArray1<'_, i64>,
+    n_classes: usize,
+    sources: Vec<Option<(PyReadonlyArray2<'_, f64>, f64)>>,
+    settings: PyRef<'_, FitSettings>,
     thetas: Option<PyReadonlyArray2<'_, f64>>,
 ) -> PyResult<GpcModel> {
     let thetas: Option<Vec<Vec<f64>>> =
@@ -99,26 +231,8 @@ fn fit_gpc(
         })
         .collect::<Result<_, GpError>>()
         .map_err(gp_error)?;
-    let mut spec = ModelSpec::new(Modalities::new(modalities, data.d).map_err(gp_error)?);
-    spec.signal_variance = signal_variance;
-    spec.length_scales = length_scales;
-    spec.weights = weights;
-    spec.free = Free {
-        signal_variance: free.0,
-        length_scales: free.1,
-        weights: free.2,
-        lambda: free.3,
-    };
-    spec.signal_variance_bounds = signal_variance_bounds;
-    spec.length_scale_bounds = length_scale_bounds;
-    spec.optimize = optimize;
-    spec.n_restarts = n_restarts;
-    spec.seed = seed;
-    spec.lbfgs.max_iter = max_iter;
-    spec.newton.max_iter = newton_max_iter;
-    spec.newton.tol = newton_tol;
-    spec.max_jitter = max_jitter;
-    spec.predictive = parse_predictive(predictive)?;
+    let spec = settings.spec(data.d)?;
+    let n_threads = settings.n_threads;
     let model = py
         .detach(|| {
             run_in_pool(n_threads, || match &thetas {
@@ -313,6 +427,7 @@ fn kernel_matrix<'py>(
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<FitSettings>()?;
     m.add_class::<GpcModel>()?;
     m.add_function(wrap_pyfunction!(fit_gpc, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_matrix, m)?)?;
