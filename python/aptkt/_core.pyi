@@ -40,14 +40,17 @@ def thermal_curve(
 # -- Laplace GPC ------------------------------------------------------------------------------
 class GpcModel:
     def predict_proba(self, x: NDArray[np.float64]) -> NDArray[np.float64]: ...
+    def predict_proba_binary(self, x: NDArray[np.float64]) -> NDArray[np.float64]: ...
     def latent(self, x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
     def log_marginal_likelihood(
-        self, theta: NDArray[np.float64], gradient: bool
+        self, theta: NDArray[np.float64], gradient: bool, include_prior: bool = False
     ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]: ...
     @property
     def theta(self) -> NDArray[np.float64]: ...
     @property
     def log_marginal_likelihood_value(self) -> NDArray[np.float64]: ...
+    @property
+    def log_hyper_prior(self) -> NDArray[np.float64]: ...
     @property
     def jitter(self) -> NDArray[np.float64]: ...
     @property
@@ -60,6 +63,8 @@ class GpcModel:
     def n_classifiers(self) -> int: ...
     @property
     def transfer(self) -> bool: ...
+    @property
+    def n_lambdas(self) -> int: ...
 
 class FitSettings:
     modalities: list[list[int]]
@@ -81,6 +86,8 @@ class FitSettings:
     max_jitter: float
     approximation: str
     n_threads: int
+    prior_signal_variance: tuple[float, float] | None
+    prior_length_scale: tuple[float, float] | None
     def __init__(
         self,
         *,
@@ -103,21 +110,24 @@ class FitSettings:
         max_jitter: float = 1e-6,
         approximation: str = "erf",
         n_threads: int = 0,
+        prior_signal_variance: tuple[float, float] | None = None,
+        prior_length_scale: tuple[float, float] | None = None,
     ) -> None: ...
 
 def fit_gpc(
     x: NDArray[np.float64],
     labels: NDArray[np.int64],
     n_classes: int,
-    sources: Sequence[tuple[NDArray[np.float64], float] | None],
+    sources: Sequence[Sequence[tuple[NDArray[np.float64], NDArray[np.float64], float]]],
     settings: FitSettings,
     thetas: NDArray[np.float64] | None = None,
+    starts: Sequence[Sequence[float] | None] | None = None,
 ) -> GpcModel: ...
 def kernel_matrix(
     x: NDArray[np.float64],
     theta: Sequence[float],
     modalities: Sequence[Sequence[int]],
-    n_source: int = 0,
+    source_sizes: Sequence[int] = ...,
 ) -> NDArray[np.float64]: ...
 
 # -- skin protocol ----------------------------------------------------------------------------

@@ -140,7 +140,8 @@ class ActionLearner:
                 self.decisions[obj] = decision
                 if decision.transfers:
                     sources[obj] = TransferSource(
-                        self._source_features(decision.source), decision.transfer_lambda
+                        self._source_features(decision.source),
+                        transfer_lambda=decision.transfer_lambda,
                     )
         seed = (self.config.seed * 1_000_003 + zlib.crc32(self.action.encode()) + step) % 2**32
         model = self.config.gp.make(groups, random_state=seed)
