@@ -252,7 +252,7 @@ def test_learn_without_a_test_set_reports_choices_and_transfer_but_no_accuracy(
         for decisions in step["transfer"].values():
             for d in decisions.values():
                 best = max(d["mean_posterior"], key=d["mean_posterior"].get)
-                if d["mean_posterior"][best] >= 0.4:
+                if d["mean_posterior"][best] >= run["config"]["eps_neg"]:
                     assert d["source"] == best and d["lambda"] == d["mean_posterior"][best]
                 else:
                     assert d["source"] is None and d["lambda"] == 0.0

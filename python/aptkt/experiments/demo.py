@@ -50,8 +50,8 @@ class DemoSettings:
     actions: tuple[str, ...] = tuple(PAPER_ACTIONS)
     priors: tuple[str, ...] = DEMO_PRIORS
     new_objects: tuple[str, ...] = DEMO_NEW
-    eps_neg: float = 0.4
-    eps_explor: float = 0.1
+    eps_neg: float = LearnerConfig.eps_neg
+    eps_explor: float = LearnerConfig.eps_explor
 
     @classmethod
     def quick(cls, **overrides: Any) -> DemoSettings:
