@@ -1,6 +1,7 @@
 """LaplaceGPC vs scikit-learn's GaussianProcessClassifier, side by side on the same data.
 
 Usage: python benches/bench_gp.py [--quick] [--skip-sklearn-opt-above N] [--single-thread]
+       python benches/bench_gp.py --transfer-variants [bench_gp_transfer.py's options]
 
 By default each side runs as a user gets it: ours fits the one-vs-all classifiers in parallel on
 all cores, scikit-learn fits them one after the other with a multi-threaded BLAS. With
@@ -92,6 +93,14 @@ def run(n: int, d: int, sklearn_opt: bool, n_jobs: int | None = None) -> dict:
 
 
 def main() -> None:
+    import sys
+
+    if "--transfer-variants" in sys.argv:  # the transfer kernels' own bench
+        import bench_gp_transfer
+
+        sys.argv.remove("--transfer-variants")
+        bench_gp_transfer.main()
+        return
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )

@@ -220,6 +220,8 @@ pub struct BinaryFit {
     pub newton_converged: bool,
     pub optimizer_converged: bool,
     pub evaluations: usize,
+    /// Quasi-Newton iterations of the start that gave `theta` (0 without optimisation).
+    pub iterations: usize,
 }
 
 struct BinaryProblem {
@@ -320,6 +322,7 @@ impl BinaryProblem {
         prior: Vec<PriorTerm>,
         optimizer_converged: bool,
         evaluations: usize,
+        iterations: usize,
     ) -> GpResult<BinaryFit> {
         let (ev, mode, hyper, _) = self.evaluate(layout, spec, &theta, None, false)?;
         let log_prior = log_prior(&prior, &theta).0;
@@ -343,6 +346,7 @@ impl BinaryProblem {
             newton_converged: mode.converged,
             optimizer_converged,
             evaluations,
+            iterations,
         })
     }
 }
@@ -430,7 +434,7 @@ fn fit_binary(
     }
     clip(&mut theta0);
     if !spec.optimize || !free.iter().any(|&f| f) {
-        return problem.finish(layout, spec, theta0, prior, true, 1);
+        return problem.finish(layout, spec, theta0, prior, true, 1, 0);
     }
 
     // Starting points: the given hyper-parameters, then one scaled to the data (unless the
@@ -469,7 +473,7 @@ fn fit_binary(
         starts.push(t);
     }
 
-    let mut best: Option<(f64, Vec<f64>, bool)> = None;
+    let mut best: Option<(f64, Vec<f64>, bool, usize)> = None;
     let mut evaluations = 0;
     let mut last_error = None;
     for t0 in starts {
@@ -496,15 +500,21 @@ fn fit_binary(
         };
         if let Some(r) = minimize(objective, &t0, &lo, &hi, &free, &spec.lbfgs) {
             evaluations += r.evaluations;
-            if best.as_ref().is_none_or(|(f, _, _)| r.fx < *f) {
-                best = Some((r.fx, r.x, r.converged));
+            if best.as_ref().is_none_or(|(f, _, _, _)| r.fx < *f) {
+                best = Some((r.fx, r.x, r.converged, r.iterations));
             }
         }
     }
     match best {
-        Some((_, theta, converged)) => {
-            problem.finish(layout, spec, theta, prior, converged, evaluations)
-        }
+        Some((_, theta, converged, iterations)) => problem.finish(
+            layout,
+            spec,
+            theta,
+            prior,
+            converged,
+            evaluations,
+            iterations,
+        ),
         None => Err(last_error.unwrap_or_else(|| {
             GpError::InvalidInput("no optimiser start could be evaluated".into())
         })),
@@ -780,7 +790,7 @@ fn fit_impl(
             match &hypers {
                 Hypers::At(t) => {
                     let prior = problem.prior_terms(&layout, spec);
-                    problem.finish(&layout, spec, t[k].clone(), prior, true, 1)
+                    problem.finish(&layout, spec, t[k].clone(), prior, true, 1, 0)
                 }
                 Hypers::Optimise(starts) => {
                     let mut lambdas: Vec<f64> = own.iter().map(|s| s.lambda).collect();

@@ -438,6 +438,16 @@ impl GpcModel {
             .collect()
     }
 
+    /// Quasi-Newton iterations of the start that gave each classifier's theta.
+    #[getter]
+    fn iterations(&self) -> Vec<usize> {
+        self.model
+            .classifiers
+            .iter()
+            .map(|c| c.iterations)
+            .collect()
+    }
+
     #[getter]
     fn n_classifiers(&self) -> usize {
         self.model.classifiers.len()
