@@ -513,6 +513,10 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
                 ls = np.repeat(ls, m)
             if ls.size != m:
                 raise ValueError(f"length_scale has {ls.size} values for {m} modalities")
+            if not np.all(np.isfinite(ls) & (ls > 0)):
+                raise ValueError(
+                    f"length_scale must be 'auto' or finite numbers > 0, got {self.length_scale!r}"
+                )
             length_scales = [float(v) for v in ls]
         if self.modality_weights is None:
             weights = [1.0 / m] * m

@@ -382,6 +382,53 @@ fn theta_box(
     (lo, hi, free)
 }
 
+/// Fails naming the first user-given entry of theta outside `[lo, hi]`.
+fn check_in_bounds(
+    layout: &Layout,
+    theta: &[f64],
+    given: &[bool],
+    lo: &[f64],
+    hi: &[f64],
+) -> GpResult<()> {
+    for i in 0..theta.len() {
+        if !given[i] || (lo[i] <= theta[i] && theta[i] <= hi[i]) {
+            continue;
+        }
+        let (name, value, lo, hi) = if i == Layout::SIGNAL {
+            (
+                "signal_variance".to_string(),
+                theta[i].exp(),
+                lo[i].exp(),
+                hi[i].exp(),
+            )
+        } else if i <= layout.n_modalities {
+            (
+                format!("the length-scale of modality {}", i - 1),
+                theta[i].exp(),
+                lo[i].exp(),
+                hi[i].exp(),
+            )
+        } else if layout
+            .weight(0)
+            .is_some_and(|w| i < w + layout.n_modalities)
+        {
+            (
+                "a modality weight logit".to_string(),
+                theta[i],
+                lo[i],
+                hi[i],
+            )
+        } else {
+            ("transfer_lambda".to_string(), theta[i], lo[i], hi[i])
+        };
+        return Err(GpError::InvalidInput(format!(
+            "{name} = {value:.4e} lies outside its bounds [{lo:.4e}, {hi:.4e}]; values given are used \
+             as they are, so widen the bounds or change the value"
+        )));
+    }
+    Ok(())
+}
+
 /// Optimises one binary classifier. `lambdas`: the starting relatedness of every λ entry of
 /// the layout (its sources' values, zero-padded); `start`: a starting theta whose non-NaN
 /// entries replace the specification's initial values.
@@ -394,6 +441,9 @@ fn fit_binary(
     seed: u64,
 ) -> GpResult<BinaryFit> {
     let m = layout.n_modalities;
+    if spec.newton.cancelled() {
+        return Err(GpError::Cancelled);
+    }
     let prior = problem.prior_terms(layout, spec);
     let needs_scale = spec.optimize || spec.length_scales.iter().any(|l| l.is_nan());
     let medians: Vec<f64> = (0..m)
@@ -425,13 +475,22 @@ fn fit_binary(
     };
     // A given start overrides the initial values entry by entry (NaN: keep the initial one).
     let mut theta0 = layout.encode(&init);
+    // Which entries the user gave: those are used as given, so one outside its bounds is an
+    // error rather than silently clamped. Data-scaled ("auto") starts are clamped.
+    let mut given = vec![false; layout.len()];
+    given[Layout::SIGNAL] = true;
+    for (k, l) in spec.length_scales.iter().enumerate() {
+        given[layout.length_scale(k)] = !l.is_nan();
+    }
     if let Some(t) = start {
-        for (v, s) in theta0.iter_mut().zip(t) {
+        for ((v, s), g) in theta0.iter_mut().zip(t).zip(given.iter_mut()) {
             if !s.is_nan() {
                 *v = *s;
+                *g = true;
             }
         }
     }
+    check_in_bounds(layout, &theta0, &given, &lo, &hi)?;
     clip(&mut theta0);
     if !spec.optimize || !free.iter().any(|&f| f) {
         return problem.finish(layout, spec, theta0, prior, true, 1, 0);
@@ -480,6 +539,10 @@ fn fit_binary(
         let mut warm: Option<Vec<f64>> = None;
         // Minimises -(log p(y | θ) + log p(θ)); the prior term is absent for ML-II.
         let objective = |t: &[f64]| -> Option<(f64, Vec<f64>)> {
+            if spec.newton.cancelled() {
+                last_error = Some(GpError::Cancelled);
+                return None;
+            }
             match problem.evaluate(layout, spec, t, warm.as_deref(), true) {
                 Ok((_, mode, _, Some(mut g))) => {
                     warm = Some(mode.a);
@@ -498,7 +561,11 @@ fn fit_binary(
                 }
             }
         };
-        if let Some(r) = minimize(objective, &t0, &lo, &hi, &free, &spec.lbfgs) {
+        let result = minimize(objective, &t0, &lo, &hi, &free, &spec.lbfgs);
+        if spec.newton.cancelled() {
+            return Err(GpError::Cancelled);
+        }
+        if let Some(r) = result {
             evaluations += r.evaluations;
             if best.as_ref().is_none_or(|(f, _, _, _)| r.fx < *f) {
                 best = Some((r.fx, r.x, r.converged, r.iterations));
