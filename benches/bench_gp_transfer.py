@@ -43,7 +43,7 @@ from aptkt.learning.dataset import load_observations
 
 PRIORS = ("rough_sponge", "paper_box", "metal_toolbox")
 NEW = ("smooth_sponge", "hard_box", "biscuit_box", "mouse_pad", "bamboo_board")
-ACTIONS = ("P1", "P2", "S1", "S2", "S3", "C1", "C2")
+ACTIONS = ("P1", "P2", "S1", "S2", "S3", "S4", "C1")
 VARIANTS = ("none", "positives ML-II", "one-vs-all ML-II", "one-vs-all MAP", "multi MAP")
 EPS_NEG = 0.4
 

@@ -216,25 +216,28 @@ pub fn lml_gradient(
 ) -> Vec<f64> {
     let n = mode.f.len();
     let k = &eval.k;
-    // Z = W½ B⁻¹ W½ (GPML's R).
-    let binv = linalg::inverse_from_cholesky(mode.l.as_ref());
-    let z = Mat::<f64>::from_fn(n, n, |i, j| mode.sw[i] * binv[(i, j)] * mode.sw[j]);
-    // diag(K - K Z K) = diag(K) - column sums of C² with C = L⁻¹ W½ K.
-    let mut c = Mat::<f64>::from_fn(n, n, |i, j| mode.sw[i] * k[(i, j)]);
-    linalg::solve_lower_mat(mode.l.as_ref(), c.as_mut());
+    let mut z = linalg::inverse_from_cholesky(mode.l.as_ref());
     // s2 = ∂LML/∂f̂ = -½ diag(Σ) ∘ ∂W/∂f, with Σ = (K⁻¹ + W)⁻¹ and, for the logistic,
     // ∂W_ii/∂f_i = π(1-π)(1-2π) (= -∇³ log p; GPML writes this factor as ∇³ log p).
+    // Since W½ K W½ = B - I, Σ = W^-½ (I - B⁻¹) W^-½: diag(Σ)_j = (1 - B⁻¹_jj) / w_j, and w_j
+    // cancels against ∂W/∂f's factor π(1-π) = w_j. This needs only B⁻¹'s diagonal instead of
+    // the n³ solve C = L⁻¹ W½ K of GPML's Algorithm 5.1, and it stays exact when w_j → 0.
     let s2: Vec<f64> = (0..n)
         .map(|j| {
-            let cc: f64 = c.col(j).iter().map(|v| v * v).sum();
-            let var = k[(j, j)] - cc;
             let p = mode.pi[j];
-            -0.5 * var * (p * (1.0 - p) * (1.0 - 2.0 * p))
+            -0.5 * (1.0 - z[(j, j)]) * (1.0 - 2.0 * p)
         })
         .collect();
-    // ∂LML/∂θ = ½ aᵀ C a - ½ tr(Z C) + s2ᵀ (b - K Z b), b = C ∇log p = C a at the mode.
-    let g = Mat::<f64>::from_fn(n, n, |i, j| 0.5 * (mode.a[i] * mode.a[j] - z[(i, j)]));
-    let (s1, bs) = eval.contract_gradients(layout, h, dist, &g, &mode.a);
+    // Z = W½ B⁻¹ W½ (GPML's R), in place.
+    for j in 0..n {
+        let swj = mode.sw[j];
+        for (i, v) in z.col_as_slice_mut(j).iter_mut().enumerate() {
+            *v *= mode.sw[i] * swj;
+        }
+    }
+    // ∂LML/∂θ = ½ aᵀ C a - ½ tr(Z C) + s2ᵀ (b - K Z b), b = C ∇log p = C a at the mode, with
+    // C = ∂K/∂θ; the first two terms are Σ_ij G_ij C_ij with G = ½ (a aᵀ - Z), formed on the fly.
+    let (s1, bs) = eval.contract_gradients(layout, h, dist, &z, &mode.a);
     let mut zb = vec![0.0; n];
     let mut kzb = vec![0.0; n];
     s1.iter()

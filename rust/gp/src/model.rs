@@ -1,6 +1,8 @@
 //! One-vs-all multi-class Laplace GPC: per-class binary classifiers with their own
 //! hyper-parameters (and, for transfer, their own source task), fitted in parallel.
 
+use std::sync::{Arc, OnceLock};
+
 use faer::Mat;
 use rayon::prelude::*;
 
@@ -227,7 +229,8 @@ pub struct BinaryFit {
 struct BinaryProblem {
     x: Data,
     y: Vec<f64>,
-    dist: PairDistances,
+    /// Shared by every classifier without sources (their rows are the same target rows).
+    dist: Arc<PairDistances>,
 }
 
 impl BinaryProblem {
@@ -240,6 +243,7 @@ impl BinaryProblem {
         sources: &[Source],
         modalities: &Modalities,
         center: &[f64],
+        target_dist: &OnceLock<Arc<PairDistances>>,
     ) -> Self {
         let mut y: Vec<f64> = sources.iter().flat_map(|s| s.y.iter().copied()).collect();
         y.extend(
@@ -261,8 +265,14 @@ impl BinaryProblem {
                 d: target.d,
             }
         };
-        let sizes: Vec<usize> = sources.iter().map(|s| s.x.n).collect();
-        let dist = PairDistances::new(&x, &sizes, modalities, center);
+        let dist = if sources.is_empty() {
+            target_dist
+                .get_or_init(|| Arc::new(PairDistances::new(target, &[], modalities, center)))
+                .clone()
+        } else {
+            let sizes: Vec<usize> = sources.iter().map(|s| s.x.n).collect();
+            Arc::new(PairDistances::new(&x, &sizes, modalities, center))
+        };
         BinaryProblem { x, y, dist }
     }
 
@@ -848,12 +858,14 @@ fn fit_impl(
         })?,
         Hypers::Optimise(None) => {}
     }
+    let target_dist = OnceLock::new();
     let classifiers = positives
         .par_iter()
         .enumerate()
         .map(|(k, &c)| {
             let own = &sources[c];
-            let problem = BinaryProblem::new(x, labels, c, own, &spec.modalities, &center);
+            let problem =
+                BinaryProblem::new(x, labels, c, own, &spec.modalities, &center, &target_dist);
             match &hypers {
                 Hypers::At(t) => {
                     let prior = problem.prior_terms(&layout, spec);
@@ -986,12 +998,12 @@ impl OneVsAll {
             .zip(thetas.par_iter())
             .map(|(c, t)| {
                 let problem = BinaryProblem {
-                    dist: PairDistances::new(
+                    dist: Arc::new(PairDistances::new(
                         &c.x,
                         &c.source_sizes,
                         &self.spec.modalities,
                         &self.center,
-                    ),
+                    )),
                     x: c.x.clone(),
                     y: c.y.clone(),
                 };
