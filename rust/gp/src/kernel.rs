@@ -1,4 +1,4 @@
-//! The multi-modal RBF kernel of DESIGN.md §5 (paper Eq. 1) and its dependent (transfer)
+//! The multi-modal RBF kernel of docs/design.md §5 (paper Eq. 1) and its dependent (transfer)
 //! variant (paper Eq. 2), with hyper-parameters in an unconstrained "theta" vector.
 //!
 //! `K(x, x') = σ² · Σ_m γ_m exp(-|x_m - x'_m|² / (2 ℓ_m²)) · B[task(x), task(x')]` where `x_m`
