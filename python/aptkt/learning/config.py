@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
-from aptkt.gp import LaplaceGPC
+from aptkt.gp import DEFAULTS, LaplaceGPC
 from aptkt.learning.transfer import (
     FEATURE_SPACES,
     RELATEDNESS,
@@ -31,12 +31,14 @@ class GPSettings:
         None: plain ML-II, the paper's "maximising the log marginal likelihood".
     """
 
-    n_restarts: int = 1
-    max_iter: int = 100
-    length_scale: float | str = "auto"
-    signal_variance: float = 1.0
-    approximation: str = "erf"
-    n_jobs: int | None = None
+    n_restarts: int = DEFAULTS.n_restarts
+    max_iter: int = DEFAULTS.max_iter
+    length_scale: float | str = DEFAULTS.length_scale
+    signal_variance: float = DEFAULTS.signal_variance
+    approximation: str = DEFAULTS.approximation
+    n_jobs: int | None = DEFAULTS.n_jobs
+    # The learner's choice, deliberately not the estimator's default (plain ML-II, as
+    # scikit-learn's): see the docstring and docs/method.md.
     hyper_prior: str | None = "weak"
 
     def __post_init__(self) -> None:
