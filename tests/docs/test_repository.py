@@ -50,6 +50,16 @@ def test_no_pointer_outside_the_repository(md):
         assert not OUTSIDE.search(line), f"{md.name}:{n} points outside the repository: {line}"
 
 
+def test_no_pointer_outside_the_repository_in_code_or_build_files():
+    files = [ROOT / "Makefile", ROOT / "pyproject.toml", ROOT / "Cargo.toml", ROOT / ".ci" / "run"]
+    for folder, pattern in (("python", "*.py"), ("rust", "*.rs"), ("benches", "*.py")):
+        files += (ROOT / folder).rglob(pattern)
+    files += (ROOT / "benches").glob("*.md")
+    for path in files:
+        for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            assert not OUTSIDE.search(line), f"{path.relative_to(ROOT)}:{n}: {line}"
+
+
 @pytest.mark.parametrize("md", DOCS, ids=lambda p: p.relative_to(ROOT).as_posix())
 def test_relative_links_exist(md):
     for target in LINK.findall(_prose(md)):
