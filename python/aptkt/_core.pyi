@@ -1,7 +1,7 @@
 """Type stubs of the compiled extension ``aptkt._core`` (Rust). Use the Python wrappers
 (:mod:`aptkt.features`, :mod:`aptkt.gp`, :mod:`aptkt.skin`) rather than these functions."""
 
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -161,3 +161,89 @@ def _encode_sensor_packets(
     force: NDArray[np.int64],
 ) -> bytes: ...
 def encode_packet_bytes(header: int, payload: bytes) -> bytes: ...
+
+# --- simulated world (aptkt-sim) ---------------------------------------------------------
+_Chunk = tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]
+
+class SimContact:
+    def __init__(
+        self,
+        clock_rate: NDArray[np.float64],
+        clock_phase: NDArray[np.float64],
+        sensor_height: NDArray[np.float64],
+        sensor_xy: NDArray[np.float64],
+        centre: tuple[float, float],
+        rotation: float,
+        surface_z: float,
+        tilt: tuple[float, float],
+        crown_radius: float,
+        waves: NDArray[np.float64],
+        size: tuple[float, float],
+        law_delta: NDArray[np.float64],
+        law_sigma: NDArray[np.float64],
+        skin_stiffness: float,
+        relax_weights: list[float],
+        relax_times: list[float],
+        sensor_area: float,
+        noise_key: tuple[int, int],
+        force_gain: NDArray[np.float64],
+        force_offset: NDArray[np.float64],
+        force_noise: float,
+        latency_ns: int,
+        jitter_s: float,
+    ) -> None: ...
+    def mechanics(
+        self,
+        t_ns: int,
+        next_k: NDArray[np.int64],
+        relax_h: NDArray[np.float64],
+        relax_last: NDArray[np.float64],
+        latest_force: NDArray[np.float64],
+        seg_t0: NDArray[np.int64],
+        seg_p0: NDArray[np.float64],
+        seg_v0: NDArray[np.float64],
+        seg_a: NDArray[np.float64],
+        t_end_ns: int,
+    ) -> tuple[int, _Chunk]: ...
+    def noise(
+        self, ks: NDArray[np.int64], cells: NDArray[np.int64], t_ns: NDArray[np.int64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]: ...
+    def force_ticks(
+        self,
+        t_ns: int,
+        next_k: NDArray[np.int64],
+        relax_h: NDArray[np.float64],
+        relax_last: NDArray[np.float64],
+        latest_force: NDArray[np.float64],
+        segment: tuple[int, Any, Any, Any],
+        queue_t: NDArray[np.int64],
+        queue_c: NDArray[np.int64],
+        queue_f: NDArray[np.float64],
+        latest: NDArray[np.float64],
+        cal_gain: NDArray[np.float64],
+        cal_offset: NDArray[np.float64],
+        control: tuple[float, float, float, float, float, int, float],
+        phase: tuple[Any, ...],
+        samples: int,
+    ) -> tuple[Any, ...]: ...
+
+def sim_heat(
+    u: NDArray[np.float64],
+    mu: NDArray[np.float64],
+    t_ss: NDArray[np.float64],
+    sqrt_c: NDArray[np.float64],
+    cells: NDArray[np.int64],
+    t_s: NDArray[np.float64],
+    config: NDArray[np.int64],
+    state: NDArray[np.float64],
+    state_t: NDArray[np.float64],
+) -> NDArray[np.float64]: ...
+def sim_texture(
+    kvec: NDArray[np.float64],
+    amplitude: NDArray[np.float64],
+    phase: NDArray[np.float64],
+    constants: list[float],
+    u: NDArray[np.float64],
+    w: NDArray[np.float64],
+    pressure: NDArray[np.float64],
+) -> NDArray[np.float64]: ...

@@ -122,7 +122,9 @@ class ActionLearner:
     def _source(self, old_object: str, transfer_lambda: float) -> TransferSource:
         """The source task of one transferred old object (``config.source``)."""
         if self.config.source == "positives":
-            return TransferSource(self._source_features(old_object), transfer_lambda=transfer_lambda)
+            return TransferSource(
+                self._source_features(old_object), transfer_lambda=transfer_lambda
+            )
         raise NotImplementedError(
             f"source={self.config.source!r} needs labelled transfer sources in aptkt.gp"
         )
