@@ -114,3 +114,9 @@ def test_citation_and_licence_match_the_metadata():
 def test_ci_needs_nothing_outside_the_repository():
     script = (ROOT / ".ci" / "run").read_text()
     assert ".." not in script.replace('"$(dirname "$0")/.."', "")
+
+
+def test_the_paper_is_cited():
+    for name in ("README.md", "docs/design.md", "docs/experiments.md", "docs/method.md"):
+        text = (ROOT / name).read_text(encoding="utf-8")
+        assert "10.3390/s18020634" in text and "Kaboli" in text, name
