@@ -212,8 +212,11 @@ def hyperparameters(model: LaplaceGPC) -> dict[str, dict[str, float]]:
         hp.update({f"length_scale[{m}]": float(ls[i, k]) for k, m in enumerate(names)})
         if len(names) > 1:
             hp.update({f"weight[{m}]": float(w[i, k]) for k, m in enumerate(names)})
-        if c in sources:
-            hp["lambda"] = float(np.atleast_1d(sources[c].transfer_lambda)[0])
+        # LaplaceGPC.sources_ lists every source of a class (several with transfer="multi").
+        for k, src in enumerate(sources.get(c, [])):
+            if src.transfer_lambda is not None:
+                key = "lambda" if k == 0 else f"lambda[{k}]"
+                hp[key] = float(np.atleast_1d(src.transfer_lambda)[0])
         out[c] = hp
     return out
 
