@@ -22,7 +22,7 @@ from aptkt.experiments.figures.common import (
     transfer_rate,
 )
 from aptkt.experiments.plots import figure
-from aptkt.experiments.report import ci, markdown_table, no_harm_verdict
+from aptkt.experiments.report import ci, listed, markdown_table, no_harm_verdict, span
 from aptkt.experiments.tables import curves_rows
 
 NAME = "fig11"
@@ -82,11 +82,22 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         gains[key] = gain_summary(curves, "APTKT", steps=steps)
         rates[key] = transfer_rate(rows, {"method": "APTKT", "panel": key})
         label = "all actions" if key == fig10.ALL else key
-        plot_panel(ax, curves, f"{label}, priors {ctx.numbers(design[key][1])}", legend=(i == 0))
+        plot_panel(
+            ax,
+            curves,
+            f"{label}, priors:\n{ctx.names(design[key][1])}",
+            chance=ctx.chance,
+            legend=(i == 0),
+        )
         curve_rows += [
             r for m, c in curves.items() for r in curves_rows({"panel": key, "method": m}, c)
         ]
-        tables.append(f"**{label}**\n\n" + accuracy_table(curves, steps))
+        fused = (
+            method_curves(rows, {"panel": key}, METHODS, value="fused_accuracy")
+            if key == fig10.ALL
+            else None  # one action: fused is the action's own accuracy
+        )
+        tables.append(f"**{label}**\n\n" + accuracy_table(curves, steps, fused))
     for ax in axes.ravel()[len(keys) :]:
         ax.set_visible(False)
     fig.suptitle("Fig. 11 — negative-transfer test: priors dissimilar to the new objects")
@@ -101,10 +112,11 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             f"dissimilar priors: APTKT ≈ baseline (no negative transfer) in all {len(keys)} settings",
             "yes",
             f"significantly below the baseline over the curve in {len(harmed)} of {len(keys)} "
-            f"({', '.join(harmed) or 'none'}); at step 0 in {len(harmed_early)} ({', '.join(harmed_early) or 'none'})",
+            f"{listed(harmed)}; at step 0 in {len(harmed_early)}{listed(harmed_early)}",
             "agrees: no negative transfer"
             if not harmed
             else "differs: negative transfer in " + ", ".join(harmed),
+            evidence=[gains[k].overall for k in keys],
         )
     ]
     # The paper explains the absence of harm by the cut-off: "stopped transferring". We read
@@ -115,7 +127,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             NAME,
             "with dissimilar priors APTKT stops transferring (λ under ε_neg)",
             "yes",
-            f"transfer rate {min(rates.values()) * 100:.0f}–{max(rates.values()) * 100:.0f} % of decisions "
+            f"transfer rate {span([100 * r for r in rates.values()])} of decisions "
             f"(below {STOPPED * 100:.0f} % in {len(stopped)} of {len(keys)} settings)",
             "agrees"
             if len(stopped) == len(keys)
