@@ -33,7 +33,8 @@ MIN_UNITS = 3
 #: How every verdict the runs cannot support begins.
 TOO_FEW = "too few runs to judge"
 
-#: The paper's headline figures (Sensors 2019, §5.3–5.6; DESIGN.md §6). Gains are fractions.
+#: The paper's headline figures (Feng, Kaboli & Cheng, Sensors 18(2):634, 2018, §5.3–5.6;
+#: docs/design.md §6). Gains are fractions.
 PAPER: Mapping[str, Any] = {
     "fig6_beats": ("P1", "P2", "C1", "S4"),
     "fig6_matches": ("S1", "S2", "S3"),
