@@ -6,6 +6,14 @@ import argparse
 import json
 import sys
 
+from aptkt.commands._checks import (
+    at_least,
+    input_file,
+    output_file,
+    resume_or_overwrite,
+    rewritable_file,
+)
+from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
 
 
@@ -94,22 +102,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.set_defaults(func=run_repair)
 
 
-def _split(text: str | None) -> list[str] | None:
-    if text is None:
-        return None
-    items = [x.strip() for x in text.split(",") if x.strip()]
-    if not items:
-        raise ConfigError("expected a comma-separated list of names")
-    return items
-
-
 def build_plan(args: argparse.Namespace):  # -> GenerationPlan
     from aptkt.actions import PAPER_ACTIONS, actions_from_toml
     from aptkt.runtime.generation import GenerationPlan
     from aptkt.sim.objects import load_library
 
+    at_least(args.seed, 0, "--seed")
+    at_least(args.first_trial, 0, "--first-trial")
+    resume_or_overwrite(args.resume, args.overwrite)
+    output_file(args.output)
     library = load_library(*args.objects_file)
-    objects = _split(args.objects) or list(library)
+    objects = split_names(args.objects, "--objects") or list(library)
     unknown = [o for o in objects if o not in library]
     if unknown:
         raise ConfigError(
@@ -122,7 +125,7 @@ def build_plan(args: argparse.Namespace):  # -> GenerationPlan
             raise ConfigError(f"--actions-file: {exc}") from None
     else:
         available = dict(PAPER_ACTIONS)
-    names = _split(args.actions) or list(available)
+    names = split_names(args.actions, "--actions") or list(available)
     unknown = [a for a in names if a not in available]
     if unknown:
         raise ConfigError(
@@ -161,6 +164,7 @@ def run_generate(args: argparse.Namespace) -> int:
 def run_info(args: argparse.Namespace) -> int:
     from aptkt.data.store import DatasetReader
 
+    input_file(args.file, "FILE")
     with DatasetReader(args.file) as rd:
         info = rd.info()
     if args.json:
@@ -194,9 +198,10 @@ def run_info(args: argparse.Namespace) -> int:
 def run_features(args: argparse.Namespace) -> int:
     from aptkt.learning.dataset import extract_features
 
+    rewritable_file(args.file)
     counts = extract_features(
         args.file,
-        actions=_split(args.actions),
+        actions=split_names(args.actions, "--actions"),
         progress=not args.no_progress and sys.stderr.isatty(),
     )
     print(
@@ -208,6 +213,7 @@ def run_features(args: argparse.Namespace) -> int:
 def run_repair(args: argparse.Namespace) -> int:
     from aptkt.data.store import repair
 
+    rewritable_file(args.file)
     kept = repair(args.file, backup=not args.no_backup)
     print(
         f"{args.file}: repaired, {kept} complete recordings kept"

@@ -20,6 +20,8 @@ file whose writer died, :func:`repair` first copies its complete recordings into
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import json
 import os
 import time
@@ -76,6 +78,48 @@ def _while_locked(step: Callable[[], _T]) -> _T:
                 raise
         time.sleep(delay)
         delay = min(2 * delay, 0.05)
+
+
+# A SWMR reader retries a metadata read whose checksum fails (the writer may be rewriting that
+# block at this moment); HDF5's default of 100 attempts backs off exponentially, so on a file
+# that is really damaged (truncated) a single read took minutes. A handful of quick attempts
+# covers a block caught mid-write.
+_SWMR_READ_ATTEMPTS = 12
+
+
+@functools.cache
+def _hdf5_library() -> ctypes.CDLL | None:
+    """The HDF5 library h5py runs on (for the one setting h5py does not expose)."""
+    candidates = sorted((Path(h5py.__file__).parent.parent / "h5py.libs").glob("libhdf5-*"))
+    if not candidates:
+        try:
+            with open("/proc/self/maps") as fh:
+                candidates = sorted(
+                    {
+                        Path(line.split()[-1])
+                        for line in fh
+                        if "/libhdf5." in line or "/libhdf5-" in line
+                    }
+                )
+        except OSError:
+            return None
+    for lib in candidates:
+        try:
+            handle = ctypes.CDLL(str(lib))
+            handle.H5Pset_metadata_read_attempts.argtypes = [ctypes.c_int64, ctypes.c_uint]
+            return handle
+        except (OSError, AttributeError):
+            continue
+    return None
+
+
+def _open_swmr_read(path: Path) -> h5py.File:
+    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+    lib = _hdf5_library()
+    if lib is not None:
+        lib.H5Pset_metadata_read_attempts(fapl.id, _SWMR_READ_ATTEMPTS)
+    fid = h5py.h5f.open(os.fsencode(path), h5py.h5f.ACC_RDONLY | h5py.h5f.ACC_SWMR_READ, fapl=fapl)
+    return h5py.File(fid)
 
 
 class DatasetError(AptktError):
@@ -400,14 +444,21 @@ class DatasetReader:
         if not self.path.exists():
             raise DatasetError(f"{self.path}: no such file")
         try:
-            self._f = _while_locked(lambda: h5py.File(self.path, "r", swmr=True))
+            self._f = _while_locked(lambda: _open_swmr_read(self.path))
         except OSError as exc:
             raise DatasetError(f"{self.path}: not a readable HDF5 data set: {exc}") from exc
-        self.version = _check_schema(self._f, self.path)
-        self._meta = self._f["recordings/metadata"]
-        self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
-        # A snapshot: recordings appended after opening are not seen (reopen to see them).
-        index = _readable_prefix(self._f["recordings/index"])
+        try:
+            self.version = _check_schema(self._f, self.path)
+            self._meta = self._f["recordings/metadata"]
+            self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
+            # A snapshot: recordings appended after opening are not seen (reopen to see them).
+            index = _readable_prefix(self._f["recordings/index"])
+        except (OSError, KeyError) as exc:
+            self._f.close()
+            raise DatasetError(
+                f"{self.path}: damaged: the file's structure cannot be read ({exc}); "
+                "no recording can be recovered from it"
+            ) from exc
         self.index = index[: self._complete(index)]
         #: Index rows of an append that was cut short (a writer killed mid-append, or one
         #: still running), left out: 0 or 1.

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.actions import ExploratoryAction
-from aptkt.data import DatasetReader, write_features
+from aptkt.data import DatasetError, DatasetReader, write_features
 from aptkt.learning.extract import ExtractionSettings, observe_recording
 from aptkt.learning.observations import Observations
 
@@ -47,13 +47,18 @@ def extract_features(
     wanted = None if actions is None else set(actions)
     by_action: dict[str, list[int]] = {}
     with DatasetReader(path) as rd:
+        recorded = set()
         for i in range(len(rd)):
             _, name, _ = rd.key(i)
+            recorded.add(name)
             if wanted is None or name in wanted:
                 by_action.setdefault(name, []).append(i)
-        missing = (wanted or set()) - set(by_action)
+        missing = (wanted or set()) - recorded
         if missing:
-            raise KeyError(f"{path} holds no recordings of action(s) {sorted(missing)}")
+            raise DatasetError(
+                f"{path} holds no recordings of action(s) {', '.join(sorted(missing))}; "
+                f"it has {', '.join(sorted(recorded))}"
+            )
         total = sum(len(v) for v in by_action.values())
         bar = None
         if progress:
@@ -94,15 +99,28 @@ def load_observations(
     path = Path(path)
     with DatasetReader(path) as rd:
         stored = rd.feature_names()
-        recorded = sorted({rd.key(i)[1] for i in range(len(rd))})
+        keys = rd.keys()
+        recorded = sorted({k[1] for k in keys})
+        recorded_objects = {k[0] for k in keys}
     names = list(actions) if actions is not None else recorded
     unknown = [a for a in names if a not in recorded]
     if unknown:
-        raise KeyError(f"{path} holds no recordings of action(s) {unknown}; it has {recorded}")
+        raise DatasetError(
+            f"{path} holds no recordings of action(s) {', '.join(unknown)}; "
+            f"it has {', '.join(recorded)}"
+        )
+    if objects is not None:
+        objects = list(objects)
+        unknown = sorted({str(o) for o in objects} - recorded_objects)
+        if unknown:
+            raise DatasetError(
+                f"{path} holds no recordings of object(s) {', '.join(unknown)}; "
+                f"it has {', '.join(sorted(recorded_objects))}"
+            )
     todo = [a for a in names if a not in stored]
     if todo:
         if not extract_missing:
-            raise KeyError(
+            raise DatasetError(
                 f"{path} has no stored features for {todo}; run `aptkt dataset features`"
             )
         extract_features(path, actions=todo, progress=progress)
