@@ -15,6 +15,7 @@ __all__ = [
     "RobotConnectionError",
     "ProgramStoppedError",
     "ConfigError",
+    "PriorFileError",
     "NotFittedError",
     "KernelNotPositiveDefiniteError",
 ]
@@ -22,6 +23,11 @@ __all__ = [
 
 class ConfigError(AptktError, ValueError):
     """A configuration file or value is invalid; the message names the file and the field."""
+
+
+class PriorFileError(AptktError, ValueError):
+    """A prior-knowledge file is not one, is damaged, or is inconsistent; the message names the
+    file and the member."""
 
 
 class NotFittedError(AptktError, AttributeError):
