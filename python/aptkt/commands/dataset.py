@@ -174,6 +174,22 @@ def run_info(args: argparse.Namespace) -> int:
     print(
         f"  {info['recordings']} recordings, {info['samples']} samples, {info['recorded_seconds']:.1f} s recorded"
     )
+    if info["damaged"]:
+        shown = ", ".join(info["damaged"][:10]) + (", ..." if len(info["damaged"]) > 10 else "")
+        print(
+            f"  DAMAGED: {len(info['damaged'])} recording(s) cannot be read ({shown}); "
+            f"'aptkt dataset repair {args.file}' keeps the {info['recordings']} readable ones"
+        )
+    if info["incomplete"]:
+        print(
+            f"  {info['incomplete']} more recording was being appended when its writer stopped "
+            "(left out)"
+        )
+    if info["writer_died"]:
+        print(
+            "  its writer died without closing it: readable as it is; run "
+            f"'aptkt dataset repair {args.file}' before appending to it"
+        )
     print(
         f"  {info['file_bytes'] / 1e6:.2f} MB on disk, {info['bytes_per_sample']:.2f} bytes per sample"
     )
@@ -216,7 +232,7 @@ def run_repair(args: argparse.Namespace) -> int:
     rewritable_file(args.file)
     kept = repair(args.file, backup=not args.no_backup)
     print(
-        f"{args.file}: repaired, {kept} complete recordings kept"
+        f"{args.file}: repaired, {kept} readable recordings kept"
         + ("" if args.no_backup else f" (original kept as {args.file}.crashed)")
     )
     return 0

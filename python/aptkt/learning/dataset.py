@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.actions import ExploratoryAction
-from aptkt.data import DatasetError, DatasetReader, write_features
+from aptkt.data import DatasetError, DatasetReader, store_features
 from aptkt.learning.extract import ExtractionSettings, observe_recording
 from aptkt.learning.observations import Observations
 
@@ -71,7 +71,15 @@ def extract_features(
                 action = ExploratoryAction.from_dict(rd.metadata(rows[0])["action"])
                 per_mod: dict[str, list[np.ndarray]] = {m: [] for m in action.modalities}
                 for i in rows:
-                    obs = observe_recording(rd.recording(i), action, settings)
+                    try:
+                        rec = rd.recording(i)
+                    except (OSError, ValueError) as exc:
+                        obj, _, trial = rd.key(i)
+                        raise DatasetError(
+                            f"{path}: recording {i} ({obj}/{name}/trial {trial}) is damaged "
+                            f"({exc}); 'aptkt dataset repair {path}' keeps the readable ones"
+                        ) from None
+                    obs = observe_recording(rec, action, settings)
                     for m, v in obs.items():
                         per_mod[m].append(v)
                     if bar is not None:
@@ -80,9 +88,13 @@ def extract_features(
         finally:
             if bar is not None:
                 bar.close()
-    for name, per_mod in values.items():
-        for modality, rows in per_mod.items():
-            write_features(path, name, modality, by_action[name], np.stack(rows))
+    store_features(
+        path,
+        {
+            name: (by_action[name], {m: np.stack(rows) for m, rows in per_mod.items()})
+            for name, per_mod in values.items()
+        },
+    )
     return {name: len(rows) for name, rows in by_action.items()}
 
 
