@@ -23,6 +23,7 @@ __all__ = [
     "TrialInterrupted",
     "ConfigError",
     "FeatureTableError",
+    "PriorFileError",
     "NotFittedError",
     "KernelNotPositiveDefiniteError",
 ]
@@ -34,6 +35,11 @@ class ConfigError(AptktError, ValueError):
 
 class FeatureTableError(ConfigError):
     """A feature table (CSV or HDF5) is malformed; the message names the file, row and column."""
+
+
+class PriorFileError(AptktError, ValueError):
+    """A prior-knowledge file is not one, is damaged, or is inconsistent; the message names the
+    file and the member."""
 
 
 class NotFittedError(AptktError, AttributeError):

@@ -15,6 +15,7 @@ from aptkt.commands._session import (
     pick_actions,
     split_names,
 )
+from aptkt.commands._checks import at_least, input_file, output_dir, output_file
 from aptkt.errors import ConfigError
 
 #: Exit code when a robot or skin fault stopped the run (1: bad input).
@@ -127,6 +128,13 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"{', '.join(offline)}: only with --table FILE")
     args.transfer = args.transfer or "paper"
 
+    input_file(args.prior, "--prior")
+    at_least(args.seed, 0, "--seed")
+    at_least(args.budget, 0, "--budget")
+    at_least(args.patience, 1, "--patience")
+    output_dir(args.output)
+    if args.record:
+        output_file(args.record, "--record")
     try:
         prior = PriorKnowledge.load(args.prior)
     except (OSError, ValueError, KeyError) as exc:
