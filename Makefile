@@ -2,41 +2,56 @@
 #   make demo   -> virtual environment, Rust build, end-to-end demo on the simulated world
 #   make test   -> virtual environment, Rust build, cargo tests of the core crates, pytest
 #
-# Both builds share target/ and compile every shared crate with the same profile (release) and
+# Every build shares target/ and compiles each shared crate with the same profile (release) and
 # the same features (cargo resolves the whole workspace for the tests, the extension's crate
 # included; see rust/python/Cargo.toml), so whichever runs second reuses what the first
-# compiled: only the test-only crates (proptest, the test binaries) are added.
+# compiled: `make test` after `make demo` adds only the test-only crates and test binaries.
 VENV ?= .venv
 PY := $(VENV)/bin/python
 PYTEST_ARGS ?=
 SHELL := /bin/bash
 .SHELLFLAGS := -eo pipefail -c
+# pip -v shows the build backend's output; keep cargo's progress lines and errors.
+SHOW_BUILD := grep -E --line-buffered "^ *(Compiling|Finished|Built wheel|Successfully installed)|[Ee]rror" | sed -u -e 's/^ */    /'
 
-.PHONY: install demo test test-rust test-python clean
+.PHONY: venv install install-test demo wheel test test-rust test-python clean
 
-install:
+venv:
 	@test -x $(PY) || { echo "==> creating the virtual environment $(VENV)"; python3 -m venv $(VENV); }
-	@echo "==> installing Python dependencies and building aptkt (Rust core, release profile;"
-	@echo "    a few minutes on 2 cores the first time, seconds once target/ is built)"
 	@$(PY) -m pip install --quiet --upgrade pip
-	@$(PY) -m pip install -v -e ".[test,bench]" 2>&1 \
-		| grep -E --line-buffered "^ *(Compiling|Finished|Built|Installing collected|Successfully installed)|error|ERROR" \
-		| sed -u -e 's/^ */    /'
-	@echo "==> aptkt installed in $(VENV)"
+
+# The package and its runtime dependencies: all the demo needs.
+install: venv
+	@echo "==> installing aptkt: Python dependencies, then the Rust core (release build: a few"
+	@echo "    minutes on 2 cores the first time, seconds once target/ holds it)"
+	@$(PY) -m pip install -v -e . 2>&1 | $(SHOW_BUILD)
+
+install-test: venv
+	@echo "==> installing aptkt with the test dependencies (Rust core: see above)"
+	@$(PY) -m pip install -v -e ".[test]" 2>&1 | $(SHOW_BUILD)
 
 demo: install
 	@echo "==> aptkt demo (simulated world: 8 objects, 7 actions, 20 trials; 3 runs per method)"
 	$(VENV)/bin/aptkt demo
 
+# dist/aptkt-<version>-cp310-abi3-<platform>.whl; maturin shares cargo's target/ with the
+# editable install, so only what differs is rebuilt.
+wheel: venv
+	@echo "==> building the wheel (reuses target/)"
+	@$(PY) -m pip install --quiet "maturin>=1.8,<2"
+	rm -f dist/aptkt-*.whl
+	$(PY) -m maturin build --release --interpreter $(PY) --out dist
+
 test-rust:
 	@echo "==> Rust tests of the core crates (release profile, reusing the extension's build)"
 	cargo test --release --workspace
 
-test-python: install
+# tests/packaging installs the wheel into a fresh virtual environment.
+test-python: install-test wheel
 	@echo "==> Python tests"
-	$(PY) -m pytest $(PYTEST_ARGS)
+	APTKT_WHEEL="$$(ls dist/aptkt-*.whl)" $(PY) -m pytest $(PYTEST_ARGS)
 
 test: test-rust test-python
 
 clean:
-	rm -rf target $(VENV) python/aptkt/_core*.so
+	rm -rf target dist $(VENV) python/aptkt/_core*.so

@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from aptkt._core import AptktError, KernelNotPositiveDefiniteError
+
+if TYPE_CHECKING:  # for annotations only: errors are the bottom layer and import nothing above
+    from aptkt.skin.samples import Recording
 
 __all__ = [
     "AptktError",
@@ -14,6 +19,8 @@ __all__ = [
     "ProtectiveStopError",
     "RobotConnectionError",
     "ProgramStoppedError",
+    "TrialFault",
+    "TrialInterrupted",
     "ConfigError",
     "NotFittedError",
     "KernelNotPositiveDefiniteError",
@@ -59,3 +66,30 @@ class RobotConnectionError(RobotError):
 class ProgramStoppedError(RobotError):
     """The control program on the controller stopped or paused (pendant or dashboard stop, the
     controller's communication watchdog, a script error); the arm no longer follows commands."""
+
+
+class TrialFault(AptktError):
+    """A robot or skin fault ended an exploratory trial after its recording had started.
+
+    ``cause`` is the robot or skin error (also ``__cause__``); the backend has stopped the arm.
+    ``recording`` is what the skin recorded: the partial recording of the movement that failed
+    (``metadata["aborted"]`` names the error), or the whole, cropped recording when ``complete``
+    is True, i.e. the action itself finished and the fault came afterwards (lifting, waiting).
+    """
+
+    def __init__(self, cause: BaseException, recording: Recording, *, complete: bool = False):
+        super().__init__(f"{type(cause).__name__}: {cause}")
+        self.cause = cause
+        self.recording = recording
+        self.complete = complete
+
+
+class TrialInterrupted(KeyboardInterrupt):
+    """Ctrl-C in the middle of a trial. Still a :class:`KeyboardInterrupt` (everything stops as
+    for any Ctrl-C), with what the skin had recorded, as on a :class:`TrialFault`."""
+
+    def __init__(self, cause: KeyboardInterrupt, recording: Recording):
+        super().__init__(*cause.args)
+        self.cause = cause
+        self.recording = recording
+        self.complete = False

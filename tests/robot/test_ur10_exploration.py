@@ -10,7 +10,7 @@ import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a miss
 from loopback_helpers import PLACEMENT, STIFFNESS, LoopbackSkin, at_rest  # noqa: E402
 
 from aptkt.actions import ExplorationSettings, ExploratoryAction, Movement, explore  # noqa: E402
-from aptkt.errors import ProtectiveStopError  # noqa: E402
+from aptkt.errors import ProtectiveStopError, TrialFault  # noqa: E402
 
 SETTINGS = ExplorationSettings(
     clearance=0.003, lift_height=0.005, thermal_wait=0.2, stamp_wall_clock=False
@@ -72,9 +72,11 @@ def test_a_fault_mid_action_keeps_the_data_recorded_so_far(robot, loopback, skin
     action = ExploratoryAction("C1-short", Movement.STATIC_CONTACT, depth=0.002, hold_time=2.0)
     timer = threading.Timer(1.0, loopback.protective_stop)
     timer.start()
-    with pytest.raises(ProtectiveStopError) as err:
+    with pytest.raises(TrialFault) as err:
         explore(robot, skin, PLACEMENT, action, settings=SETTINGS)
     timer.cancel()
+    assert isinstance(err.value.cause, ProtectiveStopError) and not err.value.complete
+    assert err.value.__cause__ is err.value.cause
     partial = err.value.recording
     assert len(partial.samples) > 0 and partial.duration > 0.3
     assert not at_rest(loopback)["moving"]

@@ -354,7 +354,7 @@ def test_a_command_racing_a_program_stop_fails_fast(make_robot, loopback, skin):
 def test_abandoned_clients_are_destroyed_only_when_their_call_has_ended():
     import threading
 
-    from aptkt.robot import ur10
+    from aptkt.robot.ur10 import connection as ur10
 
     destroyed = []
 

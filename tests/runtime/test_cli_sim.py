@@ -15,7 +15,7 @@ import pytest
 from aptkt.actions import actions_from_toml
 from aptkt.cli import main
 from aptkt.data import DatasetReader
-from aptkt.errors import ProtectiveStopError
+from aptkt.errors import ProtectiveStopError, TrialFault
 from aptkt.learning import LearnerConfig, PriorKnowledge
 from aptkt.learning.dataset import load_observations
 from aptkt.runtime.live_learning import LiveLearningAborted, learn_live
@@ -431,8 +431,7 @@ class FaultySession(SimSession):
             return rec
         rec.metadata["aborted"] = "ProtectiveStopError: injected"
         err = ProtectiveStopError("injected")
-        err.recording, err.recording_complete = rec, False
-        raise err
+        raise TrialFault(err, rec) from err
 
 
 def test_a_fault_during_live_learning_keeps_every_observation_and_the_run_so_far(

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from aptkt.actions import PAPER_ACTIONS, ExplorationSettings, ExploratoryAction, Movement, explore
-from aptkt.errors import RobotError, SafetyLimitError
+from aptkt.errors import RobotError, SafetyLimitError, TrialFault
 from aptkt.robot.base import Robot, SafetyLimits
 from aptkt.sim import SimWorld
 
@@ -78,8 +78,9 @@ def test_force_limit_stops_the_press_at_the_crossing():
     world = SimWorld(seed=5, limits=SafetyLimits(max_normal_force=limit))
     act = PAPER_ACTIONS["P2"]  # about 3.4 N on metal
     with world.session("metal_toolbox", "P2", 0, action=act) as s:
-        with pytest.raises(SafetyLimitError, match="force") as err:
+        with pytest.raises(TrialFault, match="SafetyLimitError: .*force") as err:
             explore(s.robot, s.skin, s.placement, act, settings=FAST)
+        assert isinstance(err.value.cause, SafetyLimitError) and not err.value.complete
         rec = err.value.recording
         peak = total_forces(rec).max()
         # It did get there, and stopped within one control tick of ramping (5 mm/s * 8 ms).
@@ -94,7 +95,7 @@ def test_force_control_depth_limit():
         "hard_slide", Movement.SLIDE, normal_force=3.0, speed=0.01, slide_time=1.0
     )
     with world.session("rough_sponge", "hard_slide", 0, action=act) as s:
-        with pytest.raises(SafetyLimitError, match="max_depth"):
+        with pytest.raises(TrialFault, match="SafetyLimitError: .*max_depth"):
             explore(s.robot, s.skin, s.placement, act, settings=FAST)
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from skin_helpers import frames, take
 
-from aptkt.errors import SilentCellError, SkinDisconnectedError, SkinError
+from aptkt.errors import SilentCellError, SkinDisconnectedError, SkinError, TrialFault
 from aptkt.skin import (
     PatchConfig,
     SkinSource,
@@ -116,10 +116,11 @@ def test_recording_window_and_silent_cell(skin):
     counts = {c: int((rec.samples.cell_id == c).sum()) for c in (1, 2, 3)}
     assert counts == {1: 50, 2: 50, 3: 20}  # cell 3 is not zero-filled
     assert rec.samples.t_ns.min() >= rec.start_ns and rec.samples.t_ns.max() <= rec.stop_ns
-    with pytest.raises(SilentCellError) as info:
+    with pytest.raises(TrialFault, match="SilentCellError") as info:
         skin.start_recording()
         skin.push(frame(cells=(1, 2)))
         skin.stop_recording(strict=True)
+    assert isinstance(info.value.cause, SilentCellError)
     assert info.value.recording.samples.cell_id.tolist() == [1, 2]
 
 

@@ -7,11 +7,13 @@ contact, the constant-speed part of a slide — which the robot reports in its o
 ``action_window_ns`` attribute (``(start_ns, stop_ns)`` on the skin's clock); robots without it
 get the last ``action.duration`` seconds of the movement.
 
-On a robot or skin error the error carries what was recorded: ``exc.recording`` is the partial
-recording of a movement that failed (uncropped, with the skin's calibration, the robot's trace
-if it keeps one and ``metadata["aborted"]`` naming the error), or the complete, cropped
-recording when the fault came afterwards, while lifting or waiting
-(``exc.recording_complete`` is then True).
+A robot or skin error once the recording has started is raised as a
+:class:`~aptkt.errors.TrialFault` (``from`` the error, which is also its ``cause``) carrying what
+was recorded: ``recording`` is the partial recording of a movement that failed (uncropped, with
+the skin's calibration, the robot's trace if it keeps one and ``metadata["aborted"]`` naming the
+error), or the complete, cropped recording when the fault came afterwards, while lifting or
+waiting (``complete`` is then True). An error before the recording (moving above the object,
+the approach) is raised as it is: there is nothing to keep.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.actions.definition import ExploratoryAction, Movement
-from aptkt.errors import AptktError
+from aptkt.errors import AptktError, TrialFault
 from aptkt.robot.base import Placement, Robot
 from aptkt.skin.base import SkinSource
 from aptkt.skin.samples import Recording
@@ -89,8 +91,9 @@ def explore(
 ) -> Recording:
     """Apply ``action`` once to the object at ``placement`` and return its :class:`Recording`.
 
-    On a robot or skin error the arm is stopped and lifted if possible, and the error is
-    re-raised with the data recorded so far in its ``recording`` attribute.
+    On a robot or skin error the arm is stopped and lifted if possible; once the recording has
+    started the error is raised as a :class:`~aptkt.errors.TrialFault` with the data recorded so
+    far.
     """
     from aptkt import __version__
 
@@ -137,14 +140,12 @@ def explore(
         robot_metadata = getattr(robot, "recording_metadata", None)
         if callable(robot_metadata):
             rec.metadata.update(robot_metadata(int(rec.start_ns), int(rec.stop_ns)))
-        exc.recording = rec  # type: ignore[attr-defined]
-        exc.recording_complete = False  # type: ignore[attr-defined]
         try:
             robot.stop()
             robot.lift(settings.lift_height)
         except AptktError:
             pass  # the original error is what the caller needs
-        raise
+        raise TrialFault(exc, rec) from exc
     rec = skin.stop_recording()
     window = getattr(robot, "action_window_ns", None)
     if window is None:
@@ -161,7 +162,5 @@ def explore(
         robot.wait(settings.thermal_wait)
     except AptktError as exc:
         # The action itself completed: its recording is whole and must not be lost.
-        exc.recording = out  # type: ignore[attr-defined]
-        exc.recording_complete = True  # type: ignore[attr-defined]
-        raise
+        raise TrialFault(exc, out, complete=True) from exc
     return out

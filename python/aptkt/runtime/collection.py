@@ -9,7 +9,7 @@ partial recording goes to the side file ``<name>.aborted<suffix>`` (``data.h5`` 
 ``data.aborted.h5``; a second abort of the same trial goes to ``data.aborted-2.h5``, ...), its
 metadata flagged ``aborted`` with the error; and :class:`CollectionAborted` names the object,
 action and trial. A fault *after* a complete action (while lifting off or waiting) keeps that
-trial in the data set itself, with the error in its metadata.
+trial in the data set itself, with the error in its metadata (:mod:`aptkt.runtime.salvage`).
 """
 
 from __future__ import annotations
@@ -23,10 +23,10 @@ from pathlib import Path
 from typing import Any
 
 from aptkt.actions import ExploratoryAction
-from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, recording_key, repair
+from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, repair
 from aptkt.errors import AptktError, ConfigError
 from aptkt.runtime.grid import TrialGrid
-from aptkt.skin.samples import Recording
+from aptkt.runtime.salvage import aborted_path, salvage, save_aborted
 
 __all__ = ["CollectionPlan", "CollectionAborted", "collect", "aborted_path", "save_aborted"]
 
@@ -83,31 +83,6 @@ class CollectionAborted(AptktError):
         super().__init__(message)
         self.object, self.action, self.trial = object, action, trial
         self.cause, self.saved, self.completed = cause, saved, completed
-
-
-def aborted_path(path: str | Path, attempt: int = 1) -> Path:
-    """Side file for partial recordings: ``data.h5`` → ``data.aborted.h5`` (``-2``, ... after)."""
-    path = Path(path)
-    tag = ".aborted" if attempt <= 1 else f".aborted-{attempt}"
-    return path.with_name(path.stem + tag + path.suffix)
-
-
-def save_aborted(path: str | Path, rec: Recording, error: BaseException) -> Path:
-    """Store a partial recording in the side file of data set ``path``; returns the file used."""
-    rec.metadata.setdefault("aborted", f"{type(error).__name__}: {error}")
-    rec.metadata["error_type"] = type(error).__name__
-    key = recording_key(rec)
-    for attempt in range(1, 1000):
-        target = aborted_path(path, attempt)
-        try:
-            with DatasetWriter(target, "a", description={"aborted_recordings_of": str(path)}) as w:
-                if key in w.keys():
-                    continue
-                w.append(rec)
-                return target
-        except DatasetError:
-            continue  # a side file whose writer died: leave it for inspection, use the next
-    raise DatasetError(f"no free side file for the partial recording of {key} next to {path}")
 
 
 def _check_resumable(path: Path, plan: CollectionPlan, session: Mapping[str, Any]) -> None:
@@ -234,30 +209,14 @@ def _aborted(
     exc: BaseException,
 ) -> BaseException:
     """Save what the failed trial recorded; the error to raise in its place."""
-    rec: Recording | None = getattr(exc, "recording", None)
-    saved: Path | None = None
-    what = "nothing was being recorded"
-    if rec is not None and getattr(exc, "recording_complete", False) and not rec.silent_cells:
-        # The action completed; the fault came while lifting off or waiting: keep the trial.
-        rec.metadata["fault_after_recording"] = f"{type(exc).__name__}: {exc}"
-        writer.append(rec)
-        saved = path
-        what = f"the trial's recording was complete and is stored in {path}"
-    elif rec is not None:
-        try:
-            saved = save_aborted(path, rec, exc)
-            what = (
-                f"its partial recording ({len(rec.samples)} samples, {rec.duration:.2f} s) is in {saved}"
-                f" (flagged 'aborted')"
-            )
-        except (AptktError, OSError, ValueError) as save_exc:
-            what = f"its partial recording could not be saved: {save_exc}"
+    kept = salvage(exc, writer, path)
     if isinstance(exc, KeyboardInterrupt):
-        exc.add_note(f"interrupted at {obj} / {action.name} / trial {trial}; {what}")
+        exc.add_note(f"interrupted at {obj} / {action.name} / trial {trial}; {kept.what}")
         return exc
+    cause = kept.cause
     message = (
-        f"{obj} / {action.name} / trial {trial}: {type(exc).__name__}: {exc}. The robot was stopped; "
-        f"{what}. {len(writer)} complete recordings are in {path}; run the same command with --resume "
+        f"{obj} / {action.name} / trial {trial}: {type(cause).__name__}: {cause}. The robot was stopped; "
+        f"{kept.what}. {len(writer)} complete recordings are in {path}; run the same command with --resume "
         "to continue (after clearing the fault)."
     )
     return CollectionAborted(
@@ -265,7 +224,7 @@ def _aborted(
         object=obj,
         action=action.name,
         trial=trial,
-        cause=exc,
-        saved=saved,
+        cause=cause,
+        saved=kept.saved,
         completed=len(writer),
     )

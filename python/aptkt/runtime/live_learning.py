@@ -35,7 +35,7 @@ from aptkt.learning.environment import RecordingEnvironment
 from aptkt.learning.learner import APTKT, StepRecord
 from aptkt.learning.observations import ObservationTable
 from aptkt.learning.prior import PriorKnowledge
-from aptkt.runtime.collection import save_aborted
+from aptkt.runtime.salvage import salvage
 
 __all__ = ["LiveLearningAborted", "learn_live", "describe_step", "NO_TEST_NOTE"]
 
@@ -77,7 +77,7 @@ def describe_step(rec: StepRecord, config: LearnerConfig, n_pairs: int) -> str:
         )
     parts = [head]
     for action, decisions in rec.transfer.items():
-        if config.transfer == "none":
+        if not config.transfers:
             continue
         text = "; ".join(_fmt_decision(d, config.eps_neg) for d in decisions.values())
         parts.append(f"    transfer {action}: {text}")
@@ -155,18 +155,15 @@ def learn_live(
         try:
             return session.explore(obj, action, trial)
         except (AptktError, KeyboardInterrupt) as exc:
-            failure.update(object=obj, action=action.name, trial=trial, error=exc)
-            rec = getattr(exc, "recording", None)
-            if (
-                rec is not None
-                and getattr(exc, "recording_complete", False)
-                and not rec.silent_cells
-            ):
-                rec.metadata["fault_after_recording"] = f"{type(exc).__name__}: {exc}"
-                writer.append(rec)
-                failure["saved"] = record
-            elif rec is not None:
-                failure["saved"] = save_aborted(record, rec, exc)
+            kept = salvage(exc, writer, record)
+            failure.update(
+                object=obj,
+                action=action.name,
+                trial=trial,
+                cause=kept.cause,
+                saved=kept.saved,
+                what=kept.what,
+            )
             raise
 
     def on_step(rec: StepRecord) -> None:
@@ -186,30 +183,25 @@ def learn_live(
     except (AptktError, KeyboardInterrupt) as exc:
         if not failure:
             raise  # not a fault of the robot or skin (e.g. a learning error): nothing to add
-        status = f"aborted: {type(exc).__name__}: {exc}"
+        cause = failure["cause"]
+        status = f"aborted: {type(cause).__name__}: {cause}"
         summary["stopped_early"] = True
         summary["fault"] = {
             "object": failure["object"],
             "action": failure["action"],
             "trial": failure["trial"],
-            "error": f"{type(exc).__name__}: {exc}",
+            "error": f"{type(cause).__name__}: {cause}",
             "recording_saved_to": str(failure["saved"]) if failure.get("saved") else None,
         }
         _finish(summary, steps, learner, config, output, status, t0, report)
         if isinstance(exc, KeyboardInterrupt):
             raise
-        saved = failure.get("saved")
-        where = (
-            f"the failed action's recording is in {saved}"
-            if saved
-            else "nothing was being recorded"
-        )
         raise LiveLearningAborted(
-            f"{failure['object']} / {failure['action']} / trial {failure['trial']}: {type(exc).__name__}: {exc}. "
-            f"The robot was stopped; {where}; every completed recording is in {record}; the run so far "
+            f"{failure['object']} / {failure['action']} / trial {failure['trial']}: {type(cause).__name__}: {cause}. "
+            f"The robot was stopped; {failure['what']}; every completed recording is in {record}; the run so far "
             f"({len(steps)} steps) is in {output}.",
-            cause=exc,
-            saved=saved,
+            cause=cause,
+            saved=failure["saved"],
             output=output,
         ) from exc
     finally:

@@ -3,9 +3,11 @@ hardware skin source, or the simulated world. ``aptkt collect`` and ``aptkt lear
 
 A session is a context manager with ``explore(object, action, trial) -> Recording`` (the shared
 executor, :func:`aptkt.actions.executor.explore`), ``check_objects(names)`` and ``describe()``. On a
-robot or skin fault ``explore`` raises the typed error with what was recorded in its
-``recording`` attribute (see :mod:`aptkt.actions.executor`); the robot is stopped by its backend.
-A recording in which a cell fell silent counts as a skin fault (:class:`~aptkt.errors.SilentCellError`).
+robot or skin fault ``explore`` raises the typed error, as a :class:`~aptkt.errors.TrialFault`
+with what was recorded once the recording had started (see :mod:`aptkt.actions.executor`); the
+robot is stopped by its backend. A recording in which a cell fell silent counts as a skin fault
+(a :class:`~aptkt.errors.TrialFault` caused by :class:`~aptkt.errors.SilentCellError`); Ctrl-C
+mid-trial raises :class:`~aptkt.errors.TrialInterrupted` with what the skin had recorded.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from typing import Any, Protocol
 
 from aptkt.actions import ExploratoryAction
 from aptkt.actions.executor import ExplorationSettings, _calibration, explore
-from aptkt.errors import ConfigError, SilentCellError
+from aptkt.errors import ConfigError, SilentCellError, TrialFault, TrialInterrupted
 from aptkt.skin.samples import Recording
 
 __all__ = ["LiveSession", "RobotSession", "SimSession"]
@@ -42,9 +44,7 @@ def _require_complete(rec: Recording) -> Recording:
     silently differ from complete ones. Raised with the recording attached, like any fault."""
     if rec.silent_cells:
         err = SilentCellError(f"cell(s) {list(rec.silent_cells)} fell silent during the recording")
-        err.recording = rec  # type: ignore[attr-defined]
-        err.recording_complete = False  # type: ignore[attr-defined]
-        raise err
+        raise TrialFault(err, rec) from err
     return rec
 
 
@@ -187,8 +187,7 @@ class RobotSession:
                 rec = self.skin.stop_recording()
                 rec.metadata["calibration"] = _calibration(self.skin)
                 rec.metadata["aborted"] = "KeyboardInterrupt"
-                exc.recording = rec  # type: ignore[attr-defined]
-                exc.recording_complete = False  # type: ignore[attr-defined]
+                raise TrialInterrupted(exc, rec) from exc
             raise
 
     def describe(self) -> dict[str, Any]:

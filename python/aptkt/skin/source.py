@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.errors import SilentCellError, SkinDisconnectedError, SkinError
+from aptkt.errors import SilentCellError, SkinDisconnectedError, SkinError, TrialFault
 from aptkt.skin.config import PatchConfig, default_patch, load_patch
 from aptkt.skin.protocol import StreamParser
 from aptkt.skin.ring import SampleRing
@@ -255,8 +255,8 @@ class SkinSourceBase:
         Works after a link failure too: what arrived before it is returned and the error is in
         ``metadata["link_error"]``. Cells that sent nothing, or stopped for longer than the
         patch's ``silence_timeout_s``, are listed in ``silent_cells`` (never zero-filled). With
-        ``strict=True`` that raises :class:`~aptkt.errors.SilentCellError`, whose ``recording``
-        attribute still holds the data.
+        ``strict=True`` that raises a :class:`~aptkt.errors.TrialFault` caused by
+        :class:`~aptkt.errors.SilentCellError`, whose ``recording`` still holds the data.
         """
         with self._lock:
             if self._recording is None:
@@ -289,8 +289,7 @@ class SkinSourceBase:
             err = SilentCellError(
                 f"{type(self).__name__}: cell(s) {list(silent)} silent during the recording"
             )
-            err.recording = rec  # type: ignore[attr-defined]
-            raise err
+            raise TrialFault(err, rec) from err
         return rec
 
     def _silent_in(self, samples: SkinSamples, start: int, stop: int) -> tuple[int, ...]:
