@@ -283,10 +283,12 @@ impl SimContact {
     }
 
     /// Force-control ticks (see `aptkt_sim::control::run_ticks`). `phase` is
-    /// ("settle", t_limit_ns, settled) or ("ramp", t_start_ns, t_stop_ns, v, acc, dx, dy);
+    /// ("settle", t_limit_ns, settled), ("ramp", t_start_ns, t_stop_ns, v, acc, dx, dy) or
+    /// ("guard", t_end_ns, threshold, window_ns, w_end_ns); the segments are the one in force (settle, ramp) or the
+    /// planned ones from now on (guard);
     /// `control` is (target, gain, max_vz, contact_z, max_depth, tick_ns, wrench_limit).
-    /// Updates the state arrays and `latest` in place; returns (status, t_ns, settled,
-    /// samples, segment (t0, p0, v0, a), queue (t, cell, force), last force error, chunk).
+    /// Updates the state arrays and `latest` in place; returns (status, t_ns, settled or
+    /// w_end_ns, samples, first segment (t0, p0, v0, a), queue (t, cell, force), last force error, chunk).
     #[allow(clippy::too_many_arguments)]
     fn force_ticks<'py>(
         &self,
@@ -296,7 +298,10 @@ impl SimContact {
         relax_h: PyReadwriteArray3<'py, f64>,
         relax_last: PyReadwriteArray2<'py, f64>,
         latest_force: PyReadwriteArray1<'py, f64>,
-        segment: (i64, [f64; 3], [f64; 3], [f64; 3]),
+        seg_t0: PyReadonlyArray1<'py, i64>,
+        seg_p0: PyReadonlyArray2<'py, f64>,
+        seg_v0: PyReadonlyArray2<'py, f64>,
+        seg_a: PyReadonlyArray2<'py, f64>,
         queue_t: PyReadonlyArray1<'py, i64>,
         queue_c: PyReadonlyArray1<'py, i64>,
         queue_f: PyReadonlyArray2<'py, f64>,
@@ -354,6 +359,12 @@ impl SimContact {
                 acc: phase.get_item(4)?.extract()?,
                 d: [phase.get_item(5)?.extract()?, phase.get_item(6)?.extract()?],
             },
+            "guard" => Phase::Guard {
+                t_end_ns: phase.get_item(1)?.extract()?,
+                threshold: phase.get_item(2)?.extract()?,
+                window_ns: phase.get_item(3)?.extract()?,
+                w_end_ns: phase.get_item(4)?.extract()?,
+            },
             other => return Err(PyValueError::new_err(format!("unknown phase {other:?}"))),
         };
         let (target, gain, max_vz, contact_z, max_depth, tick_ns, wrench_limit) = control;
@@ -369,12 +380,7 @@ impl SimContact {
             tick_ns,
             wrench_limit,
         };
-        let mut seg = Segment {
-            t0: segment.0,
-            p0: segment.1,
-            v0: segment.2,
-            a: segment.3,
-        };
+        let mut segs = segments(&seg_t0, &seg_p0, &seg_v0, &seg_a)?;
         let mut samples = samples;
         let mut chunk = Chunk::default();
         let (status, err) = py.detach(|| {
@@ -384,7 +390,7 @@ impl SimContact {
                 &ctl,
                 &mut ph,
                 &mut st,
-                &mut seg,
+                &mut segs,
                 &mut queue,
                 &mut chunk,
                 &mut samples,
@@ -401,15 +407,18 @@ impl SimContact {
         }
         let status = match status {
             Status::Done => "done",
+            Status::Triggered => "triggered",
             Status::Timeout => "timeout",
             Status::TooDeep => "too_deep",
             Status::Wrench => "wrench",
             Status::Flush => "flush",
         };
         let settled = match ph {
-            Phase::Settle { settled, .. } => settled,
+            Phase::Settle { settled, .. } => settled as i64,
+            Phase::Guard { w_end_ns, .. } => w_end_ns,
             Phase::Ramp { .. } => 0,
         };
+        let seg = segs[0];
         let seg_t = (seg.t0, seg.p0.to_vec(), seg.v0.to_vec(), seg.a.to_vec());
         let q = (col(py, queue.t), col(py, queue.cell), mat(py, queue.force)?);
         (
