@@ -4,7 +4,9 @@
 
 use aptkt_sim::control::{run_ticks, ForceControl, LeanQueue, Phase, Status};
 use aptkt_sim::mechanics::{Cells, Chunk, Law, MechState, Mechanics, Relaxation, Segment, Shape};
+use aptkt_sim::philox::CounterStream;
 use aptkt_sim::sensors::{Sensors, NORMALS};
+use aptkt_sim::slip::{run as slip_run, SlipCell, SlipParams};
 use aptkt_sim::texture::{acceleration, Texture, TextureResponse};
 use aptkt_sim::thermal::{heat, System};
 use aptkt_sim::SimError;
@@ -545,9 +547,70 @@ fn sim_texture<'py>(
     mat(py, out)
 }
 
+/// Stick-slip of one cell over a stretch of samples (see `aptkt_sim::slip::run`). `params` is
+/// (mu_s, mu_k, tangential_stiffness, tangential_mass, threshold_sd, coupling, rate_hz, omega,
+/// decay, gain, lag); `ring` (E, 2) the slips still ringing. Returns (acceleration, load,
+/// threshold, events, ring).
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn sim_slip<'py>(
+    py: Python<'py>,
+    params: [f64; 11],
+    key: (u64, u64),
+    load: f64,
+    threshold: f64,
+    events: i64,
+    ring: PyReadonlyArray2<'py, f64>,
+    t: PyReadonlyArray1<'py, f64>,
+    path: PyReadonlyArray1<'py, f64>,
+    force: PyReadonlyArray1<'py, f64>,
+    speed: PyReadonlyArray1<'py, f64>,
+) -> PyResult<(Bound<'py, PyAny>, f64, f64, i64, Bound<'py, PyAny>)> {
+    let (t, path, force, speed) = (vec1(&t), vec1(&path), vec1(&force), vec1(&speed));
+    if path.len() != t.len() || force.len() != t.len() || speed.len() != t.len() {
+        return Err(PyValueError::new_err(
+            "t, path, force and speed must have the same length",
+        ));
+    }
+    let c = params;
+    let p = SlipParams {
+        mu_s: c[0],
+        mu_k: c[1],
+        tangential_stiffness: c[2],
+        tangential_mass: c[3],
+        threshold_sd: c[4],
+        coupling: c[5],
+        rate_hz: c[6],
+        omega: c[7],
+        decay: c[8],
+        gain: c[9],
+        lag: c[10],
+    };
+    let stream = CounterStream::new([key.0, key.1], 2);
+    let mut cell = SlipCell {
+        load,
+        threshold,
+        events,
+        ring: rows::<2>(&ring, "ring")?
+            .into_iter()
+            .map(|r| (r[0], r[1]))
+            .collect(),
+    };
+    let out = py.detach(|| slip_run(&p, &stream, &mut cell, &t, &path, &force, &speed));
+    let ring: Vec<[f64; 2]> = cell.ring.iter().map(|&(a, b)| [a, b]).collect();
+    Ok((
+        col(py, out),
+        cell.load,
+        cell.threshold,
+        cell.events,
+        mat(py, ring)?,
+    ))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<SimContact>()?;
     m.add_function(wrap_pyfunction!(sim_heat, m)?)?;
     m.add_function(wrap_pyfunction!(sim_texture, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_slip, m)?)?;
     Ok(())
 }
