@@ -94,6 +94,8 @@ def kernel_matrix(
 # -- skin protocol ----------------------------------------------------------------------------
 PACKET_LEN: int
 PACKET_TYPES: dict[str, int]
+#: (name, numpy dtype, vector field, ((min, max, scale, offset) per column)) per sensor field
+SENSOR_FIELDS: list[tuple[str, str, bool, list[tuple[int, int, float, float]]]]
 
 class StreamParser:
     def __init__(self) -> None: ...

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from aptkt.actions import ExploratoryAction
-from aptkt.actions.executor import ExplorationSettings, _calibration, explore
+from aptkt.actions.executor import ExplorationSettings, calibration_metadata, explore
 from aptkt.errors import ConfigError, SilentCellError, TrialFault, TrialInterrupted
 from aptkt.skin.samples import Recording
 
@@ -185,7 +185,7 @@ class RobotSession:
             # Ctrl-C mid-action: the backend stopped the arm; keep what the skin recorded.
             if getattr(self.skin, "recording", False):
                 rec = self.skin.stop_recording()
-                rec.metadata["calibration"] = _calibration(self.skin)
+                rec.metadata["calibration"] = calibration_metadata(self.skin)
                 rec.metadata["aborted"] = "KeyboardInterrupt"
                 raise TrialInterrupted(exc, rec) from exc
             raise

@@ -24,6 +24,11 @@ import numpy as np
 
 from aptkt.sim.kinematics import Trajectory
 from aptkt.sim.physics import ContactPhysics, ForceTrace, Frames, MechChunk
+from aptkt.skin.protocol import RAW_RANGES, SCALE, to_physical
+
+# The wire's force field (from the protocol's one table): the lean force loop quantises to it.
+((_FORCE_SCALE, _),) = SCALE["force"]
+(_FORCE_RANGE,) = RAW_RANGES["force"]
 
 __all__ = ["FrameSink", "SimEngine", "Driver", "FastDriver", "RealTimeDriver", "StopReason"]
 
@@ -194,8 +199,10 @@ class SimEngine:
 
     def _lean_queue(self, t_ns: np.ndarray, cells: np.ndarray, force_norm: np.ndarray) -> None:
         lean = self._lean
-        raw = np.clip(np.rint(np.asarray(force_norm) * 1024.0), 0, 4095)  # the wire's 12-bit field
-        newtons = lean["gain"][cells] * (raw * (1.0 / 1024.0) - lean["offset"][cells])
+        raw = np.clip(
+            np.rint(np.asarray(force_norm) / _FORCE_SCALE), *_FORCE_RANGE
+        )  # the wire's field
+        newtons = lean["gain"][cells] * (to_physical("force", raw) - lean["offset"][cells])
         t = np.concatenate([lean["queue_t"], t_ns])
         order = np.argsort(t, kind="stable")
         lean["queue_t"] = t[order]
