@@ -15,6 +15,7 @@ from aptkt.commands._session import (
     split_names,
 )
 from aptkt.errors import ConfigError
+from aptkt.learning.config import LearnerConfig
 
 #: Exit code when a robot or skin fault stopped the run (1: bad input).
 EXIT_FAULT = 3
@@ -47,21 +48,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--budget",
         type=int,
-        default=40,
+        default=LearnerConfig.budget,
         metavar="N",
         help="observations chosen actively after the initial round (default %(default)s)",
     )
     p.add_argument(
         "--eps-neg",
         type=float,
-        default=0.4,
+        default=LearnerConfig.eps_neg,
         metavar="E",
         help="transfer cut-off ε_neg (default %(default)s)",
     )
     p.add_argument(
         "--eps-explor",
         type=float,
-        default=0.1,
+        default=LearnerConfig.eps_explor,
         metavar="E",
         help="probability of a random (action, object) pick, ε_explor (default %(default)s)",
     )

@@ -519,6 +519,15 @@ class DatasetReader:
             raise KeyError(f"no stored {modality!r} features for action {action!r}")
         return g["recording"][...], g[modality][...]
 
+    def feature_settings(self, action: str) -> dict[str, Any] | None:
+        """The extraction settings the stored features of ``action`` were computed with (None
+        if there are none, or they were stored without)."""
+        g = self._f.get(f"features/{action}")
+        if g is None or "extraction" not in g.attrs:
+            return None
+        settings: dict[str, Any] = json.loads(g.attrs["extraction"])
+        return settings
+
     def feature_names(self) -> dict[str, list[str]]:
         g = self._f.get("features")
         if g is None:
@@ -548,31 +557,43 @@ class DatasetReader:
 
 
 def write_features(
-    path: str | Path, action: str, modality: str, recordings: Sequence[int], values: np.ndarray
+    path: str | Path,
+    action: str,
+    modality: str,
+    recordings: Sequence[int],
+    values: np.ndarray,
+    *,
+    settings: Mapping[str, Any] | None = None,
 ) -> None:
-    """Store a feature matrix (one row per recording number) under ``/features/<action>``.
+    """Store a feature matrix (one row per recording number) under ``/features/<action>``,
+    keyed by the extraction ``settings`` it was computed with (JSON, see
+    :meth:`DatasetReader.feature_settings`).
 
     Opens the file for ordinary (non-SWMR) writing: no writer may be running.
     """
     values = np.asarray(values, dtype=np.float64)
-    recordings = np.asarray(recordings, dtype=np.int64)
-    if values.ndim != 2 or values.shape[0] != recordings.shape[0]:
+    rows = np.asarray(recordings, dtype=np.int64)
+    if values.ndim != 2 or values.shape[0] != rows.shape[0]:
         raise ValueError("values must be (n_recordings, dim) with one row per recording number")
     with h5py.File(path, "a", libver="latest") as f:
         _check_schema(f, Path(path))
         n = f["recordings/index"].shape[0]
-        if recordings.size and (recordings.min() < 0 or recordings.max() >= n):
+        if rows.size and (rows.min() < 0 or rows.max() >= n):
             raise ValueError(f"recording numbers must be in 0..{n - 1}")
         g = f.require_group(f"features/{action}")
-        if "recording" in g and not np.array_equal(g["recording"][...], recordings):
+        if "recording" in g and not np.array_equal(g["recording"][...], rows):
             raise ValueError(
                 f"features of {action!r} exist for other recordings; write all modalities together"
             )
         if "recording" not in g:
-            g.create_dataset("recording", data=recordings, track_times=False)
+            g.create_dataset("recording", data=rows, track_times=False)
         if modality in g:
             del g[modality]
         g.create_dataset(modality, data=values, track_times=False)
+        if settings is None:
+            g.attrs.pop("extraction", None)
+        else:
+            g.attrs["extraction"] = json.dumps(dict(settings), sort_keys=True)
 
 
 def _readable_prefix(ds: h5py.Dataset) -> np.ndarray:

@@ -83,7 +83,7 @@ def prepare_data(s: ReproduceSettings, scale: Scale) -> tuple[Path, dict[str, An
     """The data set to learn from (generated if none was given) with its features extracted."""
     from aptkt.actions import PAPER_ACTIONS
     from aptkt.data import DatasetReader
-    from aptkt.learning.dataset import extract_features
+    from aptkt.learning.dataset import extract_features, stale_features
     from aptkt.runtime.generation import GenerationPlan, generate
 
     info: dict[str, Any] = {}
@@ -109,7 +109,6 @@ def prepare_data(s: ReproduceSettings, scale: Scale) -> tuple[Path, dict[str, An
         )
     with DatasetReader(path) as rd:
         keys = set(rd.keys())
-        stored = rd.feature_names()
         info["description"] = rd.description
     missing = [
         (o, a, t)
@@ -123,7 +122,7 @@ def prepare_data(s: ReproduceSettings, scale: Scale) -> tuple[Path, dict[str, An
             f"{path} lacks {len(missing)} recording(s) this size needs (objects {list(scale.objects)}, actions "
             f"{list(scale.actions)}, trials 0..{scale.repetitions - 1}); first missing: {missing[:3]}"
         )
-    todo = [a for a in scale.actions if a not in stored]
+    todo = stale_features(path, scale.actions)
     if todo:
         _say(f"extracting features of {', '.join(todo)} into {path}")
         t0 = time.perf_counter()

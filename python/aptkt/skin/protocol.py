@@ -12,6 +12,7 @@ See ``skin-protocol.md`` (the hardware contract). Every packet is 20 bytes; sens
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 from types import MappingProxyType
 
 import numpy as np
@@ -26,6 +27,7 @@ __all__ = [
     "StreamParser",
     "PACKET_LEN",
     "PACKET_TYPES",
+    "PACKET_RATE_HZ",
     "RAW_FIELDS",
     "RAW_RANGES",
     "SCALE",
@@ -36,9 +38,15 @@ __all__ = [
 ]
 
 
-def _distinct(columns: list[tuple[int, int, float, float]], pick: slice) -> tuple[tuple, ...]:
+#: Sensor packets per cell and second: the rate the patches are set to (command 0xC8, argument
+#: 0x03; the skin also offers 63 and 125 Hz). The simulated skins send at it, and feature
+#: extraction resamples recordings onto it.
+PACKET_RATE_HZ = 250.0
+
+
+def _distinct(columns: list[tuple[int, int, float, float]], pick: slice) -> tuple[Any, ...]:
     """Per-column values; one entry when every column shares them (acc, force)."""
-    rows = tuple(tuple(c[pick]) for c in columns)
+    rows: tuple[tuple[Any, ...], ...] = tuple(c[pick] for c in columns)
     return rows[:1] if len(set(rows)) == 1 else rows
 
 

@@ -15,6 +15,7 @@ import sys
 import time
 
 from aptkt.sim.loopback.controller import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
+from aptkt.sim.loopback.tcp_skin import SkinConfig
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -66,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--skin-rate",
         type=float,
-        default=250.0,
+        default=SkinConfig.rate_hz,
         metavar="HZ",
         help="packets per cell and second of the simulated skin (default %(default)s)",
     )
@@ -116,8 +117,6 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"--workspace: {exc}", file=sys.stderr)
                 return 1
         if args.skin_pty:
-            from aptkt.sim.loopback.tcp_skin import SkinConfig
-
             try:
                 extra["skin"] = SkinConfig(rate_hz=args.skin_rate, patch=args.patch).to_dict()
             except ValueError as exc:

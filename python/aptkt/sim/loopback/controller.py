@@ -36,6 +36,7 @@ from aptkt.sim.loopback.rotvec import (
     rotvec_to_matrix,
 )
 from aptkt.sim.loopback.rtde import input_type, output_type
+from aptkt.sim.physics import GRAVITY
 
 __all__ = [
     "ControllerConfig",
@@ -415,7 +416,7 @@ class SimulatedController:
             "joint_mode": [253] * 6,
             "speed_scaling": 1.0,
             "target_speed_fraction": 1.0,
-            "actual_tool_accelerometer": [0.0, 0.0, -9.81],
+            "actual_tool_accelerometer": [0.0, 0.0, -GRAVITY],
             "joint_temperatures": [30.0] * 6,
             "actual_main_voltage": 48.0,
             "actual_robot_voltage": 48.0,
