@@ -1,7 +1,7 @@
 """Type stubs of the compiled extension ``aptkt._core`` (Rust). Use the Python wrappers
 (:mod:`aptkt.features`, :mod:`aptkt.gp`, :mod:`aptkt.skin`) rather than these functions."""
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray

@@ -491,7 +491,8 @@ class LaplaceGPC:
 
     def save(self, path: str | Path) -> None:
         """Save to a ``.npz`` file (arrays + JSON; loading executes no code)."""
-        np.savez_compressed(Path(path), **self.state())
+        arrays: dict[str, Any] = self.state()
+        np.savez_compressed(Path(path), **arrays)
 
     @classmethod
     def load(cls, path: str | Path) -> LaplaceGPC:

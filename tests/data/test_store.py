@@ -17,10 +17,9 @@ import pytest
 from aptkt.actions import PAPER_ACTIONS
 from aptkt.data import DatasetError, DatasetReader, DatasetWriter, repair, write_features
 from aptkt.data.store import raw_to_samples, samples_to_raw
-from aptkt.skin.protocol import RAW_FIELDS
-from aptkt.skin.samples import FIELDS
 from aptkt.runtime.generation import GenerationPlan, generate
 from aptkt.sim import SimWorld
+from aptkt.skin.protocol import RAW_FIELDS
 
 FIELDS = ("cell_id", "t_ns", "proximity", "acc", "temp", "force")
 PLAN = GenerationPlan(

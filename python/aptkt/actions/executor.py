@@ -22,7 +22,6 @@ import datetime as _dt
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
-
 from aptkt.actions.definition import ExploratoryAction, Movement
 from aptkt.errors import AptktError, TrialFault
 from aptkt.robot.base import Placement, Robot
@@ -90,7 +89,7 @@ def explore(
 
     settings = settings or ExplorationSettings()
     if hasattr(robot, "action_window_ns"):
-        robot.action_window_ns = None  # type: ignore[attr-defined]
+        robot.action_window_ns = None
     meta: dict[str, Any] = {
         "object": placement.object_name,
         "action": action.to_dict(),

@@ -139,7 +139,7 @@ def fit_mixture(
     resp[np.arange(X.shape[0]), labels] = 1.0
     params = _m_step(X, resp, reg_covar, covariance_type)
     lower, converged, n_iter = -np.inf, False, 0
-    for n_iter in range(1, max_iter + 1):
+    for n_iter in range(1, max_iter + 1):  # noqa: B007 - reported after the loop
         previous = lower
         lower, log_resp = _e_step(X, *params)
         params = _m_step(X, np.exp(log_resp), reg_covar, covariance_type)

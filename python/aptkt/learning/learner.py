@@ -324,21 +324,21 @@ class APTKT:
         seconds: float,
         on_step: Callable[[StepRecord], None] | None,
     ) -> None:
-        has_test = all(l.test_posteriors is not None for l in self.learners.values())
-        acc = {a: l.test_accuracy() for a, l in self.learners.items()} if has_test else {}
+        has_test = all(lrn.test_posteriors is not None for lrn in self.learners.values())
+        acc = {a: lrn.test_accuracy() for a, lrn in self.learners.items()} if has_test else {}
         fused = float("nan")
         if has_test and _same_class_order(self.learners):
             classes = [str(c) for c in next(iter(self.learners.values())).model.classes_]
             fused = fused_accuracy(
-                {a: l.test_posteriors for a, l in self.learners.items()},
-                {a: l.test_objects for a, l in self.learners.items()},
+                {a: lrn.test_posteriors for a, lrn in self.learners.items()},
+                {a: lrn.test_objects for a, lrn in self.learners.items()},
                 classes,
             )
         updated = self.learners[sel.action] if sel is not None else None
         transfer = {
-            a: {o: d.as_dict() for o, d in l.decisions.items()}
-            for a, l in self.learners.items()
-            if updated is None or l is updated
+            a: {o: d.as_dict() for o, d in lrn.decisions.items()}
+            for a, lrn in self.learners.items()
+            if updated is None or lrn is updated
         }
         record = StepRecord(
             step=step,
@@ -360,6 +360,8 @@ class APTKT:
 
 def _same_class_order(learners: Mapping[str, ActionLearner]) -> bool:
     orders = {
-        tuple(str(c) for c in l.model.classes_) for l in learners.values() if l.model is not None
+        tuple(str(c) for c in lrn.model.classes_)
+        for lrn in learners.values()
+        if lrn.model is not None
     }
     return len(orders) == 1

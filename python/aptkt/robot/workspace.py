@@ -26,11 +26,16 @@ Every problem raises :class:`~aptkt.errors.ConfigError` naming the file and the 
 from __future__ import annotations
 
 import math
-import tomllib
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.10 only
+    import tomli as tomllib
 
 from aptkt.errors import ConfigError
 from aptkt.robot.base import Placement, SafetyLimits

@@ -211,7 +211,9 @@ def _aborted(
     """Save what the failed trial recorded; the error to raise in its place."""
     kept = salvage(exc, writer, path)
     if isinstance(exc, KeyboardInterrupt):
-        exc.add_note(f"interrupted at {obj} / {action.name} / trial {trial}; {kept.what}")
+        note = f"interrupted at {obj} / {action.name} / trial {trial}; {kept.what}"
+        if sys.version_info >= (3, 11):  # notes on exceptions are new in 3.11
+            exc.add_note(note)
         return exc
     cause = kept.cause
     message = (

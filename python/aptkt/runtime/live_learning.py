@@ -225,10 +225,12 @@ def _finish(
         {**s.as_row(), "accuracy": s.accuracy, "transfer": s.transfer} for s in steps
     ]
     summary["observations"] = {
-        a: {o: l.count(o) for o in l.new_objects} for a, l in learner.learners.items()
+        a: {o: lrn.count(o) for o in lrn.new_objects} for a, lrn in learner.learners.items()
     }
     learned = output / "learned_prior.npz"
-    table = {a: l.observations for a, l in learner.learners.items() if l.observations is not None}
+    table = {
+        a: lrn.observations for a, lrn in learner.learners.items() if lrn.observations is not None
+    }
     summary["learned_prior"] = None
     if table:
         try:

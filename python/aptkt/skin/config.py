@@ -182,7 +182,7 @@ def load_patch(path: str | Path) -> PatchConfig:
 
 def default_patch() -> PatchConfig:
     """The 7-cell end-effector patch shipped with aptkt."""
-    res = resources.files("aptkt.skin").joinpath("data", DEFAULT_PATCH_FILE)
+    res = resources.files("aptkt.skin").joinpath("data").joinpath(DEFAULT_PATCH_FILE)
     with resources.as_file(res) as path:
         return load_patch(path)
 

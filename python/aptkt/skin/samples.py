@@ -17,7 +17,7 @@ from aptkt.skin.protocol import RAW_FIELDS
 __all__ = ["SkinSamples", "Recording", "FIELDS"]
 
 #: Per-sample fields, their trailing shape and dtype.
-FIELDS: Mapping[str, tuple[tuple[int, ...], type]] = {
+FIELDS: Mapping[str, tuple[tuple[int, ...], Any]] = {
     "cell_id": ((), np.uint16),
     "t_ns": ((), np.int64),
     "proximity": ((), np.float64),
@@ -57,13 +57,13 @@ class SkinSamples:
             setattr(self, name, arr)
         if self.raw is not None:
             raw = {}
-            for name, (tail, dtype) in RAW_FIELDS.items():
-                arr = np.asarray(self.raw[name], dtype=dtype)
-                if arr.shape != (n, *tail):
+            for name, (raw_tail, raw_dtype) in RAW_FIELDS.items():
+                col = np.asarray(self.raw[name], dtype=raw_dtype)
+                if col.shape != (n, *raw_tail):
                     raise ValueError(
-                        f"SkinSamples.raw[{name!r}]: shape {arr.shape}, expected {(n, *tail)}"
+                        f"SkinSamples.raw[{name!r}]: shape {col.shape}, expected {(n, *raw_tail)}"
                     )
-                raw[name] = arr
+                raw[name] = col
             self.raw = raw
 
     def __len__(self) -> int:
@@ -71,7 +71,10 @@ class SkinSamples:
 
     @classmethod
     def empty(cls) -> SkinSamples:
-        return cls(**{name: np.zeros((0, *tail), dtype) for name, (tail, dtype) in FIELDS.items()})
+        cols: dict[str, Any] = {
+            name: np.zeros((0, *tail), dtype) for name, (tail, dtype) in FIELDS.items()
+        }
+        return cls(**cols)
 
     @classmethod
     def concat(cls, parts: Iterable[SkinSamples]) -> SkinSamples:
@@ -148,6 +151,7 @@ class Recording:
             n_steps = max(int(round(self.duration * rate_hz)), 1)
             step_ns = 1e9 / rate_hz
         else:
+            assert n_steps is not None  # exactly one of the two was given
             if n_steps < 1:
                 raise ValueError("n_steps must be >= 1")
             step_ns = (self.stop_ns - self.start_ns) / n_steps
