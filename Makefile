@@ -5,23 +5,37 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 PYTEST_ARGS ?=
 
-.PHONY: install demo test test-rust test-python clean
+.PHONY: venv install install-test demo wheel test test-rust test-python clean
 
-install:
+venv:
 	@test -x $(PY) || python3 -m venv $(VENV)
 	@$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test,bench]"
+
+# The package and its runtime dependencies: all the demo needs.
+install: venv
+	$(PY) -m pip install --quiet -e .
+
+install-test: venv
+	$(PY) -m pip install --quiet -e ".[test]"
 
 demo: install
 	$(VENV)/bin/aptkt demo
 
+# dist/aptkt-<version>-cp310-abi3-<platform>.whl; maturin shares cargo's target/ with the
+# editable install, so only what differs is rebuilt.
+wheel: venv
+	$(PY) -m pip install --quiet "maturin>=1.8,<2"
+	rm -f dist/aptkt-*.whl
+	$(PY) -m maturin build --release --interpreter $(PY) --out dist
+
 test-rust:
 	cargo test --release --workspace --exclude aptkt-python
 
-test-python: install
-	$(PY) -m pytest $(PYTEST_ARGS)
+# tests/packaging installs the wheel into a fresh virtual environment.
+test-python: install-test wheel
+	APTKT_WHEEL="$$(ls dist/aptkt-*.whl)" $(PY) -m pytest $(PYTEST_ARGS)
 
 test: test-rust test-python
 
 clean:
-	rm -rf target $(VENV) python/aptkt/_core*.so
+	rm -rf target dist $(VENV) python/aptkt/_core*.so

@@ -1,6 +1,6 @@
 """The full Fig. 7 experiment: our Rust core vs the same loop on scikit-learn's GPC.
 
-Usage: python benches/bench_experiments.py --data /work/data/sim40.h5 [--sk-groups 2] [--sk-trials 1]
+Usage: python benches/bench_experiments.py --data sim40.h5 [--sk-groups 2] [--sk-trials 1]
 
 Fig. 7 (paper §5.4) is 10 groups of 3 prior objects × 5 trials × {APTKT, baseline}: 10 prior-
 knowledge builds and 100 learning runs (7 actions, 5 new objects, budget 40), i.e. 4,000 model
@@ -153,7 +153,9 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument(
-        "--data", required=True, help="the full data set (e.g. /work/data/sim40.h5)"
+        "--data",
+        required=True,
+        help="the full data set (e.g. sim40.h5 from `aptkt dataset generate`)",
     )
     parser.add_argument(
         "--sk-groups", type=int, default=2, help="groups run on scikit-learn (default %(default)s)"

@@ -2,6 +2,7 @@
 (:mod:`aptkt.features`, :mod:`aptkt.gp`, :mod:`aptkt.skin`) rather than these functions."""
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,14 +41,17 @@ def thermal_curve(
 # -- Laplace GPC ------------------------------------------------------------------------------
 class GpcModel:
     def predict_proba(self, x: NDArray[np.float64]) -> NDArray[np.float64]: ...
+    def predict_proba_binary(self, x: NDArray[np.float64]) -> NDArray[np.float64]: ...
     def latent(self, x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
     def log_marginal_likelihood(
-        self, theta: NDArray[np.float64], gradient: bool
+        self, theta: NDArray[np.float64], gradient: bool, include_prior: bool = False
     ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]: ...
     @property
     def theta(self) -> NDArray[np.float64]: ...
     @property
     def log_marginal_likelihood_value(self) -> NDArray[np.float64]: ...
+    @property
+    def log_hyper_prior(self) -> NDArray[np.float64]: ...
     @property
     def jitter(self) -> NDArray[np.float64]: ...
     @property
@@ -60,35 +64,71 @@ class GpcModel:
     def n_classifiers(self) -> int: ...
     @property
     def transfer(self) -> bool: ...
+    @property
+    def n_lambdas(self) -> int: ...
+
+class FitSettings:
+    modalities: list[list[int]]
+    signal_variance: float
+    length_scales: list[float]
+    weights: list[float]
+    free_signal_variance: bool
+    free_length_scales: bool
+    free_weights: bool
+    free_lambda: bool
+    signal_variance_bounds: tuple[float, float]
+    length_scale_bounds: tuple[float, float]
+    optimize: bool
+    n_restarts: int
+    seed: int
+    max_iter: int
+    newton_max_iter: int
+    newton_tol: float
+    max_jitter: float
+    approximation: str
+    n_threads: int
+    prior_signal_variance: tuple[float, float] | None
+    prior_length_scale: tuple[float, float] | None
+    def __init__(
+        self,
+        *,
+        modalities: Sequence[Sequence[int]],
+        signal_variance: float = 1.0,
+        length_scales: Sequence[float],
+        weights: Sequence[float],
+        free_signal_variance: bool = True,
+        free_length_scales: bool = True,
+        free_weights: bool = True,
+        free_lambda: bool = False,
+        signal_variance_bounds: tuple[float, float] = (1e-5, 1e5),
+        length_scale_bounds: tuple[float, float] = (1e-5, 1e5),
+        optimize: bool = True,
+        n_restarts: int = 2,
+        seed: int = 0,
+        max_iter: int = 200,
+        newton_max_iter: int = 100,
+        newton_tol: float = 1e-10,
+        max_jitter: float = 1e-6,
+        approximation: str = "erf",
+        n_threads: int = 0,
+        prior_signal_variance: tuple[float, float] | None = None,
+        prior_length_scale: tuple[float, float] | None = None,
+    ) -> None: ...
 
 def fit_gpc(
     x: NDArray[np.float64],
     labels: NDArray[np.int64],
     n_classes: int,
-    sources: Sequence[tuple[NDArray[np.float64], float] | None],
-    modalities: Sequence[Sequence[int]],
-    signal_variance: float,
-    length_scales: Sequence[float],
-    weights: Sequence[float],
-    free: tuple[bool, bool, bool, bool],
-    signal_variance_bounds: tuple[float, float],
-    length_scale_bounds: tuple[float, float],
-    optimize: bool,
-    n_restarts: int,
-    seed: int,
-    max_iter: int,
-    newton_max_iter: int,
-    newton_tol: float,
-    max_jitter: float,
-    predictive: str,
-    n_threads: int,
+    sources: Sequence[Sequence[tuple[NDArray[np.float64], NDArray[np.float64], float]]],
+    settings: FitSettings,
     thetas: NDArray[np.float64] | None = None,
+    starts: Sequence[Sequence[float] | None] | None = None,
 ) -> GpcModel: ...
 def kernel_matrix(
     x: NDArray[np.float64],
     theta: Sequence[float],
     modalities: Sequence[Sequence[int]],
-    n_source: int = 0,
+    source_sizes: Sequence[int] = ...,
 ) -> NDArray[np.float64]: ...
 
 # -- skin protocol ----------------------------------------------------------------------------
@@ -124,3 +164,89 @@ def _encode_sensor_packets(
     force: NDArray[np.int64],
 ) -> bytes: ...
 def encode_packet_bytes(header: int, payload: bytes) -> bytes: ...
+
+# --- simulated world (aptkt-sim) ---------------------------------------------------------
+_Chunk = tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]
+
+class SimContact:
+    def __init__(
+        self,
+        clock_rate: NDArray[np.float64],
+        clock_phase: NDArray[np.float64],
+        sensor_height: NDArray[np.float64],
+        sensor_xy: NDArray[np.float64],
+        centre: tuple[float, float],
+        rotation: float,
+        surface_z: float,
+        tilt: tuple[float, float],
+        crown_radius: float,
+        waves: NDArray[np.float64],
+        size: tuple[float, float],
+        law_delta: NDArray[np.float64],
+        law_sigma: NDArray[np.float64],
+        skin_stiffness: float,
+        relax_weights: list[float],
+        relax_times: list[float],
+        sensor_area: float,
+        noise_key: tuple[int, int],
+        force_gain: NDArray[np.float64],
+        force_offset: NDArray[np.float64],
+        force_noise: float,
+        latency_ns: int,
+        jitter_s: float,
+    ) -> None: ...
+    def mechanics(
+        self,
+        t_ns: int,
+        next_k: NDArray[np.int64],
+        relax_h: NDArray[np.float64],
+        relax_last: NDArray[np.float64],
+        latest_force: NDArray[np.float64],
+        seg_t0: NDArray[np.int64],
+        seg_p0: NDArray[np.float64],
+        seg_v0: NDArray[np.float64],
+        seg_a: NDArray[np.float64],
+        t_end_ns: int,
+    ) -> tuple[int, _Chunk]: ...
+    def noise(
+        self, ks: NDArray[np.int64], cells: NDArray[np.int64], t_ns: NDArray[np.int64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]: ...
+    def force_ticks(
+        self,
+        t_ns: int,
+        next_k: NDArray[np.int64],
+        relax_h: NDArray[np.float64],
+        relax_last: NDArray[np.float64],
+        latest_force: NDArray[np.float64],
+        segment: tuple[int, Any, Any, Any],
+        queue_t: NDArray[np.int64],
+        queue_c: NDArray[np.int64],
+        queue_f: NDArray[np.float64],
+        latest: NDArray[np.float64],
+        cal_gain: NDArray[np.float64],
+        cal_offset: NDArray[np.float64],
+        control: tuple[float, float, float, float, float, int, float],
+        phase: tuple[Any, ...],
+        samples: int,
+    ) -> tuple[Any, ...]: ...
+
+def sim_heat(
+    u: NDArray[np.float64],
+    mu: NDArray[np.float64],
+    t_ss: NDArray[np.float64],
+    sqrt_c: NDArray[np.float64],
+    cells: NDArray[np.int64],
+    t_s: NDArray[np.float64],
+    config: NDArray[np.int64],
+    state: NDArray[np.float64],
+    state_t: NDArray[np.float64],
+) -> NDArray[np.float64]: ...
+def sim_texture(
+    kvec: NDArray[np.float64],
+    amplitude: NDArray[np.float64],
+    phase: NDArray[np.float64],
+    constants: list[float],
+    u: NDArray[np.float64],
+    w: NDArray[np.float64],
+    pressure: NDArray[np.float64],
+) -> NDArray[np.float64]: ...

@@ -1,4 +1,4 @@
-"""Tactile feature kernels (paper §3.2, DESIGN.md §4), computed in Rust.
+"""Tactile feature kernels (paper §3.2, docs/design.md §4), computed in Rust.
 
 Every function accepts float64, float32 and int16 arrays (raw sensor samples), contiguous or
 strided, without copying them; other numeric dtypes are converted to float64 first. NaN or

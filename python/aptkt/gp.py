@@ -6,12 +6,14 @@
 * **multi-modal** (paper Eq. 1): the feature columns are grouped into modalities; each gets an
   RBF kernel with its own length-scale and the kernels are combined as ``Σ γ_m K_m`` with the
   weights ``γ`` on the simplex, times a signal variance;
-* **transfer** (paper Eq. 2): a class's binary classifier can be given a *source task*, the
-  observations of a related prior object, labelled as positives and coupled to the new data by
-  the dependent kernel ``[[K_ss, λ K_st], [λ K_ts, K_tt]]`` with relatedness ``λ ∈ [0, 1]``.
+* **transfer** (paper Eq. 2): a class's binary classifier can be given *source tasks*
+  (:class:`TransferSource`), each the observations of a related prior object with their labels
+  (positives only, or that object's one-vs-all task), coupled to the new data by the dependent
+  kernel ``K = B ⊗ k`` with ``B_ts = λ_s`` (one source: ``[[K_ss, λ K_st], [λ K_ts, K_tt]]``).
 
-Hyper-parameters are found by maximising each classifier's Laplace log marginal likelihood with
-analytic gradients from several starts. The classifiers are fitted in parallel in Rust with the
+Hyper-parameters are found by maximising each classifier's Laplace log marginal likelihood
+(ML-II), or that plus a weak log hyper-prior (MAP-II, :class:`HyperPrior`), with analytic
+gradients from several starts. The classifiers are fitted in parallel in Rust with the
 GIL released. Models are saved with :meth:`LaplaceGPC.save` to a NumPy ``.npz`` file (no pickle).
 """
 
@@ -21,7 +23,7 @@ import inspect
 import json
 import zipfile
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -30,23 +32,169 @@ import numpy as np
 from aptkt import _core
 from aptkt.errors import KernelNotPositiveDefiniteError, NotFittedError
 
-__all__ = ["LaplaceGPC", "TransferSource", "kernel_matrix", "KernelNotPositiveDefiniteError"]
+__all__ = [
+    "HyperPrior",
+    "KernelNotPositiveDefiniteError",
+    "LaplaceGPC",
+    "TransferSource",
+    "kernel_matrix",
+]
 
 _FIXABLE = ("signal_variance", "length_scale", "modality_weights", "transfer_lambda")
 _APPROXIMATIONS = ("erf", "quadrature")
-_SAVE_FORMAT = "aptkt.LaplaceGPC/1"
+_SAVE_FORMAT = "aptkt.LaplaceGPC/2"
+#: Formats :meth:`LaplaceGPC.from_state` still reads (version 1: one positives-only source per
+#: class, no hyper-prior).
+_OLD_FORMATS = ("aptkt.LaplaceGPC/1",)
+#: Width of the "weak" hyper-prior: one standard deviation of ln ℓ or ln σ² is a factor of 10.
+_WEAK_SD = float(np.log(10.0))
+
+
+class TransferSource:
+    """A source task (a prior object) transferred into one class's binary classifier.
+
+    Parameters
+    ----------
+    X : array (n_source, n_features)
+        The source task's observations, in the target's feature space.
+    y : None or array (n_source,)
+        Their labels for this binary task. None: positives only (every row +1, the old object's
+        own observations). Otherwise the source object's one-vs-all task: +1 for its own
+        observations, -1 for the other old objects' (values in {+1, -1}, or booleans / {0, 1}
+        with 1 = positive).
+    transfer_lambda : float in [0, 1], optional
+        Relatedness λ_s of this source to the target task: the kernel between its rows and the
+        new observations is scaled by λ_s. Required when λ is fixed (the default); a starting
+        value (0.5 if None) when λ is learned.
+    name : str, optional
+        Names this source in ``hyperparameters_`` (default ``source<k>``).
+    """
+
+    __slots__ = ("X", "name", "transfer_lambda", "y")
+
+    def __init__(
+        self,
+        X: Any,
+        y: Any = None,
+        transfer_lambda: float | None = None,
+        *,
+        name: str | None = None,
+    ) -> None:
+        if y is not None and np.ndim(y) == 0:
+            raise TypeError(
+                "TransferSource(X, y, transfer_lambda): y must be an array of labels or None, "
+                f"got the scalar {y!r}; pass the relatedness as transfer_lambda=..."
+            )
+        X = _as_matrix(X, "TransferSource.X")
+        self.X = X
+        self.y = None if y is None else _binary_labels(y, X.shape[0])
+        if transfer_lambda is not None:
+            lam = float(transfer_lambda)
+            if not 0.0 <= lam <= 1.0:  # also rejects NaN
+                raise ValueError(f"transfer_lambda must lie in [0, 1], got {transfer_lambda!r}")
+            transfer_lambda = lam
+        self.transfer_lambda = transfer_lambda
+        self.name = None if name is None else str(name)
+
+    @property
+    def labels(self) -> np.ndarray:
+        """The ±1 labels this source enters its binary classifier with."""
+        return np.ones(self.X.shape[0]) if self.y is None else self.y
+
+    def __repr__(self) -> str:
+        kind = "positives" if self.y is None else f"{int((self.y > 0).sum())} positives"
+        return (
+            f"TransferSource({self.X.shape[0]} rows, {kind}, "
+            f"transfer_lambda={self.transfer_lambda!r}, name={self.name!r})"
+        )
+
+
+def _binary_labels(y: Any, n: int) -> np.ndarray:
+    """±1 float labels from {+1, -1}, {1, 0} or booleans, checked for length and finiteness."""
+    arr = np.asarray(y)
+    if arr.ndim != 1 or arr.shape[0] != n:
+        raise ValueError(
+            f"TransferSource.y must have one label per row of X ({n}), got shape {arr.shape}"
+        )
+    if arr.dtype.kind == "b":
+        return np.where(arr, 1.0, -1.0)
+    if arr.dtype.kind not in "iuf":
+        raise TypeError(f"TransferSource.y must hold numbers or booleans, got dtype {arr.dtype}")
+    values = arr.astype(np.float64)
+    if not np.all(np.isfinite(values)):
+        raise ValueError("TransferSource.y contains a non-finite value")
+    seen = set(np.unique(values).tolist())
+    if seen <= {1.0, -1.0}:
+        return values
+    if seen <= {0.0, 1.0}:
+        return np.where(values > 0, 1.0, -1.0)
+    raise ValueError(
+        f"TransferSource.y must be binary (+1/-1, 1/0 or booleans), got values {sorted(seen)}"
+    )
 
 
 @dataclass(frozen=True)
-class TransferSource:
-    """Observations of a related source task (a prior object) for one class's classifier.
+class HyperPrior:
+    """Weak hyper-priors for MAP-II fitting: log-normal densities on the hyper-parameters.
 
-    The rows of ``X`` enter that class's binary classifier as positives; ``transfer_lambda``
-    (λ ∈ [0, 1]) scales the kernel between them and the new observations.
+    Each modality's length-scale ℓ_m gets ``ln ℓ_m ~ N(ln(length_scale_centre · s_m),
+    length_scale_sd²)``, where ``s_m`` is that modality's data scale (the median pairwise
+    distance of the new observations); the signal variance gets ``ln σ² ~
+    N(ln signal_variance_centre, signal_variance_sd²)``. The optimiser then maximises
+    ``log p(y | θ) + log p(θ)`` instead of ``log p(y | θ)``; the reported
+    ``log_marginal_likelihood_`` stays ``log p(y | θ)``. A width of None leaves that
+    hyper-parameter flat. ``HyperPrior.weak()`` (``hyper_prior="weak"``): centred on the data
+    scale and σ² = 1, one standard deviation a factor of 10 either way.
     """
 
-    X: np.ndarray
-    transfer_lambda: float
+    length_scale_centre: float = 1.0
+    length_scale_sd: float | None = _WEAK_SD
+    signal_variance_centre: float = 1.0
+    signal_variance_sd: float | None = _WEAK_SD
+
+    def __post_init__(self) -> None:
+        for name in ("length_scale_centre", "signal_variance_centre"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0):
+                raise ValueError(f"HyperPrior.{name} must be a finite number > 0, got {v!r}")
+        for name in ("length_scale_sd", "signal_variance_sd"):
+            v = getattr(self, name)
+            if v is not None and not (
+                isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0
+            ):
+                raise ValueError(
+                    f"HyperPrior.{name} must be None or a finite number > 0, got {v!r}"
+                )
+
+    @classmethod
+    def weak(cls) -> HyperPrior:
+        return cls()
+
+    @classmethod
+    def resolve(cls, value: Any) -> HyperPrior | None:
+        """None, "weak" or a HyperPrior (or its fields as a mapping) to a HyperPrior or None."""
+        if value is None or isinstance(value, HyperPrior):
+            return value
+        if isinstance(value, str):
+            if value == "weak":
+                return cls.weak()
+            raise ValueError(f"hyper_prior must be None, 'weak' or a HyperPrior, got {value!r}")
+        if isinstance(value, Mapping):
+            return cls(**value)
+        raise TypeError(
+            f"hyper_prior must be None, 'weak' or a HyperPrior, got {type(value).__name__}"
+        )
+
+    def settings(self) -> dict[str, tuple[float, float] | None]:
+        """The binding's fields."""
+        return {
+            "prior_signal_variance": None
+            if self.signal_variance_sd is None
+            else (float(self.signal_variance_centre), float(self.signal_variance_sd)),
+            "prior_length_scale": None
+            if self.length_scale_sd is None
+            else (float(self.length_scale_centre), float(self.length_scale_sd)),
+        }
 
 
 def _as_matrix(X: Any, name: str, n_features: int | None = None) -> np.ndarray:
@@ -86,6 +234,81 @@ def _normalise_modalities(modalities: Any, n_features: int) -> tuple[list[str], 
         names.append(str(name))
         groups.append(idx)
     return names, groups
+
+
+_HYPER_KEYS = ("signal_variance", "length_scales", "modality_weights", "transfer_lambda")
+
+
+def _positive(value: Any, what: str) -> float:
+    v = float(value)
+    if not (np.isfinite(v) and v > 0):
+        raise ValueError(f"{what} must be a finite number > 0, got {value!r}")
+    return v
+
+
+def _per_modality(values: Any, names: list[str], what: str) -> list[float]:
+    """Values by modality name (a mapping), or a sequence in modality order, or one scalar."""
+    if isinstance(values, Mapping):
+        missing = [n for n in names if n not in values]
+        extra = [k for k in values if k not in names]
+        if missing or extra:
+            raise ValueError(f"{what} must name the modalities {names}, got {list(values)}")
+        return [float(values[n]) for n in names]
+    arr = np.atleast_1d(np.asarray(values, dtype=np.float64))
+    if arr.size == 1:
+        arr = np.repeat(arr, len(names))
+    if arr.size != len(names):
+        raise ValueError(f"{what} has {arr.size} values for {len(names)} modalities")
+    return arr.tolist()
+
+
+def _as_source(value: Any, where: str) -> TransferSource:
+    if isinstance(value, TransferSource):
+        return value
+    if isinstance(value, tuple) and len(value) == 2 and np.ndim(value[1]) == 0:
+        return TransferSource(value[0], transfer_lambda=value[1])
+    raise TypeError(
+        f"{where} must be a TransferSource, an (X, transfer_lambda) tuple or a list of those, "
+        f"got {type(value).__name__}"
+    )
+
+
+def _normalise_sources(
+    sources: Mapping[Any, Any] | None, classes: np.ndarray, n_features: int, lambda_free: bool
+) -> dict[Any, list[TransferSource]]:
+    """Class label -> list of checked sources with names (``source<k>`` by default)."""
+    used: dict[Any, list[TransferSource]] = {}
+    for label, value in (sources or {}).items():
+        where = f"sources[{label!r}]"
+        if np.flatnonzero(classes == label).size != 1:
+            raise ValueError(
+                f"sources: class {label!r} does not occur in y (classes: {classes.tolist()})"
+            )
+        items = value if isinstance(value, list) else [value]
+        if not items:
+            continue
+        out = []
+        for k, item in enumerate(items):
+            src = _as_source(item, where)
+            if src.X.shape[1] != n_features:
+                raise ValueError(f"{where}.X has {src.X.shape[1]} features, expected {n_features}")
+            if src.transfer_lambda is None and not lambda_free:
+                raise ValueError(
+                    f"{where}: transfer_lambda is required while λ is fixed "
+                    "(fixed includes 'transfer_lambda')"
+                )
+            name = src.name if src.name is not None else f"source{k}"
+            out.append(TransferSource(src.X, src.y, src.transfer_lambda, name=name))
+        names = [s.name for s in out]
+        if len(set(names)) != len(names):
+            raise ValueError(f"{where}: source names must differ, got {names}")
+        used[label] = out
+    return used
+
+
+def _start_lambda(source: TransferSource) -> float:
+    """λ's initial value: the source's, or the middle of [0, 1] when it is to be learned."""
+    return 0.5 if source.transfer_lambda is None else float(source.transfer_lambda)
 
 
 def _seed(random_state: Any) -> int:
@@ -144,6 +367,9 @@ class LaplaceGPC:
         ~1e-5) or Gauss-Legendre quadrature of the exact integrand (error < 1e-9).
     n_jobs : int, optional
         Threads for the per-class fits; default: all cores.
+    hyper_prior : None, "weak" or HyperPrior
+        None: plain ML-II (maximise the log marginal likelihood). Otherwise MAP-II with the
+        given weak log-normal hyper-priors (see :class:`HyperPrior`).
 
     Attributes
     ----------
@@ -157,7 +383,11 @@ class LaplaceGPC:
     hyperparameter_names_ : list of str
     modality_names_ : list of str
     sources_ : dict
-        Transfer sources used, by class label.
+        Transfer sources used, by class label: a list of :class:`TransferSource` each.
+    hyperparameters_ : dict
+        Fitted hyper-parameters by class label, as named values (see the property).
+    log_hyper_prior_ : ndarray of shape (n_classifiers,)
+        Log hyper-prior density at ``theta_`` (0 for ML-II).
     """
 
     def __init__(
@@ -179,6 +409,7 @@ class LaplaceGPC:
         max_jitter: float = 1e-6,
         approximation: str = "erf",
         n_jobs: int | None = None,
+        hyper_prior: HyperPrior | str | None = None,
     ) -> None:
         self.length_scale = length_scale
         self.signal_variance = signal_variance
@@ -196,6 +427,7 @@ class LaplaceGPC:
         self.max_jitter = max_jitter
         self.approximation = approximation
         self.n_jobs = n_jobs
+        self.hyper_prior = hyper_prior
 
     # -- scikit-learn conventions -------------------------------------------------------------
     @classmethod
@@ -276,26 +508,68 @@ class LaplaceGPC:
             signal_variance=float(self.signal_variance),
             length_scales=length_scales,
             weights=weights,
-            free=tuple(k not in fixed for k in _FIXABLE),
+            free={k: k not in fixed for k in _FIXABLE},
             signal_variance_bounds=tuple(float(v) for v in self.signal_variance_bounds),
             length_scale_bounds=tuple(float(v) for v in self.length_scale_bounds),
+            hyper_prior=HyperPrior.resolve(self.hyper_prior),
+        )
+
+    def _settings(self, spec: dict[str, Any]) -> _core.FitSettings:
+        """The binding's named settings object for this estimator's parameters."""
+        free = spec["free"]
+        return _core.FitSettings(
+            modalities=spec["modalities"],
+            signal_variance=spec["signal_variance"],
+            length_scales=spec["length_scales"],
+            weights=spec["weights"],
+            free_signal_variance=free["signal_variance"],
+            free_length_scales=free["length_scale"],
+            free_weights=free["modality_weights"],
+            free_lambda=free["transfer_lambda"],
+            signal_variance_bounds=spec["signal_variance_bounds"],
+            length_scale_bounds=spec["length_scale_bounds"],
+            optimize=bool(self.optimize),
+            n_restarts=int(self.n_restarts),
+            seed=_seed(self.random_state),
+            max_iter=int(self.max_iter),
+            newton_max_iter=int(self.newton_max_iter),
+            newton_tol=float(self.newton_tol),
+            max_jitter=float(self.max_jitter),
+            approximation=self.approximation,
+            n_threads=int(self.n_jobs or 0),
+            **(spec["hyper_prior"].settings() if spec["hyper_prior"] is not None else {}),
         )
 
     def fit(
         self,
         X: Any,
         y: Any,
-        sources: Mapping[Any, TransferSource | tuple[Any, float]] | None = None,
+        sources: Mapping[Any, Any] | None = None,
+        *,
+        hyperparameters: Mapping[Any, Mapping[str, Any]] | None = None,
     ) -> LaplaceGPC:
         """Fit one binary classifier per class (one in total for two classes without sources).
 
-        ``sources`` maps a class label to a :class:`TransferSource` (or ``(X_source, λ)``):
-        that class's classifier then also learns from the source observations as positives,
-        through the dependent kernel.
-        """
-        return self._fit(X, y, sources, thetas=None)
+        ``sources`` maps a class label to a :class:`TransferSource`, to ``(X_source, λ)``
+        (positives only), or to a list of those (several sources at once, each with its own
+        λ): that class's classifier then also learns from the source tasks through the
+        dependent kernel.
 
-    def _fit(self, X: Any, y: Any, sources: Any, thetas: np.ndarray | None) -> LaplaceGPC:
+        ``hyperparameters`` maps class labels to starting values for their classifier, in the
+        form of ``hyperparameters_`` (keys ``signal_variance``, ``length_scales``,
+        ``modality_weights``, ``transfer_lambda``; any may be left out). Hyper-parameters that
+        are fixed stay at these values; the fixed λ always comes from the sources.
+        """
+        return self._fit(X, y, sources, thetas=None, starts=hyperparameters)
+
+    def _fit(
+        self,
+        X: Any,
+        y: Any,
+        sources: Any,
+        thetas: np.ndarray | None,
+        starts: Mapping[Any, Mapping[str, Any]] | None = None,
+    ) -> LaplaceGPC:
         X = _as_matrix(X, "X")
         y = np.asarray(y)
         if y.ndim != 1:
@@ -308,46 +582,28 @@ class LaplaceGPC:
                 f"LaplaceGPC needs at least two classes in y, got only {classes.tolist()!r}"
             )
         spec = self._spec(X.shape[1])
-        source_list: list[tuple[np.ndarray, float] | None] = [None] * classes.size
-        used: dict[Any, TransferSource] = {}
-        for label, src in (sources or {}).items():
-            if not isinstance(src, TransferSource):
-                src = TransferSource(*src)
-            where = np.flatnonzero(classes == label)
-            if where.size != 1:
-                raise ValueError(
-                    f"sources: class {label!r} does not occur in y (classes: {classes.tolist()})"
-                )
-            lam = float(src.transfer_lambda)
-            if not 0.0 <= lam <= 1.0:
-                raise ValueError(
-                    f"sources[{label!r}]: transfer_lambda must lie in [0, 1], got {lam}"
-                )
-            xs = _as_matrix(src.X, f"sources[{label!r}].X", X.shape[1])
-            source_list[int(where[0])] = (xs, lam)
-            used[label] = TransferSource(xs, lam)
+        used = _normalise_sources(sources, classes, X.shape[1], spec["free"]["transfer_lambda"])
+        source_lists: list[list[tuple[np.ndarray, np.ndarray, float]]] = [
+            [] for _ in range(classes.size)
+        ]
+        for label, lst in used.items():
+            k = int(np.flatnonzero(classes == label)[0])
+            source_lists[k] = [(s.X, s.labels, _start_lambda(s)) for s in lst]
+        transfer = bool(used)
+        n_lambdas = max((len(v) for v in used.values()), default=0)
+        start_rows = None
+        if starts is not None:
+            start_rows = self._start_rows(
+                starts, classes, spec, transfer, n_lambdas, spec["free"]["transfer_lambda"]
+            )
         model = _core.fit_gpc(
             X,
             labels.astype(np.int64),
             int(classes.size),
-            source_list,
-            spec["modalities"],
-            spec["signal_variance"],
-            spec["length_scales"],
-            spec["weights"],
-            spec["free"],
-            spec["signal_variance_bounds"],
-            spec["length_scale_bounds"],
-            bool(self.optimize),
-            int(self.n_restarts),
-            _seed(self.random_state),
-            int(self.max_iter),
-            int(self.newton_max_iter),
-            float(self.newton_tol),
-            float(self.max_jitter),
-            self.approximation,
-            int(self.n_jobs or 0),
+            source_lists,
+            self._settings(spec),
             None if thetas is None else np.ascontiguousarray(thetas, dtype=np.float64),
+            start_rows,
         )
         self._model = model
         self.classes_ = classes
@@ -359,18 +615,80 @@ class LaplaceGPC:
         self.modalities_ = spec["modalities"]
         self.theta_ = np.asarray(model.theta)
         self.log_marginal_likelihood_ = np.asarray(model.log_marginal_likelihood_value)
+        self.log_hyper_prior_ = np.asarray(model.log_hyper_prior)
         self.jitter_ = np.asarray(model.jitter)
         self.converged_ = np.asarray(model.optimizer_converged)
         self.n_evaluations_ = np.asarray(model.evaluations)
-        self.hyperparameter_names_ = self._names(model.transfer)
+        self.hyperparameter_names_ = self._names(model.n_lambdas)
         return self
 
-    def _names(self, transfer: bool) -> list[str]:
+    def _start_rows(
+        self,
+        starts: Mapping[Any, Mapping[str, Any]],
+        classes: np.ndarray,
+        spec: dict[str, Any],
+        transfer: bool,
+        n_lambdas: int,
+        lambda_free: bool,
+    ) -> list[list[float] | None]:
+        """Per-classifier starting theta rows (NaN: the constructor's value) from named values."""
+        names = spec["modality_names"]
+        m = len(names)
+        unknown = [label for label in starts if not np.any(classes == label)]
+        if unknown:
+            raise ValueError(
+                f"hyperparameters: class(es) {unknown!r} do not occur in y "
+                f"(classes: {classes.tolist()})"
+            )
+        positives = [1] if classes.size == 2 and not transfer else range(classes.size)
+        rows: list[list[float] | None] = []
+        for k in positives:
+            given = starts.get(classes[k])
+            if given is None and classes.size == 2 and not transfer:
+                given = starts.get(classes[0])  # the single classifier serves both classes
+            if given is None:
+                rows.append(None)
+                continue
+            bad = set(given) - set(_HYPER_KEYS)
+            if bad:
+                raise ValueError(
+                    f"hyperparameters[{classes[k]!r}]: unknown key(s) {sorted(bad)}; "
+                    f"choose from {list(_HYPER_KEYS)}"
+                )
+            row = [np.nan] * (1 + m + (m if m > 1 else 0) + n_lambdas)
+            what = f"hyperparameters[{classes[k]!r}]"
+            if "signal_variance" in given:
+                row[0] = float(
+                    np.log(_positive(given["signal_variance"], f"{what}.signal_variance"))
+                )
+            if "length_scales" in given:
+                ls = _per_modality(given["length_scales"], names, f"{what}.length_scales")
+                row[1 : 1 + m] = [float(np.log(_positive(v, f"{what}.length_scales"))) for v in ls]
+            if "modality_weights" in given and m > 1:
+                w = np.asarray(
+                    _per_modality(given["modality_weights"], names, f"{what}.modality_weights"),
+                    dtype=np.float64,
+                )
+                if not (np.all(np.isfinite(w)) and np.all(w >= 0) and w.sum() > 0):
+                    raise ValueError(f"{what}.modality_weights must be >= 0 with a positive sum")
+                with np.errstate(divide="ignore"):
+                    row[1 + m : 1 + 2 * m] = np.maximum(np.log(w / w.sum()), -50.0).tolist()
+            if "transfer_lambda" in given and lambda_free and n_lambdas:
+                lam = given["transfer_lambda"]
+                values = list(lam.values()) if isinstance(lam, Mapping) else np.ravel(lam).tolist()
+                for i, v in enumerate(values[:n_lambdas]):
+                    row[len(row) - n_lambdas + i] = float(v)
+            rows.append(row)
+        return rows
+
+    def _names(self, n_lambdas: int) -> list[str]:
         names = ["log_signal_variance"] + [f"log_length_scale[{m}]" for m in self.modality_names_]
         if len(self.modality_names_) > 1:
             names += [f"weight_logit[{m}]" for m in self.modality_names_]
-        if transfer:
+        if n_lambdas == 1:
             names.append("transfer_lambda")
+        else:
+            names += [f"transfer_lambda[{s}]" for s in range(n_lambdas)]
         return names
 
     def _check_fitted(self) -> None:
@@ -402,7 +720,43 @@ class LaplaceGPC:
         e = np.exp(logits - logits.max(axis=1, keepdims=True))
         return e / e.sum(axis=1, keepdims=True)
 
+    @property
+    def hyperparameters_(self) -> dict[Any, dict[str, Any]]:
+        """Fitted hyper-parameters by class label, as named natural-scale values.
+
+        Each entry: ``signal_variance`` (float), ``length_scales`` and ``modality_weights``
+        (dicts by modality name) and ``transfer_lambda`` (dict by source name; empty for a class
+        without sources). With two classes and no transfer one classifier serves both classes,
+        and both entries hold its values.
+        """
+        self._check_fitted()
+        sv, ls, gw = self.signal_variance_, self.length_scales_, self.modality_weights_
+        n_lambdas = self._model.n_lambdas
+        single = self.theta_.shape[0] == 1
+        out: dict[Any, dict[str, Any]] = {}
+        for k, label in enumerate(self.classes_.tolist()):
+            r = 0 if single else k
+            srcs = self.sources_.get(label, [])
+            lambdas = self.theta_[r, self.theta_.shape[1] - n_lambdas :] if n_lambdas else []
+            out[label] = {
+                "signal_variance": float(sv[r]),
+                "length_scales": {m: float(v) for m, v in zip(self.modality_names_, ls[r])},
+                "modality_weights": {m: float(v) for m, v in zip(self.modality_names_, gw[r])},
+                "transfer_lambda": {s.name: float(v) for s, v in zip(srcs, lambdas)},
+            }
+        return out
+
     # -- prediction ---------------------------------------------------------------------------
+    def predict_proba_binary(self, X: Any) -> np.ndarray:
+        """Each one-vs-all classifier's own ``p(y = +1 | x)``, shape (n_samples, n_classes).
+
+        Not normalised across classes (rows need not sum to one): the probability that a
+        binary classifier gives its own class, as relatedness needs it. With two classes and
+        a single classifier, the first column is the complement of the second.
+        """
+        self._check_fitted()
+        return np.asarray(self._model.predict_proba_binary(_as_matrix(X, "X", self.n_features_in_)))
+
     def predict_proba(self, X: Any) -> np.ndarray:
         """Class probabilities (n_samples, n_classes): one-vs-all probabilities normalised."""
         self._check_fitted()
@@ -423,17 +777,19 @@ class LaplaceGPC:
         return float(np.mean(self.predict(X) == np.asarray(y)))
 
     def log_marginal_likelihood(
-        self, theta: Any = None, eval_gradient: bool = False
+        self, theta: Any = None, eval_gradient: bool = False, *, include_prior: bool = False
     ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """Laplace log marginal likelihood of every classifier, in ``classes_`` order.
 
         ``theta``: None (the fitted values), one row applied to every classifier, or one row
         per classifier. With ``eval_gradient`` also returns the gradient with respect to every
-        entry of theta (fixed ones included), shape (n_classifiers, n_hyperparameters).
+        entry of theta (fixed ones included), shape (n_classifiers, n_hyperparameters). With
+        ``include_prior``, the log hyper-prior is added: the objective MAP-II maximises.
         """
         self._check_fitted()
         if theta is None and not eval_gradient:
-            return self.log_marginal_likelihood_.copy()
+            lml = self.log_marginal_likelihood_.copy()
+            return lml + self.log_hyper_prior_ if include_prior else lml
         t = self.theta_ if theta is None else np.asarray(theta, dtype=np.float64)
         if t.ndim == 1:
             t = np.tile(t, (self.theta_.shape[0], 1))
@@ -442,7 +798,7 @@ class LaplaceGPC:
                 f"theta must have shape {self.theta_.shape[1:]} or {self.theta_.shape}, got {t.shape}"
             )
         lml, grad = self._model.log_marginal_likelihood(
-            np.ascontiguousarray(t), bool(eval_gradient)
+            np.ascontiguousarray(t), bool(eval_gradient), bool(include_prior)
         )
         return (np.asarray(lml), np.asarray(grad)) if eval_gradient else np.asarray(lml)
 
@@ -450,43 +806,68 @@ class LaplaceGPC:
     def state(self) -> dict[str, np.ndarray]:
         """Arrays and JSON metadata that rebuild this fitted model exactly (see :meth:`from_state`)."""
         self._check_fitted()
+        source_meta = []
+        arrays = {
+            "X": self.X_train_,
+            "y": np.searchsorted(self.classes_, self.y_train_).astype(np.int64),
+            "theta": self.theta_,
+        }
+        i = 0
+        for label, lst in self.sources_.items():
+            for src in lst:
+                source_meta.append(
+                    {
+                        "class": _jsonable(label),
+                        "name": src.name,
+                        "transfer_lambda": src.transfer_lambda,
+                        "labelled": src.y is not None,
+                    }
+                )
+                arrays[f"source_X_{i}"] = src.X
+                if src.y is not None:
+                    arrays[f"source_y_{i}"] = src.y
+                i += 1
         meta = {
             "format": _SAVE_FORMAT,
             "params": {
                 k: _jsonable(v) for k, v in self.get_params().items() if k != "random_state"
             },
             "classes": self.classes_.tolist(),
-            "source_classes": [_jsonable(k) for k in self.sources_],
+            "sources": source_meta,
         }
-        arrays = {
-            "meta": np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
-            "X": self.X_train_,
-            "y": np.searchsorted(self.classes_, self.y_train_).astype(np.int64),
-            "theta": self.theta_,
-        }
-        for i, src in enumerate(self.sources_.values()):
-            arrays[f"source_X_{i}"] = src.X
-            arrays[f"source_lambda_{i}"] = np.asarray(src.transfer_lambda)
+        arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
         return arrays
 
     @classmethod
     def from_state(cls, arrays: Mapping[str, np.ndarray]) -> LaplaceGPC:
+        """Rebuild a model from :meth:`state`'s arrays (this format or version 1)."""
         meta = json.loads(bytes(np.asarray(arrays["meta"], dtype=np.uint8)).decode())
-        if meta.get("format") != _SAVE_FORMAT:
-            raise ValueError(f"not a saved LaplaceGPC (format {meta.get('format')!r})")
+        fmt = meta.get("format")
+        if fmt != _SAVE_FORMAT and fmt not in _OLD_FORMATS:
+            raise ValueError(f"not a saved LaplaceGPC (format {fmt!r})")
         params = dict(meta["params"])
         params["fixed"] = tuple(params["fixed"])
         for key in ("length_scale_bounds", "signal_variance_bounds"):
             params[key] = tuple(params[key])
+        if isinstance(params.get("hyper_prior"), Mapping):
+            params["hyper_prior"] = HyperPrior(**params["hyper_prior"])
         model = cls(**params)
         classes = np.asarray(meta["classes"])
         y = classes[np.asarray(arrays["y"])]
-        sources = {
-            label: TransferSource(
-                np.asarray(arrays[f"source_X_{i}"]), float(arrays[f"source_lambda_{i}"])
-            )
-            for i, label in enumerate(meta["source_classes"])
-        }
+        sources: dict[Any, list[TransferSource]] = {}
+        if fmt == "aptkt.LaplaceGPC/1":  # one positives-only source per class
+            for i, label in enumerate(meta["source_classes"]):
+                lam = float(arrays[f"source_lambda_{i}"])
+                sources[label] = [TransferSource(np.asarray(arrays[f"source_X_{i}"]), None, lam)]
+        else:
+            for i, entry in enumerate(meta["sources"]):
+                src = TransferSource(
+                    np.asarray(arrays[f"source_X_{i}"]),
+                    np.asarray(arrays[f"source_y_{i}"]) if entry["labelled"] else None,
+                    entry["transfer_lambda"],
+                    name=entry["name"],
+                )
+                sources.setdefault(entry["class"], []).append(src)
         return model._fit(np.asarray(arrays["X"]), y, sources, thetas=np.asarray(arrays["theta"]))
 
     def save(self, path: str | Path) -> None:
@@ -510,6 +891,8 @@ def _same(a: Any, b: Any) -> bool:
 
 
 def _jsonable(value: Any) -> Any:
+    if isinstance(value, HyperPrior):
+        return asdict(value)
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, np.ndarray):
@@ -528,15 +911,20 @@ def kernel_matrix(
     theta: Any,
     *,
     modalities: Mapping[str, Sequence[int]] | Sequence[Sequence[int]] | None = None,
-    n_source: int = 0,
+    n_source: int | Sequence[int] = 0,
 ) -> np.ndarray:
     """The kernel matrix of ``X`` at ``theta`` (layout as ``LaplaceGPC.theta_``).
 
-    With ``n_source > 0`` the first ``n_source`` rows form the source block of the dependent
-    transfer kernel and theta's last entry is λ ∈ [0, 1].
+    ``n_source``: the first rows of ``X`` that belong to source tasks, as one count (a single
+    source task) or a sequence of counts (several source tasks in order); the remaining rows
+    are the target task. Theta then ends with one λ ∈ [-1, 1] per source task.
     """
     X = _as_matrix(X, "X")
     _, groups = _normalise_modalities(modalities, X.shape[1])
-    return np.asarray(
-        _core.kernel_matrix(X, [float(v) for v in np.ravel(theta)], groups, int(n_source))
-    )
+    if np.ndim(n_source) == 0:
+        sizes = [int(n_source)] if int(n_source) > 0 else []
+    else:
+        sizes = [int(v) for v in n_source]
+    if any(v < 0 for v in sizes):
+        raise ValueError(f"n_source must hold counts >= 0, got {n_source!r}")
+    return np.asarray(_core.kernel_matrix(X, [float(v) for v in np.ravel(theta)], groups, sizes))

@@ -13,7 +13,7 @@ import pytest
 
 from aptkt.cli import main
 from aptkt.experiments.figures import FIGURES, fig7
-from aptkt.experiments.figures.base import Context
+from aptkt.experiments.figures.base import STRESS_CUTOFF, STRESS_NO_CUTOFF, Context
 from aptkt.experiments.reproduce import _paper_numbers
 from aptkt.experiments.scale import Scale
 
@@ -44,9 +44,26 @@ def test_every_figure_writes_its_files_and_report(quick_run):
     assert config["seed"] == 0 and config["quick"] is True
     assert config["scale"]["name"] == "quick" and config["software_version"]
     assert "--seed 0" in config["repeat_with"]
-    # The paper's layout: Fig. 11 has one panel per action and one for all actions.
+    # The paper's layout: Fig. 11 has one panel per action and one for all actions; beyond it,
+    # the stress panel (λ = 1 from the least related prior, with and without the cut-off).
     curves = read(quick_run / "fig11" / "curves.csv")
-    assert {r["panel"] for r in curves} == set(Scale.quick().actions) | {"all"}
+    assert {r["panel"] for r in curves} == set(Scale.quick().actions) | {"all", "stress"}
+    assert {r["method"] for r in curves if r["panel"] == "stress"} == {
+        "baseline",
+        "APTKT",
+        STRESS_CUTOFF,
+        STRESS_NO_CUTOFF,
+    }
+    fig11_report = (quick_run / "fig11" / "report.md").read_text()
+    assert "transfer rate" in fig11_report and "stress" in fig11_report
+    # The stress runs with the cut-off never transfer more than those without it.
+    rows = read(quick_run / "fig11" / "results.csv")
+    taken = defaultdict(int)
+    for r in rows:
+        if r["panel"] == "stress":
+            taken[r["method"]] += int(r["transfers"])
+    assert taken[STRESS_CUTOFF] <= taken[STRESS_NO_CUTOFF]
+    assert taken[STRESS_NO_CUTOFF] > 0  # without the cut-off, something is always transferred
 
 
 def test_per_trial_bookkeeping_in_the_results(quick_run):
@@ -55,7 +72,13 @@ def test_per_trial_bookkeeping_in_the_results(quick_run):
     runs = defaultdict(list)
     for r in rows:
         runs[(r["method"], r["group"], r["trial"])].append(int(r["step"]))
-    assert len(runs) == 2 * s.groups * s.trials
+    assert len(runs) == 3 * s.groups * s.trials  # baseline, control, APTKT
+    assert {m for m, _, _ in runs} == {"baseline", "control", "APTKT"}
+    # Every classifier's fitted hyper-parameters are columns of the results.
+    assert any(k.startswith("hp[") and k.endswith("].signal_variance") for k in rows[0])
+    assert all(float(r["median_length_scale"]) > 0 for r in rows)
+    # The baseline uses nothing of the prior, so it never transfers; nor does the control.
+    assert all(int(r["transfers"]) == 0 for r in rows if r["method"] != "APTKT")
     assert all(sorted(v) == list(range(s.budget + 1)) for v in runs.values())
     specs = [
         json.loads(line) for line in (quick_run / "fig7" / "specs.jsonl").read_text().splitlines()

@@ -74,9 +74,9 @@ def test_bad_input_errors():
     with pytest.raises(ValueError, match="non-finite"):
         model.predict_proba(np.full((1, 3), np.inf))
     with pytest.raises(ValueError, match="does not occur in y"):
-        LaplaceGPC().fit(X, y, sources={9: TransferSource(X[:2], 0.5)})
+        LaplaceGPC().fit(X, y, sources={9: TransferSource(X[:2], transfer_lambda=0.5)})
     with pytest.raises(ValueError, match=r"\[0, 1\]"):
-        LaplaceGPC().fit(X, y, sources={1: TransferSource(X[:2], 1.5)})
+        LaplaceGPC().fit(X, y, sources={1: (X[:2], 1.5)})
     with pytest.raises(ValueError, match="unknown hyper-parameter"):
         LaplaceGPC(fixed=("gamma",)).fit(X, y)
     with pytest.raises(ValueError, match="approximation"):
@@ -134,7 +134,7 @@ def test_save_and_load_round_trip(tmp_path):
     labels = np.array(["a", "b", "c"])[y]
     source = make_blobs(5, 1, 4, seed=12)[0]
     model = LaplaceGPC(modalities={"f": [0, 1], "t": [2, 3]}, random_state=1).fit(
-        X, labels, sources={"b": TransferSource(source, 0.7)}
+        X, labels, sources={"b": TransferSource(source, transfer_lambda=0.7)}
     )
     path = tmp_path / "model.npz"
     model.save(path)

@@ -56,7 +56,7 @@ def test_transfer_kernel_including_lambda():
     source = make_blobs(6, 1, 4, seed=4)[0]
     model = LaplaceGPC(
         modalities=[[0, 1], [2, 3]], optimize=False, newton_tol=1e-14, newton_max_iter=200
-    ).fit(X, y, sources={1: TransferSource(source, 0.6)})
+    ).fit(X, y, sources={1: TransferSource(source, transfer_lambda=0.6)})
     assert model.hyperparameter_names_[-1] == "transfer_lambda"
     theta = np.tile([0.9, 0.1, -0.2, 0.3, -0.3, 0.45], (3, 1))
     check(model, theta)

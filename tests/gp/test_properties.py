@@ -35,7 +35,7 @@ def test_kernels_are_symmetric_psd_for_lambda_in_unit_interval(
 
 def test_lambda_outside_unit_interval_is_rejected():
     X = np.zeros((3, 2))
-    with pytest.raises(ValueError, match=r"lambda must lie in \[0, 1\]"):
+    with pytest.raises(ValueError, match=r"lambda must lie in \[-1, 1\]"):
         kernel_matrix(X, [0.0, 0.0, 1.5], n_source=1)
 
 

@@ -45,3 +45,33 @@ def test_errors_are_clear(data, tmp_path, capsys):
     assert "not a prior-knowledge file" in capsys.readouterr().err
     assert main(["prior", "build", str(tmp_path / "missing.h5"), "-o", str(bad)]) == 1
     assert "no such data set" in capsys.readouterr().err
+
+
+def test_inspect_flags_an_effectively_constant_kernel(tmp_path, capsys):
+    """A length-scale far beyond the data's range makes a modality's kernel constant: inspect
+    says so, whatever the modality's weight (seen: texture weight 0.36 at length-scale 2.9e4)."""
+    from aptkt.learning.observations import Observations
+
+    rng = np.random.default_rng(0)
+    objects = np.repeat(["a", "b", "c"], 6)
+    force = np.repeat([0.0, 1.0, 2.0], 6)[:, None] + 0.1 * rng.standard_normal((18, 1))
+    texture = np.repeat([[0.0, 1, 0], [1, 0, 0], [0, 0, 1]], 6, axis=0) + 0.2 * rng.standard_normal(
+        (18, 3)
+    )
+    table = {"S3": Observations("S3", {"force": force, "texture": texture}, objects)}
+    prior = PriorKnowledge.build(table)
+    theta = prior["S3"].model.theta_
+    theta[:, 1:3] = 0.0  # every length-scale 1: both kernels vary over the data
+    out = tmp_path / "p.npz"
+    prior.save(out)
+    capsys.readouterr()
+    assert main(["prior", "inspect", str(out), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["actions"][0]["uninformative"] == {}
+
+    k = prior["S3"].model.modality_names_.index("texture")
+    theta[1, 1 + k] = np.log(2.9e4)  # class "b": a flat texture kernel
+    prior.save(out)
+    assert main(["prior", "inspect", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "texture: UNINFORMATIVE for b" in text and "2.9e+04" in text
+    assert "force: UNINFORMATIVE" not in text

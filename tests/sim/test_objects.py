@@ -99,3 +99,33 @@ def test_duplicates_and_broken_toml(tmp_path):
         load_library(tmp_path / "missing.toml")
     with pytest.raises(ConfigError, match="schema_version"):
         load_library(write(tmp_path, GOOD.replace("schema_version = 1", "schema_version = 9")))
+
+
+RELATION = """
+  [[object.relation]]
+  prior = "rough_sponge"
+  modality = "force"
+  actions = ["P1", "P2"]
+  why = "soft foam"
+"""
+
+
+def test_relations_name_prior_modality_and_actions(tmp_path):
+    lib = load_library(write(tmp_path, GOOD.replace('related = ["rough_sponge"]', "") + RELATION))
+    (rel,) = lib["my_block"].relations
+    assert (rel.prior, rel.modality, rel.actions, rel.why) == (
+        "rough_sponge",
+        "force",
+        ("P1", "P2"),
+        "soft foam",
+    )
+    assert lib["my_block"].related == ("rough_sponge",)  # a relation makes the prior related
+    for old, new, field in [
+        ('actions = ["P1", "P2"]', "actions = []", "relation[0].actions"),
+        ('prior = "rough_sponge"', "", "relation[0].prior"),
+        ('why = "soft foam"', 'why = "soft foam"\n  wy = 1', "relation[0].wy"),
+    ]:
+        with pytest.raises(ConfigError, match=field.replace("[", r"\[").replace("]", r"\]")):
+            load_library(write(tmp_path, GOOD + RELATION.replace(old, new)))
+    with pytest.raises(ConfigError, match="unknown object 'no_such_prior'"):
+        load_library(write(tmp_path, GOOD + RELATION.replace("rough_sponge", "no_such_prior")))

@@ -36,7 +36,7 @@ class Movement(str, enum.Enum):
     STATIC_CONTACT = "static_contact"
 
 
-#: Which feature modalities each movement yields (DESIGN.md §4, paper Table 2).
+#: Which feature modalities each movement yields (docs/design.md §4, paper Table 2).
 MODALITIES_BY_MOVEMENT: Mapping[Movement, tuple[str, ...]] = {
     Movement.PRESS: ("force", "thermal"),
     Movement.SLIDE: ("texture", "thermal"),

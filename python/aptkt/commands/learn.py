@@ -68,9 +68,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--transfer",
-        choices=("paper", "none"),
+        choices=("paper", "multi", "none", "control"),
         default="paper",
-        help="paper: APTKT's transfer (Eq. 2-3); none: the baseline (default %(default)s)",
+        help="paper: APTKT's transfer (Eq. 2-3); multi: from every prior above eps_neg; "
+        "none: the baseline (nothing of the prior); control: the prior's feature space without "
+        "transfer (default %(default)s)",
     )
     p.add_argument(
         "--auxiliary",

@@ -9,6 +9,11 @@ from pathlib import Path
 
 from aptkt.errors import ConfigError
 
+#: A modality's RBF kernel that varies by less than this over the training data (between the two
+#: most distant observations) is effectively constant: it cannot tell observations apart, so
+#: its weight γ says nothing about how informative the modality is.
+CONSTANT_KERNEL_VARIATION = 0.01
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("prior", help="build or inspect prior tactile knowledge")
@@ -108,6 +113,8 @@ def run_inspect(args: argparse.Namespace) -> int:
             str(exc) if str(args.file) in str(exc) else f"{args.file}: {exc}"
         ) from None
     rows = prior.summary()
+    for r in rows:
+        r["uninformative"] = uninformative_modalities(prior[r["action"]])
     if args.json:
         print(
             json.dumps(
@@ -130,4 +137,35 @@ def run_inspect(args: argparse.Namespace) -> int:
             f"  {r['action']}: {r['observations']} observations; {mods}; "
             f"log marginal likelihood per object {r['log_marginal_likelihood']}"
         )
+        for m, info in r["uninformative"].items():
+            print(
+                f"    {m}: UNINFORMATIVE for {', '.join(info['objects'])} — the length-scale "
+                f"(up to {info['length_scale']:.3g}) is far beyond the data's range "
+                f"({info['range']:.3g}), so the kernel is effectively constant whatever its weight"
+            )
     return 0
+
+
+def uninformative_modalities(action_prior) -> dict[str, dict]:
+    """Modalities whose kernel is effectively constant over the prior's own observations for
+    some objects' classifiers: ``1 - exp(-d_max^2 / (2 l^2)) < CONSTANT_KERNEL_VARIATION`` with
+    ``d_max`` the largest distance between two observations in that modality's features."""
+    import numpy as np
+
+    X, groups = action_prior.features(action_prior.observations)
+    model = action_prior.model
+    scales = np.atleast_2d(model.length_scales_)
+    out = {}
+    for k, name in enumerate(model.modality_names_):
+        Z = X[:, groups[name]]
+        sq = np.sum(Z**2, axis=1)
+        d2 = float(np.max(sq[:, None] + sq[None, :] - 2 * Z @ Z.T, initial=0.0))
+        variation = 1.0 - np.exp(-max(d2, 0.0) / (2.0 * scales[:, k] ** 2))
+        flat = [str(c) for c, v in zip(model.classes_, variation) if v < CONSTANT_KERNEL_VARIATION]
+        if flat:
+            out[name] = {
+                "objects": flat,
+                "length_scale": float(scales[variation < CONSTANT_KERNEL_VARIATION, k].max()),
+                "range": float(np.sqrt(max(d2, 0.0))),
+            }
+    return out

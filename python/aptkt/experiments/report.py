@@ -22,7 +22,8 @@ __all__ = [
     "markdown_table",
 ]
 
-#: The paper's headline figures (Sensors 2019, §5.3–5.6; DESIGN.md §6). Gains are fractions.
+#: The paper's headline figures (Feng, Kaboli & Cheng, Sensors 18(2):634, 2018, §5.3–5.6;
+#: docs/design.md §6). Gains are fractions.
 PAPER: Mapping[str, Any] = {
     "fig6_beats": ("P1", "P2", "C1", "S4"),
     "fig6_matches": ("S1", "S2", "S3"),

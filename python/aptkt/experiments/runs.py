@@ -66,8 +66,9 @@ def run_steps(spec: RunSpec) -> list[dict[str, Any]]:
 
     Besides the step record, each row counts the transfer decisions made at that step
     (``decisions``: every action's new objects at step 0, the updated action's afterwards),
-    how many of them transferred a prior object (``transfers``) and their mean λ
-    (``mean_lambda``, NaN without a transfer).
+    how many of them transferred a prior object (``transfers``), how many sources they
+    transferred in all (``sources``: more than ``transfers`` only with ``transfer="multi"``)
+    and the mean λ over those sources (``mean_lambda``, NaN without a transfer).
     """
     pool = _table(spec.data, spec.new_objects, spec.pool_trials, spec.actions)
     test = _table(spec.data, spec.new_objects, spec.test_trials, spec.actions)
@@ -80,9 +81,10 @@ def run_steps(spec: RunSpec) -> list[dict[str, Any]]:
     for step in run.steps:
         row = step.as_row()
         decisions = [v for d in step.transfer.values() for v in d.values()]
-        lambdas = [v["lambda"] for v in decisions if v["source"]]
+        lambdas = [lam for v in decisions for lam in v["sources"].values()]
         row["decisions"] = len(decisions)
-        row["transfers"] = len(lambdas)
+        row["transfers"] = sum(1 for v in decisions if v["sources"])
+        row["sources"] = len(lambdas)
         row["mean_lambda"] = sum(lambdas) / len(lambdas) if lambdas else float("nan")
         rows.append(row)
     return rows

@@ -7,7 +7,7 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 from aptkt.gp import LaplaceGPC
-from aptkt.learning.transfer import TRANSFER_MODES
+from aptkt.learning.transfer import RELATEDNESS, SOURCE_CHOICES, SOURCE_TASKS, TRANSFER_MODES
 
 __all__ = ["GPSettings", "LearnerConfig"]
 
@@ -44,7 +44,18 @@ class LearnerConfig:
     eps_explor : probability of a uniformly random (action, object) pick (Eq. 4).
     budget : observations collected by active selection after the initial round (which
         observes every action once on every new object).
-    transfer : "paper" (Eq. 2–3) or "none" (the baseline).
+    transfer : "paper" (Eq. 2–3: the most related old object per new object), "multi" (every
+        old object above ε_neg, each with its own λ, in one multi-source kernel), "none" (the
+        paper's baseline: nothing of the prior, feature transforms fitted on the new objects'
+        training observations) or "control" (the prior's feature space, no transfer).
+    source : the source task handed to the dependent kernel: "one-vs-all" (the chosen old
+        object's observations +1, the other old objects' −1) or "positives" (the chosen old
+        object's observations only, all +1).
+    relatedness : p̄ of Eq. 3 from each old object's own binary classifier ("binary", paper
+        §4.2) or from the normalised one-vs-all posterior ("normalised").
+    source_choice, forced_lambda : stress tests of the cut-off only — transfer the "least"
+        related old object instead of the "most", and replace λ = p̄ by a fixed value once the
+        cut-off has let the transfer through. None: λ = p̄ (the method).
     auxiliary : append the prior models' posteriors as an extra modality (Eq. 5).
     patience : stop early when the mean uncertainty over all pairs has not decreased for this
         many consecutive observations (None: always spend the budget).
@@ -58,6 +69,10 @@ class LearnerConfig:
     eps_explor: float = 0.1
     budget: int = 40
     transfer: str = "paper"
+    source: str = "positives"
+    relatedness: str = "binary"
+    source_choice: str = "most"
+    forced_lambda: float | None = None
     auxiliary: bool = False
     patience: int | None = None
     seed: int = 0
@@ -65,8 +80,18 @@ class LearnerConfig:
     gp: GPSettings = field(default_factory=GPSettings)
 
     def __post_init__(self) -> None:
-        if self.transfer not in TRANSFER_MODES:
-            raise ValueError(f"transfer must be one of {TRANSFER_MODES}, got {self.transfer!r}")
+        for name, allowed in (
+            ("transfer", TRANSFER_MODES),
+            ("source", SOURCE_TASKS),
+            ("relatedness", RELATEDNESS),
+            ("source_choice", SOURCE_CHOICES),
+        ):
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"{name} must be one of {allowed}, got {getattr(self, name)!r}")
+        if self.forced_lambda is not None and not 0.0 <= self.forced_lambda <= 1.0:
+            raise ValueError(
+                f"forced_lambda must be None or lie in [0, 1], got {self.forced_lambda}"
+            )
         for name in ("eps_neg", "eps_explor"):
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:
@@ -82,7 +107,12 @@ class LearnerConfig:
 
     @property
     def uses_prior(self) -> bool:
+        """Whether the run reads the prior knowledge at all (the baseline does not)."""
         return self.transfer != "none" or self.auxiliary
+
+    @property
+    def transfers(self) -> bool:
+        return self.transfer in ("paper", "multi")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

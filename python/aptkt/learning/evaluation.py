@@ -1,4 +1,4 @@
-"""Accuracy of the observation models on held-out test observations (DESIGN.md §5)."""
+"""Accuracy of the observation models on held-out test observations (docs/design.md §5)."""
 
 from __future__ import annotations
 

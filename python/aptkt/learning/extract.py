@@ -1,4 +1,4 @@
-"""Feature observations from skin recordings (paper §3.2, Table 2; DESIGN.md §4).
+"""Feature observations from skin recordings (paper §3.2, Table 2; docs/design.md §4).
 
 =================  ==========================================================================
 modality           raw observation of one recording

@@ -9,7 +9,10 @@
    and update only that action's model, weights, λ and transfer — until the budget is spent or
    the models stop improving.
 
-The baseline is the same loop with ``transfer="none"`` (no prior observations, no λ).
+The baseline is the same loop with ``transfer="none"``: nothing of the prior — its feature
+transforms are fitted on the new objects' training observations, as in the paper. The control
+``transfer="control"`` works in the prior's feature space without transferring, so that APTKT
+and the control differ by the transfer alone.
 """
 
 from __future__ import annotations
@@ -78,6 +81,7 @@ class ActionLearner:
         if self.prior is not None:
             # The feature space of the prior knowledge, so old and new observations compare.
             return self.prior.pipeline
+        # No prior (the baseline): fitted on the new objects' training observations so far.
         return FeaturePipeline().fit(self.observations)
 
     def _features(
@@ -115,6 +119,16 @@ class ActionLearner:
             self._source_cache[old_object] = self._features(obs, self.prior.pipeline)[0]
         return self._source_cache[old_object]
 
+    def _source(self, old_object: str, transfer_lambda: float) -> TransferSource:
+        """The source task of one transferred old object (``config.source``)."""
+        if self.config.source == "positives":
+            return TransferSource(
+                self._source_features(old_object), transfer_lambda=transfer_lambda
+            )
+        raise NotImplementedError(
+            f"source={self.config.source!r} needs labelled transfer sources in aptkt.gp"
+        )
+
     # -- model -------------------------------------------------------------------------------
     def update(self, step: int) -> None:
         """Refit this action's model on everything observed so far (weights, λ, transfer)."""
@@ -127,21 +141,26 @@ class ActionLearner:
         X, groups = self._model_input(X_full, groups_full)
         sources: dict[str, TransferSource] = {}
         self.decisions = {}
-        if self.prior is not None and self.config.transfer != "none":
-            old_post = self.prior.posteriors(X_full)
+        cfg = self.config
+        if self.prior is not None and cfg.transfers:
+            related = self.prior.relatedness(X_full, cfg.relatedness)
             for obj in self.new_objects:
                 decision = decide_transfer(
                     obj,
                     self.prior.objects,
-                    old_post[obs.objects == obj],
-                    self.config.eps_neg,
-                    self.config.transfer,
+                    related[obs.objects == obj],
+                    cfg.eps_neg,
+                    cfg.transfer,
+                    choice=cfg.source_choice,
+                    forced_lambda=cfg.forced_lambda,
                 )
                 self.decisions[obj] = decision
-                if decision.transfers:
-                    sources[obj] = TransferSource(
-                        self._source_features(decision.source), decision.transfer_lambda
+                if len(decision.sources) > 1:
+                    raise NotImplementedError(
+                        "transfer='multi' needs several sources per class in aptkt.gp"
                     )
+                if decision.transfers:
+                    sources[obj] = self._source(decision.source, decision.transfer_lambda)
         seed = (self.config.seed * 1_000_003 + zlib.crc32(self.action.encode()) + step) % 2**32
         model = self.config.gp.make(groups, random_state=seed)
         self.model = model.fit(X, obs.objects, sources=sources or None)
@@ -151,6 +170,11 @@ class ActionLearner:
             if self._test_cache is None or self.prior is None:
                 self._test_cache = self._features(self._test, pipeline)
             self.test_posteriors = self.model.predict_proba(self._test_cache[0])
+
+    def hyperparameters(self) -> dict[str, dict[str, float]]:
+        """The fitted hyper-parameters of each new object's classifier (see
+        :func:`hyperparameters`)."""
+        return {} if self.model is None else hyperparameters(self.model)
 
     def uncertainty(self, obj: str) -> float:
         """UNC(α, c_j): mean entropy of the posterior over this pair's observations."""
@@ -171,6 +195,29 @@ class ActionLearner:
         )
 
 
+def hyperparameters(model: LaplaceGPC) -> dict[str, dict[str, float]]:
+    """Class -> the fitted hyper-parameters of that class's one-vs-all classifier, by name:
+    ``signal_variance``, ``length_scale[m]`` and (several modalities) ``weight[m]`` per
+    modality m, and ``lambda`` where the classifier has a transfer source. With two classes and
+    no source there is one classifier, listed under the second class (its positive class)."""
+    classes = [str(c) for c in model.classes_]
+    n = model.theta_.shape[0]
+    owners = classes if n == len(classes) else classes[-n:]
+    names = model.modality_names_
+    sv, ls, w = model.signal_variance_, model.length_scales_, model.modality_weights_
+    sources = {str(k): v for k, v in model.sources_.items()}
+    out: dict[str, dict[str, float]] = {}
+    for i, c in enumerate(owners):
+        hp = {"signal_variance": float(sv[i])}
+        hp.update({f"length_scale[{m}]": float(ls[i, k]) for k, m in enumerate(names)})
+        if len(names) > 1:
+            hp.update({f"weight[{m}]": float(w[i, k]) for k, m in enumerate(names)})
+        if c in sources:
+            hp["lambda"] = float(np.atleast_1d(sources[c].transfer_lambda)[0])
+        out[c] = hp
+    return out
+
+
 @dataclass
 class StepRecord:
     """State after one observation (step 0: after the initial round and transfer)."""
@@ -186,8 +233,13 @@ class StepRecord:
     fused_accuracy: float
     transfer: dict[str, dict[str, Any]]
     seconds: float
+    #: action -> class -> hyper-parameter name -> value, every action's current model.
+    hyperparameters: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
 
     def as_row(self) -> dict[str, Any]:
+        """Flat: the step's fields, ``accuracy[a]`` per action, the medians of the fitted
+        signal variances and length-scales over every classifier, and each classifier's
+        hyper-parameters as ``hp[action][class].name``."""
         row = {
             k: getattr(self, k)
             for k in (
@@ -203,6 +255,14 @@ class StepRecord:
             )
         }
         row.update({f"accuracy[{a}]": v for a, v in self.accuracy.items()})
+        hps = [hp for per in self.hyperparameters.values() for hp in per.values()]
+        sv = [hp["signal_variance"] for hp in hps]
+        ls = [v for hp in hps for k, v in hp.items() if k.startswith("length_scale[")]
+        row["median_signal_variance"] = float(np.median(sv)) if sv else float("nan")
+        row["median_length_scale"] = float(np.median(ls)) if ls else float("nan")
+        for a, per in self.hyperparameters.items():
+            for c, hp in per.items():
+                row.update({f"hp[{a}][{c}].{k}": v for k, v in hp.items()})
         return row
 
 
@@ -232,9 +292,10 @@ class LearningRun:
 class APTKT:
     """Active prior tactile knowledge transfer (``config.transfer="paper"``) or the baseline.
 
-    ``prior`` may be None only for the baseline; with a prior, the baseline still uses the
-    prior's feature space (its scaling and thermal PCA) so that the two differ by the transfer
-    alone.
+    ``prior`` may be None only for the baseline (``transfer="none"``), which ignores a prior
+    that is given: it uses nothing of it, fitting its feature transforms on the new objects'
+    training observations. ``transfer="control"`` uses the prior's feature space (its scaling
+    and thermal PCA) without transferring, so that it and APTKT differ by the transfer alone.
     """
 
     def __init__(
@@ -262,7 +323,7 @@ class APTKT:
         new_objects = [str(o) for o in new_objects]
         if len(new_objects) < 2:
             raise ValueError("learning needs at least two new objects")
-        if self.prior is not None:
+        if self.prior is not None and cfg.uses_prior:
             missing = [a for a in actions if a not in self.prior]
             if missing:
                 raise ValueError(f"the prior knowledge has no experience of action(s) {missing}")
@@ -275,12 +336,13 @@ class APTKT:
                 a,
                 new_objects,
                 cfg,
-                self.prior[a] if self.prior is not None else None,
+                self.prior[a] if self.prior is not None and cfg.uses_prior else None,
                 None if test is None else test[a],
             )
             for a in actions
         }
-        run = LearningRun(cfg, actions, new_objects, self.prior.objects if self.prior else [])
+        used = self.prior.objects if self.prior is not None and cfg.uses_prior else []
+        run = LearningRun(cfg, actions, new_objects, used)
         t0 = time.perf_counter()
         for a in actions:
             for o in new_objects:
@@ -352,6 +414,7 @@ class APTKT:
             fused_accuracy=fused,
             transfer=transfer,
             seconds=seconds,
+            hyperparameters={a: l.hyperparameters() for a, l in self.learners.items()},
         )
         run.steps.append(record)
         if on_step is not None:

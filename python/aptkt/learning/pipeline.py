@@ -1,5 +1,5 @@
 """From raw feature observations to the model's input: per-modality transforms fitted on
-training observations only (DESIGN.md §4).
+training observations only (docs/design.md §4).
 
 Per modality, in order: optional ``log10`` of some columns (texture activities span orders of
 magnitude), z-scoring of every column, optional PCA (the thermal curve ``[T̄, ∇T̄]`` is reduced

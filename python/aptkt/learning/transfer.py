@@ -1,9 +1,21 @@
 """From where and how much to transfer (paper §4.6, Eq. 3).
 
 For a new object j and an action α, the prior observation model of α gives, for each of j's
-observations, a posterior over the old objects. Their mean ``p̄_i`` measures how much j is like
+observations, a probability per old object. Their mean ``p̄_i`` measures how much j is like
 old object i. The most related old object ``i* = argmax p̄_i`` is transferred with relatedness
 ``λ = p̄_i*`` unless ``p̄_i* < ε_neg``, in which case nothing is transferred.
+
+Which probability (``relatedness``):
+
+* ``"binary"`` (default, §4.2): old object i's own one-vs-all classifier's ``p(y=+1 | v)``. Each
+  is a probability in its own right, so ε_neg asks the same question ("does i's classifier
+  claim j's observations?") whatever the number of old objects.
+* ``"normalised"``: the class posterior, the binary probabilities normalised to sum to 1. With
+  N old objects ``p̄_max ≥ 1/N``, so a fixed ε_neg means something different for every N.
+
+Modes: ``"paper"`` transfers the single most related old object (Eq. 3); ``"multi"`` every old
+object whose ``p̄_i`` reaches ε_neg, each with its own λ = p̄_i; ``"none"`` (the baseline) and
+``"control"`` (the prior's feature space without transfer) never transfer.
 """
 
 from __future__ import annotations
@@ -13,37 +25,70 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["TransferDecision", "mean_posteriors", "decide_transfer", "TRANSFER_MODES"]
+__all__ = [
+    "TransferDecision",
+    "mean_posteriors",
+    "decide_transfer",
+    "TRANSFER_MODES",
+    "RELATEDNESS",
+    "SOURCE_TASKS",
+    "SOURCE_CHOICES",
+]
 
-#: "paper": the single most related prior per new object (Eq. 3); "none": the baseline.
-TRANSFER_MODES = ("paper", "none")
+#: "paper": the single most related prior per new object (Eq. 2–3); "multi": every prior above
+#: ε_neg in one multi-source kernel; "none": the paper's baseline (nothing of the prior);
+#: "control": the prior's feature space, no transfer (isolates the transfer itself).
+TRANSFER_MODES = ("paper", "multi", "none", "control")
+#: Which probability of the old model measures relatedness (see the module docstring).
+RELATEDNESS = ("binary", "normalised")
+#: The source task's labels: the chosen old object's observations +1 and the other old
+#: objects' −1 ("one-vs-all"), or the chosen object's observations only, as positives.
+SOURCE_TASKS = ("one-vs-all", "positives")
+#: Which old object Eq. 3 picks: the most related (the method) or, for a stress test of the
+#: cut-off, the least related.
+SOURCE_CHOICES = ("most", "least")
 
 
 @dataclass(frozen=True)
 class TransferDecision:
-    """What one new object's classifier of one action receives from the prior knowledge."""
+    """What one new object's classifier of one action receives from the prior knowledge.
+
+    ``sources`` and ``lambdas`` list the transferred old objects and their λ (one for
+    ``"paper"``, any number for ``"multi"``, none when nothing passes the cut-off).
+    """
 
     new_object: str
     old_objects: tuple[str, ...]
     mean_posterior: tuple[float, ...]
-    source: str | None
-    transfer_lambda: float
+    sources: tuple[str, ...] = ()
+    lambdas: tuple[float, ...] = ()
 
     @property
     def transfers(self) -> bool:
-        return self.source is not None
+        return bool(self.sources)
+
+    @property
+    def source(self) -> str | None:
+        """The (first) transferred old object, or None."""
+        return self.sources[0] if self.sources else None
+
+    @property
+    def transfer_lambda(self) -> float:
+        """λ of the (first) transferred old object, 0 without transfer."""
+        return self.lambdas[0] if self.lambdas else 0.0
 
     def as_dict(self) -> dict:
         return {
             "new_object": self.new_object,
             "source": self.source,
             "lambda": self.transfer_lambda,
+            "sources": dict(zip(self.sources, self.lambdas)),
             "mean_posterior": dict(zip(self.old_objects, self.mean_posterior)),
         }
 
 
 def mean_posteriors(old_posteriors: np.ndarray) -> np.ndarray:
-    """``p̄_i``: the mean over a new object's observations (rows) of the old posteriors."""
+    """``p̄_i``: the mean over a new object's observations (rows) of the old probabilities."""
     p = np.asarray(old_posteriors, dtype=np.float64)
     if p.ndim != 2 or p.shape[0] == 0:
         raise ValueError(
@@ -58,21 +103,43 @@ def decide_transfer(
     old_posteriors: np.ndarray,
     eps_neg: float,
     mode: str = "paper",
+    *,
+    choice: str = "most",
+    forced_lambda: float | None = None,
 ) -> TransferDecision:
-    """Eq. 3: transfer the most related old object if its mean posterior reaches ``eps_neg``."""
+    """Eq. 3: transfer the most related old object if its mean probability reaches ``eps_neg``.
+
+    ``mode="multi"`` transfers every old object that reaches ``eps_neg``. ``choice="least"``
+    and ``forced_lambda`` exist for stress tests of the cut-off: the least related old object,
+    and a λ that replaces ``p̄`` once the cut-off has let the transfer through (the cut-off
+    always looks at the chosen object's own ``p̄``).
+    """
     if mode not in TRANSFER_MODES:
         raise ValueError(f"transfer mode must be one of {TRANSFER_MODES}, got {mode!r}")
+    if choice not in SOURCE_CHOICES:
+        raise ValueError(f"choice must be one of {SOURCE_CHOICES}, got {choice!r}")
     if not 0.0 <= eps_neg <= 1.0:
         raise ValueError(f"eps_neg must lie in [0, 1], got {eps_neg}")
+    if forced_lambda is not None and not 0.0 <= forced_lambda <= 1.0:
+        raise ValueError(f"forced_lambda must lie in [0, 1], got {forced_lambda}")
     p_bar = mean_posteriors(old_posteriors)
     if p_bar.shape[0] != len(old_objects):
         raise ValueError(f"{len(old_objects)} old objects but posteriors over {p_bar.shape[0]}")
-    best = int(np.argmax(p_bar))
-    related = mode == "paper" and p_bar[best] >= eps_neg
+    if mode == "multi":
+        # Most related first; ties keep the old objects' order.
+        order = sorted(range(len(p_bar)), key=lambda i: (-p_bar[i], i))
+        if choice == "least":
+            order = order[::-1]
+        picked = [i for i in order if p_bar[i] >= eps_neg]
+    elif mode == "paper":
+        best = int(np.argmax(p_bar) if choice == "most" else np.argmin(p_bar))
+        picked = [best] if p_bar[best] >= eps_neg else []
+    else:
+        picked = []
     return TransferDecision(
         new_object=str(new_object),
         old_objects=tuple(str(o) for o in old_objects),
         mean_posterior=tuple(float(v) for v in p_bar),
-        source=str(old_objects[best]) if related else None,
-        transfer_lambda=float(p_bar[best]) if related else 0.0,
+        sources=tuple(str(old_objects[i]) for i in picked),
+        lambdas=tuple(float(p_bar[i] if forced_lambda is None else forced_lambda) for i in picked),
     )

@@ -77,7 +77,7 @@ def describe_step(rec: StepRecord, config: LearnerConfig, n_pairs: int) -> str:
         )
     parts = [head]
     for action, decisions in rec.transfer.items():
-        if config.transfer == "none":
+        if not config.transfers:
             continue
         text = "; ".join(_fmt_decision(d, config.eps_neg) for d in decisions.values())
         parts.append(f"    transfer {action}: {text}")

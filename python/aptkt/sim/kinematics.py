@@ -39,6 +39,15 @@ class Trajectory:
         self.v0.append(np.asarray(v0, dtype=np.float64).copy())
         self.a.append(np.asarray(a, dtype=np.float64).copy())
 
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The segments as arrays: start times (S,) and p0, v0, a (S, 3)."""
+        return (
+            np.asarray(self.t0, dtype=np.int64),
+            np.asarray(self.p0, dtype=np.float64),
+            np.asarray(self.v0, dtype=np.float64),
+            np.asarray(self.a, dtype=np.float64),
+        )
+
     def forget_before(self, t_ns: int) -> None:
         """Drop segments that ended before ``t_ns`` (keeps memory bounded in long sessions)."""
         i = int(np.searchsorted(np.asarray(self.t0), t_ns, side="right")) - 1

@@ -46,6 +46,11 @@ class IndentationLaw:
         self._sigma, self._delta = sigma, delta
         self._modulus_scale = modulus_scale
 
+    @property
+    def table(self) -> tuple[np.ndarray, np.ndarray]:
+        """The tabulated law: depths (increasing) and their pressures."""
+        return self._delta, self._sigma
+
     def depth(self, sigma: np.ndarray, modulus_scale: float | None = None) -> np.ndarray:
         """Total indentation (skin + object) at pressure ``sigma`` (the closed-form inverse law)."""
         scale = self._modulus_scale if modulus_scale is None else modulus_scale

@@ -29,6 +29,7 @@ __all__ = [
     "Relaxation",
     "Ridge",
     "Surface",
+    "Relation",
     "ObjectSpec",
     "ObjectLibrary",
     "load_library",
@@ -103,6 +104,18 @@ class Surface:
 
 
 @dataclass(frozen=True)
+class Relation:
+    """A designed likeness of an object to another (paper §5.1): in ``modality`` of
+    ``actions`` its observations are meant to lie nearest to ``prior``'s, for the physical
+    reason ``why``. The learner never reads it; tests and the docs check it."""
+
+    prior: str
+    modality: str
+    actions: tuple[str, ...]
+    why: str = ""
+
+
+@dataclass(frozen=True)
 class ObjectSpec:
     """A simulated object: geometry, layers, relaxation, surface."""
 
@@ -113,7 +126,8 @@ class ObjectSpec:
     surface: Surface
     relaxation: Relaxation = Relaxation()
     description: str = ""
-    related: tuple[str, ...] = ()
+    related: tuple[str, ...] = ()  # every related object, those of ``relations`` included
+    relations: tuple[Relation, ...] = ()
     height: float = 0.05  # m, top face above the table
     size: tuple[float, float] = (0.15, 0.15)  # m, extent of the top face (object x, y)
     crown_radius: float = 0.0  # m, cylindrical crown about the object's x axis; 0 = flat
@@ -372,6 +386,26 @@ def _parse_object(table: Mapping[str, Any], source: str, auto_index: int) -> Obj
     related = r._get("related", [])
     if not isinstance(related, list) or not all(isinstance(x, str) for x in related):
         raise r.fail("related", f"must be a list of object names, got {related!r}")
+    relations = []
+    for i, rt_ in enumerate(r.table_list("relation")):
+        rl = _Reader(source, name, rt_, prefix=f"relation[{i}].")
+        actions = rl._get("actions", _REQUIRED)
+        if (
+            not isinstance(actions, list)
+            or not actions
+            or not all(isinstance(a, str) and a for a in actions)
+        ):
+            raise rl.fail("actions", f"must be a non-empty list of action names, got {actions!r}")
+        relations.append(
+            Relation(
+                prior=rl.string("prior"),
+                modality=rl.string("modality"),
+                actions=tuple(actions),
+                why=rl.string("why", ""),
+            )
+        )
+        rl.finish()
+    related += [rel.prior for rel in relations if rel.prior not in related]
     size = r.numbers("size", [0.15, 0.15], length=2, lo=0.0, lo_open=True)
     spec = ObjectSpec(
         name=name,
@@ -382,6 +416,7 @@ def _parse_object(table: Mapping[str, Any], source: str, auto_index: int) -> Obj
         relaxation=Relaxation(weights, times),
         description=r.string("description", ""),
         related=tuple(related),
+        relations=tuple(relations),
         height=r.number("height", 0.05, lo=0.0, lo_open=True, hi=1.0),
         size=(size[0], size[1]),
         crown_radius=r.number("crown_radius", 0.0, lo=0.0),

@@ -2,7 +2,7 @@
 
 Patch frame: metres, x/y in the skin plane (aligned with the robot base's x/y when the skin
 faces down), origin at the centre of the middle cell. Each cell carries 3 normal-force
-sensors, an LM71, a BMA250 and a VCNL4010 (DESIGN.md §2). Values that the paper or the
+sensors, an LM71, a BMA250 and a VCNL4010 (docs/design.md §2). Values that the paper or the
 protocol do not fix are documented choices (docs/simulation.md, "The skin").
 """
 

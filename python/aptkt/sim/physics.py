@@ -17,16 +17,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aptkt._core import SimContact, sim_heat, sim_texture
 from aptkt.sim.kinematics import Trajectory
 from aptkt.sim.mechanics import IndentationLaw, SurfaceShape
 from aptkt.sim.objects import ObjectSpec, Relaxation
 from aptkt.sim.patch import PatchGeometry, PatchImperfections
-from aptkt.sim.recurrence import linear_recurrence_rows
 from aptkt.sim.seeding import CounterStream
 from aptkt.sim.texture import (
     StickSlip,
     StickSlipState,
-    texture_acceleration,
     texture_field,
     waviness_waves,
 )
@@ -255,6 +254,44 @@ class ContactPhysics:
             raise ValueError(
                 f"trial conditions are for {self._gain_drift.size} cells, the patch has {n}"
             )
+        shape = self.shape
+        self._core = SimContact(
+            np.ascontiguousarray(imperfections.clock_rate, dtype=np.float64),
+            np.ascontiguousarray(imperfections.clock_phase, dtype=np.float64),
+            np.ascontiguousarray(imperfections.sensor_height, dtype=np.float64),
+            np.ascontiguousarray(self._sensor_xy, dtype=np.float64),
+            tuple(map(float, shape.centre)),
+            float(shape.rotation),
+            float(shape.surface_z),
+            tuple(map(float, shape.tilt)),
+            float(shape.crown_radius),
+            np.ascontiguousarray(np.reshape(shape.waves, (-1, 4)), dtype=np.float64),
+            tuple(map(float, shape.size)),
+            self.law.table[0],
+            self.law.table[1],
+            self.law.skin_stiffness,
+            [float(w) for w in self.relaxation.weights],
+            [float(t) for t in self.relaxation.times],
+            float(k.sensor_area),
+            tuple(int(x) for x in self._noise.key),
+            np.ascontiguousarray(imperfections.force_gain / self._gain_drift[:, None]),
+            np.ascontiguousarray(imperfections.force_offset, dtype=np.float64),
+            float(k.force_noise),
+            self._latency_ns,
+            float(k.link_jitter),
+        )
+        self._texture_constants = [
+            k.cover_contact_length,
+            k.contact_resonance,
+            k.contact_damping,
+            k.acc_bandwidth,
+            k.coupling_modulus,
+            k.coupling_pressure,
+            k.tangential_coupling,
+            k.lateral_coupling,
+            self.top_modulus,
+            self.mu_k,
+        ]
 
     # ---------------------------------------------------------------------------------------
     def initial_state(self, t_ns: int, position: np.ndarray) -> PhysicsState:
@@ -281,19 +318,6 @@ class ContactPhysics:
             slip=self.slip.rest(),
         )
 
-    def _samples(self, state: PhysicsState, t_end_ns: int) -> tuple[np.ndarray, np.ndarray]:
-        """Cell index and sample index of every sample in ``(state.t, t_end]``, cell-major."""
-        rate, phase = self.imp.clock_rate, self.imp.clock_phase
-        last = np.floor((t_end_ns * 1e-9 - phase) * rate).astype(np.int64)
-        # Guard the float edge: a sample whose rounded ns time lies beyond t_end is not due yet.
-        t_last = np.rint((phase + last / rate) * 1e9).astype(np.int64)
-        last = np.where(t_last > t_end_ns, last - 1, last)
-        counts = np.maximum(last - state.next_k + 1, 0)
-        cells = np.repeat(np.arange(self.n), counts)
-        starts = np.repeat(state.next_k, counts)
-        offsets = np.arange(cells.size) - np.repeat(np.cumsum(counts) - counts, counts)
-        return cells, starts + offsets
-
     def step(
         self, state: PhysicsState, traj: Trajectory, t_end_ns: int, *, detail: bool = True
     ) -> tuple[PhysicsState, Frames, ForceTrace]:
@@ -307,24 +331,22 @@ class ContactPhysics:
 
     def mechanics(self, st: PhysicsState, traj: Trajectory, t_end_ns: int) -> MechChunk:
         """First half of a step (updates ``st`` in place): the samples due by ``t_end_ns``, the TCP
-        motion at their times and the contact stress at every force sensor, with relaxation."""
-        st.t_ns = max(int(t_end_ns), st.t_ns)
-        cells, ks = self._samples(st, st.t_ns)
-        if cells.size == 0:
-            return MechChunk.empty()
-        imp = self.imp
-        t_s = imp.clock_phase[cells] + ks / imp.clock_rate[cells]
-        t_ns = np.rint(t_s * 1e9).astype(np.int64)
-        pos, vel, acc = traj.evaluate(t_ns)
-        first, last, present = _runs(cells)
-        st.next_k[present] = ks[last] + 1
-        sxy = pos[:, None, :2] + self._sensor_xy[cells]  # (m, 3, 2)
-        depth = self.shape.height(sxy) - (pos[:, 2:3] + imp.sensor_height[cells])
-        elastic = self.law.stress(np.where(np.isfinite(depth), depth, -1.0))
-        sigma = np.maximum(self._relax(st, elastic, cells, first, last, present), 0.0)
-        f_true = sigma * self.k.sensor_area  # (m, 3) N
-        st.latest_force[present] = f_true[last].sum(axis=1)
-        return MechChunk(cells, ks, t_s, t_ns, pos, vel, acc, sigma)
+        motion at their times and the contact stress at every force sensor, with relaxation
+        (the per-sample loop runs in the compiled core, ``aptkt_sim::mechanics``)."""
+        t0, p0, v0, a = traj.arrays()
+        st.t_ns, parts = self._core.mechanics(
+            st.t_ns,
+            st.next_k,
+            st.relax_h,
+            st.relax_last,
+            st.latest_force,
+            t0,
+            p0,
+            v0,
+            a,
+            int(t_end_ns),
+        )
+        return MechChunk(*parts)
 
     def finish(
         self, st: PhysicsState, chunk: MechChunk, *, detail: bool = True
@@ -355,7 +377,7 @@ class ContactPhysics:
         in_contact = pressure > 0
         phi_bin = self.thermal.contact_bins(pressure / (pressure + k.contact_pressure_half))
         v_bin = np.where(in_contact, speed_bins(speed), 0)
-        temps = self._heat(st, t_s, phi_bin, v_bin, first, last, present)
+        temps = self._heat(st, cells, t_s, phi_bin, v_bin)
 
         # --- stick-slip needs every sample (it has state); texture only the emitted ones
         centre = pos[:, :2] + self._centres[cells]
@@ -377,8 +399,14 @@ class ContactPhysics:
         c_e = cells[rows]
         u = self.shape.to_object(centre[rows])
         w = self.shape.to_object_direction(vel[rows, :2])
-        tex = texture_acceleration(
-            self.texture, k, u, w, pressure[rows], self.top_modulus, self.mu_k
+        tex = sim_texture(
+            self.texture.kvec,
+            self.texture.amplitude,
+            self.texture.phase,
+            self._texture_constants,
+            np.ascontiguousarray(u),
+            np.ascontiguousarray(w),
+            np.ascontiguousarray(pressure[rows]),
         )
         tex[:, 0] += slip[rows]
         tex[:, 2] += 0.3 * slip[rows]
@@ -448,20 +476,11 @@ class ContactPhysics:
         self, ks: np.ndarray, cells: np.ndarray, t_ns: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """Normal deviates (n, 10) and arrival times of samples ``ks`` of ``cells``."""
-        index = ks * self.n + cells
-        lo = int(index.min())
-        u01 = self._noise.uniform(lo, int(index.max()) - lo + 1)[index - lo]
-        r = np.sqrt(-2.0 * np.log(1.0 - u01[:, 0:10:2]))
-        noise = np.empty((index.size, 10))
-        noise[:, 0::2] = r * np.cos(2 * np.pi * u01[:, 1:10:2])
-        noise[:, 1::2] = r * np.sin(2 * np.pi * u01[:, 1:10:2])
-        # The PC stamps arrivals with microsecond resolution.
-        arrival = (
-            t_ns
-            + self._latency_ns
-            + 1000 * np.rint(u01[:, 10] * self.k.link_jitter * 1e6).astype(np.int64)
+        return self._core.noise(
+            np.ascontiguousarray(ks, dtype=np.int64),
+            np.ascontiguousarray(cells, dtype=np.int64),
+            np.ascontiguousarray(t_ns, dtype=np.int64),
         )
-        return noise, arrival
 
     def _force_reading(
         self, f_true: np.ndarray, noise: np.ndarray, cells: np.ndarray
@@ -481,103 +500,35 @@ class ContactPhysics:
     def _heat(
         self,
         st: PhysicsState,
+        cells: np.ndarray,
         t_s: np.ndarray,
         phi_bin: np.ndarray,
         v_bin: np.ndarray,
-        first: np.ndarray,
-        last: np.ndarray,
-        present: np.ndarray,
     ) -> np.ndarray:
         """[LM71, PCB] temperatures of every sample; updates the cells' thermal states.
 
-        Each cell's samples split into runs of constant (contact, speed) configuration; the
-        r-th runs of all cells are solved together (a batch of exact LTI solutions)."""
-        runs: list[list[tuple[int, int]]] = []
-        for a0, b0 in zip(first, last + 1):
-            change = (
-                np.flatnonzero((np.diff(phi_bin[a0:b0]) != 0) | (np.diff(v_bin[a0:b0]) != 0))
-                + 1
-                + a0
-            )
-            starts = np.concatenate([[a0], change])
-            runs.append(list(zip(starts.tolist(), np.concatenate([change, [b0]]).tolist())))
-        temps = np.empty((t_s.shape[0], 2))
-        for r in range(max(len(x) for x in runs)):
-            items = [
-                (int(present[ci]), *cell_runs[r])
-                for ci, cell_runs in enumerate(runs)
-                if r < len(cell_runs)
+        Each cell's samples split into runs of constant (contact, speed) configuration, each
+        solved exactly from the cell's state (``aptkt_sim::thermal::heat``)."""
+        key = phi_bin * (1 << 20) + v_bin
+        uniq, config = np.unique(key, return_inverse=True)
+        systems = [self.thermal.net.system(int(q >> 20), int(q & ((1 << 20) - 1))) for q in uniq]
+        t_ss = np.stack(
+            [
+                self.thermal._t_ss_cached(int(q >> 20), int(q & ((1 << 20) - 1)), x)
+                for q, x in zip(uniq, systems)
             ]
-            cells_g = np.array([c for c, _, _ in items])
-            a_g = np.array([a for _, a, _ in items])
-            b_g = np.array([b for _, _, b in items])
-            lengths = b_g - a_g
-            idx = np.minimum(
-                a_g[:, None] + np.arange(int(lengths.max()))[None, :], (b_g - 1)[:, None]
-            )
-            dt = t_s[idx] - st.thermal_t[cells_g][:, None]
-            out, end = self.thermal.propagate_many(
-                st.thermal[cells_g], dt, lengths - 1, phi_bin[a_g], v_bin[a_g]
-            )
-            for g in range(len(items)):
-                temps[a_g[g] : b_g[g]] = out[g, : lengths[g]]
-            st.thermal[cells_g] = end
-            st.thermal_t[cells_g] = t_s[b_g - 1]
-        return temps
-
-    def _relax(
-        self,
-        st: PhysicsState,
-        elastic: np.ndarray,
-        cells: np.ndarray,
-        first: np.ndarray,
-        last: np.ndarray,
-        present: np.ndarray,
-    ) -> np.ndarray:
-        """Quasi-linear viscoelastic stress of every sample (see :mod:`aptkt.sim.mechanics`);
-        updates the per-cell hereditary state in ``st``. Cells are laid out as rows of a padded
-        grid so that all cells recur together."""
-        rel = self.relaxation
-        if not rel.weights:
-            st.relax_last[present] = elastic[last]
-            return elastic
-        prev = np.empty_like(elastic)
-        prev[1:] = elastic[:-1]
-        prev[first] = st.relax_last[present]
-        increments = elastic - prev
-        lengths = last - first + 1
-        width = int(lengths.max())
-        if width <= 4 and np.all(lengths == width):
-            # A control tick: every cell has the same few samples; recur over them directly.
-            inc = increments.reshape(present.size, width, 3)
-            dt = 1.0 / self.imp.clock_rate[present]
-            out = rel.long_term * elastic.reshape(present.size, width, 3)
-            for i, (wgt, tau) in enumerate(zip(rel.weights, rel.times)):
-                a = np.exp(-dt / tau)[:, None]
-                gain = wgt * (tau / dt)[:, None] * (1.0 - a)
-                h = st.relax_h[i, present]
-                for j in range(width):
-                    h = a * h + gain * inc[:, j]
-                    out[:, j] += h
-                st.relax_h[i, present] = h
-            st.relax_last[present] = elastic[last]
-            return out.reshape(-1, 3)
-        pos = np.arange(cells.size) - np.repeat(
-            first, lengths
-        )  # position of each sample in its row
-        row = np.repeat(np.arange(present.size), lengths)
-        grid = np.zeros((present.size, width, 3))
-        grid[row, pos] = increments
-        dt = 1.0 / self.imp.clock_rate[present]
-        out = rel.long_term * elastic
-        for i, (wgt, tau) in enumerate(zip(rel.weights, rel.times)):
-            a = np.exp(-dt / tau)
-            gain = (wgt * (tau / dt) * (1.0 - a))[:, None, None]
-            h = linear_recurrence_rows(a, gain * grid, st.relax_h[i, present])
-            out += h[row, pos]
-            st.relax_h[i, present] = h[np.arange(present.size), lengths - 1]
-        st.relax_last[present] = elastic[last]
-        return out
+        )
+        return sim_heat(
+            np.stack([x.u for x in systems]),
+            np.stack([x.mu for x in systems]),
+            t_ss,
+            systems[0].sqrt_c,
+            np.ascontiguousarray(cells, dtype=np.int64),
+            np.ascontiguousarray(t_s, dtype=np.float64),
+            config.astype(np.int64).reshape(-1),
+            st.thermal,
+            st.thermal_t,
+        )
 
 
 def _runs(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -80,6 +80,11 @@ class CounterStream:
         self._blocks = -(-self.slots // 4)  # Philox blocks per sample
         self._key = seq.generate_state(2, dtype=np.uint64)
 
+    @property
+    def key(self) -> tuple[int, int]:
+        """The Philox key (two 64-bit words) of this stream."""
+        return int(self._key[0]), int(self._key[1])
+
     def raw(self, start: int, count: int) -> np.ndarray:
         """uint64 words of shape ``(count, slots)`` for samples ``start .. start+count``."""
         if count <= 0:

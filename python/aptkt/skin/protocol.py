@@ -1,6 +1,6 @@
 """The skin's wire protocol: streaming parser, quantiser and encoder (all implemented in Rust).
 
-See ``skin-protocol.md`` (the hardware contract). Every packet is 20 bytes; sensor packets
+See ``docs/protocol.md`` (the hardware contract). Every packet is 20 bytes; sensor packets
 (header 0xFF) carry one cell's proximity, 3-axis acceleration, 2 temperatures and 3 forces.
 
 * :class:`StreamParser` turns a byte stream, fed in arbitrary chunks, into numpy columns.

@@ -1,4 +1,4 @@
-//! Tactile feature kernels of the APTKT pipeline (paper §3.2, DESIGN.md §4).
+//! Tactile feature kernels of the APTKT pipeline (paper §3.2, docs/design.md §4).
 //!
 //! * [`hjorth`]: Hjorth activity, mobility and complexity of a signal (texture).
 //! * [`pearson`] / [`axis_pair_correlations`]: linear correlation of acceleration axes (texture).

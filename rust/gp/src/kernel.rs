@@ -1,13 +1,15 @@
-//! The multi-modal RBF kernel of DESIGN.md §5 (paper Eq. 1) and its dependent (transfer)
+//! The multi-modal RBF kernel of docs/design.md §5 (paper Eq. 1) and its dependent (transfer)
 //! variant (paper Eq. 2), with hyper-parameters in an unconstrained "theta" vector.
 //!
-//! `K(x, x') = σ² · Σ_m γ_m exp(-|x_m - x'_m|² / (2 ℓ_m²)) · Λ(x, x')` where `x_m` is modality
-//! m's block of feature columns, `γ = softmax(η)` lies on the simplex, and `Λ = λ` between a
-//! source-task row and a target-task row and 1 otherwise. `λK + (1-λ) blockdiag(K)` is a convex
-//! combination of PSD matrices, so the dependent kernel is PSD exactly when λ ∈ [0, 1].
+//! `K(x, x') = σ² · Σ_m γ_m exp(-|x_m - x'_m|² / (2 ℓ_m²)) · B[task(x), task(x')]` where `x_m`
+//! is modality m's block of feature columns, `γ = softmax(η)` lies on the simplex, and B is the
+//! task coupling of [`Coupling`]: with S source tasks and the target task last,
+//! `B = v vᵀ + diag(1 - λ_1², …, 1 - λ_S², 0)` with `v = (λ_1, …, λ_S, 1)`. B is PSD for every
+//! λ_s ∈ [-1, 1] (a sum of PSD matrices), and the elementwise (Schur) product of two PSD
+//! matrices is PSD, so K is PSD. With one source, B = [[1, λ], [λ, 1]]: the paper's Eq. 2.
 //!
-//! theta layout: `[log σ², log ℓ_1..ℓ_M, η_1..η_M (only if M > 1), λ (only with transfer)]`.
-//! The reported logits are normalised (`η_m = log γ_m`), and λ is kept on its natural [0, 1] scale.
+//! theta layout: `[log σ², log ℓ_1..ℓ_M, η_1..η_M (only if M > 1), λ_1..λ_L (with transfer)]`.
+//! The reported logits are normalised (`η_m = log γ_m`), and each λ is kept on its natural scale.
 
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, Par};
@@ -70,7 +72,8 @@ impl Data {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Layout {
     pub n_modalities: usize,
-    pub transfer: bool,
+    /// Transfer relatedness entries (the most sources any classifier has; 0 without transfer).
+    pub n_lambdas: usize,
 }
 
 /// Lowest logit stored for a weight of 0 (γ ≈ 1e-22 relative).
@@ -87,7 +90,10 @@ impl Layout {
             } else {
                 0
             }
-            + usize::from(self.transfer)
+            + self.n_lambdas
+    }
+    pub fn transfer(&self) -> bool {
+        self.n_lambdas > 0
     }
     pub fn is_empty(&self) -> bool {
         false
@@ -99,8 +105,9 @@ impl Layout {
     pub fn weight(&self, m: usize) -> Option<usize> {
         self.has_weights().then(|| 1 + self.n_modalities + m)
     }
-    pub fn lambda(&self) -> Option<usize> {
-        self.transfer.then(|| self.len() - 1)
+    /// Index of source s's λ in theta.
+    pub fn lambda(&self, s: usize) -> Option<usize> {
+        (s < self.n_lambdas).then(|| self.len() - self.n_lambdas + s)
     }
 
     pub fn names(&self, modality_names: &[String]) -> Vec<String> {
@@ -113,8 +120,10 @@ impl Layout {
                 names.push(format!("weight_logit[{}]", modality_names[m]));
             }
         }
-        if self.transfer {
+        if self.n_lambdas == 1 {
             names.push("transfer_lambda".to_string());
+        } else {
+            names.extend((0..self.n_lambdas).map(|s| format!("transfer_lambda[{s}]")));
         }
         names
     }
@@ -142,23 +151,17 @@ impl Layout {
         } else {
             vec![1.0]
         };
-        let lambda = match self.lambda() {
-            Some(i) => {
-                let l = theta[i];
-                if !(0.0..=1.0).contains(&l) {
-                    return Err(GpError::InvalidInput(format!(
-                        "transfer lambda must lie in [0, 1] (the dependent kernel is indefinite otherwise), got {l}"
-                    )));
-                }
-                l
-            }
-            None => 1.0,
-        };
+        let lambdas = theta[self.len() - self.n_lambdas..].to_vec();
+        if let Some(l) = lambdas.iter().find(|l| !(-1.0..=1.0).contains(*l)) {
+            return Err(GpError::InvalidInput(format!(
+                "transfer lambda must lie in [-1, 1] (the dependent kernel is indefinite otherwise), got {l}"
+            )));
+        }
         Ok(Hyper {
             signal_variance,
             length_scales,
             weights,
-            lambda,
+            lambdas,
         })
     }
 
@@ -170,9 +173,7 @@ impl Layout {
             let total: f64 = h.weights.iter().sum();
             theta.extend(h.weights.iter().map(|w| (w / total).ln().max(MIN_LOGIT)));
         }
-        if self.transfer {
-            theta.push(h.lambda);
-        }
+        theta.extend((0..self.n_lambdas).map(|s| h.lambdas.get(s).copied().unwrap_or(0.0)));
         theta
     }
 }
@@ -190,7 +191,62 @@ pub struct Hyper {
     pub signal_variance: f64,
     pub length_scales: Vec<f64>,
     pub weights: Vec<f64>,
-    pub lambda: f64,
+    /// Relatedness of each source task to the target task.
+    pub lambdas: Vec<f64>,
+}
+
+/// The task coupling matrix B (T × T, T = sources + 1, the target task last) and its
+/// derivatives with respect to each λ_s.
+#[derive(Debug, Clone)]
+pub struct Coupling {
+    pub n_tasks: usize,
+    lambdas: Vec<f64>,
+    b: Vec<f64>,
+}
+
+impl Coupling {
+    /// Coupling of `n_sources` source tasks, using the first `n_sources` relatedness values.
+    pub fn new(lambdas: &[f64], n_sources: usize) -> Self {
+        let t = n_sources + 1;
+        let mut v: Vec<f64> = lambdas[..n_sources].to_vec();
+        v.push(1.0);
+        let mut b = vec![0.0; t * t];
+        for i in 0..t {
+            for j in 0..t {
+                b[i * t + j] = if i == j { 1.0 } else { v[i] * v[j] };
+            }
+        }
+        Coupling {
+            n_tasks: t,
+            lambdas: v,
+            b,
+        }
+    }
+
+    #[inline]
+    pub fn get(&self, ti: usize, tj: usize) -> f64 {
+        self.b[ti * self.n_tasks + tj]
+    }
+
+    /// The whole matrix, row-major.
+    pub fn matrix(&self) -> &[f64] {
+        &self.b
+    }
+
+    /// `∂B[ti, tj] / ∂λ_s`: B's off-diagonal entries are products `v_i v_j` with v's last entry
+    /// 1, so the derivative is `v_j` on row s, `v_i` on column s, 0 on the diagonal.
+    #[inline]
+    pub fn derivative(&self, s: usize, ti: usize, tj: usize) -> f64 {
+        if ti == tj || s + 1 >= self.n_tasks {
+            0.0
+        } else if ti == s {
+            self.lambdas[tj]
+        } else if tj == s {
+            self.lambdas[ti]
+        } else {
+            0.0
+        }
+    }
 }
 
 /// Validated modality column groups.
@@ -286,16 +342,33 @@ pub fn column_means(x: &Data) -> Vec<f64> {
     mean
 }
 
+/// Task index of every training row: the rows of source task s (sizes in order) come first,
+/// then the target rows (task `source_sizes.len()`).
+pub fn row_tasks(source_sizes: &[usize], n: usize) -> Vec<usize> {
+    let mut task = Vec::with_capacity(n);
+    for (s, &size) in source_sizes.iter().enumerate() {
+        task.extend(std::iter::repeat_n(s, size));
+    }
+    task.resize(n, source_sizes.len());
+    task
+}
+
 /// Squared distances per modality between all rows of a training set (source rows first).
 pub struct PairDistances {
     pub n: usize,
+    /// Rows of all source tasks together (the target rows start here).
     pub n_source: usize,
+    pub source_sizes: Vec<usize>,
+    /// Task index of every row (see [`row_tasks`]).
+    pub task: Vec<usize>,
     pub per_modality: Vec<Mat<f64>>,
 }
 
 impl PairDistances {
-    pub fn new(x: &Data, n_source: usize, modalities: &Modalities, center: &[f64]) -> Self {
+    pub fn new(x: &Data, source_sizes: &[usize], modalities: &Modalities, center: &[f64]) -> Self {
         let n = x.n;
+        let n_source: usize = source_sizes.iter().sum();
+        assert!(n_source <= n, "source rows exceed the training rows");
         let per_modality = (0..modalities.len())
             .map(|m| {
                 let mut d = modalities.sq_distances(m, x, x, center);
@@ -312,13 +385,14 @@ impl PairDistances {
         PairDistances {
             n,
             n_source,
+            source_sizes: source_sizes.to_vec(),
+            task: row_tasks(source_sizes, n),
             per_modality,
         }
     }
 
-    #[inline]
-    pub fn is_cross(&self, i: usize, j: usize) -> bool {
-        (i < self.n_source) != (j < self.n_source)
+    pub fn coupling(&self, h: &Hyper) -> Coupling {
+        Coupling::new(&h.lambdas, self.source_sizes.len())
     }
 
     /// Median of the non-zero pairwise distances of modality m among the target rows (all rows
@@ -367,7 +441,7 @@ impl KernelEval {
             .map(|(d, &l)| rbf_from_sq_distances(d, l))
             .collect();
         let mut k = Mat::<f64>::zeros(n, n);
-        combine_parts(&mut k, &parts, h, dist.n_source, true);
+        combine_parts(&mut k, &parts, h, &dist.coupling(h), &dist.task, &dist.task);
         KernelEval {
             k,
             parts,
@@ -403,11 +477,14 @@ impl KernelEval {
         let mut c = vec![0.0; p_len];
         let inv_l2: Vec<f64> = h.length_scales.iter().map(|l| 1.0 / (l * l)).collect();
         let sf2 = h.signal_variance;
+        let coupling = dist.coupling(h);
+        let n_lambdas = layout.n_lambdas;
         for j in 0..n {
             let vj = v[j];
+            let tj = dist.task[j];
             for i in 0..n {
-                let cross = dist.is_cross(i, j);
-                let mask = if cross { h.lambda } else { 1.0 };
+                let ti = dist.task[i];
+                let mask = coupling.get(ti, tj);
                 let mut unit = 0.0;
                 for m in 0..n_mod {
                     unit += h.weights[m] * self.parts[m][(i, j)];
@@ -421,8 +498,8 @@ impl KernelEval {
                         c[w] = sf2 * h.weights[m] * (km - unit) * mask;
                     }
                 }
-                if let Some(li) = layout.lambda() {
-                    c[li] = if cross { sf2 * unit } else { 0.0 };
+                for s in 0..n_lambdas {
+                    c[layout.len() - n_lambdas + s] = sf2 * unit * coupling.derivative(s, ti, tj);
                 }
                 let gij = g[(i, j)];
                 for p in 0..p_len {
@@ -447,14 +524,14 @@ pub fn rbf_from_sq_distances(d: &Mat<f64>, length_scale: f64) -> Mat<f64> {
     out
 }
 
-/// `out = σ² Σ_m γ_m parts_m`, with the rows before `n_source` scaled by λ against the target
-/// columns (`symmetric`: columns are the same rows, so the source columns are scaled too).
+/// `out[i, j] = σ² Σ_m γ_m parts_m[i, j] · B[row_task[i], col_task[j]]`.
 pub fn combine_parts(
     out: &mut Mat<f64>,
     parts: &[Mat<f64>],
     h: &Hyper,
-    n_source: usize,
-    symmetric: bool,
+    coupling: &Coupling,
+    row_task: &[usize],
+    col_task: &[usize],
 ) {
     for j in 0..out.ncols() {
         let col = out.col_as_slice_mut(j);
@@ -465,19 +542,23 @@ pub fn combine_parts(
                 *o += scale * p;
             }
         }
-        let column_is_source = symmetric && j < n_source;
-        let (lo, hi) = if column_is_source {
-            (n_source, col.len())
-        } else {
-            (0, n_source)
-        };
-        col[lo..hi].iter_mut().for_each(|v| *v *= h.lambda);
+        if coupling.n_tasks > 1 {
+            let tj = col_task[j];
+            for (o, &ti) in col.iter_mut().zip(row_task) {
+                *o *= coupling.get(ti, tj);
+            }
+        }
     }
 }
 
 /// Cross-kernel `K(X_train, X*)` (n_train × m) for test rows that belong to the target task,
-/// given the per-modality squared distances between the training rows and the test rows.
-pub fn cross_kernel_from_distances(dists: &[Mat<f64>], n_source: usize, h: &Hyper) -> Mat<f64> {
+/// given the per-modality squared distances between the training rows (source rows first, in
+/// tasks of `source_sizes`) and the test rows.
+pub fn cross_kernel_from_distances(
+    dists: &[Mat<f64>],
+    source_sizes: &[usize],
+    h: &Hyper,
+) -> Mat<f64> {
     let parts: Vec<Mat<f64>> = dists
         .iter()
         .zip(&h.length_scales)
@@ -485,14 +566,17 @@ pub fn cross_kernel_from_distances(dists: &[Mat<f64>], n_source: usize, h: &Hype
         .collect();
     let (n, m) = (dists[0].nrows(), dists[0].ncols());
     let mut out = Mat::<f64>::zeros(n, m);
-    combine_parts(&mut out, &parts, h, n_source, false);
+    let coupling = Coupling::new(&h.lambdas, source_sizes.len());
+    let rows = row_tasks(source_sizes, n);
+    let cols = vec![source_sizes.len(); m];
+    combine_parts(&mut out, &parts, h, &coupling, &rows, &cols);
     out
 }
 
 /// Cross-kernel `K(X_train, X*)` computed from scratch.
 pub fn cross_kernel(
     train: &Data,
-    n_source: usize,
+    source_sizes: &[usize],
     test: &Data,
     modalities: &Modalities,
     h: &Hyper,
@@ -501,7 +585,7 @@ pub fn cross_kernel(
     let dists: Vec<Mat<f64>> = (0..modalities.len())
         .map(|m| modalities.sq_distances(m, train, test, center))
         .collect();
-    cross_kernel_from_distances(&dists, n_source, h)
+    cross_kernel_from_distances(&dists, source_sizes, h)
 }
 
 #[cfg(test)]
@@ -521,18 +605,18 @@ mod tests {
     fn theta_round_trip() {
         let layout = Layout {
             n_modalities: 2,
-            transfer: true,
+            n_lambdas: 1,
         };
         let h = Hyper {
             signal_variance: 2.5,
             length_scales: vec![0.3, 4.0],
             weights: vec![0.25, 0.75],
-            lambda: 0.4,
+            lambdas: vec![0.4],
         };
         let back = layout.decode(&layout.encode(&h)).unwrap();
         assert!((back.signal_variance - 2.5).abs() < 1e-12);
         assert!((back.weights[1] - 0.75).abs() < 1e-12);
-        assert_eq!(back.lambda, 0.4);
+        assert_eq!(back.lambdas, vec![0.4]);
         assert_eq!(layout.len(), 6);
         assert!(layout.decode(&[0.0; 5]).is_err());
         let mut bad = layout.encode(&h);
@@ -545,12 +629,12 @@ mod tests {
         let x = data();
         let mods = Modalities::new(vec![vec![0, 1], vec![2]], 3).unwrap();
         let center = column_means(&x);
-        let dist = PairDistances::new(&x, 1, &mods, &center);
+        let dist = PairDistances::new(&x, &[1], &mods, &center);
         let h = Hyper {
             signal_variance: 1.7,
             length_scales: vec![0.8, 2.0],
             weights: vec![0.6, 0.4],
-            lambda: 0.3,
+            lambdas: vec![0.3],
         };
         let ev = KernelEval::new(&dist, &h);
         for i in 0..4 {
@@ -565,10 +649,54 @@ mod tests {
         }
         // The cross-kernel of the training rows against the target rows equals the block of K.
         let target = Data::new(x.values[3..].to_vec(), 3, 3).unwrap();
-        let kx = cross_kernel(&x, 1, &target, &mods, &h, &center);
+        let kx = cross_kernel(&x, &[1], &target, &mods, &h, &center);
         for i in 0..4 {
             for j in 0..3 {
                 assert!((kx[(i, j)] - ev.k[(i, j + 1)]).abs() < 1e-13);
+            }
+        }
+    }
+
+    #[test]
+    fn multi_source_coupling_has_the_documented_entries_and_derivatives() {
+        // Sources of 1 and 2 rows, then 1 target row: B_ss = 1, B_st = λ_s, B_ss' = λ_s λ_s'.
+        let x = data();
+        let mods = Modalities::all_columns(3);
+        let dist = PairDistances::new(&x, &[1, 2], &mods, &column_means(&x));
+        assert_eq!(dist.task, vec![0, 1, 1, 2]);
+        let lambdas = vec![0.3, -0.8];
+        let h = Hyper {
+            signal_variance: 1.0,
+            length_scales: vec![1.5],
+            weights: vec![1.0],
+            lambdas: lambdas.clone(),
+        };
+        let ev = KernelEval::new(&dist, &h);
+        let b = [
+            [1.0, 0.3 * -0.8, 0.3],
+            [0.3 * -0.8, 1.0, -0.8],
+            [0.3, -0.8, 1.0],
+        ];
+        for i in 0..4 {
+            for j in 0..4 {
+                let (a, c) = (x.row(i), x.row(j));
+                let d: f64 = a.iter().zip(c).map(|(p, q)| (p - q).powi(2)).sum();
+                let want = (-d / (2.0 * 2.25)).exp() * b[dist.task[i]][dist.task[j]];
+                assert!((ev.k[(i, j)] - want).abs() < 1e-13);
+            }
+        }
+        let coupling = Coupling::new(&lambdas, 2);
+        for s in 0..2 {
+            let e = 1e-6;
+            let (mut up, mut down) = (lambdas.clone(), lambdas.clone());
+            up[s] += e;
+            down[s] -= e;
+            let (cu, cd) = (Coupling::new(&up, 2), Coupling::new(&down, 2));
+            for ti in 0..3 {
+                for tj in 0..3 {
+                    let fd = (cu.get(ti, tj) - cd.get(ti, tj)) / (2.0 * e);
+                    assert!((fd - coupling.derivative(s, ti, tj)).abs() < 1e-8);
+                }
             }
         }
     }

@@ -238,12 +238,12 @@ mod tests {
             .map(|i| if i % 3 == 0 { 1.0 } else { -1.0 })
             .collect();
         let mods = Modalities::all_columns(2);
-        let dist = PairDistances::new(&x, 0, &mods, &crate::kernel::column_means(&x));
+        let dist = PairDistances::new(&x, &[], &mods, &crate::kernel::column_means(&x));
         let h = Hyper {
             signal_variance: 4.0,
             length_scales: vec![0.7],
             weights: vec![1.0],
-            lambda: 1.0,
+            lambdas: vec![],
         };
         let ev = KernelEval::new(&dist, &h);
         let mode = find_mode(ev.k.as_ref(), &y, None, &NewtonConfig::default()).unwrap();
@@ -275,12 +275,14 @@ mod tests {
             .map(|i| if (i * 5) % 7 < 3 { 1.0 } else { -1.0 })
             .collect();
         let mods = Modalities::new(vec![vec![0, 1], vec![2]], 3).unwrap();
-        let dist = PairDistances::new(&x, 4, &mods, &crate::kernel::column_means(&x));
+        // Two source tasks of 2 rows each: every λ's derivative, including the source-source
+        // coupling λ_1 λ_2, is checked.
+        let dist = PairDistances::new(&x, &[2, 2], &mods, &crate::kernel::column_means(&x));
         let layout = Layout {
             n_modalities: 2,
-            transfer: true,
+            n_lambdas: 2,
         };
-        let theta = vec![1.1, -0.2, 0.4, 0.3, -0.5, 0.35];
+        let theta = vec![1.1, -0.2, 0.4, 0.3, -0.5, 0.35, -0.6];
         let lml = |t: &[f64]| {
             let h = layout.decode(t).unwrap();
             let ev = KernelEval::new(&dist, &h);

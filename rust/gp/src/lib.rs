@@ -17,4 +17,6 @@ pub mod rng;
 pub use error::{GpError, GpResult};
 pub use kernel::{Data, Hyper, Layout, Modalities};
 pub use likelihood::Predictive;
-pub use model::{fit, fit_at, Free, ModelSpec, OneVsAll, Source};
+pub use model::{
+    fit, fit_at, fit_from, layout_for, Free, HyperPrior, ModelSpec, OneVsAll, PriorTerm, Source,
+};

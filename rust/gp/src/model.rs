@@ -6,7 +6,9 @@ use rayon::prelude::*;
 
 use crate::error::{GpError, GpResult};
 use crate::fastmath::exp_nonpositive_in_place;
-use crate::kernel::{column_means, Data, Hyper, KernelEval, Layout, Modalities, PairDistances};
+use crate::kernel::{
+    column_means, row_tasks, Coupling, Data, Hyper, KernelEval, Layout, Modalities, PairDistances,
+};
 use crate::laplace::{find_mode_with_jitter, lml_gradient, Mode, NewtonConfig};
 use crate::likelihood::{predictive_probability, Predictive};
 use crate::linalg;
@@ -33,6 +35,38 @@ impl Default for Free {
     }
 }
 
+/// Weak hyper-priors for MAP-II: independent normal densities on log σ² and on each modality's
+/// log ℓ_m (log-normal priors on σ² and ℓ_m). The optimiser then maximises
+/// `log p(y | θ) + log p(θ)`; the reported log marginal likelihood stays `log p(y | θ)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HyperPrior {
+    /// Centre (natural scale) and standard deviation of ln σ²; None: flat.
+    pub signal_variance: Option<(f64, f64)>,
+    /// Centre relative to each modality's data scale (the median pairwise distance of the
+    /// target rows) and standard deviation of ln ℓ_m; None: flat.
+    pub length_scale: Option<(f64, f64)>,
+}
+
+/// One normal term of the log hyper-prior: theta index, mean and standard deviation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PriorTerm {
+    pub index: usize,
+    pub mean: f64,
+    pub sd: f64,
+}
+
+/// `Σ log N(θ_i | mean, sd²)` and its gradient with respect to theta.
+pub fn log_prior(terms: &[PriorTerm], theta: &[f64]) -> (f64, Vec<f64>) {
+    let mut grad = vec![0.0; theta.len()];
+    let mut value = 0.0;
+    for t in terms {
+        let z = (theta[t.index] - t.mean) / t.sd;
+        value += -0.5 * z * z - t.sd.ln() - 0.5 * (2.0 * std::f64::consts::PI).ln();
+        grad[t.index] += -z / t.sd;
+    }
+    (value, grad)
+}
+
 /// Everything that defines a model except the data.
 #[derive(Debug, Clone)]
 pub struct ModelSpec {
@@ -55,6 +89,8 @@ pub struct ModelSpec {
     /// Largest diagonal jitter, relative to the signal variance, before giving up.
     pub max_jitter: f64,
     pub predictive: Predictive,
+    /// None: plain ML-II.
+    pub hyper_prior: Option<HyperPrior>,
 }
 
 impl ModelSpec {
@@ -75,6 +111,7 @@ impl ModelSpec {
             newton: NewtonConfig::default(),
             max_jitter: 1e-6,
             predictive: Predictive::ErfMixture,
+            hyper_prior: None,
         }
     }
 
@@ -121,6 +158,20 @@ impl ModelSpec {
                 )));
             }
         }
+        if let Some(prior) = &self.hyper_prior {
+            for (name, term) in [
+                ("signal variance", prior.signal_variance),
+                ("length-scale", prior.length_scale),
+            ] {
+                if let Some((centre, sd)) = term {
+                    if !(positive(centre) && positive(sd)) {
+                        return Err(GpError::InvalidInput(format!(
+                            "the {name} hyper-prior needs a centre > 0 and a width > 0, got ({centre}, {sd})"
+                        )));
+                    }
+                }
+            }
+        }
         if !(self.max_jitter >= 0.0 && self.max_jitter.is_finite()) {
             return Err(GpError::InvalidInput(format!(
                 "max_jitter must be >= 0, got {}",
@@ -131,11 +182,21 @@ impl ModelSpec {
     }
 }
 
-/// Source-task observations transferred into one class's binary classifier (labelled +1).
+/// A source task transferred into one class's binary classifier: its observations with ±1
+/// labels (all +1 for positives-only) and its relatedness λ to the target task.
 #[derive(Debug, Clone)]
 pub struct Source {
     pub x: Data,
+    pub y: Vec<f64>,
     pub lambda: f64,
+}
+
+impl Source {
+    /// Every observation labelled +1 (the old object's own observations only).
+    pub fn positives(x: Data, lambda: f64) -> Self {
+        let y = vec![1.0; x.n];
+        Source { x, y, lambda }
+    }
 }
 
 /// A fitted binary classifier: the training rows (source first), the hyper-parameters and the
@@ -144,9 +205,13 @@ pub struct BinaryFit {
     pub x: Data,
     pub y: Vec<f64>,
     pub n_source: usize,
+    pub source_sizes: Vec<usize>,
     pub theta: Vec<f64>,
     pub hyper: Hyper,
     pub lml: f64,
+    /// The hyper-prior's terms (empty for ML-II) and its log density at `theta`.
+    pub prior: Vec<PriorTerm>,
+    pub log_prior: f64,
     pub jitter: f64,
     /// ∇ log p(y | f̂) = t - π̂.
     grad_log_lik: Vec<f64>,
@@ -160,36 +225,69 @@ pub struct BinaryFit {
 struct BinaryProblem {
     x: Data,
     y: Vec<f64>,
-    n_source: usize,
     dist: PairDistances,
 }
 
 impl BinaryProblem {
+    /// The training rows of one binary classifier: every source task's rows in order, then the
+    /// target rows labelled +1 for class `positive` and -1 otherwise.
     fn new(
         target: &Data,
         labels: &[usize],
         positive: usize,
-        source: Option<&Source>,
+        sources: &[Source],
         modalities: &Modalities,
         center: &[f64],
     ) -> Self {
-        let y_target = labels
-            .iter()
-            .map(|&c| if c == positive { 1.0 } else { -1.0 });
-        let (x, y, n_source) = match source {
-            Some(s) => {
-                let y: Vec<f64> = std::iter::repeat_n(1.0, s.x.n).chain(y_target).collect();
-                (s.x.stacked(target), y, s.x.n)
+        let mut y: Vec<f64> = sources.iter().flat_map(|s| s.y.iter().copied()).collect();
+        y.extend(
+            labels
+                .iter()
+                .map(|&c| if c == positive { 1.0 } else { -1.0 }),
+        );
+        let x = if sources.is_empty() {
+            target.clone()
+        } else {
+            let mut values = Vec::with_capacity(y.len() * target.d);
+            for s in sources {
+                values.extend_from_slice(&s.x.values);
             }
-            None => (target.clone(), y_target.collect(), 0),
+            values.extend_from_slice(&target.values);
+            Data {
+                values,
+                n: y.len(),
+                d: target.d,
+            }
         };
-        let dist = PairDistances::new(&x, n_source, modalities, center);
-        BinaryProblem {
-            x,
-            y,
-            n_source,
-            dist,
+        let sizes: Vec<usize> = sources.iter().map(|s| s.x.n).collect();
+        let dist = PairDistances::new(&x, &sizes, modalities, center);
+        BinaryProblem { x, y, dist }
+    }
+
+    /// The hyper-prior's terms: centred on σ² = the given centre and on each modality's data
+    /// scale (median pairwise distance of the target rows) times the given factor.
+    fn prior_terms(&self, layout: &Layout, spec: &ModelSpec) -> Vec<PriorTerm> {
+        let Some(prior) = spec.hyper_prior else {
+            return Vec::new();
+        };
+        let mut terms = Vec::new();
+        if let Some((centre, sd)) = prior.signal_variance {
+            terms.push(PriorTerm {
+                index: Layout::SIGNAL,
+                mean: centre.ln(),
+                sd,
+            });
         }
+        if let Some((factor, sd)) = prior.length_scale {
+            for m in 0..layout.n_modalities {
+                terms.push(PriorTerm {
+                    index: layout.length_scale(m),
+                    mean: (factor * self.dist.median_distance(m)).ln(),
+                    sd,
+                });
+            }
+        }
+        terms
     }
 
     fn evaluate(
@@ -219,20 +317,25 @@ impl BinaryProblem {
         layout: &Layout,
         spec: &ModelSpec,
         theta: Vec<f64>,
+        prior: Vec<PriorTerm>,
         optimizer_converged: bool,
         evaluations: usize,
     ) -> GpResult<BinaryFit> {
         let (ev, mode, hyper, _) = self.evaluate(layout, spec, &theta, None, false)?;
+        let log_prior = log_prior(&prior, &theta).0;
         let grad_log_lik: Vec<f64> = (0..self.y.len())
             .map(|i| 0.5 * (self.y[i] + 1.0) - mode.pi[i])
             .collect();
         Ok(BinaryFit {
             x: self.x,
             y: self.y,
-            n_source: self.n_source,
+            n_source: self.dist.n_source,
+            source_sizes: self.dist.source_sizes.clone(),
             theta,
             hyper,
             lml: mode.lml,
+            prior,
+            log_prior,
             jitter: ev.jitter,
             grad_log_lik,
             sw: mode.sw,
@@ -248,7 +351,7 @@ impl BinaryProblem {
 fn theta_box(
     layout: &Layout,
     spec: &ModelSpec,
-    has_source: bool,
+    n_sources: usize,
 ) -> (Vec<f64>, Vec<f64>, Vec<bool>) {
     let n = layout.len();
     let (mut lo, mut hi, mut free) = (vec![0.0; n], vec![0.0; n], vec![false; n]);
@@ -266,22 +369,28 @@ fn theta_box(
             free[w] = spec.free.weights;
         }
     }
-    if let Some(li) = layout.lambda() {
+    for s in 0..layout.n_lambdas {
+        let li = layout.len() - layout.n_lambdas + s;
         lo[li] = 0.0;
         hi[li] = 1.0;
-        free[li] = spec.free.lambda && has_source;
+        free[li] = spec.free.lambda && s < n_sources;
     }
     (lo, hi, free)
 }
 
+/// Optimises one binary classifier. `lambdas`: the starting relatedness of every λ entry of
+/// the layout (its sources' values, zero-padded); `start`: a starting theta whose non-NaN
+/// entries replace the specification's initial values.
 fn fit_binary(
     problem: BinaryProblem,
     layout: &Layout,
     spec: &ModelSpec,
-    lambda: f64,
+    lambdas: Vec<f64>,
+    start: Option<&[f64]>,
     seed: u64,
 ) -> GpResult<BinaryFit> {
     let m = layout.n_modalities;
+    let prior = problem.prior_terms(layout, spec);
     let needs_scale = spec.optimize || spec.length_scales.iter().any(|l| l.is_nan());
     let medians: Vec<f64> = (0..m)
         .map(|k| {
@@ -302,18 +411,26 @@ fn fit_binary(
         signal_variance: spec.signal_variance,
         length_scales: init_ls.clone(),
         weights: spec.weights.clone(),
-        lambda,
+        lambdas,
     };
-    let (lo, hi, free) = theta_box(layout, spec, problem.n_source > 0);
+    let (lo, hi, free) = theta_box(layout, spec, problem.dist.source_sizes.len());
     let clip = |t: &mut Vec<f64>| {
         t.iter_mut()
             .enumerate()
             .for_each(|(i, v)| *v = v.clamp(lo[i], hi[i]))
     };
+    // A given start overrides the initial values entry by entry (NaN: keep the initial one).
     let mut theta0 = layout.encode(&init);
+    if let Some(t) = start {
+        for (v, s) in theta0.iter_mut().zip(t) {
+            if !s.is_nan() {
+                *v = *s;
+            }
+        }
+    }
     clip(&mut theta0);
     if !spec.optimize || !free.iter().any(|&f| f) {
-        return problem.finish(layout, spec, theta0, true, 1);
+        return problem.finish(layout, spec, theta0, prior, true, 1);
     }
 
     // Starting points: the given hyper-parameters, then one scaled to the data (unless the
@@ -342,7 +459,8 @@ fn fit_binary(
         if free[0] && (r > 0 || auto_given) {
             t[0] = rng.uniform_in(0.1f64.ln(), 100f64.ln());
         }
-        if let Some(li) = layout.lambda() {
+        for s in 0..layout.n_lambdas {
+            let li = layout.len() - layout.n_lambdas + s;
             if free[li] && (r > 0 || auto_given) {
                 t[li] = rng.uniform();
             }
@@ -354,13 +472,20 @@ fn fit_binary(
     let mut best: Option<(f64, Vec<f64>, bool)> = None;
     let mut evaluations = 0;
     let mut last_error = None;
-    for start in starts {
+    for t0 in starts {
         let mut warm: Option<Vec<f64>> = None;
+        // Minimises -(log p(y | θ) + log p(θ)); the prior term is absent for ML-II.
         let objective = |t: &[f64]| -> Option<(f64, Vec<f64>)> {
             match problem.evaluate(layout, spec, t, warm.as_deref(), true) {
-                Ok((_, mode, _, Some(g))) => {
+                Ok((_, mode, _, Some(mut g))) => {
                     warm = Some(mode.a);
-                    Some((-mode.lml, g.into_iter().map(|v| -v).collect()))
+                    let mut value = mode.lml;
+                    if !prior.is_empty() {
+                        let (lp, gp) = log_prior(&prior, t);
+                        value += lp;
+                        g.iter_mut().zip(gp).for_each(|(a, b)| *a += b);
+                    }
+                    Some((-value, g.into_iter().map(|v| -v).collect()))
                 }
                 Ok(_) => None,
                 Err(e) => {
@@ -369,7 +494,7 @@ fn fit_binary(
                 }
             }
         };
-        if let Some(r) = minimize(objective, &start, &lo, &hi, &free, &spec.lbfgs) {
+        if let Some(r) = minimize(objective, &t0, &lo, &hi, &free, &spec.lbfgs) {
             evaluations += r.evaluations;
             if best.as_ref().is_none_or(|(f, _, _)| r.fx < *f) {
                 best = Some((r.fx, r.x, r.converged));
@@ -377,7 +502,9 @@ fn fit_binary(
         }
     }
     match best {
-        Some((_, theta, converged)) => problem.finish(layout, spec, theta, converged, evaluations),
+        Some((_, theta, converged)) => {
+            problem.finish(layout, spec, theta, prior, converged, evaluations)
+        }
         None => Err(last_error.unwrap_or_else(|| {
             GpError::InvalidInput("no optimiser start could be evaluated".into())
         })),
@@ -411,6 +538,13 @@ impl BinaryFit {
                 .collect()
         };
         let h = &self.hyper;
+        // Each source row couples to the (target-task) test rows through its task's λ.
+        let coupling = Coupling::new(&h.lambdas, self.source_sizes.len());
+        let target_task = self.source_sizes.len();
+        let source_scale: Vec<f64> = row_tasks(&self.source_sizes, ns)
+            .into_iter()
+            .map(|t| coupling.get(t, target_task))
+            .collect();
         let coef: Vec<f64> = h.length_scales.iter().map(|l| -0.5 / (l * l)).collect();
         let mut v = Mat::<f64>::zeros(n, test.n);
         let mut mean = vec![0.0; test.n];
@@ -432,7 +566,10 @@ impl BinaryFit {
                     *c += scale * b;
                 }
             }
-            col[..ns].iter_mut().for_each(|c| *c *= h.lambda);
+            col[..ns]
+                .iter_mut()
+                .zip(&source_scale)
+                .for_each(|(c, s)| *c *= s);
             mean[j] = col.iter().zip(&self.grad_log_lik).map(|(k, g)| k * g).sum();
             for (c, s) in col.iter_mut().zip(&self.sw) {
                 *c *= s;
@@ -461,16 +598,38 @@ pub struct OneVsAll {
     pub spec: ModelSpec,
 }
 
-/// Fits the model. `labels` are class indices in `0..n_classes`; with two classes and no
-/// sources a single binary classifier (class 1 positive) serves both classes.
+/// Fits the model. `labels` are class indices in `0..n_classes`; `sources[c]` lists class c's
+/// source tasks (empty: none). With two classes and no sources a single binary classifier
+/// (class 1 positive) serves both classes.
 pub fn fit(
     x: &Data,
     labels: &[usize],
     n_classes: usize,
-    sources: &[Option<Source>],
+    sources: &[Vec<Source>],
     spec: &ModelSpec,
 ) -> GpResult<OneVsAll> {
-    fit_impl(x, labels, n_classes, sources, spec, None)
+    fit_impl(x, labels, n_classes, sources, spec, Hypers::Optimise(None))
+}
+
+/// As [`fit`], with a starting theta per classifier (None: the specification's values) whose
+/// non-NaN entries replace the specification's initial hyper-parameters; fixed entries stay
+/// at them.
+pub fn fit_from(
+    x: &Data,
+    labels: &[usize],
+    n_classes: usize,
+    sources: &[Vec<Source>],
+    spec: &ModelSpec,
+    starts: &[Option<Vec<f64>>],
+) -> GpResult<OneVsAll> {
+    fit_impl(
+        x,
+        labels,
+        n_classes,
+        sources,
+        spec,
+        Hypers::Optimise(Some(starts)),
+    )
 }
 
 /// Builds the model at given hyper-parameters, one theta row per classifier, without
@@ -479,20 +638,76 @@ pub fn fit_at(
     x: &Data,
     labels: &[usize],
     n_classes: usize,
-    sources: &[Option<Source>],
+    sources: &[Vec<Source>],
     spec: &ModelSpec,
     thetas: &[Vec<f64>],
 ) -> GpResult<OneVsAll> {
-    fit_impl(x, labels, n_classes, sources, spec, Some(thetas))
+    fit_impl(x, labels, n_classes, sources, spec, Hypers::At(thetas))
+}
+
+enum Hypers<'a> {
+    Optimise(Option<&'a [Option<Vec<f64>>]>),
+    At(&'a [Vec<f64>]),
+}
+
+/// The layout shared by every classifier of a one-vs-all model with these sources.
+pub fn layout_for(spec: &ModelSpec, sources: &[Vec<Source>]) -> Layout {
+    Layout {
+        n_modalities: spec.modalities.len(),
+        n_lambdas: sources.iter().map(Vec::len).max().unwrap_or(0),
+    }
+}
+
+fn check_sources(x: &Data, sources: &[Vec<Source>], n_classes: usize) -> GpResult<()> {
+    if sources.len() != n_classes {
+        return Err(GpError::InvalidInput(format!(
+            "expected one source list per class ({n_classes}), got {}",
+            sources.len()
+        )));
+    }
+    for (c, list) in sources.iter().enumerate() {
+        for (k, s) in list.iter().enumerate() {
+            let what = format!("source {k} of class {c}");
+            if s.x.d != x.d {
+                return Err(GpError::InvalidInput(format!(
+                    "the data of {what} have {} columns, X has {}",
+                    s.x.d, x.d
+                )));
+            }
+            if s.x.n == 0 {
+                return Err(GpError::InvalidInput(format!("{what} has no rows")));
+            }
+            s.x.check_finite(&format!("the data of {what}"))?;
+            if s.y.len() != s.x.n {
+                return Err(GpError::InvalidInput(format!(
+                    "{what} has {} rows but {} labels",
+                    s.x.n,
+                    s.y.len()
+                )));
+            }
+            if let Some(bad) = s.y.iter().find(|&&v| v != 1.0 && v != -1.0) {
+                return Err(GpError::InvalidInput(format!(
+                    "the labels of {what} must be +1 or -1, got {bad}"
+                )));
+            }
+            if !(0.0..=1.0).contains(&s.lambda) {
+                return Err(GpError::InvalidInput(format!(
+                    "the transfer lambda of {what} must lie in [0, 1], got {}",
+                    s.lambda
+                )));
+            }
+        }
+    }
+    Ok(())
 }
 
 fn fit_impl(
     x: &Data,
     labels: &[usize],
     n_classes: usize,
-    sources: &[Option<Source>],
+    sources: &[Vec<Source>],
     spec: &ModelSpec,
-    thetas: Option<&[Vec<f64>]>,
+    hypers: Hypers<'_>,
 ) -> GpResult<OneVsAll> {
     spec.validate()?;
     if labels.len() != x.n {
@@ -512,65 +727,71 @@ fn fit_impl(
             "label index {bad} is out of range for {n_classes} classes"
         )));
     }
-    if sources.len() != n_classes {
-        return Err(GpError::InvalidInput(format!(
-            "expected one source entry per class ({n_classes}), got {}",
-            sources.len()
-        )));
-    }
     x.check_finite("X")?;
-    for (c, s) in sources.iter().enumerate() {
-        if let Some(s) = s {
-            if s.x.d != x.d {
-                return Err(GpError::InvalidInput(format!(
-                    "the source data of class {c} have {} columns, X has {}",
-                    s.x.d, x.d
-                )));
-            }
-            s.x.check_finite(&format!("the source data of class {c}"))?;
-            if !(0.0..=1.0).contains(&s.lambda) {
-                return Err(GpError::InvalidInput(format!(
-                    "the transfer lambda of class {c} must lie in [0, 1], got {}",
-                    s.lambda
-                )));
-            }
-        }
-    }
-    let transfer = sources.iter().any(|s| s.is_some());
+    check_sources(x, sources, n_classes)?;
+    let layout = layout_for(spec, sources);
     let center = column_means(x);
-    let layout = Layout {
-        n_modalities: spec.modalities.len(),
-        transfer,
-    };
-    let positives: Vec<usize> = if n_classes == 2 && !transfer {
+    let positives: Vec<usize> = if n_classes == 2 && !layout.transfer() {
         vec![1]
     } else {
         (0..n_classes).collect()
     };
-    if let Some(t) = thetas {
-        if t.len() != positives.len() {
+    let rows = match &hypers {
+        Hypers::At(t) => Some(t.len()),
+        Hypers::Optimise(Some(s)) => Some(s.len()),
+        Hypers::Optimise(None) => None,
+    };
+    if let Some(r) = rows {
+        if r != positives.len() {
             return Err(GpError::InvalidInput(format!(
-                "expected {} theta rows (one per classifier), got {}",
-                positives.len(),
-                t.len()
+                "expected {} theta rows (one per classifier), got {r}",
+                positives.len()
             )));
         }
+    }
+    let check_row = |t: &[f64]| -> GpResult<()> {
+        if t.len() != layout.len() {
+            return Err(GpError::InvalidInput(format!(
+                "theta has {} entries, this model has {} hyper-parameters",
+                t.len(),
+                layout.len()
+            )));
+        }
+        layout.decode(t).map(|_| ())
+    };
+    match &hypers {
+        Hypers::At(t) => t.iter().try_for_each(|r| check_row(r))?,
+        Hypers::Optimise(Some(s)) => s.iter().flatten().try_for_each(|r| {
+            // NaN entries stand for "the initial value"; check the rest.
+            let filled: Vec<f64> = r
+                .iter()
+                .map(|v| if v.is_nan() { 0.0 } else { *v })
+                .collect();
+            check_row(&filled)
+        })?,
+        Hypers::Optimise(None) => {}
     }
     let classifiers = positives
         .par_iter()
         .enumerate()
         .map(|(k, &c)| {
-            let source = sources[c].as_ref();
-            let problem = BinaryProblem::new(x, labels, c, source, &spec.modalities, &center);
-            match thetas {
-                Some(t) => problem.finish(&layout, spec, t[k].clone(), true, 1),
-                None => {
-                    let lambda = source.map_or(0.0, |s| s.lambda);
+            let own = &sources[c];
+            let problem = BinaryProblem::new(x, labels, c, own, &spec.modalities, &center);
+            match &hypers {
+                Hypers::At(t) => {
+                    let prior = problem.prior_terms(&layout, spec);
+                    problem.finish(&layout, spec, t[k].clone(), prior, true, 1)
+                }
+                Hypers::Optimise(starts) => {
+                    let mut lambdas: Vec<f64> = own.iter().map(|s| s.lambda).collect();
+                    lambdas.resize(layout.n_lambdas, 0.0);
+                    let start = starts.and_then(|s| s[k].as_deref());
                     fit_binary(
                         problem,
                         &layout,
                         spec,
-                        lambda,
+                        lambdas,
+                        start,
                         SplitMix64::derive(spec.seed, c as u64).next_u64(),
                     )
                 }
@@ -624,9 +845,10 @@ impl OneVsAll {
         Ok((mean, var))
     }
 
-    /// Class probabilities `(n_test × n_classes)` row-major: the one-vs-all probabilities
-    /// normalised to sum to one.
-    pub fn predict_proba(&self, x: &Data) -> GpResult<Vec<f64>> {
+    /// Each one-vs-all classifier's own `p(y = +1 | x)` per class, `(n_test × n_classes)`
+    /// row-major, not normalised across classes. With a single classifier for two classes the
+    /// first column is its complement.
+    pub fn predict_binary(&self, x: &Data) -> GpResult<Vec<f64>> {
         let (mean, var) = self.latent(x)?;
         let k = self.classifiers.len();
         let c = self.n_classes;
@@ -637,14 +859,25 @@ impl OneVsAll {
                 out[i * c] = 1.0 - p;
                 out[i * c + 1] = p;
             } else {
-                let row = &mut out[i * c..(i + 1) * c];
                 for j in 0..c {
-                    row[j] = predictive_probability(
+                    out[i * c + j] = predictive_probability(
                         mean[i * k + j],
                         var[i * k + j],
                         self.spec.predictive,
                     );
                 }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Class probabilities `(n_test × n_classes)` row-major: the one-vs-all probabilities
+    /// normalised to sum to one.
+    pub fn predict_proba(&self, x: &Data) -> GpResult<Vec<f64>> {
+        let mut out = self.predict_binary(x)?;
+        let c = self.n_classes;
+        if self.classifiers.len() > 1 {
+            for row in out.chunks_mut(c) {
                 let s: f64 = row.iter().sum();
                 if s > 0.0 {
                     row.iter_mut().for_each(|v| *v /= s);
@@ -656,11 +889,13 @@ impl OneVsAll {
         Ok(out)
     }
 
-    /// Log marginal likelihood (and its gradient) of each classifier at the given theta rows.
+    /// Log marginal likelihood (and its gradient) of each classifier at the given theta rows;
+    /// with `include_prior`, plus the log hyper-prior (the MAP-II objective).
     pub fn log_marginal_likelihood(
         &self,
         thetas: &[Vec<f64>],
         gradient: bool,
+        include_prior: bool,
     ) -> GpResult<Vec<(f64, Option<Vec<f64>>)>> {
         if thetas.len() != self.classifiers.len() {
             return Err(GpError::InvalidInput(format!(
@@ -674,14 +909,26 @@ impl OneVsAll {
             .zip(thetas.par_iter())
             .map(|(c, t)| {
                 let problem = BinaryProblem {
-                    dist: PairDistances::new(&c.x, c.n_source, &self.spec.modalities, &self.center),
+                    dist: PairDistances::new(
+                        &c.x,
+                        &c.source_sizes,
+                        &self.spec.modalities,
+                        &self.center,
+                    ),
                     x: c.x.clone(),
                     y: c.y.clone(),
-                    n_source: c.n_source,
                 };
-                let (_, mode, _, g) =
+                let (_, mode, _, mut g) =
                     problem.evaluate(&self.layout, &self.spec, t, None, gradient)?;
-                Ok((mode.lml, g))
+                let mut value = mode.lml;
+                if include_prior {
+                    let (lp, gp) = log_prior(&c.prior, t);
+                    value += lp;
+                    if let Some(g) = g.as_mut() {
+                        g.iter_mut().zip(gp).for_each(|(a, b)| *a += b);
+                    }
+                }
+                Ok((value, g))
             })
             .collect()
     }
@@ -710,7 +957,7 @@ mod tests {
         let centers = [[0.0, 0.0], [3.0, 0.0], [0.0, 3.0]];
         let (x, y) = blobs(15, &centers, 3);
         let spec = ModelSpec::new(Modalities::all_columns(2));
-        let model = fit(&x, &y, 3, &[None, None, None], &spec).unwrap();
+        let model = fit(&x, &y, 3, &[vec![], vec![], vec![]], &spec).unwrap();
         let (xt, yt) = blobs(20, &centers, 99);
         let p = model.predict_proba(&xt).unwrap();
         let correct = (0..xt.n)
@@ -736,9 +983,9 @@ mod tests {
         let (x, y) = blobs(12, &[[0.0, 0.0], [1.5, 1.0]], 5);
         let mut spec = ModelSpec::new(Modalities::all_columns(2));
         spec.optimize = false;
-        let fixed = fit(&x, &y, 2, &[None, None], &spec).unwrap();
+        let fixed = fit(&x, &y, 2, &[vec![], vec![]], &spec).unwrap();
         spec.optimize = true;
-        let opt = fit(&x, &y, 2, &[None, None], &spec).unwrap();
+        let opt = fit(&x, &y, 2, &[vec![], vec![]], &spec).unwrap();
         assert_eq!(opt.classifiers.len(), 1);
         assert!(opt.classifiers[0].lml >= fixed.classifiers[0].lml - 1e-9);
     }
@@ -749,8 +996,8 @@ mod tests {
         let mut spec = ModelSpec::new(Modalities::all_columns(2));
         spec.seed = 42;
         spec.n_restarts = 3;
-        let a = fit(&x, &y, 3, &[None, None, None], &spec).unwrap();
-        let b = fit(&x, &y, 3, &[None, None, None], &spec).unwrap();
+        let a = fit(&x, &y, 3, &[vec![], vec![], vec![]], &spec).unwrap();
+        let b = fit(&x, &y, 3, &[vec![], vec![], vec![]], &spec).unwrap();
         for (ca, cb) in a.classifiers.iter().zip(&b.classifiers) {
             assert_eq!(ca.theta, cb.theta);
         }
@@ -761,25 +1008,22 @@ mod tests {
         let (x, y) = blobs(5, &[[0.0, 0.0], [2.0, 0.0]], 1);
         let spec = ModelSpec::new(Modalities::all_columns(2));
         assert!(matches!(
-            fit(&x, &y, 1, &[None], &spec),
+            fit(&x, &y, 1, &[vec![]], &spec),
             Err(GpError::InvalidInput(_))
         ));
         assert!(matches!(
-            fit(&x, &y[1..], 2, &[None, None], &spec),
+            fit(&x, &y[1..], 2, &[vec![], vec![]], &spec),
             Err(GpError::InvalidInput(_))
         ));
         let mut xn = x.clone();
         xn.values[3] = f64::NAN;
         assert!(matches!(
-            fit(&xn, &y, 2, &[None, None], &spec),
+            fit(&xn, &y, 2, &[vec![], vec![]], &spec),
             Err(GpError::NonFinite(_))
         ));
-        let src = Source {
-            x: Data::new(vec![0.0, 0.0], 1, 2).unwrap(),
-            lambda: 1.5,
-        };
+        let src = Source::positives(Data::new(vec![0.0, 0.0], 1, 2).unwrap(), 1.5);
         assert!(matches!(
-            fit(&x, &y, 2, &[Some(src), None], &spec),
+            fit(&x, &y, 2, &[vec![src], vec![]], &spec),
             Err(GpError::InvalidInput(_))
         ));
     }
@@ -800,15 +1044,12 @@ mod tests {
         spec.optimize = false;
         spec.signal_variance = 4.0;
         let probe = Data::new(vec![-1.0, 0.8], 1, 2).unwrap();
-        let plain = fit(&x, &y, 2, &[None, None], &spec)
+        let plain = fit(&x, &y, 2, &[vec![], vec![]], &spec)
             .unwrap()
             .predict_proba(&probe)
             .unwrap();
-        let source = Source {
-            x: src_x,
-            lambda: 1.0,
-        };
-        let with = fit(&x, &y, 2, &[Some(source), None], &spec)
+        let source = Source::positives(src_x, 1.0);
+        let with = fit(&x, &y, 2, &[vec![source], vec![]], &spec)
             .unwrap()
             .predict_proba(&probe)
             .unwrap();

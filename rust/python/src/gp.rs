@@ -3,7 +3,9 @@
 //! releases the GIL and maps errors.
 
 use aptkt_gp::kernel::{KernelEval, PairDistances};
-use aptkt_gp::{Data, Free, GpError, Layout, Modalities, ModelSpec, OneVsAll, Predictive, Source};
+use aptkt_gp::{
+    Data, Free, GpError, HyperPrior, Layout, Modalities, ModelSpec, OneVsAll, Predictive, Source,
+};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -46,24 +48,25 @@ pub struct GpcModel {
     n_threads: usize,
 }
 
-#[pyfunction]
-#[pyo3(signature = (
-    x, labels, n_classes, sources, modalities, signal_variance, length_scales, weights,
-    free, signal_variance_bounds, length_scale_bounds, optimize, n_restarts, seed, max_iter,
-    newton_max_iter, newton_tol, max_jitter, predictive, n_threads, thetas = None
-))]
-#[allow(clippy::too_many_arguments)]
-fn fit_gpc(
-    py: Python<'_>,
-    x: PyReadonlyArray2<'_, f64>,
-    labels: PyReadonlyArray1<'_, i64>,
-    n_classes: usize,
-    sources: Vec<Option<(PyReadonlyArray2<'_, f64>, f64)>>,
+/// Everything that defines a fit except the data: the hyper-parameters' starting values, which
+/// of them are free, their bounds, and the optimiser's and Newton iteration's limits. Built
+/// with keywords only (`FitSettings(modalities=[[0, 1]], n_restarts=2, ...)`); every field is
+/// a readable and writable attribute.
+#[pyclass(module = "aptkt._core", get_all, set_all)]
+#[derive(Clone)]
+pub struct FitSettings {
+    /// Feature columns of each modality.
     modalities: Vec<Vec<usize>>,
+    /// Initial signal variance σ².
     signal_variance: f64,
+    /// Initial length-scale per modality; NaN: scaled to the data (median pairwise distance).
     length_scales: Vec<f64>,
+    /// Initial modality weights γ (normalised).
     weights: Vec<f64>,
-    free: (bool, bool, bool, bool),
+    free_signal_variance: bool,
+    free_length_scales: bool,
+    free_weights: bool,
+    free_lambda: bool,
     signal_variance_bounds: (f64, f64),
     length_scale_bounds: (f64, f64),
     optimize: bool,
@@ -73,9 +76,172 @@ fn fit_gpc(
     newton_max_iter: usize,
     newton_tol: f64,
     max_jitter: f64,
-    predictive: &str,
+    /// Predictive integral: "erf" or "quadrature".
+    approximation: String,
+    /// Threads for the per-class fits; 0: rayon's default (all cores).
     n_threads: usize,
+    /// MAP-II hyper-prior on σ²: (centre, sd of ln σ²); None: flat.
+    prior_signal_variance: Option<(f64, f64)>,
+    /// MAP-II hyper-prior on each ℓ_m: (centre relative to the modality's data scale, sd of
+    /// ln ℓ_m); None: flat.
+    prior_length_scale: Option<(f64, f64)>,
+}
+
+#[pymethods]
+impl FitSettings {
+    #[new]
+    #[pyo3(signature = (
+        *, modalities, signal_variance = 1.0, length_scales, weights,
+        free_signal_variance = true, free_length_scales = true, free_weights = true,
+        free_lambda = false, signal_variance_bounds = (1e-5, 1e5),
+        length_scale_bounds = (1e-5, 1e5), optimize = true, n_restarts = 2, seed = 0,
+        max_iter = 200, newton_max_iter = 100, newton_tol = 1e-10, max_jitter = 1e-6,
+        approximation = "erf".to_string(), n_threads = 0, prior_signal_variance = None,
+        prior_length_scale = None
+    ))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        modalities: Vec<Vec<usize>>,
+        signal_variance: f64,
+        length_scales: Vec<f64>,
+        weights: Vec<f64>,
+        free_signal_variance: bool,
+        free_length_scales: bool,
+        free_weights: bool,
+        free_lambda: bool,
+        signal_variance_bounds: (f64, f64),
+        length_scale_bounds: (f64, f64),
+        optimize: bool,
+        n_restarts: usize,
+        seed: u64,
+        max_iter: usize,
+        newton_max_iter: usize,
+        newton_tol: f64,
+        max_jitter: f64,
+        approximation: String,
+        n_threads: usize,
+        prior_signal_variance: Option<(f64, f64)>,
+        prior_length_scale: Option<(f64, f64)>,
+    ) -> Self {
+        FitSettings {
+            modalities,
+            signal_variance,
+            length_scales,
+            weights,
+            free_signal_variance,
+            free_length_scales,
+            free_weights,
+            free_lambda,
+            signal_variance_bounds,
+            length_scale_bounds,
+            optimize,
+            n_restarts,
+            seed,
+            max_iter,
+            newton_max_iter,
+            newton_tol,
+            max_jitter,
+            approximation,
+            n_threads,
+            prior_signal_variance,
+            prior_length_scale,
+        }
+    }
+
+    fn __repr__(&self) -> String {
+        let b = |v: bool| if v { "True" } else { "False" };
+        format!(
+            "FitSettings(modalities={:?}, signal_variance={:?}, length_scales={:?}, \
+             weights={:?}, free_signal_variance={}, free_length_scales={}, free_weights={}, \
+             free_lambda={}, signal_variance_bounds={:?}, length_scale_bounds={:?}, \
+             optimize={}, n_restarts={}, seed={}, max_iter={}, newton_max_iter={}, \
+             newton_tol={:?}, max_jitter={:?}, approximation={:?}, n_threads={}, \
+             prior_signal_variance={}, prior_length_scale={})",
+            self.modalities,
+            self.signal_variance,
+            self.length_scales,
+            self.weights,
+            b(self.free_signal_variance),
+            b(self.free_length_scales),
+            b(self.free_weights),
+            b(self.free_lambda),
+            self.signal_variance_bounds,
+            self.length_scale_bounds,
+            b(self.optimize),
+            self.n_restarts,
+            self.seed,
+            self.max_iter,
+            self.newton_max_iter,
+            self.newton_tol,
+            self.max_jitter,
+            self.approximation,
+            self.n_threads,
+            py_pair(self.prior_signal_variance),
+            py_pair(self.prior_length_scale)
+        )
+    }
+}
+
+fn py_pair(p: Option<(f64, f64)>) -> String {
+    match p {
+        Some((a, b)) => format!("({a:?}, {b:?})"),
+        None => "None".to_string(),
+    }
+}
+
+impl FitSettings {
+    /// The core's model specification for data with `d` columns.
+    fn spec(&self, d: usize) -> PyResult<ModelSpec> {
+        let mut spec =
+            ModelSpec::new(Modalities::new(self.modalities.clone(), d).map_err(gp_error)?);
+        spec.signal_variance = self.signal_variance;
+        spec.length_scales = self.length_scales.clone();
+        spec.weights = self.weights.clone();
+        spec.free = Free {
+            signal_variance: self.free_signal_variance,
+            length_scales: self.free_length_scales,
+            weights: self.free_weights,
+            lambda: self.free_lambda,
+        };
+        spec.signal_variance_bounds = self.signal_variance_bounds;
+        spec.length_scale_bounds = self.length_scale_bounds;
+        spec.optimize = self.optimize;
+        spec.n_restarts = self.n_restarts;
+        spec.seed = self.seed;
+        spec.lbfgs.max_iter = self.max_iter;
+        spec.newton.max_iter = self.newton_max_iter;
+        spec.newton.tol = self.newton_tol;
+        spec.max_jitter = self.max_jitter;
+        spec.predictive = parse_predictive(&self.approximation)?;
+        if self.prior_signal_variance.is_some() || self.prior_length_scale.is_some() {
+            spec.hyper_prior = Some(HyperPrior {
+                signal_variance: self.prior_signal_variance,
+                length_scale: self.prior_length_scale,
+            });
+        }
+        Ok(spec)
+    }
+}
+
+/// One class's source tasks as (X, labels ±1, λ).
+type PySources<'py> = Vec<(PyReadonlyArray2<'py, f64>, PyReadonlyArray1<'py, f64>, f64)>;
+
+/// Fits a one-vs-all model: `labels` are class indices in `0..n_classes`, `sources` holds
+/// one list of source tasks `(X, y, λ)` per class (empty: no transfer), `settings` everything
+/// else. With `thetas` (one row per classifier) the model is built at those hyper-parameters
+/// without optimising; `starts` gives per-classifier starting rows (None: the settings').
+#[pyfunction]
+#[pyo3(signature = (x, labels, n_classes, sources, settings, thetas = None, starts = None))]
+#[allow(clippy::too_many_arguments)]
+fn fit_gpc(
+    py: Python<'_>,
+    x: PyReadonlyArray2<'_, f64>,
+    labels: PyReadonlyArray1<'_, i64>,
+    n_classes: usize,
+    sources: Vec<PySources<'_>>,
+    settings: PyRef<'_, FitSettings>,
     thetas: Option<PyReadonlyArray2<'_, f64>>,
+    starts: Option<Vec<Option<Vec<f64>>>>,
 ) -> PyResult<GpcModel> {
     let thetas: Option<Vec<Vec<f64>>> =
         thetas.map(|t| t.as_array().outer_iter().map(|r| r.to_vec()).collect());
@@ -88,42 +254,31 @@ fn fit_gpc(
                 .map_err(|_| PyValueError::new_err(format!("negative label index {v}")))
         })
         .collect::<PyResult<_>>()?;
-    let sources: Vec<Option<Source>> = sources
+    let sources: Vec<Vec<Source>> = sources
         .iter()
-        .map(|s| match s {
-            Some((sx, lambda)) => Ok(Some(Source {
-                x: data_from(sx)?,
-                lambda: *lambda,
-            })),
-            None => Ok(None),
+        .map(|list| {
+            list.iter()
+                .map(|(sx, sy, lambda)| {
+                    Ok(Source {
+                        x: data_from(sx)?,
+                        y: sy.as_array().to_vec(),
+                        lambda: *lambda,
+                    })
+                })
+                .collect::<Result<Vec<_>, GpError>>()
         })
         .collect::<Result<_, GpError>>()
         .map_err(gp_error)?;
-    let mut spec = ModelSpec::new(Modalities::new(modalities, data.d).map_err(gp_error)?);
-    spec.signal_variance = signal_variance;
-    spec.length_scales = length_scales;
-    spec.weights = weights;
-    spec.free = Free {
-        signal_variance: free.0,
-        length_scales: free.1,
-        weights: free.2,
-        lambda: free.3,
-    };
-    spec.signal_variance_bounds = signal_variance_bounds;
-    spec.length_scale_bounds = length_scale_bounds;
-    spec.optimize = optimize;
-    spec.n_restarts = n_restarts;
-    spec.seed = seed;
-    spec.lbfgs.max_iter = max_iter;
-    spec.newton.max_iter = newton_max_iter;
-    spec.newton.tol = newton_tol;
-    spec.max_jitter = max_jitter;
-    spec.predictive = parse_predictive(predictive)?;
+    let spec = settings.spec(data.d)?;
+    let n_threads = settings.n_threads;
     let model = py
         .detach(|| {
-            run_in_pool(n_threads, || match &thetas {
-                Some(t) => aptkt_gp::fit_at(&data, &labels, n_classes, &sources, &spec, t),
-                None => aptkt_gp::fit(&data, &labels, n_classes, &sources, &spec),
+            run_in_pool(n_threads, || match (&thetas, &starts) {
+                (Some(t), _) => aptkt_gp::fit_at(&data, &labels, n_classes, &sources, &spec, t),
+                (None, Some(s)) => {
+                    aptkt_gp::fit_from(&data, &labels, n_classes, &sources, &spec, s)
+                }
+                (None, None) => aptkt_gp::fit(&data, &labels, n_classes, &sources, &spec),
             })
         })
         .and_then(|r| r)
@@ -157,6 +312,20 @@ impl GpcModel {
         matrix(py, probs, data.n, self.model.n_classes)
     }
 
+    /// Each one-vs-all classifier's own p(y = +1 | x), shape (n, n_classes), not normalised.
+    fn predict_proba_binary<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let data = data_from(&x).map_err(gp_error)?;
+        let probs = py
+            .detach(|| run_in_pool(self.n_threads, || self.model.predict_binary(&data)))
+            .and_then(|r| r)
+            .map_err(gp_error)?;
+        matrix(py, probs, data.n, self.model.n_classes)
+    }
+
     /// Latent predictive means and variances, each (n, n_classifiers).
     fn latent<'py>(
         &self,
@@ -173,18 +342,22 @@ impl GpcModel {
     }
 
     /// Log marginal likelihood per classifier at `theta` (n_classifiers, n_params), and its
-    /// gradient (n_classifiers, n_params) when asked.
+    /// gradient (n_classifiers, n_params) when asked; with `include_prior`, plus the log
+    /// hyper-prior.
+    #[pyo3(signature = (theta, gradient, include_prior = false))]
     fn log_marginal_likelihood<'py>(
         &self,
         py: Python<'py>,
         theta: PyReadonlyArray2<'py, f64>,
         gradient: bool,
+        include_prior: bool,
     ) -> PyResult<(Bound<'py, PyArray1<f64>>, Option<Bound<'py, PyArray2<f64>>>)> {
         let rows: Vec<Vec<f64>> = theta.as_array().outer_iter().map(|r| r.to_vec()).collect();
         let results = py
             .detach(|| {
                 run_in_pool(self.n_threads, || {
-                    self.model.log_marginal_likelihood(&rows, gradient)
+                    self.model
+                        .log_marginal_likelihood(&rows, gradient, include_prior)
                 })
             })
             .and_then(|r| r)
@@ -219,6 +392,15 @@ impl GpcModel {
     #[getter]
     fn log_marginal_likelihood_value<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         PyArray1::from_vec(py, self.model.classifiers.iter().map(|c| c.lml).collect())
+    }
+
+    /// Log hyper-prior density at the fitted theta per classifier (0 for ML-II).
+    #[getter]
+    fn log_hyper_prior<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(
+            py,
+            self.model.classifiers.iter().map(|c| c.log_prior).collect(),
+        )
     }
 
     #[getter]
@@ -263,40 +445,52 @@ impl GpcModel {
 
     #[getter]
     fn transfer(&self) -> bool {
-        self.model.layout.transfer
+        self.model.layout.transfer()
+    }
+
+    /// λ entries per theta row (the most sources any class has).
+    #[getter]
+    fn n_lambdas(&self) -> usize {
+        self.model.layout.n_lambdas
     }
 }
 
-/// The (dependent) multi-modal kernel matrix of `x` at `theta`; rows before `n_source` form
-/// the source block.
+/// The (dependent) multi-modal kernel matrix of `x` at `theta`; the first rows form source
+/// tasks of `source_sizes` rows each, the rest the target task.
 #[pyfunction]
-#[pyo3(signature = (x, theta, modalities, n_source = 0))]
+#[pyo3(signature = (x, theta, modalities, source_sizes = Vec::new()))]
 fn kernel_matrix<'py>(
     py: Python<'py>,
     x: PyReadonlyArray2<'py, f64>,
     theta: Vec<f64>,
     modalities: Vec<Vec<usize>>,
-    n_source: usize,
+    source_sizes: Vec<usize>,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let data = data_from(&x).map_err(gp_error)?;
     data.check_finite("X").map_err(gp_error)?;
+    let n_source: usize = source_sizes.iter().sum();
     if n_source > data.n {
         return Err(PyValueError::new_err(format!(
-            "n_source = {n_source} exceeds the {} rows of X",
+            "the source tasks' {n_source} rows exceed the {} rows of X",
             data.n
         )));
+    }
+    if source_sizes.contains(&0) {
+        return Err(PyValueError::new_err(
+            "every source task needs at least one row",
+        ));
     }
     let mods = Modalities::new(modalities, data.d).map_err(gp_error)?;
     let layout = Layout {
         n_modalities: mods.len(),
-        transfer: n_source > 0,
+        n_lambdas: source_sizes.len(),
     };
     let h = layout.decode(&theta).map_err(gp_error)?;
     let n = data.n;
     let k = py.detach(|| {
         let dist = PairDistances::new(
             &data,
-            n_source,
+            &source_sizes,
             &mods,
             &aptkt_gp::kernel::column_means(&data),
         );
@@ -313,6 +507,7 @@ fn kernel_matrix<'py>(
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<FitSettings>()?;
     m.add_class::<GpcModel>()?;
     m.add_function(wrap_pyfunction!(fit_gpc, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_matrix, m)?)?;

@@ -7,6 +7,7 @@ use pyo3::prelude::*;
 mod errors;
 mod features;
 mod gp;
+mod sim;
 mod skin;
 
 #[pymodule]
@@ -15,6 +16,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::register(m)?;
     features::register(m)?;
     gp::register(m)?;
+    sim::register(m)?;
     skin::register(m)?;
     Ok(())
 }

@@ -16,15 +16,28 @@ from aptkt.experiments.scale import Scale
 from aptkt.experiments.tables import write_csv
 from aptkt.learning import GPSettings, LearnerConfig
 
-__all__ = ["Context", "Plan", "METHODS", "Section", "Headline"]
+__all__ = ["Context", "Plan", "METHODS", "Section", "Headline", "STRESS_CUTOFF", "STRESS_NO_CUTOFF"]
 
-#: The compared learners (paper Fig. 9's names and colours): the baseline (multi-modal kernel,
-#: no transfer), APTKT (Eq. 2–3), APTKT with the prior models' posteriors as auxiliary features
-#: (Eq. 5).
+STRESS_NO_CUTOFF = "λ=1 least related, no cut-off"
+STRESS_CUTOFF = "λ=1 least related, cut-off"
+
+#: The compared learners (paper Fig. 9's names and colours): the baseline (the paper's: the
+#: multi-modal kernel and nothing of the prior), APTKT (Eq. 2–3), APTKT with the prior models'
+#: posteriors as auxiliary features (Eq. 5). Beyond the paper: the control (the prior's feature
+#: space without transfer, so that it and APTKT differ by the transfer alone), and two stress
+#: tests of the cut-off: λ forced to 1 from the least related prior, without and with ε_neg.
 METHODS: Mapping[str, Mapping[str, Any]] = {
     "baseline": {"transfer": "none"},
+    "control": {"transfer": "control"},
     "APTKT": {"transfer": "paper"},
     "APTKT+aux": {"transfer": "paper", "auxiliary": True},
+    STRESS_NO_CUTOFF: {
+        "transfer": "paper",
+        "source_choice": "least",
+        "forced_lambda": 1.0,
+        "eps_neg": 0.0,
+    },
+    STRESS_CUTOFF: {"transfer": "paper", "source_choice": "least", "forced_lambda": 1.0},
 }
 
 

@@ -12,7 +12,14 @@ import numpy as np
 from aptkt.experiments.aggregate import Curves, Estimate, collect, difference, estimate
 from aptkt.experiments.plots import learning_curves
 
-__all__ = ["GainSummary", "method_curves", "gain_summary", "transfer_rate", "plot_panel"]
+__all__ = [
+    "GainSummary",
+    "method_curves",
+    "present",
+    "gain_summary",
+    "transfer_rate",
+    "plot_panel",
+]
 
 XLABEL = "observations after the initial round"
 
@@ -24,6 +31,13 @@ def method_curves(
     value: str = "mean_accuracy",
 ) -> dict[str, Curves]:
     return {m: collect(rows, {**where, "method": m}, value=value) for m in methods}
+
+
+def present(rows: Iterable[Mapping[str, Any]], methods: Sequence[str]) -> tuple[str, ...]:
+    """The methods that have result rows, in the given order (optional comparisons, such as
+    the control, are analysed only when they were run)."""
+    have = {r.get("method") for r in rows}
+    return tuple(m for m in methods if m in have)
 
 
 @dataclass

@@ -1,8 +1,9 @@
 """Fig. 7: transfer from 3 prior objects, all actions (paper §5.4).
 
 ``groups`` random groups of ``n_priors`` prior objects × ``trials`` trials; APTKT vs the
-baseline on the same pool order and exploration draws. Small panels: each group's mean curves;
-large panel: every run.
+baseline (the paper's: nothing of the prior) on the same pool order and exploration draws, with
+the control (the prior's feature space, no transfer) beside them. Small panels: each group's
+mean curves; large panel: every run.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from aptkt.experiments.figures.common import (
     plot_panel,
     prior_group_plan,
     prior_groups,
+    present,
     transfer_rate,
 )
 from aptkt.experiments.plots import canvas
@@ -28,7 +30,7 @@ from aptkt.experiments.tables import curves_rows
 
 NAME = "fig7"
 TITLE = "transfer from 3 prior objects, all actions"
-METHODS = ("baseline", "APTKT")
+METHODS = ("baseline", "control", "APTKT")
 
 
 def plan(ctx: Context) -> Plan:
@@ -38,8 +40,9 @@ def plan(ctx: Context) -> Plan:
 def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     budget = ctx.scale.budget
     where = {"panel": "all"}
-    curves = method_curves(rows, where, METHODS)
-    fused = method_curves(rows, where, METHODS, value="fused_accuracy")
+    methods = present(rows, METHODS)
+    curves = method_curves(rows, where, methods)
+    fused = method_curves(rows, where, methods, value="fused_accuracy")
     steps = key_steps(budget)
     gain = gain_summary(curves, "APTKT", steps=steps)
     fused_gain = gain_summary(fused, "APTKT", steps=steps)
@@ -53,7 +56,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     per_group = []
     for g, group in enumerate(groups):
         ax = fig.add_subplot(grid[g // ncols, g % ncols])
-        gc = method_curves(rows, {**where, "group": g}, METHODS)
+        gc = method_curves(rows, {**where, "group": g}, methods)
         per_group.append((g, group, gain_summary(gc, "APTKT")))
         plot_panel(ax, gc, f"priors {ctx.numbers(group)}", xlabel="", legend=False)
         ax.set_ylabel("")
@@ -108,6 +111,8 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         "",
         f"APTKT transferred a prior object in {100 * rate:.1f} % of its transfer decisions (ε_neg = {ctx.scale.eps_neg}).",
         "",
+        *_control_lines(curves, fused, steps),
+        "",
         "Per group (gain = mean over steps of APTKT − baseline):",
         "",
         markdown_table(
@@ -115,10 +120,41 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             [[g, ctx.numbers(group), ci(s.overall)] for g, group, s in per_group],
         ),
     ]
+    control = (
+        {
+            "control_vs_baseline": gain_summary(curves, "control", steps=steps).as_dict(),
+            "APTKT_vs_control": gain_summary(
+                curves, "APTKT", base="control", steps=steps
+            ).as_dict(),
+        }
+        if "control" in curves
+        else {}
+    )
     numbers = {
+        **control,
         "gain": gain.as_dict(),
         "fused_gain": fused_gain.as_dict(),
         "transfer_rate": rate,
         "per_group": {g: s.overall.as_dict() for g, _, s in per_group},
     }
     return Section(NAME, TITLE, headlines, "\n".join(body), files, numbers)
+
+
+def _control_lines(curves, fused, steps) -> list[str]:
+    """The control beside the baseline: what the prior's feature space alone is worth, and what
+    the transfer adds on top of it."""
+    if "control" not in curves:
+        return []
+    rows = []
+    for name, method, base in (
+        ("control − baseline (the prior's feature space alone)", "control", "baseline"),
+        ("APTKT − control (the transfer alone)", "APTKT", "control"),
+    ):
+        g = gain_summary(curves, method, base=base, steps=steps)
+        f = gain_summary(fused, method, base=base, steps=steps)
+        rows.append([name, ci(g.at[0]) if 0 in g.at else "", ci(g.overall), ci(f.overall)])
+    return [
+        "The control (the prior's feature space, no transfer) beside the baseline, paired by run:",
+        "",
+        markdown_table(["comparison", "step 0", "mean over all steps", "fused, all steps"], rows),
+    ]

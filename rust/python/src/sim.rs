@@ -1,0 +1,543 @@
+//! Bindings of the simulation core (`aptkt-sim`): `SimContact` (one object in one trial:
+//! mechanics, sensor noise, the force loop) and the heat and texture loops. Converts arrays,
+//! releases the GIL; the per-trial state stays in the Python `PhysicsState`, updated in place.
+
+use aptkt_sim::control::{run_ticks, ForceControl, LeanQueue, Phase, Status};
+use aptkt_sim::mechanics::{Cells, Chunk, Law, MechState, Mechanics, Relaxation, Segment, Shape};
+use aptkt_sim::sensors::{Sensors, NORMALS};
+use aptkt_sim::texture::{acceleration, Texture, TextureResponse};
+use aptkt_sim::thermal::{heat, System};
+use aptkt_sim::SimError;
+use numpy::ndarray::{Array1, Array2};
+use numpy::{
+    Element, IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadwriteArray1,
+    PyReadwriteArray2, PyReadwriteArray3, PyUntypedArrayMethods,
+};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyTuple;
+
+fn sim_err(e: SimError) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+fn rows<const W: usize>(a: &PyReadonlyArray2<'_, f64>, name: &str) -> PyResult<Vec<[f64; W]>> {
+    let v = a.as_array();
+    if v.ncols() != W {
+        return Err(PyValueError::new_err(format!(
+            "{name} must have {W} columns"
+        )));
+    }
+    Ok(v.rows()
+        .into_iter()
+        .map(|r| std::array::from_fn(|j| r[j]))
+        .collect())
+}
+
+fn vec1<T: Element + Copy>(a: &PyReadonlyArray1<'_, T>) -> Vec<T> {
+    a.as_array().iter().copied().collect()
+}
+
+fn col<'py, T: Element>(py: Python<'py>, v: Vec<T>) -> Bound<'py, PyAny> {
+    Array1::from_vec(v).into_pyarray(py).into_any()
+}
+
+fn mat<'py, const W: usize>(py: Python<'py>, v: Vec<[f64; W]>) -> PyResult<Bound<'py, PyAny>> {
+    let n = v.len();
+    let flat: Vec<f64> = v.into_iter().flatten().collect();
+    let a =
+        Array2::from_shape_vec((n, W), flat).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok(a.into_pyarray(py).into_any())
+}
+
+fn chunk_tuple<'py>(py: Python<'py>, c: Chunk) -> PyResult<Bound<'py, PyTuple>> {
+    PyTuple::new(
+        py,
+        [
+            col(py, c.cells),
+            col(py, c.ks),
+            col(py, c.t_s),
+            col(py, c.t_ns),
+            mat(py, c.pos)?,
+            mat(py, c.vel)?,
+            mat(py, c.acc)?,
+            mat(py, c.sigma)?,
+        ],
+    )
+}
+
+fn segments(
+    t0: &PyReadonlyArray1<'_, i64>,
+    p0: &PyReadonlyArray2<'_, f64>,
+    v0: &PyReadonlyArray2<'_, f64>,
+    a: &PyReadonlyArray2<'_, f64>,
+) -> PyResult<Vec<Segment>> {
+    let (p, v, acc) = (
+        rows::<3>(p0, "p0")?,
+        rows::<3>(v0, "v0")?,
+        rows::<3>(a, "a")?,
+    );
+    let t = t0.as_array();
+    if t.is_empty() || p.len() != t.len() || v.len() != t.len() || acc.len() != t.len() {
+        return Err(PyValueError::new_err(
+            "trajectory: one row per segment, at least one",
+        ));
+    }
+    Ok((0..t.len())
+        .map(|i| Segment {
+            t0: t[i],
+            p0: p[i],
+            v0: v[i],
+            a: acc[i],
+        })
+        .collect())
+}
+
+/// The mechanics state held by a Python `PhysicsState`, borrowed for one call.
+struct StateArrays<'py> {
+    next_k: PyReadwriteArray1<'py, i64>,
+    relax_h: PyReadwriteArray3<'py, f64>,
+    relax_last: PyReadwriteArray2<'py, f64>,
+    latest_force: PyReadwriteArray1<'py, f64>,
+}
+
+impl StateArrays<'_> {
+    fn load(&self, t_ns: i64) -> MechState {
+        MechState {
+            t_ns,
+            next_k: self.next_k.as_array().iter().copied().collect(),
+            relax_h: self.relax_h.as_array().iter().copied().collect(),
+            relax_last: self.relax_last.as_array().iter().copied().collect(),
+            latest_force: self.latest_force.as_array().iter().copied().collect(),
+        }
+    }
+
+    fn store(&mut self, st: &MechState) {
+        fn copy<D: numpy::ndarray::Dimension>(
+            dst: numpy::ndarray::ArrayViewMut<'_, f64, D>,
+            src: &[f64],
+        ) {
+            dst.into_iter().zip(src).for_each(|(d, s)| *d = *s);
+        }
+        self.next_k
+            .as_array_mut()
+            .iter_mut()
+            .zip(&st.next_k)
+            .for_each(|(d, s)| *d = *s);
+        copy(self.relax_h.as_array_mut(), &st.relax_h);
+        copy(self.relax_last.as_array_mut(), &st.relax_last);
+        copy(self.latest_force.as_array_mut(), &st.latest_force);
+    }
+}
+
+/// Contact mechanics, sensor noise and force loop of one object in one trial.
+#[pyclass(module = "aptkt._core", frozen)]
+pub struct SimContact {
+    mech: Mechanics,
+    sensors: Sensors,
+}
+
+#[pymethods]
+impl SimContact {
+    #[new]
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (clock_rate, clock_phase, sensor_height, sensor_xy, centre, rotation,
+        surface_z, tilt, crown_radius, waves, size, law_delta, law_sigma, skin_stiffness,
+        relax_weights, relax_times, sensor_area, noise_key, force_gain, force_offset,
+        force_noise, latency_ns, jitter_s))]
+    fn new(
+        clock_rate: PyReadonlyArray1<'_, f64>,
+        clock_phase: PyReadonlyArray1<'_, f64>,
+        sensor_height: PyReadonlyArray2<'_, f64>,
+        sensor_xy: PyReadonlyArray3<'_, f64>,
+        centre: (f64, f64),
+        rotation: f64,
+        surface_z: f64,
+        tilt: (f64, f64),
+        crown_radius: f64,
+        waves: PyReadonlyArray2<'_, f64>,
+        size: (f64, f64),
+        law_delta: PyReadonlyArray1<'_, f64>,
+        law_sigma: PyReadonlyArray1<'_, f64>,
+        skin_stiffness: f64,
+        relax_weights: Vec<f64>,
+        relax_times: Vec<f64>,
+        sensor_area: f64,
+        noise_key: (u64, u64),
+        force_gain: PyReadonlyArray2<'_, f64>,
+        force_offset: PyReadonlyArray2<'_, f64>,
+        force_noise: f64,
+        latency_ns: i64,
+        jitter_s: f64,
+    ) -> PyResult<Self> {
+        let xy = sensor_xy.as_array();
+        if xy.shape()[1..] != [3, 2] {
+            return Err(PyValueError::new_err("sensor_xy must be (cells, 3, 2)"));
+        }
+        let cells = Cells {
+            clock_rate: vec1(&clock_rate),
+            clock_phase: vec1(&clock_phase),
+            sensor_height: rows::<3>(&sensor_height, "sensor_height")?,
+            sensor_xy: (0..xy.shape()[0])
+                .map(|c| std::array::from_fn(|s| [xy[[c, s, 0]], xy[[c, s, 1]]]))
+                .collect(),
+        };
+        let shape = Shape {
+            centre: [centre.0, centre.1],
+            rotation,
+            surface_z,
+            tilt: [tilt.0, tilt.1],
+            crown_radius,
+            waves: rows::<4>(&waves, "waves")?,
+            size: [size.0, size.1],
+        };
+        let law = Law::new(vec1(&law_delta), vec1(&law_sigma), skin_stiffness).map_err(sim_err)?;
+        let relaxation = Relaxation {
+            weights: relax_weights,
+            times: relax_times,
+        };
+        let mech = Mechanics::new(cells, shape, law, relaxation, sensor_area).map_err(sim_err)?;
+        let sensors = Sensors::new(
+            [noise_key.0, noise_key.1],
+            rows::<3>(&force_gain, "force_gain")?,
+            rows::<3>(&force_offset, "force_offset")?,
+            force_noise,
+            latency_ns,
+            jitter_s,
+        )
+        .map_err(sim_err)?;
+        if sensors.n_cells != mech.cells.len() {
+            return Err(PyValueError::new_err(
+                "force gains must have one row per cell",
+            ));
+        }
+        Ok(Self { mech, sensors })
+    }
+
+    /// Advance the mechanics to `t_end_ns` on the trajectory's segments; updates the state
+    /// arrays in place. Returns (new t_ns, cells, ks, t_s, t_ns, pos, vel, acc, sigma).
+    #[allow(clippy::too_many_arguments)]
+    fn mechanics<'py>(
+        &self,
+        py: Python<'py>,
+        t_ns: i64,
+        next_k: PyReadwriteArray1<'py, i64>,
+        relax_h: PyReadwriteArray3<'py, f64>,
+        relax_last: PyReadwriteArray2<'py, f64>,
+        latest_force: PyReadwriteArray1<'py, f64>,
+        seg_t0: PyReadonlyArray1<'py, i64>,
+        seg_p0: PyReadonlyArray2<'py, f64>,
+        seg_v0: PyReadonlyArray2<'py, f64>,
+        seg_a: PyReadonlyArray2<'py, f64>,
+        t_end_ns: i64,
+    ) -> PyResult<(i64, Bound<'py, PyTuple>)> {
+        let segs = segments(&seg_t0, &seg_p0, &seg_v0, &seg_a)?;
+        let mut arrays = StateArrays {
+            next_k,
+            relax_h,
+            relax_last,
+            latest_force,
+        };
+        let mut st = arrays.load(t_ns);
+        self.mech.check_state(&st).map_err(sim_err)?;
+        let chunk = py.detach(|| {
+            let mut c = Chunk::default();
+            self.mech.step(&mut st, &segs, t_end_ns, &mut c);
+            c
+        });
+        arrays.store(&st);
+        Ok((st.t_ns, chunk_tuple(py, chunk)?))
+    }
+
+    /// Normal deviates (n, 10) and arrival times of samples `ks` of `cells` sampled at `t_ns`.
+    fn noise<'py>(
+        &self,
+        py: Python<'py>,
+        ks: PyReadonlyArray1<'py, i64>,
+        cells: PyReadonlyArray1<'py, i64>,
+        t_ns: PyReadonlyArray1<'py, i64>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let (ks, cells, t_ns) = (vec1(&ks), vec1(&cells), vec1(&t_ns));
+        if cells.len() != ks.len() || t_ns.len() != ks.len() {
+            return Err(PyValueError::new_err(
+                "ks, cells and t_ns must have the same length",
+            ));
+        }
+        let n = self.sensors.n_cells as i64;
+        if cells.iter().any(|&c| c < 0 || c >= n) || ks.iter().any(|&k| k < 0) {
+            return Err(PyValueError::new_err("cell or sample index out of range"));
+        }
+        let (z, arrival) = py.detach(|| {
+            let mut z = Vec::with_capacity(ks.len());
+            let mut arrival = Vec::with_capacity(ks.len());
+            for i in 0..ks.len() {
+                let (zi, a) = self
+                    .sensors
+                    .noise_and_arrival(ks[i], cells[i] as usize, t_ns[i]);
+                z.push(zi);
+                arrival.push(a);
+            }
+            (z, arrival)
+        });
+        Ok((mat::<NORMALS>(py, z)?, col(py, arrival)))
+    }
+
+    /// Force-control ticks (see `aptkt_sim::control::run_ticks`). `phase` is
+    /// ("settle", t_limit_ns, settled) or ("ramp", t_start_ns, t_stop_ns, v, acc, dx, dy);
+    /// `control` is (target, gain, max_vz, contact_z, max_depth, tick_ns, wrench_limit).
+    /// Updates the state arrays and `latest` in place; returns (status, t_ns, settled,
+    /// samples, segment (t0, p0, v0, a), queue (t, cell, force), chunk).
+    #[allow(clippy::too_many_arguments)]
+    fn force_ticks<'py>(
+        &self,
+        py: Python<'py>,
+        t_ns: i64,
+        next_k: PyReadwriteArray1<'py, i64>,
+        relax_h: PyReadwriteArray3<'py, f64>,
+        relax_last: PyReadwriteArray2<'py, f64>,
+        latest_force: PyReadwriteArray1<'py, f64>,
+        segment: (i64, [f64; 3], [f64; 3], [f64; 3]),
+        queue_t: PyReadonlyArray1<'py, i64>,
+        queue_c: PyReadonlyArray1<'py, i64>,
+        queue_f: PyReadonlyArray2<'py, f64>,
+        mut latest: PyReadwriteArray2<'py, f64>,
+        cal_gain: PyReadonlyArray2<'py, f64>,
+        cal_offset: PyReadonlyArray2<'py, f64>,
+        control: (f64, f64, f64, f64, f64, i64, f64),
+        phase: &Bound<'py, PyTuple>,
+        samples: usize,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let mut arrays = StateArrays {
+            next_k,
+            relax_h,
+            relax_last,
+            latest_force,
+        };
+        let mut st = arrays.load(t_ns);
+        self.mech.check_state(&st).map_err(sim_err)?;
+        let n = self.mech.cells.len();
+        let latest_rows: Vec<[f64; 3]> = {
+            let v = latest.as_array();
+            if v.shape() != [n, 3] {
+                return Err(PyValueError::new_err("latest must be (cells, 3)"));
+            }
+            v.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect()
+        };
+        let mut queue = LeanQueue {
+            t: vec1(&queue_t),
+            cell: vec1(&queue_c),
+            force: rows::<3>(&queue_f, "queue_f")?,
+            latest: latest_rows,
+            cal_gain: rows::<3>(&cal_gain, "cal_gain")?,
+            cal_offset: rows::<3>(&cal_offset, "cal_offset")?,
+        };
+        if queue.cell.len() != queue.t.len()
+            || queue.force.len() != queue.t.len()
+            || queue.cal_gain.len() != n
+            || queue.cal_offset.len() != n
+            || queue.cell.iter().any(|&c| c < 0 || c as usize >= n)
+        {
+            return Err(PyValueError::new_err(
+                "force queue or calibration does not match the patch",
+            ));
+        }
+        let kind: String = phase.get_item(0)?.extract()?;
+        let mut ph = match kind.as_str() {
+            "settle" => Phase::Settle {
+                t_limit_ns: phase.get_item(1)?.extract()?,
+                settled: phase.get_item(2)?.extract()?,
+            },
+            "ramp" => Phase::Ramp {
+                t_start_ns: phase.get_item(1)?.extract()?,
+                t_stop_ns: phase.get_item(2)?.extract()?,
+                v: phase.get_item(3)?.extract()?,
+                acc: phase.get_item(4)?.extract()?,
+                d: [phase.get_item(5)?.extract()?, phase.get_item(6)?.extract()?],
+            },
+            other => return Err(PyValueError::new_err(format!("unknown phase {other:?}"))),
+        };
+        let (target, gain, max_vz, contact_z, max_depth, tick_ns, wrench_limit) = control;
+        if tick_ns <= 0 {
+            return Err(PyValueError::new_err("tick_ns must be > 0"));
+        }
+        let ctl = ForceControl {
+            target,
+            gain,
+            max_vz,
+            contact_z,
+            max_depth,
+            tick_ns,
+            wrench_limit,
+        };
+        let mut seg = Segment {
+            t0: segment.0,
+            p0: segment.1,
+            v0: segment.2,
+            a: segment.3,
+        };
+        let mut samples = samples;
+        let mut chunk = Chunk::default();
+        let status = py.detach(|| {
+            run_ticks(
+                &self.mech,
+                &self.sensors,
+                &ctl,
+                &mut ph,
+                &mut st,
+                &mut seg,
+                &mut queue,
+                &mut chunk,
+                &mut samples,
+            )
+        });
+        arrays.store(&st);
+        {
+            let mut v = latest.as_array_mut();
+            for (c, r) in queue.latest.iter().enumerate() {
+                for s in 0..3 {
+                    v[[c, s]] = r[s];
+                }
+            }
+        }
+        let status = match status {
+            Status::Done => "done",
+            Status::Timeout => "timeout",
+            Status::TooDeep => "too_deep",
+            Status::Wrench => "wrench",
+            Status::Flush => "flush",
+        };
+        let settled = match ph {
+            Phase::Settle { settled, .. } => settled,
+            Phase::Ramp { .. } => 0,
+        };
+        let seg_t = (seg.t0, seg.p0.to_vec(), seg.v0.to_vec(), seg.a.to_vec());
+        let q = (col(py, queue.t), col(py, queue.cell), mat(py, queue.force)?);
+        (
+            status,
+            st.t_ns,
+            settled,
+            samples,
+            seg_t,
+            q,
+            chunk_tuple(py, chunk)?,
+        )
+            .into_pyobject(py)
+    }
+}
+
+/// [node 0, node 1] temperatures (m, 2) of a cell-major chunk (see `aptkt_sim::thermal::heat`);
+/// `state` (C, N) and `state_t` (C,) are advanced in place.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn sim_heat<'py>(
+    py: Python<'py>,
+    u: PyReadonlyArray3<'py, f64>,
+    mu: PyReadonlyArray2<'py, f64>,
+    t_ss: PyReadonlyArray2<'py, f64>,
+    sqrt_c: PyReadonlyArray1<'py, f64>,
+    cells: PyReadonlyArray1<'py, i64>,
+    t_s: PyReadonlyArray1<'py, f64>,
+    config: PyReadonlyArray1<'py, i64>,
+    mut state: PyReadwriteArray2<'py, f64>,
+    mut state_t: PyReadwriteArray1<'py, f64>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let (u, mu, t_ss) = (u.as_array(), mu.as_array(), t_ss.as_array());
+    let k = u.shape()[0];
+    let n = sqrt_c.len();
+    if u.shape() != [k, n, n] || mu.shape() != [k, n] || t_ss.shape() != [k, n] {
+        return Err(PyValueError::new_err(
+            "systems must be u (k, N, N), mu and t_ss (k, N)",
+        ));
+    }
+    let systems: Vec<System> = (0..k)
+        .map(|i| System {
+            u: u.index_axis(numpy::ndarray::Axis(0), i)
+                .iter()
+                .copied()
+                .collect(),
+            mu: mu.row(i).to_vec(),
+            t_ss: t_ss.row(i).to_vec(),
+        })
+        .collect();
+    let config: Vec<usize> = config
+        .as_array()
+        .iter()
+        .map(|&c| usize::try_from(c).map_err(|_| PyValueError::new_err("negative configuration")))
+        .collect::<PyResult<_>>()?;
+    let (sqrt_c, cells, t_s) = (vec1(&sqrt_c), vec1(&cells), vec1(&t_s));
+    let mut st: Vec<f64> = state.as_array().iter().copied().collect();
+    let mut stt: Vec<f64> = state_t.as_array().iter().copied().collect();
+    if state.as_array().ncols() != n {
+        return Err(PyValueError::new_err("state must be (cells, N)"));
+    }
+    let out = py
+        .detach(|| heat(&systems, &sqrt_c, &cells, &t_s, &config, &mut st, &mut stt))
+        .map_err(sim_err)?;
+    state
+        .as_array_mut()
+        .iter_mut()
+        .zip(&st)
+        .for_each(|(d, s)| *d = *s);
+    state_t
+        .as_array_mut()
+        .iter_mut()
+        .zip(&stt)
+        .for_each(|(d, s)| *d = *s);
+    mat(py, out)
+}
+
+/// Texture acceleration (n, 3) (see `aptkt_sim::texture::acceleration`); `constants` is
+/// (cover_contact_length, contact_resonance, contact_damping, acc_bandwidth,
+/// coupling_modulus, coupling_pressure, tangential_coupling, lateral_coupling, top_modulus,
+/// mu_kinetic).
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn sim_texture<'py>(
+    py: Python<'py>,
+    kvec: PyReadonlyArray2<'py, f64>,
+    amplitude: PyReadonlyArray1<'py, f64>,
+    phase: PyReadonlyArray1<'py, f64>,
+    constants: [f64; 10],
+    u: PyReadonlyArray2<'py, f64>,
+    w: PyReadonlyArray2<'py, f64>,
+    pressure: PyReadonlyArray1<'py, f64>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let tex = Texture {
+        kvec: rows::<2>(&kvec, "kvec")?,
+        amplitude: vec1(&amplitude),
+        phase: vec1(&phase),
+    };
+    if tex.amplitude.len() != tex.kvec.len() || tex.phase.len() != tex.kvec.len() {
+        return Err(PyValueError::new_err(
+            "kvec, amplitude and phase must have one row per wave",
+        ));
+    }
+    let (u, w, p) = (rows::<2>(&u, "u")?, rows::<2>(&w, "w")?, vec1(&pressure));
+    if w.len() != u.len() || p.len() != u.len() {
+        return Err(PyValueError::new_err(
+            "u, w and pressure must have one row per sample",
+        ));
+    }
+    let c = constants;
+    let k = TextureResponse {
+        cover_contact_length: c[0],
+        contact_resonance: c[1],
+        contact_damping: c[2],
+        acc_bandwidth: c[3],
+        coupling_modulus: c[4],
+        coupling_pressure: c[5],
+        tangential_coupling: c[6],
+        lateral_coupling: c[7],
+        top_modulus: c[8],
+        mu_kinetic: c[9],
+    };
+    let out = py.detach(|| acceleration(&tex, &k, &u, &w, &p));
+    mat(py, out)
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<SimContact>()?;
+    m.add_function(wrap_pyfunction!(sim_heat, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_texture, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,234 @@
+//! The simulated arm's force loop on the skin's reading, tick by tick (the slide's admittance
+//! control of `aptkt.sim.robot.SimRobot`), with the reading computed from the packets before
+//! they are made (`SimEngine.lean_*`): the force fields quantised to the wire's 12 bits,
+//! calibrated with the skin's calibration, newest packet per cell by arrival time.
+
+use crate::mechanics::{Chunk, MechState, Mechanics, Segment, SENSORS};
+use crate::sensors::Sensors;
+
+/// Packets computed but not yet arrived, and each cell's newest calibrated reading.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LeanQueue {
+    pub t: Vec<i64>,
+    pub cell: Vec<i64>,
+    pub force: Vec<[f64; SENSORS]>,
+    /// (C, 3) N as the skin reads it
+    pub latest: Vec<[f64; SENSORS]>,
+    /// skin calibration (C, 3)
+    pub cal_gain: Vec<[f64; SENSORS]>,
+    pub cal_offset: Vec<[f64; SENSORS]>,
+}
+
+impl LeanQueue {
+    /// Queue the readings of `chunk[from..]` (arrival order kept stable, as a stable argsort).
+    pub fn push_chunk(&mut self, sensors: &Sensors, mech: &Mechanics, chunk: &Chunk, from: usize) {
+        for i in from..chunk.len() {
+            let c = chunk.cells[i] as usize;
+            let (z, arrival) = sensors.noise_and_arrival(chunk.ks[i], c, chunk.t_ns[i]);
+            let mut f_true = [0.0; SENSORS];
+            for s in 0..SENSORS {
+                f_true[s] = chunk.sigma[i][s] * mech.sensor_area;
+            }
+            let norm = sensors.reading(c, f_true, &z);
+            let mut newtons = [0.0; SENSORS];
+            for s in 0..SENSORS {
+                let raw = (norm[s] * 1024.0).round_ties_even().clamp(0.0, 4095.0);
+                newtons[s] = self.cal_gain[c][s] * (raw * (1.0 / 1024.0) - self.cal_offset[c][s]);
+            }
+            // Insert after every entry with an arrival at or before this one (stable order).
+            let at = self.t.partition_point(|&t| t <= arrival);
+            self.t.insert(at, arrival);
+            self.cell.insert(at, c as i64);
+            self.force.insert(at, newtons);
+        }
+    }
+
+    /// Apply the packets that have arrived by `t_ns` (the newest of each cell wins).
+    pub fn deliver(&mut self, t_ns: i64) {
+        let due = self.t.partition_point(|&t| t <= t_ns);
+        for i in 0..due {
+            self.latest[self.cell[i] as usize] = self.force[i];
+        }
+        self.t.drain(..due);
+        self.cell.drain(..due);
+        self.force.drain(..due);
+    }
+
+    /// Total normal force as the skin reads it, summed as numpy sums a contiguous array
+    /// (pairwise with eight accumulators), so that both implementations agree to the bit.
+    pub fn reading(&self) -> f64 {
+        let flat: Vec<f64> = self.latest.iter().flat_map(|r| r.iter().copied()).collect();
+        numpy_sum(&flat)
+    }
+}
+
+/// numpy's pairwise summation of a contiguous float64 array (sequential below 8 elements,
+/// eight accumulators up to 128, halves beyond).
+pub fn numpy_sum(a: &[f64]) -> f64 {
+    pairwise(a)
+}
+
+fn pairwise(a: &[f64]) -> f64 {
+    let n = a.len();
+    if n < 8 {
+        let mut res = -0.0;
+        for x in a {
+            res += *x;
+        }
+        res
+    } else if n <= 128 {
+        let mut r = [0.0; 8];
+        r.copy_from_slice(&a[..8]);
+        let mut i = 8;
+        while i < n - (n % 8) {
+            for j in 0..8 {
+                r[j] += a[i + j];
+            }
+            i += 8;
+        }
+        let mut res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+        while i < n {
+            res += a[i];
+            i += 1;
+        }
+        res
+    } else {
+        let mut n2 = n / 2;
+        n2 -= n2 % 8;
+        pairwise(&a[..n2]) + pairwise(&a[n2..])
+    }
+}
+
+/// The admittance law and the limits the robot enforces in its force loop.
+#[derive(Clone, Copy, Debug)]
+pub struct ForceControl {
+    pub target: f64,
+    pub gain: f64,
+    pub max_vz: f64,
+    pub contact_z: f64,
+    pub max_depth: f64,
+    pub tick_ns: i64,
+    pub wrench_limit: f64,
+}
+
+/// What a run of ticks does.
+#[derive(Clone, Copy, Debug)]
+pub enum Phase {
+    /// Hold position in x/y until the error stays below 10 % for five ticks in a row.
+    Settle { t_limit_ns: i64, settled: u32 },
+    /// Move along `d` at `v + acc (t - t_start)` until `t_stop`.
+    Ramp {
+        t_start_ns: i64,
+        t_stop_ns: i64,
+        v: f64,
+        acc: f64,
+        d: [f64; 2],
+    },
+}
+
+/// Why a run of ticks returned.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Status {
+    /// Settled (settle) or reached t_stop (ramp).
+    Done,
+    /// Settle only: past the time limit without settling.
+    Timeout,
+    /// The next tick would start deeper than `max_depth` below contact (nothing done for it).
+    TooDeep,
+    /// The true force crossed the wrench limit during the last tick.
+    Wrench,
+    /// More than 2000 samples since the last flush: make the packets, then call again.
+    Flush,
+}
+
+/// Samples after which the packets of a stretch are made (`SimEngine.lean_advance`).
+pub const FLUSH_SAMPLES: usize = 2000;
+
+/// Run control ticks from `st.t_ns` on the trajectory's current segment `seg` (replaced by
+/// each tick's motion). New samples are appended to `chunk`; `samples` counts the samples
+/// since the last flush. Returns the status and the last force error.
+#[allow(clippy::too_many_arguments)]
+pub fn run_ticks(
+    mech: &Mechanics,
+    sensors: &Sensors,
+    ctl: &ForceControl,
+    phase: &mut Phase,
+    st: &mut MechState,
+    seg: &mut Segment,
+    queue: &mut LeanQueue,
+    chunk: &mut Chunk,
+    samples: &mut usize,
+) -> Status {
+    loop {
+        let now = st.t_ns;
+        let (vxy, axy, end) = match *phase {
+            Phase::Settle { .. } => ([0.0, 0.0], [0.0, 0.0], now + ctl.tick_ns),
+            Phase::Ramp {
+                t_start_ns,
+                t_stop_ns,
+                v,
+                acc,
+                d,
+            } => {
+                if now >= t_stop_ns {
+                    return Status::Done;
+                }
+                let tau = ((now - t_start_ns) as f64) * 1e-9;
+                let speed = v + acc * tau;
+                (
+                    [d[0] * speed, d[1] * speed],
+                    [d[0] * acc, d[1] * acc],
+                    t_stop_ns.min(now + ctl.tick_ns),
+                )
+            }
+        };
+        let err = ctl.target - queue.reading();
+        let vz = -(ctl.gain * err).clamp(-ctl.max_vz, ctl.max_vz);
+        let (p, _, _) = seg.at(now);
+        if p[2] < ctl.contact_z - ctl.max_depth {
+            return Status::TooDeep;
+        }
+        *seg = Segment {
+            t0: now,
+            p0: p,
+            v0: [vxy[0], vxy[1], vz],
+            a: [axy[0], axy[1], 0.0],
+        };
+        let before = chunk.len();
+        mech.step(st, std::slice::from_ref(seg), end, chunk);
+        let added = chunk.len() - before;
+        if added > 0 {
+            *samples += added;
+            queue.push_chunk(sensors, mech, chunk, before);
+        }
+        queue.deliver(end);
+        let flush = *samples > FLUSH_SAMPLES;
+        if flush {
+            *samples = 0;
+        }
+        let wrench: f64 = st.latest_force.iter().sum();
+        if wrench > ctl.wrench_limit {
+            return Status::Wrench;
+        }
+        if let Phase::Settle {
+            t_limit_ns,
+            ref mut settled,
+        } = *phase
+        {
+            *settled = if err.abs() < 0.1 * ctl.target {
+                *settled + 1
+            } else {
+                0
+            };
+            if st.t_ns > t_limit_ns {
+                return Status::Timeout;
+            }
+            if *settled >= 5 {
+                return Status::Done;
+            }
+        }
+        if flush {
+            return Status::Flush;
+        }
+    }
+}

@@ -1,0 +1,103 @@
+//! Exact solution of the cells' linear thermal networks over a chunk of samples
+//! (`ContactPhysics._heat` / `CellThermal.propagate_many`, docs/simulation.md "Heat exchange").
+//!
+//! For a fixed (contact, speed) configuration the network `C dT/dt = -K T + q` is linear
+//! time-invariant; with `S = C^-1/2 K C^-1/2 = U diag(mu) U^T` and the steady state `T_ss`,
+//! `T(t) = T_ss + C^-1/2 U exp(-mu t) U^T C^1/2 (T(0) - T_ss)`. The eigen-decompositions are
+//! made (and cached) on the Python side; this loop evaluates them at every sample.
+
+use crate::SimError;
+
+/// One configuration's operator: `u` (N×N row-major), `mu` (N), `t_ss` (N).
+#[derive(Clone, Debug)]
+pub struct System {
+    pub u: Vec<f64>,
+    pub mu: Vec<f64>,
+    pub t_ss: Vec<f64>,
+}
+
+/// Temperatures [node 0, node 1] of every sample of a cell-major chunk; each sample's
+/// configuration is `config[i]` (an index into `systems`). `state` (C×N) and `state_t` (C)
+/// are each cell's network state and its time; both are advanced to the cell's last sample.
+/// Returns (m × 2) temperatures.
+pub fn heat(
+    systems: &[System],
+    sqrt_c: &[f64],
+    cells: &[i64],
+    t_s: &[f64],
+    config: &[usize],
+    state: &mut [f64],
+    state_t: &mut [f64],
+) -> Result<Vec<[f64; 2]>, SimError> {
+    let n = sqrt_c.len();
+    let m = cells.len();
+    if t_s.len() != m || config.len() != m {
+        return Err(SimError::invalid(
+            "heat: cells, times and configurations differ in length",
+        ));
+    }
+    if n < 2 || state.len() != state_t.len() * n {
+        return Err(SimError::invalid(
+            "heat: state must be (cells, nodes) with >= 2 nodes",
+        ));
+    }
+    for s in systems {
+        if s.u.len() != n * n || s.mu.len() != n || s.t_ss.len() != n {
+            return Err(SimError::invalid(
+                "heat: every system must have the network's size",
+            ));
+        }
+    }
+    if config.iter().any(|&c| c >= systems.len()) {
+        return Err(SimError::invalid("heat: configuration index out of range"));
+    }
+    if cells.iter().any(|&c| c < 0 || c as usize >= state_t.len()) {
+        return Err(SimError::invalid("heat: cell index out of range"));
+    }
+    let mut out = vec![[0.0; 2]; m];
+    let mut z0 = vec![0.0; n];
+    let mut zd = vec![0.0; n];
+    let mut i = 0;
+    while i < m {
+        let c = cells[i] as usize;
+        let cfg = config[i];
+        let mut j = i;
+        while j < m && cells[j] as usize == c && config[j] == cfg {
+            j += 1;
+        }
+        let sys = &systems[cfg];
+        let x = &mut state[c * n..(c + 1) * n];
+        // z0 = U^T C^1/2 (T - T_ss)
+        z0.iter_mut().for_each(|v| *v = 0.0);
+        for (r, xr) in x.iter().enumerate() {
+            let d = (xr - sys.t_ss[r]) * sqrt_c[r];
+            let row = &sys.u[r * n..(r + 1) * n];
+            for (zk, ur) in z0.iter_mut().zip(row) {
+                *zk += d * ur;
+            }
+        }
+        let r0 = &sys.u[0..n];
+        let r1 = &sys.u[n..2 * n];
+        let t0 = state_t[c];
+        for s in i..j {
+            let dt = t_s[s] - t0;
+            let (mut a, mut b) = (0.0, 0.0);
+            for k in 0..n {
+                let v = (-dt * sys.mu[k]).exp() * z0[k];
+                zd[k] = v;
+                a += v * r0[k];
+                b += v * r1[k];
+            }
+            out[s] = [sys.t_ss[0] + a / sqrt_c[0], sys.t_ss[1] + b / sqrt_c[1]];
+        }
+        // The state at the run's last sample (zd holds its decayed modes).
+        for (r, xr) in x.iter_mut().enumerate() {
+            let row = &sys.u[r * n..(r + 1) * n];
+            let v: f64 = row.iter().zip(&zd).map(|(u, z)| u * z).sum();
+            *xr = sys.t_ss[r] + v / sqrt_c[r];
+        }
+        state_t[c] = t_s[j - 1];
+        i = j;
+    }
+    Ok(out)
+}

@@ -1,0 +1,106 @@
+"""The repository stands on its own: README and docs/ point only at files inside it, every
+relative link and path they name exists, and the citation and licence files agree with the
+package metadata."""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+import pytest
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - the package depends on tomli there
+    import tomli as tomllib
+
+ROOT = Path(__file__).resolve().parents[2]
+DOCS = sorted([ROOT / "README.md", *(ROOT / "docs").glob("*.md")])
+TOP = {p.name for p in ROOT.iterdir() if not p.name.startswith(".git")}
+
+#: Pointers to things that exist only on the machine the project was written on.
+OUTSIDE = re.compile(r"\.\./shared|DESIGN\.md|skin-protocol\.md|/work/|/home/|/Users/|[A-Z]:\\\\")
+LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
+CODE = re.compile(r"`([^`\s]+)`")
+
+
+def _slug(heading: str) -> str:
+    """GitHub's anchor for a heading: lower case, punctuation dropped, spaces to hyphens."""
+    text = re.sub(r"[`*_]", "", heading.strip().lower())
+    text = re.sub(r"[^\w\- ]", "", text)
+    return text.replace(" ", "-")
+
+
+def _anchors(md: Path) -> set[str]:
+    return {_slug(m) for m in re.findall(r"^#+ (.+)$", md.read_text(), flags=re.MULTILINE)}
+
+
+def _inside(path: Path) -> bool:
+    return path.resolve().is_relative_to(ROOT)
+
+
+def _prose(md: Path) -> str:
+    return md.read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize("md", DOCS, ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_no_pointer_outside_the_repository(md):
+    for n, line in enumerate(_prose(md).splitlines(), 1):
+        assert not OUTSIDE.search(line), f"{md.name}:{n} points outside the repository: {line}"
+
+
+@pytest.mark.parametrize("md", DOCS, ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_relative_links_exist(md):
+    for target in LINK.findall(_prose(md)):
+        if re.match(r"[a-z]+:", target):  # https:, mailto:
+            continue
+        file, _, anchor = target.partition("#")
+        path = (md.parent / file) if file else md
+        assert _inside(path), f"{md.name}: link {target} leaves the repository"
+        assert path.exists(), f"{md.name}: link {target} names a missing file"
+        if anchor and path.suffix == ".md":
+            assert anchor in _anchors(path), f"{md.name}: link {target} names a missing heading"
+
+
+@pytest.mark.parametrize("md", DOCS, ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_repository_paths_in_code_spans_exist(md):
+    """`docs/gp.md`, `python/aptkt/experiments/`, ...: a code span whose first component is a
+    top-level entry of the repository names a path that must exist."""
+    for span in CODE.findall(_prose(md)):
+        span = span.rstrip(".,:;")
+        first = span.split("/", 1)[0]
+        if "/" not in span or first not in TOP or any(c in span for c in "*<>{}"):
+            continue
+        path = ROOT / span
+        assert _inside(path) and path.exists(), f"{md.name}: `{span}` does not exist"
+
+
+def test_design_sections_cited_in_the_code_exist():
+    cited = set()
+    for src in [*(ROOT / "python").rglob("*.py"), *(ROOT / "rust").rglob("*.rs")]:
+        cited |= {int(n) for n in re.findall(r"docs/design\.md §(\d+)", src.read_text())}
+    sections = {
+        int(n)
+        for n in re.findall(r"^## (\d+)\. ", (ROOT / "docs/design.md").read_text(), re.MULTILINE)
+    }
+    assert cited and cited <= sections
+
+
+def test_citation_and_licence_match_the_metadata():
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    cargo = tomllib.loads((ROOT / "Cargo.toml").read_text())
+    cff = (ROOT / "CITATION.cff").read_text()
+    assert re.search(
+        rf'^version: "{re.escape(cargo["workspace"]["package"]["version"])}"$', cff, re.MULTILINE
+    )
+    assert "doi: 10.3390/s18020634" in cff
+    assert pyproject["project"]["license"] == {"text": "MIT"}
+    assert re.search(r"^license: MIT$", cff, re.MULTILINE)
+    licence = (ROOT / "LICENSE").read_text()
+    assert licence.startswith("MIT License") and "WITHOUT WARRANTY OF ANY KIND" in licence
+
+
+def test_ci_needs_nothing_outside_the_repository():
+    script = (ROOT / ".ci" / "run").read_text()
+    assert ".." not in script.replace('"$(dirname "$0")/.."', "")

@@ -1,0 +1,251 @@
+"""The learner's transfer options (issue 11): relatedness, the paper's baseline and the control,
+stress-test choices, several sources, and the hyper-parameters recorded per step."""
+
+import numpy as np
+import pytest
+from aptkt.learning import (
+    APTKT,
+    FeaturePipeline,
+    GPSettings,
+    LearnerConfig,
+    PoolEnvironment,
+    PriorKnowledge,
+)
+from aptkt.learning.learner import hyperparameters
+from aptkt.learning.prior import binary_probabilities
+from aptkt.learning.transfer import decide_transfer
+
+from .synthetic import ACTIONS, draw, make_world
+
+OLD = ["a", "b", "c", "d"]
+
+
+# -- Eq. 3 variants on hand-made probabilities ------------------------------------------------
+def test_multi_transfers_every_old_object_above_the_cut_off_with_its_own_lambda():
+    p = np.array([[0.7, 0.5, 0.1, 0.45], [0.5, 0.5, 0.2, 0.35]])  # p̄ = 0.6, 0.5, 0.15, 0.4
+    d = decide_transfer("n", OLD, p, eps_neg=0.4, mode="multi")
+    assert d.sources == ("a", "b", "d")
+    assert d.lambdas == pytest.approx((0.6, 0.5, 0.4))
+    assert d.as_dict()["sources"] == pytest.approx({"a": 0.6, "b": 0.5, "d": 0.4})
+    # The paper's mode keeps only the most related one.
+    paper = decide_transfer("n", OLD, p, eps_neg=0.4, mode="paper")
+    assert paper.sources == ("a",) and paper.transfer_lambda == pytest.approx(0.6)
+    assert decide_transfer("n", OLD, p, eps_neg=0.65, mode="multi").sources == ()
+
+
+def test_stress_choice_least_related_and_forced_lambda_respect_the_cut_off():
+    p = np.array([[0.7, 0.5, 0.1, 0.45]])
+    # Without a cut-off the least related prior is transferred with the forced λ.
+    d = decide_transfer("n", OLD, p, eps_neg=0.0, choice="least", forced_lambda=1.0)
+    assert d.source == "c" and d.transfer_lambda == 1.0
+    # The cut-off judges the chosen object's own p̄ (0.1): nothing passes.
+    cut = decide_transfer("n", OLD, p, eps_neg=0.4, choice="least", forced_lambda=1.0)
+    assert not cut.transfers and cut.transfer_lambda == 0.0
+    # λ = 1 from the most related one once it passes.
+    most = decide_transfer("n", OLD, p, eps_neg=0.4, forced_lambda=1.0)
+    assert most.source == "a" and most.transfer_lambda == 1.0
+    for mode in ("none", "control"):
+        assert not decide_transfer("n", OLD, p, eps_neg=0.0, mode=mode).transfers
+    with pytest.raises(ValueError, match="choice"):
+        decide_transfer("n", OLD, p, eps_neg=0.4, choice="random")
+    with pytest.raises(ValueError, match="forced_lambda"):
+        decide_transfer("n", OLD, p, eps_neg=0.4, forced_lambda=1.5)
+
+
+def test_config_validates_the_options_and_round_trips():
+    cfg = LearnerConfig(
+        transfer="control", source="positives", relatedness="normalised", forced_lambda=1.0
+    )
+    assert LearnerConfig.from_dict(cfg.to_dict()) == cfg
+    assert cfg.uses_prior and not cfg.transfers
+    assert not LearnerConfig(transfer="none").uses_prior
+    assert LearnerConfig(transfer="none", auxiliary=True).uses_prior
+    for field, bad in (
+        ("transfer", "bold"),
+        ("source", "negatives"),
+        ("relatedness", "cosine"),
+        ("source_choice", "random"),
+    ):
+        with pytest.raises(ValueError, match=field):
+            LearnerConfig(**{field: bad})
+    with pytest.raises(ValueError, match="forced_lambda"):
+        LearnerConfig(forced_lambda=-0.1)
+
+
+# -- relatedness from the old models ----------------------------------------------------------
+def _world_with_irrelevant_priors(n_irrelevant, seed=7, gp=None):
+    """One old object ("old0") that new object "new0" is like, and ``n_irrelevant`` old objects
+    far from every new object."""
+    rng = np.random.default_rng(seed)
+    means = {}
+    for a, mods in ACTIONS.items():
+        rel = {m: rng.normal(scale=4.0, size=d) for m, d in mods.items()}
+        means[(a, "old0")] = rel
+        means[(a, "new0")] = {m: v + 0.3 for m, v in rel.items()}
+        means[(a, "new1")] = {m: rng.normal(scale=4.0, size=d) - 30 for m, d in mods.items()}
+        for k in range(n_irrelevant):
+            means[(a, f"old{k + 1}")] = {
+                m: rng.normal(scale=4.0, size=d) + 30 + 12 * k for m, d in mods.items()
+            }
+    priors = [f"old{k}" for k in range(n_irrelevant + 1)]
+    prior = PriorKnowledge.build(draw(means, priors, 15, seed=1), seed=0, gp=gp)
+    news = draw(means, ["new0", "new1"], 4, seed=2)
+    return prior, news
+
+
+def _relatedness_of_new0(n_irrelevant, kind):
+    prior, news = _world_with_irrelevant_priors(n_irrelevant)
+    out = {}
+    for action in ACTIONS:
+        ap = prior[action]
+        X, _ = ap.features(news[action])
+        p = ap.relatedness(X, kind)[news[action].objects == "new0"]
+        out[action] = decide_transfer("new0", ap.objects, p, LearnerConfig().eps_neg)
+    return out
+
+
+def test_binary_relatedness_does_not_depend_on_the_number_of_priors():
+    """ε_neg means the same whatever the number of priors: with binary relatedness the related
+    prior passes the cut-off, with the same p̄, with one irrelevant prior beside it and with
+    five. The normalised posterior's p̄ of the same prior falls as irrelevant priors are added."""
+    few, many = _relatedness_of_new0(1, "binary"), _relatedness_of_new0(5, "binary")
+    for action in ACTIONS:
+        for d in (few[action], many[action]):
+            assert d.source == "old0", (action, d.as_dict())
+            assert d.transfer_lambda > 0.7
+            # Every irrelevant prior's own classifier claims new0 less than old0's does.
+            assert max(d.mean_posterior[1:]) < d.transfer_lambda - 0.2
+        assert many[action].transfer_lambda == pytest.approx(few[action].transfer_lambda, abs=0.1)
+    few_n, many_n = _relatedness_of_new0(1, "normalised"), _relatedness_of_new0(5, "normalised")
+    for action in ACTIONS:
+        assert many_n[action].mean_posterior[0] < few_n[action].mean_posterior[0] - 0.1
+
+
+def test_binary_probabilities_normalise_to_the_class_posterior():
+    """Independent check of the binary probabilities: normalising them over the classes gives
+    the model's class posterior (both with the exact predictive integral)."""
+    exact = GPSettings(approximation="quadrature")
+    prior, news = _world_with_irrelevant_priors(3, gp=exact)
+    ap = prior["P1"]
+    X, _ = ap.features(news["P1"])
+    b = binary_probabilities(ap.model, X)
+    assert b.shape == (X.shape[0], 4) and np.all((b > 0) & (b < 1))
+    np.testing.assert_allclose(b / b.sum(axis=1, keepdims=True), ap.posteriors(X), atol=1e-3)
+    assert not np.allclose(b.sum(axis=1), 1.0)  # not a posterior over old objects
+    # Two old objects: one classifier; the binary probabilities are the class posterior.
+    two, news2 = _world_with_irrelevant_priors(1, gp=exact)
+    X2, _ = two["P1"].features(news2["P1"])
+    np.testing.assert_allclose(
+        binary_probabilities(two["P1"].model, X2), two["P1"].posteriors(X2), atol=1e-3
+    )
+
+
+# -- baseline, control and records --------------------------------------------------------------
+@pytest.fixture(scope="module")
+def world():
+    priors, news, means = make_world(
+        n_prior=3, n_new=3, noise=1.0, separation=0.6, related=True, seed=1
+    )
+    return dict(
+        news=news,
+        prior=PriorKnowledge.build(draw(means, priors, 12, seed=1), seed=0),
+        pool=draw(means, news, 10, seed=2),
+        test=draw(means, news, 6, seed=3),
+    )
+
+
+def _run(world, budget=2, prior="given", **cfg):
+    learner = APTKT(
+        LearnerConfig(budget=budget, seed=1, **cfg), world["prior"] if prior == "given" else None
+    )
+    run = learner.run(
+        PoolEnvironment(world["pool"], seed=1), list(ACTIONS), world["news"], world["test"]
+    )
+    return learner, run
+
+
+def test_baseline_uses_nothing_of_the_prior(world):
+    with_prior, run_a = _run(world, transfer="none")
+    _, run_b = _run(world, transfer="none", prior=None)
+    assert run_a.prior_objects == []
+    assert _same_rows(run_a.rows(), run_b.rows())
+    for learner in with_prior.learners.values():
+        assert learner.prior is None
+        # Its feature transforms are fitted on the new objects' training observations.
+        own = FeaturePipeline().fit(learner.observations)
+        got = learner._pipeline()
+        for m in own.modality_names_:
+            np.testing.assert_allclose(got.transforms[m].mean_, own.transforms[m].mean_)
+        assert not learner.decisions
+
+
+def _same_rows(a, b):
+    # repr: NaN (no uncertainty at step 0) compares equal to itself.
+    def strip(rows):
+        return repr([{k: v for k, v in r.items() if k != "seconds"} for r in rows])
+
+    return strip(a) == strip(b)
+
+
+def test_control_works_in_the_prior_feature_space_without_transfer(world):
+    learner, run = _run(world, transfer="control")
+    assert run.prior_objects == world["prior"].objects
+    for a, l in learner.learners.items():
+        assert l._pipeline() is world["prior"][a].pipeline
+        assert not l.decisions and not l.model.sources_
+    assert all(not s.transfer or not any(s.transfer.values()) for s in run.steps)
+
+
+def test_hyperparameters_of_every_classifier_are_recorded(world):
+    learner, run = _run(world, transfer="paper", budget=1)
+    step = run.steps[-1]
+    for a, l in learner.learners.items():
+        assert step.hyperparameters[a] == hyperparameters(l.model)
+        assert set(step.hyperparameters[a]) == set(world["news"])
+        for c, hp in step.hyperparameters[a].items():
+            i = list(l.model.classes_).index(c)
+            assert hp["signal_variance"] == pytest.approx(l.model.signal_variance_[i])
+            names = l.model.modality_names_
+            for k, m in enumerate(names):
+                assert hp[f"length_scale[{m}]"] == pytest.approx(l.model.length_scales_[i, k])
+                assert hp[f"weight[{m}]"] == pytest.approx(l.model.modality_weights_[i, k])
+            d = l.decisions[c]
+            assert ("lambda" in hp) == d.transfers
+            if d.transfers:
+                assert hp["lambda"] == pytest.approx(d.transfer_lambda)
+    row = step.as_row()
+    a, c = "P1", world["news"][0]
+    assert row[f"hp[{a}][{c}].signal_variance"] == step.hyperparameters[a][c]["signal_variance"]
+    everything = [hp for per in step.hyperparameters.values() for hp in per.values()]
+    assert row["median_signal_variance"] == pytest.approx(
+        np.median([hp["signal_variance"] for hp in everything])
+    )
+    # Two classes without transfer: one classifier, listed under its positive class.
+    two = {a: obs.of_objects(world["news"][:2]) for a, obs in world["pool"].items()}
+    base = APTKT(LearnerConfig(transfer="none", budget=0)).run(
+        PoolEnvironment(two), list(ACTIONS), world["news"][:2]
+    )
+    assert set(base.steps[0].hyperparameters["P1"]) == {world["news"][1]}
+
+
+def test_logistic_gaussian_integral_against_adaptive_quadrature():
+    from aptkt.learning.prior import logistic_gaussian
+    from scipy.integrate import quad
+    from scipy.special import expit
+    from scipy.stats import norm
+
+    means = np.array([-30.0, -7.0, -1.0, 0.0, 0.5, 3.0, 14.0])
+    sds = np.array([1e-3, 0.3, 1.0, 1.01, 3.0, 56.0, 300.0])
+    M, S = np.meshgrid(means, sds)
+    got = logistic_gaussian(M, S**2)
+    for m, s, g in zip(M.ravel(), S.ravel(), got.ravel()):
+        # The reference is told where σ steps (z = −m/s), so it resolves wide Gaussians too.
+        ref = quad(
+            lambda z, m=m, s=s: expit(m + s * z) * norm.pdf(z),
+            -40,
+            40,
+            points=[-m / s],
+            epsabs=1e-13,
+            limit=500,
+        )[0]
+        assert g == pytest.approx(ref, abs=1e-8), (m, s)

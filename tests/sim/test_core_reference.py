@@ -1,0 +1,125 @@
+"""The compiled per-sample loops (Rust crate ``aptkt-sim``) against their numpy formulation
+(``numpy_reference``): the same numbers to a tight tolerance on real trial configurations, and
+whole trials that do not depend on the process that simulates them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from aptkt._core import sim_texture
+from aptkt.sim.kinematics import Trajectory
+from aptkt.sim.physics import ContactPhysics, ObjectPose
+from aptkt.sim.seeding import stable_words, trial_seed_sequence
+from aptkt.sim.texture import texture_acceleration
+from aptkt.sim.thermal import speed_bins
+from aptkt.sim.trial import TrialConditions
+from aptkt.sim.world import OBJECT_SPOT
+
+from . import numpy_reference as ref
+
+OBJECTS = ["rough_sponge", "metal_toolbox", "ceramic_tile", "towel"]
+
+
+def physics(world, name: str, trial: int = 0) -> ContactPhysics:
+    obj = world.objects[name]
+    seq = trial_seed_sequence(world.seed, name, "ref", trial)
+    cond = TrialConditions.draw(obj, world.variation, seq, world.geometry.n_cells)
+    noise = np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, *stable_words("noise")))
+    pose = ObjectPose(OBJECT_SPOT, obj.height, 0.0)
+    return ContactPhysics(obj, pose, cond, world.geometry, world.imperfections, noise)
+
+
+def press_and_slide(ph: ContactPhysics, depth: float) -> Trajectory:
+    """Down into the face, hold, slide along x and back up: contact, relaxation, waviness."""
+    x, y = OBJECT_SPOT
+    z = ph.shape.surface_z
+    tr = Trajectory.resting(0, np.array([x - 0.02, y, z + 0.002]))
+    v = (0.002 + depth) / 0.4
+    tr.append(100_000_000, [x - 0.02, y, z + 0.002], [0, 0, -v], [0, 0, 0])
+    tr.append(500_000_000, [x - 0.02, y, z - depth], [0, 0, 0], [0, 0, 0])
+    tr.append(1_500_000_000, [x - 0.02, y, z - depth], [0.01, 0.0, 0.0], [0.5, 0.0, 0.0])
+    tr.append(1_600_000_000, [x - 0.0165, y, z - depth], [0.06, 0.0, 0.0], [0, 0, 0])
+    tr.append(2_200_000_000, [x + 0.0195, y, z - depth], [0.0, 0.0, 0.01], [0, 0, 0])
+    return tr
+
+
+@pytest.mark.parametrize("name", OBJECTS)
+@pytest.mark.parametrize("depth", [0.0005, 0.002])
+def test_mechanics_matches_numpy(world, name, depth):
+    ph = physics(world, name)
+    tr = press_and_slide(ph, depth)
+    start = ph.initial_state(0, tr.p0[0])
+    a, b = start.copy(), start.copy()
+    peak = 0.0
+    for t_end in [20_000_000, 400_000_000, 408_000_000, 1_000_000_000, 2_600_000_000]:
+        got = ph.mechanics(a, tr, t_end)
+        want = ref.mechanics(ph, b, tr, t_end)
+        np.testing.assert_array_equal(got.cells, want.cells)
+        np.testing.assert_array_equal(got.ks, want.ks)
+        np.testing.assert_array_equal(got.t_ns, want.t_ns)
+        np.testing.assert_allclose(got.pos, want.pos, rtol=0, atol=1e-15)
+        scale = max(float(np.abs(want.sigma).max()), 1.0)
+        peak = max(peak, float(want.sigma.max()))
+        np.testing.assert_allclose(got.sigma, want.sigma, rtol=1e-9, atol=1e-9 * scale)
+    assert peak > 100.0  # Pa: the trajectory does press into the object
+    if ph.relaxation.weights:
+        assert float(np.abs(b.relax_h).max()) > 0
+    np.testing.assert_allclose(a.relax_h, b.relax_h, rtol=1e-9, atol=1e-9 * scale)
+    np.testing.assert_allclose(a.latest_force, b.latest_force, rtol=1e-9, atol=1e-12)
+    np.testing.assert_array_equal(a.next_k, b.next_k)
+    assert a.t_ns == b.t_ns
+
+
+@pytest.mark.parametrize("name", OBJECTS)
+def test_heat_matches_numpy(world, name):
+    ph = physics(world, name)
+    tr = press_and_slide(ph, 0.002)
+    st0 = ph.initial_state(0, tr.p0[0])
+    chunk = ph.mechanics(st0, tr, 2_600_000_000)
+    pressure = chunk.sigma.mean(axis=1)
+    phi = ph.thermal.contact_bins(pressure / (pressure + ph.k.contact_pressure_half))
+    speed = np.hypot(chunk.vel[:, 0], chunk.vel[:, 1])
+    v_bin = np.where(pressure > 0, speed_bins(speed), 0)
+    assert len(np.unique(phi)) > 3 and len(np.unique(v_bin)) > 3
+    a, b = st0.copy(), st0.copy()
+    got = ph._heat(a, chunk.cells, chunk.t_s, phi, v_bin)
+    want = ref.heat(ph, b, chunk.cells, chunk.t_s, phi, v_bin)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.thermal, b.thermal, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(a.thermal_t, b.thermal_t)
+    assert float(np.ptp(got[:, 0])) > 0.01  # the contact did move the temperatures
+
+
+def test_noise_matches_the_numpy_counter_stream(world):
+    ph = physics(world, "towel")
+    rng = np.random.default_rng(3)
+    ks = rng.integers(0, 200_000, 500)
+    cells = rng.integers(0, ph.n, 500)
+    t_ns = rng.integers(0, 10**12, 500)
+    z, arrival = ph._noise_and_arrival(ks, cells, t_ns)
+    z_ref, arrival_ref = ref.noise_and_arrival(ph, ks, cells, t_ns)
+    np.testing.assert_allclose(z, z_ref, rtol=1e-13, atol=1e-13)
+    np.testing.assert_array_equal(arrival, arrival_ref)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    speed=st.floats(1e-4, 0.1),
+    angle=st.floats(0, 2 * np.pi),
+    pressure=st.floats(0, 5e4),
+    x=st.floats(-0.05, 0.05),
+)
+def test_texture_matches_numpy(world, speed, angle, pressure, x):
+    ph = physics(world, "rough_sponge")
+    u = np.array([[x, 0.3 * x], [0.01, -0.02]])
+    w = speed * np.array([[np.cos(angle), np.sin(angle)], [0.0, 1.0]])
+    p = np.array([pressure, 0.5 * pressure])
+    got = sim_texture(
+        ph.texture.kvec, ph.texture.amplitude, ph.texture.phase, ph._texture_constants, u, w, p
+    )
+    want = texture_acceleration(ph.texture, ph.k, u, w, p, ph.top_modulus, ph.mu_k)
+    scale = max(float(np.abs(want).max()), 1e-12)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-10 * scale)
