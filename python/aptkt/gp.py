@@ -737,7 +737,7 @@ class LaplaceGPC:
         for k, label in enumerate(self.classes_.tolist()):
             r = 0 if single else k
             srcs = self.sources_.get(label, [])
-            lambdas = self.theta_[r, self.theta_.shape[1] - n_lambdas :] if n_lambdas else []
+            lambdas: Any = self.theta_[r, self.theta_.shape[1] - n_lambdas :] if n_lambdas else []
             out[label] = {
                 "signal_variance": float(sv[r]),
                 "length_scales": {m: float(v) for m, v in zip(self.modality_names_, ls[r])},
@@ -921,7 +921,7 @@ def kernel_matrix(
     """
     X = _as_matrix(X, "X")
     _, groups = _normalise_modalities(modalities, X.shape[1])
-    if np.ndim(n_source) == 0:
+    if isinstance(n_source, (int, np.integer)):
         sizes = [int(n_source)] if int(n_source) > 0 else []
     else:
         sizes = [int(v) for v in n_source]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from aptkt.commands._session import (
@@ -83,7 +84,7 @@ def _prompt(trial: int) -> None:
 def run(args: argparse.Namespace) -> int:
     from aptkt.runtime.collection import CollectionAborted, CollectionPlan, collect
 
-    objects = split_names(args.objects, "--objects")
+    objects = split_names(args.objects, "--objects") or []  # a required option
     available = available_actions(args)
     names = split_names(args.actions, "--actions") or list(available)
     plan = CollectionPlan(
@@ -96,14 +97,13 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(
             f"{args.output} exists: use --resume to complete it or --overwrite to replace it"
         )
+    progress: bool | Callable[[str], None]
     if args.no_progress:
-        progress: object = False
+        progress = False
     elif sys.stderr.isatty():
         progress = True
     else:
-
-        def progress(line: str) -> None:
-            print(line, file=sys.stderr, flush=True)
+        progress = _print_line
 
     try:
         with session:
@@ -130,3 +130,7 @@ def run(args: argparse.Namespace) -> int:
         )
     )
     return 0
+
+
+def _print_line(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)

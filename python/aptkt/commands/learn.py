@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
         prior = PriorKnowledge.load(args.prior)
     except (OSError, ValueError, KeyError) as exc:
         raise ConfigError(f"--prior {args.prior}: cannot load prior knowledge: {exc}") from None
-    objects = split_names(args.objects, "--objects")
+    objects = split_names(args.objects, "--objects") or []  # a required option
     if len(objects) < 2:
         raise ConfigError("--objects: learning needs at least two new objects")
     overlap = sorted(set(objects) & set(prior.objects))

@@ -191,7 +191,7 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
 
     config = _config(s, scale, ctx, data_info, plans)
     (out / "config.json").write_text(json.dumps(config, indent=2, default=str))
-    run_info = {
+    run_info: dict[str, Any] = {
         "command": s.command or f"aptkt reproduce {' '.join(s.figures)}",
         "software_version": __version__,
         "date": datetime.datetime.now().isoformat(timespec="seconds"),

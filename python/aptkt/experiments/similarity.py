@@ -105,7 +105,7 @@ def _e_step(
 
 def fit_mixture(
     X: np.ndarray,
-    init_labels: Sequence[int],
+    init_labels: Sequence[int] | np.ndarray,
     n_components: int,
     *,
     covariance_type: str = "tied",
@@ -154,13 +154,15 @@ def log_responsibilities(fit: MixtureFit, X: np.ndarray) -> np.ndarray:
     return _e_step(np.asarray(X, dtype=float), fit.weights, fit.means, fit.covariances)[1]
 
 
-def log_confusion(log_resp: np.ndarray, labels: Sequence[int], n_objects: int) -> np.ndarray:
+def log_confusion(
+    log_resp: np.ndarray, labels: Sequence[int] | np.ndarray, n_objects: int
+) -> np.ndarray:
     """``log C[i, k]`` with ``C[i, k]`` the mean responsibility of component k for object i's
     samples (rows of C sum to 1), computed without underflow."""
-    labels = np.asarray(labels)
+    label = np.asarray(labels)
     out = np.empty((n_objects, log_resp.shape[1]))
     for i in range(n_objects):
-        rows = log_resp[labels == i]
+        rows = log_resp[label == i]
         if rows.shape[0] == 0:
             raise ValueError(f"object {i} has no samples")
         top = rows.max(axis=0)

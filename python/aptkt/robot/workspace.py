@@ -102,7 +102,8 @@ def parse_workspace(doc: Mapping[str, Any], source: str = "<memory>") -> Workspa
         raise ConfigError(f"{source}: robot.host must be a non-empty string")
     orientation = DEFAULT_TOOL_ORIENTATION
     if "tool_orientation" in robot:
-        orientation = _vector(robot["tool_orientation"], 3, f"{source}: robot.tool_orientation")
+        rx, ry, rz = _vector(robot["tool_orientation"], 3, f"{source}: robot.tool_orientation")
+        orientation = (rx, ry, rz)
     workspace = None
     if "workspace_min" in robot or "workspace_max" in robot:
         workspace = _box(robot, f"{source}: robot")

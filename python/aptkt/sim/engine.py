@@ -17,8 +17,8 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager, nullcontext
-from typing import Protocol
+from contextlib import AbstractContextManager, contextmanager, nullcontext
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -61,7 +61,7 @@ class SimEngine:
         self.state = physics.initial_state(t0_ns, np.asarray(start_position, dtype=np.float64))
         self.trajectory = Trajectory.resting(t0_ns, start_position)
         self._pending = Frames.empty()
-        self._lean: dict | None = None
+        self._lean: dict[str, Any] | None = None
         self.lock = threading.RLock()
 
     @property
@@ -199,6 +199,7 @@ class SimEngine:
 
     def _lean_queue(self, t_ns: np.ndarray, cells: np.ndarray, force_norm: np.ndarray) -> None:
         lean = self._lean
+        assert lean is not None  # between lean_begin and lean_end
         raw = np.clip(
             np.rint(np.asarray(force_norm) / _FORCE_SCALE), *_FORCE_RANGE
         )  # the wire's field
@@ -212,6 +213,7 @@ class SimEngine:
     def lean_advance(self, t_end_ns: int, wrench_limit: float | None = None) -> str:
         """Advance the mechanics to ``t_end_ns`` (one control tick) without making packets."""
         lean = self._lean
+        assert lean is not None  # between lean_begin and lean_end
         chunk = self.physics.mechanics(self.state, self.trajectory, t_end_ns)
         if chunk.size:
             lean["chunks"].append(chunk)
@@ -235,6 +237,7 @@ class SimEngine:
 
     def lean_reading(self) -> float:
         """The skin's total normal force as it reads now (same arithmetic as the skin source)."""
+        assert self._lean is not None  # between lean_begin and lean_end
         return float(self._lean["latest"].sum())
 
     def lean_flush(self) -> None:
@@ -281,6 +284,10 @@ class Driver(Protocol):
     ) -> tuple[int, str]: ...
 
     def set_motion(self, t_ns: int, p0: np.ndarray, v0: np.ndarray, a: np.ndarray) -> None: ...
+
+    def force_loop(
+        self, lean: bool = True
+    ) -> AbstractContextManager[Callable[[], float] | None]: ...
 
 
 class FastDriver:

@@ -62,7 +62,7 @@ class SimRobot:
 
     def _check_point(self, point: np.ndarray, what: str) -> None:
         if self._placement is not None and not self._placement.contains(
-            tuple(float(x) for x in point)
+            (float(point[0]), float(point[1]), float(point[2]))
         ):
             raise SafetyLimitError(
                 f"{what}: target {np.round(point, 4).tolist()} is outside the workspace of "

@@ -12,8 +12,8 @@ See ``docs/protocol.md`` (the hardware contract). Every packet is 20 bytes; sens
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -46,7 +46,7 @@ PACKET_RATE_HZ = 250.0
 
 def _distinct(columns: list[tuple[int, int, float, float]], pick: slice) -> tuple[Any, ...]:
     """Per-column values; one entry when every column shares them (acc, force)."""
-    rows: tuple[tuple[Any, ...], ...] = tuple(c[pick] for c in columns)
+    rows: tuple[tuple[Any, ...], ...] = tuple(tuple(c)[pick] for c in columns)
     return rows[:1] if len(set(rows)) == 1 else rows
 
 

@@ -13,6 +13,7 @@ import argparse
 import json
 import sys
 import time
+from typing import Any
 
 from aptkt.sim.loopback.controller import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
 from aptkt.sim.loopback.tcp_skin import SkinConfig
@@ -83,14 +84,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ports-json", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
 
-    ports = {"rtde": 30004, "dashboard": 29999, "script": [30001, 30002, 30003]}
+    ports: dict[str, Any] = {"rtde": 30004, "dashboard": 29999, "script": [30001, 30002, 30003]}
     if args.ports_json:
         ports.update(json.loads(args.ports_json))
     if args.config_json:
         config = ControllerConfig(**json.loads(args.config_json))
     else:
-        extra = {} if args.start_pose is None else {"start_pose": tuple(args.start_pose)}
-        contact: dict = {
+        extra: dict[str, Any] = {}
+        if args.start_pose is not None:
+            extra["start_pose"] = tuple(args.start_pose)
+        contact: dict[str, Any] = {
             "type": "spring",
             "surface_z": args.surface_z,
             "stiffness": args.stiffness,
@@ -160,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     if controller.skin is not None:
         print(
-            f"simulated skin ({controller.skin.patch.name}, {config.skin['rate_hz']:g} Hz per cell) "
+            f"simulated skin ({controller.skin.patch.name}, {controller.skin.config.rate_hz:g} Hz per cell) "
             f"on {controller.skin.port}",
             flush=True,
         )

@@ -185,6 +185,9 @@ class ScriptError(Exception):
 class SimulatedController:
     """One simulated UR controller. Thread-safe through :attr:`lock` (held by every caller)."""
 
+    #: Controller time (s since "boot"); survives reset().
+    time: float
+
     def __init__(self, config: ControllerConfig | None = None):
         self.config = config or ControllerConfig()
         self.lock = threading.RLock()
