@@ -1,11 +1,12 @@
 # Two entry points do all set-up on a fresh machine (see README):
 #   make demo   -> virtual environment, Rust build, end-to-end demo on the simulated world
 #   make test   -> virtual environment, Rust build, cargo tests of the core crates, pytest
+#   make lint   -> ruff (lint, format), mypy on the package, clippy and rustfmt
 VENV ?= .venv
 PY := $(VENV)/bin/python
 PYTEST_ARGS ?=
 
-.PHONY: venv install install-test demo wheel test test-rust test-python clean
+.PHONY: venv install install-test install-lint demo wheel lint test test-rust test-python clean
 
 venv:
 	@test -x $(PY) || python3 -m venv $(VENV)
@@ -18,6 +19,9 @@ install: venv
 install-test: venv
 	$(PY) -m pip install --quiet -e ".[test]"
 
+install-lint: venv
+	$(PY) -m pip install --quiet -e ".[lint]"
+
 demo: install
 	$(VENV)/bin/aptkt demo
 
@@ -27,6 +31,15 @@ wheel: venv
 	$(PY) -m pip install --quiet "maturin>=1.8,<2"
 	rm -f dist/aptkt-*.whl
 	$(PY) -m maturin build --release --interpreter $(PY) --out dist
+
+# Static gates. mypy reads python/aptkt with the core's stub (_core.pyi), so it needs the
+# package's dependencies (numpy's types) but not the compiled extension.
+lint: install-lint
+	$(VENV)/bin/ruff check python tests benches
+	$(VENV)/bin/ruff format --check python tests benches
+	$(VENV)/bin/mypy
+	cargo clippy --workspace --all-targets -- -D warnings
+	cargo fmt --all -- --check
 
 test-rust:
 	cargo test --release --workspace --exclude aptkt-python

@@ -7,6 +7,7 @@ import importlib
 import sys
 from collections.abc import Sequence
 
+from aptkt import __version__
 from aptkt.errors import AptktError
 
 # One module per sub-command (or group); each defines ``register(subparsers)`` which adds its
@@ -35,8 +36,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _version() -> str:
-    from aptkt import __version__
-
     return __version__
 
 

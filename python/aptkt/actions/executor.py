@@ -22,6 +22,7 @@ import datetime as _dt
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
+from aptkt import __version__
 from aptkt.actions.definition import ExploratoryAction, Movement
 from aptkt.errors import AptktError, TrialFault
 from aptkt.robot.base import Placement, Robot
@@ -85,7 +86,6 @@ def explore(
     started the error is raised as a :class:`~aptkt.errors.TrialFault` with the data recorded so
     far.
     """
-    from aptkt import __version__
 
     settings = settings or ExplorationSettings()
     if hasattr(robot, "action_window_ns"):

@@ -31,6 +31,7 @@ from typing import Any, TypeVar
 import h5py
 import numpy as np
 
+from aptkt import __version__
 from aptkt.data.schema import (
     INDEX_DTYPE,
     READABLE_VERSIONS,
@@ -200,7 +201,6 @@ class DatasetWriter:
         description: Mapping[str, Any] | None = None,
         overwrite: bool = False,
     ):
-        from aptkt import __version__
 
         self.path = Path(path)
         if mode not in ("w", "a"):

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
 from aptkt import __version__
 from aptkt.actions import PAPER_ACTIONS
@@ -29,6 +30,7 @@ from aptkt.experiments.runs import RunSpec, flatten, run_many
 from aptkt.experiments.tables import write_csv
 from aptkt.learning import GPSettings, LearnerConfig, PriorKnowledge
 from aptkt.learning.dataset import extract_features, load_observations, stale_features
+from aptkt.runtime.generation import GenerationPlan, generate
 
 __all__ = ["DemoSettings", "run_demo", "DEMO_PRIORS", "DEMO_NEW"]
 
@@ -72,10 +74,6 @@ def _say(msg: str) -> None:
 
 
 def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
-    from tqdm import tqdm
-
-    from aptkt.runtime.generation import GenerationPlan, generate
-
     t_start = time.perf_counter()
     out = Path(s.output)
     out.mkdir(parents=True, exist_ok=True)

@@ -120,7 +120,7 @@ class DaskExecutor:
     def imap_unordered(
         self, fn: Callable[[Any], Any], items: Sequence[Any]
     ) -> Iterator[tuple[int, Any]]:
-        from dask.distributed import as_completed
+        from dask.distributed import as_completed  # optional dependency: the dask extra
 
         if not items:
             return

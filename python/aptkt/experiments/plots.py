@@ -23,6 +23,8 @@ METHOD_COLOURS = {
 
 
 def _pyplot():
+    # Imported when a plot is made: the non-interactive backend must be chosen before pyplot,
+    # and matplotlib is slow to import for everything that does not plot.
     import matplotlib
 
     matplotlib.use("Agg")
@@ -52,7 +54,7 @@ def learning_curves(
         ax.plot(x, mean, label=f"{method} (n={values.shape[0]})", color=colour, lw=2)
         ax.fill_between(x, mean - sd, mean + sd, color=colour, alpha=0.18, lw=0)
     ax.set_ylim(0, 1.02)
-    from matplotlib.ticker import MaxNLocator
+    from matplotlib.ticker import MaxNLocator  # see _pyplot
 
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel(xlabel)

@@ -23,7 +23,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from aptkt import __version__
+from aptkt.actions import PAPER_ACTIONS
+from aptkt.data import DatasetReader
 from aptkt.errors import ConfigError
 from aptkt.experiments.batch import build_priors, run_batch
 from aptkt.experiments.executors import make_executor
@@ -33,6 +37,9 @@ from aptkt.experiments.report import markdown_table, render_report
 from aptkt.experiments.run_store import RunStore, data_fingerprint, run_key
 from aptkt.experiments.runs import label
 from aptkt.experiments.scale import Scale
+from aptkt.learning.dataset import extract_features, stale_features
+from aptkt.runtime.generation import GenerationPlan, generate
+from aptkt.sim.objects import default_library
 
 __all__ = ["ReproduceSettings", "reproduce", "FIGURE_NAMES"]
 
@@ -66,7 +73,6 @@ def _say(msg: str) -> None:
 
 def _paper_numbers(objects: Sequence[str]) -> dict[str, int]:
     """Each object's number in the paper (the library index); others numbered after them."""
-    from aptkt.sim.objects import default_library
 
     lib = default_library()
     out, extra = {}, 100
@@ -81,10 +87,6 @@ def _paper_numbers(objects: Sequence[str]) -> dict[str, int]:
 
 def prepare_data(s: ReproduceSettings, scale: Scale) -> tuple[Path, dict[str, Any]]:
     """The data set to learn from (generated if none was given) with its features extracted."""
-    from aptkt.actions import PAPER_ACTIONS
-    from aptkt.data import DatasetReader
-    from aptkt.learning.dataset import extract_features, stale_features
-    from aptkt.runtime.generation import GenerationPlan, generate
 
     info: dict[str, Any] = {}
     if s.data is not None:
@@ -231,8 +233,6 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
 
 
 def _json_default(v: Any) -> Any:
-    import numpy as np
-
     if isinstance(v, np.generic):
         return v.item()
     if isinstance(v, np.ndarray):
@@ -269,7 +269,6 @@ def _config(
     data_info: dict[str, Any],
     plans: dict[str, Any],
 ) -> dict[str, Any]:
-    import numpy as np
 
     return {
         "command": s.command,

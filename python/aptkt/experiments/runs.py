@@ -9,6 +9,7 @@ from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 from typing import Any
 
+from aptkt.experiments.executors import LocalExecutor
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.dataset import load_observations
 
@@ -107,7 +108,6 @@ def run_many(
     progress: Callable[[int], None] | None = None,
 ) -> list[list[dict[str, Any]]]:
     """Execute runs on local processes (results in the order of ``specs``)."""
-    from aptkt.experiments.executors import LocalExecutor
 
     results: list[list[dict[str, Any]] | None] = [None] * len(specs)
     executor = LocalExecutor(jobs)

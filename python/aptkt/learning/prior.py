@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.special import expit, ndtr
 
 from aptkt import __version__
 from aptkt.gp import LaplaceGPC
@@ -84,7 +85,6 @@ def logistic_gaussian(mean: np.ndarray, var: np.ndarray) -> np.ndarray:
     dt``, which follows from ``σ(f) = H(f) − sign(f) σ(−|f|)``; that integrand decays like
     ``e^{−t}`` and is smooth for sd > 1, so Gauss-Laguerre integrates it.
     """
-    from scipy.special import expit, ndtr
 
     mean = np.asarray(mean, dtype=np.float64)
     sd = np.sqrt(np.maximum(np.asarray(var, dtype=np.float64), 0.0))

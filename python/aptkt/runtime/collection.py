@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from tqdm import tqdm
+
 from aptkt.actions import ExploratoryAction
 from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, repair
 from aptkt.errors import AptktError, ConfigError
@@ -147,8 +149,6 @@ def collect(
     todo = [(o, a, t) for o, a, t in plan.trials() if (o, a.name, t) not in done]
     bar = None
     if progress is True:
-        from tqdm import tqdm
-
         bar = tqdm(
             total=len(plan),
             initial=len(plan) - len(todo),

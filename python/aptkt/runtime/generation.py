@@ -16,9 +16,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from tqdm import tqdm
+
 from aptkt.actions import PAPER_ACTIONS, ExploratoryAction
 from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, repair
 from aptkt.runtime.grid import TrialGrid
+from aptkt.sim.objects import default_library, load_library
+from aptkt.sim.world import SimWorld
 from aptkt.skin.samples import Recording
 
 # Workers are spawned, never forked: a fork copies the parent's thread pools (rayon in the
@@ -65,7 +69,6 @@ class GenerationPlan(TrialGrid):
 
 def paper_plan(seed: int = 0, repetitions: int = 20) -> GenerationPlan:
     """The paper's test set (§5.2): each of the 7 actions 20 times on each of the 15 objects."""
-    from aptkt.sim.objects import default_library
 
     return GenerationPlan(
         tuple(default_library()), tuple(PAPER_ACTIONS.values()), repetitions, seed
@@ -78,8 +81,6 @@ _WORLD = None
 
 def _init_world(seed: int, object_files: tuple[str, ...], options: dict[str, Any]) -> None:
     global _WORLD
-    from aptkt.sim.objects import default_library, load_library
-    from aptkt.sim.world import SimWorld
 
     library = load_library(*object_files) if object_files else default_library()
     _WORLD = SimWorld(library, seed=seed, **options)
@@ -124,8 +125,6 @@ def generate(
     todo = [(o, a, t) for o, a, t in plan.trials() if (o, a.name, t) not in done]
     bar = None
     if progress is True:
-        from tqdm import tqdm
-
         bar = tqdm(
             total=len(plan),
             initial=len(plan) - len(todo),

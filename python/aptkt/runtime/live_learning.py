@@ -26,6 +26,8 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from aptkt import __version__
 from aptkt.actions import ExploratoryAction
 from aptkt.data.store import DatasetReader, DatasetWriter
@@ -266,8 +268,6 @@ def _finite(obj: Any) -> Any:
 
 def _json(obj: Any) -> Any:
     try:
-        import numpy as np
-
         if isinstance(obj, np.generic):
             return obj.item()
         if isinstance(obj, np.ndarray):

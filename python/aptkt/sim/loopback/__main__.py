@@ -15,7 +15,16 @@ import sys
 import time
 from typing import Any
 
-from aptkt.sim.loopback.controller import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
+from aptkt.errors import ConfigError
+from aptkt.sim.loopback.contact import scene_from_workspace
+from aptkt.sim.loopback.controller import (
+    CB3_VERSION,
+    E_SERIES_VERSION,
+    ControllerConfig,
+    SimulatedController,
+)
+from aptkt.sim.loopback.process import serve_stdio
+from aptkt.sim.loopback.servers import LoopbackServer
 from aptkt.sim.loopback.tcp_skin import SkinConfig
 
 
@@ -109,9 +118,6 @@ def main(argv: list[str] | None = None) -> int:
                 "y": args.object_xy[1],
             }
         if args.workspace:
-            from aptkt.errors import ConfigError
-            from aptkt.sim.loopback.contact import scene_from_workspace
-
             try:
                 contact = scene_from_workspace(
                     args.workspace, stiffness=args.stiffness, friction=args.friction
@@ -132,13 +138,8 @@ def main(argv: list[str] | None = None) -> int:
         )
 
     if args.stdio:
-        from aptkt.sim.loopback.process import serve_stdio
-
         serve_stdio(config, args.host, ports, sys.stdin, sys.stdout)
         return 0
-
-    from aptkt.sim.loopback.controller import SimulatedController
-    from aptkt.sim.loopback.servers import LoopbackServer
 
     try:
         controller = SimulatedController(config)

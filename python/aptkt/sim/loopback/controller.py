@@ -36,6 +36,7 @@ from aptkt.sim.loopback.rotvec import (
     rotvec_to_matrix,
 )
 from aptkt.sim.loopback.rtde import input_type, output_type
+from aptkt.sim.loopback.tcp_skin import SimulatedSkin, SkinConfig
 from aptkt.sim.physics import GRAVITY
 
 __all__ = [
@@ -206,8 +207,6 @@ class SimulatedController:
         self._input_owner: dict[str, int] = {}
         self.skin: Any = None
         if self.config.skin is not None:
-            from aptkt.sim.loopback.tcp_skin import SimulatedSkin, SkinConfig
-
             self.skin = SimulatedSkin(SkinConfig.from_spec(self.config.skin))
         self._skin_errors = 0
         self.reset()

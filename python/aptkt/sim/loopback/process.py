@@ -20,7 +20,14 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from typing import Any
 
-from aptkt.sim.loopback.controller import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
+from aptkt.sim.loopback.controller import (
+    CB3_VERSION,
+    E_SERIES_VERSION,
+    ControllerConfig,
+    SimulatedController,
+)
+from aptkt.sim.loopback.servers import LoopbackServer
+from aptkt.sim.loopback.tcp_skin import SkinConfig
 
 __all__ = ["Loopback", "LoopbackError"]
 
@@ -34,8 +41,6 @@ def serve_stdio(
 ) -> None:
     """Child side: serve the controller, read JSON commands from ``stdin``, answer on ``stdout``."""
     # Imported here so importing this module never builds a controller.
-    from aptkt.sim.loopback.controller import SimulatedController
-    from aptkt.sim.loopback.servers import LoopbackServer
 
     def answer(reply: dict[str, Any]) -> None:
         stdout.write(json.dumps(reply) + "\n")
@@ -164,8 +169,6 @@ class Loopback:
         **config: Any,
     ):
         if skin is not None and skin is not False:
-            from aptkt.sim.loopback.tcp_skin import SkinConfig
-
             skin_config = SkinConfig.from_spec(skin)  # validated here, in the parent
             if skin_config is not None:
                 config["skin"] = skin_config.to_dict()

@@ -39,11 +39,12 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.sim.loopback.contact import ThermalContact
 from aptkt.sim.loopback.rotvec import rotvec_to_matrix
+from aptkt.sim.loopback.thermal_contact import ThermalContact
 from aptkt.sim.objects import Layer
 from aptkt.sim.patch import SkinConstants
 from aptkt.sim.physics import GRAVITY
+from aptkt.sim.skin_stream import PtySkinLink
 from aptkt.sim.thermal import CellThermal, speed_bins
 from aptkt.skin import encode_sensor_packets, quantize
 from aptkt.skin.config import PatchConfig, default_patch, load_patch
@@ -116,8 +117,6 @@ class SimulatedSkin:
         self._centres = patch.positions_mm[:, :2] * 1e-3  # (n, 2) m
         self.constants = SkinConstants()
         if link is None:
-            from aptkt.sim.skin_stream import PtySkinLink
-
             link = PtySkinLink()
         self.link = link
         self._rng = np.random.default_rng(self.config.seed)
