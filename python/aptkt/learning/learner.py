@@ -218,16 +218,14 @@ def hyperparameters(model: LaplaceGPC) -> dict[str, dict[str, float]]:
         hp.update({f"length_scale[{m}]": float(ls[i, k]) for k, m in enumerate(names)})
         if len(names) > 1:
             hp.update({f"weight[{m}]": float(w[i, k]) for k, m in enumerate(names)})
-        # The λ each transfer source was given (sources_ holds a list per class).
-        given = [
-            float(np.atleast_1d(src.transfer_lambda)[0])
-            for src in sources.get(c, [])
-            if src.transfer_lambda is not None  # None: λ is fitted, see model.hyperparameters_
-        ]
-        if len(given) == 1:
-            hp["lambda"] = given[0]
+        # The λ each transfer source was given (None: learned, see model.hyperparameters_).
+        used = [s for s in sources.get(c, []) if s.transfer_lambda is not None]
+        if len(used) == 1:
+            hp["lambda"] = float(np.atleast_1d(used[0].transfer_lambda)[0])
         else:
-            hp.update({f"lambda[{j}]": lam for j, lam in enumerate(given)})
+            hp.update(
+                {f"lambda[{s.name}]": float(np.atleast_1d(s.transfer_lambda)[0]) for s in used}
+            )
         out[c] = hp
     return out
 
