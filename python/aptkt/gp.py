@@ -480,6 +480,9 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
     def __sklearn_is_fitted__(self) -> bool:
         return hasattr(self, "_model")
 
+    #: The fitted core model (``aptkt._core.GpcModel``), set by ``fit`` and ``from_state``.
+    _model: Any
+
     def __getstate__(self) -> dict[str, Any]:
         # The compiled model is rebuilt from plain arrays (what ``save`` writes) on unpickling:
         # joblib and scikit-learn's tools copy estimators between processes this way.

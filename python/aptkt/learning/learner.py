@@ -219,13 +219,14 @@ def hyperparameters(model: LaplaceGPC) -> dict[str, dict[str, float]]:
         if len(names) > 1:
             hp.update({f"weight[{m}]": float(w[i, k]) for k, m in enumerate(names)})
         # The λ each transfer source was given (None: learned, see model.hyperparameters_).
-        used = [s for s in sources.get(c, []) if s.transfer_lambda is not None]
-        if len(used) == 1:
-            hp["lambda"] = float(np.atleast_1d(used[0].transfer_lambda)[0])
+        given: list[tuple[str, float]] = []
+        for src in sources.get(c, []):
+            if src.transfer_lambda is not None:
+                given.append((str(src.name), float(np.atleast_1d(src.transfer_lambda)[0])))
+        if len(given) == 1:
+            hp["lambda"] = given[0][1]
         else:
-            hp.update(
-                {f"lambda[{s.name}]": float(np.atleast_1d(s.transfer_lambda)[0]) for s in used}
-            )
+            hp.update({f"lambda[{name}]": lam for name, lam in given})
         out[c] = hp
     return out
 
