@@ -107,7 +107,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--seed",
         type=int,
-        default=0,
+        default=LearnerConfig.seed,
         help="seed of the learner (and of the simulated world) (default %(default)s)",
     )
     p.set_defaults(func=run)
