@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aptkt.data import DatasetReader, DatasetWriter
+from aptkt.data import DatasetError, DatasetReader, DatasetWriter
 from aptkt.learning.dataset import extract_features, load_observations, stale_features
 from aptkt.learning.extract import ExtractionSettings
 from aptkt.sim import SimWorld
@@ -47,7 +47,7 @@ def test_loading_reads_only_and_the_cache_is_keyed_by_the_settings(tmp_path, dat
     assert digest(path) == before  # nothing was written into the file it reads
     with DatasetReader(path) as rd:
         assert rd.feature_names() == {}
-    with pytest.raises(KeyError, match="dataset features"):
+    with pytest.raises(DatasetError, match="dataset features"):
         load_observations(path, extract_missing=False)
 
     assert stale_features(path, [ACTION]) == [ACTION]
@@ -60,7 +60,7 @@ def test_loading_reads_only_and_the_cache_is_keyed_by_the_settings(tmp_path, dat
     # Other settings: the stored features are not theirs.
     coarse = ExtractionSettings(thermal_bin_s=0.2)
     assert stale_features(path, [ACTION], coarse) == [ACTION]
-    with pytest.raises(KeyError, match="extraction settings"):
+    with pytest.raises(DatasetError, match="extraction settings"):
         load_observations(path, settings=coarse, extract_missing=False)
     stored = digest(path)
     other = load_observations(path, settings=coarse)
@@ -83,7 +83,7 @@ def test_filters_pick_the_same_rows_from_memory_and_from_the_file(tmp_path, data
 
 
 def test_a_filter_that_matches_nothing_gives_an_empty_table(data):
-    table = load_observations(data, objects=["no_such_object"])
+    table = load_observations(data, trials=[99])
     assert len(table[ACTION].objects) == 0
     assert {m: v.shape[0] for m, v in table[ACTION].modalities.items()} == {
         "force": 0,

@@ -7,6 +7,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from aptkt.commands._checks import at_least, output_file, resume_or_overwrite
 from aptkt.commands._session import (
     add_action_arguments,
     add_session_arguments,
@@ -84,6 +85,11 @@ def _prompt(trial: int) -> None:
 def run(args: argparse.Namespace) -> int:
     from aptkt.runtime.collection import CollectionAborted, CollectionPlan, collect
 
+    at_least(args.repetitions, 1, "--repetitions")
+    at_least(args.first_trial, 0, "--first-trial")
+    at_least(args.seed, 0, "--seed")
+    resume_or_overwrite(args.resume, args.overwrite)
+    output_file(args.output)
     objects = split_names(args.objects, "--objects") or []  # a required option
     available = available_actions(args)
     names = split_names(args.actions, "--actions") or list(available)

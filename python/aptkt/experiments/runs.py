@@ -10,10 +10,10 @@ from functools import lru_cache
 from typing import Any
 
 from aptkt.experiments.executors import LocalExecutor
-from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
+from aptkt.learning import APTKT, LearnerConfig, LearningRun, PoolEnvironment, PriorKnowledge
 from aptkt.learning.dataset import load_observations
 
-__all__ = ["RunSpec", "execute", "flatten", "label", "run_many", "run_steps"]
+__all__ = ["RunSpec", "execute", "flatten", "label", "run_many", "run_steps", "step_rows"]
 
 
 @dataclass(frozen=True)
@@ -78,6 +78,15 @@ def run_steps(spec: RunSpec) -> list[dict[str, Any]]:
     run = learner.run(
         PoolEnvironment(pool, seed=spec.pool_seed), spec.actions, spec.new_objects, test
     )
+    return step_rows(run, learner, spec.new_objects)
+
+
+def step_rows(
+    run: LearningRun, learner: APTKT | None = None, objects: Sequence[str] = ()
+) -> list[dict[str, Any]]:
+    """One row per step of a finished run, with the transfer counts of :func:`run_steps`; with
+    the ``learner`` that made it, the last row has the final models' confusion over
+    ``objects``."""
     rows = []
     for step in run.steps:
         row = step.as_row()
@@ -88,7 +97,26 @@ def run_steps(spec: RunSpec) -> list[dict[str, Any]]:
         row["sources"] = len(lambdas)
         row["mean_lambda"] = sum(lambdas) / len(lambdas) if lambdas else float("nan")
         rows.append(row)
+    if rows and learner is not None:
+        rows[-1]["confusion"] = final_confusion(learner, objects)
     return rows
+
+
+def final_confusion(learner: APTKT, objects: Sequence[str]) -> list[list[int]]:
+    """Test observations of each object (rows, in ``objects`` order) by the object the final
+    models predict (columns), counted over every action's model on its own test observations."""
+    pos = {o: i for i, o in enumerate(objects)}
+    counts = [[0] * len(objects) for _ in objects]
+    for action_learner in learner.learners.values():
+        if action_learner.test_posteriors is None:
+            continue
+        model = action_learner.model
+        assert model is not None  # it has test posteriors
+        classes = [str(c) for c in model.classes_]
+        predicted = [classes[k] for k in action_learner.test_posteriors.argmax(axis=1)]
+        for truth, guess in zip(action_learner.test_objects, predicted):
+            counts[pos[str(truth)]][pos[guess]] += 1
+    return counts
 
 
 def label(spec: RunSpec, steps: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:

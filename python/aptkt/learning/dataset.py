@@ -17,9 +17,10 @@ import numpy as np
 from tqdm import tqdm
 
 from aptkt.actions import ExploratoryAction
-from aptkt.data import DatasetReader, write_features
+from aptkt.data import DatasetError, DatasetReader, store_features
 from aptkt.learning.extract import ExtractionSettings, observe_recording
 from aptkt.learning.observations import Observations
+from aptkt.skin.samples import Recording
 
 __all__ = ["extract_features", "load_observations", "stored_actions", "stale_features"]
 
@@ -44,8 +45,22 @@ def _rows_by_action(rd: DatasetReader, wanted: Iterable[str] | None) -> dict[str
             by_action.setdefault(name, []).append(i)
     missing = (names or set()) - set(by_action)
     if missing:
-        raise KeyError(f"{rd.path} holds no recordings of action(s) {sorted(missing)}")
+        raise DatasetError(
+            f"{rd.path} holds no recordings of action(s) {', '.join(sorted(missing))}; "
+            f"it has {', '.join(sorted({rd.key(i)[1] for i in range(len(rd))}))}"
+        )
     return by_action
+
+
+def _recording(rd: DatasetReader, i: int) -> Recording:
+    try:
+        return rd.recording(i)
+    except (OSError, ValueError) as exc:
+        obj, name, trial = rd.key(i)
+        raise DatasetError(
+            f"{rd.path}: recording {i} ({obj}/{name}/trial {trial}) is damaged "
+            f"({exc}); 'aptkt dataset repair {rd.path}' keeps the readable ones"
+        ) from None
 
 
 def _extract(
@@ -64,7 +79,7 @@ def _extract(
             action = ExploratoryAction.from_dict(rd.metadata(rows[0])["action"])
             per_mod: dict[str, list[np.ndarray]] = {m: [] for m in action.modalities}
             for i in rows:
-                obs = observe_recording(rd.recording(i), action, settings)
+                obs = observe_recording(_recording(rd, i), action, settings)
                 for m, v in obs.items():
                     per_mod[m].append(v)
                 if bar is not None:
@@ -102,9 +117,11 @@ def extract_features(
     with DatasetReader(path) as rd:
         by_action = _rows_by_action(rd, actions)
         values = _extract(rd, by_action, settings, progress, f"features {path.name}")
-    for name, per_mod in values.items():
-        for modality, rows in per_mod.items():
-            write_features(path, name, modality, by_action[name], rows, settings=settings.to_dict())
+    store_features(
+        path,
+        {name: (by_action[name], per_mod) for name, per_mod in values.items()},
+        settings=settings.to_dict(),
+    )
     return {name: len(rows) for name, rows in by_action.items()}
 
 
@@ -121,7 +138,7 @@ def load_observations(
     """Observation table from a data set, optionally restricted to objects and trial numbers.
 
     Stored features are used when they were extracted with ``settings``; the others are
-    extracted in memory (``extract_missing=False``: a ``KeyError`` instead). The file is only
+    extracted in memory (``extract_missing=False``: a ``DatasetError`` instead). The file is only
     read: run :func:`extract_features` (``aptkt dataset features``) to store them.
     """
     path = Path(path)
@@ -133,13 +150,23 @@ def load_observations(
     with DatasetReader(path) as rd:
         keys = rd.keys()
         recorded = sorted({k[1] for k in keys})
+        recorded_objects = {k[0] for k in keys}
         names = list(actions) if actions is not None else recorded
         unknown = [a for a in names if a not in recorded]
         if unknown:
-            raise KeyError(f"{path} holds no recordings of action(s) {unknown}; it has {recorded}")
+            raise DatasetError(
+                f"{path} holds no recordings of action(s) {', '.join(unknown)}; "
+                f"it has {', '.join(recorded)}"
+            )
+        if obj_filter is not None and obj_filter - recorded_objects:
+            raise DatasetError(
+                f"{path} holds no recordings of object(s) "
+                f"{', '.join(sorted(obj_filter - recorded_objects))}; "
+                f"it has {', '.join(sorted(recorded_objects))}"
+            )
         todo = [a for a in names if rd.feature_settings(a) != key]
         if todo and not extract_missing:
-            raise KeyError(
+            raise DatasetError(
                 f"{path} has no features stored with these extraction settings for {todo}; "
                 "run `aptkt dataset features`"
             )
