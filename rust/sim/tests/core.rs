@@ -324,10 +324,9 @@ fn force_loop_settles_on_the_target() {
         settled: 0,
     };
     let mut chunk = Chunk::default();
-    let mut samples = 0;
     let mut status = Status::Flush;
     while status == Status::Flush {
-        samples = 0;
+        let mut samples = 0;
         (status, _) = run_ticks(
             &m,
             &sensors,
