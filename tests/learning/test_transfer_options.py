@@ -3,6 +3,7 @@ stress-test choices, several sources, and the hyper-parameters recorded per step
 
 import numpy as np
 import pytest
+
 from aptkt.learning import (
     APTKT,
     FeaturePipeline,
@@ -199,17 +200,17 @@ def test_control_works_in_the_prior_feature_space_without_transfer(world):
 def test_hyperparameters_of_every_classifier_are_recorded(world):
     learner, run = _run(world, transfer="paper", budget=1)
     step = run.steps[-1]
-    for a, l in learner.learners.items():
-        assert step.hyperparameters[a] == hyperparameters(l.model)
+    for a, lrn in learner.learners.items():
+        assert step.hyperparameters[a] == hyperparameters(lrn.model)
         assert set(step.hyperparameters[a]) == set(world["news"])
         for c, hp in step.hyperparameters[a].items():
-            i = list(l.model.classes_).index(c)
-            assert hp["signal_variance"] == pytest.approx(l.model.signal_variance_[i])
-            names = l.model.modality_names_
+            i = list(lrn.model.classes_).index(c)
+            assert hp["signal_variance"] == pytest.approx(lrn.model.signal_variance_[i])
+            names = lrn.model.modality_names_
             for k, m in enumerate(names):
-                assert hp[f"length_scale[{m}]"] == pytest.approx(l.model.length_scales_[i, k])
-                assert hp[f"weight[{m}]"] == pytest.approx(l.model.modality_weights_[i, k])
-            d = l.decisions[c]
+                assert hp[f"length_scale[{m}]"] == pytest.approx(lrn.model.length_scales_[i, k])
+                assert hp[f"weight[{m}]"] == pytest.approx(lrn.model.modality_weights_[i, k])
+            d = lrn.decisions[c]
             lambdas = {k: v for k, v in hp.items() if k.startswith("lambda[")}
             assert lambdas == pytest.approx(
                 {f"lambda[{o}]": lam for o, lam in zip(d.sources, d.lambdas)}

@@ -23,6 +23,7 @@ from typing import Any
 
 from aptkt.actions import PAPER_ACTIONS
 from aptkt.learning.config import LearnerConfig
+from aptkt.sim.objects import default_library
 
 __all__ = ["Scale"]
 
@@ -34,7 +35,7 @@ class Scale:
     new_objects: tuple[str, ...]
     actions: tuple[str, ...]
     repetitions: int = 40
-    budget: int = 40
+    budget: int = LearnerConfig.budget
     groups: int = 10
     trials: int = 5
     n_priors: int = 3
@@ -94,7 +95,6 @@ class Scale:
     @classmethod
     def full(cls) -> Scale:
         """The paper's sizes on the simulated world's 10 prior and 5 new objects."""
-        from aptkt.sim.objects import default_library
 
         lib = default_library()
         return cls(

@@ -125,7 +125,7 @@ def learn_from_table(s: TableSettings, *, say=print) -> dict[str, Any]:
     curves = _curves(rows, methods)
     fused = _curves(rows, methods, key="fused_accuracy")
     x = np.arange(max(c.shape[1] for c in curves.values()))
-    chance = 1.0 / len(s.new_objects)
+    chance = 1.0 / len(s.new_objects)  # guessing one of the new objects
     lines = _table(curves, fused, x, chance)
     for line in lines:
         say("      " + line)

@@ -157,7 +157,7 @@ class ActionLearner:
         """Refit this action's model on everything observed so far (weights, λ, transfer)."""
         obs = self.observations
         missing = [o for o in self.new_objects if self.count(o) == 0]
-        if missing:
+        if missing or obs is None:
             raise RuntimeError(f"action {self.action!r}: no observation yet of {missing}")
         cfg = self.config
         # The old models judge the new observations in their own space.
@@ -203,6 +203,8 @@ class ActionLearner:
 
     def uncertainty(self, obj: str) -> float:
         """UNC(α, c_j): mean entropy of the posterior over this pair's observations."""
+        if self.observations is None:
+            raise RuntimeError(f"action {self.action!r}: nothing observed yet")
         mask = self.observations.objects == obj
         return float(self.train_entropy[mask].mean())
 
@@ -213,10 +215,12 @@ class ActionLearner:
         return self._test.objects
 
     def test_accuracy(self) -> float:
-        if self._test is None or self.test_posteriors is None:
+        if self._test is None or self.test_posteriors is None or self.model is None:
             raise RuntimeError("no test observations were given")
         return accuracy(
-            self.test_posteriors, [str(c) for c in self.model.classes_], self._test.objects
+            self.test_posteriors,
+            [str(c) for c in self.model.classes_],
+            [str(o) for o in self._test.objects],
         )
 
 
@@ -404,21 +408,27 @@ class APTKT:
         seconds: float,
         on_step: Callable[[StepRecord], None] | None,
     ) -> None:
-        has_test = all(l.test_posteriors is not None for l in self.learners.values())
-        acc = {a: l.test_accuracy() for a, l in self.learners.items()} if has_test else {}
+        has_test = all(lrn.test_posteriors is not None for lrn in self.learners.values())
+        acc = {a: lrn.test_accuracy() for a, lrn in self.learners.items()} if has_test else {}
         fused = float("nan")
         if has_test and _same_class_order(self.learners):
-            classes = [str(c) for c in next(iter(self.learners.values())).model.classes_]
+            first = next(iter(self.learners.values())).model
+            assert first is not None  # has_test: every learner has a model
+            classes = [str(c) for c in first.classes_]
             fused = fused_accuracy(
-                {a: l.test_posteriors for a, l in self.learners.items()},
-                {a: l.test_objects for a, l in self.learners.items()},
+                {
+                    a: lrn.test_posteriors
+                    for a, lrn in self.learners.items()
+                    if lrn.test_posteriors is not None
+                },
+                {a: lrn.test_objects for a, lrn in self.learners.items()},
                 classes,
             )
         updated = self.learners[sel.action] if sel is not None else None
         transfer = {
-            a: {o: d.as_dict() for o, d in l.decisions.items()}
-            for a, l in self.learners.items()
-            if updated is None or l is updated
+            a: {o: d.as_dict() for o, d in lrn.decisions.items()}
+            for a, lrn in self.learners.items()
+            if updated is None or lrn is updated
         }
         record = StepRecord(
             step=step,
@@ -432,7 +442,7 @@ class APTKT:
             fused_accuracy=fused,
             transfer=transfer,
             seconds=seconds,
-            hyperparameters={a: l.hyperparameters() for a, l in self.learners.items()},
+            hyperparameters={a: lrn.hyperparameters() for a, lrn in self.learners.items()},
         )
         run.steps.append(record)
         if on_step is not None:
@@ -441,6 +451,8 @@ class APTKT:
 
 def _same_class_order(learners: Mapping[str, ActionLearner]) -> bool:
     orders = {
-        tuple(str(c) for c in l.model.classes_) for l in learners.values() if l.model is not None
+        tuple(str(c) for c in lrn.model.classes_)
+        for lrn in learners.values()
+        if lrn.model is not None
     }
     return len(orders) == 1

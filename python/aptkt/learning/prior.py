@@ -133,8 +133,8 @@ class PriorKnowledge:
     # -- persistence ---------------------------------------------------------------------------
     def save(self, path: str | Path) -> Path:
         path = Path(path)
-        arrays: dict[str, np.ndarray] = {}
-        for i, (name, prior) in enumerate(self.actions.items()):
+        arrays: dict[str, Any] = {}
+        for i, prior in enumerate(self.actions.values()):
             p = f"a{i}"
             arrays.update(prior.observations.to_npz(f"{p}/obs"))
             arrays.update(prior.pipeline.state(f"{p}/pipeline"))
