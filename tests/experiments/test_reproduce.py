@@ -73,13 +73,16 @@ def test_per_trial_bookkeeping_in_the_results(quick_run):
     runs = defaultdict(list)
     for r in rows:
         runs[(r["method"], r["group"], r["trial"])].append(int(r["step"]))
-    assert len(runs) == 3 * s.groups * s.trials  # baseline, control, APTKT
-    assert {m for m, _, _ in runs} == {"baseline", "control", "APTKT"}
+    methods = {"baseline", "control", "APTKT", "APTKT-multi"}
+    assert len(runs) == len(methods) * s.groups * s.trials
+    assert {m for m, _, _ in runs} == methods
     # Every classifier's fitted hyper-parameters are columns of the results.
     assert any(k.startswith("hp[") and k.endswith("].signal_variance") for k in rows[0])
     assert all(float(r["median_length_scale"]) > 0 for r in rows)
     # The baseline uses nothing of the prior, so it never transfers; nor does the control.
-    assert all(int(r["transfers"]) == 0 for r in rows if r["method"] != "APTKT")
+    assert all(int(r["transfers"]) == 0 for r in rows if r["method"] in ("baseline", "control"))
+    # "multi" transfers at least as many sources as decisions that transfer.
+    assert all(int(r["sources"]) >= int(r["transfers"]) for r in rows)
     assert all(sorted(v) == list(range(s.budget + 1)) for v in runs.values())
     specs = [
         json.loads(line) for line in (quick_run / "fig7" / "specs.jsonl").read_text().splitlines()

@@ -90,10 +90,12 @@ def test_auxiliary_features_are_an_extra_modality(related_world):
     n_old = len(related_world["prior"].objects)
     aux_cols = model.modalities_[-1]
     assert len(aux_cols) == n_old
-    # The auxiliary columns are the prior model's posteriors of each observation (Eq. 5).
+    # The auxiliary columns are the prior model's posteriors of each observation (Eq. 5), in
+    # the prior's own feature space.
     X = model.X_train_
     prior = related_world["prior"]["P1"]
-    np.testing.assert_allclose(X[:, aux_cols], prior.posteriors(X[:, : aux_cols[0]]), atol=1e-12)
+    in_prior = prior.pipeline.transform(learner.learners["P1"].observations)[0]
+    np.testing.assert_allclose(X[:, aux_cols], prior.posteriors(in_prior), atol=1e-12)
     np.testing.assert_allclose(X[:, aux_cols].sum(axis=1), 1.0)
 
 

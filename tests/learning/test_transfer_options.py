@@ -174,7 +174,7 @@ def test_baseline_uses_nothing_of_the_prior(world):
         assert learner.prior is None
         # Its feature transforms are fitted on the new objects' training observations.
         own = FeaturePipeline().fit(learner.observations)
-        got = learner._pipeline()
+        got = learner._pipeline(transfers=False)
         for m in own.modality_names_:
             np.testing.assert_allclose(got.transforms[m].mean_, own.transforms[m].mean_)
         assert not learner.decisions
@@ -192,7 +192,7 @@ def test_control_works_in_the_prior_feature_space_without_transfer(world):
     learner, run = _run(world, transfer="control")
     assert run.prior_objects == world["prior"].objects
     for a, lrn in learner.learners.items():
-        assert lrn._pipeline() is world["prior"][a].pipeline
+        assert lrn._pipeline(transfers=False) is world["prior"][a].pipeline
         assert not lrn.decisions and not lrn.model.sources_
     assert all(not s.transfer or not any(s.transfer.values()) for s in run.steps)
 
@@ -211,9 +211,10 @@ def test_hyperparameters_of_every_classifier_are_recorded(world):
                 assert hp[f"length_scale[{m}]"] == pytest.approx(lrn.model.length_scales_[i, k])
                 assert hp[f"weight[{m}]"] == pytest.approx(lrn.model.modality_weights_[i, k])
             d = lrn.decisions[c]
-            assert ("lambda" in hp) == d.transfers
-            if d.transfers:
-                assert hp["lambda"] == pytest.approx(d.transfer_lambda)
+            lambdas = {k: v for k, v in hp.items() if k.startswith("lambda[")}
+            assert lambdas == pytest.approx(
+                {f"lambda[{o}]": lam for o, lam in zip(d.sources, d.lambdas)}
+            )
     row = step.as_row()
     a, c = "P1", world["news"][0]
     assert row[f"hp[{a}][{c}].signal_variance"] == step.hyperparameters[a][c]["signal_variance"]
@@ -221,33 +222,108 @@ def test_hyperparameters_of_every_classifier_are_recorded(world):
     assert row["median_signal_variance"] == pytest.approx(
         np.median([hp["signal_variance"] for hp in everything])
     )
-    # Two classes without transfer: one classifier, listed under its positive class.
+    # Two classes without transfer: one classifier serves both, both list its values.
     two = {a: obs.of_objects(world["news"][:2]) for a, obs in world["pool"].items()}
     base = APTKT(LearnerConfig(transfer="none", budget=0)).run(
         PoolEnvironment(two), list(ACTIONS), world["news"][:2]
     )
-    assert set(base.steps[0].hyperparameters["P1"]) == {world["news"][1]}
+    two_hp = base.steps[0].hyperparameters["P1"]
+    assert set(two_hp) == set(world["news"][:2])
+    assert two_hp[world["news"][0]] == two_hp[world["news"][1]]
 
 
-def test_logistic_gaussian_integral_against_adaptive_quadrature():
-    from scipy.integrate import quad
-    from scipy.special import expit
-    from scipy.stats import norm
+def test_transfer_from_a_related_prior_is_not_inert(world):
+    """With a related prior and λ = p̄, the transfer changes the new objects' predictions
+    materially at one observation per object, against the control (same feature space, no
+    transfer), and not for the worse."""
+    test = world["test"]
+    changes, gains = [], []
+    for seed in range(3):
+        post = {}
+        for transfer in ("paper", "control"):
+            learner = APTKT(LearnerConfig(transfer=transfer, budget=0, seed=seed), world["prior"])
+            run = learner.run(
+                PoolEnvironment(world["pool"], seed=seed), list(ACTIONS), world["news"], test
+            )
+            post[transfer] = (
+                {a: lrn.test_posteriors for a, lrn in learner.learners.items()},
+                run.steps[0].mean_accuracy,
+            )
+            if transfer == "paper":
+                lambdas = [
+                    d.transfer_lambda
+                    for lrn in learner.learners.values()
+                    for d in lrn.decisions.values()
+                ]
+                assert np.mean(lambdas) > 0.5  # related priors pass the cut-off
+        for a in ACTIONS:
+            changes.append(np.abs(post["paper"][0][a] - post["control"][0][a]).mean())
+        gains.append(post["paper"][1] - post["control"][1])
+    assert np.mean(changes) > 0.1, changes
+    assert np.mean(gains) > 0.05, gains
 
-    from aptkt.learning.prior import logistic_gaussian
 
-    means = np.array([-30.0, -7.0, -1.0, 0.0, 0.5, 3.0, 14.0])
-    sds = np.array([1e-3, 0.3, 1.0, 1.01, 3.0, 56.0, 300.0])
-    M, S = np.meshgrid(means, sds)
-    got = logistic_gaussian(M, S**2)
-    for m, s, g in zip(M.ravel(), S.ravel(), got.ravel()):
-        # The reference is told where σ steps (z = −m/s), so it resolves wide Gaussians too.
-        ref = quad(
-            lambda z, m=m, s=s: expit(m + s * z) * norm.pdf(z),
-            -40,
-            40,
-            points=[-m / s],
-            epsabs=1e-13,
-            limit=500,
-        )[0]
-        assert g == pytest.approx(ref, abs=1e-8), (m, s)
+def test_one_vs_all_sources_and_several_sources_reach_the_classifiers(world):
+    """The default source task is the chosen old object's one-vs-all data; "multi" hands every
+    old object above the cut-off to the classifier, each with its own λ."""
+    prior = world["prior"]
+    learner, _ = _run(world, transfer="multi", budget=0, eps_neg=0.0)
+    n_old = {a: len(prior[a].observations) for a in ACTIONS}
+    for a, lrn in learner.learners.items():
+        for c, d in lrn.decisions.items():
+            assert len(d.sources) == len(prior.objects)  # ε_neg = 0: every old object
+            got = lrn.model.sources_[c]
+            assert [s.name for s in got] == list(d.sources)
+            assert [s.transfer_lambda for s in got] == pytest.approx(list(d.lambdas))
+            for s in got:
+                assert s.X.shape[0] == n_old[a]
+                mine = prior[a].observations.objects == s.name
+                np.testing.assert_array_equal(s.y, np.where(mine, 1.0, -1.0))
+    paper, _ = _run(world, transfer="paper", budget=0, source="positives")
+    for a, lrn in paper.learners.items():
+        for _c, srcs in lrn.model.sources_.items():
+            (s,) = srcs
+            assert s.y is None
+            assert s.X.shape[0] == int(np.sum(prior[a].observations.objects == s.name))
+
+
+def test_feature_space_auto_uses_nothing_of_an_irrelevant_prior():
+    """feature_space="auto": when the cut-off stops every transfer, APTKT is the baseline
+    exactly; when something transfers, the model lives in the prior's feature space. "new"
+    never uses the prior's space, "prior" always does."""
+    priors, news, means = make_world(n_prior=3, n_new=3, separation=0.6, related=False, seed=1)
+    far = dict(
+        news=news,
+        prior=PriorKnowledge.build(draw(means, priors, 12, seed=1), seed=0),
+        pool=draw(means, news, 10, seed=2),
+        test=draw(means, news, 6, seed=3),
+    )
+    aptkt, run = _run(far, transfer="paper", budget=3)
+    assert all(not d.transfers for lrn in aptkt.learners.values() for d in lrn.decisions.values())
+    _, base = _run(far, transfer="none", budget=3)
+    strip = lambda rows: [  # noqa: E731
+        {k: v for k, v in r.items() if k in ("mean_accuracy", "fused_accuracy", "action")}
+        for r in rows
+    ]
+    assert strip(run.rows()) == strip(base.rows())
+    in_prior, _ = _run(far, transfer="paper", budget=0, feature_space="prior")
+    for a, lrn in in_prior.learners.items():
+        assert lrn._pipeline(transfers=False) is far["prior"][a].pipeline
+    # Related priors: "auto" transfers, in the prior's space; "new" keeps its own.
+    for space, expect_prior in (("auto", True), ("new", False)):
+        learner, _ = _run(_related(), transfer="paper", budget=0, feature_space=space)
+        for _a, lrn in learner.learners.items():
+            assert any(d.transfers for d in lrn.decisions.values())
+            assert (lrn._pipeline(transfers=True) is lrn.prior.pipeline) == expect_prior
+
+
+def _related():
+    priors, news, means = make_world(
+        n_prior=3, n_new=3, noise=1.0, separation=0.6, related=True, seed=1
+    )
+    return dict(
+        news=news,
+        prior=PriorKnowledge.build(draw(means, priors, 12, seed=1), seed=0),
+        pool=draw(means, news, 10, seed=2),
+        test=draw(means, news, 6, seed=3),
+    )

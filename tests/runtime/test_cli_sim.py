@@ -252,7 +252,7 @@ def test_learn_without_a_test_set_reports_choices_and_transfer_but_no_accuracy(
         for decisions in step["transfer"].values():
             for d in decisions.values():
                 best = max(d["mean_posterior"], key=d["mean_posterior"].get)
-                if d["mean_posterior"][best] >= 0.4:
+                if d["mean_posterior"][best] >= run["config"]["eps_neg"]:
                     assert d["source"] == best and d["lambda"] == d["mean_posterior"][best]
                 else:
                     assert d["source"] is None and d["lambda"] == 0.0
@@ -464,3 +464,23 @@ def test_a_fault_during_live_learning_keeps_every_observation_and_the_run_so_far
     with DatasetReader(err.value.saved) as rd:
         assert len(rd) == 1 and "ProtectiveStopError" in rd.recording(0).metadata["aborted"]
     assert PriorKnowledge.load(out / "learned_prior.npz").objects == sorted(NEW.split(","))
+
+
+@pytest.mark.parametrize("transfer", ["multi", "control", "none"])
+def test_learn_takes_every_transfer_mode(workdir: Path, prior: Path, transfer: str, capsys):
+    out = workdir / f"run-{transfer}"
+    assert (
+        learn(workdir, prior, out, "--objects", NEW, "--budget", "1", "--transfer", transfer) == 0
+    )
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "completed" and run["config"]["transfer"] == transfer
+    decided = [d for s in run["steps"] for ds in s["transfer"].values() for d in ds.values()]
+    if transfer == "multi":
+        assert decided  # one decision per action and new object at step 0, then per update
+        # Every source above the cut-off, each with its own λ = its p̄.
+        for d in decided:
+            assert d["sources"] == {
+                o: p for o, p in d["mean_posterior"].items() if p >= run["config"]["eps_neg"]
+            }
+    else:
+        assert not decided  # the baseline and the control make no transfer decisions

@@ -56,9 +56,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--eps-neg",
         type=float,
-        default=LearnerConfig.eps_neg,
+        default=None,
         metavar="E",
-        help="transfer cut-off ε_neg (default %(default)s)",
+        help="transfer cut-off ε_neg (default: the learner's, 0.5 with binary relatedness)",
     )
     p.add_argument(
         "--eps-explor",
@@ -158,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
     actions = {a.name: a for a in pick_actions(names, available_actions(args))}
     try:
         config = LearnerConfig(
-            eps_neg=args.eps_neg,
+            **({} if args.eps_neg is None else {"eps_neg": args.eps_neg}),
             eps_explor=args.eps_explor,
             budget=args.budget,
             transfer=args.transfer,
@@ -182,7 +182,7 @@ def run(args: argparse.Namespace) -> int:
         f"learning {', '.join(objects)} with {', '.join(actions)} on {args.robot}; prior objects: "
         f"{', '.join(prior.objects)}; transfer {args.transfer}"
         + (" + auxiliary features" if args.auxiliary else "")
-        + f"; budget {args.budget}, eps_neg {args.eps_neg}, eps_explor {args.eps_explor}, seed {args.seed}"
+        + f"; budget {args.budget}, eps_neg {config.eps_neg}, eps_explor {args.eps_explor}, seed {args.seed}"
     )
     try:
         with session:

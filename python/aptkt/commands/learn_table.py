@@ -89,9 +89,10 @@ def run(args: argparse.Namespace) -> int:
     runs = DEFAULT_RUNS if args.runs is None else args.runs
     if runs < 1:
         raise ConfigError("--runs must be >= 1")
+    eps_neg = LearnerConfig.eps_neg if args.eps_neg is None else args.eps_neg
     try:  # the learner's own checks of the shared options, as a one-line error
         LearnerConfig(
-            eps_neg=args.eps_neg,
+            eps_neg=eps_neg,
             eps_explor=args.eps_explor,
             budget=args.budget,
             patience=args.patience,
@@ -107,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         output=args.output,
         runs=runs,
         budget=args.budget,
-        eps_neg=args.eps_neg,
+        eps_neg=eps_neg,
         eps_explor=args.eps_explor,
         patience=args.patience,
         seed=args.seed,

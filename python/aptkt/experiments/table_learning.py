@@ -42,8 +42,8 @@ class TableSettings:
     output: Path = Path("aptkt-learn")
     runs: int = 3
     budget: int = 40
-    eps_neg: float = 0.4
-    eps_explor: float = 0.1
+    eps_neg: float = LearnerConfig.eps_neg
+    eps_explor: float = LearnerConfig.eps_explor
     patience: int | None = None
     seed: int = 0
 

@@ -7,14 +7,29 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 from aptkt.gp import DEFAULTS, LaplaceGPC
-from aptkt.learning.transfer import RELATEDNESS, SOURCE_CHOICES, SOURCE_TASKS, TRANSFER_MODES
+from aptkt.learning.transfer import (
+    FEATURE_SPACES,
+    RELATEDNESS,
+    SOURCE_CHOICES,
+    SOURCE_TASKS,
+    TRANSFER_MODES,
+)
 
 __all__ = ["GPSettings", "LearnerConfig"]
 
 
 @dataclass(frozen=True)
 class GPSettings:
-    """How the observation models (one-vs-all Laplace GPCs) are fitted."""
+    """How the observation models (one-vs-all Laplace GPCs) are fitted.
+
+    hyper_prior : "weak" (default): MAP-II, the marginal likelihood times weak log-normal
+        hyper-priors centred on the data's scale (length-scales) and on σ² = 1, one standard
+        deviation a factor of 10 (``aptkt.gp.HyperPrior``). It keeps a classifier that has
+        little evidence (one observation of its object, or a block of positives-only source
+        rows) from explaining its data by a flat latent function — an extremely long
+        length-scale with a huge signal variance — under which λ carries no shape.
+        None: plain ML-II, the paper's "maximising the log marginal likelihood".
+    """
 
     n_restarts: int = DEFAULTS.n_restarts
     max_iter: int = DEFAULTS.max_iter
@@ -22,6 +37,13 @@ class GPSettings:
     signal_variance: float = DEFAULTS.signal_variance
     approximation: str = DEFAULTS.approximation
     n_jobs: int | None = DEFAULTS.n_jobs
+    # The learner's choice, deliberately not the estimator's default (plain ML-II, as
+    # scikit-learn's): see the docstring and docs/method.md.
+    hyper_prior: str | None = "weak"
+
+    def __post_init__(self) -> None:
+        if self.hyper_prior not in ("weak", None):
+            raise ValueError(f"hyper_prior must be 'weak' or None, got {self.hyper_prior!r}")
 
     def make(self, modalities: Mapping[str, list[int]], random_state: int) -> LaplaceGPC:
         return LaplaceGPC(
@@ -33,6 +55,7 @@ class GPSettings:
             approximation=self.approximation,
             random_state=random_state,
             n_jobs=self.n_jobs,
+            hyper_prior=self.hyper_prior,
         )
 
 
@@ -40,7 +63,11 @@ class GPSettings:
 class LearnerConfig:
     """Parameters of APTKT (and of the baseline, which is ``transfer="none"``).
 
-    eps_neg : the cut-off of Eq. 3 below which no prior object is transferred.
+    eps_neg : the cut-off of Eq. 3 below which no prior object is transferred. 0.5 with the
+        default binary relatedness: the old object's own classifier must claim the new
+        object's observations on average (its decision threshold); far from its data a GP
+        classifier's probability returns to 0.5 ("don't know"), which must not pass for
+        relatedness. (The normalised relatedness lives on another scale: p̄_max ≥ 1/N_old.)
     eps_explor : probability of a uniformly random (action, object) pick (Eq. 4).
     budget : observations collected by active selection after the initial round (which
         observes every action once on every new object).
@@ -51,6 +78,14 @@ class LearnerConfig:
     source : the source task handed to the dependent kernel: "one-vs-all" (the chosen old
         object's observations +1, the other old objects' −1) or "positives" (the chosen old
         object's observations only, all +1).
+    feature_space : where APTKT's new-object models live. "auto" (default): in the prior's
+        feature space (transforms fitted on the many old observations, where old and new
+        observations compare) when the update transfers from at least one old object, and in
+        the baseline's (fitted on the new objects' training observations) when the cut-off
+        stops every transfer — irrelevant prior knowledge is then not used at all, and APTKT
+        equals the baseline. "prior": always the prior's; "new": always the baseline's, with
+        the old observations mapped into it. The old models always judge relatedness (Eq. 3)
+        and auxiliary features (Eq. 5) in their own space.
     relatedness : p̄ of Eq. 3 from each old object's own binary classifier ("binary", paper
         §4.2) or from the normalised one-vs-all posterior ("normalised").
     source_choice, forced_lambda : stress tests of the cut-off only — transfer the "least"
@@ -65,11 +100,12 @@ class LearnerConfig:
         models always see all of theirs.
     """
 
-    eps_neg: float = 0.4
+    eps_neg: float = 0.5
     eps_explor: float = 0.1
     budget: int = 40
     transfer: str = "paper"
-    source: str = "positives"
+    source: str = "one-vs-all"
+    feature_space: str = "auto"
     relatedness: str = "binary"
     source_choice: str = "most"
     forced_lambda: float | None = None
@@ -83,6 +119,7 @@ class LearnerConfig:
         for name, allowed in (
             ("transfer", TRANSFER_MODES),
             ("source", SOURCE_TASKS),
+            ("feature_space", FEATURE_SPACES),
             ("relatedness", RELATEDNESS),
             ("source_choice", SOURCE_CHOICES),
         ):

@@ -61,10 +61,10 @@ class ActionLearner:
         self.train_entropy: np.ndarray = np.zeros(0)
         self.n_updates = 0
         self._test = test
-        self._test_cache: tuple[np.ndarray, dict[str, list[int]]] | None = None
+        self._test_cache: tuple[FeaturePipeline, np.ndarray] | None = None
         self.test_posteriors: np.ndarray | None = None
-        # Source-task features of each old object, computed once.
-        self._source_cache: dict[str, np.ndarray] = {}
+        # Every old object's features and objects (the source tasks), computed once.
+        self._old_cache: tuple[FeaturePipeline, np.ndarray, np.ndarray] | None = None
 
     # -- data --------------------------------------------------------------------------------
     def add(self, obj: str, observation: Mapping[str, np.ndarray], trial: int = 0) -> None:
@@ -77,24 +77,41 @@ class ActionLearner:
         return 0 if self.observations is None else int(np.sum(self.observations.objects == obj))
 
     # -- features ----------------------------------------------------------------------------
-    def _pipeline(self) -> FeaturePipeline:
-        if self.prior is not None:
-            # The feature space of the prior knowledge, so old and new observations compare.
+    def _pipeline(self, transfers: bool) -> FeaturePipeline:
+        """The new objects' model space: the prior's, or fitted on the new objects' training
+        observations so far (the baseline's). ``feature_space``: "prior" always the prior's
+        (so does the control), "new" never, "auto" the prior's exactly when this update
+        transfers from at least one old object."""
+        cfg = self.config
+        if self.prior is not None and (
+            cfg.transfer == "control"
+            or cfg.feature_space == "prior"
+            or (cfg.feature_space == "auto" and transfers)
+        ):
             return self.prior.pipeline
-        # No prior (the baseline): fitted on the new objects' training observations so far.
         assert self.observations is not None  # update() checks every object was observed
         return FeaturePipeline().fit(self.observations)
 
     def _features(
         self, obs: Observations, pipeline: FeaturePipeline
     ) -> tuple[np.ndarray, dict[str, list[int]]]:
-        return self._model_input(*pipeline.transform(obs))
+        X, groups = pipeline.transform(obs)
+        return self._model_input(X, groups, self._prior_space(obs, pipeline, X))
+
+    def _prior_space(
+        self, obs: Observations, pipeline: FeaturePipeline, X: np.ndarray
+    ) -> np.ndarray | None:
+        """``obs`` in the prior's feature space, where its models judge them (Eq. 3, Eq. 5)."""
+        if self.prior is None:
+            return None
+        return X if pipeline is self.prior.pipeline else self.prior.pipeline.transform(obs)[0]
 
     def _model_input(
-        self, X_full: np.ndarray, groups: dict[str, list[int]]
+        self, X_full: np.ndarray, groups: dict[str, list[int]], X_prior: np.ndarray | None
     ) -> tuple[np.ndarray, dict[str, list[int]]]:
         """The new objects' model input from features of every modality: the selected
-        modalities, then (Eq. 5) the prior model's posteriors, which need every modality."""
+        modalities, then (Eq. 5) the prior model's posteriors of the observations in its own
+        space (``X_prior``), which need every modality."""
         wanted = self.config.modalities
         names = [m for m in groups if wanted is None or m in wanted]
         if not names:
@@ -108,27 +125,33 @@ class ActionLearner:
         for m in names:
             out_groups[m] = list(range(start, start + len(groups[m])))
             start += len(groups[m])
-        if self.config.auxiliary and self.prior is not None:
-            aux = self.prior.posteriors(X_full)
+        if self.config.auxiliary and self.prior is not None and X_prior is not None:
+            aux = self.prior.posteriors(X_prior)
             out_groups[AUXILIARY] = list(range(start, start + aux.shape[1]))
             X = np.hstack([X, aux])
         return X, out_groups
 
-    def _source_features(self, old_object: str) -> np.ndarray:
-        if old_object not in self._source_cache:
+    def _old_features(self, pipeline: FeaturePipeline) -> tuple[np.ndarray, np.ndarray]:
+        """Every old object's observations in the model's input space, and their objects
+        (kept while the model space stays the same)."""
+        if self._old_cache is None or self._old_cache[0] is not pipeline:
             assert self.prior is not None  # sources come from the prior knowledge
-            obs = self.prior.observations.of_objects([old_object])
-            self._source_cache[old_object] = self._features(obs, self.prior.pipeline)[0]
-        return self._source_cache[old_object]
+            obs = self.prior.observations
+            self._old_cache = (pipeline, self._features(obs, pipeline)[0], np.asarray(obs.objects))
+        return self._old_cache[1], self._old_cache[2]
 
-    def _source(self, old_object: str, transfer_lambda: float) -> TransferSource:
-        """The source task of one transferred old object (``config.source``)."""
+    def _source(
+        self, old_object: str, transfer_lambda: float, pipeline: FeaturePipeline
+    ) -> TransferSource:
+        """The source task of one transferred old object (``config.source``): its one-vs-all
+        task (its observations +1, the other old objects' −1) or its observations alone as
+        positives."""
+        X, objects = self._old_features(pipeline)
+        mine = objects == old_object
         if self.config.source == "positives":
-            return TransferSource(
-                self._source_features(old_object), transfer_lambda=transfer_lambda
-            )
-        raise NotImplementedError(
-            f"source={self.config.source!r} needs labelled transfer sources in aptkt.gp"
+            return TransferSource(X[mine], transfer_lambda=transfer_lambda, name=old_object)
+        return TransferSource(
+            X, np.where(mine, 1.0, -1.0), transfer_lambda=transfer_lambda, name=old_object
         )
 
     # -- model -------------------------------------------------------------------------------
@@ -138,14 +161,12 @@ class ActionLearner:
         missing = [o for o in self.new_objects if self.count(o) == 0]
         if missing or obs is None:
             raise RuntimeError(f"action {self.action!r}: no observation yet of {missing}")
-        pipeline = self._pipeline()
-        X_full, groups_full = pipeline.transform(obs)
-        X, groups = self._model_input(X_full, groups_full)
-        sources: dict[str, TransferSource] = {}
-        self.decisions = {}
         cfg = self.config
-        if self.prior is not None and cfg.transfers:
-            related = self.prior.relatedness(X_full, cfg.relatedness)
+        # The old models judge the new observations in their own space.
+        X_prior = None if self.prior is None else self.prior.pipeline.transform(obs)[0]
+        self.decisions = {}
+        if self.prior is not None and X_prior is not None and cfg.transfers:
+            related = self.prior.relatedness(X_prior, cfg.relatedness)
             for obj in self.new_objects:
                 decision = decide_transfer(
                     obj,
@@ -157,21 +178,25 @@ class ActionLearner:
                     forced_lambda=cfg.forced_lambda,
                 )
                 self.decisions[obj] = decision
-                if len(decision.sources) > 1:
-                    raise NotImplementedError(
-                        "transfer='multi' needs several sources per class in aptkt.gp"
-                    )
-                if decision.transfers and decision.source is not None:
-                    sources[obj] = self._source(decision.source, decision.transfer_lambda)
+        pipeline = self._pipeline(any(d.transfers for d in self.decisions.values()))
+        X_full, groups_full = pipeline.transform(obs)
+        X, groups = self._model_input(X_full, groups_full, X_prior)
+        # Several sources ("multi") share one block kernel B ⊗ k with B = v vᵀ + diag(1 − λ_s²,
+        # 0), v = (λ_1 … λ_S, 1): positive semi-definite for every λ_s ∈ [0, 1].
+        sources = {
+            obj: [self._source(old, lam, pipeline) for old, lam in zip(d.sources, d.lambdas)]
+            for obj, d in self.decisions.items()
+            if d.transfers
+        }
         seed = (self.config.seed * 1_000_003 + zlib.crc32(self.action.encode()) + step) % 2**32
         model = self.config.gp.make(groups, random_state=seed)
         self.model = model.fit(X, obs.objects, sources=sources or None)
         self.train_entropy = entropy(self.model.predict_proba(X))
         self.n_updates += 1
         if self._test is not None:
-            if self._test_cache is None or self.prior is None:
-                self._test_cache = self._features(self._test, pipeline)
-            self.test_posteriors = self.model.predict_proba(self._test_cache[0])
+            if self._test_cache is None or self._test_cache[0] is not pipeline:
+                self._test_cache = (pipeline, self._features(self._test, pipeline)[0])
+            self.test_posteriors = self.model.predict_proba(self._test_cache[1])
 
     def hyperparameters(self) -> dict[str, dict[str, float]]:
         """The fitted hyper-parameters of each new object's classifier (see
@@ -202,32 +227,18 @@ class ActionLearner:
 
 
 def hyperparameters(model: LaplaceGPC) -> dict[str, dict[str, float]]:
-    """Class -> the fitted hyper-parameters of that class's one-vs-all classifier, by name:
-    ``signal_variance``, ``length_scale[m]`` and (several modalities) ``weight[m]`` per
-    modality m, and ``lambda`` where the classifier has a transfer source. With two classes and
-    no source there is one classifier, listed under the second class (its positive class)."""
-    classes = [str(c) for c in model.classes_]
-    n = model.theta_.shape[0]
-    owners = classes if n == len(classes) else classes[-n:]
-    names = model.modality_names_
-    sv, ls, w = model.signal_variance_, model.length_scales_, model.modality_weights_
-    sources = {str(k): v for k, v in model.sources_.items()}
+    """Class -> the fitted hyper-parameters of that class's one-vs-all classifier, flat and by
+    name: ``signal_variance``, ``length_scale[m]`` and (several modalities) ``weight[m]`` per
+    modality m, and ``lambda[s]`` per transfer source s (named by its old object). With two
+    classes and no source one classifier serves both, and both list its values."""
     out: dict[str, dict[str, float]] = {}
-    for i, c in enumerate(owners):
-        hp = {"signal_variance": float(sv[i])}
-        hp.update({f"length_scale[{m}]": float(ls[i, k]) for k, m in enumerate(names)})
-        if len(names) > 1:
-            hp.update({f"weight[{m}]": float(w[i, k]) for k, m in enumerate(names)})
-        # The λ each transfer source was given (None: learned, see model.hyperparameters_).
-        given: list[tuple[str, float]] = []
-        for src in sources.get(c, []):
-            if src.transfer_lambda is not None:
-                given.append((str(src.name), float(np.atleast_1d(src.transfer_lambda)[0])))
-        if len(given) == 1:
-            hp["lambda"] = given[0][1]
-        else:
-            hp.update({f"lambda[{name}]": lam for name, lam in given})
-        out[c] = hp
+    for c, hp in model.hyperparameters_.items():
+        flat = {"signal_variance": float(hp["signal_variance"])}
+        flat.update({f"length_scale[{m}]": float(v) for m, v in hp["length_scales"].items()})
+        if len(hp["modality_weights"]) > 1:
+            flat.update({f"weight[{m}]": float(v) for m, v in hp["modality_weights"].items()})
+        flat.update({f"lambda[{s}]": float(v) for s, v in hp["transfer_lambda"].items()})
+        out[str(c)] = flat
     return out
 
 

@@ -15,7 +15,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.special import expit, ndtr
 
 from aptkt import __version__
 from aptkt.errors import PriorFileError
@@ -72,49 +71,9 @@ class ActionPrior:
         return self.pipeline.transform(self.observations.of_objects([old_object]))[0]
 
 
-_GH_Z, _GH_W = np.polynomial.hermite_e.hermegauss(48)
-_GH_W = _GH_W / _GH_W.sum()
-_GL_T, _GL_W = np.polynomial.laguerre.laggauss(64)
-
-
-def logistic_gaussian(mean: np.ndarray, var: np.ndarray) -> np.ndarray:
-    """``E[σ(f)]`` for ``f ~ N(mean, var)``, elementwise, to ~1e-9.
-
-    A narrow Gaussian (sd ≤ 1) by Gauss-Hermite in the standardised variable (σ is smooth on
-    its scale). A wide one (where σ looks like a step) as ``Φ(μ/s) + ∫_0^∞ σ(−t) [N(−t) − N(t)]
-    dt``, which follows from ``σ(f) = H(f) − sign(f) σ(−|f|)``; that integrand decays like
-    ``e^{−t}`` and is smooth for sd > 1, so Gauss-Laguerre integrates it.
-    """
-
-    mean = np.asarray(mean, dtype=np.float64)
-    sd = np.sqrt(np.maximum(np.asarray(var, dtype=np.float64), 0.0))
-    out = np.empty(np.broadcast(mean, sd).shape)
-    mean, sd = np.broadcast_to(mean, out.shape), np.broadcast_to(sd, out.shape)
-    narrow = sd <= 1.0
-    m, s = mean[narrow][:, None], sd[narrow][:, None]
-    out[narrow] = expit(m + s * _GH_Z) @ _GH_W
-    m, s = mean[~narrow][:, None], sd[~narrow][:, None]
-    t = _GL_T[None, :]
-    dens = (np.exp(-0.5 * ((-t - m) / s) ** 2) - np.exp(-0.5 * ((t - m) / s) ** 2)) / (
-        s * np.sqrt(2 * np.pi)
-    )
-    # σ(−t) = e^{−t} / (1 + e^{−t}); Laguerre's weight supplies the e^{−t}.
-    out[~narrow] = ndtr(m[:, 0] / s[:, 0]) + (dens / (1.0 + np.exp(-t))) @ _GL_W
-    return out
-
-
 def binary_probabilities(model: LaplaceGPC, X: np.ndarray) -> np.ndarray:
     """Each one-vs-all classifier's own ``p(y=+1 | x)`` of a fitted :class:`LaplaceGPC`."""
-    own = getattr(model, "predict_proba_binary", None)
-    if own is not None:
-        return np.asarray(own(X))
-    # Until the GP layer offers them: the predictive integral of each classifier's latent
-    # Gaussian.
-    mean, var = model.latent(X)
-    p = logistic_gaussian(mean, var)
-    if p.shape[1] == 1 and len(model.classes_) == 2:
-        p = np.hstack([1.0 - p, p])  # one classifier for two classes: the second is +1
-    return p
+    return model.predict_proba_binary(X)
 
 
 class PriorKnowledge:

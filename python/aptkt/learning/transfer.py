@@ -33,6 +33,7 @@ __all__ = [
     "RELATEDNESS",
     "SOURCE_TASKS",
     "SOURCE_CHOICES",
+    "FEATURE_SPACES",
 ]
 
 #: "paper": the single most related prior per new object (Eq. 2–3); "multi": every prior above
@@ -44,6 +45,8 @@ RELATEDNESS = ("binary", "normalised")
 #: The source task's labels: the chosen old object's observations +1 and the other old
 #: objects' −1 ("one-vs-all"), or the chosen object's observations only, as positives.
 SOURCE_TASKS = ("one-vs-all", "positives")
+#: Where the new objects' models live (see LearnerConfig.feature_space).
+FEATURE_SPACES = ("auto", "prior", "new")
 #: Which old object Eq. 3 picks: the most related (the method) or, for a stress test of the
 #: cut-off, the least related.
 SOURCE_CHOICES = ("most", "least")

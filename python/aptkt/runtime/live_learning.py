@@ -58,7 +58,9 @@ class LiveLearningAborted(AptktError):
 
 def _fmt_decision(d: Mapping[str, Any], eps_neg: float) -> str:
     if d.get("source"):
-        return f"{d['new_object']} <- {d['source']} (lambda {d['lambda']:.2f})"
+        sources = d.get("sources") or {d["source"]: d["lambda"]}
+        got = ", ".join(f"{s} (lambda {lam:.2f})" for s, lam in sources.items())
+        return f"{d['new_object']} <- {got}"
     best = max(d.get("mean_posterior", {}).values(), default=float("nan"))
     return f"{d['new_object']}: none (max p {best:.2f} < eps_neg {eps_neg:g})"
 

@@ -26,13 +26,15 @@ STRESS_CUTOFF = "λ=1 least related, cut-off"
 #: The compared learners (paper Fig. 9's names and colours): the baseline (the paper's: the
 #: multi-modal kernel and nothing of the prior), APTKT (Eq. 2–3), APTKT with the prior models'
 #: posteriors as auxiliary features (Eq. 5). Beyond the paper: the control (the prior's feature
-#: space without transfer, so that it and APTKT differ by the transfer alone), and two stress
+#: space without transfer, so that it and APTKT differ by the transfer alone), transfer from
+#: every prior above ε_neg at once ("APTKT-multi", one multi-source kernel), and two stress
 #: tests of the cut-off: λ forced to 1 from the least related prior, without and with ε_neg.
 METHODS: Mapping[str, Mapping[str, Any]] = {
     "baseline": {"transfer": "none"},
     "control": {"transfer": "control"},
     "APTKT": {"transfer": "paper"},
     "APTKT+aux": {"transfer": "paper", "auxiliary": True},
+    "APTKT-multi": {"transfer": "multi"},
     STRESS_NO_CUTOFF: {
         "transfer": "paper",
         "source_choice": "least",

@@ -1,0 +1,73 @@
+"""The revised transfer method against the previous reading, on the same runs (issue 11).
+
+A reduced-size reproduction of Fig. 7, 9 and 11, once with the learner's defaults ("new") and
+once with the previous reading's settings ("old": baseline = the prior's feature space without
+transfer, positives-only sources, normalised relatedness with eps_neg 0.4, every model in the
+prior's feature space, plain ML-II). Both readings are options of the learner, so the runs
+differ by the method alone (same data, groups, pool orders, exploration draws).
+
+    python benches/transfer_readings.py OUT new|old DATA.h5 [--repetitions 20]
+
+DATA.h5: a data set of all 15 objects and 7 actions (``aptkt dataset generate -n 20``). The
+numbers in docs/experiments.md ("The method's choices, measured") come from this script.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, field
+from pathlib import Path
+
+
+def main() -> None:
+    import aptkt.experiments.figures.base as base
+    import aptkt.experiments.reproduce as rep
+    from aptkt.experiments.scale import Scale
+    from aptkt.learning import GPSettings
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("output", type=Path)
+    p.add_argument("reading", choices=("new", "old"))
+    p.add_argument("data", type=Path)
+    p.add_argument("--repetitions", type=int, default=20)
+    p.add_argument("--figures", default="fig7,fig9,fig11")
+    p.add_argument("-j", "--jobs", type=int, default=2)
+    args = p.parse_args()
+    scale = Scale.full().with_(
+        name="mid",
+        repetitions=args.repetitions,
+        budget=10,
+        groups=3,
+        trials=2,
+        prior_counts=(3, 10),
+        fig11_trials=3,
+    )
+    if args.reading == "old":
+        scale = scale.with_(eps_neg=0.4)
+        old = {"source": "positives", "relatedness": "normalised", "feature_space": "prior"}
+        methods = dict(base.METHODS)
+        methods["baseline"] = {"transfer": "control"}
+        for k in ("APTKT", "APTKT+aux", "APTKT-multi", base.STRESS_CUTOFF, base.STRESS_NO_CUTOFF):
+            methods[k] = {**methods[k], **old}
+        base.METHODS = methods
+
+        @dataclass
+        class OldContext(base.Context):
+            gp: GPSettings = field(default_factory=lambda: GPSettings(hyper_prior=None))
+
+        rep.Context = OldContext
+    rep.reproduce(
+        rep.ReproduceSettings(
+            figures=tuple(args.figures.split(",")),
+            output=args.output,
+            data=args.data,
+            jobs=args.jobs,
+            scale=scale,
+            progress=False,
+            command=f"benches/transfer_readings.py {args.output} {args.reading} {args.data}",
+        )
+    )
+
+
+if __name__ == "__main__":
+    main()
