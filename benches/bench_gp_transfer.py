@@ -34,9 +34,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from _common import save, table
-
 from aptkt.gp import LaplaceGPC, TransferSource
 from aptkt.learning import GPSettings, PriorKnowledge
 from aptkt.learning.dataset import load_observations
@@ -113,7 +111,7 @@ def run_action(prior, table_new, runs: int, seed: int) -> dict:
             ).fit(X, y, sources=sources or None)
             acc[variant].append(float(np.mean(model.predict(Xt) == yt)))
             scale = {m: median_pairwise(X[:, cols]) for m, cols in groups.items()}
-            for label, hp in model.hyperparameters_.items():
+            for hp in model.hyperparameters_.values():
                 if hp["transfer_lambda"]:
                     rel = [hp["length_scales"][m] / scale[m] for m in scale]
                     collapse[variant].append((float(np.median(rel)), hp["signal_variance"]))

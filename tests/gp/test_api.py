@@ -2,9 +2,8 @@
 
 import numpy as np
 import pytest
-from sklearn.base import clone
-
 from aptkt.gp import LaplaceGPC, TransferSource
+from sklearn.base import clone
 
 from .conftest import make_blobs
 

@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from aptkt.gp import LaplaceGPC
 
 from .conftest import make_blobs

@@ -2,11 +2,10 @@
 
 import numpy as np
 import pytest
+from aptkt.gp import LaplaceGPC
 from scipy import integrate
 from sklearn.gaussian_process import GaussianProcessClassifier
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel
-
-from aptkt.gp import LaplaceGPC
 
 from .conftest import make_blobs
 

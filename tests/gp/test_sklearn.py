@@ -6,14 +6,13 @@ import pickle
 
 import numpy as np
 import pytest
+from aptkt.errors import NotFittedError
+from aptkt.gp import DEFAULTS, LaplaceGPC, _threads
 from sklearn.base import clone
 from sklearn.model_selection import GridSearchCV, cross_val_score
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.utils.estimator_checks import parametrize_with_checks
-
-from aptkt.errors import NotFittedError
-from aptkt.gp import DEFAULTS, LaplaceGPC, _threads
 
 from .conftest import make_blobs
 
