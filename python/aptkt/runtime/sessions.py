@@ -19,7 +19,13 @@ from typing import Any, Protocol
 
 from aptkt.actions import ExploratoryAction
 from aptkt.actions.executor import ExplorationSettings, _calibration, explore
-from aptkt.errors import ConfigError, SilentCellError, TrialFault, TrialInterrupted
+from aptkt.errors import (
+    ConfigError,
+    SafetyLimitError,
+    SilentCellError,
+    TrialFault,
+    TrialInterrupted,
+)
 from aptkt.skin.samples import Recording
 
 __all__ = ["LiveSession", "RobotSession", "SimSession"]
@@ -35,6 +41,10 @@ class LiveSession(Protocol):
     def explore(self, obj: str, action: ExploratoryAction, trial: int) -> Recording: ...
 
     def check_objects(self, names: Iterable[str]) -> None: ...
+
+    def check_actions(self, actions: Iterable[ExploratoryAction], objects: Iterable[str]) -> None:
+        """Refuse, before any motion, actions the backend's limits would stop mid-way."""
+        ...
 
     def describe(self) -> dict[str, Any]: ...
 
@@ -76,6 +86,9 @@ class SimSession:
 
     def __exit__(self, *exc: object) -> None:
         pass
+
+    def check_actions(self, actions: Iterable[ExploratoryAction], objects: Iterable[str]) -> None:
+        pass  # the simulated world has no safety limits to exceed
 
     def check_objects(self, names: Iterable[str]) -> None:
         unknown = [n for n in names if n not in self.world.objects]
@@ -142,6 +155,16 @@ class RobotSession:
                 f"--objects: {self.workspace_file} places no object(s) {', '.join(unknown)}; "
                 f"it places: {known}"
             )
+
+    def check_actions(self, actions: Iterable[ExploratoryAction], objects: Iterable[str]) -> None:
+        from aptkt.actions.limits import check_action_limits
+
+        placements = [self.workspace.placements[o] for o in objects]
+        for action in actions:
+            try:
+                check_action_limits(action, self.workspace.limits, placements)
+            except SafetyLimitError as exc:
+                raise SafetyLimitError(f"{exc} (limits of {self.workspace_file})") from None
 
     def __enter__(self) -> RobotSession:
         from aptkt.robot import UR10
