@@ -22,6 +22,7 @@ __all__ = [
     "TrialFault",
     "TrialInterrupted",
     "ConfigError",
+    "FeatureTableError",
     "PriorFileError",
     "NotFittedError",
     "KernelNotPositiveDefiniteError",
@@ -30,6 +31,10 @@ __all__ = [
 
 class ConfigError(AptktError, ValueError):
     """A configuration file or value is invalid; the message names the file and the field."""
+
+
+class FeatureTableError(ConfigError):
+    """A feature table (CSV or HDF5) is malformed; the message names the file, row and column."""
 
 
 class PriorFileError(AptktError, ValueError):

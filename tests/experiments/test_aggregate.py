@@ -145,3 +145,23 @@ def test_collect_recovers_any_matrix(n_runs, n_steps, seed):
     np.testing.assert_allclose(c.mean(), m.mean(axis=0))
     np.testing.assert_allclose(c.sd(), m.std(axis=0))
     assert isinstance(c, Curves)
+
+
+def test_mean_band_is_the_t_interval_of_the_mean():
+    """The plots' bands: 95 % Student-t interval of the mean over runs, per column (scipy as
+    the independent reference); columns with fewer than two runs have no band."""
+    from scipy import stats
+
+    from aptkt.experiments.aggregate import mean_band
+
+    rng = np.random.default_rng(1)
+    values = rng.uniform(0.2, 0.9, size=(7, 4))
+    values[2:, 3] = np.nan  # two runs left in the last column
+    values[1:, 0] = np.nan  # one run in the first
+    mean, low, high = mean_band(values)
+    for j in (1, 2, 3):
+        v = values[np.isfinite(values[:, j]), j]
+        lo, hi = stats.t.interval(0.95, len(v) - 1, loc=v.mean(), scale=stats.sem(v))
+        assert mean[j] == pytest.approx(v.mean())
+        assert low[j] == pytest.approx(lo, abs=2e-3) and high[j] == pytest.approx(hi, abs=2e-3)
+    assert mean[0] == pytest.approx(values[0, 0]) and np.isnan(low[0]) and np.isnan(high[0])

@@ -3,6 +3,8 @@
 import csv
 import json
 
+import numpy as np
+
 from aptkt.cli import main
 
 
@@ -19,6 +21,9 @@ def test_quick_demo_writes_every_output(tmp_path, capsys):
         "summary.json",
         "learning_curves.png",
         "learning_curves.svg",
+        "confusion.png",
+        "confusion.svg",
+        "confusion.csv",
     ):
         assert (out / name).stat().st_size > 0, name
     summary = json.loads((out / "summary.json").read_text())
@@ -31,6 +36,23 @@ def test_quick_demo_writes_every_output(tmp_path, capsys):
     # The table printed is the one computed from the rows.
     for line in summary["table"][2:]:
         assert line in printed
+    # Fused accuracy beside the per-action average, chance level, and what ± means.
+    assert set(summary["final_fused_accuracy"]) == {"APTKT", "APTKT+aux", "baseline"}
+    assert [line[10:26].strip() for line in summary["table"]].count("fused") == 3
+    assert "chance level 0.333" in printed and "95 % interval" in printed
+    svg = (out / "learning_curves.svg").read_text()
+    assert "chance" in svg and "95 % interval" in svg
+    # The final models' confusion between the new objects, for the baseline and APTKT: every
+    # test observation of every action counted once per run.
+    confusion = summary["final_confusion"]
+    n_test = summary["settings"]["test_reps"] * len(summary["settings"]["actions"])
+    for method in ("baseline", "APTKT"):
+        counts = np.array(confusion[method])
+        assert counts.shape == (3, 3)
+        assert (counts.sum(axis=1) == n_test * summary["settings"]["trials"]).all()
+    csv_rows = list(csv.DictReader((out / "confusion.csv").open()))
+    assert {r["method"] for r in csv_rows} == {"baseline", "APTKT"}
+    assert "true object" in (out / "confusion.svg").read_text()
     # A second run reuses the simulated data.
     assert main(["demo", "--quick", "-o", str(out), "--no-progress", "-j", "2"]) == 0
     assert "(0 simulated now" in capsys.readouterr().out

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 from collections import defaultdict
@@ -137,8 +138,13 @@ def test_rerun_resumes_everything_and_gives_the_same_results(quick_run, capsys):
     assert (quick_run / "fig9" / "results.csv").read_text() == before
 
 
+def enough_groups() -> Scale:
+    """The quick size with 4 groups: verdicts need at least 3 (2 support none)."""
+    return dataclasses.replace(Scale.quick(), groups=4)
+
+
 def hand_made_rows(gain: float, noise: float = 0.0):
-    s = Scale.quick()
+    s = enough_groups()
     rng = np.random.default_rng(0)
     rows = []
     for g in range(s.groups):
@@ -167,7 +173,7 @@ def hand_made_rows(gain: float, noise: float = 0.0):
     "gain, expected", [(0.10, "agrees"), (0.30, "more than twice"), (-0.10, "worse")]
 )
 def test_report_numbers_follow_hand_made_results(tmp_path, gain, expected):
-    scale = Scale.quick()
+    scale = enough_groups()
     ctx = Context(
         scale=scale,
         seed=0,
@@ -188,3 +194,24 @@ def test_report_numbers_follow_hand_made_results(tmp_path, gain, expected):
     )
     assert (tmp_path / "fig7" / "fig7.svg").exists()
     assert not math.isnan(section.numbers["fused_gain"]["overall"]["mean"])
+
+
+def test_quick_report_gives_no_verdict_it_cannot_support(quick_run):
+    """2 groups / 2 runs per setting: every gain verdict of the quick report is withheld."""
+    report = (quick_run / "report.md").read_text()
+    assert "too few runs to judge" in report and "Not judged" in report
+    assert "differs: no significant gain" not in report
+    assert "–100 %" not in report.replace("0–100 %", "") and "(none)" not in report
+    assert "Per-action average" in report
+
+
+def test_figures_name_objects_and_show_chance_and_bands(quick_run):
+    for fig in ("fig6", "fig7", "fig8", "fig9", "fig11"):
+        svg = (quick_run / fig / f"{fig}.svg").read_text()
+        assert "chance" in svg and "95 % interval" in svg, fig
+    fig7_svg = (quick_run / "fig7" / "fig7.svg").read_text()
+    assert "rough sponge" in fig7_svg or "paper box" in fig7_svg  # panels name their priors
+    assert fig7_svg.count("accuracy") >= 3  # small panels have axis labels too
+    fig10_svg = (quick_run / "fig10" / "fig10.svg").read_text()
+    assert "row: observations of this object" in fig10_svg
+    assert "column: assigned to this object" in fig10_svg and "smooth sponge" in fig10_svg

@@ -10,12 +10,12 @@ from aptkt.commands._checks import at_least, input_file
 from aptkt.errors import ConfigError
 
 
-def add_session_arguments(p: argparse.ArgumentParser) -> None:
+def add_session_arguments(p: argparse.ArgumentParser, *, robot_required: bool = True) -> None:
     g = p.add_argument_group("robot and skin")
     g.add_argument(
         "--robot",
         choices=("ur10", "sim"),
-        required=True,
+        required=robot_required,
         help="ur10: the arm through ur_rtde with a hardware skin; sim: the simulated world (fast)",
     )
     g.add_argument(

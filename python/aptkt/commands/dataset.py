@@ -91,6 +91,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--no-progress", action="store_true", help="no progress bar")
     f.set_defaults(func=run_features)
 
+    x = ds.add_parser(
+        "export-features",
+        help="write the feature observations as a feature table (CSV or HDF5) for aptkt learn --table",
+        description="One row per recording: object, action, trial and the feature columns "
+        "<modality>.<k> (see docs/feature-tables.md). Features not yet stored are extracted first.",
+    )
+    x.add_argument("file", metavar="FILE", help="data set (HDF5)")
+    x.add_argument(
+        "-o", "--output", required=True, metavar="TABLE", help="table to write (.csv, .h5)"
+    )
+    x.add_argument(
+        "--actions", metavar="P1,S1,...", help="only these actions (default: all recorded)"
+    )
+    x.add_argument("--objects", metavar="A,B,...", help="only these objects (default: all)")
+    x.add_argument("--no-progress", action="store_true", help="no progress bar")
+    x.set_defaults(func=run_export_features)
+
     r = ds.add_parser(
         "repair",
         help="make a file whose writer died appendable again (keeps every complete recording)",
@@ -223,6 +240,29 @@ def run_features(args: argparse.Namespace) -> int:
     print(
         f"{args.file}: features of " + ", ".join(f"{a} ({n} recordings)" for a, n in counts.items())
     )
+    return 0
+
+
+def run_export_features(args: argparse.Namespace) -> int:
+    from aptkt.data.store import DatasetError
+    from aptkt.learning.dataset import load_observations
+    from aptkt.learning.feature_table import write_feature_table
+
+    try:
+        table = load_observations(
+            args.file,
+            actions=_split(args.actions),
+            objects=_split(args.objects),
+            progress=not args.no_progress and sys.stderr.isatty(),
+        )
+    except (DatasetError, KeyError, OSError) as exc:
+        raise ConfigError(f"{args.file}: {exc}") from None
+    empty = [a for a, obs in table.items() if len(obs) == 0]
+    if empty:
+        raise ConfigError(f"{args.file}: no observations of {', '.join(empty)} for these objects")
+    write_feature_table(args.output, table)
+    rows = sum(len(obs) for obs in table.values())
+    print(f"{args.output}: {rows} rows ({', '.join(f'{a} {len(o)}' for a, o in table.items())})")
     return 0
 
 

@@ -27,8 +27,10 @@ import os
 import shutil
 import tempfile
 import time
+import zlib
 from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -50,6 +52,8 @@ __all__ = [
     "DatasetError",
     "DatasetWriter",
     "DatasetReader",
+    "PackedRecording",
+    "pack_recording",
     "repair",
     "write_features",
     "recording_key",
@@ -59,7 +63,10 @@ __all__ = [
 
 _CHUNK_ROWS = 16384
 _META_CHUNK_BYTES = 4096  # a recording's metadata is ≈ 3 KB of JSON
-_COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+#: Level 1: the samples are small integers after the byte shuffle; higher levels cost several
+#: times the CPU for a few percent of file size.
+_GZIP_LEVEL = 1
+_COMPRESSION = {"compression": "gzip", "compression_opts": _GZIP_LEVEL, "shuffle": True}
 _LOCK_PATIENCE_S = 2.0
 
 _T = TypeVar("_T")
@@ -332,6 +339,76 @@ def raw_to_samples(raw: Mapping[str, np.ndarray], metadata: Mapping[str, Any]) -
     )
 
 
+@dataclass(frozen=True)
+class PackedRecording:
+    """A recording as the writer stores it: its key, times, metadata JSON and, per sample field,
+    the compressed HDF5 chunks of its raw integers (byte shuffle + deflate, exactly the
+    datasets' filter pipeline), ready to be placed. Compact and cheap to pass between
+    processes, so that data set generation compresses in its workers and the single writer
+    only places chunks."""
+
+    key: tuple[str, str, int]
+    start_ns: int
+    stop_ns: int
+    rows: int
+    meta_json: str
+    chunks: dict[str, tuple[bytes, ...]]
+
+
+def _compress_chunks(
+    values: np.ndarray, tail: tuple[int, ...], dtype: np.dtype
+) -> tuple[bytes, ...]:
+    """The chunks of one field: rows padded with zeros to whole chunks, each chunk's bytes
+    shuffled (byte j of every element together, as HDF5's shuffle filter) and deflated."""
+    n = values.shape[0]
+    padded = np.zeros((_next_chunk_start(n, _CHUNK_ROWS), *tail), dtype=dtype)
+    padded[:n] = values
+    out = []
+    for start in range(0, padded.shape[0], _CHUNK_ROWS):
+        block = padded[start : start + _CHUNK_ROWS].reshape(-1).view(np.uint8)
+        shuffled = block.reshape(-1, dtype.itemsize).T.tobytes()
+        out.append(zlib.compress(shuffled, _GZIP_LEVEL))
+    return tuple(out)
+
+
+def pack_raw(
+    key: tuple[str, str, int],
+    start_ns: int,
+    stop_ns: int,
+    raw: Mapping[str, np.ndarray],
+    meta_json: str,
+) -> PackedRecording:
+    """Raw sample fields (see :data:`SAMPLE_FIELDS`) and metadata → a :class:`PackedRecording`."""
+    obj, action, trial = key
+    if len(obj.encode()) > 64 or len(action.encode()) > 32:
+        raise ValueError("object names are limited to 64 bytes and action names to 32")
+    n = int(np.asarray(raw["cell_id"]).shape[0])
+    chunks = {}
+    for name, (tail, dtype) in SAMPLE_FIELDS.items():
+        values = np.asarray(raw[name])
+        if values.shape != (n, *tail):
+            raise ValueError(f"{name}: expected shape {(n, *tail)}, got {values.shape}")
+        chunks[name] = _compress_chunks(values.astype(dtype, copy=False), tail, dtype)
+    return PackedRecording(
+        (str(obj), str(action), int(trial)), int(start_ns), int(stop_ns), n, meta_json, chunks
+    )
+
+
+def pack_recording(rec: Recording) -> PackedRecording:
+    """A recording → a :class:`PackedRecording` (raw integers of the wire, exact)."""
+    meta = dict(rec.metadata)
+    meta.setdefault("cells", list(rec.cells))
+    meta["silent_cells"] = list(rec.silent_cells)
+    raw = samples_to_raw(rec.samples, meta)
+    return pack_raw(
+        recording_key(rec),
+        rec.start_ns,
+        rec.stop_ns,
+        raw,
+        json.dumps(meta, sort_keys=True, default=_json_default),
+    )
+
+
 class DatasetWriter:
     """Append recordings to a data set file, crash-safe (see the module docstring).
 
@@ -443,18 +520,7 @@ class DatasetWriter:
 
     def append(self, rec: Recording) -> int:
         """Store one recording (flushed before returning); returns its number in the file."""
-        key = recording_key(rec)
-        meta = dict(rec.metadata)
-        meta.setdefault("cells", list(rec.cells))
-        meta["silent_cells"] = list(rec.silent_cells)
-        raw = samples_to_raw(rec.samples, meta)
-        return self._append_raw(
-            key,
-            rec.start_ns,
-            rec.stop_ns,
-            raw,
-            json.dumps(meta, sort_keys=True, default=_json_default),
-        )
+        return self.append_packed(pack_recording(rec))
 
     def _append_raw(
         self,
@@ -464,12 +530,18 @@ class DatasetWriter:
         raw: Mapping[str, np.ndarray],
         meta_json: str,
     ) -> int:
+        return self.append_packed(pack_raw(key, start_ns, stop_ns, raw, meta_json))
+
+    def append_packed(self, rec: PackedRecording) -> int:
+        """Store a packed recording (see :func:`pack_recording`); flushed before returning."""
+        key = rec.key
         obj, action, trial = key
         if key in self._keys:
             raise DatasetError(f"{self.path}: {obj}/{action}/trial {trial} is already stored")
-        if len(obj.encode()) > 64 or len(action.encode()) > 32:
-            raise ValueError("object names are limited to 64 bytes and action names to 32")
-        n = int(raw["cell_id"].shape[0])
+        n = rec.rows
+        want = _next_chunk_start(n, _CHUNK_ROWS) // _CHUNK_ROWS
+        if any(len(rec.chunks.get(name, ())) != want for name in self._samples):
+            raise ValueError(f"packed recording {key}: expected {want} chunks per field")
         # Each recording starts on a fresh chunk of every dataset: chunks are then written once,
         # never rewritten by a later append — a rewritten compressed chunk moves, and a writer
         # killed before the move is on disk must not take an earlier recording with it. The
@@ -478,9 +550,10 @@ class DatasetWriter:
         # Samples first, then the metadata, the index row last: the index defines what exists.
         for name, ds in self._samples.items():
             ds.resize(row0 + n, axis=0)
-            if n:
-                ds[row0 : row0 + n] = raw[name]
-        meta_bytes = np.frombuffer(meta_json.encode("utf-8"), dtype=np.uint8)
+            for j, data in enumerate(rec.chunks[name]):
+                offset = (row0 + j * _CHUNK_ROWS,) + (0,) * (ds.ndim - 1)
+                ds.id.write_direct_chunk(offset, data)
+        meta_bytes = np.frombuffer(rec.meta_json.encode("utf-8"), dtype=np.uint8)
         meta0 = _next_chunk_start(self._meta.shape[0], _META_CHUNK_BYTES)
         self._meta.resize(meta0 + meta_bytes.size, axis=0)
         self._meta[meta0 : meta0 + meta_bytes.size] = meta_bytes
@@ -491,8 +564,8 @@ class DatasetWriter:
                     obj.encode(),
                     action.encode(),
                     trial,
-                    start_ns,
-                    stop_ns,
+                    rec.start_ns,
+                    rec.stop_ns,
                     row0,
                     row0 + n,
                     meta0,

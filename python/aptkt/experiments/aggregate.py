@@ -6,7 +6,8 @@ of observations), NaN where a run has no such step (a run that stopped early). M
 compared on the same runs (same group, same trial seed: same pool order and exploration
 draws) are compared run by run (:func:`difference`).
 
-Spread: the standard deviation over runs (``ddof=0``), as the plots' bands show it.
+Spread: the standard deviation over runs (``ddof=0``), as the report's tables give it.
+The plots' bands are 95 % Student-t intervals of the mean over runs (:func:`mean_band`).
 Uncertainty of a mean: a 95 % Student-t interval over independent units — the prior-object
 groups when there are several (runs of one group share its prior objects, so they are not
 independent), otherwise the runs.
@@ -30,6 +31,7 @@ __all__ = [
     "mean_over_panels",
     "estimate",
     "t_quantile",
+    "mean_band",
 ]
 
 # Two-sided 95 % quantiles of Student's t (df -> t_0.975); between table entries the quantile
@@ -78,6 +80,24 @@ def t_quantile(df: int) -> float:
         t_lo, t_hi = _T975[lo], _T975[hi]
     w = (1 / lo - 1 / df) / (1 / lo - (0 if math.isinf(hi) else 1 / hi))
     return t_lo + w * (t_hi - t_lo)
+
+
+def mean_band(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per column of ``values`` (runs × x): the mean over runs and its 95 % Student-t interval
+    ``mean ± t(n-1) · sd / √n`` (``sd`` with ``ddof=1``, ``n`` the finite runs of the column).
+    Where fewer than two runs have a value the interval is NaN (no band can be drawn)."""
+    v = np.asarray(values, dtype=float)
+    if v.ndim != 2:
+        raise ValueError(f"values must be (runs, x), got shape {v.shape}")
+    n = np.sum(np.isfinite(v), axis=0)
+    mean = _quiet(np.nanmean, v, axis=0)
+    half = np.full(v.shape[1], np.nan)
+    ok = n >= 2
+    if np.any(ok):
+        sd = _quiet(np.nanstd, v[:, ok], axis=0, ddof=1)
+        t = np.array([t_quantile(int(k) - 1) for k in n[ok]])
+        half[ok] = t * sd / np.sqrt(n[ok])
+    return mean, mean - half, mean + half
 
 
 def _quiet(fn, *args, **kw):

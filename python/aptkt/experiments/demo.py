@@ -7,7 +7,12 @@
 4. learn the new objects with APTKT, APTKT with auxiliary features and the baseline,
    ``trials`` runs each, drawing
    observations from the first ``train_reps`` trials and testing on the rest;
-5. print a table, plot the learning curves, write every number to the output directory.
+5. print a table, plot the learning curves (with chance level and 95 % bands) and the final
+   models' confusion between the new objects, write every number to the output directory.
+
+Accuracy is reported two ways everywhere: the mean over actions of each action's model on its
+own test observations (the paper's measure), and all actions' posteriors fused.
+A quick-size and a full-size result never share a directory: the second refuses to start.
 """
 
 from __future__ import annotations
@@ -24,6 +29,8 @@ import numpy as np
 
 from aptkt import __version__
 from aptkt.actions import PAPER_ACTIONS
+from aptkt.errors import ConfigError
+from aptkt.experiments.aggregate import mean_band
 from aptkt.experiments.plots import figure, learning_curves, save_figure
 from aptkt.experiments.runs import RunSpec, flatten, run_many
 from aptkt.experiments.tables import write_csv
@@ -52,6 +59,7 @@ class DemoSettings:
     new_objects: tuple[str, ...] = DEMO_NEW
     eps_neg: float = 0.4
     eps_explor: float = 0.1
+    size: str = "full"  # "quick" for the reduced size; results of two sizes never mix
 
     @classmethod
     def quick(cls, **overrides: Any) -> DemoSettings:
@@ -63,6 +71,7 @@ class DemoSettings:
             test_reps=3,
             actions=("P2", "S3", "C1"),
             new_objects=DEMO_NEW[:3],
+            size="quick",
         )
         return replace(base, **overrides)
 
@@ -78,6 +87,7 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
 
     t_start = time.perf_counter()
     out = Path(s.output)
+    _refuse_other_size(out, s.size)
     out.mkdir(parents=True, exist_ok=True)
     data = out / "data.h5"
     prior_path = out / "prior.npz"
@@ -154,30 +164,57 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
     curves = _curves(rows, methods)
     fused = _curves(rows, methods, key="fused_accuracy")
     x = np.arange(s.budget + 1)
-    table = _table(curves, fused, x)
+    chance = 1.0 / len(s.new_objects)
+    table = _table(curves, fused, x, chance)
     for line in table:
         _say("      " + line)
     fig, axes = figure(1, 2, figsize=(11, 4.2))
     learning_curves(
-        axes[0], curves, x[: curves["APTKT"].shape[1]], title="mean accuracy of the actions' models"
+        axes[0],
+        curves,
+        x[: curves["APTKT"].shape[1]],
+        chance=chance,
+        title="mean accuracy of the actions' models",
     )
-    learning_curves(axes[1], fused, x[: fused["APTKT"].shape[1]], title="all actions fused")
+    learning_curves(
+        axes[1], fused, x[: fused["APTKT"].shape[1]], chance=chance, title="all actions fused"
+    )
     fig.suptitle(f"{len(s.new_objects)} new objects, priors: {', '.join(s.priors)}")
     plots = save_figure(fig, out / "learning_curves")
-    write_csv(out / "results.csv", rows)
+    confusion = _confusion(rows, ("baseline", "APTKT"), s.new_objects)
+    plots += _plot_confusion(confusion, s.new_objects, out / "confusion")
+    write_csv(
+        out / "confusion.csv",
+        [
+            {
+                "method": m,
+                "object": o,
+                **{f"predicted {p}": int(c[i, k]) for k, p in enumerate(s.new_objects)},
+            }
+            for m, c in confusion.items()
+            for i, o in enumerate(s.new_objects)
+        ],
+    )
+    write_csv(out / "results.csv", [{k: v for k, v in r.items() if k != "confusion"} for r in rows])
     summary = {
         "software_version": __version__,
         "python": platform.python_version(),
         "settings": {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(s).items()},
         "learner": {name: cfg.to_dict() for name, cfg in methods.items()},
         "table": table,
+        "size": s.size,
+        "chance": chance,
         "final_mean_accuracy": {m: float(np.nanmean(c[:, -1])) for m, c in curves.items()},
         "initial_mean_accuracy": {m: float(np.nanmean(c[:, 0])) for m, c in curves.items()},
+        "final_fused_accuracy": {m: float(np.nanmean(c[:, -1])) for m, c in fused.items()},
+        "initial_fused_accuracy": {m: float(np.nanmean(c[:, 0])) for m, c in fused.items()},
+        "final_confusion": {m: c.astype(int).tolist() for m, c in confusion.items()},
         "seconds": time.perf_counter() - t_start,
         "files": {
             "data": str(data),
             "prior": str(prior_path),
             "results": str(out / "results.csv"),
+            "confusion": str(out / "confusion.csv"),
             "plots": [str(p) for p in plots],
         },
     }
@@ -208,14 +245,90 @@ def _curves(
     return curves
 
 
-def _table(curves: dict[str, np.ndarray], fused: dict[str, np.ndarray], x: np.ndarray) -> list[str]:
+def _refuse_other_size(out: Path, size: str) -> None:
+    """A result of the other size in ``out`` would be overwritten piece by piece: refuse."""
+    summary = out / "summary.json"
+    if not summary.exists():
+        return
+    try:
+        found = json.loads(summary.read_text()).get("size", "full")
+    except (OSError, ValueError):
+        raise ConfigError(
+            f"{out} holds a summary.json that cannot be read; choose another --output"
+        ) from None
+    if found != size:
+        raise ConfigError(
+            f"{out} holds a {found}-size demo result; a {size}-size run would overwrite it. "
+            f"Choose another --output (e.g. {out}-{size})"
+        )
+
+
+def _cell(values: np.ndarray) -> str:
+    mean, low, high = (float(v[0]) for v in mean_band(values[:, None]))
+    if not np.isfinite(low):
+        return f"{mean:.3f}"
+    return f"{mean:.3f}±{(high - low) / 2:.3f}"
+
+
+def _table(
+    curves: dict[str, np.ndarray], fused: dict[str, np.ndarray], x: np.ndarray, chance: float
+) -> list[str]:
+    """Mean accuracy (± half-width of the 95 % interval over runs) at a few steps, per action
+    averaged and all actions fused, beside each other."""
     n = min(c.shape[1] for c in curves.values())
     marks = sorted({0, n // 4, n // 2, n - 1})
-    head = (
-        f"{'method':<10}" + "".join(f"{f'+{x[m]} obs':>14}" for m in marks) + f"{'fused (end)':>14}"
-    )
+    head = f"{'method':<10}{'accuracy':<16}" + "".join(f"{f'+{x[m]} obs':>16}" for m in marks)
     lines = [head, "-" * len(head)]
     for name, c in curves.items():
-        cells = "".join(f"{np.nanmean(c[:, m]):>8.3f}±{np.nanstd(c[:, m]):<5.3f}" for m in marks)
-        lines.append(f"{name:<10}{cells}{np.nanmean(fused[name][:, n - 1]):>14.3f}")
+        for kind, values in (("action mean", c), ("fused", fused[name])):
+            cells = "".join(f"{_cell(values[:, m]):>16}" for m in marks)
+            lines.append(f"{name if kind == 'action mean' else '':<10}{kind:<16}{cells}")
+    lines.append(
+        f"chance level {chance:.3f}; ± is half the 95 % interval over {c.shape[0]} run(s); "
+        "action mean = each action's model on its own test observations, averaged over actions "
+        "(the paper's measure); fused = all actions' posteriors combined"
+    )
     return lines
+
+
+def _confusion(
+    rows: list[dict[str, Any]], methods: tuple[str, ...], objects: tuple[str, ...]
+) -> dict[str, np.ndarray]:
+    """Per method, the final models' confusion counts summed over runs (rows: true object)."""
+    out = {}
+    for m in methods:
+        total = np.zeros((len(objects), len(objects)), dtype=int)
+        for r in rows:
+            if r["method"] == m and "confusion" in r:
+                total += np.asarray(r["confusion"], dtype=int)
+        out[m] = total
+    return out
+
+
+def _plot_confusion(confusion: dict[str, np.ndarray], objects: tuple[str, ...], stem: Path):
+    names = [o.replace("_", " ") for o in objects]
+    fig, axes = figure(1, len(confusion), figsize=(4.6 * len(confusion), 4.4), squeeze=False)
+    for ax, (method, counts) in zip(axes[0], confusion.items()):
+        share = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1)
+        im = ax.imshow(share, vmin=0, vmax=1, cmap="Blues")
+        for i in range(len(objects)):
+            for k in range(len(objects)):
+                ax.text(
+                    k,
+                    i,
+                    f"{share[i, k]:.2f}",
+                    ha="center",
+                    va="center",
+                    fontsize=7,
+                    color="white" if share[i, k] > 0.6 else "black",
+                )
+        ax.set_xticks(range(len(objects)), names, rotation=45, ha="right", fontsize=8)
+        ax.set_yticks(range(len(objects)), names, fontsize=8)
+        ax.set_xlabel("predicted object")
+        ax.set_ylabel("true object")
+        ax.set_title(f"{method}: final models", fontsize=10)
+    fig.colorbar(
+        im, ax=axes[0].tolist(), shrink=0.8, label="share of the true object's test observations"
+    )
+    fig.suptitle("confusion between the new objects (every action's model, all runs)")
+    return save_figure(fig, stem)

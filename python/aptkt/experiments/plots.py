@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["learning_curves", "save_figure", "figure", "canvas", "METHOD_COLOURS"]
+__all__ = ["BAND_LABEL", "learning_curves", "save_figure", "figure", "canvas", "METHOD_COLOURS"]
 
 #: The paper's colours (Fig. 9): baseline red, APTKT blue, APTKT with auxiliary features green.
 METHOD_COLOURS = {
@@ -31,26 +31,35 @@ def _pyplot():
     return plt
 
 
+#: What the bands of every learning-curve plot are (shown in the legend).
+BAND_LABEL = "bands: 95 % interval of the mean over runs"
+
+
 def learning_curves(
     ax,
     curves: Mapping[str, np.ndarray],
     x: np.ndarray,
     *,
+    chance: float,
     title: str = "",
     ylabel: str = "accuracy on the test set",
     xlabel: str = "observations collected after the initial round",
 ) -> None:
-    """Mean curve with a band of ± one standard deviation over trials, per method.
+    """Mean curve with its 95 % interval over runs as a band, per method, and chance level.
 
-    ``curves[method]`` has shape (trials, len(x)).
+    ``curves[method]`` has shape (runs, len(x)); ``chance`` is the accuracy of guessing
+    (1 / number of classes), drawn as a dashed line. The legend says what the bands are.
     """
+    from aptkt.experiments.aggregate import mean_band
+
     for method, values in curves.items():
         values = np.asarray(values, dtype=float)
-        mean = np.nanmean(values, axis=0)
-        sd = np.nanstd(values, axis=0)
+        mean, low, high = mean_band(values)
         colour = METHOD_COLOURS.get(method)
         ax.plot(x, mean, label=f"{method} (n={values.shape[0]})", color=colour, lw=2)
-        ax.fill_between(x, mean - sd, mean + sd, color=colour, alpha=0.18, lw=0)
+        ax.fill_between(x, low, high, color=colour, alpha=0.18, lw=0)
+    ax.axhline(chance, color="0.4", ls="--", lw=1, label=f"chance ({chance:.2f})")
+    ax.plot([], [], " ", label=BAND_LABEL)  # a legend line that only explains the bands
     ax.set_ylim(0, 1.02)
     from matplotlib.ticker import MaxNLocator
 

@@ -20,7 +20,18 @@ __all__ = [
     "no_harm_verdict",
     "render_report",
     "markdown_table",
+    "MIN_UNITS",
+    "TOO_FEW",
+    "too_few",
+    "listed",
+    "span",
 ]
+
+#: Fewest independent units (groups, or runs) behind an estimate for a verdict: with two, the
+#: 95 % t interval is ±12.7 standard errors and supports no conclusion either way.
+MIN_UNITS = 3
+#: How every verdict the runs cannot support begins.
+TOO_FEW = "too few runs to judge"
 
 #: The paper's headline figures (Feng, Kaboli & Cheng, Sensors 18(2):634, 2018, §5.3–5.6;
 #: docs/design.md §6). Gains are fractions.
@@ -62,10 +73,28 @@ def ci(e: Estimate) -> str:
     return f"{pp(e.mean)} [{100 * e.low:+.1f}, {100 * e.high:+.1f}] (95 % CI, {e.n} {e.unit})"
 
 
+def too_few(*estimates: Estimate) -> bool:
+    """Whether any estimate rests on fewer than :data:`MIN_UNITS` units or has no interval."""
+    return any(e.n < MIN_UNITS or not math.isfinite(e.low) for e in estimates)
+
+
+def listed(items: Sequence[str]) -> str:
+    """`` (a, b)`` after a count, or nothing for an empty list."""
+    return f" ({', '.join(items)})" if items else ""
+
+
+def span(values: Sequence[float], fmt: str = "{:.0f}", unit: str = " %") -> str:
+    """``40–75 %`` for a range of values, ``100 %`` when they are all the same."""
+    lo, hi = fmt.format(min(values)), fmt.format(max(values))
+    return f"{lo}{unit}" if lo == hi else f"{lo}–{hi}{unit}"
+
+
 def gain_verdict(e: Estimate, paper: float) -> str:
     """Compare a gain over the baseline with the paper's (positive) gain."""
-    if not math.isfinite(e.mean) or not math.isfinite(e.low):
-        return "cannot judge: too few runs for an interval"
+    if too_few(e):
+        return f"{TOO_FEW} ({e.n} {e.unit})"
+    if e.low < 0 < e.high and e.low < paper < e.high:
+        return f"{TOO_FEW}: the 95 % interval holds both no gain and the paper's {pp(paper)}"
     if e.significant_negative:
         return f"differs: APTKT is significantly worse than the baseline (paper: {pp(paper)})"
     if not e.significant_positive:
@@ -80,8 +109,8 @@ def gain_verdict(e: Estimate, paper: float) -> str:
 
 def no_harm_verdict(e: Estimate) -> str:
     """The paper's negative-transfer claim: APTKT is not worse than the baseline."""
-    if not math.isfinite(e.mean) or not math.isfinite(e.low):
-        return "cannot judge: too few runs for an interval"
+    if too_few(e):
+        return f"{TOO_FEW} ({e.n} {e.unit})"
     if e.significant_negative:
         return "differs: negative transfer — APTKT significantly below the baseline"
     if e.significant_positive:
@@ -114,6 +143,13 @@ def render_report(sections: Sequence[Any], run_info: Mapping[str, Any]) -> str:
         "to see whether the paper's findings hold *in shape* here — not to match its numbers. Gains are "
         "APTKT minus baseline accuracy on the test set, in percentage points (pp), paired run by run.",
         "",
+        "Accuracy is measured two ways. *Per-action average*: each action's model classifies that "
+        "action's test observations and the accuracies are averaged over actions — this is what the "
+        "paper's figures show, and what the headline numbers and verdicts use. *Fused*: the posteriors "
+        "of all actions' models are combined for each test object (a product, as independent "
+        "evidence) — reported beside it, where a run uses more than one action. Learning-curve bands "
+        "are 95 % intervals of the mean over runs; the dashed line is chance level.",
+        "",
         "## Headline figures: paper vs this run",
         "",
     ]
@@ -124,15 +160,25 @@ def render_report(sections: Sequence[Any], run_info: Mapping[str, Any]) -> str:
             [[h.figure, h.claim, h.paper, h.ours, h.verdict] for h in heads],
         )
     )
-    differ = [h for h in heads if not h.agrees]
+    undecided = [h for h in heads if h.undecided]
+    differ = [h for h in heads if not h.agrees and not h.undecided]
     out += ["", "## Where this run differs from the paper", ""]
     if differ:
         out += [
             f"- **{h.figure}** — {h.claim}: paper {h.paper}; here {h.ours}. {h.verdict[0].upper()}{h.verdict[1:]}."
             for h in differ
         ]
+    elif undecided:
+        out.append("No headline claim that this run can judge differs from the paper.")
     else:
         out.append("Every headline claim above agrees in shape.")
+    if undecided:
+        out += [
+            "",
+            f"Not judged — {TOO_FEW} ({len(undecided)} of {len(heads)} claims; a verdict needs at "
+            f"least {MIN_UNITS} independent groups or runs and an interval that excludes one of "
+            "the outcomes): " + "; ".join(f"{h.figure} {h.claim}" for h in undecided) + ".",
+        ]
     for s in sections:
         out += ["", f"## {s.figure}: {s.title}", "", s.body.strip(), ""]
         if s.files:

@@ -9,10 +9,10 @@ from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 from typing import Any
 
-from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
+from aptkt.learning import APTKT, LearnerConfig, LearningRun, PoolEnvironment, PriorKnowledge
 from aptkt.learning.dataset import load_observations
 
-__all__ = ["RunSpec", "execute", "flatten", "label", "run_many", "run_steps"]
+__all__ = ["RunSpec", "execute", "flatten", "label", "run_many", "run_steps", "step_rows"]
 
 
 @dataclass(frozen=True)
@@ -77,6 +77,11 @@ def run_steps(spec: RunSpec) -> list[dict[str, Any]]:
     run = learner.run(
         PoolEnvironment(pool, seed=spec.pool_seed), spec.actions, spec.new_objects, test
     )
+    return step_rows(run)
+
+
+def step_rows(run: LearningRun) -> list[dict[str, Any]]:
+    """One row per step of a finished run, with the transfer counts of :func:`run_steps`."""
     rows = []
     for step in run.steps:
         row = step.as_row()
@@ -87,7 +92,24 @@ def run_steps(spec: RunSpec) -> list[dict[str, Any]]:
         row["sources"] = len(lambdas)
         row["mean_lambda"] = sum(lambdas) / len(lambdas) if lambdas else float("nan")
         rows.append(row)
+    if rows:
+        rows[-1]["confusion"] = final_confusion(learner, spec.new_objects)
     return rows
+
+
+def final_confusion(learner: APTKT, objects: Sequence[str]) -> list[list[int]]:
+    """Test observations of each object (rows, in ``objects`` order) by the object the final
+    models predict (columns), counted over every action's model on its own test observations."""
+    pos = {o: i for i, o in enumerate(objects)}
+    counts = [[0] * len(objects) for _ in objects]
+    for action_learner in learner.learners.values():
+        if action_learner.test_posteriors is None:
+            continue
+        classes = [str(c) for c in action_learner.model.classes_]
+        predicted = [classes[k] for k in action_learner.test_posteriors.argmax(axis=1)]
+        for truth, guess in zip(action_learner.test_objects, predicted):
+            counts[pos[str(truth)]][pos[guess]] += 1
+    return counts
 
 
 def label(spec: RunSpec, steps: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:

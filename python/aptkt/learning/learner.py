@@ -212,8 +212,11 @@ def hyperparameters(model: LaplaceGPC) -> dict[str, dict[str, float]]:
         hp.update({f"length_scale[{m}]": float(ls[i, k]) for k, m in enumerate(names)})
         if len(names) > 1:
             hp.update({f"weight[{m}]": float(w[i, k]) for k, m in enumerate(names)})
-        if c in sources:
-            hp["lambda"] = float(np.atleast_1d(sources[c].transfer_lambda)[0])
+        used = sources.get(c, [])
+        if len(used) == 1:
+            hp["lambda"] = float(used[0].transfer_lambda)
+        else:
+            hp.update({f"lambda[{s.name}]": float(s.transfer_lambda) for s in used})
         out[c] = hp
     return out
 

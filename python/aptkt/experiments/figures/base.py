@@ -8,7 +8,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from aptkt.experiments.aggregate import Estimate
 from aptkt.experiments.plots import save_figure
+from aptkt.experiments.report import TOO_FEW, too_few
 from aptkt.experiments.priors import PriorTask
 from aptkt.experiments.runs import RunSpec
 from aptkt.experiments.sampling import derive_seed
@@ -132,6 +134,19 @@ class Context:
         """Objects as the paper's numbers, in increasing order, e.g. ``{1, 5, 10}``."""
         return "{" + ", ".join(str(n) for n in sorted(self.index[o] for o in objects)) + "}"
 
+    def label(self, obj: str) -> str:
+        """An object's number and name, e.g. ``2 rough sponge``."""
+        return f"{self.index[obj]} {obj.replace('_', ' ')}"
+
+    def names(self, objects: Sequence[str], sep: str = ", ") -> str:
+        """Objects by number and name, in the paper's order, e.g. ``1 ceramic tile, 5 cork board``."""
+        return sep.join(self.label(o) for o in sorted(objects, key=self.index.__getitem__))
+
+    @property
+    def chance(self) -> float:
+        """Accuracy of guessing among the new objects (the learning curves' floor)."""
+        return 1.0 / len(self.scale.new_objects)
+
 
 @dataclass
 class Plan:
@@ -150,10 +165,22 @@ class Headline:
     paper: str
     ours: str
     verdict: str
+    #: The estimates the verdict rests on: if any has too few runs, the verdict says so instead.
+    evidence: Sequence[Estimate] = ()
+
+    def __post_init__(self) -> None:
+        if self.evidence and too_few(*self.evidence) and not self.undecided:
+            n = min(e.n for e in self.evidence)
+            unit = next(e.unit for e in self.evidence if e.n == n)
+            self.verdict = f"{TOO_FEW} ({n} {unit})"
 
     @property
     def agrees(self) -> bool:
         return self.verdict.startswith("agrees")
+
+    @property
+    def undecided(self) -> bool:
+        return self.verdict.startswith(TOO_FEW)
 
 
 @dataclass

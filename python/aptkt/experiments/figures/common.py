@@ -91,12 +91,27 @@ def transfer_rate(rows: Iterable[Mapping[str, Any]], where: Mapping[str, Any]) -
 
 
 def plot_panel(
-    ax, curves: Mapping[str, Curves], title: str, *, xlabel: str = XLABEL, legend: bool = True
+    ax,
+    curves: Mapping[str, Curves],
+    title: str,
+    *,
+    chance: float,
+    xlabel: str = XLABEL,
+    ylabel: str = "accuracy on the test set",
+    legend: bool = True,
 ) -> None:
     x = next(iter(curves.values())).x
     from matplotlib.ticker import MaxNLocator
 
-    learning_curves(ax, {m: c.values for m, c in curves.items()}, x, title=title, xlabel=xlabel)
+    learning_curves(
+        ax,
+        {m: c.values for m, c in curves.items()},
+        x,
+        chance=chance,
+        title=title,
+        xlabel=xlabel,
+        ylabel=ylabel,
+    )
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     if not legend and ax.get_legend() is not None:
         ax.get_legend().remove()
@@ -150,17 +165,26 @@ def prior_group_plan(
     return plan
 
 
-def accuracy_table(curves: Mapping[str, Curves], steps: Sequence[int]) -> str:
-    """Markdown: mean ± sd accuracy per method at chosen steps."""
+def accuracy_table(
+    curves: Mapping[str, Curves],
+    steps: Sequence[int],
+    fused: Mapping[str, Curves] | None = None,
+) -> str:
+    """Markdown: mean ± sd accuracy per method at chosen steps — the per-action average and,
+    with ``fused`` (runs over several actions), all actions' posteriors fused beside it."""
     from aptkt.experiments.report import markdown_table
 
     steps = [s for s in steps if s in set(next(iter(curves.values())).x.tolist())]
     rows = []
     for m, c in curves.items():
-        mean, sd = c.mean(), c.sd()
-        idx = [int(np.flatnonzero(c.x == s)[0]) for s in steps]
-        rows.append([m, c.n_runs] + [f"{mean[i]:.3f} ± {sd[i]:.3f}" for i in idx])
-    return markdown_table(["method", "runs"] + [f"step {s}" for s in steps], rows)
+        kinds = [("per-action average", c)] + ([("fused", fused[m])] if fused else [])
+        for kind, cc in kinds:
+            mean, sd = cc.mean(), cc.sd()
+            idx = [int(np.flatnonzero(cc.x == s)[0]) for s in steps]
+            rows.append([m, kind, cc.n_runs] + [f"{mean[i]:.3f} ± {sd[i]:.3f}" for i in idx])
+    return markdown_table(
+        ["method", "accuracy", "runs"] + [f"step {s} (mean ± sd)" for s in steps], rows
+    )
 
 
 def key_steps(budget: int) -> list[int]:

@@ -95,12 +95,15 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     keys = list(matrices)
     ncols = min(4, len(keys))
     nrows = math.ceil(len(keys) / ncols)
-    fig, axes = figure(nrows, ncols, figsize=(4.3 * ncols, 4.2 * nrows), squeeze=False)
+    fig, axes = figure(nrows, ncols, figsize=(5.6 * ncols, 5.6 * nrows), squeeze=False)
     prior_set = set(ctx.scale.priors)
+    names = [ctx.label(o) for o in objects]
     for ax, key in zip(axes.ravel(), keys):
         im = ax.imshow(matrices[key], vmin=0, vmax=1, cmap="viridis")
-        ax.set_xticks(range(len(objects)), numbers, fontsize=7)
-        ax.set_yticks(range(len(objects)), numbers, fontsize=7)
+        ax.set_xticks(range(len(objects)), names, fontsize=6, rotation=90)
+        ax.set_yticks(range(len(objects)), names, fontsize=6)
+        ax.set_ylabel("row: observations of this object", fontsize=8)
+        ax.set_xlabel("column: assigned to this object's mixture component", fontsize=8)
         # The paper's colours: old objects' numbers blue, new objects' red.
         for lab, obj in zip(ax.get_xticklabels() + ax.get_yticklabels(), objects + objects):
             lab.set_color("tab:blue" if obj in prior_set else "tab:red")
@@ -181,14 +184,14 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         markdown_table(
             [
                 "panel",
-                "dissimilar priors (numbers)",
-                "paper",
+                "dissimilar priors",
+                "paper (numbers)",
                 "log10 similarity of each prior (number: score)",
             ],
             [
                 [
                     k,
-                    ctx.numbers(chosen[k]),
+                    ctx.names(chosen[k]),
                     "{" + ", ".join(map(str, paper_sets.get(k, ()))) + "}",
                     ", ".join(f"{ctx.index[o]}: {v:.1f}" for o, v in sim["scores"][k].items()),
                 ]

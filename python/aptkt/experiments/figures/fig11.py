@@ -37,7 +37,7 @@ from aptkt.experiments.figures.common import (
     transfer_rate,
 )
 from aptkt.experiments.plots import figure
-from aptkt.experiments.report import ci, markdown_table, no_harm_verdict, pp
+from aptkt.experiments.report import ci, listed, markdown_table, no_harm_verdict, pp, span
 from aptkt.experiments.tables import curves_rows
 
 NAME = "fig11"
@@ -110,25 +110,38 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         rates[key] = transfer_rate(rows, {"method": "APTKT", "panel": key})
         worst[key] = float(np.nanmin(gains[key].gain.mean()))
         label = "all actions" if key == fig10.ALL else key
-        plot_panel(ax, curves, f"{label}, priors {ctx.numbers(design[key][1])}", legend=(i == 0))
+        plot_panel(
+            ax,
+            curves,
+            f"{label}, priors:\n{ctx.names(design[key][1])}",
+            chance=ctx.chance,
+            legend=(i == 0),
+        )
         curve_rows += [
             r for m, c in curves.items() for r in curves_rows({"panel": key, "method": m}, c)
         ]
-        tables.append(f"**{label}**\n\n" + accuracy_table(curves, steps))
+        fused = (
+            method_curves(rows, {"panel": key}, METHODS, value="fused_accuracy")
+            if key == fig10.ALL
+            else None  # one action: fused is the action's own accuracy
+        )
+        tables.append(f"**{label}**\n\n" + accuracy_table(curves, steps, fused))
     stress_numbers: dict[str, Any] = {}
     if stress:
         ax = axes.ravel()[len(keys)]
         methods = present(stress, STRESS_METHODS)
         curves = method_curves(stress, {}, methods)
+        fused = method_curves(stress, {}, methods, value="fused_accuracy")
         plot_panel(
             ax,
             curves,
-            f"stress: λ = 1 from the least related of {ctx.numbers(design[fig10.ALL][1])}",
+            f"stress: λ = 1 from the least related of\n{ctx.names(design[fig10.ALL][1])}",
+            chance=ctx.chance,
         )
         curve_rows += [
             r for m, c in curves.items() for r in curves_rows({"panel": STRESS, "method": m}, c)
         ]
-        tables.append("**stress (all actions)**\n\n" + accuracy_table(curves, steps))
+        tables.append("**stress (all actions)**\n\n" + accuracy_table(curves, steps, fused))
         for m in methods[1:]:
             g = gain_summary(curves, m, steps=steps)
             stress_numbers[m] = {
@@ -150,10 +163,11 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             f"dissimilar priors: APTKT ≈ baseline (no negative transfer) in all {len(keys)} settings",
             "yes",
             f"significantly below the baseline over the curve in {len(harmed)} of {len(keys)} "
-            f"({', '.join(harmed) or 'none'}); at step 0 in {len(harmed_early)} ({', '.join(harmed_early) or 'none'})",
+            f"{listed(harmed)}; at step 0 in {len(harmed_early)}{listed(harmed_early)}",
             "agrees: no negative transfer"
             if not harmed
             else "differs: negative transfer in " + ", ".join(harmed),
+            evidence=[gains[k].overall for k in keys],
         )
     ]
     # The paper explains the absence of harm by the cut-off: "stopped transferring". We read
@@ -164,7 +178,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             NAME,
             "with dissimilar priors APTKT stops transferring (λ under ε_neg)",
             "yes",
-            f"transfer rate {min(rates.values()) * 100:.0f}–{max(rates.values()) * 100:.0f} % of decisions "
+            f"transfer rate {span([100 * r for r in rates.values()])} of decisions "
             f"(at most {STOPPED * 100:.0f} % in {len(stopped)} of {len(keys)} settings)",
             "agrees"
             if len(stopped) == len(keys)
@@ -179,8 +193,9 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             f"no step below the baseline by more than {100 * HARM:.0f} pp (mean over trials)",
             "yes (Fig. 11)",
             f"worst step {pp(min(worst.values()))}; more than {100 * HARM:.0f} pp below in "
-            f"{len(below)} of {len(keys)} settings ({', '.join(below) or 'none'})",
+            f"{len(below)} of {len(keys)} settings{listed(below)}",
             "agrees" if not below else "differs: " + ", ".join(below),
+            evidence=[gains[k].overall for k in keys],
         )
     )
     if STRESS_NO_CUTOFF in stress_numbers and STRESS_CUTOFF in stress_numbers:
@@ -216,7 +231,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             [
                 [
                     k,
-                    ctx.numbers(design[k][1]),
+                    ctx.names(design[k][1]),
                     ci(gains[k].overall),
                     no_harm_verdict(gains[k].overall),
                     ci(gains[k].at[0]) if 0 in gains[k].at else "",

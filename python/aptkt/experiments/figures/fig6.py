@@ -20,7 +20,7 @@ from aptkt.experiments.aggregate import collect, difference, estimate, mean_over
 from aptkt.experiments.figures.base import Context, Headline, Plan, Section
 from aptkt.experiments.figures.common import plot_panel
 from aptkt.experiments.plots import figure
-from aptkt.experiments.report import PAPER, ci, markdown_table
+from aptkt.experiments.report import PAPER, ci, listed, markdown_table
 from aptkt.experiments.sampling import draw_groups
 from aptkt.experiments.tables import curves_rows
 
@@ -91,9 +91,10 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     )
     axes = axes.ravel()
     curve_rows = []
+    chance = 1.0 / ctx.scale.fig6_group_size  # each run tells the objects of one group apart
     for i, a in enumerate(actions):
         curves = {k: collect(rows, {"panel": a, "method": k}, x="n_observations") for k in kinds(a)}
-        plot_panel(axes[i], curves, a, xlabel=XLABEL, legend=False)
+        plot_panel(axes[i], curves, a, chance=chance, xlabel=XLABEL, legend=False)
         curve_rows += [
             r for k, c in curves.items() for r in curves_rows({"panel": a, "method": k}, c)
         ]
@@ -117,7 +118,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         if have:
             avg[k] = mean_over_panels(have)
     plot_panel(
-        axes[len(actions)], avg, "averaged over actions", xlabel=XLABEL
+        axes[len(actions)], avg, "averaged over actions", chance=chance, xlabel=XLABEL
     )  # every model: the legend
     curve_rows += [
         r for k, c in avg.items() for r in curves_rows({"panel": "average", "method": k}, c)
@@ -141,11 +142,12 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             "the multi-modal kernel matches or beats the best single modality, every action",
             "yes, all 7",
             f"beats for {sum(c == 'beats' for c in cats.values())}, matches for "
-            f"{sum(c == 'matches' for c in cats.values())}, worse for {len(worse)} of {len(actions)} "
-            f"({', '.join(worse) or 'none'})",
+            f"{sum(c == 'matches' for c in cats.values())}, worse for {len(worse)} of {len(actions)}"
+            f"{listed(worse)}",
             "agrees"
             if not worse
             else "differs: worse than the best single modality for " + ", ".join(worse),
+            evidence=[per_action[a]["vs_best"] for a in actions],
         ),
         Headline(
             NAME,
@@ -155,6 +157,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             "agrees: the same per action"
             if not mismatched
             else f"differs for {len(mismatched)} of {len([a for a in actions if a in paper_cat])}: {', '.join(mismatched)}",
+            evidence=[per_action[a]["vs_best"] for a in actions],
         ),
     ]
     body = [

@@ -58,10 +58,19 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         ax = fig.add_subplot(grid[g // ncols, g % ncols])
         gc = method_curves(rows, {**where, "group": g}, methods)
         per_group.append((g, group, gain_summary(gc, "APTKT")))
-        plot_panel(ax, gc, f"priors {ctx.numbers(group)}", xlabel="", legend=False)
-        ax.set_ylabel("")
+        # Small panels keep short axis labels; the title names the group's priors.
+        plot_panel(
+            ax,
+            gc,
+            f"group {g}:\n" + ctx.names(group, sep=",\n"),
+            chance=ctx.chance,
+            xlabel="observations",
+            ylabel="accuracy",
+            legend=False,
+        )
+        ax.title.set_fontsize(8)
     big = fig.add_subplot(grid[:, ncols:])
-    plot_panel(big, curves, f"average of {curves['APTKT'].n_runs} runs")
+    plot_panel(big, curves, f"average of {curves['APTKT'].n_runs} runs", chance=ctx.chance)
     fig.suptitle(
         f"Fig. 7 — transfer from {ctx.scale.n_priors} prior objects, {len(ctx.scale.actions)} actions"
     )
@@ -88,6 +97,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             "agrees"
             if gain.positive_steps == 1.0
             else "differs: the mean gain is not positive at every step",
+            evidence=[gain.overall],
         ),
     ]
     body = [
@@ -96,7 +106,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         "(every action once on every new object). Accuracy: each action's model on its test observations, "
         "averaged over actions.",
         "",
-        accuracy_table(curves, steps),
+        accuracy_table(curves, steps, fused),
         "",
         "Gain (APTKT − baseline), paired by run:",
         "",
@@ -117,7 +127,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         "",
         markdown_table(
             ["group", "priors", "gain"],
-            [[g, ctx.numbers(group), ci(s.overall)] for g, group, s in per_group],
+            [[g, ctx.names(group), ci(s.overall)] for g, group, s in per_group],
         ),
     ]
     control = (

@@ -23,7 +23,7 @@ from aptkt.experiments.figures.common import (
     transfer_rate,
 )
 from aptkt.experiments.plots import figure
-from aptkt.experiments.report import PAPER, ci, gain_verdict, markdown_table, pp
+from aptkt.experiments.report import PAPER, ci, gain_verdict, listed, markdown_table, pp
 from aptkt.experiments.tables import curves_rows
 
 NAME = "fig8"
@@ -55,7 +55,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     for i, a in enumerate(actions):
         curves = method_curves(rows, {"panel": a}, METHODS)
         gains[a] = gain_summary(curves, "APTKT", steps=steps)
-        plot_panel(axes[i], curves, a, legend=(i == 0))
+        plot_panel(axes[i], curves, a, chance=ctx.chance, legend=(i == 0))
         curve_rows += [
             r for m, c in curves.items() for r in curves_rows({"panel": a, "method": m}, c)
         ]
@@ -106,6 +106,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                 else "differs: "
                 + ", ".join(a for a in little if gains[a].overall.mean >= LITTLE)
                 + f" gain(s) {pp(LITTLE, sign=False)} or more",
+                evidence=[gains[a].overall for a in little],
             )
         )
     press = [a for a in PAPER["fig8_larger"] if a in gains]
@@ -120,6 +121,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                 "yes",
                 f"mean gain {pp(mp)} vs {pp(ms)}",
                 "agrees" if mp > ms else "differs: the sliding actions gain as much or more",
+                evidence=[gains[a].overall for a in press + slide],
             )
         )
     pos = [a for a in actions if gains[a].overall.significant_positive]
@@ -129,11 +131,12 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             NAME,
             "APTKT above the baseline with every single action",
             f"yes, all {len(actions)}",
-            f"significantly above for {len(pos)} of {len(actions)} ({', '.join(pos) or 'none'}); "
-            f"significantly below for {len(neg)} ({', '.join(neg) or 'none'})",
+            f"significantly above for {len(pos)} of {len(actions)}{listed(pos)}; "
+            f"significantly below for {len(neg)}{listed(neg)}",
             "agrees"
             if len(pos) == len(actions)
             else f"differs: {len(actions) - len(pos)} action(s) without a significant gain",
+            evidence=[gains[a].overall for a in actions],
         )
     )
     body = [

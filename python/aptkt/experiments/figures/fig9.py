@@ -56,12 +56,14 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             axes[0, i],
             curves,
             f"({'abcdefgh'[i % 8]}) {n} prior objects, {groups} group(s)",
+            chance=ctx.chance,
             legend=(i == 0),
         )
         curve_rows += [
             r for m, c in curves.items() for r in curves_rows({"n_priors": n, "method": m}, c)
         ]
-        tables.append(f"**{n} priors**\n\n" + accuracy_table(curves, steps))
+        fused = method_curves(rows, {"n_priors": n}, METHODS, value="fused_accuracy")
+        tables.append(f"**{n} priors**\n\n" + accuracy_table(curves, steps, fused))
     fig.suptitle(
         "Fig. 9 — more prior objects: baseline (red), APTKT (blue), APTKT with auxiliary features (green)"
     )
@@ -93,6 +95,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                 if fades and fewer
                 else "differs: "
                 + ("the gain does not shrink" if not fades else "the transfer rate does not fall"),
+                evidence=[plain[fewest].overall, plain[most].overall],
             )
         )
         more = [n for n in counts if n > fewest]
@@ -106,6 +109,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                 "agrees"
                 if len(restored) == len(more)
                 else f"differs: significantly better for {len(restored)} of {len(more)} prior counts",
+                evidence=[aux_vs_plain[n].overall for n in more],
             )
         )
     body = [
