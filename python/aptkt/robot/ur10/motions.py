@@ -357,8 +357,11 @@ class Motions:
             link.mode = None  # the controller already stopped the arm, or we cannot reach it
             return
         self.stop()
-        if not isinstance(exc, AptktError) or link.lost is not None:
-            return  # e.g. KeyboardInterrupt or a bug: stopped, but do not move on our own
+        if sup.retracting or link.lost is not None:
+            return  # a second fault (or Ctrl-C) while retracting: stopped, no further motion
+        if not isinstance(exc, (AptktError, KeyboardInterrupt)):
+            return  # a bug: stopped, but do not move on our own
+        # Ctrl-C and SIGTERM too: the arm must not be left pressing on the object.
         sup.retracting = True
         try:
             sup.reset()
