@@ -298,3 +298,24 @@ def test_a_signal_mid_press_retracts_and_keeps_the_data(cell, sig, code, word):
     with DatasetReader(d / f"signal-{sig.name}.aborted.h5") as rd:
         assert rd.keys() == [("block_b", "Pq", 0)]
         assert len(rd.recording(0).samples) > 0
+
+
+def test_a_dropped_link_mid_press_is_a_fault_that_keeps_the_data(cell, capsys):
+    d, lb = cell
+    data = d / "dropped.h5"
+    watcher = on_press(lb, 2, lambda: lb.drop_connections())
+    args = ("--objects", "block_a,block_b", "-n", "1", "-o", str(data), "--no-progress")
+    assert run_cli(cell, "collect", *args) == 3
+    watcher.join(timeout=5.0)
+    err = capsys.readouterr().err
+    assert "block_b / Pq / trial 0: RobotConnectionError" in err and "--resume" in err, err
+    time.sleep(0.7)  # the controller's RTDE watchdog stops the program
+    assert not lb.state()["moving"]
+    with DatasetReader(data) as rd:
+        assert rd.keys() == [("block_a", "Pq", 0)]
+    with DatasetReader(d / "dropped.aborted.h5") as rd:
+        assert rd.keys() == [("block_b", "Pq", 0)]
+    # The link is back: the same command completes the data set.
+    assert run_cli(cell, "collect", *args, "--resume") == 0
+    with DatasetReader(data) as rd:
+        assert sorted(rd.keys()) == [("block_a", "Pq", 0), ("block_b", "Pq", 0)]
