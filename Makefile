@@ -1,38 +1,54 @@
 # Two entry points do all set-up on a fresh machine (see README):
 #   make demo   -> virtual environment, Rust build, end-to-end demo on the simulated world
 #   make test   -> virtual environment, Rust build, cargo tests of the core crates, pytest
+#
+# Every build shares target/ and compiles each shared crate with the same profile (release) and
+# the same features (cargo resolves the whole workspace for the tests, the extension's crate
+# included; see rust/python/Cargo.toml), so whichever runs second reuses what the first
+# compiled: `make test` after `make demo` adds only the test-only crates and test binaries.
 VENV ?= .venv
 PY := $(VENV)/bin/python
 PYTEST_ARGS ?=
+SHELL := /bin/bash
+.SHELLFLAGS := -eo pipefail -c
+# pip -v shows the build backend's output; keep cargo's progress lines and errors.
+SHOW_BUILD := grep -E --line-buffered "^ *(Compiling|Finished|Built wheel|Successfully installed)|[Ee]rror" | sed -u -e 's/^ */    /'
 
 .PHONY: venv install install-test demo wheel test test-rust test-python clean
 
 venv:
-	@test -x $(PY) || python3 -m venv $(VENV)
+	@test -x $(PY) || { echo "==> creating the virtual environment $(VENV)"; python3 -m venv $(VENV); }
 	@$(PY) -m pip install --quiet --upgrade pip
 
 # The package and its runtime dependencies: all the demo needs.
 install: venv
-	$(PY) -m pip install --quiet -e .
+	@echo "==> installing aptkt: Python dependencies, then the Rust core (release build: a few"
+	@echo "    minutes on 2 cores the first time, seconds once target/ holds it)"
+	@$(PY) -m pip install -v -e . 2>&1 | $(SHOW_BUILD)
 
 install-test: venv
-	$(PY) -m pip install --quiet -e ".[test]"
+	@echo "==> installing aptkt with the test dependencies (Rust core: see above)"
+	@$(PY) -m pip install -v -e ".[test]" 2>&1 | $(SHOW_BUILD)
 
 demo: install
+	@echo "==> aptkt demo (simulated world: 8 objects, 7 actions, 20 trials; 3 runs per method)"
 	$(VENV)/bin/aptkt demo
 
 # dist/aptkt-<version>-cp310-abi3-<platform>.whl; maturin shares cargo's target/ with the
 # editable install, so only what differs is rebuilt.
 wheel: venv
-	$(PY) -m pip install --quiet "maturin>=1.8,<2"
+	@echo "==> building the wheel (reuses target/)"
+	@$(PY) -m pip install --quiet "maturin>=1.8,<2"
 	rm -f dist/aptkt-*.whl
 	$(PY) -m maturin build --release --interpreter $(PY) --out dist
 
 test-rust:
-	cargo test --release --workspace --exclude aptkt-python
+	@echo "==> Rust tests of the core crates (release profile, reusing the extension's build)"
+	cargo test --release --workspace
 
 # tests/packaging installs the wheel into a fresh virtual environment.
 test-python: install-test wheel
+	@echo "==> Python tests"
 	APTKT_WHEEL="$$(ls dist/aptkt-*.whl)" $(PY) -m pytest $(PYTEST_ARGS)
 
 test: test-rust test-python

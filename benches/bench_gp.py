@@ -1,6 +1,13 @@
 """LaplaceGPC vs scikit-learn's GaussianProcessClassifier, side by side on the same data.
 
 Usage: python benches/bench_gp.py [--quick] [--skip-sklearn-opt-above N] [--single-thread]
+       python benches/bench_gp.py --transfer-variants [bench_gp_transfer.py's options]
+       python benches/bench_gp.py --large [--sizes 1000,2000]
+
+--large: a default 3-class fit (LaplaceGPC(random_state=0), n_jobs=None, 6 features) at each
+size, each in a fresh process, reporting wall time, CPU time and peak resident memory
+(ru_maxrss of that process, the data included), beside the same fit with n_restarts=2,
+max_iter=200 (the former defaults).
 
 By default each side runs as a user gets it: ours fits the one-vs-all classifiers in parallel on
 all cores, scikit-learn fits them one after the other with a multi-threaded BLAS. With
@@ -91,7 +98,70 @@ def run(n: int, d: int, sklearn_opt: bool, n_jobs: int | None = None) -> dict:
     return row
 
 
+LARGE_CHILD = """
+import resource, sys, time
+import numpy as np
+from sklearn.datasets import make_classification
+from aptkt.gp import LaplaceGPC
+n, restarts, max_iter = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+X, y = make_classification(n_samples=n, n_features=6, n_informative=4, n_redundant=0,
+                           n_classes=3, n_clusters_per_class=1, random_state=0)
+t, c = time.perf_counter(), time.process_time()
+model = LaplaceGPC(n_restarts=restarts, max_iter=max_iter, random_state=0).fit(X, y)
+wall, cpu = time.perf_counter() - t, time.process_time() - c
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+print(wall, cpu, peak, model.score(X, y), float(model.log_marginal_likelihood_.sum()))
+"""
+
+
+def run_large(sizes: list[int]) -> None:
+    import os
+    import subprocess
+    import sys
+
+    rows = []
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    for n in sizes:
+        for restarts, max_iter, label in ((1, 100, "default"), (2, 200, "2 restarts, 200 it")):
+            out = subprocess.run(
+                [sys.executable, "-c", LARGE_CHILD, str(n), str(restarts), str(max_iter)],
+                capture_output=True,
+                text=True,
+                check=True,
+                env=env,
+            ).stdout.split()
+            wall, cpu, peak, acc, lml = map(float, out)
+            row = {
+                "n": n,
+                "settings": label,
+                "wall s": wall,
+                "cpu s": cpu,
+                "peak MB": peak,
+                "train acc": acc,
+                "LML (sum)": lml,
+            }
+            rows.append(row)
+            print(row, flush=True)
+    print(table(rows, ["n", "settings", "wall s", "cpu s", "peak MB", "train acc", "LML (sum)"]))
+    print("saved", save("gp-large", {"rows": rows}))
+
+
 def main() -> None:
+    import sys
+
+    if "--large" in sys.argv:
+        sizes = [1000, 2000]
+        if "--sizes" in sys.argv:
+            sizes = [int(v) for v in sys.argv[sys.argv.index("--sizes") + 1].split(",")]
+        run_large(sizes)
+        return
+
+    if "--transfer-variants" in sys.argv:  # the transfer kernels' own bench
+        import bench_gp_transfer
+
+        sys.argv.remove("--transfer-variants")
+        bench_gp_transfer.main()
+        return
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )

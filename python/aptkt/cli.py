@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from aptkt.errors import AptktError
 
@@ -40,17 +42,64 @@ def _version() -> str:
     return __version__
 
 
+def _label(args: argparse.Namespace) -> str:
+    """``aptkt dataset generate``: the command as typed, for messages."""
+    words = [args.command]
+    for key, value in vars(args).items():
+        if key.endswith("_command") and isinstance(value, str):
+            words.append(value)
+    return "aptkt " + " ".join(words)
+
+
+def _missing_dirs(args: argparse.Namespace) -> list[Path]:
+    """The output paths (and their parent directories) that do not exist yet, deepest first:
+    those a failed command may have created as directories and must not leave behind empty."""
+    missing: list[Path] = []
+    for key in ("output", "record"):
+        value = getattr(args, key, None)
+        if not isinstance(value, (str, Path)):
+            continue
+        path = Path(value).absolute()
+        for p in (path, *path.parents):
+            if p.exists() or os.path.lexists(p):
+                break
+            missing.append(p)
+    return sorted(set(missing), key=lambda p: len(p.parts), reverse=True)
+
+
+def _remove_empty(dirs: list[Path]) -> None:
+    for d in dirs:
+        try:
+            d.rmdir()  # only an empty directory
+        except OSError:
+            pass
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    label = _label(args)
+    created = _missing_dirs(args)
+    code = 1
     try:
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        return code
     except AptktError as exc:
-        print(f"aptkt {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{label}: error: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:
+        # The system refused a file operation the checks up front could not foresee (a disk
+        # full, a file removed meanwhile): one line naming the file, not a traceback.
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"{label}: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print(f"aptkt {args.command}: interrupted", file=sys.stderr)
-        return 130
+        print(f"{label}: interrupted", file=sys.stderr)
+        code = 130
+        return code
+    finally:
+        if code != 0:
+            _remove_empty(created)
 
 
 if __name__ == "__main__":

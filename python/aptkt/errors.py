@@ -22,6 +22,8 @@ __all__ = [
     "TrialFault",
     "TrialInterrupted",
     "ConfigError",
+    "FeatureTableError",
+    "PriorFileError",
     "NotFittedError",
     "KernelNotPositiveDefiniteError",
 ]
@@ -29,6 +31,15 @@ __all__ = [
 
 class ConfigError(AptktError, ValueError):
     """A configuration file or value is invalid; the message names the file and the field."""
+
+
+class FeatureTableError(ConfigError):
+    """A feature table (CSV or HDF5) is malformed; the message names the file, row and column."""
+
+
+class PriorFileError(AptktError, ValueError):
+    """A prior-knowledge file is not one, is damaged, or is inconsistent; the message names the
+    file and the member."""
 
 
 class NotFittedError(AptktError, AttributeError):

@@ -19,8 +19,8 @@ GIL released. Models are saved with :meth:`LaplaceGPC.save` to a NumPy ``.npz`` 
 
 from __future__ import annotations
 
-import inspect
 import json
+import os
 import zipfile
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
@@ -28,17 +28,40 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from sklearn.base import BaseEstimator, ClassifierMixin
+from sklearn.exceptions import NotFittedError as _SklearnNotFitted
+from sklearn.utils.multiclass import check_classification_targets
+from sklearn.utils.validation import validate_data
 
 from aptkt import _core
 from aptkt.errors import KernelNotPositiveDefiniteError, NotFittedError
 
 __all__ = [
+    "DEFAULTS",
+    "FitDefaults",
     "HyperPrior",
     "KernelNotPositiveDefiniteError",
     "LaplaceGPC",
     "TransferSource",
     "kernel_matrix",
 ]
+
+
+@dataclass(frozen=True)
+class FitDefaults:
+    """Default fit settings: the one source of LaplaceGPC's defaults and of the learner's
+    ``GPSettings`` (which imports them from here; the GP layer sits below learning)."""
+
+    length_scale: str = "auto"
+    signal_variance: float = 1.0
+    n_restarts: int = 1
+    max_iter: int = 100
+    approximation: str = "erf"
+    n_jobs: int | None = None
+    hyper_prior: str | None = None
+
+
+DEFAULTS = FitDefaults()
 
 _FIXABLE = ("signal_variance", "length_scale", "modality_weights", "transfer_lambda")
 _APPROXIMATIONS = ("erf", "quadrature")
@@ -311,6 +334,22 @@ def _start_lambda(source: TransferSource) -> float:
     return 0.5 if source.transfer_lambda is None else float(source.transfer_lambda)
 
 
+class _NotFitted(NotFittedError, _SklearnNotFitted):
+    """Both the project's and scikit-learn's "not fitted" error, so either can be caught."""
+
+
+def _threads(n_jobs: Any) -> int:
+    """Threads for ``n_jobs`` by joblib's convention: None -> 1, -1 -> every core, -2 -> all
+    but one, and so on."""
+    if n_jobs is None:
+        return 1
+    if isinstance(n_jobs, bool) or not isinstance(n_jobs, (int, np.integer)) or n_jobs == 0:
+        raise ValueError(f"n_jobs must be None or a non-zero integer, got {n_jobs!r}")
+    if n_jobs > 0:
+        return int(n_jobs)
+    return max(1, (os.cpu_count() or 1) + 1 + int(n_jobs))
+
+
 def _seed(random_state: Any) -> int:
     if random_state is None:
         return int(np.random.SeedSequence().generate_state(1, np.uint64)[0])
@@ -327,14 +366,17 @@ def _seed(random_state: Any) -> int:
     )
 
 
-class LaplaceGPC:
+class LaplaceGPC(ClassifierMixin, BaseEstimator):
     """One-vs-all Gaussian-process classifier with the Laplace approximation.
+
+    A scikit-learn classifier: ``get_params``/``set_params``, ``clone``, ``score``,
+    pipelines, grid search and cross-validation work as for any other.
 
     Parameters
     ----------
     length_scale : float, "auto" or sequence of float
-        Initial RBF length-scale (one per modality, or one for all). ``"auto"`` starts at the
-        median pairwise distance of each modality.
+        Initial RBF length-scale (one per modality, or one for all). ``"auto"`` (default) starts
+        at the median pairwise distance of each modality.
     signal_variance : float
         Initial signal variance σ² (the kernel's amplitude).
     modalities : None, mapping name -> columns, or sequence of column lists
@@ -344,8 +386,9 @@ class LaplaceGPC:
     optimize : bool
         Maximise the log marginal likelihood over the free hyper-parameters.
     n_restarts : int
-        Starts besides the initial hyper-parameters: the first is scaled to the data (median
-        pairwise distance per modality), the others are random around that scale.
+        Starts besides the initial hyper-parameters (default 1): the first is scaled to the
+        data (median pairwise distance per modality; random around it when the initial
+        length-scale is already "auto"), the others are random around that scale.
     fixed : iterable of str
         Hyper-parameters held at their initial values, among ``"signal_variance"``,
         ``"length_scale"``, ``"modality_weights"``, ``"transfer_lambda"``. By default λ is fixed
@@ -353,7 +396,7 @@ class LaplaceGPC:
     random_state : None, int or numpy Generator
         Seeds the random starts; the fit is deterministic for a given value.
     max_iter : int
-        Iterations of the quasi-Newton optimiser per start.
+        Iterations of the quasi-Newton optimiser per start (default 100).
     length_scale_bounds, signal_variance_bounds : (float, float)
         Box constraints of the optimiser.
     newton_max_iter, newton_tol : int, float
@@ -366,7 +409,8 @@ class LaplaceGPC:
         Predictive integral ``∫σ(f)N(f|μ,s²)df``: the five-erf mixture (as scikit-learn; error
         ~1e-5) or Gauss-Legendre quadrature of the exact integrand (error < 1e-9).
     n_jobs : int, optional
-        Threads for the per-class fits; default: all cores.
+        Threads for the per-class fits, by joblib's convention: None (default) one, -1 every
+        core, -2 all but one, ...
     hyper_prior : None, "weak" or HyperPrior
         None: plain ML-II (maximise the log marginal likelihood). Otherwise MAP-II with the
         given weak log-normal hyper-priors (see :class:`HyperPrior`).
@@ -386,30 +430,32 @@ class LaplaceGPC:
         Transfer sources used, by class label: a list of :class:`TransferSource` each.
     hyperparameters_ : dict
         Fitted hyper-parameters by class label, as named values (see the property).
+    n_iter_ : ndarray of shape (n_classifiers,)
+        Quasi-Newton iterations of the start that gave each classifier's hyper-parameters.
     log_hyper_prior_ : ndarray of shape (n_classifiers,)
         Log hyper-prior density at ``theta_`` (0 for ML-II).
     """
 
     def __init__(
         self,
-        length_scale: float | str | Sequence[float] = 1.0,
-        signal_variance: float = 1.0,
+        length_scale: float | str | Sequence[float] = DEFAULTS.length_scale,
+        signal_variance: float = DEFAULTS.signal_variance,
         *,
         modalities: Mapping[str, Sequence[int]] | Sequence[Sequence[int]] | None = None,
         modality_weights: Sequence[float] | None = None,
         optimize: bool = True,
-        n_restarts: int = 2,
+        n_restarts: int = DEFAULTS.n_restarts,
         fixed: Iterable[str] = ("transfer_lambda",),
         random_state: Any = None,
-        max_iter: int = 200,
+        max_iter: int = DEFAULTS.max_iter,
         length_scale_bounds: tuple[float, float] = (1e-5, 1e5),
         signal_variance_bounds: tuple[float, float] = (1e-5, 1e5),
         newton_max_iter: int = 100,
         newton_tol: float = 1e-10,
         max_jitter: float = 1e-6,
-        approximation: str = "erf",
-        n_jobs: int | None = None,
-        hyper_prior: HyperPrior | str | None = None,
+        approximation: str = DEFAULTS.approximation,
+        n_jobs: int | None = DEFAULTS.n_jobs,
+        hyper_prior: HyperPrior | str | None = DEFAULTS.hyper_prior,
     ) -> None:
         self.length_scale = length_scale
         self.signal_variance = signal_variance
@@ -430,36 +476,26 @@ class LaplaceGPC:
         self.hyper_prior = hyper_prior
 
     # -- scikit-learn conventions -------------------------------------------------------------
-    @classmethod
-    def _param_names(cls) -> list[str]:
-        sig = inspect.signature(cls.__init__)
-        return [p for p in sig.parameters if p != "self"]
+    # get_params / set_params / repr / score come from BaseEstimator and ClassifierMixin.
+    def __sklearn_is_fitted__(self) -> bool:
+        return hasattr(self, "_model")
 
-    def get_params(self, deep: bool = True) -> dict[str, Any]:
-        return {name: getattr(self, name) for name in self._param_names()}
+    def __getstate__(self) -> dict[str, Any]:
+        # The compiled model is rebuilt from plain arrays (what ``save`` writes) on unpickling:
+        # joblib and scikit-learn's tools copy estimators between processes this way.
+        state = super().__getstate__()
+        if "_model" in state:
+            state = dict(state)
+            del state["_model"]
+            state["_fitted_state"] = self.state()
+        return state
 
-    def set_params(self, **params: Any) -> LaplaceGPC:
-        valid = set(self._param_names())
-        for key, value in params.items():
-            if key not in valid:
-                raise ValueError(
-                    f"invalid parameter {key!r} for LaplaceGPC; valid: {sorted(valid)}"
-                )
-            setattr(self, key, value)
-        return self
-
-    def __repr__(self) -> str:
-        defaults = {
-            name: p.default
-            for name, p in inspect.signature(type(self).__init__).parameters.items()
-            if name != "self"
-        }
-        changed = [
-            f"{k}={v!r}"
-            for k, v in self.get_params().items()
-            if not _same(defaults.get(k, inspect.Parameter.empty), v)
-        ]
-        return f"LaplaceGPC({', '.join(changed)})"
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        state = dict(state)
+        arrays = state.pop("_fitted_state", None)
+        super().__setstate__(state)
+        if arrays is not None:
+            self._model = type(self).from_state(arrays)._model
 
     # -- fitting ------------------------------------------------------------------------------
     def _spec(self, n_features: int) -> dict[str, Any]:
@@ -477,6 +513,10 @@ class LaplaceGPC:
                 ls = np.repeat(ls, m)
             if ls.size != m:
                 raise ValueError(f"length_scale has {ls.size} values for {m} modalities")
+            if not np.all(np.isfinite(ls) & (ls > 0)):
+                raise ValueError(
+                    f"length_scale must be 'auto' or finite numbers > 0, got {self.length_scale!r}"
+                )
             length_scales = [float(v) for v in ls]
         if self.modality_weights is None:
             weights = [1.0 / m] * m
@@ -498,10 +538,7 @@ class LaplaceGPC:
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < 0:
                 raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
-        if self.n_jobs is not None and (
-            not isinstance(self.n_jobs, (int, np.integer)) or self.n_jobs < 1
-        ):
-            raise ValueError(f"n_jobs must be None or a positive integer, got {self.n_jobs!r}")
+        _threads(self.n_jobs)  # checks the value
         return dict(
             modality_names=names,
             modalities=groups,
@@ -536,7 +573,7 @@ class LaplaceGPC:
             newton_tol=float(self.newton_tol),
             max_jitter=float(self.max_jitter),
             approximation=self.approximation,
-            n_threads=int(self.n_jobs or 0),
+            n_threads=_threads(self.n_jobs),
             **(spec["hyper_prior"].settings() if spec["hyper_prior"] is not None else {}),
         )
 
@@ -570,16 +607,15 @@ class LaplaceGPC:
         thetas: np.ndarray | None,
         starts: Mapping[Any, Mapping[str, Any]] | None = None,
     ) -> LaplaceGPC:
-        X = _as_matrix(X, "X")
-        y = np.asarray(y)
-        if y.ndim != 1:
-            raise ValueError(f"y must be 1-D, got shape {y.shape}")
-        if y.shape[0] != X.shape[0]:
-            raise ValueError(f"X has {X.shape[0]} rows but y has {y.shape[0]} labels")
+        # Non-finite values are left to the core, whose message names the row and column.
+        X, y = validate_data(self, X, y, dtype=np.float64, ensure_all_finite=False)
+        X = np.ascontiguousarray(X)
+        check_classification_targets(y)
         classes, labels = np.unique(y, return_inverse=True)
         if classes.size < 2:
             raise ValueError(
-                f"LaplaceGPC needs at least two classes in y, got only {classes.tolist()!r}"
+                f"LaplaceGPC needs at least two classes in y, got only one class: "
+                f"{classes.tolist()!r}"
             )
         spec = self._spec(X.shape[1])
         used = _normalise_sources(sources, classes, X.shape[1], spec["free"]["transfer_lambda"])
@@ -619,6 +655,7 @@ class LaplaceGPC:
         self.jitter_ = np.asarray(model.jitter)
         self.converged_ = np.asarray(model.optimizer_converged)
         self.n_evaluations_ = np.asarray(model.evaluations)
+        self.n_iter_ = np.asarray(model.iterations)
         self.hyperparameter_names_ = self._names(model.n_lambdas)
         return self
 
@@ -693,7 +730,12 @@ class LaplaceGPC:
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "_model"):
-            raise NotFittedError("this LaplaceGPC is not fitted yet; call fit(X, y) first")
+            raise _NotFitted("this LaplaceGPC is not fitted yet; call fit(X, y) first")
+
+    def _test_matrix(self, X: Any) -> np.ndarray:
+        self._check_fitted()
+        X = validate_data(self, X, reset=False, dtype=np.float64, ensure_all_finite=False)
+        return np.ascontiguousarray(X)
 
     # -- fitted views -------------------------------------------------------------------------
     @property
@@ -755,12 +797,12 @@ class LaplaceGPC:
         a single classifier, the first column is the complement of the second.
         """
         self._check_fitted()
-        return np.asarray(self._model.predict_proba_binary(_as_matrix(X, "X", self.n_features_in_)))
+        return np.asarray(self._model.predict_proba_binary(self._test_matrix(X)))
 
     def predict_proba(self, X: Any) -> np.ndarray:
         """Class probabilities (n_samples, n_classes): one-vs-all probabilities normalised."""
         self._check_fitted()
-        return np.asarray(self._model.predict_proba(_as_matrix(X, "X", self.n_features_in_)))
+        return np.asarray(self._model.predict_proba(self._test_matrix(X)))
 
     def predict(self, X: Any) -> np.ndarray:
         self._check_fitted()
@@ -769,12 +811,8 @@ class LaplaceGPC:
     def latent(self, X: Any) -> tuple[np.ndarray, np.ndarray]:
         """Latent predictive means and variances per classifier, each (n_samples, n_classifiers)."""
         self._check_fitted()
-        mean, var = self._model.latent(_as_matrix(X, "X", self.n_features_in_))
+        mean, var = self._model.latent(self._test_matrix(X))
         return np.asarray(mean), np.asarray(var)
-
-    def score(self, X: Any, y: Any) -> float:
-        """Mean accuracy."""
-        return float(np.mean(self.predict(X) == np.asarray(y)))
 
     def log_marginal_likelihood(
         self, theta: Any = None, eval_gradient: bool = False, *, include_prior: bool = False
@@ -880,13 +918,6 @@ class LaplaceGPC:
             raise ValueError(f"{path}: not a saved LaplaceGPC (not an .npz archive)")
         with np.load(Path(path), allow_pickle=False) as data:
             return cls.from_state({k: data[k] for k in data.files})
-
-
-def _same(a: Any, b: Any) -> bool:
-    try:
-        return bool(a == b)
-    except Exception:  # arrays and other ambiguous comparisons
-        return a is b
 
 
 def _jsonable(value: Any) -> Any:

@@ -50,6 +50,16 @@ def test_no_pointer_outside_the_repository(md):
         assert not OUTSIDE.search(line), f"{md.name}:{n} points outside the repository: {line}"
 
 
+def test_no_pointer_outside_the_repository_in_code_or_build_files():
+    files = [ROOT / "Makefile", ROOT / "pyproject.toml", ROOT / "Cargo.toml", ROOT / ".ci" / "run"]
+    for folder, pattern in (("python", "*.py"), ("rust", "*.rs"), ("benches", "*.py")):
+        files += (ROOT / folder).rglob(pattern)
+    files += (ROOT / "benches").glob("*.md")
+    for path in files:
+        for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            assert not OUTSIDE.search(line), f"{path.relative_to(ROOT)}:{n}: {line}"
+
+
 @pytest.mark.parametrize("md", DOCS, ids=lambda p: p.relative_to(ROOT).as_posix())
 def test_relative_links_exist(md):
     for target in LINK.findall(_prose(md)):
@@ -104,3 +114,9 @@ def test_citation_and_licence_match_the_metadata():
 def test_ci_needs_nothing_outside_the_repository():
     script = (ROOT / ".ci" / "run").read_text()
     assert ".." not in script.replace('"$(dirname "$0")/.."', "")
+
+
+def test_the_paper_is_cited():
+    for name in ("README.md", "docs/design.md", "docs/experiments.md", "docs/method.md"):
+        text = (ROOT / name).read_text(encoding="utf-8")
+        assert "10.3390/s18020634" in text and "Kaboli" in text, name

@@ -6,7 +6,6 @@ likelihoods and their gradients are compared with values that implementation sav
 from pathlib import Path
 
 import numpy as np
-
 from aptkt.gp import LaplaceGPC, TransferSource
 
 REFERENCE = Path(__file__).with_name("data") / "paper_kernel_reference.npz"
@@ -27,7 +26,8 @@ def problem():
 def fits(X, y, source, make_source):
     fixed = LaplaceGPC([1.3, 0.9], 2.0, modalities=MODALITIES, optimize=False)
     fixed.fit(X, y, sources={0: make_source(source, 0.7)})
-    fitted = LaplaceGPC(modalities=MODALITIES, n_restarts=2, random_state=5)
+    # The defaults of the time, spelled out (they have changed since).
+    fitted = LaplaceGPC(1.0, modalities=MODALITIES, n_restarts=2, max_iter=200, random_state=5)
     fitted.fit(X, y, sources={0: make_source(source, 0.6)})
     return fixed, fitted
 

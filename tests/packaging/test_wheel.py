@@ -21,6 +21,7 @@ import venv
 import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -138,3 +139,36 @@ for transfer in ("paper", "none"):
     assert set(results) == {"paper", "none"}
     for accuracy in results.values():
         assert 0.75 <= float(accuracy) <= 1.0
+
+
+def test_installed_command_line_learns_from_a_table(fresh, tmp_path):
+    """``aptkt learn --table`` from the installed command: the demo's files for three methods."""
+    lines = ["object,action,trial,force.0,thermal.0"]
+    centres = {"old_a": 0.0, "old_b": 4.0, "new_a": 0.5, "new_b": 4.5}
+    rng = np.random.default_rng(1)
+    for obj, c in centres.items():
+        for trial in range(4):
+            force, heat = c + rng.normal(), -c + rng.normal()
+            lines.append(f"{obj},press,{trial},{force!r},{heat!r}")
+    (tmp_path / "features.csv").write_text("\n".join(lines) + "\n")
+    out = _run(
+        fresh,
+        str(fresh / "bin" / "aptkt"),
+        "learn",
+        "--table",
+        "features.csv",
+        "--prior-objects",
+        "old_a,old_b",
+        "--objects",
+        "new_a,new_b",
+        "--budget",
+        "2",
+        "--runs",
+        "1",
+        "-o",
+        "learned",
+        cwd=tmp_path,
+    )
+    assert out.returncode == 0, out.stderr
+    for name in ("results.csv", "summary.json", "learning_curves.png", "prior.npz"):
+        assert (tmp_path / "learned" / name).is_file(), name

@@ -133,3 +133,33 @@ def test_lean_force_control_reads_what_the_skin_reads():
     # the wire's resolution (rare rounding flips).
     assert np.abs(a.temp - b.temp).max() <= 0.5 + 1e-9 and np.mean(a.temp != b.temp) < 1e-3
     assert np.abs(a.acc - b.acc).max() <= 2 / 256 and np.mean(a.acc != b.acc) < 1e-3
+
+
+@pytest.mark.parametrize(("obj", "action"), [("rough_sponge", "S1"), ("ceramic_tile", "S4")])
+def test_native_force_loop_matches_the_python_loop(obj, action):
+    """The slide's force loop in the compiled core ticks exactly as the Python loop: the same
+    recording to the last bit."""
+    act = PAPER_ACTIONS[action]
+    recs = []
+    for native in (True, False):
+        world = SimWorld(seed=3)
+        with world.session(obj, action, 1, action=act) as s:
+            s.robot.native_force_loop = native
+            recs.append(explore(s.robot, s.skin, s.placement, act, trial=1, settings=FAST))
+    a, b = (r.samples for r in recs)
+    assert len(a) > 1000
+    for field in ("cell_id", "t_ns", "force", "acc", "temp", "proximity"):
+        assert np.array_equal(getattr(a, field), getattr(b, field)), field
+    assert recs[0].metadata["contact_z"] == recs[1].metadata["contact_z"]
+
+
+@pytest.mark.parametrize("native", [True, False])
+def test_force_limit_stops_the_slide_in_either_loop(native):
+    world = SimWorld(seed=5, limits=SafetyLimits(max_normal_force=1.0))
+    act = ExploratoryAction("pushy", Movement.SLIDE, normal_force=0.99, speed=0.01, slide_time=1.0)
+    with world.session("metal_toolbox", "pushy", 0, action=act) as s:
+        s.robot.native_force_loop = native
+        s.robot.force_gain = 0.5  # an aggressive loop overshoots the 1 N limit
+        with pytest.raises(TrialFault, match="SafetyLimitError: .*under force control"):
+            explore(s.robot, s.skin, s.placement, act, settings=FAST)
+        assert s.engine.wrench() == 0.0  # retracted

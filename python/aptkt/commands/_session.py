@@ -6,15 +6,16 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from aptkt.commands._checks import at_least, input_file
 from aptkt.errors import ConfigError
 
 
-def add_session_arguments(p: argparse.ArgumentParser) -> None:
+def add_session_arguments(p: argparse.ArgumentParser, *, robot_required: bool = True) -> None:
     g = p.add_argument_group("robot and skin")
     g.add_argument(
         "--robot",
         choices=("ur10", "sim"),
-        required=True,
+        required=robot_required,
         help="ur10: the arm through ur_rtde with a hardware skin; sim: the simulated world (fast)",
     )
     g.add_argument(
@@ -94,6 +95,7 @@ def available_actions(args: argparse.Namespace) -> dict[str, Any]:
 
     actions = dict(PAPER_ACTIONS)
     if args.actions_file:
+        input_file(args.actions_file, "--actions-file")
         try:
             actions.update(actions_from_toml(args.actions_file))
         except (OSError, ValueError) as exc:
@@ -122,8 +124,7 @@ def make_session(args: argparse.Namespace, *, seed: int = 0) -> Any:
     """The (not yet entered) live session the options describe."""
     from aptkt.actions import ExplorationSettings
 
-    if not args.thermal_wait >= 0:
-        raise ConfigError("--thermal-wait must be >= 0")
+    at_least(args.thermal_wait, 0, "--thermal-wait")
     settings = ExplorationSettings(thermal_wait=args.thermal_wait)
     if args.robot == "sim":
         from aptkt.runtime.sessions import SimSession
@@ -152,6 +153,9 @@ def make_session(args: argparse.Namespace, *, seed: int = 0) -> Any:
         raise ConfigError("--objects-file: only for --robot sim")
     if not args.workspace:
         raise ConfigError("--robot ur10 needs --workspace FILE (where each object lies)")
+    for option, value in (("--workspace", args.workspace), ("--patch", args.patch)):
+        if value:
+            input_file(value, option)
     if bool(args.skin) == bool(args.tsu):
         raise ConfigError(
             "--robot ur10 needs the skin: --skin PORT (USB adapter) or --tsu (UDP), not both"

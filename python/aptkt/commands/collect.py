@@ -14,6 +14,7 @@ from aptkt.commands._session import (
     pick_actions,
     split_names,
 )
+from aptkt.commands._checks import at_least, output_file, resume_or_overwrite
 from aptkt.errors import ConfigError
 
 #: Exit code when a robot or skin fault stopped the collection mid-trial (1: bad input).
@@ -83,6 +84,11 @@ def _prompt(trial: int) -> None:
 def run(args: argparse.Namespace) -> int:
     from aptkt.runtime.collection import CollectionAborted, CollectionPlan, collect
 
+    at_least(args.repetitions, 1, "--repetitions")
+    at_least(args.first_trial, 0, "--first-trial")
+    at_least(args.seed, 0, "--seed")
+    resume_or_overwrite(args.resume, args.overwrite)
+    output_file(args.output)
     objects = split_names(args.objects, "--objects")
     available = available_actions(args)
     names = split_names(args.actions, "--actions") or list(available)

@@ -6,6 +6,14 @@ import argparse
 import json
 import sys
 
+from aptkt.commands._checks import (
+    at_least,
+    input_file,
+    output_file,
+    resume_or_overwrite,
+    rewritable_file,
+)
+from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
 
 
@@ -83,6 +91,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--no-progress", action="store_true", help="no progress bar")
     f.set_defaults(func=run_features)
 
+    x = ds.add_parser(
+        "export-features",
+        help="write the feature observations as a feature table (CSV or HDF5) for aptkt learn --table",
+        description="One row per recording: object, action, trial and the feature columns "
+        "<modality>.<k> (see docs/feature-tables.md). Features not yet stored are extracted first.",
+    )
+    x.add_argument("file", metavar="FILE", help="data set (HDF5)")
+    x.add_argument(
+        "-o", "--output", required=True, metavar="TABLE", help="table to write (.csv, .h5)"
+    )
+    x.add_argument(
+        "--actions", metavar="P1,S1,...", help="only these actions (default: all recorded)"
+    )
+    x.add_argument("--objects", metavar="A,B,...", help="only these objects (default: all)")
+    x.add_argument("--no-progress", action="store_true", help="no progress bar")
+    x.set_defaults(func=run_export_features)
+
     r = ds.add_parser(
         "repair",
         help="make a file whose writer died appendable again (keeps every complete recording)",
@@ -94,22 +119,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.set_defaults(func=run_repair)
 
 
-def _split(text: str | None) -> list[str] | None:
-    if text is None:
-        return None
-    items = [x.strip() for x in text.split(",") if x.strip()]
-    if not items:
-        raise ConfigError("expected a comma-separated list of names")
-    return items
-
-
 def build_plan(args: argparse.Namespace):  # -> GenerationPlan
     from aptkt.actions import PAPER_ACTIONS, actions_from_toml
     from aptkt.runtime.generation import GenerationPlan
     from aptkt.sim.objects import load_library
 
+    at_least(args.seed, 0, "--seed")
+    at_least(args.first_trial, 0, "--first-trial")
+    resume_or_overwrite(args.resume, args.overwrite)
+    output_file(args.output)
     library = load_library(*args.objects_file)
-    objects = _split(args.objects) or list(library)
+    objects = split_names(args.objects, "--objects") or list(library)
     unknown = [o for o in objects if o not in library]
     if unknown:
         raise ConfigError(
@@ -122,7 +142,7 @@ def build_plan(args: argparse.Namespace):  # -> GenerationPlan
             raise ConfigError(f"--actions-file: {exc}") from None
     else:
         available = dict(PAPER_ACTIONS)
-    names = _split(args.actions) or list(available)
+    names = split_names(args.actions, "--actions") or list(available)
     unknown = [a for a in names if a not in available]
     if unknown:
         raise ConfigError(
@@ -161,6 +181,7 @@ def run_generate(args: argparse.Namespace) -> int:
 def run_info(args: argparse.Namespace) -> int:
     from aptkt.data.store import DatasetReader
 
+    input_file(args.file, "FILE")
     with DatasetReader(args.file) as rd:
         info = rd.info()
     if args.json:
@@ -170,6 +191,22 @@ def run_info(args: argparse.Namespace) -> int:
     print(
         f"  {info['recordings']} recordings, {info['samples']} samples, {info['recorded_seconds']:.1f} s recorded"
     )
+    if info["damaged"]:
+        shown = ", ".join(info["damaged"][:10]) + (", ..." if len(info["damaged"]) > 10 else "")
+        print(
+            f"  DAMAGED: {len(info['damaged'])} recording(s) cannot be read ({shown}); "
+            f"'aptkt dataset repair {args.file}' keeps the {info['recordings']} readable ones"
+        )
+    if info["incomplete"]:
+        print(
+            f"  {info['incomplete']} more recording was being appended when its writer stopped "
+            "(left out)"
+        )
+    if info["writer_died"]:
+        print(
+            "  its writer died without closing it: readable as it is; run "
+            f"'aptkt dataset repair {args.file}' before appending to it"
+        )
     print(
         f"  {info['file_bytes'] / 1e6:.2f} MB on disk, {info['bytes_per_sample']:.2f} bytes per sample"
     )
@@ -194,9 +231,10 @@ def run_info(args: argparse.Namespace) -> int:
 def run_features(args: argparse.Namespace) -> int:
     from aptkt.learning.dataset import extract_features
 
+    rewritable_file(args.file)
     counts = extract_features(
         args.file,
-        actions=_split(args.actions),
+        actions=split_names(args.actions, "--actions"),
         progress=not args.no_progress and sys.stderr.isatty(),
     )
     print(
@@ -205,12 +243,36 @@ def run_features(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_export_features(args: argparse.Namespace) -> int:
+    from aptkt.data.store import DatasetError
+    from aptkt.learning.dataset import load_observations
+    from aptkt.learning.feature_table import write_feature_table
+
+    try:
+        table = load_observations(
+            args.file,
+            actions=_split(args.actions),
+            objects=_split(args.objects),
+            progress=not args.no_progress and sys.stderr.isatty(),
+        )
+    except (DatasetError, KeyError, OSError) as exc:
+        raise ConfigError(f"{args.file}: {exc}") from None
+    empty = [a for a, obs in table.items() if len(obs) == 0]
+    if empty:
+        raise ConfigError(f"{args.file}: no observations of {', '.join(empty)} for these objects")
+    write_feature_table(args.output, table)
+    rows = sum(len(obs) for obs in table.values())
+    print(f"{args.output}: {rows} rows ({', '.join(f'{a} {len(o)}' for a, o in table.items())})")
+    return 0
+
+
 def run_repair(args: argparse.Namespace) -> int:
     from aptkt.data.store import repair
 
+    rewritable_file(args.file)
     kept = repair(args.file, backup=not args.no_backup)
     print(
-        f"{args.file}: repaired, {kept} complete recordings kept"
+        f"{args.file}: repaired, {kept} readable recordings kept"
         + ("" if args.no_backup else f" (original kept as {args.file}.crashed)")
     )
     return 0

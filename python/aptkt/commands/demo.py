@@ -41,12 +41,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from aptkt.commands._checks import at_least, output_dir
     from aptkt.experiments.demo import DemoSettings, run_demo
 
-    if args.jobs < 1 or args.trials < 1 or args.budget < 0:
-        from aptkt.errors import ConfigError
-
-        raise ConfigError("--jobs and --trials must be >= 1 and --budget >= 0")
+    at_least(args.jobs, 1, "--jobs")
+    at_least(args.trials, 1, "--trials")
+    at_least(args.budget, 0, "--budget")
+    at_least(args.seed, 0, "--seed")
+    output_dir(args.output)
     common = dict(output=args.output, seed=args.seed, jobs=args.jobs)
     settings = (
         DemoSettings.quick(**common)

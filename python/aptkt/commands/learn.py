@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from aptkt.commands import learn_table
 from aptkt.commands._session import (
     add_action_arguments,
     add_session_arguments,
@@ -14,6 +15,7 @@ from aptkt.commands._session import (
     pick_actions,
     split_names,
 )
+from aptkt.commands._checks import at_least, input_file, output_dir, output_file
 from aptkt.errors import ConfigError
 
 #: Exit code when a robot or skin fault stopped the run (1: bad input).
@@ -30,12 +32,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "new objects' observations and models to OUTPUT/learned_prior.npz, usable later as --prior. A live "
         "run has no test set: accuracy is reported only with --test FILE.",
     )
-    add_session_arguments(p)
+    add_session_arguments(p, robot_required=False)  # required unless --table
     p.add_argument(
         "--prior",
-        required=True,
         metavar="PRIOR.npz",
-        help="prior knowledge (aptkt.learning.PriorKnowledge file)",
+        help="prior knowledge (aptkt.learning.PriorKnowledge file; required unless --table)",
     )
     p.add_argument(
         "--objects",
@@ -68,10 +69,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--transfer",
         choices=("paper", "multi", "none", "control"),
-        default="paper",
+        default=None,
         help="paper: APTKT's transfer (Eq. 2-3); multi: from every prior above eps_neg; "
         "none: the baseline (nothing of the prior); control: the prior's feature space without "
-        "transfer (default %(default)s)",
+        "transfer (default paper)",
     )
     p.add_argument(
         "--auxiliary",
@@ -109,6 +110,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=0,
         help="seed of the learner (and of the simulated world) (default %(default)s)",
     )
+    learn_table.add_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -116,6 +118,23 @@ def run(args: argparse.Namespace) -> int:
     from aptkt.learning import LearnerConfig, PriorKnowledge
     from aptkt.runtime.live_learning import LiveLearningAborted, learn_live
 
+    if args.table:
+        return learn_table.run(args)
+    for option, value in (("--robot", args.robot), ("--prior", args.prior)):
+        if not value:
+            raise ConfigError(f"{option} is required (or learn offline with --table FILE)")
+    offline = learn_table.table_only(args)
+    if offline:
+        raise ConfigError(f"{', '.join(offline)}: only with --table FILE")
+    args.transfer = args.transfer or "paper"
+
+    input_file(args.prior, "--prior")
+    at_least(args.seed, 0, "--seed")
+    at_least(args.budget, 0, "--budget")
+    at_least(args.patience, 1, "--patience")
+    output_dir(args.output)
+    if args.record:
+        output_file(args.record, "--record")
     try:
         prior = PriorKnowledge.load(args.prior)
     except (OSError, ValueError, KeyError) as exc:

@@ -7,6 +7,8 @@ import json
 import sys
 from pathlib import Path
 
+from aptkt.commands._checks import at_least, input_file, output_file
+from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
 
 #: A modality's RBF kernel that varies by less than this over the training data (between the two
@@ -52,10 +54,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     i.set_defaults(func=run_inspect)
 
 
-def _split(text: str | None) -> list[str] | None:
-    return None if text is None else [t.strip() for t in text.split(",") if t.strip()]
-
-
 def _trials(text: str | None) -> range | None:
     if text is None:
         return None
@@ -76,11 +74,20 @@ def run_build(args: argparse.Namespace) -> int:
 
     if not args.data.exists():
         raise ConfigError(f"{args.data}: no such data set")
+    input_file(args.data, "DATA")
+    at_least(args.seed, 0, "--seed")
+    at_least(args.restarts, 0, "--restarts")
+    # Before the features are extracted and the models fitted: not after.
+    output_file(args.output)
+    objects = split_names(args.objects, "--objects")
+    if objects is not None and len(objects) < 2:
+        raise ConfigError("--objects: prior knowledge needs at least two objects")
+    trials = _trials(args.trials)
     table = load_observations(
         args.data,
-        actions=_split(args.actions),
-        objects=_split(args.objects),
-        trials=_trials(args.trials),
+        actions=split_names(args.actions, "--actions"),
+        objects=objects,
+        trials=trials,
         progress=sys.stderr.isatty(),
     )
     empty = [a for a, obs in table.items() if len(obs) == 0]
@@ -104,8 +111,7 @@ def run_build(args: argparse.Namespace) -> int:
 def run_inspect(args: argparse.Namespace) -> int:
     from aptkt.learning import PriorKnowledge
 
-    if not args.file.exists():
-        raise ConfigError(f"{args.file}: no such file")
+    input_file(args.file, "FILE")
     try:
         prior = PriorKnowledge.load(args.file)
     except (ValueError, KeyError, OSError) as exc:

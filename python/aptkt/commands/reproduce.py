@@ -63,13 +63,22 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from aptkt.commands._checks import at_least, input_file, output_dir
     from aptkt.errors import ConfigError
     from aptkt.experiments.reproduce import FIGURE_NAMES, ReproduceSettings, reproduce
 
-    if args.jobs < 1:
-        raise ConfigError("--jobs must be >= 1")
-    if args.seed < 0:
-        raise ConfigError("--seed must be >= 0")
+    at_least(args.jobs, 1, "--jobs")
+    at_least(args.seed, 0, "--seed")
+    output_dir(args.output)
+    if args.data is not None:
+        input_file(args.data, "--data")
+    if args.scheduler:
+        try:
+            import dask.distributed  # noqa: F401
+        except ImportError:
+            raise ConfigError(
+                "--scheduler needs dask[distributed]: pip install 'aptkt[dask]'"
+            ) from None
     figures = FIGURE_NAMES if args.name == "all" else (args.name,)
     settings = ReproduceSettings(
         figures=figures,

@@ -3,7 +3,14 @@
 collecting them on a robot are in :mod:`aptkt.runtime`."""
 
 from aptkt.data.schema import SCHEMA, SCHEMA_VERSION
-from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, repair, write_features
+from aptkt.data.store import (
+    DatasetError,
+    DatasetReader,
+    DatasetWriter,
+    repair,
+    store_features,
+    write_features,
+)
 
 __all__ = [
     "SCHEMA",
@@ -12,5 +19,6 @@ __all__ = [
     "DatasetReader",
     "DatasetWriter",
     "repair",
+    "store_features",
     "write_features",
 ]

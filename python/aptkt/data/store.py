@@ -20,11 +20,17 @@ file whose writer died, :func:`repair` first copies its complete recordings into
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import json
 import os
+import shutil
+import tempfile
 import time
+import zlib
 from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -46,6 +52,8 @@ __all__ = [
     "DatasetError",
     "DatasetWriter",
     "DatasetReader",
+    "PackedRecording",
+    "pack_recording",
     "repair",
     "write_features",
     "recording_key",
@@ -55,7 +63,10 @@ __all__ = [
 
 _CHUNK_ROWS = 16384
 _META_CHUNK_BYTES = 4096  # a recording's metadata is ≈ 3 KB of JSON
-_COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+#: Level 1: the samples are small integers after the byte shuffle; higher levels cost several
+#: times the CPU for a few percent of file size.
+_GZIP_LEVEL = 1
+_COMPRESSION = {"compression": "gzip", "compression_opts": _GZIP_LEVEL, "shuffle": True}
 _LOCK_PATIENCE_S = 2.0
 
 _T = TypeVar("_T")
@@ -76,6 +87,148 @@ def _while_locked(step: Callable[[], _T]) -> _T:
                 raise
         time.sleep(delay)
         delay = min(2 * delay, 0.05)
+
+
+# A SWMR reader retries a metadata read whose checksum fails (the writer may be rewriting that
+# block at this moment); HDF5's default of 100 attempts backs off exponentially, so on a file
+# that is really damaged (truncated) a single read took minutes. A handful of quick attempts
+# covers a block caught mid-write.
+_SWMR_READ_ATTEMPTS = 12
+
+
+@functools.cache
+def _hdf5_library() -> ctypes.CDLL | None:
+    """The HDF5 library h5py runs on (for the one setting h5py does not expose)."""
+    candidates = sorted((Path(h5py.__file__).parent.parent / "h5py.libs").glob("libhdf5-*"))
+    if not candidates:
+        try:
+            with open("/proc/self/maps") as fh:
+                candidates = sorted(
+                    {
+                        Path(line.split()[-1])
+                        for line in fh
+                        if "/libhdf5." in line or "/libhdf5-" in line
+                    }
+                )
+        except OSError:
+            return None
+    for lib in candidates:
+        try:
+            handle = ctypes.CDLL(str(lib))
+            handle.H5Pset_metadata_read_attempts.argtypes = [ctypes.c_int64, ctypes.c_uint]
+            return handle
+        except (OSError, AttributeError):
+            continue
+    return None
+
+
+def _open_swmr_read(path: Path) -> h5py.File:
+    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+    lib = _hdf5_library()
+    if lib is not None:
+        lib.H5Pset_metadata_read_attempts(fapl.id, _SWMR_READ_ATTEMPTS)
+    fid = h5py.h5f.open(os.fsencode(path), h5py.h5f.ACC_RDONLY | h5py.h5f.ACC_SWMR_READ, fapl=fapl)
+    return h5py.File(fid)
+
+
+# -- files whose writer died outside SWMR mode ---------------------------------------------------
+# HDF5 marks a file "open for writing" in its superblock while a writer has it open. A writer in
+# SWMR mode marks it "SWMR writing" too, and SWMR readers accept it even after that writer died.
+# A writer killed *outside* SWMR mode (between opening a file and switching to SWMR, or any
+# older aptkt writing features in place) leaves a mark every HDF5 open then refuses. What it
+# wrote is intact: the reader works on a private copy whose mark is cleared (what HDF5's own
+# h5clear does), never touching the file itself.
+
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def _lookup3(data: bytes) -> int:
+    """Bob Jenkins' lookup3 ``hashlittle`` with seed 0: HDF5's metadata checksum."""
+    mask = 0xFFFFFFFF
+
+    def rot(x: int, k: int) -> int:
+        return ((x << k) | (x >> (32 - k))) & mask
+
+    n = len(data)
+    a = b = c = (0xDEADBEEF + n) & mask
+    k = 0
+    while n > 12:
+        a = (a + int.from_bytes(data[k : k + 4], "little")) & mask
+        b = (b + int.from_bytes(data[k + 4 : k + 8], "little")) & mask
+        c = (c + int.from_bytes(data[k + 8 : k + 12], "little")) & mask
+        a = (a - c) & mask ^ rot(c, 4)
+        c = (c + b) & mask
+        b = (b - a) & mask ^ rot(a, 6)
+        a = (a + c) & mask
+        c = (c - b) & mask ^ rot(b, 8)
+        b = (b + a) & mask
+        a = (a - c) & mask ^ rot(c, 16)
+        c = (c + b) & mask
+        b = (b - a) & mask ^ rot(a, 19)
+        a = (a + c) & mask
+        c = (c - b) & mask ^ rot(b, 4)
+        b = (b + a) & mask
+        n -= 12
+        k += 12
+    if n == 0:
+        return c
+    tail = data[k:] + bytes(12 - n)
+    a = (a + int.from_bytes(tail[0:4], "little")) & mask
+    b = (b + int.from_bytes(tail[4:8], "little")) & mask
+    c = (c + int.from_bytes(tail[8:12], "little")) & mask
+    c = (c ^ b) - rot(b, 14) & mask
+    a = (a ^ c) - rot(c, 11) & mask
+    b = (b ^ a) - rot(a, 25) & mask
+    c = (c ^ b) - rot(b, 16) & mask
+    a = (a ^ c) - rot(c, 4) & mask
+    b = (b ^ a) - rot(a, 14) & mask
+    c = (c ^ b) - rot(b, 24) & mask
+    return c
+
+
+def _superblock(fh: Any) -> tuple[int, bytearray] | None:
+    """Offset and bytes of a version 2 or 3 superblock (the only ones with writer marks); HDF5
+    looks for it at 0, 512, 1024, 2048, ..."""
+    size = os.fstat(fh.fileno()).st_size
+    offset = 0
+    while offset + 12 <= size:
+        fh.seek(offset)
+        head = fh.read(12)
+        if head[:8] == _HDF5_SIGNATURE:
+            if head[8] not in (2, 3):
+                return None
+            fh.seek(offset)
+            return offset, bytearray(fh.read(12 + 4 * head[9] + 4))
+        offset = 512 if offset == 0 else 2 * offset
+    return None
+
+
+def _writer_mark(path: Path) -> int:
+    """The superblock's file consistency flags (0: no writer has it open)."""
+    try:
+        with open(path, "rb") as fh:
+            sb = _superblock(fh)
+    except OSError:
+        return 0
+    return 0 if sb is None else sb[1][11]
+
+
+def _copy_without_writer_mark(path: Path, dest: Path) -> None:
+    shutil.copyfile(path, dest)
+    with open(dest, "r+b") as fh:
+        found = _superblock(fh)
+        if found is None:
+            return
+        offset, sb = found
+        sb[11] = 0
+        sb[-4:] = _lookup3(bytes(sb[:-4])).to_bytes(4, "little")
+        fh.seek(offset)
+        fh.write(sb)
+
+
+def _refused_for_writer_mark(exc: BaseException) -> bool:
+    text = str(exc)
+    return "not already open for SWMR writing" in text or "already open for write" in text
 
 
 class DatasetError(AptktError):
@@ -183,6 +336,76 @@ def raw_to_samples(raw: Mapping[str, np.ndarray], metadata: Mapping[str, Any]) -
         acc=np.asarray(raw["acc"], dtype=np.float64) * (1 / 256),
         temp=np.stack([temp[:, 0] * 0.5 + 24.0, temp[:, 1] * 0.03125], axis=1),
         force=gain * (np.asarray(raw["force"], dtype=np.float64) * (1 / 1024) - offset),
+    )
+
+
+@dataclass(frozen=True)
+class PackedRecording:
+    """A recording as the writer stores it: its key, times, metadata JSON and, per sample field,
+    the compressed HDF5 chunks of its raw integers (byte shuffle + deflate, exactly the
+    datasets' filter pipeline), ready to be placed. Compact and cheap to pass between
+    processes, so that data set generation compresses in its workers and the single writer
+    only places chunks."""
+
+    key: tuple[str, str, int]
+    start_ns: int
+    stop_ns: int
+    rows: int
+    meta_json: str
+    chunks: dict[str, tuple[bytes, ...]]
+
+
+def _compress_chunks(
+    values: np.ndarray, tail: tuple[int, ...], dtype: np.dtype
+) -> tuple[bytes, ...]:
+    """The chunks of one field: rows padded with zeros to whole chunks, each chunk's bytes
+    shuffled (byte j of every element together, as HDF5's shuffle filter) and deflated."""
+    n = values.shape[0]
+    padded = np.zeros((_next_chunk_start(n, _CHUNK_ROWS), *tail), dtype=dtype)
+    padded[:n] = values
+    out = []
+    for start in range(0, padded.shape[0], _CHUNK_ROWS):
+        block = padded[start : start + _CHUNK_ROWS].reshape(-1).view(np.uint8)
+        shuffled = block.reshape(-1, dtype.itemsize).T.tobytes()
+        out.append(zlib.compress(shuffled, _GZIP_LEVEL))
+    return tuple(out)
+
+
+def pack_raw(
+    key: tuple[str, str, int],
+    start_ns: int,
+    stop_ns: int,
+    raw: Mapping[str, np.ndarray],
+    meta_json: str,
+) -> PackedRecording:
+    """Raw sample fields (see :data:`SAMPLE_FIELDS`) and metadata → a :class:`PackedRecording`."""
+    obj, action, trial = key
+    if len(obj.encode()) > 64 or len(action.encode()) > 32:
+        raise ValueError("object names are limited to 64 bytes and action names to 32")
+    n = int(np.asarray(raw["cell_id"]).shape[0])
+    chunks = {}
+    for name, (tail, dtype) in SAMPLE_FIELDS.items():
+        values = np.asarray(raw[name])
+        if values.shape != (n, *tail):
+            raise ValueError(f"{name}: expected shape {(n, *tail)}, got {values.shape}")
+        chunks[name] = _compress_chunks(values.astype(dtype, copy=False), tail, dtype)
+    return PackedRecording(
+        (str(obj), str(action), int(trial)), int(start_ns), int(stop_ns), n, meta_json, chunks
+    )
+
+
+def pack_recording(rec: Recording) -> PackedRecording:
+    """A recording → a :class:`PackedRecording` (raw integers of the wire, exact)."""
+    meta = dict(rec.metadata)
+    meta.setdefault("cells", list(rec.cells))
+    meta["silent_cells"] = list(rec.silent_cells)
+    raw = samples_to_raw(rec.samples, meta)
+    return pack_raw(
+        recording_key(rec),
+        rec.start_ns,
+        rec.stop_ns,
+        raw,
+        json.dumps(meta, sort_keys=True, default=_json_default),
     )
 
 
@@ -297,18 +520,7 @@ class DatasetWriter:
 
     def append(self, rec: Recording) -> int:
         """Store one recording (flushed before returning); returns its number in the file."""
-        key = recording_key(rec)
-        meta = dict(rec.metadata)
-        meta.setdefault("cells", list(rec.cells))
-        meta["silent_cells"] = list(rec.silent_cells)
-        raw = samples_to_raw(rec.samples, meta)
-        return self._append_raw(
-            key,
-            rec.start_ns,
-            rec.stop_ns,
-            raw,
-            json.dumps(meta, sort_keys=True, default=_json_default),
-        )
+        return self.append_packed(pack_recording(rec))
 
     def _append_raw(
         self,
@@ -318,12 +530,18 @@ class DatasetWriter:
         raw: Mapping[str, np.ndarray],
         meta_json: str,
     ) -> int:
+        return self.append_packed(pack_raw(key, start_ns, stop_ns, raw, meta_json))
+
+    def append_packed(self, rec: PackedRecording) -> int:
+        """Store a packed recording (see :func:`pack_recording`); flushed before returning."""
+        key = rec.key
         obj, action, trial = key
         if key in self._keys:
             raise DatasetError(f"{self.path}: {obj}/{action}/trial {trial} is already stored")
-        if len(obj.encode()) > 64 or len(action.encode()) > 32:
-            raise ValueError("object names are limited to 64 bytes and action names to 32")
-        n = int(raw["cell_id"].shape[0])
+        n = rec.rows
+        want = _next_chunk_start(n, _CHUNK_ROWS) // _CHUNK_ROWS
+        if any(len(rec.chunks.get(name, ())) != want for name in self._samples):
+            raise ValueError(f"packed recording {key}: expected {want} chunks per field")
         # Each recording starts on a fresh chunk of every dataset: chunks are then written once,
         # never rewritten by a later append — a rewritten compressed chunk moves, and a writer
         # killed before the move is on disk must not take an earlier recording with it. The
@@ -332,9 +550,10 @@ class DatasetWriter:
         # Samples first, then the metadata, the index row last: the index defines what exists.
         for name, ds in self._samples.items():
             ds.resize(row0 + n, axis=0)
-            if n:
-                ds[row0 : row0 + n] = raw[name]
-        meta_bytes = np.frombuffer(meta_json.encode("utf-8"), dtype=np.uint8)
+            for j, data in enumerate(rec.chunks[name]):
+                offset = (row0 + j * _CHUNK_ROWS,) + (0,) * (ds.ndim - 1)
+                ds.id.write_direct_chunk(offset, data)
+        meta_bytes = np.frombuffer(rec.meta_json.encode("utf-8"), dtype=np.uint8)
         meta0 = _next_chunk_start(self._meta.shape[0], _META_CHUNK_BYTES)
         self._meta.resize(meta0 + meta_bytes.size, axis=0)
         self._meta[meta0 : meta0 + meta_bytes.size] = meta_bytes
@@ -345,8 +564,8 @@ class DatasetWriter:
                     obj.encode(),
                     action.encode(),
                     trial,
-                    start_ns,
-                    stop_ns,
+                    rec.start_ns,
+                    rec.stop_ns,
                     row0,
                     row0 + n,
                     meta0,
@@ -399,21 +618,47 @@ class DatasetReader:
         self.path = Path(path)
         if not self.path.exists():
             raise DatasetError(f"{self.path}: no such file")
+        #: The file's writer died outside SWMR mode: it is read through a private copy.
+        self.writer_died = False
+        self._copy: Path | None = None
+        self._damaged: list[int] | None = None
         try:
-            self._f = _while_locked(lambda: h5py.File(self.path, "r", swmr=True))
+            self._f = _while_locked(lambda: _open_swmr_read(self.path))
         except OSError as exc:
-            raise DatasetError(f"{self.path}: not a readable HDF5 data set: {exc}") from exc
-        self.version = _check_schema(self._f, self.path)
-        self._meta = self._f["recordings/metadata"]
-        self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
-        # A snapshot: recordings appended after opening are not seen (reopen to see them).
-        index = _readable_prefix(self._f["recordings/index"])
+            if not _refused_for_writer_mark(exc):
+                raise DatasetError(f"{self.path}: not a readable HDF5 data set: {exc}") from exc
+            self._f = self._open_private_copy()
+        try:
+            self.version = _check_schema(self._f, self.path)
+            self._meta = self._f["recordings/metadata"]
+            self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
+            # A snapshot: recordings appended after opening are not seen (reopen to see them).
+            index = _readable_prefix(self._f["recordings/index"])
+        except (OSError, KeyError) as exc:
+            self.close()
+            raise DatasetError(
+                f"{self.path}: damaged: the file's structure cannot be read ({exc}); "
+                "no recording can be recovered from it"
+            ) from exc
         self.index = index[: self._complete(index)]
         #: Index rows of an append that was cut short (a writer killed mid-append, or one
         #: still running), left out: 0 or 1.
         # (A last index chunk past the end of the file is dropped by _readable_prefix and not
         # counted: it can only hold that same in-flight row.)
         self.incomplete = len(index) - len(self.index)
+
+    def _open_private_copy(self) -> h5py.File:
+        fd, name = tempfile.mkstemp(prefix=f"{self.path.name}.", suffix=".reading")
+        os.close(fd)
+        self._copy = Path(name)
+        try:
+            _copy_without_writer_mark(self.path, self._copy)
+            f = _open_swmr_read(self._copy)
+        except OSError as exc:
+            self._copy.unlink(missing_ok=True)
+            raise DatasetError(f"{self.path}: not a readable HDF5 data set: {exc}") from exc
+        self.writer_died = True
+        return f
 
     def _complete(self, index: np.ndarray) -> int:
         """How many leading rows of ``index`` are complete recordings. Only the last can be
@@ -456,6 +701,9 @@ class DatasetReader:
     def close(self) -> None:
         if self._f.id.valid:
             self._f.close()
+        if self._copy is not None:
+            self._copy.unlink(missing_ok=True)
+            self._copy = None
 
     def __len__(self) -> int:
         return int(self.index.shape[0])
@@ -526,21 +774,41 @@ class DatasetReader:
             return {}
         return {a: sorted(k for k in g[a] if k != "recording") for a in g}
 
+    def damaged(self) -> list[int]:
+        """Numbers of the indexed recordings whose samples or metadata cannot be read (a file
+        cut short, or damaged on disk). Reads every recording once."""
+        if self._damaged is None:
+            bad = []
+            for i in range(len(self)):
+                try:
+                    self.metadata(i)
+                    self.raw(i)
+                except (OSError, ValueError):
+                    bad.append(i)
+            self._damaged = bad
+        return list(self._damaged)
+
     def info(self) -> dict[str, Any]:
-        """A summary: counts per object and action, samples, size on disk, schema."""
-        objects = Counter(self.index["object"].astype(str).tolist())
-        actions = Counter(self.index["action"].astype(str).tolist())
-        rows = int(np.sum(self.index["row_stop"] - self.index["row_start"])) if len(self) else 0
-        durations = (self.index["stop_ns"] - self.index["start_ns"]) * 1e-9
+        """A summary of the readable recordings: counts per object and action, samples, size on
+        disk, schema; ``damaged`` lists ``object/action/trial`` of those that are not."""
+        damaged = self.damaged()
+        index = np.delete(self.index, damaged)
+        objects = Counter(index["object"].astype(str).tolist())
+        actions = Counter(index["action"].astype(str).tolist())
+        rows = int(np.sum(index["row_stop"] - index["row_start"])) if len(index) else 0
+        durations = (index["stop_ns"] - index["start_ns"]) * 1e-9
         return {
             "path": str(self.path),
             "schema": f"{self.attrs.get('schema')} v{self.attrs.get('schema_version')}",
             "software_version": self.attrs.get("software_version"),
-            "recordings": len(self),
+            "recordings": len(index),
+            "damaged": ["{}/{}/trial {}".format(*self.key(i)) for i in damaged],
+            "writer_died": self.writer_died,
+            "incomplete": self.incomplete,
             "objects": dict(objects),
             "actions": dict(actions),
             "samples": rows,
-            "recorded_seconds": float(durations.sum()) if len(self) else 0.0,
+            "recorded_seconds": float(durations.sum()) if len(index) else 0.0,
             "file_bytes": self.path.stat().st_size,
             "bytes_per_sample": self.path.stat().st_size / rows if rows else float("nan"),
             "features": self.feature_names(),
@@ -551,29 +819,66 @@ class DatasetReader:
 def write_features(
     path: str | Path, action: str, modality: str, recordings: Sequence[int], values: np.ndarray
 ) -> None:
-    """Store a feature matrix (one row per recording number) under ``/features/<action>``.
+    """Store a feature matrix (one row per recording number) under ``/features/<action>``
+    (see :func:`store_features`)."""
+    store_features(path, {action: (recordings, {modality: values})})
 
-    Opens the file for ordinary (non-SWMR) writing: no writer may be running.
-    """
-    values = np.asarray(values, dtype=np.float64)
-    recordings = np.asarray(recordings, dtype=np.int64)
-    if values.ndim != 2 or values.shape[0] != recordings.shape[0]:
-        raise ValueError("values must be (n_recordings, dim) with one row per recording number")
-    with h5py.File(path, "a", libver="latest") as f:
-        _check_schema(f, Path(path))
-        n = f["recordings/index"].shape[0]
-        if recordings.size and (recordings.min() < 0 or recordings.max() >= n):
-            raise ValueError(f"recording numbers must be in 0..{n - 1}")
-        g = f.require_group(f"features/{action}")
-        if "recording" in g and not np.array_equal(g["recording"][...], recordings):
-            raise ValueError(
-                f"features of {action!r} exist for other recordings; write all modalities together"
-            )
-        if "recording" not in g:
-            g.create_dataset("recording", data=recordings, track_times=False)
-        if modality in g:
-            del g[modality]
-        g.create_dataset(modality, data=values, track_times=False)
+
+def store_features(
+    path: str | Path,
+    features: Mapping[str, tuple[Sequence[int], Mapping[str, np.ndarray]]],
+) -> None:
+    """Store feature matrices: ``{action: (recording numbers, {modality: values})}``.
+
+    The file is never modified in place: the features are written into a copy that then
+    replaces it (a rename), so a kill at any moment leaves the file as it was, or with all the
+    features. No writer may be running (the copy would miss its later appends)."""
+    path = Path(path)
+    checked = {}
+    for action, (recordings, mods) in features.items():
+        recs = np.asarray(recordings, dtype=np.int64)
+        vals = {m: np.asarray(v, dtype=np.float64) for m, v in mods.items()}
+        for v in vals.values():
+            if v.ndim != 2 or v.shape[0] != recs.shape[0]:
+                raise ValueError(
+                    "values must be (n_recordings, dim) with one row per recording number"
+                )
+        checked[action] = (recs, vals)
+    if _writer_mark(path):
+        raise DatasetError(
+            f"{path}: a writer has the file open, or died without closing it; wait for it to "
+            f"finish, or run 'aptkt dataset repair {path}' first"
+        )
+    tmp = path.with_name(path.name + ".features-tmp")
+    try:
+        shutil.copyfile(path, tmp)
+        with h5py.File(tmp, "a", libver="latest") as f:
+            _check_schema(f, path)
+            n = f["recordings/index"].shape[0]
+            for action, (recs, vals) in checked.items():
+                if recs.size and (recs.min() < 0 or recs.max() >= n):
+                    raise ValueError(f"recording numbers must be in 0..{n - 1}")
+                g = f.require_group(f"features/{action}")
+                if "recording" in g and not np.array_equal(g["recording"][...], recs):
+                    if not set(vals) >= set(g) - {"recording"}:
+                        raise ValueError(
+                            f"features of {action!r} exist for other recordings; write all "
+                            "modalities together"
+                        )
+                    del g["recording"]
+                    for m in [k for k in g if k != "recording"]:
+                        del g[m]
+                if "recording" not in g:
+                    g.create_dataset("recording", data=recs, track_times=False)
+                for modality, values in vals.items():
+                    if modality in g:
+                        del g[modality]
+                    g.create_dataset(modality, data=values, track_times=False)
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def _readable_prefix(ds: h5py.Dataset) -> np.ndarray:
@@ -587,23 +892,33 @@ def _readable_prefix(ds: h5py.Dataset) -> np.ndarray:
 
 
 def repair(path: str | Path, *, backup: bool = True) -> int:
-    """Make a file whose writer died appendable again: copy its complete recordings into a
+    """Make a file whose writer died appendable again: copy every readable recording into a
     fresh file and put that in its place (the original is kept as ``<name>.crashed`` when
-    ``backup``). Returns the number of recordings kept. Also rewrites a file of an older
-    schema version in the current one."""
+    ``backup``). Returns the number of recordings kept (:attr:`DatasetReader.damaged` tells
+    which were not). Also rewrites a file of an older schema version in the current one. On
+    any failure the file is left as it was and no temporary file remains."""
     path = Path(path)
     tmp = path.with_name(path.name + ".repairing")
-    with DatasetReader(path) as src:
-        desc = src.description
-        with DatasetWriter(tmp, "w", description=desc, overwrite=True) as dst:
-            for i in range(len(src)):
-                r = src.index[i]
-                meta_json = json.dumps(src.metadata(i), sort_keys=True, default=_json_default)
-                dst._append_raw(
-                    src.key(i), int(r["start_ns"]), int(r["stop_ns"]), src.raw(i), meta_json
-                )
-        n = len(src)
-    if backup:
-        os.replace(path, path.with_name(path.name + ".crashed"))
-    os.replace(tmp, path)
+    try:
+        with DatasetReader(path) as src:
+            desc = src.description
+            with DatasetWriter(tmp, "w", description=desc, overwrite=True) as dst:
+                n = 0
+                for i in range(len(src)):
+                    try:
+                        meta = src.metadata(i)
+                        raw = src.raw(i)
+                    except (OSError, ValueError):  # damaged (e.g. lies past a truncation)
+                        continue
+                    r = src.index[i]
+                    meta_json = json.dumps(meta, sort_keys=True, default=_json_default)
+                    dst._append_raw(
+                        src.key(i), int(r["start_ns"]), int(r["stop_ns"]), raw, meta_json
+                    )
+                    n += 1
+        if backup:
+            os.replace(path, path.with_name(path.name + ".crashed"))
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
     return n

@@ -143,22 +143,22 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
     timings: dict[str, float] = {}
     scale = s.resolved_scale()
     out = Path(s.output)
-    out.mkdir(parents=True, exist_ok=True)
-
-    t0 = time.perf_counter()
-    data, data_info = prepare_data(s, scale)
-    fingerprint = data_fingerprint(data)
-    timings["data"] = time.perf_counter() - t0
-    ctx = Context(
-        scale=scale,
-        seed=s.seed,
-        data=str(data.resolve()),
-        fingerprint=fingerprint,
-        output=out.resolve(),
-        index=_paper_numbers(scale.objects),
-    )
+    # The executor first: an unreachable cluster is reported before minutes of simulation.
     executor = make_executor(s.jobs, s.scheduler)
     try:
+        out.mkdir(parents=True, exist_ok=True)
+        t0 = time.perf_counter()
+        data, data_info = prepare_data(s, scale)
+        fingerprint = data_fingerprint(data)
+        timings["data"] = time.perf_counter() - t0
+        ctx = Context(
+            scale=scale,
+            seed=s.seed,
+            data=str(data.resolve()),
+            fingerprint=fingerprint,
+            output=out.resolve(),
+            index=_paper_numbers(scale.objects),
+        )
         _say(f"planning {', '.join(s.figures)} ({scale.name} size) on {executor.description}")
         plans = {name: FIGURES[name].plan(ctx) for name in s.figures}
         tasks = {t.key: t for p in plans.values() for t in p.priors}

@@ -9,10 +9,10 @@ from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 from typing import Any
 
-from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
+from aptkt.learning import APTKT, LearnerConfig, LearningRun, PoolEnvironment, PriorKnowledge
 from aptkt.learning.dataset import load_observations
 
-__all__ = ["RunSpec", "execute", "flatten", "label", "run_many", "run_steps"]
+__all__ = ["RunSpec", "execute", "flatten", "label", "run_many", "run_steps", "step_rows"]
 
 
 @dataclass(frozen=True)
@@ -77,6 +77,11 @@ def run_steps(spec: RunSpec) -> list[dict[str, Any]]:
     run = learner.run(
         PoolEnvironment(pool, seed=spec.pool_seed), spec.actions, spec.new_objects, test
     )
+    return step_rows(run)
+
+
+def step_rows(run: LearningRun) -> list[dict[str, Any]]:
+    """One row per step of a finished run, with the transfer counts of :func:`run_steps`."""
     rows = []
     for step in run.steps:
         row = step.as_row()

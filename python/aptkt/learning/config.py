@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
-from aptkt.gp import LaplaceGPC
+from aptkt.gp import DEFAULTS, LaplaceGPC
 from aptkt.learning.transfer import RELATEDNESS, SOURCE_CHOICES, SOURCE_TASKS, TRANSFER_MODES
 
 __all__ = ["GPSettings", "LearnerConfig"]
@@ -16,12 +16,12 @@ __all__ = ["GPSettings", "LearnerConfig"]
 class GPSettings:
     """How the observation models (one-vs-all Laplace GPCs) are fitted."""
 
-    n_restarts: int = 1
-    max_iter: int = 100
-    length_scale: float | str = "auto"
-    signal_variance: float = 1.0
-    approximation: str = "erf"
-    n_jobs: int | None = None
+    n_restarts: int = DEFAULTS.n_restarts
+    max_iter: int = DEFAULTS.max_iter
+    length_scale: float | str = DEFAULTS.length_scale
+    signal_variance: float = DEFAULTS.signal_variance
+    approximation: str = DEFAULTS.approximation
+    n_jobs: int | None = DEFAULTS.n_jobs
 
     def make(self, modalities: Mapping[str, list[int]], random_state: int) -> LaplaceGPC:
         return LaplaceGPC(

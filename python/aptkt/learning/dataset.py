@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.actions import ExploratoryAction
-from aptkt.data import DatasetReader, write_features
+from aptkt.data import DatasetError, DatasetReader, store_features
 from aptkt.learning.extract import ExtractionSettings, observe_recording
 from aptkt.learning.observations import Observations
 
@@ -47,13 +47,18 @@ def extract_features(
     wanted = None if actions is None else set(actions)
     by_action: dict[str, list[int]] = {}
     with DatasetReader(path) as rd:
+        recorded = set()
         for i in range(len(rd)):
             _, name, _ = rd.key(i)
+            recorded.add(name)
             if wanted is None or name in wanted:
                 by_action.setdefault(name, []).append(i)
-        missing = (wanted or set()) - set(by_action)
+        missing = (wanted or set()) - recorded
         if missing:
-            raise KeyError(f"{path} holds no recordings of action(s) {sorted(missing)}")
+            raise DatasetError(
+                f"{path} holds no recordings of action(s) {', '.join(sorted(missing))}; "
+                f"it has {', '.join(sorted(recorded))}"
+            )
         total = sum(len(v) for v in by_action.values())
         bar = None
         if progress:
@@ -66,7 +71,15 @@ def extract_features(
                 action = ExploratoryAction.from_dict(rd.metadata(rows[0])["action"])
                 per_mod: dict[str, list[np.ndarray]] = {m: [] for m in action.modalities}
                 for i in rows:
-                    obs = observe_recording(rd.recording(i), action, settings)
+                    try:
+                        rec = rd.recording(i)
+                    except (OSError, ValueError) as exc:
+                        obj, _, trial = rd.key(i)
+                        raise DatasetError(
+                            f"{path}: recording {i} ({obj}/{name}/trial {trial}) is damaged "
+                            f"({exc}); 'aptkt dataset repair {path}' keeps the readable ones"
+                        ) from None
+                    obs = observe_recording(rec, action, settings)
                     for m, v in obs.items():
                         per_mod[m].append(v)
                     if bar is not None:
@@ -75,9 +88,13 @@ def extract_features(
         finally:
             if bar is not None:
                 bar.close()
-    for name, per_mod in values.items():
-        for modality, rows in per_mod.items():
-            write_features(path, name, modality, by_action[name], np.stack(rows))
+    store_features(
+        path,
+        {
+            name: (by_action[name], {m: np.stack(rows) for m, rows in per_mod.items()})
+            for name, per_mod in values.items()
+        },
+    )
     return {name: len(rows) for name, rows in by_action.items()}
 
 
@@ -94,15 +111,28 @@ def load_observations(
     path = Path(path)
     with DatasetReader(path) as rd:
         stored = rd.feature_names()
-        recorded = sorted({rd.key(i)[1] for i in range(len(rd))})
+        keys = rd.keys()
+        recorded = sorted({k[1] for k in keys})
+        recorded_objects = {k[0] for k in keys}
     names = list(actions) if actions is not None else recorded
     unknown = [a for a in names if a not in recorded]
     if unknown:
-        raise KeyError(f"{path} holds no recordings of action(s) {unknown}; it has {recorded}")
+        raise DatasetError(
+            f"{path} holds no recordings of action(s) {', '.join(unknown)}; "
+            f"it has {', '.join(recorded)}"
+        )
+    if objects is not None:
+        objects = list(objects)
+        unknown = sorted({str(o) for o in objects} - recorded_objects)
+        if unknown:
+            raise DatasetError(
+                f"{path} holds no recordings of object(s) {', '.join(unknown)}; "
+                f"it has {', '.join(sorted(recorded_objects))}"
+            )
     todo = [a for a in names if a not in stored]
     if todo:
         if not extract_missing:
-            raise KeyError(
+            raise DatasetError(
                 f"{path} has no stored features for {todo}; run `aptkt dataset features`"
             )
         extract_features(path, actions=todo, progress=progress)

@@ -9,7 +9,6 @@ Saved as one ``.npz`` file of plain arrays plus JSON metadata; loading executes 
 from __future__ import annotations
 
 import json
-import zipfile
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,14 +17,15 @@ from typing import Any
 import numpy as np
 
 from aptkt import __version__
+from aptkt.errors import PriorFileError
 from aptkt.gp import LaplaceGPC
 from aptkt.learning.config import GPSettings
 from aptkt.learning.observations import Observations, ObservationTable
 from aptkt.learning.pipeline import FeaturePipeline, ModalityTransform
+from aptkt.learning.prior_file import FORMAT as _FORMAT
+from aptkt.learning.prior_file import check_action, read_members
 
 __all__ = ["ActionPrior", "PriorKnowledge"]
-
-_FORMAT = "aptkt.PriorKnowledge/1"
 
 
 @dataclass
@@ -184,34 +184,47 @@ class PriorKnowledge:
         meta = {"format": _FORMAT, "actions": list(self.actions), "metadata": self.metadata}
         arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
         tmp = path.with_name(path.name + ".tmp")
-        with tmp.open("wb") as fh:
-            np.savez_compressed(fh, **arrays)
-        tmp.replace(path)  # never leave a half-written file under the real name
+        try:
+            with tmp.open("wb") as fh:
+                np.savez_compressed(fh, **arrays)
+            tmp.replace(path)  # never leave a half-written file under the real name
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
         return path
 
     @classmethod
     def load(cls, path: str | Path) -> PriorKnowledge:
+        """Read a prior file; every member is checked first (see :mod:`aptkt.learning.prior_file`):
+        a file that is not one, damaged, inconsistent or too large is a
+        :class:`~aptkt.errors.PriorFileError` naming the member."""
         path = Path(path)
-        if not zipfile.is_zipfile(path):
-            raise ValueError(f"{path}: not a prior-knowledge file (not an .npz archive)")
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
-        if "meta" not in arrays:
-            raise ValueError(f"{path}: not a prior-knowledge file")
-        meta = json.loads(bytes(arrays["meta"]).decode())
-        if meta.get("format") != _FORMAT:
-            raise ValueError(
-                f"{path}: unsupported format {meta.get('format')!r} (expected {_FORMAT})"
-            )
+        meta, arrays = read_members(path)
+        prefixes = {f"a{i}" for i in range(len(meta["actions"]))}
+        extra = sorted(k for k in arrays if k.split("/")[0] not in prefixes)
+        if extra:
+            raise PriorFileError(f"{path}: member {extra[0]!r} belongs to no action of the file")
         actions = {}
         for i, name in enumerate(meta["actions"]):
             p = f"a{i}"
-            obs = Observations.from_npz(name, arrays, f"{p}/obs")
-            pipeline = FeaturePipeline.from_state(arrays, f"{p}/pipeline")
-            model_state = {
-                k[len(f"{p}/model/") :]: v for k, v in arrays.items() if k.startswith(f"{p}/model/")
-            }
-            model = LaplaceGPC.from_state(model_state)
+            check_action(path, arrays, p, name)
+            try:
+                obs = Observations.from_npz(name, arrays, f"{p}/obs")
+                pipeline = FeaturePipeline.from_state(arrays, f"{p}/pipeline")
+                model_state = {
+                    k[len(f"{p}/model/") :]: v
+                    for k, v in arrays.items()
+                    if k.startswith(f"{p}/model/")
+                }
+                model = LaplaceGPC.from_state(model_state)
+            except (ValueError, KeyError, IndexError, TypeError) as exc:
+                raise PriorFileError(f"{path}: members {p}/... (action {name}): {exc}") from None
+            if list(model.modality_names_) != list(pipeline.modality_names_):
+                raise PriorFileError(
+                    f"{path}: member {p}/model/meta (action {name}): modalities "
+                    f"{model.modality_names_} differ from the pipeline's "
+                    f"{list(pipeline.modality_names_)}"
+                )
             actions[name] = ActionPrior(name, obs, pipeline, model)
         return cls(actions, meta.get("metadata", {}))
 

@@ -17,9 +17,15 @@ from pathlib import Path
 from typing import Any
 
 from aptkt.actions import PAPER_ACTIONS, ExploratoryAction
-from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, repair
+from aptkt.data.store import (
+    DatasetError,
+    DatasetReader,
+    DatasetWriter,
+    PackedRecording,
+    pack_recording,
+    repair,
+)
 from aptkt.runtime.grid import TrialGrid
-from aptkt.skin.samples import Recording
 
 # Workers are spawned, never forked: a fork copies the parent's thread pools (rayon in the
 # compiled core) without their threads, and the first parallel call in the child then hangs.
@@ -85,10 +91,13 @@ def _init_world(seed: int, object_files: tuple[str, ...], options: dict[str, Any
     _WORLD = SimWorld(library, seed=seed, **options)
 
 
-def _simulate(job: tuple[str, dict[str, Any], int]) -> Recording:
+def _simulate(job: tuple[str, dict[str, Any], int]) -> PackedRecording:
+    """One trial, returned packed: raw integers already compressed into the file's chunks, so
+    that the single writer only places bytes (a few kB per trial cross the process boundary,
+    not a pickled object graph)."""
     obj, action, trial = job
     assert _WORLD is not None
-    return _WORLD.explore(obj, ExploratoryAction.from_dict(action), trial)
+    return pack_recording(_WORLD.explore(obj, ExploratoryAction.from_dict(action), trial))
 
 
 # --------------------------------------------------------------------------- driver
@@ -135,12 +144,10 @@ def generate(
         )
     try:
         for rec in _run(plan, todo, jobs):
-            writer.append(rec)
+            writer.append_packed(rec)
             if bar is not None:
                 bar.update(1)
-                bar.set_postfix_str(
-                    f"{rec.metadata['object']} {rec.metadata['action']['name']}", refresh=False
-                )
+                bar.set_postfix_str(f"{rec.key[0]} {rec.key[1]}", refresh=False)
             elif callable(progress):
                 progress(len(writer), len(plan))
     finally:
@@ -156,7 +163,7 @@ def generate(
 
 def _run(
     plan: GenerationPlan, todo: Sequence[tuple[str, ExploratoryAction, int]], jobs: int
-) -> Iterator[Recording]:
+) -> Iterator[PackedRecording]:
     args = (plan.seed, plan.object_files, plan.world_options)
     work = [(o, a.to_dict(), t) for o, a, t in todo]
     if jobs <= 1:

@@ -27,6 +27,10 @@ from aptkt.sim.physics import ContactPhysics, ForceTrace, Frames, MechChunk
 
 __all__ = ["FrameSink", "SimEngine", "Driver", "FastDriver", "RealTimeDriver", "StopReason"]
 
+#: Samples of a lean force-control stretch after which its packets are made (the compiled
+#: core's FLUSH_SAMPLES is the same number).
+_FLUSH_SAMPLES = 2000
+
 
 class FrameSink(Protocol):
     """Receives the frames that have arrived by now, in arrival order."""
@@ -217,7 +221,7 @@ class SimEngine:
             lean["latest"][lean["queue_c"][:due]] = lean["queue_f"][:due]
             for key in ("queue_t", "queue_c", "queue_f"):
                 lean[key] = lean[key][due:]
-        if lean.get("samples", 0) > 2000:  # keep the window bounded; packets every ~1 s
+        if lean.get("samples", 0) > _FLUSH_SAMPLES:  # keep the window bounded; packets every ~1 s
             self.lean_flush()
             lean["samples"] = 0
         self.trajectory.forget_before(self.now_ns)  # the chunks hold the motion they need
@@ -225,6 +229,60 @@ class SimEngine:
         if wrench_limit is not None and self.wrench() > wrench_limit:
             return StopReason.WRENCH
         return StopReason.DONE
+
+    def lean_ticks(
+        self,
+        control: tuple[float, float, float, float, float, int, float],
+        phase: tuple,
+    ) -> tuple[str, float]:
+        """Run force-control ticks in the compiled core (``aptkt_sim::control``): the same
+        admittance law, mechanics, packets' force fields and flushes as ticking through
+        :meth:`lean_advance` from Python, one call per phase instead of one per tick.
+
+        ``control`` is (target N, gain m/s/N, max |v_z|, contact z, max depth, tick ns, wrench
+        limit N); ``phase`` ("settle", t_limit_ns, 0) or ("ramp", t_start_ns, t_stop_ns, v,
+        acc, dx, dy). Returns the status ("done", "timeout", "too_deep", "wrench") and the
+        force error of the last tick."""
+        lean = self._lean
+        if lean is None:
+            raise RuntimeError("lean_ticks needs a running lean force loop")
+        st = self.state
+        while True:
+            t0, p0, v0, a = self.trajectory.segment_at(st.t_ns)
+            before = st.t_ns
+            status, t_ns, settled, samples, seg, queue, err, parts = self.physics.core.force_ticks(
+                st.t_ns,
+                st.next_k,
+                st.relax_h,
+                st.relax_last,
+                st.latest_force,
+                (t0, p0, v0, a),
+                lean["queue_t"],
+                lean["queue_c"],
+                lean["queue_f"],
+                lean["latest"],
+                lean["gain"],
+                lean["offset"],
+                control,
+                phase,
+                lean.get("samples", 0),
+            )
+            st.t_ns = int(t_ns)
+            lean["queue_t"], lean["queue_c"], lean["queue_f"] = queue
+            chunk = MechChunk(*parts)
+            if chunk.size:
+                lean["chunks"].append(chunk)
+            if st.t_ns != before:
+                self.trajectory.append(*seg)
+            lean["samples"] = samples
+            if samples > _FLUSH_SAMPLES:
+                self.lean_flush()
+                lean["samples"] = 0
+            self.trajectory.forget_before(st.t_ns)
+            if status != "flush":
+                return status, float(err)
+            if phase[0] == "settle":
+                phase = (phase[0], phase[1], settled)
 
     def lean_reading(self) -> float:
         """The skin's total normal force as it reads now (same arithmetic as the skin source)."""
@@ -304,6 +362,10 @@ class FastDriver:
             why = self.engine.lean_advance(t_end_ns, wrench_limit)
             return self.engine.now_ns, why
         return self.engine.run(t_end_ns, tick_ns, stop=stop, wrench_limit=wrench_limit)
+
+    def force_ticks(self, control: tuple, phase: tuple) -> tuple[str, float]:
+        """A whole phase of a lean force loop in the compiled core (see SimEngine.lean_ticks)."""
+        return self.engine.lean_ticks(control, phase)
 
     @contextmanager
     def force_loop(self, lean: bool = True) -> Iterator[Callable[[], float] | None]:

@@ -39,6 +39,11 @@ class Trajectory:
         self.v0.append(np.asarray(v0, dtype=np.float64).copy())
         self.a.append(np.asarray(a, dtype=np.float64).copy())
 
+    def segment_at(self, t_ns: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+        """The segment in force at ``t_ns`` (the first one before the trajectory starts)."""
+        i = max(int(np.searchsorted(np.asarray(self.t0), t_ns, side="right")) - 1, 0)
+        return self.t0[i], self.p0[i], self.v0[i], self.a[i]
+
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The segments as arrays: start times (S,) and p0, v0, a (S, 3)."""
         return (

@@ -255,7 +255,8 @@ class ContactPhysics:
                 f"trial conditions are for {self._gain_drift.size} cells, the patch has {n}"
             )
         shape = self.shape
-        self._core = SimContact(
+        #: The compiled core of this trial (mechanics, sensor noise, force-control ticks).
+        self.core = SimContact(
             np.ascontiguousarray(imperfections.clock_rate, dtype=np.float64),
             np.ascontiguousarray(imperfections.clock_phase, dtype=np.float64),
             np.ascontiguousarray(imperfections.sensor_height, dtype=np.float64),
@@ -334,7 +335,7 @@ class ContactPhysics:
         motion at their times and the contact stress at every force sensor, with relaxation
         (the per-sample loop runs in the compiled core, ``aptkt_sim::mechanics``)."""
         t0, p0, v0, a = traj.arrays()
-        st.t_ns, parts = self._core.mechanics(
+        st.t_ns, parts = self.core.mechanics(
             st.t_ns,
             st.next_k,
             st.relax_h,
@@ -476,7 +477,7 @@ class ContactPhysics:
         self, ks: np.ndarray, cells: np.ndarray, t_ns: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """Normal deviates (n, 10) and arrival times of samples ``ks`` of ``cells``."""
-        return self._core.noise(
+        return self.core.noise(
             np.ascontiguousarray(ks, dtype=np.int64),
             np.ascontiguousarray(cells, dtype=np.int64),
             np.ascontiguousarray(t_ns, dtype=np.int64),

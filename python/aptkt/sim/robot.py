@@ -39,6 +39,7 @@ class SimRobot:
         depth_error: float = 0.0,
         force_gain: float = 0.02,
         lean_force_control: bool = True,
+        native_force_loop: bool = True,
     ):
         self.driver = driver
         self.limits = limits or SafetyLimits()
@@ -48,6 +49,9 @@ class SimRobot:
         #: Fast simulation only: the force loop gets the skin's reading computed from the packets
         #: before they are made (same numbers, one light step per tick); see FastDriver.force_loop.
         self.lean_force_control = lean_force_control
+        #: With lean force control on a fast driver: run each phase of the loop in the compiled
+        #: core (same ticks, same numbers) instead of one Python call per tick.
+        self.native_force_loop = native_force_loop
         self._placement: Placement | None = None
         self._contact_z: float | None = None
         #: ``(start_ns, stop_ns)`` of the last hold or constant-speed slide (see aptkt.actions.executor).
@@ -211,7 +215,19 @@ class SimRobot:
         length = speed * (duration + t_acc)
         self._check_point(p + d * length, "slide")
 
+        phases = [
+            (t_acc, lim.max_acceleration),
+            (duration, 0.0),
+            (t_acc, -lim.max_acceleration),
+        ]
         with self.driver.force_loop(self.lean_force_control) as reading:
+            if (
+                reading is not None
+                and self.native_force_loop
+                and hasattr(self.driver, "force_ticks")
+            ):
+                self._native_slide(normal_force, d, phases)
+                return
             measure = reading or total_force
             # 1. Establish the normal force (admittance control on the skin's reading).
             settled, t_limit = 0, self.now_ns() + int(3e9)
@@ -224,11 +240,6 @@ class SimRobot:
                         f"could not establish {normal_force} N within 3 s (reading off by {err:+.3f} N)"
                     )
             # 2. Accelerate, slide, decelerate, keeping the force.
-            phases = [
-                (t_acc, lim.max_acceleration),
-                (duration, 0.0),
-                (t_acc, -lim.max_acceleration),
-            ]
             v = 0.0
             for k, (span, acc) in enumerate(phases):
                 t_start = self.now_ns()
@@ -246,6 +257,55 @@ class SimRobot:
                 if k == 1:
                     self.action_window_ns = (t_start, t_stop)
             self.stop()
+
+    def _native_slide(
+        self, normal_force: float, d: np.ndarray, phases: list[tuple[float, float]]
+    ) -> None:
+        """The slide's force loop, phase by phase in the compiled core: the same ticks, limits
+        and errors as the Python loop in :meth:`slide` (which the tests compare it with)."""
+        lim = self.limits
+        assert self._contact_z is not None
+        control = (
+            float(normal_force),
+            float(self.force_gain),
+            float(lim.approach_speed),
+            float(self._contact_z),
+            float(lim.max_depth),
+            int(self.tick_ns),
+            float(lim.max_normal_force),
+        )
+
+        def check(status: str, err: float) -> None:
+            if status == "timeout":
+                self.stop()
+                raise RobotError(
+                    f"could not establish {normal_force} N within 3 s (reading off by {err:+.3f} N)"
+                )
+            if status == "too_deep":
+                p, _ = self._pose()
+                raise self._safety_stop(
+                    f"force control pushed {(self._contact_z - p[2]) * 1e3:.2f} mm deep, "
+                    f"beyond max_depth {lim.max_depth * 1e3:.2f} mm"
+                )
+            if status == "wrench":
+                raise self._safety_stop(
+                    f"contact force above {lim.max_normal_force} N under force control"
+                )
+
+        check(*self.driver.force_ticks(control, ("settle", self.now_ns() + int(3e9), 0)))
+        v = 0.0
+        for k, (span, acc) in enumerate(phases):
+            t_start = self.now_ns()
+            t_stop = t_start + int(round(span * 1e9))
+            check(
+                *self.driver.force_ticks(
+                    control, ("ramp", t_start, t_stop, v, acc, float(d[0]), float(d[1]))
+                )
+            )
+            v = max(v + acc * span, 0.0)
+            if k == 1:
+                self.action_window_ns = (t_start, t_stop)
+        self.stop()
 
     def _force_tick(
         self,

@@ -14,6 +14,9 @@ pub enum GpError {
          (a transfer lambda outside [0, 1] makes the dependent kernel indefinite) or raise max_jitter"
     )]
     NotPositiveDefinite { pivot: usize, jitter: f64 },
+    /// The fit was cancelled through its cancel flag.
+    #[error("the fit was cancelled")]
+    Cancelled,
 }
 
 pub type GpResult<T> = Result<T, GpError>;

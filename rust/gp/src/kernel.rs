@@ -458,15 +458,16 @@ impl KernelEval {
         self
     }
 
-    /// For every hyper-parameter p: `s1[p] = Σ_ij G_ij ∂K_ij/∂θ_p` and `b[p] = (∂K/∂θ_p) v`.
-    /// One pass over the matrix computes every derivative element on the fly, so no
-    /// n × n × p gradient tensor is ever stored.
+    /// For every hyper-parameter p: `s1[p] = Σ_ij G_ij ∂K_ij/∂θ_p` with
+    /// `G = ½ (v vᵀ - Z)`, and `b[p] = (∂K/∂θ_p) v`. One pass over the matrix computes every
+    /// derivative element (and G's) on the fly, so neither G nor an n × n × p gradient tensor
+    /// is ever stored.
     pub fn contract_gradients(
         &self,
         layout: &Layout,
         h: &Hyper,
         dist: &PairDistances,
-        g: &Mat<f64>,
+        z: &Mat<f64>,
         v: &[f64],
     ) -> (Vec<f64>, Vec<Vec<f64>>) {
         let n = dist.n;
@@ -501,7 +502,7 @@ impl KernelEval {
                 for s in 0..n_lambdas {
                     c[layout.len() - n_lambdas + s] = sf2 * unit * coupling.derivative(s, ti, tj);
                 }
-                let gij = g[(i, j)];
+                let gij = 0.5 * (v[i] * vj - z[(i, j)]);
                 for p in 0..p_len {
                     s1[p] += gij * c[p];
                     b[p][i] += c[p] * vj;

@@ -1,6 +1,9 @@
 //! Binary Laplace-approximation GP classification with the logistic likelihood
 //! (Rasmussen & Williams, GPML, Algorithms 3.1, 3.2 and 5.1). Labels are ±1.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
 use faer::{Mat, MatRef};
 
 use crate::error::{GpError, GpResult};
@@ -9,11 +12,21 @@ use crate::likelihood::{log_sigmoid, sigmoid};
 use crate::linalg;
 
 /// Newton mode-finding settings.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct NewtonConfig {
     pub max_iter: usize,
     /// Stop when the objective Ψ(f) changes by less than this.
     pub tol: f64,
+    /// Set from another thread to stop a fit between Newton iterations (e.g. on Ctrl-C).
+    pub cancel: Option<Arc<AtomicBool>>,
+}
+
+impl NewtonConfig {
+    pub fn cancelled(&self) -> bool {
+        self.cancel
+            .as_ref()
+            .is_some_and(|c| c.load(Ordering::Relaxed))
+    }
 }
 
 impl Default for NewtonConfig {
@@ -21,8 +34,18 @@ impl Default for NewtonConfig {
         NewtonConfig {
             max_iter: 100,
             tol: 1e-10,
+            cancel: None,
         }
     }
+}
+
+/// Why mode finding stopped without a mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ModeFailure {
+    /// The Cholesky factorisation of B failed at this pivot.
+    Pivot(usize),
+    /// The cancel flag was set.
+    Cancelled,
 }
 
 /// The posterior mode and everything Algorithms 3.2 and 5.1 reuse.
@@ -65,13 +88,13 @@ fn factor_b(k: MatRef<'_, f64>, f: &[f64]) -> Result<(Vec<f64>, Vec<f64>, Mat<f6
 
 /// Algorithm 3.1 with a step-halving safeguard (the plain Newton step can overshoot when the
 /// kernel is large), warm-started from `warm_a` when given and better than f = 0.
-/// Err carries the failing Cholesky pivot.
+/// Fails with the failing Cholesky pivot, or when the configuration's cancel flag is set.
 pub fn find_mode(
     k: MatRef<'_, f64>,
     y: &[f64],
     warm_a: Option<&[f64]>,
     cfg: &NewtonConfig,
-) -> Result<Mode, usize> {
+) -> Result<Mode, ModeFailure> {
     let n = y.len();
     let mut a = vec![0.0; n];
     let mut f = vec![0.0; n];
@@ -91,8 +114,11 @@ pub fn find_mode(
     let mut kb = vec![0.0; n];
     let mut f_new = vec![0.0; n];
     for it in 0..cfg.max_iter {
+        if cfg.cancelled() {
+            return Err(ModeFailure::Cancelled);
+        }
         iterations = it + 1;
-        let (pi, sw, l) = factor_b(k, &f)?;
+        let (pi, sw, l) = factor_b(k, &f).map_err(ModeFailure::Pivot)?;
         // b = W f + ∇log p(y|f), with ∇log p = t - π and t = (y + 1) / 2.
         let b: Vec<f64> = (0..n)
             .map(|i| sw[i] * sw[i] * f[i] + (0.5 * (y[i] + 1.0) - pi[i]))
@@ -126,7 +152,7 @@ pub fn find_mode(
             break;
         }
     }
-    let (pi, sw, l) = factor_b(k, &f)?;
+    let (pi, sw, l) = factor_b(k, &f).map_err(ModeFailure::Pivot)?;
     let log_det_half: f64 = (0..n).map(|i| l[(i, i)].ln()).sum();
     let lml = objective(&a, &f, y) - log_det_half;
     Ok(Mode {
@@ -166,7 +192,8 @@ pub fn find_mode_with_jitter(
     loop {
         match find_mode(eval.k.as_ref(), y, warm_a, cfg) {
             Ok(mode) => return Ok((eval, mode)),
-            Err(pivot) => {
+            Err(ModeFailure::Cancelled) => return Err(GpError::Cancelled),
+            Err(ModeFailure::Pivot(pivot)) => {
                 let next = if jitter == 0.0 { 1e-10 } else { jitter * 100.0 };
                 if next > max_jitter * (1.0 + 1e-12) {
                     return Err(GpError::NotPositiveDefinite { pivot, jitter });
@@ -189,25 +216,28 @@ pub fn lml_gradient(
 ) -> Vec<f64> {
     let n = mode.f.len();
     let k = &eval.k;
-    // Z = W½ B⁻¹ W½ (GPML's R).
-    let binv = linalg::inverse_from_cholesky(mode.l.as_ref());
-    let z = Mat::<f64>::from_fn(n, n, |i, j| mode.sw[i] * binv[(i, j)] * mode.sw[j]);
-    // diag(K - K Z K) = diag(K) - column sums of C² with C = L⁻¹ W½ K.
-    let mut c = Mat::<f64>::from_fn(n, n, |i, j| mode.sw[i] * k[(i, j)]);
-    linalg::solve_lower_mat(mode.l.as_ref(), c.as_mut());
+    let mut z = linalg::inverse_from_cholesky(mode.l.as_ref());
     // s2 = ∂LML/∂f̂ = -½ diag(Σ) ∘ ∂W/∂f, with Σ = (K⁻¹ + W)⁻¹ and, for the logistic,
     // ∂W_ii/∂f_i = π(1-π)(1-2π) (= -∇³ log p; GPML writes this factor as ∇³ log p).
+    // Since W½ K W½ = B - I, Σ = W^-½ (I - B⁻¹) W^-½: diag(Σ)_j = (1 - B⁻¹_jj) / w_j, and w_j
+    // cancels against ∂W/∂f's factor π(1-π) = w_j. This needs only B⁻¹'s diagonal instead of
+    // the n³ solve C = L⁻¹ W½ K of GPML's Algorithm 5.1, and it stays exact when w_j → 0.
     let s2: Vec<f64> = (0..n)
         .map(|j| {
-            let cc: f64 = c.col(j).iter().map(|v| v * v).sum();
-            let var = k[(j, j)] - cc;
             let p = mode.pi[j];
-            -0.5 * var * (p * (1.0 - p) * (1.0 - 2.0 * p))
+            -0.5 * (1.0 - z[(j, j)]) * (1.0 - 2.0 * p)
         })
         .collect();
-    // ∂LML/∂θ = ½ aᵀ C a - ½ tr(Z C) + s2ᵀ (b - K Z b), b = C ∇log p = C a at the mode.
-    let g = Mat::<f64>::from_fn(n, n, |i, j| 0.5 * (mode.a[i] * mode.a[j] - z[(i, j)]));
-    let (s1, bs) = eval.contract_gradients(layout, h, dist, &g, &mode.a);
+    // Z = W½ B⁻¹ W½ (GPML's R), in place.
+    for j in 0..n {
+        let swj = mode.sw[j];
+        for (i, v) in z.col_as_slice_mut(j).iter_mut().enumerate() {
+            *v *= mode.sw[i] * swj;
+        }
+    }
+    // ∂LML/∂θ = ½ aᵀ C a - ½ tr(Z C) + s2ᵀ (b - K Z b), b = C ∇log p = C a at the mode, with
+    // C = ∂K/∂θ; the first two terms are Σ_ij G_ij C_ij with G = ½ (a aᵀ - Z), formed on the fly.
+    let (s1, bs) = eval.contract_gradients(layout, h, dist, &z, &mode.a);
     let mut zb = vec![0.0; n];
     let mut kzb = vec![0.0; n];
     s1.iter()
@@ -293,6 +323,7 @@ mod tests {
                 &NewtonConfig {
                     max_iter: 200,
                     tol: 1e-14,
+                    cancel: None,
                 },
             )
             .unwrap()
@@ -307,6 +338,7 @@ mod tests {
             &NewtonConfig {
                 max_iter: 200,
                 tol: 1e-14,
+                cancel: None,
             },
         )
         .unwrap();
@@ -365,6 +397,7 @@ mod tests {
             &NewtonConfig {
                 max_iter: 1,
                 tol: 1e-10,
+                cancel: None,
             },
             1e-6,
         );

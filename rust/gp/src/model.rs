@@ -1,6 +1,8 @@
 //! One-vs-all multi-class Laplace GPC: per-class binary classifiers with their own
 //! hyper-parameters (and, for transfer, their own source task), fitted in parallel.
 
+use std::sync::{Arc, OnceLock};
+
 use faer::Mat;
 use rayon::prelude::*;
 
@@ -220,12 +222,15 @@ pub struct BinaryFit {
     pub newton_converged: bool,
     pub optimizer_converged: bool,
     pub evaluations: usize,
+    /// Quasi-Newton iterations of the start that gave `theta` (0 without optimisation).
+    pub iterations: usize,
 }
 
 struct BinaryProblem {
     x: Data,
     y: Vec<f64>,
-    dist: PairDistances,
+    /// Shared by every classifier without sources (their rows are the same target rows).
+    dist: Arc<PairDistances>,
 }
 
 impl BinaryProblem {
@@ -238,6 +243,7 @@ impl BinaryProblem {
         sources: &[Source],
         modalities: &Modalities,
         center: &[f64],
+        target_dist: &OnceLock<Arc<PairDistances>>,
     ) -> Self {
         let mut y: Vec<f64> = sources.iter().flat_map(|s| s.y.iter().copied()).collect();
         y.extend(
@@ -259,8 +265,14 @@ impl BinaryProblem {
                 d: target.d,
             }
         };
-        let sizes: Vec<usize> = sources.iter().map(|s| s.x.n).collect();
-        let dist = PairDistances::new(&x, &sizes, modalities, center);
+        let dist = if sources.is_empty() {
+            target_dist
+                .get_or_init(|| Arc::new(PairDistances::new(target, &[], modalities, center)))
+                .clone()
+        } else {
+            let sizes: Vec<usize> = sources.iter().map(|s| s.x.n).collect();
+            Arc::new(PairDistances::new(&x, &sizes, modalities, center))
+        };
         BinaryProblem { x, y, dist }
     }
 
@@ -320,6 +332,7 @@ impl BinaryProblem {
         prior: Vec<PriorTerm>,
         optimizer_converged: bool,
         evaluations: usize,
+        iterations: usize,
     ) -> GpResult<BinaryFit> {
         let (ev, mode, hyper, _) = self.evaluate(layout, spec, &theta, None, false)?;
         let log_prior = log_prior(&prior, &theta).0;
@@ -343,6 +356,7 @@ impl BinaryProblem {
             newton_converged: mode.converged,
             optimizer_converged,
             evaluations,
+            iterations,
         })
     }
 }
@@ -378,6 +392,53 @@ fn theta_box(
     (lo, hi, free)
 }
 
+/// Fails naming the first user-given entry of theta outside `[lo, hi]`.
+fn check_in_bounds(
+    layout: &Layout,
+    theta: &[f64],
+    given: &[bool],
+    lo: &[f64],
+    hi: &[f64],
+) -> GpResult<()> {
+    for i in 0..theta.len() {
+        if !given[i] || (lo[i] <= theta[i] && theta[i] <= hi[i]) {
+            continue;
+        }
+        let (name, value, lo, hi) = if i == Layout::SIGNAL {
+            (
+                "signal_variance".to_string(),
+                theta[i].exp(),
+                lo[i].exp(),
+                hi[i].exp(),
+            )
+        } else if i <= layout.n_modalities {
+            (
+                format!("the length-scale of modality {}", i - 1),
+                theta[i].exp(),
+                lo[i].exp(),
+                hi[i].exp(),
+            )
+        } else if layout
+            .weight(0)
+            .is_some_and(|w| i < w + layout.n_modalities)
+        {
+            (
+                "a modality weight logit".to_string(),
+                theta[i],
+                lo[i],
+                hi[i],
+            )
+        } else {
+            ("transfer_lambda".to_string(), theta[i], lo[i], hi[i])
+        };
+        return Err(GpError::InvalidInput(format!(
+            "{name} = {value:.4e} lies outside its bounds [{lo:.4e}, {hi:.4e}]; values given are used \
+             as they are, so widen the bounds or change the value"
+        )));
+    }
+    Ok(())
+}
+
 /// Optimises one binary classifier. `lambdas`: the starting relatedness of every λ entry of
 /// the layout (its sources' values, zero-padded); `start`: a starting theta whose non-NaN
 /// entries replace the specification's initial values.
@@ -390,6 +451,9 @@ fn fit_binary(
     seed: u64,
 ) -> GpResult<BinaryFit> {
     let m = layout.n_modalities;
+    if spec.newton.cancelled() {
+        return Err(GpError::Cancelled);
+    }
     let prior = problem.prior_terms(layout, spec);
     let needs_scale = spec.optimize || spec.length_scales.iter().any(|l| l.is_nan());
     let medians: Vec<f64> = (0..m)
@@ -421,16 +485,25 @@ fn fit_binary(
     };
     // A given start overrides the initial values entry by entry (NaN: keep the initial one).
     let mut theta0 = layout.encode(&init);
+    // Which entries the user gave: those are used as given, so one outside its bounds is an
+    // error rather than silently clamped. Data-scaled ("auto") starts are clamped.
+    let mut given = vec![false; layout.len()];
+    given[Layout::SIGNAL] = true;
+    for (k, l) in spec.length_scales.iter().enumerate() {
+        given[layout.length_scale(k)] = !l.is_nan();
+    }
     if let Some(t) = start {
-        for (v, s) in theta0.iter_mut().zip(t) {
+        for ((v, s), g) in theta0.iter_mut().zip(t).zip(given.iter_mut()) {
             if !s.is_nan() {
                 *v = *s;
+                *g = true;
             }
         }
     }
+    check_in_bounds(layout, &theta0, &given, &lo, &hi)?;
     clip(&mut theta0);
     if !spec.optimize || !free.iter().any(|&f| f) {
-        return problem.finish(layout, spec, theta0, prior, true, 1);
+        return problem.finish(layout, spec, theta0, prior, true, 1, 0);
     }
 
     // Starting points: the given hyper-parameters, then one scaled to the data (unless the
@@ -469,13 +542,17 @@ fn fit_binary(
         starts.push(t);
     }
 
-    let mut best: Option<(f64, Vec<f64>, bool)> = None;
+    let mut best: Option<(f64, Vec<f64>, bool, usize)> = None;
     let mut evaluations = 0;
     let mut last_error = None;
     for t0 in starts {
         let mut warm: Option<Vec<f64>> = None;
         // Minimises -(log p(y | θ) + log p(θ)); the prior term is absent for ML-II.
         let objective = |t: &[f64]| -> Option<(f64, Vec<f64>)> {
+            if spec.newton.cancelled() {
+                last_error = Some(GpError::Cancelled);
+                return None;
+            }
             match problem.evaluate(layout, spec, t, warm.as_deref(), true) {
                 Ok((_, mode, _, Some(mut g))) => {
                     warm = Some(mode.a);
@@ -494,17 +571,27 @@ fn fit_binary(
                 }
             }
         };
-        if let Some(r) = minimize(objective, &t0, &lo, &hi, &free, &spec.lbfgs) {
+        let result = minimize(objective, &t0, &lo, &hi, &free, &spec.lbfgs);
+        if spec.newton.cancelled() {
+            return Err(GpError::Cancelled);
+        }
+        if let Some(r) = result {
             evaluations += r.evaluations;
-            if best.as_ref().is_none_or(|(f, _, _)| r.fx < *f) {
-                best = Some((r.fx, r.x, r.converged));
+            if best.as_ref().is_none_or(|(f, _, _, _)| r.fx < *f) {
+                best = Some((r.fx, r.x, r.converged, r.iterations));
             }
         }
     }
     match best {
-        Some((_, theta, converged)) => {
-            problem.finish(layout, spec, theta, prior, converged, evaluations)
-        }
+        Some((_, theta, converged, iterations)) => problem.finish(
+            layout,
+            spec,
+            theta,
+            prior,
+            converged,
+            evaluations,
+            iterations,
+        ),
         None => Err(last_error.unwrap_or_else(|| {
             GpError::InvalidInput("no optimiser start could be evaluated".into())
         })),
@@ -771,16 +858,18 @@ fn fit_impl(
         })?,
         Hypers::Optimise(None) => {}
     }
+    let target_dist = OnceLock::new();
     let classifiers = positives
         .par_iter()
         .enumerate()
         .map(|(k, &c)| {
             let own = &sources[c];
-            let problem = BinaryProblem::new(x, labels, c, own, &spec.modalities, &center);
+            let problem =
+                BinaryProblem::new(x, labels, c, own, &spec.modalities, &center, &target_dist);
             match &hypers {
                 Hypers::At(t) => {
                     let prior = problem.prior_terms(&layout, spec);
-                    problem.finish(&layout, spec, t[k].clone(), prior, true, 1)
+                    problem.finish(&layout, spec, t[k].clone(), prior, true, 1, 0)
                 }
                 Hypers::Optimise(starts) => {
                     let mut lambdas: Vec<f64> = own.iter().map(|s| s.lambda).collect();
@@ -909,12 +998,12 @@ impl OneVsAll {
             .zip(thetas.par_iter())
             .map(|(c, t)| {
                 let problem = BinaryProblem {
-                    dist: PairDistances::new(
+                    dist: Arc::new(PairDistances::new(
                         &c.x,
                         &c.source_sizes,
                         &self.spec.modalities,
                         &self.center,
-                    ),
+                    )),
                     x: c.x.clone(),
                     y: c.y.clone(),
                 };

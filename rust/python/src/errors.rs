@@ -25,6 +25,7 @@ pub fn gp_error(e: aptkt_gp::GpError) -> PyErr {
         aptkt_gp::GpError::NotPositiveDefinite { .. } => {
             KernelNotPositiveDefiniteError::new_err(e.to_string())
         }
+        aptkt_gp::GpError::Cancelled => AptktError::new_err(e.to_string()),
     }
 }
 

@@ -9,6 +9,9 @@ use aptkt_gp::{
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use crate::errors::gp_error;
 
@@ -28,6 +31,44 @@ fn matrix<'py>(
         .reshape([rows, cols])
         .map_err(|e| PyValueError::new_err(format!("internal shape error: {e}")))
 }
+
+/// Runs `work` on a helper thread with the GIL released while this thread polls for Python
+/// signals every few milliseconds. If a signal handler raises (Ctrl-C: `KeyboardInterrupt`),
+/// `cancel` is set, the work (which checks the flag between iterations) is waited for, and the
+/// handler's exception is returned.
+fn run_interruptible<T: Send>(
+    py: Python<'_>,
+    cancel: &AtomicBool,
+    work: impl FnOnce() -> T + Send,
+) -> PyResult<T> {
+    std::thread::scope(|scope| {
+        let handle = scope.spawn(work);
+        loop {
+            let finished = py.detach(|| {
+                let start = Instant::now();
+                while !handle.is_finished() && start.elapsed() < POLL {
+                    std::thread::sleep(Duration::from_millis(2));
+                }
+                handle.is_finished()
+            });
+            if finished {
+                break;
+            }
+            if let Err(e) = py.check_signals() {
+                cancel.store(true, Ordering::Relaxed);
+                // The result of a cancelled fit is of no use; only its end is waited for.
+                let _ = py.detach(|| handle.join());
+                return Err(e);
+            }
+        }
+        handle
+            .join()
+            .map_err(|_| PyValueError::new_err("internal error: the fit's thread panicked"))
+    })
+}
+
+/// How often a long fit looks for Ctrl-C.
+const POLL: Duration = Duration::from_millis(20);
 
 fn run_in_pool<T: Send>(n_threads: usize, f: impl FnOnce() -> T + Send) -> Result<T, GpError> {
     if n_threads == 0 {
@@ -269,20 +310,19 @@ fn fit_gpc(
         })
         .collect::<Result<_, GpError>>()
         .map_err(gp_error)?;
-    let spec = settings.spec(data.d)?;
+    let mut spec = settings.spec(data.d)?;
+    let cancel = Arc::new(AtomicBool::new(false));
+    spec.newton.cancel = Some(cancel.clone());
     let n_threads = settings.n_threads;
-    let model = py
-        .detach(|| {
-            run_in_pool(n_threads, || match (&thetas, &starts) {
-                (Some(t), _) => aptkt_gp::fit_at(&data, &labels, n_classes, &sources, &spec, t),
-                (None, Some(s)) => {
-                    aptkt_gp::fit_from(&data, &labels, n_classes, &sources, &spec, s)
-                }
-                (None, None) => aptkt_gp::fit(&data, &labels, n_classes, &sources, &spec),
-            })
+    let model = run_interruptible(py, &cancel, || {
+        run_in_pool(n_threads, || match (&thetas, &starts) {
+            (Some(t), _) => aptkt_gp::fit_at(&data, &labels, n_classes, &sources, &spec, t),
+            (None, Some(s)) => aptkt_gp::fit_from(&data, &labels, n_classes, &sources, &spec, s),
+            (None, None) => aptkt_gp::fit(&data, &labels, n_classes, &sources, &spec),
         })
-        .and_then(|r| r)
-        .map_err(gp_error)?;
+    })?
+    .and_then(|r| r)
+    .map_err(gp_error)?;
     Ok(GpcModel { model, n_threads })
 }
 
@@ -435,6 +475,16 @@ impl GpcModel {
             .classifiers
             .iter()
             .map(|c| c.evaluations)
+            .collect()
+    }
+
+    /// Quasi-Newton iterations of the start that gave each classifier's theta.
+    #[getter]
+    fn iterations(&self) -> Vec<usize> {
+        self.model
+            .classifiers
+            .iter()
+            .map(|c| c.iterations)
             .collect()
     }
 

@@ -286,7 +286,7 @@ impl SimContact {
     /// ("settle", t_limit_ns, settled) or ("ramp", t_start_ns, t_stop_ns, v, acc, dx, dy);
     /// `control` is (target, gain, max_vz, contact_z, max_depth, tick_ns, wrench_limit).
     /// Updates the state arrays and `latest` in place; returns (status, t_ns, settled,
-    /// samples, segment (t0, p0, v0, a), queue (t, cell, force), chunk).
+    /// samples, segment (t0, p0, v0, a), queue (t, cell, force), last force error, chunk).
     #[allow(clippy::too_many_arguments)]
     fn force_ticks<'py>(
         &self,
@@ -377,7 +377,7 @@ impl SimContact {
         };
         let mut samples = samples;
         let mut chunk = Chunk::default();
-        let status = py.detach(|| {
+        let (status, err) = py.detach(|| {
             run_ticks(
                 &self.mech,
                 &self.sensors,
@@ -419,6 +419,7 @@ impl SimContact {
             samples,
             seg_t,
             q,
+            err,
             chunk_tuple(py, chunk)?,
         )
             .into_pyobject(py)

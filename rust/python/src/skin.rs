@@ -106,18 +106,29 @@ impl PyStreamParser {
             // bytearray / memoryview / numpy: copy into bytes, since a mutable buffer could
             // change while the GIL is released.
             // Through a memoryview, so that only buffer-protocol objects are accepted (`bytes(5)`
-            // would quietly make five zero bytes).
-            converted = PyMemoryView::from(data)
-                .and_then(|view| py.get_type::<PyBytes>().call1((view,)))
-                .map_err(|_| {
-                    pyo3::exceptions::PyTypeError::new_err(format!(
-                        "StreamParser.feed expects bytes-like data, got {}",
-                        data.get_type()
-                            .name()
-                            .map(|n| n.to_string())
-                            .unwrap_or_default()
-                    ))
-                })?;
+            // would quietly make five zero bytes), and only buffers of single bytes: an int64 or
+            // float array would otherwise be parsed as its raw memory.
+            let type_name = data
+                .get_type()
+                .name()
+                .map(|n| n.to_string())
+                .unwrap_or_default();
+            let view = PyMemoryView::from(data).map_err(|_| {
+                pyo3::exceptions::PyTypeError::new_err(format!(
+                    "StreamParser.feed expects bytes-like data, got {type_name}"
+                ))
+            })?;
+            let itemsize: usize = view.getattr("itemsize")?.extract()?;
+            let format: String = view.getattr("format")?.extract()?;
+            let code = format.trim_start_matches(['@', '=', '<', '>', '!']);
+            if itemsize != 1 || !matches!(code, "B" | "b" | "c") {
+                return Err(pyo3::exceptions::PyTypeError::new_err(format!(
+                    "StreamParser.feed expects single bytes (bytes, bytearray, or a buffer of \
+                     uint8/int8), got {type_name} of item format {format:?} \
+                     ({itemsize} bytes per item)"
+                )));
+            }
+            converted = py.get_type::<PyBytes>().call1((view,))?;
             converted.cast::<PyBytes>()?.as_bytes()
         };
         let parser = &mut self.inner;

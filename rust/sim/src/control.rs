@@ -137,7 +137,8 @@ pub enum Status {
     TooDeep,
     /// The true force crossed the wrench limit during the last tick.
     Wrench,
-    /// More than 2000 samples since the last flush: make the packets, then call again.
+    /// More than `FLUSH_SAMPLES` samples since the last flush: make the packets (and reset
+    /// the count), then call again.
     Flush,
 }
 
@@ -146,7 +147,7 @@ pub const FLUSH_SAMPLES: usize = 2000;
 
 /// Run control ticks from `st.t_ns` on the trajectory's current segment `seg` (replaced by
 /// each tick's motion). New samples are appended to `chunk`; `samples` counts the samples
-/// since the last flush. Returns the status and the last force error.
+/// since the last flush. Returns the status and the force error of the last tick.
 #[allow(clippy::too_many_arguments)]
 pub fn run_ticks(
     mech: &Mechanics,
@@ -158,7 +159,8 @@ pub fn run_ticks(
     queue: &mut LeanQueue,
     chunk: &mut Chunk,
     samples: &mut usize,
-) -> Status {
+) -> (Status, f64) {
+    let mut err = f64::NAN;
     loop {
         let now = st.t_ns;
         let (vxy, axy, end) = match *phase {
@@ -171,7 +173,7 @@ pub fn run_ticks(
                 d,
             } => {
                 if now >= t_stop_ns {
-                    return Status::Done;
+                    return (Status::Done, err);
                 }
                 let tau = ((now - t_start_ns) as f64) * 1e-9;
                 let speed = v + acc * tau;
@@ -182,11 +184,11 @@ pub fn run_ticks(
                 )
             }
         };
-        let err = ctl.target - queue.reading();
+        err = ctl.target - queue.reading();
         let vz = -(ctl.gain * err).clamp(-ctl.max_vz, ctl.max_vz);
         let (p, _, _) = seg.at(now);
         if p[2] < ctl.contact_z - ctl.max_depth {
-            return Status::TooDeep;
+            return (Status::TooDeep, err);
         }
         *seg = Segment {
             t0: now,
@@ -202,13 +204,12 @@ pub fn run_ticks(
             queue.push_chunk(sensors, mech, chunk, before);
         }
         queue.deliver(end);
+        // The caller makes the packets (and resets `samples`) after any return with
+        // `samples > FLUSH_SAMPLES`, before acting on the status, as `lean_advance` does.
         let flush = *samples > FLUSH_SAMPLES;
-        if flush {
-            *samples = 0;
-        }
         let wrench: f64 = st.latest_force.iter().sum();
         if wrench > ctl.wrench_limit {
-            return Status::Wrench;
+            return (Status::Wrench, err);
         }
         if let Phase::Settle {
             t_limit_ns,
@@ -221,14 +222,14 @@ pub fn run_ticks(
                 0
             };
             if st.t_ns > t_limit_ns {
-                return Status::Timeout;
+                return (Status::Timeout, err);
             }
             if *settled >= 5 {
-                return Status::Done;
+                return (Status::Done, err);
             }
         }
         if flush {
-            return Status::Flush;
+            return (Status::Flush, err);
         }
     }
 }

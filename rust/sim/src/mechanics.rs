@@ -320,16 +320,25 @@ impl Mechanics {
             let mut prev = [0.0; SENSORS];
             prev.copy_from_slice(&st.relax_last[c * SENSORS..(c + 1) * SENSORS]);
             let mut f_last = 0.0;
+            // The surface height under a sensor depends on the TCP's x, y only: kept while they
+            // do not change (presses, holds and waits move along z or not at all).
+            let mut last_xy = [f64::NAN; 2];
+            let mut heights = [0.0; SENSORS];
             for k in k0..=last {
                 let t_s = phase + k as f64 / rate;
                 let t_ns = (t_s * 1e9).round_ties_even() as i64;
                 let (p, v, acc) = segment_at(segs, t_ns).at(t_ns);
                 let mut sigma = [0.0; SENSORS];
                 let mut elastic = [0.0; SENSORS];
+                if p[0] != last_xy[0] || p[1] != last_xy[1] {
+                    last_xy = [p[0], p[1]];
+                    for (s, h) in heights.iter_mut().enumerate() {
+                        let xy = self.cells.sensor_xy[c][s];
+                        *h = self.shape.height([p[0] + xy[0], p[1] + xy[1]]);
+                    }
+                }
                 for s in 0..SENSORS {
-                    let xy = self.cells.sensor_xy[c][s];
-                    let h = self.shape.height([p[0] + xy[0], p[1] + xy[1]]);
-                    let depth = h - (p[2] + self.cells.sensor_height[c][s]);
+                    let depth = heights[s] - (p[2] + self.cells.sensor_height[c][s]);
                     let depth = if depth.is_finite() { depth } else { -1.0 };
                     elastic[s] = self.law.stress(depth);
                 }

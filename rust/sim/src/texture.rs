@@ -61,31 +61,47 @@ pub fn acceleration(
         .map(|q| (-((PI * k.cover_contact_length * q).powi(2))).exp())
         .collect();
     let stiff = (k.top_modulus / (k.top_modulus + k.coupling_modulus)).sqrt();
+    // The response of each wave depends on the velocity only: kept while it does not change
+    // (a cell sliding at constant speed), recomputed when it does.
+    let mut resp = vec![(0.0, 0.0, 0.0, 0.0); m]; // (base/A-free gain, phase lag, tangential, 1)
+    let mut last_w = [f64::NAN, f64::NAN];
     for i in 0..n {
         let speed = w[i][0].hypot(w[i][1]);
         let p = pressure[i];
         if !(speed > 1e-6 && p > 0.0) {
             continue;
         }
+        if w[i] != last_w {
+            last_w = w[i];
+            for j in 0..m {
+                let kv = tex.kvec[j];
+                let f = (w[i][0] * kv[0] + w[i][1] * kv[1]).abs();
+                let r = f / k.contact_resonance;
+                let two_zr = 2.0 * k.contact_damping * r;
+                let h_t = cdiv((1.0, two_zr), (1.0 - r * r, two_zr));
+                let h_l = cdiv((1.0, 0.0), (1.0, f / k.acc_bandwidth));
+                let h = cmul(h_t, h_l);
+                let base =
+                    -(tex.amplitude[j] * smooth[j]) * (2.0 * PI * f).powi(2) * h.0.hypot(h.1);
+                let cross = (w[i][0] * kv[1] - w[i][1] * kv[0]) / (speed * qnorm[j].max(1e-12));
+                resp[j] = (
+                    base,
+                    h.1.atan2(h.0),
+                    k.tangential_coupling * k.mu_kinetic / (1.0 + r * r),
+                    k.lateral_coupling * cross,
+                );
+            }
+        }
         let coupling = stiff * p / (p + k.coupling_pressure);
         let (mut tang, mut lat, mut norm) = (0.0, 0.0, 0.0);
         for j in 0..m {
             let kv = tex.kvec[j];
-            let f = (w[i][0] * kv[0] + w[i][1] * kv[1]).abs();
-            let r = f / k.contact_resonance;
-            let two_zr = 2.0 * k.contact_damping * r;
-            let h_t = cdiv((1.0, two_zr), (1.0 - r * r, two_zr));
-            let h_l = cdiv((1.0, 0.0), (1.0, f / k.acc_bandwidth));
-            let h = cmul(h_t, h_l);
-            let habs = h.0.hypot(h.1);
+            let (base, lag, t_gain, l_gain) = resp[j];
             let phase = 2.0 * PI * (u[i][0] * kv[0] + u[i][1] * kv[1]) + tex.phase[j];
-            let base = -(tex.amplitude[j] * smooth[j]) * (2.0 * PI * f).powi(2) * habs;
-            let arg = phase + h.1.atan2(h.0);
-            let (sa, ca) = arg.sin_cos();
+            let (sa, ca) = (phase + lag).sin_cos();
             let normal = base * sa;
-            tang += k.tangential_coupling * k.mu_kinetic * normal / (1.0 + r * r);
-            let cross = (w[i][0] * kv[1] - w[i][1] * kv[0]) / (speed * qnorm[j].max(1e-12));
-            lat += k.lateral_coupling * cross * base * ca;
+            tang += t_gain * normal;
+            lat += l_gain * base * ca;
             norm += normal;
         }
         out[i] = [coupling * tang, coupling * lat, coupling * norm];

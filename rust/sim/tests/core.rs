@@ -327,7 +327,8 @@ fn force_loop_settles_on_the_target() {
     let mut samples = 0;
     let mut status = Status::Flush;
     while status == Status::Flush {
-        status = run_ticks(
+        samples = 0;
+        (status, _) = run_ticks(
             &m,
             &sensors,
             &ctl,

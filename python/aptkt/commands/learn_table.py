@@ -1,0 +1,116 @@
+"""``aptkt learn --table FILE``: learn new objects from a feature table of any sensor, offline.
+
+The options of this mode; :mod:`aptkt.commands.learn` dispatches to :func:`run` when ``--table``
+is given.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from aptkt.commands._session import split_names
+from aptkt.errors import ConfigError
+
+DEFAULT_RUNS = 3
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group(
+        "from a feature table (no robot)",
+        "--table FILE learns from recorded feature observations (CSV or HDF5: columns object, "
+        "action, trial, <modality>.<k>; see docs/feature-tables.md) and compares APTKT, APTKT "
+        "with auxiliary features and the baseline, as the demo does.",
+    )
+    g.add_argument("--table", metavar="FILE", help="feature table (.csv, .h5)")
+    g.add_argument(
+        "--prior-objects",
+        metavar="A,B,...",
+        help="the objects whose rows build the prior knowledge (with --table)",
+    )
+    g.add_argument(
+        "--test-trials",
+        metavar="FIRST:STOP",
+        help="hold out the new objects' rows with these trial numbers (default: the later half "
+        "of each object's trials per action)",
+    )
+    g.add_argument(
+        "--runs",
+        type=int,
+        metavar="N",
+        help=f"learning runs per method (with --table; default {DEFAULT_RUNS})",
+    )
+
+
+def table_only(args: argparse.Namespace) -> list[str]:
+    """The options of this mode that were given (an error without --table)."""
+    given = (args.prior_objects, args.test_trials, args.runs)
+    return [
+        o for o, v in zip(("--prior-objects", "--test-trials", "--runs"), given) if v is not None
+    ]
+
+
+def _trials(text: str) -> tuple[int, ...]:
+    try:
+        first, stop = (int(v) for v in text.split(":"))
+    except ValueError:
+        raise ConfigError(
+            f"--test-trials must look like FIRST:STOP (e.g. 10:20), got {text!r}"
+        ) from None
+    if not 0 <= first < stop:
+        raise ConfigError(f"--test-trials: need 0 <= FIRST < STOP, got {text!r}")
+    return tuple(range(first, stop))
+
+
+def run(args: argparse.Namespace) -> int:
+    from aptkt.experiments.table_learning import TableSettings, learn_from_table
+    from aptkt.learning import LearnerConfig
+
+    live_only = [
+        option
+        for option, value in (
+            ("--prior", args.prior),
+            ("--transfer", args.transfer),
+            ("--auxiliary", args.auxiliary),
+            ("--robot", args.robot),
+            ("--test", args.test),
+            ("--record", args.record),
+        )
+        if value
+    ]
+    if live_only:
+        raise ConfigError(
+            f"{', '.join(live_only)}: not with --table, which builds its prior knowledge from "
+            "--prior-objects and compares APTKT, APTKT+aux and the baseline on held-out rows"
+        )
+    priors = split_names(args.prior_objects, "--prior-objects")
+    if not priors:
+        raise ConfigError("--table needs --prior-objects A,B,... (the objects of prior knowledge)")
+    runs = DEFAULT_RUNS if args.runs is None else args.runs
+    if runs < 1:
+        raise ConfigError("--runs must be >= 1")
+    try:  # the learner's own checks of the shared options, as a one-line error
+        LearnerConfig(
+            eps_neg=args.eps_neg,
+            eps_explor=args.eps_explor,
+            budget=args.budget,
+            patience=args.patience,
+        )
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    settings = TableSettings(
+        table=Path(args.table),
+        prior_objects=tuple(priors),
+        new_objects=tuple(split_names(args.objects, "--objects")),
+        actions=tuple(split_names(args.actions, "--actions") or ()) or None,
+        test_trials=_trials(args.test_trials) if args.test_trials else None,
+        output=args.output,
+        runs=runs,
+        budget=args.budget,
+        eps_neg=args.eps_neg,
+        eps_explor=args.eps_explor,
+        patience=args.patience,
+        seed=args.seed,
+    )
+    learn_from_table(settings, say=lambda line: print(line, flush=True))
+    return 0

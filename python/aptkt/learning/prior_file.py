@@ -1,0 +1,249 @@
+"""Reading a prior-knowledge ``.npz`` file defensively.
+
+A prior file comes from elsewhere (another machine, another version, a colleague's mail), and
+``aptkt learn`` acts on it only after the robot has moved: so every member is checked before
+anything is built from it, and nothing the file declares is trusted with memory.
+
+* Only the members the format defines are read (see :func:`expected_member`); any other
+  member is an error, and is never decompressed.
+* Each member's header (dtype, shape) is read first; its declared size is checked against
+  :data:`PRIOR_FILE_MAX_BYTES` (for all members together) before its data is read.
+* Object arrays, pickles and non-native types are refused (``allow_pickle=False``).
+* Names, dtypes, shapes and their consistency (observations ↔ pipeline ↔ model) are checked;
+  a failure is a :class:`~aptkt.errors.PriorFileError` naming the member.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import zipfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aptkt.errors import PriorFileError
+
+__all__ = ["FORMAT", "PRIOR_FILE_MAX_BYTES", "check_action", "read_members"]
+
+FORMAT = "aptkt.PriorKnowledge/1"
+
+#: Largest total (uncompressed) size of the arrays of a prior file. The paper's prior knowledge
+#: (15 objects, 7 actions, 20 trials) takes about 2 MB; the limit leaves room for a thousand
+#: times that while keeping a hostile or corrupt file from exhausting memory.
+PRIOR_FILE_MAX_BYTES = 2 << 30
+
+_META_MAX_BYTES = 1 << 20
+_NAME = r"[A-Za-z0-9_.\-]+"
+_MEMBER_PATTERNS = [
+    re.compile(p)
+    for p in (
+        r"meta",
+        r"a\d+/obs/(objects|trials)",
+        rf"a\d+/obs/modality/{_NAME}",
+        r"a\d+/pipeline/modalities",
+        rf"a\d+/pipeline/{_NAME}/(log_columns|pca_components|mean|scale|pca_scale|components)",
+        r"a\d+/model/(meta|X|y|theta)",
+        r"a\d+/model/source_(X|lambda)_\d+",
+    )
+]
+
+
+def expected_member(name: str) -> bool:
+    return any(p.fullmatch(name) for p in _MEMBER_PATTERNS)
+
+
+def _header(zf: zipfile.ZipFile, member: str, path: Path) -> tuple[tuple[int, ...], np.dtype]:
+    with zf.open(member + ".npy") as fh:
+        try:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+            elif version == (2, 0):
+                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+            else:
+                raise ValueError(f"format version {version}")
+        except (ValueError, OSError, SyntaxError) as exc:
+            raise PriorFileError(f"{path}: member {member!r}: not a NumPy array ({exc})") from None
+    if dtype.hasobject or dtype.kind not in "biufU":
+        raise PriorFileError(
+            f"{path}: member {member!r}: arrays of {dtype} are not allowed in a prior file"
+        )
+    return tuple(int(n) for n in shape), dtype
+
+
+def read_members(path: Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """The file's metadata (checked) and its arrays, each member checked before it is read."""
+    if not zipfile.is_zipfile(path):
+        raise PriorFileError(f"{path}: not a prior-knowledge file (not an .npz archive)")
+    try:
+        with zipfile.ZipFile(path) as zf:
+            names = zf.namelist()
+            bad = [n for n in names if not n.endswith(".npy") or not expected_member(n[:-4])]
+            if bad:
+                raise PriorFileError(
+                    f"{path}: member {bad[0]!r} is not part of a prior-knowledge file "
+                    f"({len(bad)} unknown member(s)); the file was not read"
+                )
+            members = [n[:-4] for n in names]
+            if "meta" not in members:
+                raise PriorFileError(f"{path}: not a prior-knowledge file (no member 'meta')")
+            headers = {m: _header(zf, m, path) for m in members}
+            total = 0
+            for m, (shape, dtype) in headers.items():
+                size = int(np.prod(shape, dtype=object)) * dtype.itemsize
+                total += size
+                if m == "meta" and size > _META_MAX_BYTES:
+                    raise PriorFileError(f"{path}: member 'meta' declares {size} bytes")
+                if total > PRIOR_FILE_MAX_BYTES:
+                    raise PriorFileError(
+                        f"{path}: member {m!r} declares {shape} of {dtype}: the file's arrays "
+                        f"exceed the limit of {PRIOR_FILE_MAX_BYTES} bytes for a prior file"
+                    )
+            arrays = {}
+            for m in members:
+                with zf.open(m + ".npy") as fh:
+                    arrays[m] = np.lib.format.read_array(fh, allow_pickle=False)
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError) as exc:
+        if isinstance(exc, PriorFileError):
+            raise
+        raise PriorFileError(f"{path}: damaged prior-knowledge file ({exc})") from None
+    meta = _meta(arrays.pop("meta"), path)
+    return meta, arrays
+
+
+def _meta(raw: np.ndarray, path: Path) -> dict[str, Any]:
+    if raw.dtype != np.uint8 or raw.ndim != 1:
+        raise PriorFileError(f"{path}: member 'meta': expected JSON bytes (uint8, 1-D)")
+    try:
+        meta = json.loads(raw.tobytes().decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise PriorFileError(f"{path}: member 'meta': not JSON ({exc})") from None
+    if not isinstance(meta, dict):
+        raise PriorFileError(f"{path}: member 'meta': expected a JSON object")
+    if meta.get("format") != FORMAT:
+        raise PriorFileError(
+            f"{path}: unsupported format {meta.get('format')!r} (expected {FORMAT})"
+        )
+    actions = meta.get("actions")
+    if (
+        not isinstance(actions, list)
+        or not actions
+        or not all(isinstance(a, str) and a for a in actions)
+    ):
+        raise PriorFileError(
+            f"{path}: member 'meta': 'actions' must be a non-empty list of action names, "
+            f"got {actions!r}"
+        )
+    if len(set(actions)) != len(actions):
+        raise PriorFileError(f"{path}: member 'meta': an action appears twice in {actions}")
+    if not isinstance(meta.get("metadata", {}), dict):
+        raise PriorFileError(f"{path}: member 'meta': 'metadata' must be a JSON object")
+    return meta
+
+
+class _Checker:
+    """Checks of one action's members; every failure names the member."""
+
+    def __init__(self, path: Path, arrays: dict[str, np.ndarray], prefix: str, action: str):
+        self.path, self.arrays, self.prefix, self.action = path, arrays, prefix, action
+
+    def fail(self, member: str, problem: str) -> PriorFileError:
+        return PriorFileError(
+            f"{self.path}: member {self.prefix}/{member!s} (action {self.action}): {problem}"
+        )
+
+    def get(
+        self,
+        member: str,
+        kinds: str,
+        ndim: int,
+        shape: Callable[[tuple[int, ...]], bool] | None = None,
+        want: str = "",
+    ) -> np.ndarray:
+        key = f"{self.prefix}/{member}"
+        if key not in self.arrays:
+            raise self.fail(member, "missing")
+        a = self.arrays[key]
+        if a.dtype.kind not in kinds:
+            names = {"U": "text", "i": "integer", "u": "integer", "f": "float", "b": "boolean"}
+            expected = " or ".join(sorted({names[k] for k in kinds}))
+            raise self.fail(member, f"expected {expected} values, got {a.dtype}")
+        if a.ndim != ndim or (shape is not None and not shape(a.shape)):
+            raise self.fail(member, f"expected a {ndim}-D array{want}, got shape {a.shape}")
+        if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+            raise self.fail(member, "non-finite values")
+        return a
+
+
+def check_action(path: Path, arrays: dict[str, np.ndarray], prefix: str, action: str) -> None:
+    """Names, dtypes, shapes and consistency of one action's observations, pipeline and model."""
+    c = _Checker(path, arrays, prefix, action)
+    objects = c.get("obs/objects", "U", 1)
+    n = objects.shape[0]
+    if n == 0:
+        raise c.fail("obs/objects", "no observations")
+    if any(not str(o) for o in objects):
+        raise c.fail("obs/objects", "an empty object name")
+    c.get("obs/trials", "iu", 1, lambda s: s == (n,), f" of {n} trial numbers")
+    mod_prefix = f"{prefix}/obs/modality/"
+    obs_mods = sorted(k[len(mod_prefix) :] for k in arrays if k.startswith(mod_prefix))
+    if not obs_mods:
+        raise c.fail("obs/modality", "no modality")
+    dims = {}
+    for m in obs_mods:
+        a = c.get(f"obs/modality/{m}", "f", 2, lambda s: s[0] == n, f" with {n} rows")
+        dims[m] = a.shape[1]
+    pipe_mods = c.get("pipeline/modalities", "U", 1).tolist()
+    if sorted(pipe_mods) != obs_mods or len(set(pipe_mods)) != len(pipe_mods):
+        raise c.fail("pipeline/modalities", f"{pipe_mods} differ from the observations' {obs_mods}")
+    width = 0
+    for m in pipe_mods:
+        d = dims[m]
+        logs = c.get(f"pipeline/{m}/log_columns", "iu", 1)
+        if logs.size and not (0 <= logs.min() and logs.max() < d):
+            raise c.fail(f"pipeline/{m}/log_columns", f"columns outside 0..{d - 1}")
+        pca = int(c.get(f"pipeline/{m}/pca_components", "iu", 0))
+        c.get(f"pipeline/{m}/mean", "f", 1, lambda s, d=d: s == (d,), f" of {d} values")
+        scale = c.get(f"pipeline/{m}/scale", "f", 1, lambda s, d=d: s == (d,), f" of {d} values")
+        if np.any(scale <= 0):
+            raise c.fail(f"pipeline/{m}/scale", "scales must be > 0")
+        if float(c.get(f"pipeline/{m}/pca_scale", "f", 0)) <= 0:
+            raise c.fail(f"pipeline/{m}/pca_scale", "must be > 0")
+        if f"{prefix}/pipeline/{m}/components" in arrays:
+            comp = c.get(
+                f"pipeline/{m}/components",
+                "f",
+                2,
+                lambda s, d=d: s[1] == d and 1 <= s[0] <= d,
+                f" of shape (k, {d})",
+            )
+            if pca < 0:
+                raise c.fail(f"pipeline/{m}/components", "present without pca_components")
+            width += comp.shape[0]
+        else:
+            if pca >= 0:
+                raise c.fail(f"pipeline/{m}/components", "missing (pca_components is set)")
+            width += d
+    X = c.get("model/X", "f", 2, lambda s: s == (n, width), f" of shape ({n}, {width})")
+    del X
+    y = c.get("model/y", "iu", 1, lambda s: s == (n,), f" of {n} class numbers")
+    classes = sorted(set(objects.tolist()))
+    if len(classes) < 2:
+        raise c.fail("obs/objects", "prior knowledge needs at least two objects")
+    if y.min() < 0 or y.max() >= len(classes) or [classes[i] for i in y] != objects.tolist():
+        raise c.fail("model/y", "the model's training labels differ from the observations' objects")
+    meta_raw = c.get("model/meta", "u", 1)
+    try:
+        meta = json.loads(meta_raw.tobytes().decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise c.fail("model/meta", f"not JSON ({exc})") from None
+    if not isinstance(meta, dict) or meta.get("classes") != classes:
+        got = meta.get("classes") if isinstance(meta, dict) else meta
+        raise c.fail("model/meta", f"classes {got!r} differ from the observations' {classes}")
+    theta = c.get("model/theta", "f", 2)
+    rows = 1 if len(classes) == 2 else len(classes)  # two classes: a single binary classifier
+    if theta.shape[0] != rows:
+        raise c.fail("model/theta", f"expected {rows} row(s) of hyper-parameters")

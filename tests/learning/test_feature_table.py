@@ -1,0 +1,200 @@
+"""Feature tables (``aptkt learn --table``): reading and writing CSV and HDF5, every validation
+error as one line naming the row or column, and the offline comparison end to end."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+from aptkt.cli import main
+from aptkt.errors import FeatureTableError
+from aptkt.learning import Observations
+from aptkt.learning.feature_table import (
+    read_feature_table,
+    split_held_out,
+    write_feature_table,
+)
+
+from .synthetic import draw, make_world
+
+PRIORS, NEW = ["old0", "old1", "old2"], ["new0", "new1", "new2"]
+
+
+def _world_table(n_per=6):
+    """Two actions with different modalities (thermal 6-d on both, force on P1, texture on S1)."""
+    priors, news, means = make_world(n_prior=3, n_new=3, related=True, seed=1)
+    table = draw(means, priors + news, n_per, seed=2)
+    for obs in table.values():
+        obs.trials = np.tile(np.arange(n_per), len(priors + news))
+    return table
+
+
+def _equal(a: dict[str, Observations], b: dict[str, Observations]) -> None:
+    assert list(a) == list(b)
+    for name in a:
+        # Modalities come in the table's column order, whatever order they were given in.
+        assert sorted(a[name].modality_names) == sorted(b[name].modality_names)
+        for m in a[name].modality_names:
+            np.testing.assert_array_equal(a[name].modalities[m], b[name].modalities[m])
+        np.testing.assert_array_equal(a[name].objects, b[name].objects)
+        np.testing.assert_array_equal(a[name].trials, b[name].trials)
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".h5"])
+def test_round_trip_is_exact(tmp_path, suffix):
+    table = _world_table()
+    path = write_feature_table(tmp_path / f"t{suffix}", table)
+    read = read_feature_table(path)
+    assert read.action_names == ["P1", "S1"]
+    assert read.columns[:2] == ["force.0", "thermal.0"]
+    _equal(read.observations(), table)
+
+
+def test_held_out_split_by_trial(tmp_path):
+    read = read_feature_table(write_feature_table(tmp_path / "t.csv", _world_table()))
+    pool, test = split_held_out(read, ["P1", "S1"], NEW)
+    assert set(read.trials[pool]) == {0, 1, 2} and set(read.trials[test]) == {3, 4, 5}
+    assert set(read.objects[pool | test]) == set(NEW)
+    pool, test = split_held_out(read, ["P1"], NEW, test_trials=[0, 5])
+    assert set(read.trials[test]) == {0, 5} and set(read.trials[pool]) == {1, 2, 3, 4}
+    with pytest.raises(FeatureTableError, match="no row left to learn from"):
+        split_held_out(read, ["P1"], NEW, test_trials=range(6))
+
+
+def _write_csv(path, header, rows):
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        w.writerows(rows)
+    return path
+
+
+GOOD_HEADER = ["object", "action", "trial", "force.0", "thermal.0", "thermal.1"]
+
+
+def _good_rows():
+    rows = []
+    for o, obj in enumerate(["a", "b", "c", "d"]):
+        for t in range(3):
+            rows.append([obj, "P1", t, o + 0.1 * t, o, -o])
+    return rows
+
+
+def _learn(path, capsys, *extra):
+    code = main(
+        ["learn", "--table", str(path), "--prior-objects", "a,b", "--objects", "c,d"]
+        + ["--budget", "1", "--runs", "1", "-o", str(path.parent / "out"), *extra]
+    )
+    err = capsys.readouterr().err.strip()
+    return code, err
+
+
+def _bad(tmp_path, edit):
+    header, rows = list(GOOD_HEADER), _good_rows()
+    header, rows = edit(header, rows) or (header, rows)
+    return _write_csv(tmp_path / "t.csv", header, rows)
+
+
+@pytest.mark.parametrize(
+    "edit,message",
+    [
+        (
+            lambda h, r: (h[:1] + h[2:], [x[:1] + x[2:] for x in r]),
+            "missing column(s) action",
+        ),
+        (lambda h, r: (h[:-1] + ["thermal_1"], r), "column 'thermal_1': is neither"),
+        (lambda h, r: (h[:-1] + ["thermal.2"], r), "modality thermal has no column thermal.1"),
+        (lambda h, r: r[4].__setitem__(3, "inf"), "row 5, column force.0: non-finite value 'inf'"),
+        (lambda h, r: r[6].__setitem__(5, "nan"), "row 7, column thermal.1: non-finite value"),
+        (lambda h, r: r[2].__setitem__(4, "1,5"), "row 3, column thermal.0: '1,5' is not a number"),
+        (lambda h, r: r[1].__setitem__(2, "x"), "row 2, column trial: 'x' is not a whole"),
+        (
+            lambda h, r: r[8].__setitem__(4, ""),
+            "row 9, column thermal.0: empty, but filled in row 1",
+        ),
+        (lambda h, r: r[3].__setitem__(0, ""), "row 4, column object: empty name"),
+        (
+            lambda h, r: r[4].__setitem__(2, "0"),
+            "row 5: object b, action P1, trial 0 also in row 4",
+        ),
+        (lambda h, r: r.append(["e", "P1", 0, 1.0, 2.0]), "row 13: 5 cells, but the header has 6"),
+        (
+            lambda h, r: (h, [x for x in r if not (x[0] == "d" and x[2] > 0)]),
+            "object d has 1 row(s) of action P1 (rows: 10); learning needs at least 2",
+        ),
+    ],
+)
+def test_bad_tables_give_one_line_naming_the_place(tmp_path, capsys, edit, message):
+    path = _bad(tmp_path, edit)
+    code, err = _learn(path, capsys)
+    assert code == 1
+    assert err.count("\n") == 0, err
+    assert err.startswith(f"aptkt learn: error: {path}"), err
+    assert message in err, err
+
+
+def test_hdf5_tables_are_checked_too(tmp_path, capsys):
+    path = write_feature_table(tmp_path / "t.h5", _world_table())
+    with h5py.File(path, "a") as f:
+        f["thermal.2"][7] = np.inf
+    code, err = _learn(path, capsys)
+    assert code == 1 and "row 8, column thermal.2: non-finite value inf" in err
+    with h5py.File(path, "a") as f:
+        f["thermal.2"][7] = np.nan  # an empty cell in a row whose action has the column
+    code, err = _learn(path, capsys)
+    assert code == 1 and "row 8, column thermal.2: empty, but filled in row 1" in err
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--prior-objects", "a,zz"], "no rows of prior object(s) zz"),
+        (["--objects", "c,a"], "a are both prior and new"),
+        (["--actions", "P9"], "no rows of action(s) P9"),
+        (["--test-trials", "2:1"], "--test-trials: need 0 <= FIRST < STOP"),
+        (["--transfer", "none"], "--transfer: not with --table"),
+        (["--eps-neg", "2"], "eps_neg must lie in [0, 1]"),
+    ],
+)
+def test_bad_options_give_one_line(tmp_path, capsys, args, message):
+    path = _write_csv(tmp_path / "t.csv", GOOD_HEADER, _good_rows())
+    code, err = _learn(path, capsys, *args)
+    assert code == 1 and err.count("\n") == 0 and message in err, err
+
+
+def test_live_options_are_not_mixed_up(capsys):
+    assert main(["learn", "--objects", "a,b", "--prior", "p.npz", "--runs", "2"]) == 1
+    err = capsys.readouterr().err
+    assert "--robot is required (or learn offline with --table FILE)" in err
+
+
+@pytest.mark.slow
+def test_learn_from_a_table_writes_the_demo_outputs(tmp_path, capsys):
+    """CSV and HDF5 give the same results; every method learns from the related priors."""
+    table = _world_table(n_per=8)
+    results = {}
+    for suffix in (".csv", ".h5"):
+        path = write_feature_table(tmp_path / f"t{suffix}", table)
+        out = tmp_path / f"out{suffix}"
+        args = ["learn", "--table", str(path), "--prior-objects", ",".join(PRIORS)]
+        args += ["--objects", ",".join(NEW), "--budget", "3", "--runs", "2", "-o", str(out)]
+        assert main(args) == 0
+        printed = capsys.readouterr().out
+        assert "APTKT+aux" in printed and "baseline" in printed
+        for name in ("results.csv", "learning_curves.png", "learning_curves.svg", "prior.npz"):
+            assert (out / name).is_file(), name
+        summary = json.loads((out / "summary.json").read_text())
+        with (out / "results.csv").open() as fh:
+            rows = list(csv.DictReader(fh))
+        assert {r["method"] for r in rows} == {"APTKT", "APTKT+aux", "baseline"}
+        assert len(rows) == 3 * 2 * (3 + 1)
+        results[suffix] = [(r["method"], r["trial"], r["step"], r["mean_accuracy"]) for r in rows]
+        assert set(summary["final_mean_accuracy"]) == {"APTKT", "APTKT+aux", "baseline"}
+        for acc in summary["final_mean_accuracy"].values():
+            assert 0.5 < acc <= 1.0  # 3 well separated new objects: far above chance (1/3)
+        assert summary["settings"]["prior_objects"] == PRIORS
+    assert results[".csv"] == results[".h5"]

@@ -1,0 +1,182 @@
+"""A prior-knowledge file is checked member by member before anything is built from it:
+corrupt, inconsistent, foreign or oversized files are a PriorFileError naming the member."""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+
+import numpy as np
+import pytest
+from aptkt.cli import main
+from aptkt.errors import PriorFileError
+from aptkt.learning import PriorKnowledge
+from aptkt.learning.prior_file import PRIOR_FILE_MAX_BYTES
+
+from .synthetic import draw, make_world
+
+
+@pytest.fixture(scope="module")
+def good(tmp_path_factory):
+    priors, _, means = make_world(n_prior=3)
+    path = tmp_path_factory.mktemp("prior") / "good.npz"
+    PriorKnowledge.build(draw(means, priors, 4, seed=1), seed=0).save(path)
+    return path
+
+
+def _members(path):
+    with np.load(path, allow_pickle=False) as d:
+        return {k: d[k] for k in d.files}
+
+
+def _write(path, members):
+    np.savez(path, **members)
+    return path
+
+
+def _meta(members):
+    return json.loads(members["meta"].tobytes())
+
+
+def _set_meta(members, meta):
+    members["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+
+
+def test_the_saved_file_loads_and_round_trips(good):
+    prior = PriorKnowledge.load(good)
+    assert prior.objects == ["old0", "old1", "old2"]
+    assert set(prior.actions) == {"P1", "S1"}
+
+
+def _corrupt_pipeline_shape(m):
+    key = "a0/pipeline/thermal/mean"
+    m[key] = np.concatenate([m[key], [0.0]])
+    return key
+
+
+def _integer_object_names(m):
+    m["a0/obs/objects"] = np.arange(len(m["a0/obs/objects"]))
+    return "a0/obs/objects"
+
+
+def _actions_as_a_string(m):
+    meta = _meta(m)
+    meta["actions"] = "P1S1"
+    _set_meta(m, meta)
+    return "meta"
+
+
+def _missing_member(m):
+    del m["a1/model/theta"]
+    return "a1/model/theta"
+
+
+def _labels_differ(m):
+    m["a0/model/y"] = m["a0/model/y"][::-1].copy()
+    return "a0/model/y"
+
+
+def _model_features_wrong_width(m):
+    m["a1/model/X"] = m["a1/model/X"][:, :-1].copy()
+    return "a1/model/X"
+
+
+def _non_finite(m):
+    m["a0/obs/modality/force"] = m["a0/obs/modality/force"].copy()
+    m["a0/obs/modality/force"][0, 0] = np.nan
+    return "a0/obs/modality/force"
+
+
+def _modalities_differ(m):
+    m["a0/pipeline/modalities"] = np.array(["force", "texture"])
+    return "a0/pipeline/modalities"
+
+
+def _classes_differ(m):
+    meta = json.loads(m["a0/model/meta"].tobytes())
+    meta["classes"] = ["old0", "old1", "oldX"]
+    m["a0/model/meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+    return "a0/model/meta"
+
+
+def _unknown_member(m):
+    m["junk"] = np.zeros(10)
+    return "junk"
+
+
+def _member_of_no_action(m):
+    m["a7/obs/objects"] = np.array(["x"])
+    return "a7/obs/objects"
+
+
+@pytest.mark.parametrize(
+    "corrupt",
+    [
+        _corrupt_pipeline_shape,
+        _integer_object_names,
+        _actions_as_a_string,
+        _missing_member,
+        _labels_differ,
+        _model_features_wrong_width,
+        _non_finite,
+        _modalities_differ,
+        _classes_differ,
+        _unknown_member,
+        _member_of_no_action,
+    ],
+)
+def test_corrupt_members_are_named(good, tmp_path, corrupt):
+    members = _members(good)
+    member = corrupt(members)
+    bad = _write(tmp_path / "bad.npz", members)
+    with pytest.raises(PriorFileError, match=member.replace("/", "/")) as info:
+        PriorKnowledge.load(bad)
+    assert str(bad) in str(info.value)
+
+
+def _npy_header(shape, dtype="<f8"):
+    """A .npy member that declares ``shape`` but holds only a few bytes of data."""
+    buf = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        buf, {"descr": dtype, "fortran_order": False, "shape": shape}
+    )
+    return buf.getvalue() + b"\0" * 64
+
+
+@pytest.mark.parametrize("member", ["a0/model/X", "zeros"])
+def test_declared_sizes_are_checked_before_reading(good, tmp_path, member):
+    bad = tmp_path / "huge.npz"
+    with zipfile.ZipFile(good) as src, zipfile.ZipFile(bad, "w") as dst:
+        for item in src.infolist():
+            if item.filename != member + ".npy":
+                dst.writestr(item, src.read(item))
+        dst.writestr(member + ".npy", _npy_header((10**11,)))
+    assert 10**11 * 8 > PRIOR_FILE_MAX_BYTES
+    with pytest.raises(PriorFileError, match=member):
+        PriorKnowledge.load(bad)
+
+
+def test_object_arrays_are_refused(good, tmp_path):
+    bad = tmp_path / "obj.npz"
+    with zipfile.ZipFile(good) as src, zipfile.ZipFile(bad, "w") as dst:
+        for item in src.infolist():
+            if item.filename != "a0/obs/objects.npy":
+                dst.writestr(item, src.read(item))
+        dst.writestr("a0/obs/objects.npy", _npy_header((3,), "|O"))
+    with pytest.raises(PriorFileError, match="a0/obs/objects"):
+        PriorKnowledge.load(bad)
+
+
+def test_learn_refuses_a_corrupt_prior_before_anything_moves(good, tmp_path, capsys):
+    members = _members(good)
+    _integer_object_names(members)
+    bad = _write(tmp_path / "bad.npz", members)
+    out = tmp_path / "run"
+    argv = ["learn", "--robot", "sim", "--prior", str(bad), "--objects", "towel,cork_board"]
+    assert main([*argv, "-o", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "a0/obs/objects" in err and "Traceback" not in err
+    assert not out.exists()
+    assert main(["prior", "inspect", str(bad)]) == 1
+    assert "a0/obs/objects" in capsys.readouterr().err

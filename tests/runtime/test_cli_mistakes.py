@@ -1,0 +1,278 @@
+"""Every sub-command against a table of user mistakes: each ends in one
+``aptkt <command>: error: ...`` line naming the problem, exit code 1, no traceback, and no
+(empty) output directory left behind."""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import pytest
+from aptkt.actions import PAPER_ACTIONS
+from aptkt.cli import main
+from aptkt.learning import PriorKnowledge
+from aptkt.learning.dataset import load_observations
+from aptkt.runtime.generation import GenerationPlan, generate
+
+PYTHON_DIR = Path(__file__).resolve().parents[2] / "python"
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("mistakes")
+    data = d / "d.h5"
+    objects = ("rough_sponge", "metal_toolbox", "towel")
+    generate(data, GenerationPlan(objects, (PAPER_ACTIONS["P1"],), 3, seed=1), progress=False)
+    table = load_observations(data, objects=objects[:2])
+    PriorKnowledge.build(table).save(d / "p.npz")
+    (d / "afile").write_text("a file")
+    (d / "dir").mkdir()
+    truncated = d / "trunc.h5"
+    truncated.write_bytes(data.read_bytes()[: data.stat().st_size // 2])
+    return d
+
+
+DATA_GEN = ["--objects", "towel", "--actions", "P1", "-n", "1", "--no-progress"]
+SIM = ["--robot", "sim"]
+
+# (arguments, a fragment the error line must contain); {d} is the fixture directory.
+MISTAKES = [
+    # an output path that is a file, or lies under a file
+    (["demo", "-o", "{d}/afile", "--quick"], "is a file"),
+    (["dataset", "generate", "-o", "{d}/afile/x.h5", *DATA_GEN], "is a file"),
+    (["reproduce", "fig6", "-o", "{d}/afile", "--quick"], "is a file"),
+    (
+        ["learn", *SIM, "--prior", "{d}/p.npz", "--objects", "towel,cork_board", "-o", "{d}/afile"],
+        "is a file",
+    ),
+    (["prior", "build", "{d}/d.h5", "-o", "{d}/afile/x.npz"], "is a file"),
+    (["collect", *SIM, "--objects", "towel", "-n", "1", "-o", "{d}/afile/x.h5"], "is a file"),
+    # an output path that is a directory
+    (["dataset", "generate", "-o", "{d}/dir", "--overwrite", *DATA_GEN], "is a directory"),
+    (["prior", "build", "{d}/d.h5", "-o", "{d}/dir"], "is a directory"),
+    # negative values
+    (["dataset", "generate", "-o", "{d}/new/s.h5", "--seed", "-5", *DATA_GEN], "--seed"),
+    (
+        ["dataset", "generate", "-o", "{d}/new/s.h5", "--first-trial", "-3", *DATA_GEN],
+        "--first-trial",
+    ),
+    (["prior", "build", "{d}/d.h5", "-o", "{d}/new/r.npz", "--restarts", "-1"], "--restarts"),
+    (["demo", "-o", "{d}/new/demo", "--seed", "-1", "--quick"], "--seed"),
+    (["reproduce", "fig6", "-o", "{d}/new/r", "--seed", "-1", "--quick"], "--seed"),
+    (
+        [
+            "collect",
+            *SIM,
+            "--objects",
+            "towel",
+            "-n",
+            "1",
+            "-o",
+            "{d}/new/c.h5",
+            "--first-trial",
+            "-3",
+        ],
+        "--first-trial",
+    ),
+    (
+        [
+            "learn",
+            *SIM,
+            "--prior",
+            "{d}/p.npz",
+            "--objects",
+            "towel,cork_board",
+            "-o",
+            "{d}/new/l",
+            "--seed",
+            "-2",
+        ],
+        "--seed",
+    ),
+    # unknown names, too few or duplicate objects
+    (["dataset", "features", "{d}/d.h5", "--actions", "Z9"], "Z9"),
+    (["prior", "build", "{d}/d.h5", "-o", "{d}/new/z.npz", "--actions", "Z9"], "Z9"),
+    (
+        ["prior", "build", "{d}/d.h5", "-o", "{d}/new/o.npz", "--objects", "rough_sponge"],
+        "at least two",
+    ),
+    (
+        [
+            "prior",
+            "build",
+            "{d}/d.h5",
+            "-o",
+            "{d}/new/o.npz",
+            "--objects",
+            "rough_sponge,metl_toolbox",
+        ],
+        "metl_toolbox",
+    ),
+    (
+        [
+            "prior",
+            "build",
+            "{d}/d.h5",
+            "-o",
+            "{d}/new/o.npz",
+            "--objects",
+            "rough_sponge,rough_sponge",
+        ],
+        "twice",
+    ),
+    (
+        [
+            "dataset",
+            "generate",
+            "-o",
+            "{d}/new/s.h5",
+            "--objects",
+            "towel,towel",
+            "--actions",
+            "P1",
+            "-n",
+            "1",
+        ],
+        "twice",
+    ),
+    (
+        ["learn", *SIM, "--prior", "{d}/p.npz", "--objects", "towel,towel", "-o", "{d}/new/l"],
+        "twice",
+    ),
+    (["collect", *SIM, "--objects", "towel,towl", "-n", "1", "-o", "{d}/new/c.h5"], "towl"),
+    # missing and damaged inputs
+    (
+        [
+            "learn",
+            *SIM,
+            "--prior",
+            "{d}/missing.npz",
+            "--objects",
+            "towel,cork_board",
+            "-o",
+            "{d}/new/l",
+        ],
+        "no such file",
+    ),
+    (["prior", "inspect", "{d}/missing.npz"], "no such file"),
+    (["dataset", "info", "{d}/missing.h5"], "no such file"),
+    (["dataset", "features", "{d}/trunc.h5"], "damaged"),
+    (["dataset", "info", "{d}/trunc.h5"], "damaged"),
+    (
+        ["reproduce", "fig6", "--quick", "--data", "{d}/missing.h5", "-o", "{d}/new/r"],
+        "no such file",
+    ),
+    # contradicting options
+    (
+        ["dataset", "generate", "-o", "{d}/new/s.h5", "--resume", "--overwrite", *DATA_GEN],
+        "--resume and --overwrite",
+    ),
+    (
+        [
+            "collect",
+            *SIM,
+            "--objects",
+            "towel",
+            "-n",
+            "1",
+            "-o",
+            "{d}/new/c.h5",
+            "--resume",
+            "--overwrite",
+        ],
+        "--resume and --overwrite",
+    ),
+    (["skin", "monitor"], "PORT"),
+]
+
+
+def _label(argv: list[str]) -> str:
+    words = [argv[0]]
+    if argv[0] in ("dataset", "prior", "skin"):
+        words.append(argv[1])
+    return "aptkt " + " ".join(words)
+
+
+@pytest.mark.parametrize(("argv", "fragment"), MISTAKES, ids=lambda v: " ".join(v)[:60])
+def test_every_mistake_is_one_error_line(files, capsys, argv, fragment):
+    argv = [a.replace("{d}", str(files)) for a in argv]
+    before = sorted(p.name for p in files.iterdir())
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1, err
+    assert re.match(rf"^{re.escape(_label(argv))}: error: ", lines[0]), lines[0]
+    assert fragment in lines[0]
+    # no output directory (nor anything else) left behind
+    assert sorted(p.name for p in files.iterdir()) == before
+
+
+def test_scheduler_without_dask_fails_before_any_work(files, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)  # import fails
+    out = files / "new" / "r"
+    argv = ["reproduce", "fig6", "--quick", "--scheduler", "tcp://h:1", "-o", str(out)]
+    assert main(argv) == 1
+    assert "--scheduler needs dask" in capsys.readouterr().err
+    assert not (files / "new").exists()
+
+
+def _unprivileged(cmd: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    """Run as a user who cannot write where the test made things read-only (root ignores file
+    modes, so as root the command runs as nobody)."""
+    env = {**os.environ, "PYTHONPATH": str(PYTHON_DIR)}
+    prefix: list[str] = []
+    if os.geteuid() == 0:
+        setpriv = shutil.which("setpriv")
+        assert setpriv, "as root this test needs setpriv (util-linux) to drop privileges"
+        prefix = [setpriv, "--reuid=65534", "--regid=65534", "--clear-groups"]
+    return subprocess.run(
+        [*prefix, sys.executable, "-m", "aptkt.cli", *cmd],
+        check=False,
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+@pytest.fixture
+def read_only(files):
+    base = Path(tempfile.mkdtemp(prefix="aptkt-ro-"))
+    base.chmod(0o755)
+    ro = base / "ro"
+    ro.mkdir()
+    shutil.copy(files / "d.h5", ro / "d.h5")
+    (ro / "d.h5").chmod(0o444)
+    ro.chmod(0o555)
+    yield base
+    ro.chmod(0o755)
+    shutil.rmtree(base)
+
+
+@pytest.mark.parametrize(
+    ("argv", "fragment"),
+    [
+        (["reproduce", "fig6", "--quick", "-o", "ro/out"], "cannot write"),
+        (["dataset", "features", "ro/d.h5"], "read-only"),
+        (["dataset", "repair", "ro/d.h5"], "read-only"),
+        (["dataset", "generate", "-o", "ro/new.h5", *DATA_GEN], "cannot write"),
+        (["prior", "build", "ro/d.h5", "-o", "ro/p.npz"], "cannot write"),
+    ],
+    ids=lambda v: " ".join(v)[:40],
+)
+def test_read_only_places_are_one_error_line(read_only, argv, fragment):
+    before = sorted(p.name for p in (read_only / "ro").iterdir())
+    r = _unprivileged(argv, read_only)
+    assert r.returncode == 1, r.stderr
+    assert "Traceback" not in r.stderr
+    lines = [line for line in r.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith(f"{_label(argv)}: error: "), r.stderr
+    assert fragment in lines[0]
+    assert sorted(p.name for p in (read_only / "ro").iterdir()) == before
