@@ -125,14 +125,21 @@ def learn_from_table(s: TableSettings, *, say=print) -> dict[str, Any]:
     curves = _curves(rows, methods)
     fused = _curves(rows, methods, key="fused_accuracy")
     x = np.arange(max(c.shape[1] for c in curves.values()))
-    lines = _table(curves, fused, x)
+    chance = 1.0 / len(s.new_objects)
+    lines = _table(curves, fused, x, chance)
     for line in lines:
         say("      " + line)
     fig, axes = figure(1, 2, figsize=(11, 4.2))
     learning_curves(
-        axes[0], curves, x[: curves["APTKT"].shape[1]], title="mean accuracy of the actions' models"
+        axes[0],
+        curves,
+        x[: curves["APTKT"].shape[1]],
+        chance=chance,
+        title="mean accuracy of the actions' models",
     )
-    learning_curves(axes[1], fused, x[: fused["APTKT"].shape[1]], title="all actions fused")
+    learning_curves(
+        axes[1], fused, x[: fused["APTKT"].shape[1]], chance=chance, title="all actions fused"
+    )
     fig.suptitle(
         f"{table.path.name}: {len(s.new_objects)} new objects, priors: {', '.join(s.prior_objects)}"
     )
