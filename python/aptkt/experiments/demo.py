@@ -308,8 +308,14 @@ def _confusion(
 
 def _plot_confusion(confusion: dict[str, np.ndarray], objects: tuple[str, ...], stem: Path):
     names = [o.replace("_", " ") for o in objects]
-    fig, axes = figure(1, len(confusion), figsize=(4.6 * len(confusion), 4.4), squeeze=False)
-    for ax, (method, counts) in zip(axes[0], confusion.items()):
+    fig, axes = figure(
+        1,
+        len(confusion),
+        figsize=(4.0 * len(confusion) + 2.5, 4.6),
+        squeeze=False,
+        layout="constrained",
+    )
+    for panel, (ax, (method, counts)) in enumerate(zip(axes[0], confusion.items())):
         share = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1)
         im = ax.imshow(share, vmin=0, vmax=1, cmap="Blues")
         for i in range(len(objects)):
@@ -324,9 +330,10 @@ def _plot_confusion(confusion: dict[str, np.ndarray], objects: tuple[str, ...], 
                     color="white" if share[i, k] > 0.6 else "black",
                 )
         ax.set_xticks(range(len(objects)), names, rotation=45, ha="right", fontsize=8)
-        ax.set_yticks(range(len(objects)), names, fontsize=8)
+        ax.set_yticks(range(len(objects)), names if panel == 0 else [], fontsize=8)
         ax.set_xlabel("predicted object")
-        ax.set_ylabel("true object")
+        if panel == 0:  # the panels share their rows: one set of row labels
+            ax.set_ylabel("true object")
         ax.set_title(f"{method}: final models", fontsize=10)
     fig.colorbar(
         im, ax=axes[0].tolist(), shrink=0.8, label="share of the true object's test observations"
