@@ -251,8 +251,8 @@ def run_export_features(args: argparse.Namespace) -> int:
     try:
         table = load_observations(
             args.file,
-            actions=_split(args.actions),
-            objects=_split(args.objects),
+            actions=split_names(args.actions, "--actions"),
+            objects=split_names(args.objects, "--objects"),
             progress=not args.no_progress and sys.stderr.isatty(),
         )
     except (DatasetError, KeyError, OSError) as exc:

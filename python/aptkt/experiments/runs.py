@@ -77,7 +77,10 @@ def run_steps(spec: RunSpec) -> list[dict[str, Any]]:
     run = learner.run(
         PoolEnvironment(pool, seed=spec.pool_seed), spec.actions, spec.new_objects, test
     )
-    return step_rows(run)
+    rows = step_rows(run)
+    if rows:
+        rows[-1]["confusion"] = final_confusion(learner, spec.new_objects)
+    return rows
 
 
 def step_rows(run: LearningRun) -> list[dict[str, Any]]:
@@ -92,8 +95,6 @@ def step_rows(run: LearningRun) -> list[dict[str, Any]]:
         row["sources"] = len(lambdas)
         row["mean_lambda"] = sum(lambdas) / len(lambdas) if lambdas else float("nan")
         rows.append(row)
-    if rows:
-        rows[-1]["confusion"] = final_confusion(learner, spec.new_objects)
     return rows
 
 
