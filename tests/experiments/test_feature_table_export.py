@@ -57,6 +57,8 @@ def test_export_errors_are_one_line(quick_data, tmp_path, capsys):
         == 1
     )
     err = capsys.readouterr().err.strip()
-    assert err.startswith("aptkt dataset: error:") and "P9" in err and "\n" not in err
+    assert (
+        err.startswith("aptkt dataset export-features: error:") and "P9" in err and "\n" not in err
+    )
     assert main(["dataset", "export-features", str(quick_data), "-o", str(tmp_path / "t.txt")]) == 1
     assert ".csv or an HDF5" in capsys.readouterr().err
