@@ -217,7 +217,10 @@ class SimContact:
         relax_h: NDArray[np.float64],
         relax_last: NDArray[np.float64],
         latest_force: NDArray[np.float64],
-        segment: tuple[int, Any, Any, Any],
+        seg_t0: NDArray[np.int64],
+        seg_p0: NDArray[np.float64],
+        seg_v0: NDArray[np.float64],
+        seg_a: NDArray[np.float64],
         queue_t: NDArray[np.int64],
         queue_c: NDArray[np.int64],
         queue_f: NDArray[np.float64],
@@ -249,3 +252,15 @@ def sim_texture(
     w: NDArray[np.float64],
     pressure: NDArray[np.float64],
 ) -> NDArray[np.float64]: ...
+def sim_slip(
+    params: list[float],
+    key: tuple[int, int],
+    load: float,
+    threshold: float,
+    events: int,
+    ring: NDArray[np.float64],
+    t: NDArray[np.float64],
+    path: NDArray[np.float64],
+    force: NDArray[np.float64],
+    speed: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], float, float, int, NDArray[np.float64]]: ...

@@ -5,6 +5,8 @@ run by run through :meth:`CellThermal.propagate_many`."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from aptkt.sim.kinematics import Trajectory
@@ -104,3 +106,79 @@ def noise_and_arrival(ph: ContactPhysics, ks, cells, t_ns):
     noise[:, 1::2] = r * np.sin(2 * np.pi * u01[:, 1:10:2])
     jitter = np.rint(u01[:, 10] * ph.k.link_jitter * 1e6).astype(np.int64)
     return noise, t_ns + ph._latency_ns + 1000 * jitter
+
+
+def slip_run(ss, state, cell, t, path, force, speed):
+    """``StickSlip.run`` in numpy (the reference of ``aptkt_sim::slip``)."""
+    k = ss.k
+    cache: dict = {}
+
+    def z(event):
+        block, off = divmod(event, 256)
+        if block not in cache:
+            cache[block] = ss._streams[cell].normal(block * 256, 128).reshape(-1)
+        return float(cache[block][off])
+
+    def threshold(event, f):
+        return ss.mu_s * f * max(0.5, 1.0 + k.slip_threshold_sd * z(event))
+
+    k = ss.k
+    n = t.shape[0]
+    dmu = ss.mu_s - ss.mu_k
+    v_c = np.where(
+        force > 0, dmu * force / math.sqrt(k.tangential_stiffness * k.tangential_mass), 0.0
+    )
+    strength = np.where((v_c > 0) & (speed < v_c), 1.0 - speed / np.maximum(v_c, 1e-300), 0.0)
+    active = (strength > 0) & (path > 0)
+    ring = state.ringing[cell]
+    t_before = t[0] - 1.0 / k.rate_hz
+    i = 0
+    while i < n:
+        j = i
+        while j < n and active[j] == active[i]:
+            j += 1
+        if not active[i]:
+            # Steady sliding (or none): the spring carries the kinetic friction.
+            state.load[cell] = (
+                ss.mu_k * force[j - 1] if (force[j - 1] > 0 and path[j - 1] > 0) else 0.0
+            )
+            state.threshold[cell] = np.inf
+        else:
+            if not np.isfinite(state.threshold[cell]):
+                state.threshold[cell] = threshold(int(state.events[cell]), float(force[i]))
+            load = state.load[cell] + k.tangential_stiffness * np.cumsum(path[i:j])
+            while True:
+                hit = int(np.searchsorted(load, state.threshold[cell], side="left"))
+                if hit >= load.size:
+                    break
+                s = i + hit
+                before = load[hit - 1] if hit > 0 else state.load[cell]
+                t0 = t[s - 1] if s > 0 else t_before
+                frac = (state.threshold[cell] - before) / max(load[hit] - before, 1e-15)
+                drop = 2.0 * dmu * float(force[s])
+                ring.append(
+                    (
+                        t0 + min(max(frac, 0.0), 1.0) * (t[s] - t0),
+                        strength[s] * k.slip_coupling * drop / k.tangential_mass,
+                    )
+                )
+                load[hit:] -= drop
+                state.events[cell] += 1
+                state.threshold[cell] = threshold(int(state.events[cell]), float(force[s]))
+            state.load[cell] = float(load[-1])
+        i = j
+    out = np.zeros(n)
+    if ring:
+        ev = np.array(ring)  # (E, 2): time, peak
+        tau = t[:, None] - ev[None, :, 0]
+        live = tau >= 0
+        wave = (
+            ev[None, :, 1]
+            * ss._gain
+            * np.exp(-ss._decay * np.where(live, tau, 0.0))
+            * np.sin(ss._omega * tau + ss._lag)
+        )
+        out = np.sum(np.where(live, wave, 0.0), axis=1)
+        # Forget slips that have rung out (< 0.1 % of their peak).
+        state.ringing[cell] = [e for e in ring if (t[-1] - e[0]) * ss._decay <= 7.0]
+    return out

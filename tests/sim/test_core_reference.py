@@ -123,3 +123,28 @@ def test_texture_matches_numpy(world, speed, angle, pressure, x):
     want = texture_acceleration(ph.texture, ph.k, u, w, p, ph.top_modulus, ph.mu_k)
     scale = max(float(np.abs(want).max()), 1e-12)
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-10 * scale)
+
+
+@pytest.mark.parametrize("name", ["rubber_mat", "rough_sponge", "wooden_board"])
+def test_stick_slip_matches_numpy(world, name):
+    ph = physics(world, name)
+    rng = np.random.default_rng(5)
+    n = 3000
+    t = 0.25 + np.arange(n) / 250.0
+    # Slow and fast sliding, pauses, varying load: sticking, slipping and steady stretches.
+    speed = np.repeat(rng.choice([0.0, 0.002, 0.01, 0.05], 30), n // 30) * rng.uniform(0.9, 1.1, n)
+    force = np.clip(0.03 + 0.01 * rng.standard_normal(n), 0.0, None)
+    path = speed / 250.0
+    a, b = ph.slip.rest(), ph.slip.rest()
+    events = 0
+    for cell in range(ph.n):
+        for lo, hi in [(0, 1000), (1000, 1001), (1001, n)]:  # state carried between stretches
+            s = slice(lo, hi)
+            got = ph.slip.run(a, cell, t[s], path[s], force[s], speed[s])
+            want = ref.slip_run(ph.slip, b, cell, t[s], path[s], force[s], speed[s])
+            np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)
+        events += int(b.events[cell])
+        assert a.events[cell] == b.events[cell] and a.ringing[cell] == b.ringing[cell]
+    np.testing.assert_array_equal(a.load, b.load)
+    np.testing.assert_array_equal(a.threshold, b.threshold)
+    assert events > 20  # the stretches did slip

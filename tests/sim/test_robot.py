@@ -135,10 +135,13 @@ def test_lean_force_control_reads_what_the_skin_reads():
     assert np.abs(a.acc - b.acc).max() <= 2 / 256 and np.mean(a.acc != b.acc) < 1e-3
 
 
-@pytest.mark.parametrize(("obj", "action"), [("rough_sponge", "S1"), ("ceramic_tile", "S4")])
+@pytest.mark.parametrize(
+    ("obj", "action"),
+    [("rough_sponge", "S1"), ("ceramic_tile", "S4"), ("towel", "P1"), ("metal_toolbox", "C1")],
+)
 def test_native_force_loop_matches_the_python_loop(obj, action):
-    """The slide's force loop in the compiled core ticks exactly as the Python loop: the same
-    recording to the last bit."""
+    """The guarded approach and the slide's force loop in the compiled core tick exactly as the
+    Python loops reading the skin: the same recording to the last bit."""
     act = PAPER_ACTIONS[action]
     recs = []
     for native in (True, False):

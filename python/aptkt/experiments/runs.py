@@ -77,14 +77,15 @@ def run_steps(spec: RunSpec) -> list[dict[str, Any]]:
     run = learner.run(
         PoolEnvironment(pool, seed=spec.pool_seed), spec.actions, spec.new_objects, test
     )
-    rows = step_rows(run)
-    if rows:
-        rows[-1]["confusion"] = final_confusion(learner, spec.new_objects)
-    return rows
+    return step_rows(run, learner, spec.new_objects)
 
 
-def step_rows(run: LearningRun) -> list[dict[str, Any]]:
-    """One row per step of a finished run, with the transfer counts of :func:`run_steps`."""
+def step_rows(
+    run: LearningRun, learner: APTKT | None = None, objects: Sequence[str] = ()
+) -> list[dict[str, Any]]:
+    """One row per step of a finished run, with the transfer counts of :func:`run_steps`; the
+    last row also holds the final models' ``confusion`` over ``objects`` when ``learner`` is
+    given."""
     rows = []
     for step in run.steps:
         row = step.as_row()
@@ -95,6 +96,8 @@ def step_rows(run: LearningRun) -> list[dict[str, Any]]:
         row["sources"] = len(lambdas)
         row["mean_lambda"] = sum(lambdas) / len(lambdas) if lambdas else float("nan")
         rows.append(row)
+    if rows and learner is not None:
+        rows[-1]["confusion"] = final_confusion(learner, objects)
     return rows
 
 

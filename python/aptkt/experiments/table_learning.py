@@ -22,7 +22,7 @@ import numpy as np
 from aptkt import __version__
 from aptkt.errors import FeatureTableError
 from aptkt.experiments.demo import report_results
-from aptkt.experiments.runs import final_confusion, step_rows
+from aptkt.experiments.runs import step_rows
 from aptkt.learning import APTKT, GPSettings, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import read_feature_table, split_held_out
 
@@ -117,8 +117,7 @@ def learn_from_table(s: TableSettings, *, say=print) -> dict[str, Any]:
         for name, cfg in methods.items():
             learner = APTKT(replace(cfg, seed=s.seed + t), prior)
             run = learner.run(PoolEnvironment(pool, seed=s.seed + t), actions, s.new_objects, test)
-            steps = step_rows(run)
-            steps[-1]["confusion"] = final_confusion(learner, s.new_objects)
+            steps = step_rows(run, learner, s.new_objects)
             rows += [{"method": name, "trial": t, **r} for r in steps]
 
     settings = {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(s).items()}

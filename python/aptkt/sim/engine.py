@@ -30,6 +30,8 @@ __all__ = ["FrameSink", "SimEngine", "Driver", "FastDriver", "RealTimeDriver", "
 #: Samples of a lean force-control stretch after which its packets are made (the compiled
 #: core's FLUSH_SAMPLES is the same number).
 _FLUSH_SAMPLES = 2000
+#: Speculation window of guarded moves (ns): short, because they stop early.
+_GUARD_WINDOW_NS = 250_000_000
 
 
 class FrameSink(Protocol):
@@ -111,7 +113,7 @@ class SimEngine:
         the time reached and why it ended; after a stop the state is exactly that at the
         stopping tick."""
         if window_ns is None:  # guarded moves stop early: keep their speculation short
-            window_ns = 250_000_000 if stop is not None else 4_000_000_000
+            window_ns = _GUARD_WINDOW_NS if stop is not None else 4_000_000_000
         while self.now_ns < t_end_ns:
             start = self.state
             w_end = min(t_end_ns, self.now_ns + window_ns)
@@ -240,23 +242,31 @@ class SimEngine:
         :meth:`lean_advance` from Python, one call per phase instead of one per tick.
 
         ``control`` is (target N, gain m/s/N, max |v_z|, contact z, max depth, tick ns, wrench
-        limit N); ``phase`` ("settle", t_limit_ns, 0) or ("ramp", t_start_ns, t_stop_ns, v,
-        acc, dx, dy). Returns the status ("done", "timeout", "too_deep", "wrench") and the
-        force error of the last tick."""
+        limit N); ``phase`` ("settle", t_limit_ns, 0), ("ramp", t_start_ns, t_stop_ns, v, acc,
+        dx, dy) or ("guard", t_end_ns, threshold N, window_ns, 0): a guarded move on the planned
+        trajectory, ticked as :meth:`run` ticks it. Returns the status ("done", "timeout",
+        "too_deep", "wrench", "triggered") and the force error of the last tick."""
         lean = self._lean
         if lean is None:
             raise RuntimeError("lean_ticks needs a running lean force loop")
         st = self.state
+        guard = phase[0] == "guard"
         while True:
-            t0, p0, v0, a = self.trajectory.segment_at(st.t_ns)
+            t0, p0, v0, a = self.trajectory.arrays()
+            # Force phases start from the segment in force; a guard follows the plan from it.
+            i = max(int(np.searchsorted(t0, st.t_ns, side="right")) - 1, 0)
+            last = None if guard else i + 1
             before = st.t_ns
-            status, t_ns, settled, samples, seg, queue, err, parts = self.physics.core.force_ticks(
+            status, t_ns, carry, samples, seg, queue, err, parts = self.physics.core.force_ticks(
                 st.t_ns,
                 st.next_k,
                 st.relax_h,
                 st.relax_last,
                 st.latest_force,
-                (t0, p0, v0, a),
+                t0[i:last],
+                p0[i:last],
+                v0[i:last],
+                a[i:last],
                 lean["queue_t"],
                 lean["queue_c"],
                 lean["queue_f"],
@@ -272,7 +282,7 @@ class SimEngine:
             chunk = MechChunk(*parts)
             if chunk.size:
                 lean["chunks"].append(chunk)
-            if st.t_ns != before:
+            if st.t_ns != before and not guard:
                 self.trajectory.append(*seg)
             lean["samples"] = samples
             if samples > _FLUSH_SAMPLES:
@@ -281,8 +291,8 @@ class SimEngine:
             self.trajectory.forget_before(st.t_ns)
             if status != "flush":
                 return status, float(err)
-            if phase[0] == "settle":
-                phase = (phase[0], phase[1], settled)
+            # Carry the phase's progress (settled ticks, the current speculation window).
+            phase = (*phase[:-1], int(carry)) if phase[0] in ("settle", "guard") else phase
 
     def lean_reading(self) -> float:
         """The skin's total normal force as it reads now (same arithmetic as the skin source)."""
@@ -366,6 +376,19 @@ class FastDriver:
     def force_ticks(self, control: tuple, phase: tuple) -> tuple[str, float]:
         """A whole phase of a lean force loop in the compiled core (see SimEngine.lean_ticks)."""
         return self.engine.lean_ticks(control, phase)
+
+    def guarded_ticks(
+        self, t_end_ns: int, threshold: float, tick_ns: int, wrench_limit: float
+    ) -> str:
+        """A guarded move on the planned trajectory inside a lean force loop, in the compiled
+        core: the same ticks, stop and wrench checks as :meth:`run` with a stop predicate on the
+        skin's reading. Returns the StopReason."""
+        control = (0.0, 0.0, 0.0, 0.0, 0.0, int(tick_ns), float(wrench_limit))
+        phase = ("guard", int(t_end_ns), float(threshold), _GUARD_WINDOW_NS, -(2**62))
+        why, _ = self.engine.lean_ticks(control, phase)
+        return {"triggered": StopReason.PREDICATE, "wrench": StopReason.WRENCH}.get(
+            why, StopReason.DONE
+        )
 
     @contextmanager
     def force_loop(self, lean: bool = True) -> Iterator[Callable[[], float] | None]:

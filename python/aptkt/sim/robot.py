@@ -145,12 +145,22 @@ class SimRobot:
         t1 = t + int(round(t_acc * 1e9))
         self.driver.set_motion(t1, p1, down * speed, np.zeros(3))
         t_end = t1 + int(round((travel - (p0[2] - p1[2])) / speed * 1e9))
-        reached, why = self.driver.run(
-            t_end,
-            self.tick_ns,
-            stop=lambda: total_force() > threshold,
-            wrench_limit=self.limits.max_normal_force,
-        )
+        why = None
+        if self.native_force_loop and hasattr(self.driver, "guarded_ticks"):
+            # The skin's reading computed from the packets before they are made, the ticks in
+            # the compiled core: the same stop as reading the skin every tick (tested).
+            with self.driver.force_loop(self.lean_force_control) as reading:
+                if reading is not None:
+                    why = self.driver.guarded_ticks(
+                        t_end, threshold, self.tick_ns, self.limits.max_normal_force
+                    )
+        if why is None:
+            reached, why = self.driver.run(
+                t_end,
+                self.tick_ns,
+                stop=lambda: total_force() > threshold,
+                wrench_limit=self.limits.max_normal_force,
+            )
         self.stop()
         if why == StopReason.WRENCH:
             raise self._safety_stop(

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from aptkt._core import sim_slip
 from aptkt.sim.objects import ObjectSpec
 from aptkt.sim.patch import SkinConstants
 from aptkt.sim.seeding import CounterStream, seed_sequence
@@ -184,11 +185,26 @@ class StickSlip:
             for c in range(n_cells)
         ]
         self.n_cells = n_cells
-        self._z_cache: dict[int, tuple[int, np.ndarray]] = {}
         self._omega = 2 * np.pi * k.slip_ring_frequency
         self._decay = k.slip_ring_damping * self._omega
         h = 1.0 / (1 + 1j * k.slip_ring_frequency / k.acc_bandwidth)
         self._gain, self._lag = abs(h), float(np.angle(h))
+        self._params = [
+            float(x)
+            for x in (
+                mu_static,
+                mu_kinetic,
+                k.tangential_stiffness,
+                k.tangential_mass,
+                k.slip_threshold_sd,
+                k.slip_coupling,
+                k.rate_hz,
+                self._omega,
+                self._decay,
+                self._gain,
+                self._lag,
+            )
+        ]
 
     def rest(self) -> StickSlipState:
         n = self.n_cells
@@ -216,18 +232,6 @@ class StickSlip:
         state.load[cells] = np.where((force > 0) & (path > 0), self.mu_k * force, 0.0)
         state.threshold[cells] = np.inf
 
-    def _z(self, cell: int, event: int) -> float:
-        """Standard normal deviate of a cell's ``event``-th slip, drawn in blocks of 256."""
-        block, off = divmod(event, 256)
-        cached = self._z_cache.get(cell)
-        if cached is None or cached[0] != block:
-            cached = (block, self._streams[cell].normal(block * 256, 128).reshape(-1))
-            self._z_cache[cell] = cached
-        return float(cached[1][off])
-
-    def _threshold(self, cell: int, event: int, force: float) -> float:
-        return self.mu_s * force * max(0.5, 1.0 + self.k.slip_threshold_sd * self._z(cell, event))
-
     def run(
         self,
         state: StickSlipState,
@@ -241,68 +245,22 @@ class StickSlip:
 
         ``path`` (n,) is the sliding distance covered since the previous sample, ``force`` (n,)
         the cell's normal force, ``speed`` (n,) its sliding speed. Updates ``state`` in place.
+        The loop runs in the compiled core (``aptkt_sim::slip``); its numpy formulation is the
+        tests' reference (tests/sim/numpy_reference.py).
         """
-        k = self.k
-        n = t.shape[0]
-        dmu = self.mu_s - self.mu_k
-        v_c = np.where(
-            force > 0, dmu * force / math.sqrt(k.tangential_stiffness * k.tangential_mass), 0.0
+        ring = np.asarray(state.ringing[cell], dtype=np.float64).reshape(-1, 2)
+        out, load, threshold, events, ring = sim_slip(
+            self._params,
+            self._streams[cell].key,
+            float(state.load[cell]),
+            float(state.threshold[cell]),
+            int(state.events[cell]),
+            ring,
+            np.ascontiguousarray(t, dtype=np.float64),
+            np.ascontiguousarray(path, dtype=np.float64),
+            np.ascontiguousarray(force, dtype=np.float64),
+            np.ascontiguousarray(speed, dtype=np.float64),
         )
-        strength = np.where((v_c > 0) & (speed < v_c), 1.0 - speed / np.maximum(v_c, 1e-300), 0.0)
-        active = (strength > 0) & (path > 0)
-        ring = state.ringing[cell]
-        t_before = t[0] - 1.0 / k.rate_hz
-        i = 0
-        while i < n:
-            j = i
-            while j < n and active[j] == active[i]:
-                j += 1
-            if not active[i]:
-                # Steady sliding (or none): the spring carries the kinetic friction.
-                state.load[cell] = (
-                    self.mu_k * force[j - 1] if (force[j - 1] > 0 and path[j - 1] > 0) else 0.0
-                )
-                state.threshold[cell] = np.inf
-            else:
-                if not np.isfinite(state.threshold[cell]):
-                    state.threshold[cell] = self._threshold(
-                        cell, int(state.events[cell]), float(force[i])
-                    )
-                load = state.load[cell] + k.tangential_stiffness * np.cumsum(path[i:j])
-                while True:
-                    hit = int(np.searchsorted(load, state.threshold[cell], side="left"))
-                    if hit >= load.size:
-                        break
-                    s = i + hit
-                    before = load[hit - 1] if hit > 0 else state.load[cell]
-                    t0 = t[s - 1] if s > 0 else t_before
-                    frac = (state.threshold[cell] - before) / max(load[hit] - before, 1e-15)
-                    drop = 2.0 * dmu * float(force[s])
-                    ring.append(
-                        (
-                            t0 + min(max(frac, 0.0), 1.0) * (t[s] - t0),
-                            strength[s] * k.slip_coupling * drop / k.tangential_mass,
-                        )
-                    )
-                    load[hit:] -= drop
-                    state.events[cell] += 1
-                    state.threshold[cell] = self._threshold(
-                        cell, int(state.events[cell]), float(force[s])
-                    )
-                state.load[cell] = float(load[-1])
-            i = j
-        out = np.zeros(n)
-        if ring:
-            ev = np.array(ring)  # (E, 2): time, peak
-            tau = t[:, None] - ev[None, :, 0]
-            live = tau >= 0
-            wave = (
-                ev[None, :, 1]
-                * self._gain
-                * np.exp(-self._decay * np.where(live, tau, 0.0))
-                * np.sin(self._omega * tau + self._lag)
-            )
-            out = np.sum(np.where(live, wave, 0.0), axis=1)
-            # Forget slips that have rung out (< 0.1 % of their peak).
-            state.ringing[cell] = [e for e in ring if (t[-1] - e[0]) * self._decay <= 7.0]
+        state.load[cell], state.threshold[cell], state.events[cell] = load, threshold, events
+        state.ringing[cell] = [(float(a), float(b)) for a, b in ring]
         return out

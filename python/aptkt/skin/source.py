@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.errors import SilentCellError, SkinDisconnectedError, SkinError, TrialFault
+from aptkt.errors import SilentCellError, SkinError, TrialFault
 from aptkt.skin.config import PatchConfig, default_patch, load_patch
 from aptkt.skin.protocol import StreamParser
 from aptkt.skin.ring import SampleRing

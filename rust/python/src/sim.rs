@@ -4,7 +4,9 @@
 
 use aptkt_sim::control::{run_ticks, ForceControl, LeanQueue, Phase, Status};
 use aptkt_sim::mechanics::{Cells, Chunk, Law, MechState, Mechanics, Relaxation, Segment, Shape};
+use aptkt_sim::philox::CounterStream;
 use aptkt_sim::sensors::{Sensors, NORMALS};
+use aptkt_sim::slip::{run as slip_run, SlipCell, SlipParams};
 use aptkt_sim::texture::{acceleration, Texture, TextureResponse};
 use aptkt_sim::thermal::{heat, System};
 use aptkt_sim::SimError;
@@ -283,10 +285,12 @@ impl SimContact {
     }
 
     /// Force-control ticks (see `aptkt_sim::control::run_ticks`). `phase` is
-    /// ("settle", t_limit_ns, settled) or ("ramp", t_start_ns, t_stop_ns, v, acc, dx, dy);
+    /// ("settle", t_limit_ns, settled), ("ramp", t_start_ns, t_stop_ns, v, acc, dx, dy) or
+    /// ("guard", t_end_ns, threshold, window_ns, w_end_ns); the segments are the one in force (settle, ramp) or the
+    /// planned ones from now on (guard);
     /// `control` is (target, gain, max_vz, contact_z, max_depth, tick_ns, wrench_limit).
-    /// Updates the state arrays and `latest` in place; returns (status, t_ns, settled,
-    /// samples, segment (t0, p0, v0, a), queue (t, cell, force), last force error, chunk).
+    /// Updates the state arrays and `latest` in place; returns (status, t_ns, settled or
+    /// w_end_ns, samples, first segment (t0, p0, v0, a), queue (t, cell, force), last force error, chunk).
     #[allow(clippy::too_many_arguments)]
     fn force_ticks<'py>(
         &self,
@@ -296,7 +300,10 @@ impl SimContact {
         relax_h: PyReadwriteArray3<'py, f64>,
         relax_last: PyReadwriteArray2<'py, f64>,
         latest_force: PyReadwriteArray1<'py, f64>,
-        segment: (i64, [f64; 3], [f64; 3], [f64; 3]),
+        seg_t0: PyReadonlyArray1<'py, i64>,
+        seg_p0: PyReadonlyArray2<'py, f64>,
+        seg_v0: PyReadonlyArray2<'py, f64>,
+        seg_a: PyReadonlyArray2<'py, f64>,
         queue_t: PyReadonlyArray1<'py, i64>,
         queue_c: PyReadonlyArray1<'py, i64>,
         queue_f: PyReadonlyArray2<'py, f64>,
@@ -354,6 +361,12 @@ impl SimContact {
                 acc: phase.get_item(4)?.extract()?,
                 d: [phase.get_item(5)?.extract()?, phase.get_item(6)?.extract()?],
             },
+            "guard" => Phase::Guard {
+                t_end_ns: phase.get_item(1)?.extract()?,
+                threshold: phase.get_item(2)?.extract()?,
+                window_ns: phase.get_item(3)?.extract()?,
+                w_end_ns: phase.get_item(4)?.extract()?,
+            },
             other => return Err(PyValueError::new_err(format!("unknown phase {other:?}"))),
         };
         let (target, gain, max_vz, contact_z, max_depth, tick_ns, wrench_limit) = control;
@@ -369,12 +382,7 @@ impl SimContact {
             tick_ns,
             wrench_limit,
         };
-        let mut seg = Segment {
-            t0: segment.0,
-            p0: segment.1,
-            v0: segment.2,
-            a: segment.3,
-        };
+        let mut segs = segments(&seg_t0, &seg_p0, &seg_v0, &seg_a)?;
         let mut samples = samples;
         let mut chunk = Chunk::default();
         let (status, err) = py.detach(|| {
@@ -384,7 +392,7 @@ impl SimContact {
                 &ctl,
                 &mut ph,
                 &mut st,
-                &mut seg,
+                &mut segs,
                 &mut queue,
                 &mut chunk,
                 &mut samples,
@@ -401,15 +409,18 @@ impl SimContact {
         }
         let status = match status {
             Status::Done => "done",
+            Status::Triggered => "triggered",
             Status::Timeout => "timeout",
             Status::TooDeep => "too_deep",
             Status::Wrench => "wrench",
             Status::Flush => "flush",
         };
         let settled = match ph {
-            Phase::Settle { settled, .. } => settled,
+            Phase::Settle { settled, .. } => settled as i64,
+            Phase::Guard { w_end_ns, .. } => w_end_ns,
             Phase::Ramp { .. } => 0,
         };
+        let seg = segs[0];
         let seg_t = (seg.t0, seg.p0.to_vec(), seg.v0.to_vec(), seg.a.to_vec());
         let q = (col(py, queue.t), col(py, queue.cell), mat(py, queue.force)?);
         (
@@ -536,9 +547,70 @@ fn sim_texture<'py>(
     mat(py, out)
 }
 
+/// Stick-slip of one cell over a stretch of samples (see `aptkt_sim::slip::run`). `params` is
+/// (mu_s, mu_k, tangential_stiffness, tangential_mass, threshold_sd, coupling, rate_hz, omega,
+/// decay, gain, lag); `ring` (E, 2) the slips still ringing. Returns (acceleration, load,
+/// threshold, events, ring).
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn sim_slip<'py>(
+    py: Python<'py>,
+    params: [f64; 11],
+    key: (u64, u64),
+    load: f64,
+    threshold: f64,
+    events: i64,
+    ring: PyReadonlyArray2<'py, f64>,
+    t: PyReadonlyArray1<'py, f64>,
+    path: PyReadonlyArray1<'py, f64>,
+    force: PyReadonlyArray1<'py, f64>,
+    speed: PyReadonlyArray1<'py, f64>,
+) -> PyResult<(Bound<'py, PyAny>, f64, f64, i64, Bound<'py, PyAny>)> {
+    let (t, path, force, speed) = (vec1(&t), vec1(&path), vec1(&force), vec1(&speed));
+    if path.len() != t.len() || force.len() != t.len() || speed.len() != t.len() {
+        return Err(PyValueError::new_err(
+            "t, path, force and speed must have the same length",
+        ));
+    }
+    let c = params;
+    let p = SlipParams {
+        mu_s: c[0],
+        mu_k: c[1],
+        tangential_stiffness: c[2],
+        tangential_mass: c[3],
+        threshold_sd: c[4],
+        coupling: c[5],
+        rate_hz: c[6],
+        omega: c[7],
+        decay: c[8],
+        gain: c[9],
+        lag: c[10],
+    };
+    let stream = CounterStream::new([key.0, key.1], 2);
+    let mut cell = SlipCell {
+        load,
+        threshold,
+        events,
+        ring: rows::<2>(&ring, "ring")?
+            .into_iter()
+            .map(|r| (r[0], r[1]))
+            .collect(),
+    };
+    let out = py.detach(|| slip_run(&p, &stream, &mut cell, &t, &path, &force, &speed));
+    let ring: Vec<[f64; 2]> = cell.ring.iter().map(|&(a, b)| [a, b]).collect();
+    Ok((
+        col(py, out),
+        cell.load,
+        cell.threshold,
+        cell.events,
+        mat(py, ring)?,
+    ))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<SimContact>()?;
     m.add_function(wrap_pyfunction!(sim_heat, m)?)?;
     m.add_function(wrap_pyfunction!(sim_texture, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_slip, m)?)?;
     Ok(())
 }

@@ -124,13 +124,25 @@ pub enum Phase {
         acc: f64,
         d: [f64; 2],
     },
+    /// A guarded move on a planned trajectory (the segments given): tick until the reading
+    /// exceeds `threshold` or `t_end` is reached. The force law is not used. Ticks follow
+    /// `SimEngine.run`'s speculation windows: every `tick_ns` from a window's start and one at
+    /// its end `w_end_ns` (a new window of `window_ns` starts when `now` reaches it).
+    Guard {
+        t_end_ns: i64,
+        threshold: f64,
+        window_ns: i64,
+        w_end_ns: i64,
+    },
 }
 
 /// Why a run of ticks returned.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Status {
-    /// Settled (settle) or reached t_stop (ramp).
+    /// Settled (settle), reached t_stop (ramp) or t_end without contact (guard).
     Done,
+    /// Guard only: the reading exceeded the threshold at the last tick.
+    Triggered,
     /// Settle only: past the time limit without settling.
     Timeout,
     /// The next tick would start deeper than `max_depth` below contact (nothing done for it).
@@ -145,9 +157,11 @@ pub enum Status {
 /// Samples after which the packets of a stretch are made (`SimEngine.lean_advance`).
 pub const FLUSH_SAMPLES: usize = 2000;
 
-/// Run control ticks from `st.t_ns` on the trajectory's current segment `seg` (replaced by
-/// each tick's motion). New samples are appended to `chunk`; `samples` counts the samples
-/// since the last flush. Returns the status and the force error of the last tick.
+/// Run control ticks from `st.t_ns`. Force phases (settle, ramp) start from the trajectory's
+/// current segment `segs[0]` and replace it by each tick's motion; a guard follows the planned
+/// segments `segs`. New samples are appended to `chunk`; `samples` counts the samples since
+/// the last flush. Returns the status and the force error of the last tick (guard: the reading
+/// minus the threshold).
 #[allow(clippy::too_many_arguments)]
 pub fn run_ticks(
     mech: &Mechanics,
@@ -155,16 +169,58 @@ pub fn run_ticks(
     ctl: &ForceControl,
     phase: &mut Phase,
     st: &mut MechState,
-    seg: &mut Segment,
+    segs: &mut Vec<Segment>,
     queue: &mut LeanQueue,
     chunk: &mut Chunk,
     samples: &mut usize,
 ) -> (Status, f64) {
     let mut err = f64::NAN;
+    if segs.is_empty() {
+        return (Status::Done, err);
+    }
     loop {
         let now = st.t_ns;
+        if let Phase::Guard {
+            t_end_ns,
+            threshold,
+            window_ns,
+            ref mut w_end_ns,
+        } = *phase
+        {
+            // engine.run with a stop predicate: at each tick the wrench first, then the skin's
+            // reading.
+            if now >= t_end_ns {
+                return (Status::Done, err);
+            }
+            if now >= *w_end_ns {
+                *w_end_ns = t_end_ns.min(now + window_ns.max(1));
+            }
+            let end = (*w_end_ns).min(now + ctl.tick_ns);
+            let before = chunk.len();
+            mech.step(st, segs, end, chunk);
+            let added = chunk.len() - before;
+            if added > 0 {
+                *samples += added;
+                queue.push_chunk(sensors, mech, chunk, before);
+            }
+            queue.deliver(end);
+            let wrench: f64 = st.latest_force.iter().sum();
+            if wrench > ctl.wrench_limit {
+                return (Status::Wrench, err);
+            }
+            err = queue.reading() - threshold;
+            if err > 0.0 {
+                return (Status::Triggered, err);
+            }
+            if *samples > FLUSH_SAMPLES {
+                return (Status::Flush, err);
+            }
+            continue;
+        }
+        let seg = &mut segs[0];
         let (vxy, axy, end) = match *phase {
             Phase::Settle { .. } => ([0.0, 0.0], [0.0, 0.0], now + ctl.tick_ns),
+            Phase::Guard { .. } => unreachable!("handled above"),
             Phase::Ramp {
                 t_start_ns,
                 t_stop_ns,

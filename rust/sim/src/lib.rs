@@ -9,6 +9,7 @@ pub mod control;
 pub mod mechanics;
 pub mod philox;
 pub mod sensors;
+pub mod slip;
 pub mod texture;
 pub mod thermal;
 

@@ -298,12 +298,12 @@ fn force_loop_settles_on_the_target() {
     .unwrap();
     let mut st = rest_state(&m);
     // Start just touching the face.
-    let mut seg = Segment {
+    let mut segs = vec![Segment {
         t0: 0,
         p0: [0.55, 0.0, 0.02],
         v0: [0.0; 3],
         a: [0.0; 3],
-    };
+    }];
     let mut q = LeanQueue {
         latest: vec![[0.0; 3]; n],
         cal_gain: vec![[0.5; 3]; n],
@@ -334,7 +334,7 @@ fn force_loop_settles_on_the_target() {
             &ctl,
             &mut phase,
             &mut st,
-            &mut seg,
+            &mut segs,
             &mut q,
             &mut chunk,
             &mut samples,
@@ -349,4 +349,75 @@ fn force_loop_settles_on_the_target() {
     for c in 0..n {
         assert_eq!(per_cell[c] as i64, st.next_k[c]);
     }
+}
+
+#[test]
+fn guarded_move_stops_at_the_first_tick_over_the_threshold() {
+    let m = mechanics(vec![0.3], vec![0.2]);
+    let n = m.cells.len();
+    let sensors = Sensors::new(
+        [3, 4],
+        vec![[0.5; 3]; n],
+        vec![[1.0; 3]; n],
+        1e-3,
+        800_000,
+        6e-4,
+    )
+    .unwrap();
+    let ctl = ForceControl {
+        target: 0.0,
+        gain: 0.0,
+        max_vz: 0.0,
+        contact_z: 0.0,
+        max_depth: 0.0,
+        tick_ns: 8_000_000,
+        wrench_limit: 5.0,
+    };
+    // Down at 5 mm/s from 1 mm above the face.
+    let plan = vec![Segment {
+        t0: 0,
+        p0: [0.55, 0.0, 0.021],
+        v0: [0.0, 0.0, -0.005],
+        a: [0.0; 3],
+    }];
+    let run = |threshold: f64, t_end_ns: i64| {
+        let mut st = rest_state(&m);
+        let mut segs = plan.clone();
+        let mut q = LeanQueue {
+            latest: vec![[0.0; 3]; n],
+            cal_gain: vec![[0.5; 3]; n],
+            cal_offset: vec![[1.0; 3]; n],
+            ..Default::default()
+        };
+        let mut phase = Phase::Guard {
+            t_end_ns,
+            threshold,
+            window_ns: 250_000_000,
+            w_end_ns: i64::MIN,
+        };
+        let (mut chunk, mut samples) = (Chunk::default(), 0);
+        let mut status = Status::Flush;
+        while status == Status::Flush {
+            samples = 0;
+            (status, _) = run_ticks(
+                &m,
+                &sensors,
+                &ctl,
+                &mut phase,
+                &mut st,
+                &mut segs,
+                &mut q,
+                &mut chunk,
+                &mut samples,
+            );
+        }
+        (status, st.t_ns, q.reading())
+    };
+    let (status, t, reading) = run(0.05, 2_000_000_000);
+    assert_eq!(status, Status::Triggered);
+    assert!(reading > 0.05 && t > 200_000_000, "{t} {reading}");
+    // Up to one tick earlier the reading stayed below: a guard ending there does not fire.
+    let (status_early, t_early, reading_early) = run(0.05, t - 8_000_000);
+    assert_eq!((status_early, t_early), (Status::Done, t - 8_000_000));
+    assert!(reading_early <= 0.05);
 }
