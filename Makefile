@@ -1,6 +1,7 @@
 # Two entry points do all set-up on a fresh machine (see README):
 #   make demo   -> virtual environment, Rust build, end-to-end demo on the simulated world
 #   make test   -> virtual environment, Rust build, cargo tests of the core crates, pytest
+#   make lint   -> ruff (lint, format), mypy on the package, clippy and rustfmt
 #
 # Every build shares target/ and compiles each shared crate with the same profile (release) and
 # the same features (cargo resolves the whole workspace for the tests, the extension's crate
@@ -14,7 +15,7 @@ SHELL := /bin/bash
 # pip -v shows the build backend's output; keep cargo's progress lines and errors.
 SHOW_BUILD := grep -E --line-buffered "^ *(Compiling|Finished|Built wheel|Successfully installed)|[Ee]rror" | sed -u -e 's/^ */    /'
 
-.PHONY: venv install install-test demo wheel test test-rust test-python clean
+.PHONY: venv install install-test install-lint demo wheel lint test test-rust test-python clean
 
 venv:
 	@test -x $(PY) || { echo "==> creating the virtual environment $(VENV)"; python3 -m venv $(VENV); }
@@ -30,6 +31,9 @@ install-test: venv
 	@echo "==> installing aptkt with the test dependencies (Rust core: see above)"
 	@$(PY) -m pip install -v -e ".[test]" 2>&1 | $(SHOW_BUILD)
 
+install-lint: venv
+	$(PY) -m pip install --quiet -e ".[lint]"
+
 demo: install
 	@echo "==> aptkt demo (simulated world: 8 objects, 7 actions, 20 trials; 3 runs per method)"
 	$(VENV)/bin/aptkt demo
@@ -41,6 +45,22 @@ wheel: venv
 	@$(PY) -m pip install --quiet "maturin>=1.8,<2"
 	rm -f dist/aptkt-*.whl
 	$(PY) -m maturin build --release --interpreter $(PY) --out dist
+
+# Clippy lints that argue with the numerical kernels' idioms, allowed for the workspace:
+# index loops over several parallel arrays, `!(a > b)` comparisons that reject NaN on purpose,
+# kernels that take each array as its own argument, constants written with the digits they were
+# published with, and the nested slice types of the kernel interfaces.
+CLIPPY_ALLOW := -A clippy::needless_range_loop -A clippy::neg_cmp_op_on_partial_ord \
+	-A clippy::too_many_arguments -A clippy::excessive_precision -A clippy::type_complexity
+
+# Static gates. mypy reads python/aptkt with the core's stub (_core.pyi), so it needs the
+# package's dependencies (numpy's types) but not the compiled extension.
+lint: install-lint
+	$(VENV)/bin/ruff check python tests benches
+	$(VENV)/bin/ruff format --check python tests benches
+	$(VENV)/bin/mypy
+	cargo clippy --workspace --all-targets -- -D warnings $(CLIPPY_ALLOW)
+	cargo fmt --all -- --check
 
 test-rust:
 	@echo "==> Rust tests of the core crates (release profile, reusing the extension's build)"

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import antropy
 import numpy as np
-
 from _common import best_of, save, table
+
 from aptkt import features
 
 
@@ -30,8 +30,8 @@ def main() -> None:
     for shape in [(7, 3, 5000), (7, 3, 250), (7, 3, 50_000)]:
         x = rng.normal(size=shape) * 0.01 + 1.0
         mb = x.nbytes / 1e6
-        t_ours = best_of(lambda: features.hjorth(x), repeat=5, min_time=0.2)
-        t_ref = best_of(lambda: antropy.hjorth_params(x, axis=-1), repeat=5, min_time=0.2)
+        t_ours = best_of(lambda x=x: features.hjorth(x), repeat=5, min_time=0.2)
+        t_ref = best_of(lambda x=x: antropy.hjorth_params(x, axis=-1), repeat=5, min_time=0.2)
         rows.append(
             {
                 "kernel": "hjorth",
@@ -43,8 +43,8 @@ def main() -> None:
                 "reference us": t_ref * 1e6,
             }
         )
-        t_ours = best_of(lambda: features.texture_descriptor(x), repeat=5, min_time=0.2)
-        t_ref = best_of(lambda: numpy_texture(x), repeat=5, min_time=0.2)
+        t_ours = best_of(lambda x=x: features.texture_descriptor(x), repeat=5, min_time=0.2)
+        t_ref = best_of(lambda x=x: numpy_texture(x), repeat=5, min_time=0.2)
         rows.append(
             {
                 "kernel": "texture_descriptor",

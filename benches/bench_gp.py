@@ -27,12 +27,11 @@ import argparse
 import warnings
 
 import numpy as np
+from _common import best_of, median_of, save, table
 from sklearn.datasets import make_classification
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessClassifier
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel
-
-from _common import best_of, median_of, save, table
 from threadpoolctl import threadpool_limits
 
 from aptkt.gp import LaplaceGPC

@@ -34,7 +34,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from _common import save, table
 
 from aptkt.gp import LaplaceGPC, TransferSource
@@ -101,7 +100,7 @@ def run_action(prior, table_new, runs: int, seed: int) -> dict:
                     sources[obj] = TransferSource(old_X, old_y == old, lam, name=old)
                 elif variant == "multi MAP" and multi[obj]:
                     sources[obj] = [
-                        TransferSource(old_X, old_y == o, l, name=o) for o, l in multi[obj]
+                        TransferSource(old_X, old_y == o, lam, name=o) for o, lam in multi[obj]
                     ]
             model = LaplaceGPC(
                 length_scale=gp.length_scale,
@@ -113,7 +112,7 @@ def run_action(prior, table_new, runs: int, seed: int) -> dict:
             ).fit(X, y, sources=sources or None)
             acc[variant].append(float(np.mean(model.predict(Xt) == yt)))
             scale = {m: median_pairwise(X[:, cols]) for m, cols in groups.items()}
-            for label, hp in model.hyperparameters_.items():
+            for hp in model.hyperparameters_.values():
                 if hp["transfer_lambda"]:
                     rel = [hp["length_scales"][m] / scale[m] for m in scale]
                     collapse[variant].append((float(np.median(rel)), hp["signal_variance"]))

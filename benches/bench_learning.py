@@ -18,6 +18,7 @@ import pstats
 import time
 
 from _common import save, table
+
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.dataset import load_observations
 

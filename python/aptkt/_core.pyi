@@ -1,7 +1,8 @@
 """Type stubs of the compiled extension ``aptkt._core`` (Rust). Use the Python wrappers
 (:mod:`aptkt.features`, :mod:`aptkt.gp`, :mod:`aptkt.skin`) rather than these functions."""
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -135,6 +136,8 @@ def kernel_matrix(
 # -- skin protocol ----------------------------------------------------------------------------
 PACKET_LEN: int
 PACKET_TYPES: dict[str, int]
+#: (name, numpy dtype, vector field, ((min, max, scale, offset) per column)) per sensor field
+SENSOR_FIELDS: list[tuple[str, str, bool, list[tuple[int, int, float, float]]]]
 
 class StreamParser:
     def __init__(self) -> None: ...

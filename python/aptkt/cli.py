@@ -9,6 +9,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from aptkt import __version__
 from aptkt.errors import AptktError
 
 # One module per sub-command (or group); each defines ``register(subparsers)`` which adds its
@@ -37,8 +38,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _version() -> str:
-    from aptkt import __version__
-
     return __version__
 
 

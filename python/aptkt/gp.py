@@ -480,6 +480,9 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
     def __sklearn_is_fitted__(self) -> bool:
         return hasattr(self, "_model")
 
+    #: The fitted core model (``aptkt._core.GpcModel``), set by ``fit`` and ``from_state``.
+    _model: Any
+
     def __getstate__(self) -> dict[str, Any]:
         # The compiled model is rebuilt from plain arrays (what ``save`` writes) on unpickling:
         # joblib and scikit-learn's tools copy estimators between processes this way.
@@ -779,7 +782,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         for k, label in enumerate(self.classes_.tolist()):
             r = 0 if single else k
             srcs = self.sources_.get(label, [])
-            lambdas = self.theta_[r, self.theta_.shape[1] - n_lambdas :] if n_lambdas else []
+            lambdas: Any = self.theta_[r, self.theta_.shape[1] - n_lambdas :] if n_lambdas else []
             out[label] = {
                 "signal_variance": float(sv[r]),
                 "length_scales": {m: float(v) for m, v in zip(self.modality_names_, ls[r])},
@@ -910,7 +913,8 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
 
     def save(self, path: str | Path) -> None:
         """Save to a ``.npz`` file (arrays + JSON; loading executes no code)."""
-        np.savez_compressed(Path(path), **self.state())
+        arrays: dict[str, Any] = self.state()
+        np.savez_compressed(Path(path), **arrays)
 
     @classmethod
     def load(cls, path: str | Path) -> LaplaceGPC:
@@ -951,7 +955,7 @@ def kernel_matrix(
     """
     X = _as_matrix(X, "X")
     _, groups = _normalise_modalities(modalities, X.shape[1])
-    if np.ndim(n_source) == 0:
+    if isinstance(n_source, (int, np.integer)):
         sizes = [int(n_source)] if int(n_source) > 0 else []
     else:
         sizes = [int(v) for v in n_source]

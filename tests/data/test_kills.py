@@ -13,6 +13,7 @@ from pathlib import Path
 
 import h5py
 import pytest
+
 from aptkt.actions import PAPER_ACTIONS
 from aptkt.cli import main
 from aptkt.data import DatasetReader, DatasetWriter, repair

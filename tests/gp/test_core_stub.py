@@ -14,6 +14,7 @@ import inspect
 from pathlib import Path
 
 import pytest
+
 from aptkt import _core
 
 STUB = Path(_core.__file__).with_name("_core.pyi")

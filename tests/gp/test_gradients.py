@@ -1,7 +1,6 @@
 """Analytic LML gradients against central finite differences, for every hyper-parameter."""
 
 import numpy as np
-import pytest
 
 from aptkt.gp import LaplaceGPC, TransferSource
 

@@ -6,6 +6,7 @@ likelihoods and their gradients are compared with values that implementation sav
 from pathlib import Path
 
 import numpy as np
+
 from aptkt.gp import LaplaceGPC, TransferSource
 
 REFERENCE = Path(__file__).with_name("data") / "paper_kernel_reference.npz"

@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from aptkt.gp import LaplaceGPC, TransferSource, kernel_matrix
+from aptkt.gp import LaplaceGPC, kernel_matrix
 
 from .conftest import make_blobs
 

@@ -66,7 +66,7 @@ def test_quadrature_is_exact_against_scipy():
     for m, v, got in zip(mean[:, 0], var[:, 0], p):
         sd = np.sqrt(v)
         want, _ = integrate.quad(
-            lambda f: (
+            lambda f, m=m, sd=sd: (
                 np.exp(-0.5 * ((f - m) / sd) ** 2) / (sd * np.sqrt(2 * np.pi)) / (1 + np.exp(-f))
             ),
             m - 12 * sd,

@@ -6,13 +6,14 @@ import json
 
 import numpy as np
 import pytest
-from aptkt.gp import HyperPrior, LaplaceGPC, TransferSource, kernel_matrix
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 from scipy.stats import norm
 from sklearn.gaussian_process import GaussianProcessClassifier
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel
+
+from aptkt.gp import HyperPrior, LaplaceGPC, TransferSource, kernel_matrix
 
 from .conftest import make_blobs
 

@@ -68,7 +68,7 @@ def test_transfer_decisions_follow_relatedness(related_world):
         related_world["test"],
     )
     # make_world relates new{j} to old{j}.
-    for action, decisions in run.steps[0].transfer.items():
+    for _action, decisions in run.steps[0].transfer.items():
         for obj, d in decisions.items():
             if d["source"] is not None:
                 assert d["source"] == obj.replace("new", "old")

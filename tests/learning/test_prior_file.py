@@ -9,6 +9,7 @@ import zipfile
 
 import numpy as np
 import pytest
+
 from aptkt.cli import main
 from aptkt.errors import PriorFileError
 from aptkt.learning import PriorKnowledge

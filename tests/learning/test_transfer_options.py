@@ -3,6 +3,7 @@ stress-test choices, several sources, and the hyper-parameters recorded per step
 
 import numpy as np
 import pytest
+
 from aptkt.learning import (
     APTKT,
     FeaturePipeline,
@@ -190,26 +191,26 @@ def _same_rows(a, b):
 def test_control_works_in_the_prior_feature_space_without_transfer(world):
     learner, run = _run(world, transfer="control")
     assert run.prior_objects == world["prior"].objects
-    for a, l in learner.learners.items():
-        assert l._pipeline() is world["prior"][a].pipeline
-        assert not l.decisions and not l.model.sources_
+    for a, lrn in learner.learners.items():
+        assert lrn._pipeline() is world["prior"][a].pipeline
+        assert not lrn.decisions and not lrn.model.sources_
     assert all(not s.transfer or not any(s.transfer.values()) for s in run.steps)
 
 
 def test_hyperparameters_of_every_classifier_are_recorded(world):
     learner, run = _run(world, transfer="paper", budget=1)
     step = run.steps[-1]
-    for a, l in learner.learners.items():
-        assert step.hyperparameters[a] == hyperparameters(l.model)
+    for a, lrn in learner.learners.items():
+        assert step.hyperparameters[a] == hyperparameters(lrn.model)
         assert set(step.hyperparameters[a]) == set(world["news"])
         for c, hp in step.hyperparameters[a].items():
-            i = list(l.model.classes_).index(c)
-            assert hp["signal_variance"] == pytest.approx(l.model.signal_variance_[i])
-            names = l.model.modality_names_
+            i = list(lrn.model.classes_).index(c)
+            assert hp["signal_variance"] == pytest.approx(lrn.model.signal_variance_[i])
+            names = lrn.model.modality_names_
             for k, m in enumerate(names):
-                assert hp[f"length_scale[{m}]"] == pytest.approx(l.model.length_scales_[i, k])
-                assert hp[f"weight[{m}]"] == pytest.approx(l.model.modality_weights_[i, k])
-            d = l.decisions[c]
+                assert hp[f"length_scale[{m}]"] == pytest.approx(lrn.model.length_scales_[i, k])
+                assert hp[f"weight[{m}]"] == pytest.approx(lrn.model.modality_weights_[i, k])
+            d = lrn.decisions[c]
             assert ("lambda" in hp) == d.transfers
             if d.transfers:
                 assert hp["lambda"] == pytest.approx(d.transfer_lambda)
@@ -229,10 +230,11 @@ def test_hyperparameters_of_every_classifier_are_recorded(world):
 
 
 def test_logistic_gaussian_integral_against_adaptive_quadrature():
-    from aptkt.learning.prior import logistic_gaussian
     from scipy.integrate import quad
     from scipy.special import expit
     from scipy.stats import norm
+
+    from aptkt.learning.prior import logistic_gaussian
 
     means = np.array([-30.0, -7.0, -1.0, 0.0, 0.5, 3.0, 14.0])
     sds = np.array([1e-3, 0.3, 1.0, 1.01, 3.0, 56.0, 300.0])

@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a missing one must fail, not skip
-
 from loopback_helpers import PLACEMENT, STIFFNESS, LoopbackSkin, at_rest  # noqa: E402
 
 from aptkt.actions import ExplorationSettings, ExploratoryAction, Movement, explore  # noqa: E402

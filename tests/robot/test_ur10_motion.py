@@ -6,9 +6,7 @@ import time
 
 import numpy as np
 import pytest
-
 import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a missing one must fail, not skip
-
 from loopback_helpers import (
     PLACEMENT,
     STIFFNESS,

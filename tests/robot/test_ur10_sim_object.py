@@ -6,9 +6,7 @@ from __future__ import annotations
 import math
 
 import pytest
-
 import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a missing one must fail, not skip
-
 from loopback_helpers import FakeSkin  # noqa: E402
 
 from aptkt.robot import Placement  # noqa: E402

@@ -13,10 +13,11 @@ import tempfile
 from pathlib import Path
 
 import pytest
+
 from aptkt.actions import PAPER_ACTIONS
 from aptkt.cli import main
 from aptkt.learning import PriorKnowledge
-from aptkt.learning.dataset import load_observations
+from aptkt.learning.dataset import extract_features, load_observations
 from aptkt.runtime.generation import GenerationPlan, generate
 
 PYTHON_DIR = Path(__file__).resolve().parents[2] / "python"
@@ -28,6 +29,9 @@ def files(tmp_path_factory):
     data = d / "d.h5"
     objects = ("rough_sponge", "metal_toolbox", "towel")
     generate(data, GenerationPlan(objects, (PAPER_ACTIONS["P1"],), 3, seed=1), progress=False)
+    # Stored features (loading only reads): the half-length copy below then cuts through the
+    # file's structure, not only through recordings.
+    extract_features(data, progress=False)
     table = load_observations(data, objects=objects[:2])
     PriorKnowledge.build(table).save(d / "p.npz")
     (d / "afile").write_text("a file")

@@ -12,9 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a missing one must fail, not skip
-
 from loopback_helpers import free_loopback_host  # noqa: E402
 
 from aptkt.cli import main  # noqa: E402

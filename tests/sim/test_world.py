@@ -38,7 +38,7 @@ def test_recording_shape_units_and_protocol_grid(explore):
     assert np.all(np.abs(per_cell - 750) <= 4)  # 250 Hz per cell, clocks off by < 0.2 %
     assert np.all(np.diff(s.t_ns) >= 0)
     # Values went through quantize → encode → parse: they sit on the protocol's grid.
-    for name, col in (("acc", slice(None)), ("proximity", slice(None))):
+    for name, _col in (("acc", slice(None)), ("proximity", slice(None))):
         scale, off = SCALE[name][0]
         v = getattr(s, name)
         assert np.array_equal(np.rint((v - off) / scale) * scale + off, v)

@@ -10,6 +10,7 @@ import time
 import tty
 
 import numpy as np
+
 from aptkt.skin import encode_sensor_packets
 
 RAW_KEYS = ("cell_id", "proximity", "acc", "temp", "force")

@@ -8,9 +8,10 @@ import array
 
 import numpy as np
 import pytest
+from skin_helpers import random_raw
+
 from aptkt._core import StreamParser
 from aptkt.skin.protocol import encode_sensor_packets
-from skin_helpers import random_raw
 
 STREAM = encode_sensor_packets(random_raw(np.random.default_rng(3), 25))
 

@@ -22,15 +22,15 @@ import datetime as _dt
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
-import numpy as np
-
+from aptkt import __version__
 from aptkt.actions.definition import ExploratoryAction, Movement
 from aptkt.errors import AptktError, TrialFault
 from aptkt.robot.base import Placement, Robot
 from aptkt.skin.base import SkinSource
+from aptkt.skin.config import ForceCalibration
 from aptkt.skin.samples import Recording
 
-__all__ = ["ExplorationSettings", "explore", "crop_recording"]
+__all__ = ["ExplorationSettings", "explore", "crop_recording", "calibration_metadata"]
 
 
 @dataclass(frozen=True)
@@ -64,19 +64,10 @@ def crop_recording(rec: Recording, start_ns: int, stop_ns: int) -> Recording:
     )
 
 
-def _calibration(skin: SkinSource) -> dict[str, Any] | None:
+def calibration_metadata(skin: SkinSource) -> dict[str, Any] | None:
+    """The skin's force calibration as recordings carry it in their metadata (None without one)."""
     cal = getattr(skin, "calibration", None)
-    if cal is None:
-        return None
-    try:
-        return {
-            "model": "newtons = gain * (normalised - offset)",
-            "cell_ids": [int(c) for c in cal.cell_ids],
-            "offset": np.asarray(cal.offset, dtype=float).tolist(),
-            "gain": np.asarray(cal.gain, dtype=float).tolist(),
-        }
-    except AttributeError:
-        return None
+    return cal.to_metadata() if isinstance(cal, ForceCalibration) else None
 
 
 def explore(
@@ -95,11 +86,10 @@ def explore(
     started the error is raised as a :class:`~aptkt.errors.TrialFault` with the data recorded so
     far.
     """
-    from aptkt import __version__
 
     settings = settings or ExplorationSettings()
     if hasattr(robot, "action_window_ns"):
-        robot.action_window_ns = None  # type: ignore[attr-defined]
+        robot.action_window_ns = None
     meta: dict[str, Any] = {
         "object": placement.object_name,
         "action": action.to_dict(),
@@ -135,7 +125,7 @@ def explore(
     except AptktError as exc:
         rec = skin.stop_recording()
         # Everything needed to store and understand the partial recording travels with it.
-        rec.metadata["calibration"] = _calibration(skin)
+        rec.metadata["calibration"] = calibration_metadata(skin)
         rec.metadata["aborted"] = f"{type(exc).__name__}: {exc}"
         robot_metadata = getattr(robot, "recording_metadata", None)
         if callable(robot_metadata):
@@ -152,7 +142,7 @@ def explore(
         window = (rec.stop_ns - int(round(action.duration * 1e9)), rec.stop_ns)
     rec.metadata["movement_stop_ns"] = int(rec.stop_ns)
     rec.metadata["window_ns"] = [int(window[0]), int(window[1])]
-    rec.metadata["calibration"] = _calibration(skin)
+    rec.metadata["calibration"] = calibration_metadata(skin)
     robot_metadata = getattr(robot, "recording_metadata", None)
     if callable(robot_metadata):  # e.g. the UR10's own trace and clock (robot timestamps)
         rec.metadata.update(robot_metadata(int(rec.start_ns), int(rec.stop_ns)))

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from aptkt.actions.executor import ExplorationSettings
 from aptkt.commands._checks import at_least, input_file
 from aptkt.errors import ConfigError
 
@@ -56,7 +57,7 @@ def add_session_arguments(p: argparse.ArgumentParser, *, robot_required: bool = 
     g.add_argument(
         "--thermal-wait",
         type=float,
-        default=30.0,
+        default=ExplorationSettings.thermal_wait,
         metavar="S",
         help="seconds to let the temperature sensors recover after each action (default %(default)s, paper §5.2)",
     )
@@ -122,8 +123,6 @@ def _host_port(text: str, option: str) -> tuple[str, int]:
 
 def make_session(args: argparse.Namespace, *, seed: int = 0) -> Any:
     """The (not yet entered) live session the options describe."""
-    from aptkt.actions import ExplorationSettings
-
     at_least(args.thermal_wait, 0, "--thermal-wait")
     settings = ExplorationSettings(thermal_wait=args.thermal_wait)
     if args.robot == "sim":

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
+from aptkt.commands._checks import at_least, output_file, resume_or_overwrite
 from aptkt.commands._session import (
     add_action_arguments,
     add_session_arguments,
@@ -14,7 +16,6 @@ from aptkt.commands._session import (
     pick_actions,
     split_names,
 )
-from aptkt.commands._checks import at_least, output_file, resume_or_overwrite
 from aptkt.errors import ConfigError
 
 #: Exit code when a robot or skin fault stopped the collection mid-trial (1: bad input).
@@ -89,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     at_least(args.seed, 0, "--seed")
     resume_or_overwrite(args.resume, args.overwrite)
     output_file(args.output)
-    objects = split_names(args.objects, "--objects")
+    objects = split_names(args.objects, "--objects") or []  # a required option
     available = available_actions(args)
     names = split_names(args.actions, "--actions") or list(available)
     plan = CollectionPlan(
@@ -102,14 +103,13 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(
             f"{args.output} exists: use --resume to complete it or --overwrite to replace it"
         )
+    progress: bool | Callable[[str], None]
     if args.no_progress:
-        progress: object = False
+        progress = False
     elif sys.stderr.isatty():
         progress = True
     else:
-
-        def progress(line: str) -> None:
-            print(line, file=sys.stderr, flush=True)
+        progress = _print_line
 
     try:
         with session:
@@ -136,3 +136,7 @@ def run(args: argparse.Namespace) -> int:
         )
     )
     return 0
+
+
+def _print_line(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)

@@ -7,6 +7,8 @@ import os
 import sys
 from pathlib import Path
 
+from aptkt.learning.config import LearnerConfig
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -31,7 +33,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--trials", type=int, default=3, help="learning runs per method (default %(default)s)"
     )
     p.add_argument(
-        "--budget", type=int, default=40, help="actively chosen observations (default %(default)s)"
+        "--budget",
+        type=int,
+        default=LearnerConfig.budget,
+        help="actively chosen observations (default %(default)s)",
     )
     p.add_argument(
         "--quick", action="store_true", help="a reduced size that runs in well under a minute"

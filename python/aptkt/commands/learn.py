@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from aptkt.commands import learn_table
+from aptkt.commands._checks import at_least, input_file, output_dir, output_file
 from aptkt.commands._session import (
     add_action_arguments,
     add_session_arguments,
@@ -15,8 +16,8 @@ from aptkt.commands._session import (
     pick_actions,
     split_names,
 )
-from aptkt.commands._checks import at_least, input_file, output_dir, output_file
 from aptkt.errors import ConfigError
+from aptkt.learning.config import LearnerConfig
 
 #: Exit code when a robot or skin fault stopped the run (1: bad input).
 EXIT_FAULT = 3
@@ -48,21 +49,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--budget",
         type=int,
-        default=40,
+        default=LearnerConfig.budget,
         metavar="N",
         help="observations chosen actively after the initial round (default %(default)s)",
     )
     p.add_argument(
         "--eps-neg",
         type=float,
-        default=0.4,
+        default=LearnerConfig.eps_neg,
         metavar="E",
         help="transfer cut-off ε_neg (default %(default)s)",
     )
     p.add_argument(
         "--eps-explor",
         type=float,
-        default=0.1,
+        default=LearnerConfig.eps_explor,
         metavar="E",
         help="probability of a random (action, object) pick, ε_explor (default %(default)s)",
     )
@@ -107,7 +108,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--seed",
         type=int,
-        default=0,
+        default=LearnerConfig.seed,
         help="seed of the learner (and of the simulated world) (default %(default)s)",
     )
     learn_table.add_arguments(p)
@@ -139,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
         prior = PriorKnowledge.load(args.prior)
     except (OSError, ValueError, KeyError) as exc:
         raise ConfigError(f"--prior {args.prior}: cannot load prior knowledge: {exc}") from None
-    objects = split_names(args.objects, "--objects")
+    objects = split_names(args.objects, "--objects") or []  # a required option
     if len(objects) < 2:
         raise ConfigError("--objects: learning needs at least two new objects")
     overlap = sorted(set(objects) & set(prior.objects))

@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     settings = TableSettings(
         table=Path(args.table),
         prior_objects=tuple(priors),
-        new_objects=tuple(split_names(args.objects, "--objects")),
+        new_objects=tuple(split_names(args.objects, "--objects") or ()),  # a required option
         actions=tuple(split_names(args.actions, "--actions") or ()) or None,
         test_trials=_trials(args.test_trials) if args.test_trials else None,
         output=args.output,

@@ -13,7 +13,7 @@
     /recordings/samples/cell_id      (M,)   uint16   all samples of all recordings, row ranges
     /recordings/samples/t_ns         (M,)   int64    from the index; raw integers as the wire
     /recordings/samples/proximity    (M,)   uint16   carries them (physical = raw * scale +
-    /recordings/samples/acc          (M, 3) int16    offset, see RAW_SCALE), force before the
+    /recordings/samples/acc          (M, 3) int16    offset, see skin.SCALE), force before the
     /recordings/samples/temp         (M, 2) int16    per-cell calibration (stored in each
     /recordings/samples/force        (M, 3) uint16   recording's metadata)
     /features/<action>/<modality>    (K, D) float64  optional, rows of recordings ...
@@ -33,13 +33,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from aptkt.skin.protocol import RAW_FIELDS
+
 __all__ = [
     "SCHEMA",
     "SCHEMA_VERSION",
     "READABLE_VERSIONS",
     "INDEX_DTYPE",
     "SAMPLE_FIELDS",
-    "RAW_SCALE",
 ]
 
 SCHEMA = "aptkt.dataset"
@@ -61,20 +62,10 @@ INDEX_DTYPE = np.dtype(
     ]
 )
 
-#: Stored per-sample fields: trailing shape and dtype.
+#: Stored per-sample fields: trailing shape and dtype. The skin's raw fields as the wire carries
+#: them (:data:`aptkt.skin.protocol.RAW_FIELDS`, from the Rust crate), plus the host timestamp.
 SAMPLE_FIELDS: dict[str, tuple[tuple[int, ...], np.dtype]] = {
-    "cell_id": ((), np.dtype("<u2")),
+    "cell_id": RAW_FIELDS["cell_id"],
     "t_ns": ((), np.dtype("<i8")),
-    "proximity": ((), np.dtype("<u2")),
-    "acc": ((3,), np.dtype("<i2")),
-    "temp": ((2,), np.dtype("<i2")),
-    "force": ((3,), np.dtype("<u2")),
-}
-
-#: physical = raw * scale + offset, per field (per column for temp): the protocol's scales.
-RAW_SCALE: dict[str, tuple[tuple[float, float], ...]] = {
-    "proximity": ((1 / 65536, 0.0),),
-    "acc": ((1 / 256, 0.0),),
-    "temp": ((0.5, 24.0), (0.03125, 0.0)),
-    "force": ((1 / 1024, 0.0),),
+    **{name: field for name, field in RAW_FIELDS.items() if name != "cell_id"},
 }

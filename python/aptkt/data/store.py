@@ -37,15 +37,17 @@ from typing import Any, TypeVar
 import h5py
 import numpy as np
 
+from aptkt import __version__
 from aptkt.data.schema import (
     INDEX_DTYPE,
-    RAW_SCALE,
     READABLE_VERSIONS,
     SAMPLE_FIELDS,
     SCHEMA,
     SCHEMA_VERSION,
 )
 from aptkt.errors import AptktError
+from aptkt.skin.config import ForceCalibration
+from aptkt.skin.protocol import RAW_FIELDS, SCALE, to_physical
 from aptkt.skin.samples import Recording, SkinSamples
 
 __all__ = [
@@ -264,26 +266,8 @@ def _json_default(obj: Any) -> Any:
     raise TypeError(f"metadata value of type {type(obj).__name__} is not JSON-serialisable")
 
 
-def _calibration(meta: Mapping[str, Any], cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-sample (gain, offset) rows from the calibration in a recording's metadata."""
-    cal = meta.get("calibration")
-    if not cal:
-        raise ValueError(
-            "the recording's metadata has no 'calibration' (needed to store raw forces)"
-        )
-    ids = np.asarray(cal["cell_ids"], dtype=np.int64)
-    gain = np.asarray(cal["gain"], dtype=np.float64).reshape(len(ids), 3)
-    offset = np.asarray(cal["offset"], dtype=np.float64).reshape(len(ids), 3)
-    table = {int(c): i for i, c in enumerate(ids)}
-    try:
-        rows = np.array([table[int(c)] for c in cells], dtype=np.int64)
-    except KeyError as exc:
-        raise ValueError(f"no calibration for cell {exc.args[0]}") from None
-    return gain[rows], offset[rows]
-
-
 def _to_raw(name: str, values: np.ndarray, column: int = 0) -> np.ndarray:
-    scale, offset = RAW_SCALE[name][column]
+    scale, offset = SCALE[name][column]
     raw = np.rint((values - offset) / scale)
     off_grid = (raw * scale + offset) != values
     if np.any(off_grid):
@@ -294,48 +278,64 @@ def _to_raw(name: str, values: np.ndarray, column: int = 0) -> np.ndarray:
     return raw
 
 
+def _calibration_of(metadata: Mapping[str, Any]) -> ForceCalibration:
+    try:
+        return ForceCalibration.from_metadata(metadata.get("calibration"))
+    except ValueError as exc:
+        raise ValueError(f"{exc} (needed to store and read raw forces)") from None
+
+
 def samples_to_raw(samples: SkinSamples, metadata: Mapping[str, Any]) -> dict[str, np.ndarray]:
-    """Physical samples → the raw integers of the wire (exact; raises if they are not)."""
-    gain, offset = (
-        _calibration(metadata, samples.cell_id)
-        if len(samples)
-        else (np.ones((0, 3)), np.zeros((0, 3)))
-    )
-    force_norm = samples.force / gain + offset
-    force = np.rint(force_norm * 1024.0)
-    back = gain * (force * (1.0 / 1024.0) - offset)
-    if not np.allclose(back, samples.force, rtol=1e-9, atol=1e-12):
-        raise ValueError(
-            "force: calibrated values do not come from 12-bit readings with this calibration"
-        )
-    out = {
-        "cell_id": samples.cell_id.astype("<u2"),
-        "t_ns": samples.t_ns.astype("<i8"),
-        "proximity": _to_raw("proximity", samples.proximity).astype("<u2"),
-        "acc": _to_raw("acc", samples.acc).astype("<i2"),
-        "temp": np.stack(
+    """Samples → the stored columns: the raw integers of the wire.
+
+    Samples that came off the wire keep those integers (``samples.raw``): they are stored as
+    they are. Samples made otherwise are mapped back onto the wire's grid, exactly (raises if
+    they are not on it).
+    """
+    fields = {name: dtype for name, (_, dtype) in SAMPLE_FIELDS.items()}
+    out = {"t_ns": samples.t_ns.astype(fields["t_ns"])}
+    if samples.raw is not None:
+        out.update({name: col.astype(fields[name]) for name, col in samples.raw.items()})
+        return {name: out[name] for name in SAMPLE_FIELDS}
+    if len(samples):
+        cal = _calibration_of(metadata)
+        force_norm = cal.to_normalised(samples.cell_id, samples.force)
+    else:
+        cal, force_norm = None, np.zeros((0, 3))
+    ((force_scale, _),) = SCALE["force"]
+    force = np.rint(force_norm / force_scale)
+    if cal is not None:
+        back = cal.to_newtons(samples.cell_id, force * force_scale)
+        if not np.allclose(back, samples.force, rtol=1e-9, atol=1e-12):
+            raise ValueError(
+                "force: calibrated values do not come from 12-bit readings with this calibration"
+            )
+    out.update(
+        cell_id=samples.cell_id.astype(fields["cell_id"]),
+        proximity=_to_raw("proximity", samples.proximity).astype(fields["proximity"]),
+        acc=_to_raw("acc", samples.acc).astype(fields["acc"]),
+        temp=np.stack(
             [_to_raw("temp", samples.temp[:, 0], 0), _to_raw("temp", samples.temp[:, 1], 1)], axis=1
-        ).astype("<i2"),
-        "force": force.astype("<u2"),
-    }
-    return out
+        ).astype(fields["temp"]),
+        force=force.astype(fields["force"]),
+    )
+    return {name: out[name] for name in SAMPLE_FIELDS}
 
 
 def raw_to_samples(raw: Mapping[str, np.ndarray], metadata: Mapping[str, Any]) -> SkinSamples:
-    """Raw integers → physical samples, with the same arithmetic as the skin sources."""
+    """Stored raw integers → physical samples, with the same arithmetic as the skin sources
+    (the integers stay with the samples, see :class:`~aptkt.skin.SkinSamples`)."""
     cells = np.asarray(raw["cell_id"], dtype=np.uint16)
-    if len(cells):
-        gain, offset = _calibration(metadata, cells)
-    else:
-        gain, offset = np.ones((0, 3)), np.zeros((0, 3))
-    temp = np.asarray(raw["temp"], dtype=np.float64)
+    force_norm = to_physical("force", raw["force"])
+    force = _calibration_of(metadata).to_newtons(cells, force_norm) if len(cells) else force_norm
     return SkinSamples(
         cell_id=cells,
         t_ns=np.asarray(raw["t_ns"], dtype=np.int64),
-        proximity=np.asarray(raw["proximity"], dtype=np.float64) * (1 / 65536),
-        acc=np.asarray(raw["acc"], dtype=np.float64) * (1 / 256),
-        temp=np.stack([temp[:, 0] * 0.5 + 24.0, temp[:, 1] * 0.03125], axis=1),
-        force=gain * (np.asarray(raw["force"], dtype=np.float64) * (1 / 1024) - offset),
+        proximity=to_physical("proximity", raw["proximity"]),
+        acc=to_physical("acc", raw["acc"]),
+        temp=to_physical("temp", raw["temp"]),
+        force=force,
+        raw={name: raw[name] for name in RAW_FIELDS},
     )
 
 
@@ -424,7 +424,6 @@ class DatasetWriter:
         description: Mapping[str, Any] | None = None,
         overwrite: bool = False,
     ):
-        from aptkt import __version__
 
         self.path = Path(path)
         if mode not in ("w", "a"):
@@ -768,6 +767,15 @@ class DatasetReader:
             raise KeyError(f"no stored {modality!r} features for action {action!r}")
         return g["recording"][...], g[modality][...]
 
+    def feature_settings(self, action: str) -> dict[str, Any] | None:
+        """The extraction settings the stored features of ``action`` were computed with (None
+        if there are none, or they were stored without)."""
+        g = self._f.get(f"features/{action}")
+        if g is None or "extraction" not in g.attrs:
+            return None
+        settings: dict[str, Any] = json.loads(g.attrs["extraction"])
+        return settings
+
     def feature_names(self) -> dict[str, list[str]]:
         g = self._f.get("features")
         if g is None:
@@ -817,18 +825,28 @@ class DatasetReader:
 
 
 def write_features(
-    path: str | Path, action: str, modality: str, recordings: Sequence[int], values: np.ndarray
+    path: str | Path,
+    action: str,
+    modality: str,
+    recordings: Sequence[int],
+    values: np.ndarray,
+    *,
+    settings: Mapping[str, Any] | None = None,
 ) -> None:
     """Store a feature matrix (one row per recording number) under ``/features/<action>``
     (see :func:`store_features`)."""
-    store_features(path, {action: (recordings, {modality: values})})
+    store_features(path, {action: (recordings, {modality: values})}, settings=settings)
 
 
 def store_features(
     path: str | Path,
     features: Mapping[str, tuple[Sequence[int], Mapping[str, np.ndarray]]],
+    *,
+    settings: Mapping[str, Any] | None = None,
 ) -> None:
-    """Store feature matrices: ``{action: (recording numbers, {modality: values})}``.
+    """Store feature matrices: ``{action: (recording numbers, {modality: values})}``, keyed by
+    the extraction ``settings`` they were computed with (JSON, see
+    :meth:`DatasetReader.feature_settings`; None: unknown settings).
 
     The file is never modified in place: the features are written into a copy that then
     replaces it (a rename), so a kill at any moment leaves the file as it was, or with all the
@@ -874,6 +892,10 @@ def store_features(
                     if modality in g:
                         del g[modality]
                     g.create_dataset(modality, data=values, track_times=False)
+                if settings is None:
+                    g.attrs.pop("extraction", None)
+                else:
+                    g.attrs["extraction"] = json.dumps(dict(settings), sort_keys=True)
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, path)

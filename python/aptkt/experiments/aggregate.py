@@ -269,7 +269,10 @@ class Estimate:
 
 
 def estimate(
-    values: Sequence[float], units: Sequence[Any] | None = None, *, unit_name: str = "group"
+    values: Sequence[float] | np.ndarray,
+    units: Sequence[Any] | None = None,
+    *,
+    unit_name: str = "group",
 ) -> Estimate:
     """Mean of ``values`` with a 95 % t interval. With ``units`` (one per value) and at least
     two distinct units, values are first averaged within each unit and the interval is over

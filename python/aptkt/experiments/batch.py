@@ -6,7 +6,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
+
+from tqdm import tqdm
 
 from aptkt.experiments.executors import Executor
 from aptkt.experiments.priors import PriorTask, build_prior
@@ -26,8 +29,6 @@ class BatchResult:
 
 
 def _bar(progress: bool, total: int, initial: int, desc: str):
-    from tqdm import tqdm
-
     return tqdm(
         total=total, initial=initial, unit="run", desc=desc, disable=not progress, smoothing=0.05
     )
@@ -35,7 +36,6 @@ def _bar(progress: bool, total: int, initial: int, desc: str):
 
 def build_priors(tasks: Sequence[PriorTask], executor: Executor, *, progress: bool = True) -> None:
     """Build every distinct prior-knowledge file that does not exist yet."""
-    from pathlib import Path
 
     todo = {t.key: t for t in tasks if not Path(t.path).exists()}
     if not todo:

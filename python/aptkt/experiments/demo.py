@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
 from aptkt import __version__
 from aptkt.actions import PAPER_ACTIONS
@@ -35,7 +36,8 @@ from aptkt.experiments.plots import figure, learning_curves, save_figure
 from aptkt.experiments.runs import RunSpec, flatten, run_many
 from aptkt.experiments.tables import write_csv
 from aptkt.learning import GPSettings, LearnerConfig, PriorKnowledge
-from aptkt.learning.dataset import load_observations
+from aptkt.learning.dataset import extract_features, load_observations, stale_features
+from aptkt.runtime.generation import GenerationPlan, generate
 
 __all__ = ["DemoSettings", "report_results", "run_demo", "DEMO_PRIORS", "DEMO_NEW"]
 
@@ -51,14 +53,14 @@ class DemoSettings:
     seed: int = 0
     jobs: int = field(default_factory=lambda: os.cpu_count() or 1)
     trials: int = 3
-    budget: int = 40
+    budget: int = LearnerConfig.budget
     train_reps: int = 10
     test_reps: int = 10
     actions: tuple[str, ...] = tuple(PAPER_ACTIONS)
     priors: tuple[str, ...] = DEMO_PRIORS
     new_objects: tuple[str, ...] = DEMO_NEW
-    eps_neg: float = 0.4
-    eps_explor: float = 0.1
+    eps_neg: float = LearnerConfig.eps_neg
+    eps_explor: float = LearnerConfig.eps_explor
     size: str = "full"  # "quick" for the reduced size; results of two sizes never mix
 
     @classmethod
@@ -81,10 +83,6 @@ def _say(msg: str) -> None:
 
 
 def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
-    from tqdm import tqdm
-
-    from aptkt.runtime.generation import GenerationPlan, generate
-
     t_start = time.perf_counter()
     out = Path(s.output)
     _refuse_other_size(out, s.size)
@@ -108,6 +106,9 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
     _say("[2/5] extracting features")
     train_trials = tuple(range(s.train_reps))
     test_trials = tuple(range(s.train_reps, reps))
+    todo = stale_features(data, s.actions)
+    if todo:  # stored once, so the learning runs (and a re-run) read them
+        extract_features(data, actions=todo, progress=progress)
     prior_table = load_observations(
         data, actions=s.actions, objects=s.priors, trials=train_trials, progress=progress
     )

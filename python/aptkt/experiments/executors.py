@@ -114,12 +114,13 @@ class DaskExecutor:
             except (OSError, TimeoutError) as exc:
                 raise ConfigError(f"cannot reach the Dask scheduler at {address!r}: {exc}") from exc
         workers = len(self.client.scheduler_info().get("workers", {}))
-        self.description = f"Dask cluster at {self.client.scheduler.address} ({workers} worker(s))"
+        where = getattr(self.client.scheduler, "address", address)
+        self.description = f"Dask cluster at {where} ({workers} worker(s))"
 
     def imap_unordered(
         self, fn: Callable[[Any], Any], items: Sequence[Any]
     ) -> Iterator[tuple[int, Any]]:
-        from dask.distributed import as_completed
+        from dask.distributed import as_completed  # optional dependency: the dask extra
 
         if not items:
             return

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from aptkt.experiments.aggregate import mean_band
+
 __all__ = ["BAND_LABEL", "learning_curves", "save_figure", "figure", "canvas", "METHOD_COLOURS"]
 
 #: The paper's colours (Fig. 9): baseline red, APTKT blue, APTKT with auxiliary features green.
@@ -23,6 +25,8 @@ METHOD_COLOURS = {
 
 
 def _pyplot():
+    # Imported when a plot is made: the non-interactive backend must be chosen before pyplot,
+    # and matplotlib is slow to import for everything that does not plot.
     import matplotlib
 
     matplotlib.use("Agg")
@@ -50,7 +54,6 @@ def learning_curves(
     ``curves[method]`` has shape (runs, len(x)); ``chance`` is the accuracy of guessing
     (1 / number of classes), drawn as a dashed line. The legend says what the bands are.
     """
-    from aptkt.experiments.aggregate import mean_band
 
     for method, values in curves.items():
         values = np.asarray(values, dtype=float)
@@ -61,7 +64,7 @@ def learning_curves(
     ax.axhline(chance, color="0.4", ls="--", lw=1, label=f"chance ({chance:.2f})")
     ax.plot([], [], " ", label=BAND_LABEL)  # a legend line that only explains the bands
     ax.set_ylim(0, 1.02)
-    from matplotlib.ticker import MaxNLocator
+    from matplotlib.ticker import MaxNLocator  # see _pyplot
 
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel(xlabel)

@@ -23,7 +23,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from aptkt import __version__
+from aptkt.actions import PAPER_ACTIONS
+from aptkt.data import DatasetReader
 from aptkt.errors import ConfigError
 from aptkt.experiments.batch import build_priors, run_batch
 from aptkt.experiments.executors import make_executor
@@ -33,6 +37,9 @@ from aptkt.experiments.report import markdown_table, render_report
 from aptkt.experiments.run_store import RunStore, data_fingerprint, run_key
 from aptkt.experiments.runs import label
 from aptkt.experiments.scale import Scale
+from aptkt.learning.dataset import extract_features, stale_features
+from aptkt.runtime.generation import GenerationPlan, generate
+from aptkt.sim.objects import default_library
 
 __all__ = ["ReproduceSettings", "reproduce", "FIGURE_NAMES"]
 
@@ -66,7 +73,6 @@ def _say(msg: str) -> None:
 
 def _paper_numbers(objects: Sequence[str]) -> dict[str, int]:
     """Each object's number in the paper (the library index); others numbered after them."""
-    from aptkt.sim.objects import default_library
 
     lib = default_library()
     out, extra = {}, 100
@@ -81,10 +87,6 @@ def _paper_numbers(objects: Sequence[str]) -> dict[str, int]:
 
 def prepare_data(s: ReproduceSettings, scale: Scale) -> tuple[Path, dict[str, Any]]:
     """The data set to learn from (generated if none was given) with its features extracted."""
-    from aptkt.actions import PAPER_ACTIONS
-    from aptkt.data import DatasetReader
-    from aptkt.learning.dataset import extract_features
-    from aptkt.runtime.generation import GenerationPlan, generate
 
     info: dict[str, Any] = {}
     if s.data is not None:
@@ -109,7 +111,6 @@ def prepare_data(s: ReproduceSettings, scale: Scale) -> tuple[Path, dict[str, An
         )
     with DatasetReader(path) as rd:
         keys = set(rd.keys())
-        stored = rd.feature_names()
         info["description"] = rd.description
     missing = [
         (o, a, t)
@@ -123,7 +124,7 @@ def prepare_data(s: ReproduceSettings, scale: Scale) -> tuple[Path, dict[str, An
             f"{path} lacks {len(missing)} recording(s) this size needs (objects {list(scale.objects)}, actions "
             f"{list(scale.actions)}, trials 0..{scale.repetitions - 1}); first missing: {missing[:3]}"
         )
-    todo = [a for a in scale.actions if a not in stored]
+    todo = stale_features(path, scale.actions)
     if todo:
         _say(f"extracting features of {', '.join(todo)} into {path}")
         t0 = time.perf_counter()
@@ -192,7 +193,7 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
 
     config = _config(s, scale, ctx, data_info, plans)
     (out / "config.json").write_text(json.dumps(config, indent=2, default=str))
-    run_info = {
+    run_info: dict[str, Any] = {
         "command": s.command or f"aptkt reproduce {' '.join(s.figures)}",
         "software_version": __version__,
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
@@ -232,8 +233,6 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
 
 
 def _json_default(v: Any) -> Any:
-    import numpy as np
-
     if isinstance(v, np.generic):
         return v.item()
     if isinstance(v, np.ndarray):
@@ -270,7 +269,6 @@ def _config(
     data_info: dict[str, Any],
     plans: dict[str, Any],
 ) -> dict[str, Any]:
-    import numpy as np
 
     return {
         "command": s.command,

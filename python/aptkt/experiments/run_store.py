@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from aptkt import __version__
+from aptkt.data import DatasetReader
 from aptkt.experiments.runs import RunSpec
 
 __all__ = ["RunStore", "data_fingerprint", "run_key", "canonical_json"]
@@ -40,8 +41,6 @@ def _digest(value: Any) -> str:
 
 @lru_cache(maxsize=16)
 def _fingerprint(path: str, size: int, mtime_ns: int) -> str:
-    from aptkt.data import DatasetReader
-
     h = hashlib.sha256()
     with DatasetReader(path) as rd:
         h.update(canonical_json(rd.keys()).encode())

@@ -9,6 +9,7 @@ from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 from typing import Any
 
+from aptkt.experiments.executors import LocalExecutor
 from aptkt.learning import APTKT, LearnerConfig, LearningRun, PoolEnvironment, PriorKnowledge
 from aptkt.learning.dataset import load_observations
 
@@ -83,9 +84,9 @@ def run_steps(spec: RunSpec) -> list[dict[str, Any]]:
 def step_rows(
     run: LearningRun, learner: APTKT | None = None, objects: Sequence[str] = ()
 ) -> list[dict[str, Any]]:
-    """One row per step of a finished run, with the transfer counts of :func:`run_steps`; the
-    last row also holds the final models' ``confusion`` over ``objects`` when ``learner`` is
-    given."""
+    """One row per step of a finished run, with the transfer counts of :func:`run_steps`; with
+    the ``learner`` that made it, the last row has the final models' confusion over
+    ``objects``."""
     rows = []
     for step in run.steps:
         row = step.as_row()
@@ -109,7 +110,9 @@ def final_confusion(learner: APTKT, objects: Sequence[str]) -> list[list[int]]:
     for action_learner in learner.learners.values():
         if action_learner.test_posteriors is None:
             continue
-        classes = [str(c) for c in action_learner.model.classes_]
+        model = action_learner.model
+        assert model is not None  # it has test posteriors
+        classes = [str(c) for c in model.classes_]
         predicted = [classes[k] for k in action_learner.test_posteriors.argmax(axis=1)]
         for truth, guess in zip(action_learner.test_objects, predicted):
             counts[pos[str(truth)]][pos[guess]] += 1
@@ -133,7 +136,6 @@ def run_many(
     progress: Callable[[int], None] | None = None,
 ) -> list[list[dict[str, Any]]]:
     """Execute runs on local processes (results in the order of ``specs``)."""
-    from aptkt.experiments.executors import LocalExecutor
 
     results: list[list[dict[str, Any]] | None] = [None] * len(specs)
     executor = LocalExecutor(jobs)

@@ -22,6 +22,8 @@ from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 from aptkt.actions import PAPER_ACTIONS
+from aptkt.learning.config import LearnerConfig
+from aptkt.sim.objects import default_library
 
 __all__ = ["Scale"]
 
@@ -33,7 +35,7 @@ class Scale:
     new_objects: tuple[str, ...]
     actions: tuple[str, ...]
     repetitions: int = 40
-    budget: int = 40
+    budget: int = LearnerConfig.budget
     groups: int = 10
     trials: int = 5
     n_priors: int = 3
@@ -43,8 +45,8 @@ class Scale:
     fig6_budget: int = 40
     fig11_trials: int = 10
     dissimilar_count: int = 3
-    eps_neg: float = 0.4
-    eps_explor: float = 0.1
+    eps_neg: float = LearnerConfig.eps_neg
+    eps_explor: float = LearnerConfig.eps_explor
 
     def __post_init__(self) -> None:
         if self.repetitions < 2:
@@ -93,7 +95,6 @@ class Scale:
     @classmethod
     def full(cls) -> Scale:
         """The paper's sizes on the simulated world's 10 prior and 5 new objects."""
-        from aptkt.sim.objects import default_library
 
         lib = default_library()
         return cls(

@@ -105,7 +105,7 @@ def _e_step(
 
 def fit_mixture(
     X: np.ndarray,
-    init_labels: Sequence[int],
+    init_labels: Sequence[int] | np.ndarray,
     n_components: int,
     *,
     covariance_type: str = "tied",
@@ -139,7 +139,7 @@ def fit_mixture(
     resp[np.arange(X.shape[0]), labels] = 1.0
     params = _m_step(X, resp, reg_covar, covariance_type)
     lower, converged, n_iter = -np.inf, False, 0
-    for n_iter in range(1, max_iter + 1):
+    for n_iter in range(1, max_iter + 1):  # noqa: B007 - reported after the loop
         previous = lower
         lower, log_resp = _e_step(X, *params)
         params = _m_step(X, np.exp(log_resp), reg_covar, covariance_type)
@@ -154,13 +154,15 @@ def log_responsibilities(fit: MixtureFit, X: np.ndarray) -> np.ndarray:
     return _e_step(np.asarray(X, dtype=float), fit.weights, fit.means, fit.covariances)[1]
 
 
-def log_confusion(log_resp: np.ndarray, labels: Sequence[int], n_objects: int) -> np.ndarray:
+def log_confusion(
+    log_resp: np.ndarray, labels: Sequence[int] | np.ndarray, n_objects: int
+) -> np.ndarray:
     """``log C[i, k]`` with ``C[i, k]`` the mean responsibility of component k for object i's
     samples (rows of C sum to 1), computed without underflow."""
-    labels = np.asarray(labels)
+    label = np.asarray(labels)
     out = np.empty((n_objects, log_resp.shape[1]))
     for i in range(n_objects):
-        rows = log_resp[labels == i]
+        rows = log_resp[label == i]
         if rows.shape[0] == 0:
             raise ValueError(f"object {i} has no samples")
         top = rows.max(axis=0)

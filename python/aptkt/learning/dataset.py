@@ -1,8 +1,10 @@
 """Feature observations from recorded data sets (HDF5, :mod:`aptkt.data`).
 
 :func:`extract_features` computes every recording's feature observation once and stores it in
-the file (``/features/<action>/<modality>``); :func:`load_observations` reads them back as an
-observation table, extracting first if needed.
+the file (``/features/<action>/<modality>``), keyed by the extraction settings; this is the one
+function that writes. :func:`load_observations` reads them back as an observation table; it
+uses stored features only when they were extracted with the settings asked for, and otherwise
+extracts in memory, never writing into the file it reads.
 """
 
 from __future__ import annotations
@@ -12,13 +14,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
 from aptkt.actions import ExploratoryAction
 from aptkt.data import DatasetError, DatasetReader, store_features
 from aptkt.learning.extract import ExtractionSettings, observe_recording
 from aptkt.learning.observations import Observations
+from aptkt.skin.samples import Recording
 
-__all__ = ["extract_features", "load_observations", "stored_actions"]
+__all__ = ["extract_features", "load_observations", "stored_actions", "stale_features"]
 
 
 def stored_actions(path: str | Path) -> dict[str, ExploratoryAction]:
@@ -32,6 +36,70 @@ def stored_actions(path: str | Path) -> dict[str, ExploratoryAction]:
     return actions
 
 
+def _rows_by_action(rd: DatasetReader, wanted: Iterable[str] | None) -> dict[str, list[int]]:
+    names = None if wanted is None else set(wanted)
+    by_action: dict[str, list[int]] = {}
+    for i in range(len(rd)):
+        _, name, _ = rd.key(i)
+        if names is None or name in names:
+            by_action.setdefault(name, []).append(i)
+    missing = (names or set()) - set(by_action)
+    if missing:
+        raise DatasetError(
+            f"{rd.path} holds no recordings of action(s) {', '.join(sorted(missing))}; "
+            f"it has {', '.join(sorted({rd.key(i)[1] for i in range(len(rd))}))}"
+        )
+    return by_action
+
+
+def _recording(rd: DatasetReader, i: int) -> Recording:
+    try:
+        return rd.recording(i)
+    except (OSError, ValueError) as exc:
+        obj, name, trial = rd.key(i)
+        raise DatasetError(
+            f"{rd.path}: recording {i} ({obj}/{name}/trial {trial}) is damaged "
+            f"({exc}); 'aptkt dataset repair {rd.path}' keeps the readable ones"
+        ) from None
+
+
+def _extract(
+    rd: DatasetReader,
+    by_action: dict[str, list[int]],
+    settings: ExtractionSettings,
+    progress: bool,
+    desc: str,
+) -> dict[str, dict[str, np.ndarray]]:
+    """Feature values per action and modality, one row per recording of ``by_action``."""
+    total = sum(len(v) for v in by_action.values())
+    bar = tqdm(total=total, unit="rec", desc=desc) if progress else None
+    values: dict[str, dict[str, np.ndarray]] = {}
+    try:
+        for name, rows in by_action.items():
+            action = ExploratoryAction.from_dict(rd.metadata(rows[0])["action"])
+            per_mod: dict[str, list[np.ndarray]] = {m: [] for m in action.modalities}
+            for i in rows:
+                obs = observe_recording(_recording(rd, i), action, settings)
+                for m, v in obs.items():
+                    per_mod[m].append(v)
+                if bar is not None:
+                    bar.update(1)
+            values[name] = {m: np.stack(v) for m, v in per_mod.items()}
+    finally:
+        if bar is not None:
+            bar.close()
+    return values
+
+
+def stale_features(
+    path: str | Path, actions: Iterable[str], settings: ExtractionSettings | None = None
+) -> list[str]:
+    """Of ``actions``, those without stored features extracted with ``settings``."""
+    key = (settings or ExtractionSettings()).to_dict()
+    with DatasetReader(path) as rd:
+        return [a for a in actions if rd.feature_settings(a) != key]
+
+
 def extract_features(
     path: str | Path,
     *,
@@ -39,61 +107,20 @@ def extract_features(
     settings: ExtractionSettings | None = None,
     progress: bool = True,
 ) -> dict[str, int]:
-    """Extract and store the feature observations of every recording (of ``actions``).
+    """Extract and store the feature observations of every recording (of ``actions``), keyed by
+    ``settings``.
 
     Returns the number of recordings per action. The file must not be open for writing.
     """
     path = Path(path)
-    wanted = None if actions is None else set(actions)
-    by_action: dict[str, list[int]] = {}
+    settings = settings or ExtractionSettings()
     with DatasetReader(path) as rd:
-        recorded = set()
-        for i in range(len(rd)):
-            _, name, _ = rd.key(i)
-            recorded.add(name)
-            if wanted is None or name in wanted:
-                by_action.setdefault(name, []).append(i)
-        missing = (wanted or set()) - recorded
-        if missing:
-            raise DatasetError(
-                f"{path} holds no recordings of action(s) {', '.join(sorted(missing))}; "
-                f"it has {', '.join(sorted(recorded))}"
-            )
-        total = sum(len(v) for v in by_action.values())
-        bar = None
-        if progress:
-            from tqdm import tqdm
-
-            bar = tqdm(total=total, unit="rec", desc=f"features {path.name}")
-        values: dict[str, dict[str, list[np.ndarray]]] = {}
-        try:
-            for name, rows in by_action.items():
-                action = ExploratoryAction.from_dict(rd.metadata(rows[0])["action"])
-                per_mod: dict[str, list[np.ndarray]] = {m: [] for m in action.modalities}
-                for i in rows:
-                    try:
-                        rec = rd.recording(i)
-                    except (OSError, ValueError) as exc:
-                        obj, _, trial = rd.key(i)
-                        raise DatasetError(
-                            f"{path}: recording {i} ({obj}/{name}/trial {trial}) is damaged "
-                            f"({exc}); 'aptkt dataset repair {path}' keeps the readable ones"
-                        ) from None
-                    obs = observe_recording(rec, action, settings)
-                    for m, v in obs.items():
-                        per_mod[m].append(v)
-                    if bar is not None:
-                        bar.update(1)
-                values[name] = per_mod
-        finally:
-            if bar is not None:
-                bar.close()
+        by_action = _rows_by_action(rd, actions)
+        values = _extract(rd, by_action, settings, progress, f"features {path.name}")
     store_features(
         path,
-        {
-            name: (by_action[name], {m: np.stack(rows) for m, rows in per_mod.items()})
-            for name, per_mod in values.items()
-        },
+        {name: (by_action[name], per_mod) for name, per_mod in values.items()},
+        settings=settings.to_dict(),
     )
     return {name: len(rows) for name, rows in by_action.items()}
 
@@ -104,57 +131,70 @@ def load_observations(
     actions: Sequence[str] | None = None,
     objects: Iterable[str] | None = None,
     trials: Iterable[int] | None = None,
+    settings: ExtractionSettings | None = None,
     extract_missing: bool = True,
     progress: bool = False,
 ) -> dict[str, Observations]:
-    """Observation table from a data set, optionally restricted to objects and trial numbers."""
+    """Observation table from a data set, optionally restricted to objects and trial numbers.
+
+    Stored features are used when they were extracted with ``settings``; the others are
+    extracted in memory (``extract_missing=False``: a ``DatasetError`` instead). The file is only
+    read: run :func:`extract_features` (``aptkt dataset features``) to store them.
+    """
     path = Path(path)
-    with DatasetReader(path) as rd:
-        stored = rd.feature_names()
-        keys = rd.keys()
-        recorded = sorted({k[1] for k in keys})
-        recorded_objects = {k[0] for k in keys}
-    names = list(actions) if actions is not None else recorded
-    unknown = [a for a in names if a not in recorded]
-    if unknown:
-        raise DatasetError(
-            f"{path} holds no recordings of action(s) {', '.join(unknown)}; "
-            f"it has {', '.join(recorded)}"
-        )
-    if objects is not None:
-        objects = list(objects)
-        unknown = sorted({str(o) for o in objects} - recorded_objects)
-        if unknown:
-            raise DatasetError(
-                f"{path} holds no recordings of object(s) {', '.join(unknown)}; "
-                f"it has {', '.join(sorted(recorded_objects))}"
-            )
-    todo = [a for a in names if a not in stored]
-    if todo:
-        if not extract_missing:
-            raise DatasetError(
-                f"{path} has no stored features for {todo}; run `aptkt dataset features`"
-            )
-        extract_features(path, actions=todo, progress=progress)
+    settings = settings or ExtractionSettings()
+    key = settings.to_dict()
     obj_filter = None if objects is None else {str(o) for o in objects}
     trial_filter = None if trials is None else {int(t) for t in trials}
     table: dict[str, Observations] = {}
     with DatasetReader(path) as rd:
         keys = rd.keys()
+        recorded = sorted({k[1] for k in keys})
+        recorded_objects = {k[0] for k in keys}
+        names = list(actions) if actions is not None else recorded
+        unknown = [a for a in names if a not in recorded]
+        if unknown:
+            raise DatasetError(
+                f"{path} holds no recordings of action(s) {', '.join(unknown)}; "
+                f"it has {', '.join(recorded)}"
+            )
+        if obj_filter is not None and obj_filter - recorded_objects:
+            raise DatasetError(
+                f"{path} holds no recordings of object(s) "
+                f"{', '.join(sorted(obj_filter - recorded_objects))}; "
+                f"it has {', '.join(sorted(recorded_objects))}"
+            )
+        todo = [a for a in names if rd.feature_settings(a) != key]
+        if todo and not extract_missing:
+            raise DatasetError(
+                f"{path} has no features stored with these extraction settings for {todo}; "
+                "run `aptkt dataset features`"
+            )
+
+        def wanted(i: int) -> bool:
+            obj, _, trial = keys[i]
+            return (obj_filter is None or obj in obj_filter) and (
+                trial_filter is None or trial in trial_filter
+            )
+
+        # Only the recordings asked for are extracted in memory (one if none is: the table
+        # still needs each modality's width).
+        by_action = {
+            name: [i for i in rows if wanted(i)] or rows[:1]
+            for name, rows in (_rows_by_action(rd, todo) if todo else {}).items()
+        }
+        fresh = _extract(rd, by_action, settings, progress, f"features {path.name}")
         for name in names:
             mods: dict[str, Any] = {}
-            recs = None
-            for modality in rd.feature_names()[name]:
-                recs, vals = rd.features(name, modality)
-                mods[modality] = vals
-            assert recs is not None
+            if name in todo:
+                recs = np.asarray(by_action[name], dtype=np.int64)
+                mods = dict(fresh[name])
+            else:
+                for modality in rd.feature_names()[name]:
+                    recs, mods[modality] = rd.features(name, modality)
+            keep = np.array([wanted(int(i)) for i in recs], dtype=bool)
             objs = np.array([keys[i][0] for i in recs])
             trs = np.array([keys[i][2] for i in recs], dtype=np.int64)
-            keep = np.ones(len(recs), dtype=bool)
-            if obj_filter is not None:
-                keep &= np.isin(objs, list(obj_filter))
-            if trial_filter is not None:
-                keep &= np.isin(trs, list(trial_filter))
             table[name] = Observations(
                 name, {m: v[keep] for m, v in mods.items()}, objs[keep], trs[keep]
             )

@@ -10,6 +10,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from aptkt.errors import AptktError
+from aptkt.learning.extract import observe_recording
 from aptkt.learning.observations import ObservationTable
 
 __all__ = ["Environment", "PoolEnvironment", "PoolExhaustedError", "RecordingEnvironment"]
@@ -87,8 +88,6 @@ class RecordingEnvironment:
         return action in self.actions
 
     def observe(self, action: str, obj: str) -> Mapping[str, np.ndarray]:
-        from aptkt.learning.extract import observe_recording
-
         if action not in self.actions:
             raise KeyError(f"unknown action {action!r}; known: {sorted(self.actions)}")
         trial = self._next.get((action, obj), self._first)

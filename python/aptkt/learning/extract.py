@@ -24,6 +24,7 @@ import numpy as np
 from aptkt import features
 from aptkt.actions import ExploratoryAction
 from aptkt.learning.observations import Observations
+from aptkt.skin.protocol import PACKET_RATE_HZ
 from aptkt.skin.samples import Recording
 
 __all__ = ["ExtractionSettings", "observe_recording", "observations_from_recordings"]
@@ -35,11 +36,15 @@ LM71 = 1
 class ExtractionSettings:
     """Sampling choices of the extraction (documented defaults)."""
 
-    def __init__(self, rate_hz: float = 250.0, thermal_bin_s: float = 0.1) -> None:
+    def __init__(self, rate_hz: float = PACKET_RATE_HZ, thermal_bin_s: float = 0.1) -> None:
         if rate_hz <= 0 or thermal_bin_s <= 0:
             raise ValueError("rates and bin widths must be > 0")
         self.rate_hz = float(rate_hz)
         self.thermal_bin_s = float(thermal_bin_s)
+
+    def to_dict(self) -> dict[str, float]:
+        """The settings as stored with extracted features (their cache key)."""
+        return {"rate_hz": self.rate_hz, "thermal_bin_s": self.thermal_bin_s}
 
     def thermal_bins(self, action: ExploratoryAction) -> int:
         return max(int(round(action.duration / self.thermal_bin_s)), 2)

@@ -21,6 +21,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import h5py
 import numpy as np
 
 from aptkt.errors import FeatureTableError
@@ -143,8 +144,6 @@ def _read_csv(path: Path) -> tuple[list[str], dict[str, list]]:
 
 
 def _read_hdf5(path: Path) -> tuple[list[str], dict[str, list]]:
-    import h5py
-
     try:
         with h5py.File(path, "r") as f:
             header = [k for k in f if isinstance(f[k], h5py.Dataset)]
@@ -276,8 +275,8 @@ def _check_rows(table: FeatureTable) -> None:
         if not filled[first].any():
             raise table._error(f"action {action} has no feature values", int(first))
         used: dict[str, list[int]] = {}
-        for c in np.flatnonzero(filled[first]):
-            m, k = _split(table.columns[c])
+        for col in np.flatnonzero(filled[first]):
+            m, k = _split(table.columns[col])
             used.setdefault(m, []).append(k)
         for m, ks in used.items():
             gap = sorted(set(range(max(ks) + 1)) - set(ks))
@@ -327,8 +326,6 @@ def write_feature_table(path: str | Path, table: ObservationTable) -> Path:
             for o, a, t, row in zip(objects, actions, trials, values):
                 w.writerow([o, a, t, *("" if math.isnan(x) else repr(float(x)) for x in row)])
     else:
-        import h5py
-
         with h5py.File(tmp, "w", track_order=True) as f:
             f.create_dataset(
                 "object", data=np.array(objects, dtype=object), dtype=h5py.string_dtype()

@@ -82,6 +82,7 @@ class ActionLearner:
             # The feature space of the prior knowledge, so old and new observations compare.
             return self.prior.pipeline
         # No prior (the baseline): fitted on the new objects' training observations so far.
+        assert self.observations is not None  # update() checks every object was observed
         return FeaturePipeline().fit(self.observations)
 
     def _features(
@@ -115,6 +116,7 @@ class ActionLearner:
 
     def _source_features(self, old_object: str) -> np.ndarray:
         if old_object not in self._source_cache:
+            assert self.prior is not None  # sources come from the prior knowledge
             obs = self.prior.observations.of_objects([old_object])
             self._source_cache[old_object] = self._features(obs, self.prior.pipeline)[0]
         return self._source_cache[old_object]
@@ -134,7 +136,7 @@ class ActionLearner:
         """Refit this action's model on everything observed so far (weights, λ, transfer)."""
         obs = self.observations
         missing = [o for o in self.new_objects if self.count(o) == 0]
-        if missing:
+        if missing or obs is None:
             raise RuntimeError(f"action {self.action!r}: no observation yet of {missing}")
         pipeline = self._pipeline()
         X_full, groups_full = pipeline.transform(obs)
@@ -159,7 +161,7 @@ class ActionLearner:
                     raise NotImplementedError(
                         "transfer='multi' needs several sources per class in aptkt.gp"
                     )
-                if decision.transfers:
+                if decision.transfers and decision.source is not None:
                     sources[obj] = self._source(decision.source, decision.transfer_lambda)
         seed = (self.config.seed * 1_000_003 + zlib.crc32(self.action.encode()) + step) % 2**32
         model = self.config.gp.make(groups, random_state=seed)
@@ -178,6 +180,8 @@ class ActionLearner:
 
     def uncertainty(self, obj: str) -> float:
         """UNC(α, c_j): mean entropy of the posterior over this pair's observations."""
+        if self.observations is None:
+            raise RuntimeError(f"action {self.action!r}: nothing observed yet")
         mask = self.observations.objects == obj
         return float(self.train_entropy[mask].mean())
 
@@ -188,10 +192,12 @@ class ActionLearner:
         return self._test.objects
 
     def test_accuracy(self) -> float:
-        if self._test is None or self.test_posteriors is None:
+        if self._test is None or self.test_posteriors is None or self.model is None:
             raise RuntimeError("no test observations were given")
         return accuracy(
-            self.test_posteriors, [str(c) for c in self.model.classes_], self._test.objects
+            self.test_posteriors,
+            [str(c) for c in self.model.classes_],
+            [str(o) for o in self._test.objects],
         )
 
 
@@ -212,11 +218,15 @@ def hyperparameters(model: LaplaceGPC) -> dict[str, dict[str, float]]:
         hp.update({f"length_scale[{m}]": float(ls[i, k]) for k, m in enumerate(names)})
         if len(names) > 1:
             hp.update({f"weight[{m}]": float(w[i, k]) for k, m in enumerate(names)})
-        used = sources.get(c, [])
-        if len(used) == 1:
-            hp["lambda"] = float(used[0].transfer_lambda)
+        # The λ each transfer source was given (None: learned, see model.hyperparameters_).
+        given: list[tuple[str, float]] = []
+        for src in sources.get(c, []):
+            if src.transfer_lambda is not None:
+                given.append((str(src.name), float(np.atleast_1d(src.transfer_lambda)[0])))
+        if len(given) == 1:
+            hp["lambda"] = given[0][1]
         else:
-            hp.update({f"lambda[{s.name}]": float(s.transfer_lambda) for s in used})
+            hp.update({f"lambda[{name}]": lam for name, lam in given})
         out[c] = hp
     return out
 
@@ -389,21 +399,27 @@ class APTKT:
         seconds: float,
         on_step: Callable[[StepRecord], None] | None,
     ) -> None:
-        has_test = all(l.test_posteriors is not None for l in self.learners.values())
-        acc = {a: l.test_accuracy() for a, l in self.learners.items()} if has_test else {}
+        has_test = all(lrn.test_posteriors is not None for lrn in self.learners.values())
+        acc = {a: lrn.test_accuracy() for a, lrn in self.learners.items()} if has_test else {}
         fused = float("nan")
         if has_test and _same_class_order(self.learners):
-            classes = [str(c) for c in next(iter(self.learners.values())).model.classes_]
+            first = next(iter(self.learners.values())).model
+            assert first is not None  # has_test: every learner has a model
+            classes = [str(c) for c in first.classes_]
             fused = fused_accuracy(
-                {a: l.test_posteriors for a, l in self.learners.items()},
-                {a: l.test_objects for a, l in self.learners.items()},
+                {
+                    a: lrn.test_posteriors
+                    for a, lrn in self.learners.items()
+                    if lrn.test_posteriors is not None
+                },
+                {a: lrn.test_objects for a, lrn in self.learners.items()},
                 classes,
             )
         updated = self.learners[sel.action] if sel is not None else None
         transfer = {
-            a: {o: d.as_dict() for o, d in l.decisions.items()}
-            for a, l in self.learners.items()
-            if updated is None or l is updated
+            a: {o: d.as_dict() for o, d in lrn.decisions.items()}
+            for a, lrn in self.learners.items()
+            if updated is None or lrn is updated
         }
         record = StepRecord(
             step=step,
@@ -417,7 +433,7 @@ class APTKT:
             fused_accuracy=fused,
             transfer=transfer,
             seconds=seconds,
-            hyperparameters={a: l.hyperparameters() for a, l in self.learners.items()},
+            hyperparameters={a: lrn.hyperparameters() for a, lrn in self.learners.items()},
         )
         run.steps.append(record)
         if on_step is not None:
@@ -426,6 +442,8 @@ class APTKT:
 
 def _same_class_order(learners: Mapping[str, ActionLearner]) -> bool:
     orders = {
-        tuple(str(c) for c in l.model.classes_) for l in learners.values() if l.model is not None
+        tuple(str(c) for c in lrn.model.classes_)
+        for lrn in learners.values()
+        if lrn.model is not None
     }
     return len(orders) == 1

@@ -68,11 +68,10 @@ class ModalityTransform:
     def n_features_out(self) -> int:
         if not self.fitted:
             raise RuntimeError("transform not fitted")
-        return (
-            int(self.components_.shape[0])
-            if self.components_ is not None
-            else int(self.mean_.shape[0])
-        )
+        if self.components_ is not None:
+            return int(self.components_.shape[0])
+        assert self.mean_ is not None  # fitted
+        return int(self.mean_.shape[0])
 
     def transform(self, X: np.ndarray) -> np.ndarray:
         if not self.fitted:
@@ -83,7 +82,7 @@ class ModalityTransform:
         return Z
 
     def state(self) -> dict[str, np.ndarray]:
-        out = {
+        out: dict[str, Any] = {
             "log_columns": np.asarray(self.log_columns, dtype=np.int64),
             "pca_components": np.asarray(
                 -1 if self.pca_components is None else self.pca_components

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.special import expit, ndtr
 
 from aptkt import __version__
 from aptkt.errors import PriorFileError
@@ -84,7 +85,6 @@ def logistic_gaussian(mean: np.ndarray, var: np.ndarray) -> np.ndarray:
     dt``, which follows from ``σ(f) = H(f) − sign(f) σ(−|f|)``; that integrand decays like
     ``e^{−t}`` and is smooth for sd > 1, so Gauss-Laguerre integrates it.
     """
-    from scipy.special import expit, ndtr
 
     mean = np.asarray(mean, dtype=np.float64)
     sd = np.sqrt(np.maximum(np.asarray(var, dtype=np.float64), 0.0))
@@ -174,8 +174,8 @@ class PriorKnowledge:
     # -- persistence ---------------------------------------------------------------------------
     def save(self, path: str | Path) -> Path:
         path = Path(path)
-        arrays: dict[str, np.ndarray] = {}
-        for i, (name, prior) in enumerate(self.actions.items()):
+        arrays: dict[str, Any] = {}
+        for i, prior in enumerate(self.actions.values()):
             p = f"a{i}"
             arrays.update(prior.observations.to_npz(f"{p}/obs"))
             arrays.update(prior.pipeline.state(f"{p}/pipeline"))

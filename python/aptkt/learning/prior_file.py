@@ -206,8 +206,8 @@ def check_action(path: Path, arrays: dict[str, np.ndarray], prefix: str, action:
         if logs.size and not (0 <= logs.min() and logs.max() < d):
             raise c.fail(f"pipeline/{m}/log_columns", f"columns outside 0..{d - 1}")
         pca = int(c.get(f"pipeline/{m}/pca_components", "iu", 0))
-        c.get(f"pipeline/{m}/mean", "f", 1, lambda s, d=d: s == (d,), f" of {d} values")
-        scale = c.get(f"pipeline/{m}/scale", "f", 1, lambda s, d=d: s == (d,), f" of {d} values")
+        c.get(f"pipeline/{m}/mean", "f", 1, _vector_of(d), f" of {d} values")
+        scale = c.get(f"pipeline/{m}/scale", "f", 1, _vector_of(d), f" of {d} values")
         if np.any(scale <= 0):
             raise c.fail(f"pipeline/{m}/scale", "scales must be > 0")
         if float(c.get(f"pipeline/{m}/pca_scale", "f", 0)) <= 0:
@@ -217,7 +217,7 @@ def check_action(path: Path, arrays: dict[str, np.ndarray], prefix: str, action:
                 f"pipeline/{m}/components",
                 "f",
                 2,
-                lambda s, d=d: s[1] == d and 1 <= s[0] <= d,
+                _rows_of_width(d),
                 f" of shape (k, {d})",
             )
             if pca < 0:
@@ -247,3 +247,13 @@ def check_action(path: Path, arrays: dict[str, np.ndarray], prefix: str, action:
     rows = 1 if len(classes) == 2 else len(classes)  # two classes: a single binary classifier
     if theta.shape[0] != rows:
         raise c.fail("model/theta", f"expected {rows} row(s) of hyper-parameters")
+
+
+def _vector_of(d: int) -> Callable[[tuple[int, ...]], bool]:
+    """Shape check: a vector of ``d`` values."""
+    return lambda shape: shape == (d,)
+
+
+def _rows_of_width(d: int) -> Callable[[tuple[int, ...]], bool]:
+    """Shape check: 1 to ``d`` rows of ``d`` values (PCA components)."""
+    return lambda shape: shape[1] == d and 1 <= shape[0] <= d

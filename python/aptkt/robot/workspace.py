@@ -26,11 +26,16 @@ Every problem raises :class:`~aptkt.errors.ConfigError` naming the file and the 
 from __future__ import annotations
 
 import math
-import tomllib
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.10 only
+    import tomli as tomllib
 
 from aptkt.errors import ConfigError
 from aptkt.robot.base import Placement, SafetyLimits
@@ -97,7 +102,8 @@ def parse_workspace(doc: Mapping[str, Any], source: str = "<memory>") -> Workspa
         raise ConfigError(f"{source}: robot.host must be a non-empty string")
     orientation = DEFAULT_TOOL_ORIENTATION
     if "tool_orientation" in robot:
-        orientation = _vector(robot["tool_orientation"], 3, f"{source}: robot.tool_orientation")
+        rx, ry, rz = _vector(robot["tool_orientation"], 3, f"{source}: robot.tool_orientation")
+        orientation = (rx, ry, rz)
     workspace = None
     if "workspace_min" in robot or "workspace_max" in robot:
         workspace = _box(robot, f"{source}: robot")

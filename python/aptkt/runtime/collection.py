@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from tqdm import tqdm
+
 from aptkt.actions import ExploratoryAction
 from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, repair
 from aptkt.errors import AptktError, ConfigError
@@ -147,8 +149,6 @@ def collect(
     todo = [(o, a, t) for o, a, t in plan.trials() if (o, a.name, t) not in done]
     bar = None
     if progress is True:
-        from tqdm import tqdm
-
         bar = tqdm(
             total=len(plan),
             initial=len(plan) - len(todo),
@@ -211,7 +211,9 @@ def _aborted(
     """Save what the failed trial recorded; the error to raise in its place."""
     kept = salvage(exc, writer, path)
     if isinstance(exc, KeyboardInterrupt):
-        exc.add_note(f"interrupted at {obj} / {action.name} / trial {trial}; {kept.what}")
+        note = f"interrupted at {obj} / {action.name} / trial {trial}; {kept.what}"
+        if sys.version_info >= (3, 11):  # notes on exceptions are new in 3.11
+            exc.add_note(note)
         return exc
     cause = kept.cause
     message = (

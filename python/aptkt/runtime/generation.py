@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from tqdm import tqdm
+
 from aptkt.actions import PAPER_ACTIONS, ExploratoryAction
 from aptkt.data.store import (
     DatasetError,
@@ -26,6 +28,8 @@ from aptkt.data.store import (
     repair,
 )
 from aptkt.runtime.grid import TrialGrid
+from aptkt.sim.objects import default_library, load_library
+from aptkt.sim.world import SimWorld
 
 # Workers are spawned, never forked: a fork copies the parent's thread pools (rayon in the
 # compiled core) without their threads, and the first parallel call in the child then hangs.
@@ -71,7 +75,6 @@ class GenerationPlan(TrialGrid):
 
 def paper_plan(seed: int = 0, repetitions: int = 20) -> GenerationPlan:
     """The paper's test set (§5.2): each of the 7 actions 20 times on each of the 15 objects."""
-    from aptkt.sim.objects import default_library
 
     return GenerationPlan(
         tuple(default_library()), tuple(PAPER_ACTIONS.values()), repetitions, seed
@@ -84,8 +87,6 @@ _WORLD = None
 
 def _init_world(seed: int, object_files: tuple[str, ...], options: dict[str, Any]) -> None:
     global _WORLD
-    from aptkt.sim.objects import default_library, load_library
-    from aptkt.sim.world import SimWorld
 
     library = load_library(*object_files) if object_files else default_library()
     _WORLD = SimWorld(library, seed=seed, **options)
@@ -133,8 +134,6 @@ def generate(
     todo = [(o, a, t) for o, a, t in plan.trials() if (o, a.name, t) not in done]
     bar = None
     if progress is True:
-        from tqdm import tqdm
-
         bar = tqdm(
             total=len(plan),
             initial=len(plan) - len(todo),

@@ -26,6 +26,8 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from aptkt import __version__
 from aptkt.actions import ExploratoryAction
 from aptkt.data.store import DatasetReader, DatasetWriter
@@ -225,10 +227,12 @@ def _finish(
         {**s.as_row(), "accuracy": s.accuracy, "transfer": s.transfer} for s in steps
     ]
     summary["observations"] = {
-        a: {o: l.count(o) for o in l.new_objects} for a, l in learner.learners.items()
+        a: {o: lrn.count(o) for o in lrn.new_objects} for a, lrn in learner.learners.items()
     }
     learned = output / "learned_prior.npz"
-    table = {a: l.observations for a, l in learner.learners.items() if l.observations is not None}
+    table = {
+        a: lrn.observations for a, lrn in learner.learners.items() if lrn.observations is not None
+    }
     summary["learned_prior"] = None
     if table:
         try:
@@ -264,8 +268,6 @@ def _finite(obj: Any) -> Any:
 
 def _json(obj: Any) -> Any:
     try:
-        import numpy as np
-
         if isinstance(obj, np.generic):
             return obj.item()
         if isinstance(obj, np.ndarray):

@@ -18,8 +18,12 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from aptkt.actions import ExploratoryAction
-from aptkt.actions.executor import ExplorationSettings, _calibration, explore
+from aptkt.actions.executor import ExplorationSettings, calibration_metadata, explore
 from aptkt.errors import ConfigError, SilentCellError, TrialFault, TrialInterrupted
+from aptkt.robot import UR10
+from aptkt.robot.workspace import load_workspace
+from aptkt.sim.objects import default_library, load_library
+from aptkt.sim.world import SimWorld
 from aptkt.skin.samples import Recording
 
 __all__ = ["LiveSession", "RobotSession", "SimSession"]
@@ -60,8 +64,6 @@ class SimSession:
         settings: ExplorationSettings | None = None,
         object_files: Sequence[str] = (),
     ):
-        from aptkt.sim.objects import default_library, load_library
-        from aptkt.sim.world import SimWorld
 
         library = load_library(*object_files) if object_files else default_library()
         settings = settings or ExplorationSettings()
@@ -119,7 +121,6 @@ class RobotSession:
         cell_timeout: float = 2.0,
         **robot_options: Any,
     ):
-        from aptkt.robot.workspace import load_workspace
 
         self.workspace = load_workspace(workspace)
         self.workspace_file = str(workspace)
@@ -144,8 +145,6 @@ class RobotSession:
             )
 
     def __enter__(self) -> RobotSession:
-        from aptkt.robot import UR10
-
         skin = self._make_skin()
         skin.open()
         try:
@@ -185,7 +184,7 @@ class RobotSession:
             # Ctrl-C mid-action: the backend stopped the arm; keep what the skin recorded.
             if getattr(self.skin, "recording", False):
                 rec = self.skin.stop_recording()
-                rec.metadata["calibration"] = _calibration(self.skin)
+                rec.metadata["calibration"] = calibration_metadata(self.skin)
                 rec.metadata["aborted"] = "KeyboardInterrupt"
                 raise TrialInterrupted(exc, rec) from exc
             raise

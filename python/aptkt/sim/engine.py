@@ -17,13 +17,18 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager, nullcontext
-from typing import Protocol
+from contextlib import AbstractContextManager, contextmanager, nullcontext
+from typing import Any, Protocol
 
 import numpy as np
 
 from aptkt.sim.kinematics import Trajectory
 from aptkt.sim.physics import ContactPhysics, ForceTrace, Frames, MechChunk
+from aptkt.skin.protocol import RAW_RANGES, SCALE, to_physical
+
+# The wire's force field (from the protocol's one table): the lean force loop quantises to it.
+((_FORCE_SCALE, _),) = SCALE["force"]
+(_FORCE_RANGE,) = RAW_RANGES["force"]
 
 __all__ = ["FrameSink", "SimEngine", "Driver", "FastDriver", "RealTimeDriver", "StopReason"]
 
@@ -62,7 +67,7 @@ class SimEngine:
         self.state = physics.initial_state(t0_ns, np.asarray(start_position, dtype=np.float64))
         self.trajectory = Trajectory.resting(t0_ns, start_position)
         self._pending = Frames.empty()
-        self._lean: dict | None = None
+        self._lean: dict[str, Any] | None = None
         self.lock = threading.RLock()
 
     @property
@@ -200,8 +205,11 @@ class SimEngine:
 
     def _lean_queue(self, t_ns: np.ndarray, cells: np.ndarray, force_norm: np.ndarray) -> None:
         lean = self._lean
-        raw = np.clip(np.rint(np.asarray(force_norm) * 1024.0), 0, 4095)  # the wire's 12-bit field
-        newtons = lean["gain"][cells] * (raw * (1.0 / 1024.0) - lean["offset"][cells])
+        assert lean is not None  # between lean_begin and lean_end
+        raw = np.clip(
+            np.rint(np.asarray(force_norm) / _FORCE_SCALE), *_FORCE_RANGE
+        )  # the wire's field
+        newtons = lean["gain"][cells] * (to_physical("force", raw) - lean["offset"][cells])
         t = np.concatenate([lean["queue_t"], t_ns])
         order = np.argsort(t, kind="stable")
         lean["queue_t"] = t[order]
@@ -211,6 +219,7 @@ class SimEngine:
     def lean_advance(self, t_end_ns: int, wrench_limit: float | None = None) -> str:
         """Advance the mechanics to ``t_end_ns`` (one control tick) without making packets."""
         lean = self._lean
+        assert lean is not None  # between lean_begin and lean_end
         chunk = self.physics.mechanics(self.state, self.trajectory, t_end_ns)
         if chunk.size:
             lean["chunks"].append(chunk)
@@ -296,6 +305,7 @@ class SimEngine:
 
     def lean_reading(self) -> float:
         """The skin's total normal force as it reads now (same arithmetic as the skin source)."""
+        assert self._lean is not None  # between lean_begin and lean_end
         return float(self._lean["latest"].sum())
 
     def lean_flush(self) -> None:
@@ -342,6 +352,10 @@ class Driver(Protocol):
     ) -> tuple[int, str]: ...
 
     def set_motion(self, t_ns: int, p0: np.ndarray, v0: np.ndarray, a: np.ndarray) -> None: ...
+
+    def force_loop(
+        self, lean: bool = True
+    ) -> AbstractContextManager[Callable[[], float] | None]: ...
 
 
 class FastDriver:

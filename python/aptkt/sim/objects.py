@@ -10,12 +10,17 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
+import sys
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.10 only
+    import tomli as tomllib
 
 from aptkt.errors import ConfigError
 
@@ -447,7 +452,7 @@ def _parse_document(doc: Mapping[str, Any], source: str, first_auto_index: int) 
     tables = doc.get("object", [])
     if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
         raise ConfigError(f"{source}: field 'object': expected [[object]] tables")
-    out = []
+    out: list[ObjectSpec] = []
     for t in tables:
         out.append(_parse_object(t, source, first_auto_index + len(out)))
     return out

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from aptkt.sim.seeding import seed_sequence, spawn_generators
+from aptkt.skin.protocol import PACKET_RATE_HZ
 
 __all__ = ["SkinConstants", "PatchGeometry", "PatchImperfections", "DEFAULT_CELL_IDS"]
 
@@ -25,7 +26,7 @@ DEFAULT_CELL_IDS: tuple[int, ...] = (1, 2, 3, 4, 5, 6, 7)
 class SkinConstants:
     """Physical constants of the skin, shared by every cell. SI units."""
 
-    rate_hz: float = 250.0  # sensor packets per cell and second (command 0xC8 argument 0x03)
+    rate_hz: float = PACKET_RATE_HZ  # sensor packets per cell and second
     pitch: float = 0.015  # m between neighbouring cell centres (flat-to-flat hexagon width)
     sensor_radius: float = 0.0045  # m from the cell centre to each force sensor
     # --- mechanics

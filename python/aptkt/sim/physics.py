@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -261,20 +262,20 @@ class ContactPhysics:
             np.ascontiguousarray(imperfections.clock_phase, dtype=np.float64),
             np.ascontiguousarray(imperfections.sensor_height, dtype=np.float64),
             np.ascontiguousarray(self._sensor_xy, dtype=np.float64),
-            tuple(map(float, shape.centre)),
+            _pair(shape.centre),
             float(shape.rotation),
             float(shape.surface_z),
-            tuple(map(float, shape.tilt)),
+            _pair(shape.tilt),
             float(shape.crown_radius),
             np.ascontiguousarray(np.reshape(shape.waves, (-1, 4)), dtype=np.float64),
-            tuple(map(float, shape.size)),
+            _pair(shape.size),
             self.law.table[0],
             self.law.table[1],
             self.law.skin_stiffness,
             [float(w) for w in self.relaxation.weights],
             [float(t) for t in self.relaxation.times],
             float(k.sensor_area),
-            tuple(int(x) for x in self._noise.key),
+            (int(self._noise.key[0]), int(self._noise.key[1])),
             np.ascontiguousarray(imperfections.force_gain / self._gain_drift[:, None]),
             np.ascontiguousarray(imperfections.force_offset, dtype=np.float64),
             float(k.force_noise),
@@ -542,3 +543,7 @@ def _runs(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _child(seq: np.random.SeedSequence, n: int) -> np.random.SeedSequence:
     return np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, n))
+
+
+def _pair(v: Any) -> tuple[float, float]:
+    return (float(v[0]), float(v[1]))

@@ -55,9 +55,9 @@ def linear_recurrence_rows(a: np.ndarray, x: np.ndarray, y0: np.ndarray) -> np.n
     out = np.empty_like(x)
     y = np.array(np.broadcast_to(y0, (rows, *x.shape[2:])), dtype=np.float64)
     if length <= 8:
-        for k in range(length):
-            y = ar * y + x[:, k]
-            out[:, k] = y
+        for step in range(length):
+            y = ar * y + x[:, step]
+            out[:, step] = y
         return out
     if np.any((a <= 0) | (a > 1)):
         raise ValueError("decay factors must be in (0, 1]")

@@ -9,6 +9,7 @@ that tick, retracts it and raises :class:`~aptkt.errors.SafetyLimitError`.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -66,7 +67,7 @@ class SimRobot:
 
     def _check_point(self, point: np.ndarray, what: str) -> None:
         if self._placement is not None and not self._placement.contains(
-            tuple(float(x) for x in point)
+            (float(point[0]), float(point[1]), float(point[2]))
         ):
             raise SafetyLimitError(
                 f"{what}: target {np.round(point, 4).tolist()} is outside the workspace of "
@@ -302,13 +303,14 @@ class SimRobot:
                     f"contact force above {lim.max_normal_force} N under force control"
                 )
 
-        check(*self.driver.force_ticks(control, ("settle", self.now_ns() + int(3e9), 0)))
+        fast: Any = self.driver  # a driver with force_ticks (the caller checked)
+        check(*fast.force_ticks(control, ("settle", self.now_ns() + int(3e9), 0)))
         v = 0.0
         for k, (span, acc) in enumerate(phases):
             t_start = self.now_ns()
             t_stop = t_start + int(round(span * 1e9))
             check(
-                *self.driver.force_ticks(
+                *fast.force_ticks(
                     control, ("ramp", t_start, t_stop, v, acc, float(d[0]), float(d[1]))
                 )
             )

@@ -17,7 +17,6 @@ import os
 import tty
 from collections.abc import Callable
 
-
 from aptkt.sim.physics import Frames
 from aptkt.skin import PatchConfig, encode_sensor_packets, quantize
 from aptkt.skin.source import SkinSourceBase
@@ -94,20 +93,20 @@ class PtySkinLink:
         counted (used directly by the loopback controller's skin)."""
         if self.master < 0:
             return
-        data = memoryview(data)
-        while data:
+        view = memoryview(data)
+        while view:
             try:
-                n = os.write(self.master, data)
+                n = os.write(self.master, view)
             except BlockingIOError:
-                self.bytes_dropped += len(data)
+                self.bytes_dropped += len(view)
                 break
             except OSError as exc:
                 if exc.errno in (errno.EIO, errno.EBADF):
-                    self.bytes_dropped += len(data)
+                    self.bytes_dropped += len(view)
                     break
                 raise
             self.bytes_written += n
-            data = data[n:]
+            view = view[n:]
         self._drain()
 
     def _drain(self) -> None:

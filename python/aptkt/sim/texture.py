@@ -70,11 +70,11 @@ def texture_field(obj: ObjectSpec) -> TextureField:
     if s.roughness_rms > 0:
         q_lo, q_hi = 1.0 / s.roughness_band[1], 1.0 / s.roughness_band[0]
         edges = np.geomspace(q_lo, q_hi, _RANDOM_COMPONENTS + 1)
-        q = edges[:-1] * (edges[1:] / edges[:-1]) ** rng.uniform(0, 1, _RANDOM_COMPONENTS)
-        amp = q**-s.roughness_exponent
+        qs = edges[:-1] * (edges[1:] / edges[:-1]) ** rng.uniform(0, 1, _RANDOM_COMPONENTS)
+        amp = qs**-s.roughness_exponent
         amp *= s.roughness_rms / np.sqrt(np.sum(amp**2) / 2.0)
         theta = rng.uniform(0, np.pi, _RANDOM_COMPONENTS)
-        for qi, ai, ti in zip(q, amp, theta):
+        for qi, ai, ti in zip(qs, amp, theta):
             k.append((qi * math.cos(ti), qi * math.sin(ti)))
             a.append(ai)
             ph.append(rng.uniform(0, 2 * np.pi))

@@ -98,8 +98,8 @@ class SimWorld:
                 CellConfig(
                     cell_id=cid,
                     position_mm=(float(x * 1e3), float(y * 1e3), 0.0),
-                    force_offset=tuple(float(v) for v in self.imperfections.believed_offset[i]),
-                    force_gain=tuple(float(v) for v in self.imperfections.believed_gain[i]),
+                    force_offset=_triple(self.imperfections.believed_offset[i]),
+                    force_gain=_triple(self.imperfections.believed_gain[i]),
                 )
                 for i, (cid, (x, y)) in enumerate(
                     zip(self.geometry.cell_ids, self.geometry.centres)
@@ -242,3 +242,7 @@ class SimWorld:
             "object_role": obj.role,
             "conditions": cond.to_dict(),
         }
+
+
+def _triple(v: Any) -> tuple[float, float, float]:
+    return (float(v[0]), float(v[1]), float(v[2]))

@@ -23,11 +23,11 @@ from __future__ import annotations
 
 import math
 import sys
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -63,16 +63,51 @@ class CellConfig:
     force_gain: tuple[float, float, float]
 
 
+@dataclass(frozen=True, eq=False)
 class ForceCalibration:
-    """Per-cell, per-sensor affine map between normalised force readings and newtons."""
+    """Per-cell, per-sensor affine map between normalised force readings and newtons,
+    ``newtons = gain * (normalised - offset)``; ``offset`` and ``gain`` are ``(cells, 3)``.
 
-    def __init__(self, cell_ids: Sequence[int], offset: np.ndarray, gain: np.ndarray) -> None:
-        self.cell_ids = tuple(int(c) for c in cell_ids)
-        self.offset = np.array(offset, dtype=np.float64).reshape(len(self.cell_ids), 3)
-        self.gain = np.array(gain, dtype=np.float64).reshape(len(self.cell_ids), 3)
-        # cell id → row; -1 for cells outside the patch. A table keeps lookups vectorised.
-        self.index = np.full(_MAX_CELL_ID + 1, -1, dtype=np.intp)
-        self.index[list(self.cell_ids)] = np.arange(len(self.cell_ids))
+    Recordings carry it in their metadata as :meth:`to_metadata` (plain JSON);
+    :meth:`from_metadata` reads it back.
+    """
+
+    cell_ids: tuple[int, ...]
+    offset: np.ndarray
+    gain: np.ndarray
+    #: cell id → row; -1 for cells outside the patch. A table keeps lookups vectorised.
+    index: np.ndarray = field(init=False, repr=False)
+
+    MODEL: ClassVar[str] = "newtons = gain * (normalised - offset)"
+
+    def __post_init__(self) -> None:
+        cell_ids = tuple(int(c) for c in self.cell_ids)
+        n = len(cell_ids)
+        object.__setattr__(self, "cell_ids", cell_ids)
+        object.__setattr__(self, "offset", np.array(self.offset, dtype=np.float64).reshape(n, 3))
+        object.__setattr__(self, "gain", np.array(self.gain, dtype=np.float64).reshape(n, 3))
+        index = np.full(_MAX_CELL_ID + 1, -1, dtype=np.intp)
+        index[list(cell_ids)] = np.arange(n)
+        object.__setattr__(self, "index", index)
+
+    def to_metadata(self) -> dict[str, Any]:
+        """The calibration as recordings carry it in their metadata (JSON)."""
+        return {
+            "model": self.MODEL,
+            "cell_ids": list(self.cell_ids),
+            "offset": self.offset.tolist(),
+            "gain": self.gain.tolist(),
+        }
+
+    @classmethod
+    def from_metadata(cls, data: Mapping[str, Any] | None) -> ForceCalibration:
+        """Inverse of :meth:`to_metadata`; ``ValueError`` if ``data`` is missing or malformed."""
+        if not data:
+            raise ValueError("the recording's metadata has no 'calibration'")
+        try:
+            return cls(data["cell_ids"], data["offset"], data["gain"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"the recording's calibration is malformed: {exc}") from None
 
     def rows(self, cell_id: np.ndarray) -> np.ndarray:
         """Row of each cell id, -1 for cells the patch does not describe."""
@@ -80,7 +115,8 @@ class ForceCalibration:
         inside = (cid >= 0) & (cid <= _MAX_CELL_ID)
         return np.where(inside, self.index[np.clip(cid, 0, _MAX_CELL_ID)], -1)
 
-    def _checked_rows(self, cell_id: np.ndarray) -> np.ndarray:
+    def checked_rows(self, cell_id: np.ndarray) -> np.ndarray:
+        """Like :meth:`rows`; ``ValueError`` naming the cells without a calibration."""
         rows = self.rows(cell_id)
         if (rows < 0).any():
             unknown = sorted(set(np.asarray(cell_id)[rows < 0].tolist()))
@@ -89,12 +125,12 @@ class ForceCalibration:
 
     def to_newtons(self, cell_id: np.ndarray, force_norm: np.ndarray) -> np.ndarray:
         """``(n,)`` cell ids and ``(n, 3)`` normalised forces → ``(n, 3)`` newtons."""
-        rows = self._checked_rows(cell_id)
+        rows = self.checked_rows(cell_id)
         return self.gain[rows] * (np.asarray(force_norm, dtype=np.float64) - self.offset[rows])
 
     def to_normalised(self, cell_id: np.ndarray, force_n: np.ndarray) -> np.ndarray:
         """Inverse of :meth:`to_newtons` (what a cell would report for a given force)."""
-        rows = self._checked_rows(cell_id)
+        rows = self.checked_rows(cell_id)
         return np.asarray(force_n, dtype=np.float64) / self.gain[rows] + self.offset[rows]
 
 
@@ -146,7 +182,7 @@ def load_patch(path: str | Path) -> PatchConfig:
 
 def default_patch() -> PatchConfig:
     """The 7-cell end-effector patch shipped with aptkt."""
-    res = resources.files("aptkt.skin").joinpath("data", DEFAULT_PATCH_FILE)
+    res = resources.files("aptkt.skin").joinpath("data").joinpath(DEFAULT_PATCH_FILE)
     with resources.as_file(res) as path:
         return load_patch(path)
 

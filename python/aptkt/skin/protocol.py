@@ -13,11 +13,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from aptkt._core import PACKET_LEN, PACKET_TYPES, StreamParser
+from aptkt._core import PACKET_LEN, PACKET_TYPES, SENSOR_FIELDS, StreamParser
 from aptkt._core import _encode_sensor_packets as _encode_core
 from aptkt._core import _quantize as _quantize_core
 from aptkt._core import encode_packet_bytes as _encode_packet_core
@@ -26,45 +27,67 @@ __all__ = [
     "StreamParser",
     "PACKET_LEN",
     "PACKET_TYPES",
+    "PACKET_RATE_HZ",
     "RAW_FIELDS",
     "RAW_RANGES",
     "SCALE",
+    "to_physical",
     "quantize",
     "encode_sensor_packets",
     "encode_packet",
 ]
 
+
+#: Sensor packets per cell and second: the rate the patches are set to (command 0xC8, argument
+#: 0x03; the skin also offers 63 and 125 Hz). The simulated skins send at it, and feature
+#: extraction resamples recordings onto it.
+PACKET_RATE_HZ = 250.0
+
+
+def _distinct(columns: list[tuple[int, int, float, float]], pick: slice) -> tuple[Any, ...]:
+    """Per-column values; one entry when every column shares them (acc, force)."""
+    rows: tuple[tuple[Any, ...], ...] = tuple(tuple(c)[pick] for c in columns)
+    return rows[:1] if len(set(rows)) == 1 else rows
+
+
+# Everything below is read from the Rust crate's table (``aptkt._core.SENSOR_FIELDS``): the
+# wire's fields, ranges and scales exist once, in rust/skin.
+
 #: Raw sensor fields: trailing shape and the dtype ``feed(raw=True)`` / :func:`quantize` return.
-RAW_FIELDS: Mapping[str, tuple[tuple[int, ...], type]] = MappingProxyType(
+RAW_FIELDS: Mapping[str, tuple[tuple[int, ...], np.dtype]] = MappingProxyType(
     {
-        "cell_id": ((), np.uint16),
-        "proximity": ((), np.uint16),
-        "acc": ((3,), np.int16),
-        "temp": ((2,), np.int16),  # accelerometer die (8 bit), LM71 (14 bit)
-        "force": ((3,), np.uint16),
+        name: (((len(columns),) if vector else ()), np.dtype(dtype))
+        for name, dtype, vector, columns in SENSOR_FIELDS
     }
 )
 
 #: Representable raw values per field (per column for ``temp``), inclusive.
 RAW_RANGES: Mapping[str, tuple[tuple[int, int], ...]] = MappingProxyType(
+    {name: _distinct(columns, slice(0, 2)) for name, _, _, columns in SENSOR_FIELDS}
+)
+
+#: physical = raw * scale + offset, per field (temp: per column): proximity 0..1, acc in g,
+#: temp in °C (accelerometer die, LM71), force normalised (calibration to newtons is per cell).
+SCALE: Mapping[str, tuple[tuple[float, float], ...]] = MappingProxyType(
     {
-        "cell_id": ((0, 0x3FFF),),
-        "proximity": ((0, 0xFFFF),),
-        "acc": ((-512, 511),),
-        "temp": ((-128, 127), (-8192, 8191)),
-        "force": ((0, 0x0FFF),),
+        name: _distinct(columns, slice(2, 4))
+        for name, _, _, columns in SENSOR_FIELDS
+        if name != "cell_id"  # an identity, not a measurement
     }
 )
 
-#: physical = raw * scale + offset, per field (temp: per column).
-SCALE: Mapping[str, tuple[tuple[float, float], ...]] = MappingProxyType(
-    {
-        "proximity": ((1 / 65536, 0.0),),
-        "acc": ((1 / 256, 0.0),),  # g
-        "temp": ((0.5, 24.0), (0.03125, 0.0)),  # °C
-        "force": ((1 / 1024, 0.0),),  # normalised
-    }
-)
+
+def to_physical(name: str, raw: ArrayLike) -> np.ndarray:
+    """Raw integers of field ``name`` → physical units (float64), column by column."""
+    values = np.asarray(raw, dtype=np.float64)
+    scales = SCALE[name]
+    if len(scales) == 1:
+        scale, offset = scales[0]
+        return values * scale + offset
+    out = np.empty_like(values)
+    for c, (scale, offset) in enumerate(scales):
+        out[..., c] = values[..., c] * scale + offset
+    return out
 
 
 def _float_rows(name: str, value: ArrayLike, n: int, width: int | None) -> np.ndarray:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from aptkt.skin.samples import FIELDS, SkinSamples
@@ -18,7 +20,7 @@ class SampleRing:
         if capacity < 1:
             raise ValueError(f"ring capacity must be >= 1, got {capacity}")
         self.capacity = int(capacity)
-        self._cols = {
+        self._cols: dict[str, Any] = {
             name: np.zeros((self.capacity, *tail), dtype) for name, (tail, dtype) in FIELDS.items()
         }
         self._head = 0  # index of the oldest row

@@ -12,10 +12,12 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.skin.protocol import RAW_FIELDS
+
 __all__ = ["SkinSamples", "Recording", "FIELDS"]
 
 #: Per-sample fields, their trailing shape and dtype.
-FIELDS: Mapping[str, tuple[tuple[int, ...], type]] = {
+FIELDS: Mapping[str, tuple[tuple[int, ...], Any]] = {
     "cell_id": ((), np.uint16),
     "t_ns": ((), np.int64),
     "proximity": ((), np.float64),
@@ -27,7 +29,12 @@ FIELDS: Mapping[str, tuple[tuple[int, ...], type]] = {
 
 @dataclass
 class SkinSamples:
-    """A batch of sensor samples (rows) from one or more cells, in arrival order."""
+    """A batch of sensor samples (rows) from one or more cells, in arrival order.
+
+    ``raw``, when the samples came off the wire, holds the integers they were converted from
+    (the keys of :data:`aptkt.skin.protocol.RAW_FIELDS`, force before calibration): the data
+    set store writes those as they are, so a recording is converted to physical units once.
+    """
 
     cell_id: np.ndarray
     t_ns: np.ndarray
@@ -35,6 +42,7 @@ class SkinSamples:
     acc: np.ndarray
     temp: np.ndarray
     force: np.ndarray
+    raw: Mapping[str, np.ndarray] | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         n = None
@@ -47,23 +55,46 @@ class SkinSamples:
             elif arr.shape[0] != n:
                 raise ValueError(f"SkinSamples.{name}: {arr.shape[0]} rows, expected {n}")
             setattr(self, name, arr)
+        if self.raw is not None:
+            raw = {}
+            for name, (raw_tail, raw_dtype) in RAW_FIELDS.items():
+                col = np.asarray(self.raw[name], dtype=raw_dtype)
+                if col.shape != (n, *raw_tail):
+                    raise ValueError(
+                        f"SkinSamples.raw[{name!r}]: shape {col.shape}, expected {(n, *raw_tail)}"
+                    )
+                raw[name] = col
+            self.raw = raw
 
     def __len__(self) -> int:
         return int(self.cell_id.shape[0])
 
     @classmethod
     def empty(cls) -> SkinSamples:
-        return cls(**{name: np.zeros((0, *tail), dtype) for name, (tail, dtype) in FIELDS.items()})
+        cols: dict[str, Any] = {
+            name: np.zeros((0, *tail), dtype) for name, (tail, dtype) in FIELDS.items()
+        }
+        return cls(**cols)
 
     @classmethod
     def concat(cls, parts: Iterable[SkinSamples]) -> SkinSamples:
         parts = [p for p in parts if len(p)]
         if not parts:
             return cls.empty()
-        return cls(**{name: np.concatenate([getattr(p, name) for p in parts]) for name in FIELDS})
+        raws = [p.raw for p in parts]
+        raw = None
+        if all(r is not None for r in raws):
+            raw = {
+                name: np.concatenate([r[name] for r in raws if r is not None])
+                for name in RAW_FIELDS
+            }
+        return cls(
+            **{name: np.concatenate([getattr(p, name) for p in parts]) for name in FIELDS}, raw=raw
+        )
 
     def take(self, index: np.ndarray | slice) -> SkinSamples:
-        return SkinSamples(**{name: getattr(self, name)[index] for name in FIELDS})
+        raw = None if self.raw is None else {name: col[index] for name, col in self.raw.items()}
+        return SkinSamples(**{name: getattr(self, name)[index] for name in FIELDS}, raw=raw)
 
     def for_cell(self, cell_id: int) -> SkinSamples:
         return self.take(self.cell_id == cell_id)
@@ -120,6 +151,7 @@ class Recording:
             n_steps = max(int(round(self.duration * rate_hz)), 1)
             step_ns = 1e9 / rate_hz
         else:
+            assert n_steps is not None  # exactly one of the two was given
             if n_steps < 1:
                 raise ValueError("n_steps must be >= 1")
             step_ns = (self.stop_ns - self.start_ns) / n_steps

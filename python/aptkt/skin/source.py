@@ -24,7 +24,7 @@ import numpy as np
 
 from aptkt.errors import SilentCellError, SkinError, TrialFault
 from aptkt.skin.config import PatchConfig, default_patch, load_patch
-from aptkt.skin.protocol import StreamParser
+from aptkt.skin.protocol import StreamParser, to_physical
 from aptkt.skin.ring import SampleRing
 from aptkt.skin.samples import Recording, SkinSamples
 
@@ -93,7 +93,7 @@ class SkinSourceBase:
         that knows when each packet was sent). Returns the number of sensor packets parsed.
         """
         with self._lock:
-            parsed = self._parser.feed(data)
+            parsed = self._parser.feed(data, raw=True)
             n = len(parsed["cell_id"])
             if n:
                 t = np.broadcast_to(np.asarray(t_ns, dtype=np.int64), (n,))
@@ -109,14 +109,18 @@ class SkinSourceBase:
             t_ns, rows = t_ns[known], rows[known]
             if not len(rows):
                 return
-        force_n = self.calibration.gain[rows] * (parsed["force"] - self.calibration.offset[rows])
+        # The one conversion of these samples to physical units (the raw integers are kept
+        # for the data set store).
+        force_norm = to_physical("force", parsed["force"])
+        force_n = self.calibration.gain[rows] * (force_norm - self.calibration.offset[rows])
         samples = SkinSamples(
             cell_id=parsed["cell_id"],
             t_ns=np.ascontiguousarray(t_ns),
-            proximity=parsed["proximity"],
-            acc=parsed["acc"],
-            temp=parsed["temp"],
+            proximity=to_physical("proximity", parsed["proximity"]),
+            acc=to_physical("acc", parsed["acc"]),
+            temp=to_physical("temp", parsed["temp"]),
             force=force_n,
+            raw=parsed,
         )
         # Latest value per cell: the last row of each cell in this batch.
         last = np.full(len(self._count), -1, dtype=np.intp)

@@ -129,7 +129,7 @@ class TsuSkin(ThreadedSkinSource):
         sock.settimeout(timeout_s)
         try:
             datagram, sender = sock.recvfrom(2048)
-        except (TimeoutError, socket.timeout):
+        except TimeoutError:
             return packets
         except ConnectionRefusedError:
             return packets  # ICMP port-unreachable for an alive datagram: the TSU is not up yet

@@ -85,7 +85,7 @@ pub fn thermal_curve<T: Sample>(
             format!("a temperature curve needs at least 2 time steps, got {steps}"),
         ));
     }
-    if temp.len() == 0 {
+    if temp.is_empty() {
         return Err(FeatureError::shape(name, "no temperature sensors"));
     }
     check_finite(name, &temp)?;

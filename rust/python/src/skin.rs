@@ -6,6 +6,7 @@
 use aptkt_skin::{
     encode_packet, encode_sensor_columns, quantize as quantize_one, PacketType, PhysicalColumns,
     RawColumns, RawColumnsRef, RejectReason, Stats, StreamParser, PACKET_LEN, PAYLOAD_LEN,
+    SENSOR_FIELDS,
 };
 use numpy::ndarray::{Array1, Array2};
 use numpy::{Element, IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
@@ -322,6 +323,21 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(encode_sensor_packets, m)?)?;
     m.add_function(wrap_pyfunction!(encode_packet_bytes, m)?)?;
     m.add("PACKET_LEN", PACKET_LEN)?;
+    // The sensor fields as (name, numpy dtype, vector, ((min, max, scale, offset), ...)): the
+    // crate's table, so Python keeps no copy of the wire's ranges and scales.
+    let fields = SENSOR_FIELDS
+        .iter()
+        .map(|f| {
+            let dtype = if f.signed { "<i2" } else { "<u2" };
+            let columns: Vec<(i64, i64, f64, f64)> = f
+                .columns
+                .iter()
+                .map(|c| (c.min, c.max, c.scale, c.offset))
+                .collect();
+            (f.name, dtype, f.vector, columns)
+        })
+        .collect::<Vec<_>>();
+    m.add("SENSOR_FIELDS", fields)?;
     let types = PyDict::new(py);
     for t in PacketType::ALL {
         types.set_item(t.name(), t.header())?;

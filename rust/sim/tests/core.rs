@@ -208,7 +208,7 @@ fn heat_reaches_the_steady_state_and_is_exact_in_time() {
     let mut state = vec![25.0, 10.0];
     let mut state_t = vec![0.0];
     let out = heat(
-        &[sys.clone()],
+        std::slice::from_ref(&sys),
         &sqrt_c,
         &cells,
         &t,
@@ -226,7 +226,7 @@ fn heat_reaches_the_steady_state_and_is_exact_in_time() {
     let mut t2 = vec![0.0];
     for half in [0..50, 50..100] {
         heat(
-            &[sys.clone()],
+            std::slice::from_ref(&sys),
             &sqrt_c,
             &cells[half.clone()],
             &t[half.clone()],
@@ -324,10 +324,9 @@ fn force_loop_settles_on_the_target() {
         settled: 0,
     };
     let mut chunk = Chunk::default();
-    let mut samples = 0;
     let mut status = Status::Flush;
     while status == Status::Flush {
-        samples = 0;
+        let mut samples = 0;
         (status, _) = run_ticks(
             &m,
             &sensors,

@@ -31,6 +31,7 @@ pub use error::{EncodeError, QuantizeError};
 pub use packet::{encode_packet, is_valid_packet, PacketType, END_MARKER, PACKET_LEN, PAYLOAD_LEN};
 pub use parser::{PacketSink, RejectReason, Stats, StreamParser, MAX_CARRY};
 pub use sensor::{
-    decode_sensor, encode_sensor, encode_sensor_into, quantize, scale, SensorPhysical, SensorRaw,
-    RANGE_ACC, RANGE_CELL_ID, RANGE_FORCE, RANGE_PROXIMITY, RANGE_TEMP_ACC, RANGE_TEMP_LM71,
+    decode_sensor, encode_sensor, encode_sensor_into, quantize, scale, ColumnSpec, FieldSpec,
+    SensorPhysical, SensorRaw, RANGE_ACC, RANGE_CELL_ID, RANGE_FORCE, RANGE_PROXIMITY,
+    RANGE_TEMP_ACC, RANGE_TEMP_LM71, SENSOR_FIELDS,
 };

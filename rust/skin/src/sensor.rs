@@ -29,6 +29,82 @@ pub mod scale {
     pub const FORCE: f64 = 1.0 / 1024.0;
 }
 
+/// One column of a raw sensor field: its representable range and its conversion to physical
+/// units (`physical = raw * scale + offset`; `cell_id` is an identity, scale 1, offset 0).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ColumnSpec {
+    pub min: i64,
+    pub max: i64,
+    pub scale: f64,
+    pub offset: f64,
+}
+
+/// One raw field of a sensor packet: its name, whether it is signed (all fields are 16-bit
+/// integers in memory), and one [`ColumnSpec`] per column (1 for a scalar field).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FieldSpec {
+    pub name: &'static str,
+    pub signed: bool,
+    /// `false` for a scalar field (shape `(n,)`), `true` for a row of columns (`(n, k)`).
+    pub vector: bool,
+    pub columns: &'static [ColumnSpec],
+}
+
+const fn col(range: RangeInclusive<i64>, scale: f64, offset: f64) -> ColumnSpec {
+    ColumnSpec {
+        min: *range.start(),
+        max: *range.end(),
+        scale,
+        offset,
+    }
+}
+
+/// The sensor packet's fields in the order of [`SensorRaw`]: the one table of names, ranges
+/// and scales that the Python package reads (through the binding) instead of keeping copies.
+pub const SENSOR_FIELDS: [FieldSpec; 5] = [
+    FieldSpec {
+        name: "cell_id",
+        signed: false,
+        vector: false,
+        columns: &[col(RANGE_CELL_ID, 1.0, 0.0)],
+    },
+    FieldSpec {
+        name: "proximity",
+        signed: false,
+        vector: false,
+        columns: &[col(RANGE_PROXIMITY, scale::PROXIMITY, 0.0)],
+    },
+    FieldSpec {
+        name: "acc",
+        signed: true,
+        vector: true,
+        columns: &[
+            col(RANGE_ACC, scale::ACC, 0.0),
+            col(RANGE_ACC, scale::ACC, 0.0),
+            col(RANGE_ACC, scale::ACC, 0.0),
+        ],
+    },
+    FieldSpec {
+        name: "temp",
+        signed: true,
+        vector: true,
+        columns: &[
+            col(RANGE_TEMP_ACC, scale::TEMP_ACC, scale::TEMP_ACC_OFFSET),
+            col(RANGE_TEMP_LM71, scale::TEMP_LM71, 0.0),
+        ],
+    },
+    FieldSpec {
+        name: "force",
+        signed: false,
+        vector: true,
+        columns: &[
+            col(RANGE_FORCE, scale::FORCE, 0.0),
+            col(RANGE_FORCE, scale::FORCE, 0.0),
+            col(RANGE_FORCE, scale::FORCE, 0.0),
+        ],
+    },
+];
+
 /// Raw fields of one sensor packet. `temp` is `[accelerometer die, LM71]`.
 ///
 /// Not every value of these Rust types is representable on the wire (see the `RANGE_*`
@@ -225,6 +301,65 @@ pub fn quantize(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Sets column `c` of the field named `name` in `raw` (the table's order and shapes).
+    fn set(raw: &mut SensorRaw, name: &str, c: usize, v: i64) {
+        match name {
+            "cell_id" => raw.cell_id = v as u16,
+            "proximity" => raw.proximity = v as u16,
+            "acc" => raw.acc[c] = v as i16,
+            "temp" => raw.temp[c] = v as i16,
+            "force" => raw.force[c] = v as u16,
+            other => panic!("unknown field {other}"),
+        }
+    }
+
+    fn physical(p: &SensorPhysical, name: &str, c: usize) -> f64 {
+        match name {
+            "cell_id" => f64::from(p.cell_id),
+            "proximity" => p.proximity,
+            "acc" => p.acc[c],
+            "temp" => p.temp[c],
+            "force" => p.force[c],
+            other => panic!("unknown field {other}"),
+        }
+    }
+
+    /// The exported table is the one the decoder and the validator use: its ranges are exactly
+    /// what `validate` accepts, its scales what `to_physical` applies.
+    #[test]
+    fn the_field_table_agrees_with_decoding_and_validation() {
+        let names: Vec<&str> = SENSOR_FIELDS.iter().map(|f| f.name).collect();
+        assert_eq!(names, ["cell_id", "proximity", "acc", "temp", "force"]);
+        for field in SENSOR_FIELDS {
+            assert_eq!(field.vector, field.columns.len() > 1);
+            for (c, spec) in field.columns.iter().enumerate() {
+                assert_eq!(field.signed, spec.min < 0, "{}", field.name);
+                for v in [spec.min, spec.max, (spec.min + spec.max) / 2] {
+                    let mut raw = SensorRaw::default();
+                    set(&mut raw, field.name, c, v);
+                    assert!(raw.validate().is_ok(), "{} = {v}", field.name);
+                    let got = physical(&raw.to_physical(), field.name, c);
+                    assert_eq!(
+                        got,
+                        v as f64 * spec.scale + spec.offset,
+                        "{}[{c}]",
+                        field.name
+                    );
+                }
+                let limit = if field.signed {
+                    i64::from(i16::MAX)
+                } else {
+                    i64::from(u16::MAX)
+                };
+                if spec.max < limit {
+                    let mut raw = SensorRaw::default();
+                    set(&mut raw, field.name, c, spec.max + 1);
+                    assert!(raw.validate().is_err(), "{} = {}", field.name, spec.max + 1);
+                }
+            }
+        }
+    }
 
     /// A packet written out by hand from the protocol table, bit by bit.
     #[test]

@@ -123,7 +123,6 @@ def test_the_accelerometers_feel_gravity_in_the_tool_frame_and_the_tcps_accelera
 def test_temperatures_fall_faster_on_metal_than_on_foam():
     lm71 = {}
     for name in ("metal_toolbox", "rough_sponge"):
-        height = {"metal_toolbox": 0.09, "rough_sponge": 0.035}
         ctl = controller(
             {"type": "sim_object", "object": name, "x": 0.0, "y": -0.5}, (0.0, -0.5, 0.2, *DOWN)
         )

@@ -10,8 +10,8 @@ from typing import Any
 
 from aptkt.experiments.aggregate import Estimate
 from aptkt.experiments.plots import save_figure
-from aptkt.experiments.report import TOO_FEW, too_few
 from aptkt.experiments.priors import PriorTask
+from aptkt.experiments.report import TOO_FEW, too_few
 from aptkt.experiments.runs import RunSpec
 from aptkt.experiments.sampling import derive_seed
 from aptkt.experiments.scale import Scale

@@ -10,7 +10,10 @@ from typing import Any
 import numpy as np
 
 from aptkt.experiments.aggregate import Curves, Estimate, collect, difference, estimate
+from aptkt.experiments.figures.base import Plan
 from aptkt.experiments.plots import learning_curves
+from aptkt.experiments.report import markdown_table
+from aptkt.experiments.sampling import draw_groups
 
 __all__ = [
     "GainSummary",
@@ -101,6 +104,8 @@ def plot_panel(
     legend: bool = True,
 ) -> None:
     x = next(iter(curves.values())).x
+    # matplotlib only when plotting: it is slow to import, and the backend is chosen first
+    # (plots._pyplot).
     from matplotlib.ticker import MaxNLocator
 
     learning_curves(
@@ -119,7 +124,6 @@ def plot_panel(
 
 def prior_groups(ctx, n_priors: int) -> list[tuple[str, ...]]:
     """The random groups of ``n_priors`` prior objects (the same for every figure that asks)."""
-    from aptkt.experiments.sampling import draw_groups
 
     return draw_groups(
         ctx.scale.priors, n_priors, ctx.scale.groups, ctx.seed_for("prior-groups", n_priors)
@@ -133,7 +137,6 @@ def prior_group_plan(
     (a panel names the actions learned). A trial's seed depends on (n_priors, group, trial)
     only, so all methods and panels of a trial see the same pool order and exploration draws,
     and figures sharing a design share its runs."""
-    from aptkt.experiments.figures.base import Plan
 
     plan = Plan()
     for g, group in enumerate(prior_groups(ctx, n_priors)):
@@ -172,7 +175,6 @@ def accuracy_table(
 ) -> str:
     """Markdown: mean ± sd accuracy per method at chosen steps — the per-action average and,
     with ``fused`` (runs over several actions), all actions' posteriors fused beside it."""
-    from aptkt.experiments.report import markdown_table
 
     steps = [s for s in steps if s in set(next(iter(curves.values())).x.tolist())]
     rows = []

@@ -54,7 +54,9 @@ HARM = 0.02
 def panels(ctx: Context) -> dict[str, tuple[tuple[str, ...], tuple[str, ...]]]:
     """Panel -> (actions learned, prior objects)."""
     chosen = fig10.similarity(ctx)["dissimilar"]
-    out = {a: ((a,), tuple(chosen[a])) for a in ctx.scale.actions}
+    out: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+        a: ((a,), tuple(chosen[a])) for a in ctx.scale.actions
+    }
     out[fig10.ALL] = (tuple(ctx.scale.actions), tuple(chosen[fig10.ALL]))
     return out
 

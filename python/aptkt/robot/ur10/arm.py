@@ -33,7 +33,8 @@ class _Setting(Generic[T]):
         self.name = name
 
     def __get__(self, robot: Any, owner: type | None = None) -> T:
-        return getattr(getattr(robot, self.part), self.name)  # type: ignore[no-any-return]
+        value: T = getattr(getattr(robot, self.part), self.name)
+        return value
 
     def __set__(self, robot: Any, value: T) -> None:
         setattr(getattr(robot, self.part), self.name, value)

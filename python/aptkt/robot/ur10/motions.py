@@ -40,12 +40,12 @@ class Motions:
         clock: Callable[[], int],
         tool_orientation: tuple[float, ...],
         *,
-        transfer_speed: float = 0.05,
-        retract_height: float = 0.01,
-        force_tolerance: float = 0.15,
-        force_tolerance_abs: float = 0.02,
-        settle_samples: int = 5,
-        establish_timeout: float = 3.0,
+        transfer_speed: float,
+        retract_height: float,
+        force_tolerance: float,
+        force_tolerance_abs: float,
+        settle_samples: int,
+        establish_timeout: float,
     ):
         self.link = link
         self.supervisor = supervisor
@@ -260,7 +260,7 @@ class Motions:
         decel = self.limits.max_acceleration * 4.0
         # ur_rtde's script kills the speed/force threads in speedStop/forceModeStop, so only
         # stop the modes that are on; stopL ends an asynchronous moveL.
-        steps = []
+        steps: list[tuple[str, tuple[float, ...]]] = []
         if link.mode in ("speed", "force+speed"):
             steps.append(("speedStop", (decel,)))
         if link.mode in ("force", "force+speed"):

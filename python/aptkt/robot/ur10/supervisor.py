@@ -42,9 +42,9 @@ class Supervisor:
         clock: Callable[[], int],
         trace: Trace,
         *,
-        workspace: Box | None = None,
-        measured_tolerance: float = 1.5,
-        max_supervision_hz: float = 250.0,
+        workspace: Box | None,
+        measured_tolerance: float,
+        max_supervision_hz: float,
     ):
         self.link = link
         self.limits = limits
@@ -156,7 +156,7 @@ class Supervisor:
             )
         self.check_global(point, what)
 
-    def check_global(self, point: Sequence[float], what: str) -> None:
+    def check_global(self, point: Sequence[float] | np.ndarray, what: str) -> None:
         """``point`` must lie in the cell's workspace box (if one is set)."""
         if self.workspace is not None:
             lo, hi = self.workspace

@@ -13,8 +13,19 @@ import argparse
 import json
 import sys
 import time
+from typing import Any
 
-from aptkt.sim.loopback.controller import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
+from aptkt.errors import ConfigError
+from aptkt.sim.loopback.contact import scene_from_workspace
+from aptkt.sim.loopback.controller import (
+    CB3_VERSION,
+    E_SERIES_VERSION,
+    ControllerConfig,
+    SimulatedController,
+)
+from aptkt.sim.loopback.process import serve_stdio
+from aptkt.sim.loopback.servers import LoopbackServer
+from aptkt.sim.loopback.tcp_skin import SkinConfig
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -66,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--skin-rate",
         type=float,
-        default=250.0,
+        default=SkinConfig.rate_hz,
         metavar="HZ",
         help="packets per cell and second of the simulated skin (default %(default)s)",
     )
@@ -82,14 +93,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ports-json", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
 
-    ports = {"rtde": 30004, "dashboard": 29999, "script": [30001, 30002, 30003]}
+    ports: dict[str, Any] = {"rtde": 30004, "dashboard": 29999, "script": [30001, 30002, 30003]}
     if args.ports_json:
         ports.update(json.loads(args.ports_json))
     if args.config_json:
         config = ControllerConfig(**json.loads(args.config_json))
     else:
-        extra = {} if args.start_pose is None else {"start_pose": tuple(args.start_pose)}
-        contact: dict = {
+        extra: dict[str, Any] = {}
+        if args.start_pose is not None:
+            extra["start_pose"] = tuple(args.start_pose)
+        contact: dict[str, Any] = {
             "type": "spring",
             "surface_z": args.surface_z,
             "stiffness": args.stiffness,
@@ -105,9 +118,6 @@ def main(argv: list[str] | None = None) -> int:
                 "y": args.object_xy[1],
             }
         if args.workspace:
-            from aptkt.errors import ConfigError
-            from aptkt.sim.loopback.contact import scene_from_workspace
-
             try:
                 contact = scene_from_workspace(
                     args.workspace, stiffness=args.stiffness, friction=args.friction
@@ -116,8 +126,6 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"--workspace: {exc}", file=sys.stderr)
                 return 1
         if args.skin_pty:
-            from aptkt.sim.loopback.tcp_skin import SkinConfig
-
             try:
                 extra["skin"] = SkinConfig(rate_hz=args.skin_rate, patch=args.patch).to_dict()
             except ValueError as exc:
@@ -130,13 +138,8 @@ def main(argv: list[str] | None = None) -> int:
         )
 
     if args.stdio:
-        from aptkt.sim.loopback.process import serve_stdio
-
         serve_stdio(config, args.host, ports, sys.stdin, sys.stdout)
         return 0
-
-    from aptkt.sim.loopback.controller import SimulatedController
-    from aptkt.sim.loopback.servers import LoopbackServer
 
     try:
         controller = SimulatedController(config)
@@ -161,7 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     if controller.skin is not None:
         print(
-            f"simulated skin ({controller.skin.patch.name}, {config.skin['rate_hz']:g} Hz per cell) "
+            f"simulated skin ({controller.skin.patch.name}, {controller.skin.config.rate_hz:g} Hz per cell) "
             f"on {controller.skin.port}",
             flush=True,
         )

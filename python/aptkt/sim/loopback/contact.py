@@ -37,6 +37,11 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from aptkt.robot.workspace import load_workspace
+from aptkt.sim.loopback.object_surface import SimObjectSurface
+from aptkt.sim.loopback.thermal_contact import ThermalContact
+from aptkt.sim.objects import default_library, load_library
+
 __all__ = [
     "ContactModel",
     "NoContact",
@@ -104,18 +109,6 @@ class SpringSurface:
             return 0.0
         depth = self.surface_z - z
         return self.stiffness * depth if depth > 0 else 0.0
-
-
-@dataclass(frozen=True)
-class ThermalContact:
-    """What the skin touches, thermally: the object's layers (top first,
-    :class:`aptkt.sim.objects.Layer`), the contact conductance of its surface (W/(m^2 K)) and
-    its temperature relative to the room (K)."""
-
-    name: str
-    layers: tuple[Any, ...]
-    contact_conductance: float
-    temperature_offset: float = 0.0
 
 
 class Scene:
@@ -192,8 +185,6 @@ def scene_from_workspace(
     the placement's workspace box. So one workspace file describes both the loopback's world
     and the cell that ``aptkt collect --robot ur10`` explores.
     """
-    from aptkt.robot.workspace import load_workspace
-    from aptkt.sim.objects import default_library, load_library
 
     config = load_workspace(path)
     library = load_library(*library_files) if library_files else default_library()
@@ -264,7 +255,6 @@ def build(spec: Mapping[str, Any] | None) -> Any:
             return build(scene_from_workspace(spec.pop("file"), **spec))
         if kind == "sim_object":
             # The simulated world's contact physics (imported only when asked for).
-            from aptkt.sim.loopback.object_surface import SimObjectSurface
 
             return SimObjectSurface(**spec)
         if kind not in _BUILTIN:

@@ -36,6 +36,8 @@ from aptkt.sim.loopback.rotvec import (
     rotvec_to_matrix,
 )
 from aptkt.sim.loopback.rtde import input_type, output_type
+from aptkt.sim.loopback.tcp_skin import SimulatedSkin, SkinConfig
+from aptkt.sim.physics import GRAVITY
 
 __all__ = [
     "ControllerConfig",
@@ -184,6 +186,9 @@ class ScriptError(Exception):
 class SimulatedController:
     """One simulated UR controller. Thread-safe through :attr:`lock` (held by every caller)."""
 
+    #: Controller time (s since "boot"); survives reset().
+    time: float
+
     def __init__(self, config: ControllerConfig | None = None):
         self.config = config or ControllerConfig()
         self.lock = threading.RLock()
@@ -202,8 +207,6 @@ class SimulatedController:
         self._input_owner: dict[str, int] = {}
         self.skin: Any = None
         if self.config.skin is not None:
-            from aptkt.sim.loopback.tcp_skin import SimulatedSkin, SkinConfig
-
             self.skin = SimulatedSkin(SkinConfig.from_spec(self.config.skin))
         self._skin_errors = 0
         self.reset()
@@ -415,7 +418,7 @@ class SimulatedController:
             "joint_mode": [253] * 6,
             "speed_scaling": 1.0,
             "target_speed_fraction": 1.0,
-            "actual_tool_accelerometer": [0.0, 0.0, -9.81],
+            "actual_tool_accelerometer": [0.0, 0.0, -GRAVITY],
             "joint_temperatures": [30.0] * 6,
             "actual_main_voltage": 48.0,
             "actual_robot_voltage": 48.0,

@@ -23,7 +23,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from aptkt.sim.loopback.contact import ThermalContact
+from aptkt.sim.loopback.thermal_contact import ThermalContact
 from aptkt.sim.mechanics import IndentationLaw, SurfaceShape
 from aptkt.sim.objects import default_library, load_library
 from aptkt.sim.patch import PatchGeometry, SkinConstants

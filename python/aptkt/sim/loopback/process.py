@@ -20,7 +20,14 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from typing import Any
 
-from aptkt.sim.loopback.controller import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
+from aptkt.sim.loopback.controller import (
+    CB3_VERSION,
+    E_SERIES_VERSION,
+    ControllerConfig,
+    SimulatedController,
+)
+from aptkt.sim.loopback.servers import LoopbackServer
+from aptkt.sim.loopback.tcp_skin import SkinConfig
 
 __all__ = ["Loopback", "LoopbackError"]
 
@@ -34,8 +41,6 @@ def serve_stdio(
 ) -> None:
     """Child side: serve the controller, read JSON commands from ``stdin``, answer on ``stdout``."""
     # Imported here so importing this module never builds a controller.
-    from aptkt.sim.loopback.controller import SimulatedController
-    from aptkt.sim.loopback.servers import LoopbackServer
 
     def answer(reply: dict[str, Any]) -> None:
         stdout.write(json.dumps(reply) + "\n")
@@ -164,9 +169,9 @@ class Loopback:
         **config: Any,
     ):
         if skin is not None and skin is not False:
-            from aptkt.sim.loopback.tcp_skin import SkinConfig
-
-            config["skin"] = SkinConfig.from_spec(skin).to_dict()  # validated here, in the parent
+            skin_config = SkinConfig.from_spec(skin)  # validated here, in the parent
+            if skin_config is not None:
+                config["skin"] = skin_config.to_dict()
         self._skin_port: str | None = None
         if "version" not in config:
             if series not in ("cb3", "e-series"):
@@ -217,7 +222,9 @@ class Loopback:
             self._kill()
             raise LoopbackError(f"loopback on {self.host} failed to start: {reply['error']}")
         if self.config.skin is not None:
-            self._skin_port = self.skin_stats()["port"]
+            stats = self.skin_stats()
+            assert stats is not None  # the controller was started with a skin
+            self._skin_port = stats["port"]
         return self
 
     def __enter__(self) -> Loopback:
@@ -246,7 +253,8 @@ class Loopback:
             return
         for stream in (proc.stdin, proc.stdout):
             try:
-                stream.close()
+                if stream is not None:
+                    stream.close()
             except OSError:
                 pass
         try:

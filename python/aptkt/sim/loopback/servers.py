@@ -143,9 +143,9 @@ class _RtdeClient(_Client):
                 self.started = False
                 self.send(rtde.pack(kind, struct.pack(">B", 1)))
             elif kind == rtde.DATA_PACKAGE:
-                recipe = self.inputs.get(payload[0]) if payload else None
-                if recipe is not None and len(payload) >= recipe.struct.size:
-                    ctl.apply_inputs(recipe.decode(payload))
+                in_recipe = self.inputs.get(payload[0]) if payload else None
+                if in_recipe is not None and len(payload) >= in_recipe.struct.size:
+                    ctl.apply_inputs(in_recipe.decode(payload))
                 else:
                     ctl.log(f"RTDE: data package for unknown input recipe {payload[:1]!r}")
             elif kind == rtde.TEXT_MESSAGE:

@@ -39,17 +39,18 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.sim.loopback.contact import ThermalContact
 from aptkt.sim.loopback.rotvec import rotvec_to_matrix
+from aptkt.sim.loopback.thermal_contact import ThermalContact
 from aptkt.sim.objects import Layer
 from aptkt.sim.patch import SkinConstants
+from aptkt.sim.physics import GRAVITY
+from aptkt.sim.skin_stream import PtySkinLink
 from aptkt.sim.thermal import CellThermal, speed_bins
 from aptkt.skin import encode_sensor_packets, quantize
 from aptkt.skin.config import PatchConfig, default_patch, load_patch
+from aptkt.skin.protocol import PACKET_RATE_HZ
 
 __all__ = ["SkinConfig", "SimulatedSkin", "GENERIC_BLOCK"]
-
-GRAVITY = 9.80665
 
 #: Thermal stand-in for contact models that do not describe their material: a 2 cm wooden block.
 GENERIC_BLOCK = ThermalContact(
@@ -63,8 +64,8 @@ GENERIC_BLOCK = ThermalContact(
 class SkinConfig:
     """The loopback skin's settings (JSON-able: they cross the controller's process pipe)."""
 
-    #: Sensor packets per cell and second (the skin's update rates are 63, 125 and 250 Hz).
-    rate_hz: float = 250.0
+    #: Sensor packets per cell and second.
+    rate_hz: float = PACKET_RATE_HZ
     #: Patch file of the *reader* (cell ids and force calibration); None: the default patch.
     patch: str | None = None
     force_noise: float = 1.5e-3  # N rms per force sensor
@@ -116,8 +117,6 @@ class SimulatedSkin:
         self._centres = patch.positions_mm[:, :2] * 1e-3  # (n, 2) m
         self.constants = SkinConstants()
         if link is None:
-            from aptkt.sim.skin_stream import PtySkinLink
-
             link = PtySkinLink()
         self.link = link
         self._rng = np.random.default_rng(self.config.seed)

@@ -1,0 +1,149 @@
+"""The package's import graph: imports run only downwards through the layers, and no module
+imports itself back through others (no cycles).
+
+Layers, low to high (a room may import from its own room and from lower layers only; rooms
+on one layer do not import each other, e.g. ``sim`` and ``learning`` stand side by side)::
+
+    _core | errors | skin, features, gp | robot, data | actions | sim, learning | runtime
+    | experiments | commands, cli
+
+Imports under ``if TYPE_CHECKING:`` are for annotations only and are not counted. Imports
+inside functions are: they are real dependencies, only deferred. The package root (``aptkt``,
+which re-exports the core's version) counts as the bottom layer.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "python" / "aptkt"
+
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("_core",),  # the compiled core: the errors below derive from its AptktError
+    ("", "errors"),
+    ("skin", "features", "gp"),
+    ("robot", "data"),
+    ("actions",),
+    ("sim", "learning"),
+    ("runtime",),
+    ("experiments",),
+    ("commands", "cli"),
+)
+LAYER_OF = {room: i for i, rooms in enumerate(LAYERS) for room in rooms}
+
+
+def module_name(path: Path) -> str:
+    parts = ["aptkt", *path.relative_to(PACKAGE).with_suffix("").parts]
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def room(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else ""
+
+
+def _is_type_checking(test: ast.expr) -> bool:
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    )
+
+
+def imports_of(path: Path) -> list[tuple[str, int]]:
+    """``(imported aptkt module, line)`` for every import of the file that runs."""
+    name = module_name(path)
+    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    found: list[tuple[str, int]] = []
+
+    def visit(node: ast.AST) -> None:
+        if isinstance(node, ast.If) and _is_type_checking(node.test):
+            for child in node.orelse:
+                visit(child)
+            return
+        if isinstance(node, ast.Import):
+            found.extend((a.name, node.lineno) for a in node.names if a.name.startswith("aptkt"))
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - (node.level - 1)]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if target == "aptkt" or target.startswith("aptkt."):
+                for alias in node.names:
+                    # `from aptkt.sim import world` imports the module aptkt.sim.world.
+                    sub = f"{target}.{alias.name}"
+                    found.append((sub if sub in MODULES else target, node.lineno))
+        for child in ast.iter_child_nodes(node):
+            visit(child)
+
+    visit(ast.parse(path.read_text(encoding="utf-8")))
+    return found
+
+
+FILES = sorted(PACKAGE.rglob("*.py"))
+MODULES = {module_name(p) for p in FILES} | {"aptkt._core"}
+GRAPH = {module_name(p): imports_of(p) for p in FILES}
+
+
+def test_every_room_has_a_layer():
+    rooms = {room(m) for m in MODULES}
+    assert rooms <= set(LAYER_OF), f"rooms without a layer: {sorted(rooms - set(LAYER_OF))}"
+
+
+def test_imports_only_run_downwards():
+    wrong = []
+    for module, imports in GRAPH.items():
+        here = room(module)
+        for target, line in imports:
+            there = room(target)
+            if there != here and LAYER_OF[there] >= LAYER_OF[here]:
+                wrong.append(f"{module}:{line} imports {target} ({here} -> {there})")
+    assert not wrong, "imports against the layers:\n" + "\n".join(wrong)
+
+
+def test_no_module_imports_itself_back():
+    edges = {m: {t for t, _ in imps if t in GRAPH and t != m} for m, imps in GRAPH.items()}
+    # A package's __init__ importing its own modules is how re-exports work; a module of the
+    # package importing the package (its __init__) back is the cycle that matters.
+    for m in list(edges):
+        edges[m] = {t for t in edges[m] if not m.startswith(t + ".")}
+    cycles = []
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def walk(m: str) -> None:
+        state[m] = 1
+        stack.append(m)
+        for t in sorted(edges[m]):
+            if state.get(t) == 1:
+                cycles.append(" -> ".join([*stack[stack.index(t) :], t]))
+            elif t not in state:
+                walk(t)
+        stack.pop()
+        state[m] = 2
+
+    for m in sorted(edges):
+        if m not in state:
+            walk(m)
+    assert not cycles, "import cycles:\n" + "\n".join(cycles)
+
+
+@pytest.mark.parametrize(
+    ("source", "expected"),
+    [
+        ("from aptkt.sim import world\n", ["aptkt.sim.world"]),
+        ("from aptkt.errors import ConfigError\n", ["aptkt.errors"]),
+        ("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import aptkt.sim\n", []),
+        ("def f():\n    from aptkt.runtime import sessions\n", ["aptkt.runtime.sessions"]),
+    ],
+)
+def test_the_checker_reads_imports_as_python_does(tmp_path, source, expected, monkeypatch):
+    # The checker itself: a checker that missed imports would pass anything.
+    fake = PACKAGE / "learning" / "_layers_probe.py"
+    monkeypatch.setattr(Path, "read_text", lambda self, encoding=None: source)
+    assert [t for t, _ in imports_of(fake)] == expected
