@@ -2,12 +2,13 @@
 
 Usage: python benches/bench_gp.py [--quick] [--skip-sklearn-opt-above N] [--single-thread]
        python benches/bench_gp.py --transfer-variants [bench_gp_transfer.py's options]
-       python benches/bench_gp.py --large [--sizes 1000,2000]
+       python benches/bench_gp.py --large [--sizes 1000,2000] [--n-jobs 1] [--other DIR]
 
---large: a default 3-class fit (LaplaceGPC(random_state=0), n_jobs=None, 6 features) at each
-size, each in a fresh process, reporting wall time, CPU time and peak resident memory
-(ru_maxrss of that process, the data included), beside the same fit with n_restarts=2,
-max_iter=200 (the former defaults).
+--large: a 3-class fit (6 features, random_state=0) at each size with today's defaults and with
+the former ones (length_scale=1.0, n_restarts=2, max_iter=200), each in a fresh process,
+reporting wall time, CPU time and peak resident memory (ru_maxrss, the data included). With
+--other DIR (the python/ directory of another checkout, e.g. an older commit with its own
+compiled extension) the former settings also run on that implementation, side by side.
 
 By default each side runs as a user gets it: ours fits the one-vs-all classifiers in parallel on
 all cores, scikit-learn fits them one after the other with a multi-threaded BLAS. With
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import warnings
+from pathlib import Path
 
 import numpy as np
 from _common import best_of, median_of, save, table
@@ -64,8 +66,13 @@ def run(n: int, d: int, sklearn_opt: bool, n_jobs: int | None = None) -> dict:
     row: dict = {"n": n, "d": d}
 
     fixed_kernel = ConstantKernel(2.0, "fixed") * RBF(np.sqrt(d), "fixed")
-    sk_fixed = lambda: GaussianProcessClassifier(fixed_kernel, optimizer=None).fit(X, y)  # noqa: E731
-    ours_fixed = lambda: LaplaceGPC(np.sqrt(d), 2.0, optimize=False, n_jobs=n_jobs).fit(X, y)  # noqa: E731
+
+    def sk_fixed():
+        return GaussianProcessClassifier(fixed_kernel, optimizer=None).fit(X, y)
+
+    def ours_fixed():
+        return LaplaceGPC(np.sqrt(d), 2.0, optimize=False, n_jobs=n_jobs).fit(X, y)
+
     row["fixed sklearn s"] = median_of(sk_fixed)
     row["fixed aptkt s"] = median_of(ours_fixed)
     row["fixed ratio"] = row["fixed sklearn s"] / row["fixed aptkt s"]
@@ -76,7 +83,8 @@ def run(n: int, d: int, sklearn_opt: bool, n_jobs: int | None = None) -> dict:
     row["predict aptkt s"] = best_of(lambda: our_model.predict_proba(Xp))
     row["predict ratio"] = row["predict sklearn s"] / row["predict aptkt s"]
 
-    ours = LaplaceGPC(n_restarts=RESTARTS, random_state=0, n_jobs=n_jobs)
+    # Same starts as scikit-learn's (length-scale 1, then random restarts), its iteration cap.
+    ours = LaplaceGPC(1.0, n_restarts=RESTARTS, max_iter=200, random_state=0, n_jobs=n_jobs)
     row["opt aptkt s"] = median_of(lambda: ours.fit(X, y), repeat=3 if n <= 400 else 1)
     row["aptkt LML (sum)"] = float(ours.log_marginal_likelihood_.sum())
     row["aptkt acc"] = ours.score(Xt, yt)
@@ -102,28 +110,45 @@ import resource, sys, time
 import numpy as np
 from sklearn.datasets import make_classification
 from aptkt.gp import LaplaceGPC
-n, restarts, max_iter = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+n, length_scale, restarts, max_iter = int(sys.argv[1]), sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
+length_scale = length_scale if length_scale == "auto" else float(length_scale)
 X, y = make_classification(n_samples=n, n_features=6, n_informative=4, n_redundant=0,
                            n_classes=3, n_clusters_per_class=1, random_state=0)
 t, c = time.perf_counter(), time.process_time()
-model = LaplaceGPC(n_restarts=restarts, max_iter=max_iter, random_state=0).fit(X, y)
+model = LaplaceGPC(length_scale, n_restarts=restarts, max_iter=max_iter, random_state=0,
+                   n_jobs=int(sys.argv[5])).fit(X, y)
 wall, cpu = time.perf_counter() - t, time.process_time() - c
 peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 print(wall, cpu, peak, model.score(X, y), float(model.log_marginal_likelihood_.sum()))
 """
 
+#: (label, length_scale, n_restarts, max_iter): today's defaults and the former ones.
+LARGE_SETTINGS = (
+    ("default (auto, 1, 100)", "auto", 1, 100),
+    ("former (1.0, 2, 200)", "1.0", 2, 200),
+)
 
-def run_large(sizes: list[int]) -> None:
+
+def run_large(sizes: list[int], other: str | None, n_jobs: int) -> None:
+    """Each fit in a fresh process; with ``other`` (a python/ directory of another checkout)
+    the former settings also run on that implementation, side by side."""
     import os
     import subprocess
     import sys
 
     rows = []
-    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    here = str(Path(__file__).resolve().parents[1] / "python")
     for n in sizes:
-        for restarts, max_iter, label in ((1, 100, "default"), (2, 200, "2 restarts, 200 it")):
+        runs = [("this", here, *cfg) for cfg in LARGE_SETTINGS]
+        if other:
+            runs.append(("other", other, *LARGE_SETTINGS[1]))
+        for impl, path, label, ls, restarts, max_iter in runs:
+            env = {**os.environ, "PYTHONPATH": path}
+            args = [str(n), ls, str(restarts), str(max_iter), str(n_jobs)]
+            if impl == "other":
+                args[-1] = "1"  # its n_jobs: a thread count (None meant all cores)
             out = subprocess.run(
-                [sys.executable, "-c", LARGE_CHILD, str(n), str(restarts), str(max_iter)],
+                [sys.executable, "-c", LARGE_CHILD, *args],
                 capture_output=True,
                 text=True,
                 check=True,
@@ -132,6 +157,7 @@ def run_large(sizes: list[int]) -> None:
             wall, cpu, peak, acc, lml = map(float, out)
             row = {
                 "n": n,
+                "implementation": impl,
                 "settings": label,
                 "wall s": wall,
                 "cpu s": cpu,
@@ -141,18 +167,29 @@ def run_large(sizes: list[int]) -> None:
             }
             rows.append(row)
             print(row, flush=True)
-    print(table(rows, ["n", "settings", "wall s", "cpu s", "peak MB", "train acc", "LML (sum)"]))
-    print("saved", save("gp-large", {"rows": rows}))
+    cols = [
+        "n",
+        "implementation",
+        "settings",
+        "wall s",
+        "cpu s",
+        "peak MB",
+        "train acc",
+        "LML (sum)",
+    ]
+    print(table(rows, cols))
+    print("saved", save("gp-large", {"rows": rows, "n_jobs": n_jobs, "other": other}))
 
 
 def main() -> None:
     import sys
 
     if "--large" in sys.argv:
-        sizes = [1000, 2000]
-        if "--sizes" in sys.argv:
-            sizes = [int(v) for v in sys.argv[sys.argv.index("--sizes") + 1].split(",")]
-        run_large(sizes)
+        opt = {"--sizes": "1000,2000", "--other": None, "--n-jobs": "1"}
+        for key in opt:
+            if key in sys.argv:
+                opt[key] = sys.argv[sys.argv.index(key) + 1]
+        run_large([int(v) for v in opt["--sizes"].split(",")], opt["--other"], int(opt["--n-jobs"]))
         return
 
     if "--transfer-variants" in sys.argv:  # the transfer kernels' own bench
@@ -177,7 +214,7 @@ def main() -> None:
         help="both sides on one thread (saved as gp-single-thread.json)",
     )
     args = parser.parse_args()
-    n_jobs = 1 if args.single_thread else None
+    n_jobs = 1 if args.single_thread else -1  # -1: every core (joblib's convention)
     limits = threadpool_limits(1) if args.single_thread else None
     sizes = [50, 100] if args.quick else [50, 100, 200, 400, 800]
     rows = []

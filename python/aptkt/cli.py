@@ -5,12 +5,14 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 
 from aptkt import __version__
-from aptkt.errors import AptktError
+from aptkt.errors import AptktError, Terminated
 
 # One module per sub-command (or group); each defines ``register(subparsers)`` which adds its
 # parser and sets ``func`` (called with the parsed arguments, returns an exit code).
@@ -74,12 +76,21 @@ def _remove_empty(dirs: list[Path]) -> None:
             pass
 
 
+def _terminate(signum: int, frame: object) -> None:
+    raise Terminated(f"signal {signal.Signals(signum).name}")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     label = _label(args)
     created = _missing_dirs(args)
     code = 1
+    # SIGTERM takes the path of Ctrl-C: every command stops cleanly (a robot command stops
+    # and retracts the arm and keeps the partial recording) instead of dying on the spot.
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         code = int(args.func(args) or 0)
         return code
@@ -92,11 +103,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"{label}: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print(f"{label}: interrupted", file=sys.stderr)
-        code = 130
+    except KeyboardInterrupt as exc:
+        # (A trial's interruption carries the signal's as its cause.)
+        terminated = isinstance(exc, Terminated) or isinstance(exc.__cause__, Terminated)
+        notes = "; ".join(getattr(exc, "__notes__", ()))
+        print(
+            f"{label}: {'terminated (SIGTERM)' if terminated else 'interrupted'}"
+            + (f": {notes}" if notes else ""),
+            file=sys.stderr,
+        )
+        code = 143 if terminated else 130
         return code
     finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
         if code != 0:
             _remove_empty(created)
 

@@ -24,6 +24,7 @@ __all__ = [
     "ConfigError",
     "FeatureTableError",
     "PriorFileError",
+    "Terminated",
     "NotFittedError",
     "KernelNotPositiveDefiniteError",
 ]
@@ -40,6 +41,11 @@ class FeatureTableError(ConfigError):
 class PriorFileError(AptktError, ValueError):
     """A prior-knowledge file is not one, is damaged, or is inconsistent; the message names the
     file and the member."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, a scheduler ending a job): handled exactly like Ctrl-C — the arm
+    stops and retracts, the partial recording is saved — then the command exits with 143."""
 
 
 class NotFittedError(AptktError, AttributeError):

@@ -542,17 +542,17 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             if not isinstance(value, (int, np.integer)) or value < 0:
                 raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
         _threads(self.n_jobs)  # checks the value
-        return dict(
-            modality_names=names,
-            modalities=groups,
-            signal_variance=float(self.signal_variance),
-            length_scales=length_scales,
-            weights=weights,
-            free={k: k not in fixed for k in _FIXABLE},
-            signal_variance_bounds=tuple(float(v) for v in self.signal_variance_bounds),
-            length_scale_bounds=tuple(float(v) for v in self.length_scale_bounds),
-            hyper_prior=HyperPrior.resolve(self.hyper_prior),
-        )
+        return {
+            "modality_names": names,
+            "modalities": groups,
+            "signal_variance": float(self.signal_variance),
+            "length_scales": length_scales,
+            "weights": weights,
+            "free": {k: k not in fixed for k in _FIXABLE},
+            "signal_variance_bounds": tuple(float(v) for v in self.signal_variance_bounds),
+            "length_scale_bounds": tuple(float(v) for v in self.length_scale_bounds),
+            "hyper_prior": HyperPrior.resolve(self.hyper_prior),
+        }
 
     def _settings(self, spec: dict[str, Any]) -> _core.FitSettings:
         """The binding's named settings object for this estimator's parameters."""

@@ -77,21 +77,23 @@ def test_fifty_kills_at_random_moments(base, tmp_path):
         name = list(duration)[k % len(duration)]
         shutil.copy(base, work)
         pid = _in_child(_commands(work)[name])
-        time.sleep(rng.uniform(0, duration[name]))
+        time.sleep(rng.uniform(0, 0.9 * duration[name]))
         os.kill(pid, signal.SIGKILL)
         _, status = os.waitpid(pid, 0)
         killed += os.WIFSIGNALED(status)
         # Readable by aptkt as it is, with every recording it held before ...
         with DatasetReader(work) as rd:
             assert len(rd) >= 6, name
-            assert not rd.damaged()
+            assert not rd.damaged(full=True)
         assert main(["dataset", "info", str(work)]) == 0
         # ... and repair makes it appendable.
         repair(work, backup=False)
         DatasetWriter(work, "a").close()
         for p in tmp_path.glob("work.h5.*"):  # a killed run's scratch file: harmless, removed
             p.unlink()
-    assert killed >= 25  # most kills landed while the command ran
+    # Most kills land while the command runs (a loaded machine may run one faster than its
+    # measured time, and then the kill comes after its end).
+    assert killed >= 20, f"only {killed} of 50 kills hit a running command"
 
 
 def test_a_writer_killed_outside_swmr_mode(base, tmp_path):

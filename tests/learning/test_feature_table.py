@@ -185,7 +185,13 @@ def test_learn_from_a_table_writes_the_demo_outputs(tmp_path, capsys):
         assert main(args) == 0
         printed = capsys.readouterr().out
         assert "APTKT+aux" in printed and "baseline" in printed
-        for name in ("results.csv", "learning_curves.png", "learning_curves.svg", "prior.npz"):
+        for name in (
+            "results.csv",
+            "learning_curves.png",
+            "confusion.csv",
+            "confusion.png",
+            "prior.npz",
+        ):
             assert (out / name).is_file(), name
         summary = json.loads((out / "summary.json").read_text())
         with (out / "results.csv").open() as fh:

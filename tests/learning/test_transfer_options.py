@@ -191,9 +191,9 @@ def _same_rows(a, b):
 def test_control_works_in_the_prior_feature_space_without_transfer(world):
     learner, run = _run(world, transfer="control")
     assert run.prior_objects == world["prior"].objects
-    for a, l in learner.learners.items():
-        assert l._pipeline(transfers=False) is world["prior"][a].pipeline
-        assert not l.decisions and not l.model.sources_
+    for a, lrn in learner.learners.items():
+        assert lrn._pipeline(transfers=False) is world["prior"][a].pipeline
+        assert not lrn.decisions and not lrn.model.sources_
     assert all(not s.transfer or not any(s.transfer.values()) for s in run.steps)
 
 
@@ -246,14 +246,14 @@ def test_transfer_from_a_related_prior_is_not_inert(world):
                 PoolEnvironment(world["pool"], seed=seed), list(ACTIONS), world["news"], test
             )
             post[transfer] = (
-                {a: l.test_posteriors for a, l in learner.learners.items()},
+                {a: lrn.test_posteriors for a, lrn in learner.learners.items()},
                 run.steps[0].mean_accuracy,
             )
             if transfer == "paper":
                 lambdas = [
                     d.transfer_lambda
-                    for l in learner.learners.values()
-                    for d in l.decisions.values()
+                    for lrn in learner.learners.values()
+                    for d in lrn.decisions.values()
                 ]
                 assert np.mean(lambdas) > 0.5  # related priors pass the cut-off
         for a in ACTIONS:
@@ -269,10 +269,10 @@ def test_one_vs_all_sources_and_several_sources_reach_the_classifiers(world):
     prior = world["prior"]
     learner, _ = _run(world, transfer="multi", budget=0, eps_neg=0.0)
     n_old = {a: len(prior[a].observations) for a in ACTIONS}
-    for a, l in learner.learners.items():
-        for c, d in l.decisions.items():
+    for a, lrn in learner.learners.items():
+        for c, d in lrn.decisions.items():
             assert len(d.sources) == len(prior.objects)  # ε_neg = 0: every old object
-            got = l.model.sources_[c]
+            got = lrn.model.sources_[c]
             assert [s.name for s in got] == list(d.sources)
             assert [s.transfer_lambda for s in got] == pytest.approx(list(d.lambdas))
             for s in got:
@@ -280,8 +280,8 @@ def test_one_vs_all_sources_and_several_sources_reach_the_classifiers(world):
                 mine = prior[a].observations.objects == s.name
                 np.testing.assert_array_equal(s.y, np.where(mine, 1.0, -1.0))
     paper, _ = _run(world, transfer="paper", budget=0, source="positives")
-    for a, l in paper.learners.items():
-        for c, srcs in l.model.sources_.items():
+    for a, lrn in paper.learners.items():
+        for _c, srcs in lrn.model.sources_.items():
             (s,) = srcs
             assert s.y is None
             assert s.X.shape[0] == int(np.sum(prior[a].observations.objects == s.name))
@@ -299,7 +299,7 @@ def test_feature_space_auto_uses_nothing_of_an_irrelevant_prior():
         test=draw(means, news, 6, seed=3),
     )
     aptkt, run = _run(far, transfer="paper", budget=3)
-    assert all(not d.transfers for l in aptkt.learners.values() for d in l.decisions.values())
+    assert all(not d.transfers for lrn in aptkt.learners.values() for d in lrn.decisions.values())
     _, base = _run(far, transfer="none", budget=3)
     strip = lambda rows: [  # noqa: E731
         {k: v for k, v in r.items() if k in ("mean_accuracy", "fused_accuracy", "action")}
@@ -307,14 +307,14 @@ def test_feature_space_auto_uses_nothing_of_an_irrelevant_prior():
     ]
     assert strip(run.rows()) == strip(base.rows())
     in_prior, _ = _run(far, transfer="paper", budget=0, feature_space="prior")
-    for a, l in in_prior.learners.items():
-        assert l._pipeline(transfers=False) is far["prior"][a].pipeline
+    for a, lrn in in_prior.learners.items():
+        assert lrn._pipeline(transfers=False) is far["prior"][a].pipeline
     # Related priors: "auto" transfers, in the prior's space; "new" keeps its own.
     for space, expect_prior in (("auto", True), ("new", False)):
         learner, _ = _run(_related(), transfer="paper", budget=0, feature_space=space)
-        for a, l in learner.learners.items():
-            assert any(d.transfers for d in l.decisions.values())
-            assert (l._pipeline(transfers=True) is l.prior.pipeline) == expect_prior
+        for _a, lrn in learner.learners.items():
+            assert any(d.transfers for d in lrn.decisions.values())
+            assert (lrn._pipeline(transfers=True) is lrn.prior.pipeline) == expect_prior
 
 
 def _related():

@@ -5,6 +5,10 @@ real SerialSkin reads — hardware in the loop on one machine."""
 from __future__ import annotations
 
 import math
+import os
+import signal
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -253,3 +257,63 @@ def test_learn_runs_live_through_the_loopback(cell, capsys):
     # The force feature (mean over the 21 sensors) follows each block's spring law.
     for name, f in force.items():
         assert f * 21 == pytest.approx(STIFFNESS[name] * DEPTH + 0.05, abs=0.06)
+
+
+@pytest.mark.parametrize(
+    ("sig", "code", "word"),
+    [(signal.SIGTERM, 143, "terminated (SIGTERM)"), (signal.SIGINT, 130, "interrupted")],
+    ids=["SIGTERM", "SIGINT"],
+)
+def test_a_signal_mid_press_retracts_and_keeps_the_data(cell, sig, code, word):
+    """SIGTERM and Ctrl-C in the middle of a press: the arm stops and retracts (no force left on
+    the object), the completed trial and the partial recording are kept, one message, 143/130."""
+    d, lb = cell
+    lb.reset(pose=START)
+    data = d / f"signal-{sig.name}.h5"
+    argv = [
+        "collect", "--robot", "ur10", "--workspace", str(d / "cell.toml"), "--skin", lb.skin_port,
+        "--patch", str(d / "patch.toml"), "--actions-file", str(d / "actions.toml"),
+        "--actions", "Pq", "--thermal-wait", "0", "--objects", "block_a,block_b", "-n", "1",
+        "-o", str(data), "--no-progress",
+    ]  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2] / "python")}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "aptkt.cli", *argv], env=env, stderr=subprocess.PIPE, text=True
+    )
+    # In the middle of the second press (block_b, trial 0), after block_a's trial completed.
+    watcher = on_press(lb, 2, lambda: proc.send_signal(sig))
+    _, err = proc.communicate(timeout=180)
+    watcher.join(timeout=5.0)
+    assert proc.returncode == code, err
+    assert word in err and "Traceback" not in err, err
+    assert "block_b / Pq / trial 0" in err, err
+    time.sleep(0.2)
+    state = lb.state()
+    assert not state["moving"] and state["normal_force"] == 0.0, state
+    assert state["pose"][2] > 0.003, state  # lifted off the object
+    with DatasetReader(data) as rd:
+        assert rd.keys() == [("block_a", "Pq", 0)]
+    with DatasetReader(d / f"signal-{sig.name}.aborted.h5") as rd:
+        assert rd.keys() == [("block_b", "Pq", 0)]
+        assert len(rd.recording(0).samples) > 0
+
+
+def test_a_dropped_link_mid_press_is_a_fault_that_keeps_the_data(cell, capsys):
+    d, lb = cell
+    data = d / "dropped.h5"
+    watcher = on_press(lb, 2, lambda: lb.drop_connections())
+    args = ("--objects", "block_a,block_b", "-n", "1", "-o", str(data), "--no-progress")
+    assert run_cli(cell, "collect", *args) == 3
+    watcher.join(timeout=5.0)
+    err = capsys.readouterr().err
+    assert "block_b / Pq / trial 0: RobotConnectionError" in err and "--resume" in err, err
+    time.sleep(0.7)  # the controller's RTDE watchdog stops the program
+    assert not lb.state()["moving"]
+    with DatasetReader(data) as rd:
+        assert rd.keys() == [("block_a", "Pq", 0)]
+    with DatasetReader(d / "dropped.aborted.h5") as rd:
+        assert rd.keys() == [("block_b", "Pq", 0)]
+    # The link is back: the same command completes the data set.
+    assert run_cli(cell, "collect", *args, "--resume") == 0
+    with DatasetReader(data) as rd:
+        assert sorted(rd.keys()) == [("block_a", "Pq", 0), ("block_b", "Pq", 0)]

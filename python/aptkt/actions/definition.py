@@ -56,7 +56,7 @@ class ExploratoryAction:
 
     Units are SI throughout: ``depth`` in m (indentation below the point of light contact),
     ``hold_time`` and ``slide_time`` in s, ``normal_force`` in N, ``speed`` in m/s.
-    Parameters that do not belong to the movement stay at 0.
+    Parameters that do not belong to the movement must stay at 0 (an error otherwise).
     """
 
     name: str
@@ -83,6 +83,18 @@ class ExploratoryAction:
                 raise ValueError(
                     f"action {self.name!r}: a {self.movement.value} movement needs {key} > 0"
                 )
+        # A parameter the movement does not use would be silently ignored: a typo'd action
+        # ("speed" on a press) must not run as something else than the user meant.
+        unused = [
+            k
+            for k in ("depth", "hold_time", "normal_force", "speed", "slide_time")
+            if k not in _REQUIRED[self.movement] and getattr(self, k) != 0
+        ]
+        if unused:
+            raise ValueError(
+                f"action {self.name!r}: a {self.movement.value} movement does not use "
+                f"{', '.join(unused)} (it uses {', '.join(_REQUIRED[self.movement])})"
+            )
 
     @property
     def modalities(self) -> tuple[str, ...]:

@@ -98,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
     )
     session = make_session(args, seed=args.seed)
     session.check_objects(plan.objects)
+    session.check_actions(plan.actions, plan.objects)
     if Path(args.output).exists() and not (args.resume or args.overwrite):
         # Before the arm moves, not after.
         raise ConfigError(

@@ -256,7 +256,8 @@ def run_export_features(args: argparse.Namespace) -> int:
             progress=not args.no_progress and sys.stderr.isatty(),
         )
     except (DatasetError, KeyError, OSError) as exc:
-        raise ConfigError(f"{args.file}: {exc}") from None
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+        raise ConfigError(msg if str(args.file) in msg else f"{args.file}: {msg}") from None
     empty = [a for a, obs in table.items() if len(obs) == 0]
     if empty:
         raise ConfigError(f"{args.file}: no observations of {', '.join(empty)} for these objects")

@@ -173,6 +173,7 @@ def run(args: argparse.Namespace) -> int:
         test = _load_test(args.test, names, objects)
     session = make_session(args, seed=args.seed)
     session.check_objects(objects)
+    session.check_actions(actions.values(), objects)
     record = Path(args.record) if args.record else args.output / "recordings.h5"
 
     def report(line: str) -> None:

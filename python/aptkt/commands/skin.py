@@ -82,7 +82,7 @@ def _make_source(args: argparse.Namespace) -> Any:
             listen_address=_host_port(args.listen, "--listen"),
         )
     if not args.port:
-        raise ConfigError("aptkt skin monitor: give a serial PORT, or --tsu for UDP")
+        raise ConfigError("give a serial PORT, or --tsu for UDP")
     return SerialSkin(args.port, args.patch)
 
 

@@ -39,7 +39,7 @@ from aptkt.learning import GPSettings, LearnerConfig, PriorKnowledge
 from aptkt.learning.dataset import extract_features, load_observations, stale_features
 from aptkt.runtime.generation import GenerationPlan, generate
 
-__all__ = ["DemoSettings", "run_demo", "DEMO_PRIORS", "DEMO_NEW"]
+__all__ = ["DemoSettings", "report_results", "run_demo", "DEMO_PRIORS", "DEMO_NEW"]
 
 #: Three prior objects, each related to one new object (paper §5.1).
 DEMO_PRIORS = ("rough_sponge", "paper_box", "metal_toolbox")
@@ -162,13 +162,52 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
     rows = flatten(results)
 
     _say("[5/5] results")
+    summary = report_results(
+        out,
+        rows,
+        methods,
+        s.new_objects,
+        budget=s.budget,
+        title=f"{len(s.new_objects)} new objects, priors: {', '.join(s.priors)}",
+        head={
+            "software_version": __version__,
+            "python": platform.python_version(),
+            "settings": {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(s).items()},
+            "learner": {name: cfg.to_dict() for name, cfg in methods.items()},
+        },
+        size=s.size,
+        files={"data": str(data), "prior": str(prior_path)},
+        t_start=t_start,
+    )
+    _say(f"      done in {summary['seconds']:.0f} s")
+    return summary
+
+
+def report_results(
+    out: Path,
+    rows: list[dict[str, Any]],
+    methods: dict[str, LearnerConfig],
+    new_objects: tuple[str, ...],
+    *,
+    budget: int,
+    title: str,
+    head: dict[str, Any],
+    size: str,
+    files: dict[str, str],
+    t_start: float,
+    say: Any = _say,
+) -> dict[str, Any]:
+    """The demo's results from its runs' step rows — printed table, learning curves, confusion
+    matrices, ``results.csv``, ``confusion.csv`` and ``summary.json`` — shared with learning from
+    a feature table (:mod:`aptkt.experiments.table_learning`)."""
+    new_objects = tuple(new_objects)
     curves = _curves(rows, methods)
     fused = _curves(rows, methods, key="fused_accuracy")
-    x = np.arange(s.budget + 1)
-    chance = 1.0 / len(s.new_objects)
+    x = np.arange(budget + 1)
+    chance = 1.0 / len(new_objects)
     table = _table(curves, fused, x, chance)
     for line in table:
-        _say("      " + line)
+        say("      " + line)
     fig, axes = figure(1, 2, figsize=(11, 4.2))
     learning_curves(
         axes[0],
@@ -180,30 +219,27 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
     learning_curves(
         axes[1], fused, x[: fused["APTKT"].shape[1]], chance=chance, title="all actions fused"
     )
-    fig.suptitle(f"{len(s.new_objects)} new objects, priors: {', '.join(s.priors)}")
+    fig.suptitle(title)
     plots = save_figure(fig, out / "learning_curves")
-    confusion = _confusion(rows, ("baseline", "APTKT"), s.new_objects)
-    plots += _plot_confusion(confusion, s.new_objects, out / "confusion")
+    confusion = _confusion(rows, ("baseline", "APTKT"), new_objects)
+    plots += _plot_confusion(confusion, new_objects, out / "confusion")
     write_csv(
         out / "confusion.csv",
         [
             {
                 "method": m,
                 "object": o,
-                **{f"predicted {p}": int(c[i, k]) for k, p in enumerate(s.new_objects)},
+                **{f"predicted {p}": int(c[i, k]) for k, p in enumerate(new_objects)},
             }
             for m, c in confusion.items()
-            for i, o in enumerate(s.new_objects)
+            for i, o in enumerate(new_objects)
         ],
     )
     write_csv(out / "results.csv", [{k: v for k, v in r.items() if k != "confusion"} for r in rows])
     summary = {
-        "software_version": __version__,
-        "python": platform.python_version(),
-        "settings": {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(s).items()},
-        "learner": {name: cfg.to_dict() for name, cfg in methods.items()},
+        **head,
         "table": table,
-        "size": s.size,
+        "size": size,
         "chance": chance,
         "final_mean_accuracy": {m: float(np.nanmean(c[:, -1])) for m, c in curves.items()},
         "initial_mean_accuracy": {m: float(np.nanmean(c[:, 0])) for m, c in curves.items()},
@@ -212,19 +248,17 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
         "final_confusion": {m: c.astype(int).tolist() for m, c in confusion.items()},
         "seconds": time.perf_counter() - t_start,
         "files": {
-            "data": str(data),
-            "prior": str(prior_path),
+            **files,
             "results": str(out / "results.csv"),
             "confusion": str(out / "confusion.csv"),
             "plots": [str(p) for p in plots],
         },
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    _say(f"      plots: {', '.join(str(p) for p in plots)}")
-    _say(
+    say(f"      plots: {', '.join(str(p) for p in plots)}")
+    say(
         f"      every step of every run: {out / 'results.csv'}; settings and table: {out / 'summary.json'}"
     )
-    _say(f"      done in {summary['seconds']:.0f} s")
     return summary
 
 
@@ -308,8 +342,14 @@ def _confusion(
 
 def _plot_confusion(confusion: dict[str, np.ndarray], objects: tuple[str, ...], stem: Path):
     names = [o.replace("_", " ") for o in objects]
-    fig, axes = figure(1, len(confusion), figsize=(4.6 * len(confusion), 4.4), squeeze=False)
-    for ax, (method, counts) in zip(axes[0], confusion.items()):
+    fig, axes = figure(
+        1,
+        len(confusion),
+        figsize=(4.0 * len(confusion) + 2.5, 4.6),
+        squeeze=False,
+        layout="constrained",
+    )
+    for panel, (ax, (method, counts)) in enumerate(zip(axes[0], confusion.items())):
         share = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1)
         im = ax.imshow(share, vmin=0, vmax=1, cmap="Blues")
         for i in range(len(objects)):
@@ -324,9 +364,10 @@ def _plot_confusion(confusion: dict[str, np.ndarray], objects: tuple[str, ...], 
                     color="white" if share[i, k] > 0.6 else "black",
                 )
         ax.set_xticks(range(len(objects)), names, rotation=45, ha="right", fontsize=8)
-        ax.set_yticks(range(len(objects)), names, fontsize=8)
+        ax.set_yticks(range(len(objects)), names if panel == 0 else [], fontsize=8)
         ax.set_xlabel("predicted object")
-        ax.set_ylabel("true object")
+        if panel == 0:  # the panels share their rows: one set of row labels
+            ax.set_ylabel("true object")
         ax.set_title(f"{method}: final models", fontsize=10)
     fig.colorbar(
         im, ax=axes[0].tolist(), shrink=0.8, label="share of the true object's test observations"

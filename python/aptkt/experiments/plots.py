@@ -16,6 +16,7 @@ METHOD_COLOURS = {
     "baseline": "tab:red",
     "APTKT": "tab:blue",
     "APTKT+aux": "tab:green",
+    "control": "tab:gray",
     # Fig. 6: the multi-modal kernel and the single modalities (the paper's names).
     "Multi": "tab:purple",
     "STIF": "tab:brown",
@@ -34,6 +35,8 @@ def _pyplot():
 
     return plt
 
+
+_SPARE_COLOURS = ("tab:pink", "tab:cyan", "black", "tab:olive", "tab:brown")
 
 #: What the bands of every learning-curve plot are (shown in the legend).
 BAND_LABEL = "bands: 95 % interval of the mean over runs"
@@ -55,10 +58,12 @@ def learning_curves(
     (1 / number of classes), drawn as a dashed line. The legend says what the bands are.
     """
 
+    # Methods without a colour of their own take one that no method of this plot uses.
+    spare = iter(c for c in _SPARE_COLOURS if c not in {METHOD_COLOURS.get(m) for m in curves})
     for method, values in curves.items():
         values = np.asarray(values, dtype=float)
         mean, low, high = mean_band(values)
-        colour = METHOD_COLOURS.get(method)
+        colour = METHOD_COLOURS.get(method) or next(spare, None)
         ax.plot(x, mean, label=f"{method} (n={values.shape[0]})", color=colour, lw=2)
         ax.fill_between(x, low, high, color=colour, alpha=0.18, lw=0)
     ax.axhline(chance, color="0.4", ls="--", lw=1, label=f"chance ({chance:.2f})")

@@ -4,13 +4,13 @@ comparison.
 The prior objects' rows build the prior knowledge; the new objects' rows are split into a pool
 to learn from and a held-out test set (by trial number); APTKT, APTKT with auxiliary features and
 the baseline then learn the new objects ``runs`` times each, as in the demo, and the same files
-are written: ``results.csv`` (every step of every run), ``learning_curves.png``/``.svg``,
-``summary.json`` (settings, table, accuracies) and ``prior.npz``.
+are written (:func:`aptkt.experiments.demo.report_results`): ``results.csv`` (every step of
+every run), ``learning_curves.png``/``.svg``, ``confusion.png``/``.svg``/``.csv`` (the final
+models, baseline and APTKT), ``summary.json`` (settings, table, accuracies) and ``prior.npz``.
 """
 
 from __future__ import annotations
 
-import json
 import platform
 import time
 from dataclasses import asdict, dataclass, replace
@@ -21,10 +21,8 @@ import numpy as np
 
 from aptkt import __version__
 from aptkt.errors import FeatureTableError
-from aptkt.experiments.demo import _curves, _table
-from aptkt.experiments.plots import figure, learning_curves, save_figure
+from aptkt.experiments.demo import report_results
 from aptkt.experiments.runs import step_rows
-from aptkt.experiments.tables import write_csv
 from aptkt.learning import APTKT, GPSettings, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import read_feature_table, split_held_out
 
@@ -117,54 +115,31 @@ def learn_from_table(s: TableSettings, *, say=print) -> dict[str, Any]:
     rows: list[dict[str, Any]] = []
     for t in range(s.runs):
         for name, cfg in methods.items():
-            run = APTKT(replace(cfg, seed=s.seed + t), prior).run(
-                PoolEnvironment(pool, seed=s.seed + t), actions, s.new_objects, test
-            )
-            rows += [{"method": name, "trial": t, **r} for r in step_rows(run)]
+            learner = APTKT(replace(cfg, seed=s.seed + t), prior)
+            run = learner.run(PoolEnvironment(pool, seed=s.seed + t), actions, s.new_objects, test)
+            steps = step_rows(run, learner, s.new_objects)
+            rows += [{"method": name, "trial": t, **r} for r in steps]
 
-    curves = _curves(rows, methods)
-    fused = _curves(rows, methods, key="fused_accuracy")
-    x = np.arange(max(c.shape[1] for c in curves.values()))
-    chance = 1.0 / len(s.new_objects)  # guessing one of the new objects
-    lines = _table(curves, fused, x, chance)
-    for line in lines:
-        say("      " + line)
-    fig, axes = figure(1, 2, figsize=(11, 4.2))
-    learning_curves(
-        axes[0],
-        curves,
-        x[: curves["APTKT"].shape[1]],
-        chance=chance,
-        title="mean accuracy of the actions' models",
-    )
-    learning_curves(
-        axes[1], fused, x[: fused["APTKT"].shape[1]], chance=chance, title="all actions fused"
-    )
-    fig.suptitle(
-        f"{table.path.name}: {len(s.new_objects)} new objects, priors: {', '.join(s.prior_objects)}"
-    )
-    plots = save_figure(fig, out / "learning_curves")
-    write_csv(out / "results.csv", rows)
-    summary = {
-        "software_version": __version__,
-        "python": platform.python_version(),
-        "settings": {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(s).items()},
-        "actions": actions,
-        "learner": {name: cfg.to_dict() for name, cfg in methods.items()},
-        "table": lines,
-        "final_mean_accuracy": {m: float(np.nanmean(c[:, -1])) for m, c in curves.items()},
-        "initial_mean_accuracy": {m: float(np.nanmean(c[:, 0])) for m, c in curves.items()},
-        "seconds": time.perf_counter() - t_start,
-        "files": {
-            "table": str(table.path),
-            "prior": str(prior_path),
-            "results": str(out / "results.csv"),
-            "plots": [str(p) for p in plots],
+    settings = {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(s).items()}
+    return report_results(
+        out,
+        rows,
+        methods,
+        tuple(s.new_objects),
+        budget=s.budget,
+        title=(
+            f"{table.path.name}: {len(s.new_objects)} new objects, "
+            f"priors: {', '.join(s.prior_objects)}"
+        ),
+        head={
+            "software_version": __version__,
+            "python": platform.python_version(),
+            "settings": settings,
+            "actions": actions,
+            "learner": {name: cfg.to_dict() for name, cfg in methods.items()},
         },
-    }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    say(f"      plots: {', '.join(str(p) for p in plots)}")
-    say(
-        f"      every step of every run: {out / 'results.csv'}; settings and table: {out / 'summary.json'}"
+        size="table",
+        files={"table": str(table.path), "prior": str(prior_path)},
+        t_start=t_start,
+        say=say,
     )
-    return summary

@@ -128,7 +128,7 @@ def read_feature_table(path: str | Path) -> FeatureTable:
 
 def _read_csv(path: Path) -> tuple[list[str], dict[str, list]]:
     try:
-        with path.open(newline="", encoding="utf-8") as fh:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
             reader = csv.reader(fh)
             header = [h.strip() for h in next(reader, [])]
             rows = list(reader)

@@ -89,6 +89,7 @@ class ActionLearner:
             or (cfg.feature_space == "auto" and transfers)
         ):
             return self.prior.pipeline
+        assert self.observations is not None  # update() checks every object was observed
         return FeaturePipeline().fit(self.observations)
 
     def _features(
@@ -124,7 +125,7 @@ class ActionLearner:
         for m in names:
             out_groups[m] = list(range(start, start + len(groups[m])))
             start += len(groups[m])
-        if self.config.auxiliary and self.prior is not None:
+        if self.config.auxiliary and self.prior is not None and X_prior is not None:
             aux = self.prior.posteriors(X_prior)
             out_groups[AUXILIARY] = list(range(start, start + aux.shape[1]))
             X = np.hstack([X, aux])
@@ -134,6 +135,7 @@ class ActionLearner:
         """Every old object's observations in the model's input space, and their objects
         (kept while the model space stays the same)."""
         if self._old_cache is None or self._old_cache[0] is not pipeline:
+            assert self.prior is not None  # sources come from the prior knowledge
             obs = self.prior.observations
             self._old_cache = (pipeline, self._features(obs, pipeline)[0], np.asarray(obs.objects))
         return self._old_cache[1], self._old_cache[2]
@@ -163,7 +165,7 @@ class ActionLearner:
         # The old models judge the new observations in their own space.
         X_prior = None if self.prior is None else self.prior.pipeline.transform(obs)[0]
         self.decisions = {}
-        if self.prior is not None and cfg.transfers:
+        if self.prior is not None and X_prior is not None and cfg.transfers:
             related = self.prior.relatedness(X_prior, cfg.relatedness)
             for obj in self.new_objects:
                 decision = decide_transfer(

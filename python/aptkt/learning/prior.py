@@ -143,6 +143,7 @@ class PriorKnowledge:
         meta = {"format": _FORMAT, "actions": list(self.actions), "metadata": self.metadata}
         arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
         tmp = path.with_name(path.name + ".tmp")
+        path.parent.mkdir(parents=True, exist_ok=True)
         try:
             with tmp.open("wb") as fh:
                 np.savez_compressed(fh, **arrays)

@@ -44,6 +44,7 @@ class SafetyLimits:
     approach_speed: float = 0.005  # m/s for the guarded move towards contact
     max_approach_travel: float = 0.05  # m the guarded move may travel before giving up
     watchdog_timeout: float = 0.5  # s without fresh skin or robot data
+    max_hold_time: float = 60.0  # s an action may hold a contact or slide
 
     def __post_init__(self) -> None:
         for name in self.__dataclass_fields__:

@@ -19,7 +19,14 @@ from typing import Any, Protocol
 
 from aptkt.actions import ExploratoryAction
 from aptkt.actions.executor import ExplorationSettings, calibration_metadata, explore
-from aptkt.errors import ConfigError, SilentCellError, TrialFault, TrialInterrupted
+from aptkt.actions.limits import check_action_limits
+from aptkt.errors import (
+    ConfigError,
+    SafetyLimitError,
+    SilentCellError,
+    TrialFault,
+    TrialInterrupted,
+)
 from aptkt.robot import UR10
 from aptkt.robot.workspace import load_workspace
 from aptkt.sim.objects import default_library, load_library
@@ -39,6 +46,10 @@ class LiveSession(Protocol):
     def explore(self, obj: str, action: ExploratoryAction, trial: int) -> Recording: ...
 
     def check_objects(self, names: Iterable[str]) -> None: ...
+
+    def check_actions(self, actions: Iterable[ExploratoryAction], objects: Iterable[str]) -> None:
+        """Refuse, before any motion, actions the backend's limits would stop mid-way."""
+        ...
 
     def describe(self) -> dict[str, Any]: ...
 
@@ -78,6 +89,9 @@ class SimSession:
 
     def __exit__(self, *exc: object) -> None:
         pass
+
+    def check_actions(self, actions: Iterable[ExploratoryAction], objects: Iterable[str]) -> None:
+        pass  # the simulated world has no safety limits to exceed
 
     def check_objects(self, names: Iterable[str]) -> None:
         unknown = [n for n in names if n not in self.world.objects]
@@ -143,6 +157,14 @@ class RobotSession:
                 f"--objects: {self.workspace_file} places no object(s) {', '.join(unknown)}; "
                 f"it places: {known}"
             )
+
+    def check_actions(self, actions: Iterable[ExploratoryAction], objects: Iterable[str]) -> None:
+        placements = [self.workspace.placements[o] for o in objects]
+        for action in actions:
+            try:
+                check_action_limits(action, self.workspace.limits, placements)
+            except SafetyLimitError as exc:
+                raise SafetyLimitError(f"{exc} (limits of {self.workspace_file})") from None
 
     def __enter__(self) -> RobotSession:
         skin = self._make_skin()

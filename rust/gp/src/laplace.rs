@@ -70,11 +70,17 @@ fn objective(a: &[f64], f: &[f64], y: &[f64]) -> f64 {
 }
 
 /// `W½` and the Cholesky factor of `B` at latent values `f`. Err carries the failing pivot.
-fn factor_b(k: MatRef<'_, f64>, f: &[f64]) -> Result<(Vec<f64>, Vec<f64>, Mat<f64>), usize> {
+/// The factor is written into `b` (n × n, reused across Newton iterations: one n × n buffer
+/// per mode search instead of one per iteration).
+fn factor_b(
+    k: MatRef<'_, f64>,
+    f: &[f64],
+    b: &mut Mat<f64>,
+) -> Result<(Vec<f64>, Vec<f64>), usize> {
     let n = f.len();
     let pi: Vec<f64> = f.iter().map(|&v| sigmoid(v)).collect();
     let sw: Vec<f64> = pi.iter().map(|p| (p * (1.0 - p)).sqrt()).collect();
-    let mut b = Mat::<f64>::zeros(n, n);
+    // Only the lower triangle is read; the factorisation zeroes the strictly upper one.
     for j in 0..n {
         let (dst, src) = (b.col_as_slice_mut(j), k.col(j));
         for i in j..n {
@@ -82,8 +88,8 @@ fn factor_b(k: MatRef<'_, f64>, f: &[f64]) -> Result<(Vec<f64>, Vec<f64>, Mat<f6
         }
         dst[j] += 1.0;
     }
-    linalg::cholesky_lower(&mut b)?;
-    Ok((pi, sw, b))
+    linalg::cholesky_lower(b)?;
+    Ok((pi, sw))
 }
 
 /// Algorithm 3.1 with a step-halving safeguard (the plain Newton step can overshoot when the
@@ -113,12 +119,13 @@ pub fn find_mode(
     let mut iterations = 0;
     let mut kb = vec![0.0; n];
     let mut f_new = vec![0.0; n];
+    let mut l = Mat::<f64>::zeros(n, n);
     for it in 0..cfg.max_iter {
         if cfg.cancelled() {
             return Err(ModeFailure::Cancelled);
         }
         iterations = it + 1;
-        let (pi, sw, l) = factor_b(k, &f).map_err(ModeFailure::Pivot)?;
+        let (pi, sw) = factor_b(k, &f, &mut l).map_err(ModeFailure::Pivot)?;
         // b = W f + ∇log p(y|f), with ∇log p = t - π and t = (y + 1) / 2.
         let b: Vec<f64> = (0..n)
             .map(|i| sw[i] * sw[i] * f[i] + (0.5 * (y[i] + 1.0) - pi[i]))
@@ -152,7 +159,7 @@ pub fn find_mode(
             break;
         }
     }
-    let (pi, sw, l) = factor_b(k, &f).map_err(ModeFailure::Pivot)?;
+    let (pi, sw) = factor_b(k, &f, &mut l).map_err(ModeFailure::Pivot)?;
     let log_det_half: f64 = (0..n).map(|i| l[(i, i)].ln()).sum();
     let lml = objective(&a, &f, y) - log_det_half;
     Ok(Mode {

@@ -95,14 +95,18 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     keys = list(matrices)
     ncols = min(4, len(keys))
     nrows = math.ceil(len(keys) / ncols)
-    fig, axes = figure(nrows, ncols, figsize=(5.6 * ncols, 5.6 * nrows), squeeze=False)
+    fig, axes = figure(
+        nrows, ncols, figsize=(4.6 * ncols + 2, 5.2 * nrows), squeeze=False, layout="constrained"
+    )
     prior_set = set(ctx.scale.priors)
     names = [ctx.label(o) for o in objects]
-    for ax, key in zip(axes.ravel(), keys):
+    for panel, (ax, key) in enumerate(zip(axes.ravel(), keys)):
+        first = panel % ncols == 0  # panels of a row share their rows: one set of row labels
         im = ax.imshow(matrices[key], vmin=0, vmax=1, cmap="viridis")
         ax.set_xticks(range(len(objects)), names, fontsize=6, rotation=90)
-        ax.set_yticks(range(len(objects)), names, fontsize=6)
-        ax.set_ylabel("row: observations of this object", fontsize=8)
+        ax.set_yticks(range(len(objects)), names if first else [], fontsize=6)
+        if first:
+            ax.set_ylabel("row: observations of this object", fontsize=8)
         ax.set_xlabel("column: assigned to this object's mixture component", fontsize=8)
         # The paper's colours: old objects' numbers blue, new objects' red.
         for lab, obj in zip(ax.get_xticklabels() + ax.get_yticklabels(), objects + objects):

@@ -130,7 +130,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             [[g, ctx.names(group), ci(s.overall)] for g, group, s in per_group],
         ),
     ]
-    control = (
+    control: dict[str, Any] = (
         {
             "control_vs_baseline": gain_summary(curves, "control", steps=steps).as_dict(),
             "APTKT_vs_control": gain_summary(

@@ -18,9 +18,9 @@ from aptkt.experiments.figures.common import (
     key_steps,
     method_curves,
     plot_panel,
+    present,
     prior_group_plan,
     prior_groups,
-    present,
     transfer_rate,
 )
 from aptkt.experiments.plots import figure

@@ -153,6 +153,10 @@ class Motions:
             raise SafetyLimitError(
                 f"press depth {depth * 1000:.2f} mm exceeds max_depth {self.limits.max_depth * 1000:.2f} mm"
             )
+        if hold_time > self.limits.max_hold_time:
+            raise SafetyLimitError(
+                f"hold time {hold_time} s exceeds max_hold_time {self.limits.max_hold_time} s"
+            )
         assert self.contact_z is not None
         target = np.array([*self.link.peek_pose()[:3], *self.tool_orientation])
         target[2] = self.contact_z - depth
@@ -183,6 +187,10 @@ class Motions:
         if speed > self.limits.max_speed:
             raise SafetyLimitError(
                 f"slide speed {speed} m/s exceeds max_speed {self.limits.max_speed} m/s"
+            )
+        if duration > self.limits.max_hold_time:
+            raise SafetyLimitError(
+                f"slide time {duration} s exceeds max_hold_time {self.limits.max_hold_time} s"
             )
         dx, dy = float(direction[0]), float(direction[1])
         norm = math.hypot(dx, dy)
@@ -349,8 +357,11 @@ class Motions:
             link.mode = None  # the controller already stopped the arm, or we cannot reach it
             return
         self.stop()
-        if not isinstance(exc, AptktError) or link.lost is not None:
-            return  # e.g. KeyboardInterrupt or a bug: stopped, but do not move on our own
+        if sup.retracting or link.lost is not None:
+            return  # a second fault (or Ctrl-C) while retracting: stopped, no further motion
+        if not isinstance(exc, (AptktError, KeyboardInterrupt)):
+            return  # a bug: stopped, but do not move on our own
+        # Ctrl-C and SIGTERM too: the arm must not be left pressing on the object.
         sup.retracting = True
         try:
             sup.reset()

@@ -1,0 +1,87 @@
+"""Actions are checked against the cell's safety limits when the files are read, before the
+robot is even connected: the error names the action, the parameter, the value and the limit."""
+
+from __future__ import annotations
+
+import pytest
+
+from aptkt.actions import ExploratoryAction, Movement
+from aptkt.actions.limits import check_action_limits
+from aptkt.cli import main
+from aptkt.errors import SafetyLimitError
+from aptkt.robot.base import Placement, SafetyLimits
+
+# Nothing listens there: a command that tried to connect would fail with a connection error,
+# not with the limit named below.
+CELL = """
+[robot]
+host = "127.0.0.1"
+
+[[object]]
+name = "block"
+x = 0.0
+y = -0.5
+surface_z = 0.0
+workspace_min = [-0.02, -0.52, -0.01]
+workspace_max = [0.02, -0.48, 0.04]
+"""
+
+BAD_ACTIONS = {
+    "deep": ('movement = "press"\ndepth = 0.010\nhold_time = 1.0', "depth = 0.01 m", "max_depth"),
+    "fast": (
+        'movement = "slide"\nnormal_force = 0.1\nspeed = 0.5\nslide_time = 0.01',
+        "speed = 0.5 m/s",
+        "max_speed",
+    ),
+    "hard": (
+        'movement = "slide"\nnormal_force = 20.0\nspeed = 0.01\nslide_time = 0.5',
+        "normal_force = 20 N",
+        "max_normal_force",
+    ),
+    "long": (
+        'movement = "press"\ndepth = 0.001\nhold_time = 1e9',
+        "hold_time = 1e+09 s",
+        "max_hold_time",
+    ),
+    "far": (
+        'movement = "slide"\nnormal_force = 0.1\nspeed = 0.01\nslide_time = 5.0',
+        "would leave the box of object block",
+        "workspace_max",
+    ),
+}
+
+
+@pytest.mark.parametrize("name", sorted(BAD_ACTIONS))
+def test_limits_are_checked_before_connecting(tmp_path, capsys, name):
+    body, value, limit = BAD_ACTIONS[name]
+    (tmp_path / "cell.toml").write_text(CELL)
+    (tmp_path / "actions.toml").write_text(f'[[action]]\nname = "{name}"\n{body}\n')
+    argv = [
+        "collect", "--robot", "ur10", "--workspace", str(tmp_path / "cell.toml"),
+        "--skin", "/dev/null", "--actions-file", str(tmp_path / "actions.toml"),
+        "--actions", name, "--objects", "block", "-n", "1", "-o", str(tmp_path / "d.h5"),
+    ]  # fmt: skip
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("aptkt collect: error: "), err
+    assert f"action {name}" in lines[0] and value in lines[0] and limit in lines[0]
+    assert not (tmp_path / "d.h5").exists()
+
+
+def test_unused_parameters_are_an_error():
+    with pytest.raises(ValueError, match="does not use speed"):
+        ExploratoryAction("P", Movement.PRESS, depth=0.001, hold_time=1.0, speed=0.02)
+    with pytest.raises(ValueError, match="does not use depth"):
+        ExploratoryAction("S", Movement.SLIDE, normal_force=0.1, speed=0.01, slide_time=1, depth=1)
+
+
+def test_paper_actions_fit_the_default_limits_and_a_roomy_box():
+    from aptkt.actions import PAPER_ACTIONS
+
+    box = Placement("o", 0.0, 0.0, 0.0, (-0.1, -0.1, -0.01), (0.1, 0.1, 0.1))
+    for action in PAPER_ACTIONS.values():
+        check_action_limits(action, SafetyLimits(), [box])
+    with pytest.raises(SafetyLimitError, match="action S1: .*box of object o"):
+        small = Placement("o", 0.0, 0.0, 0.0, (-0.01, -0.01, -0.01), (0.01, 0.01, 0.1))
+        check_action_limits(PAPER_ACTIONS["S1"], SafetyLimits(), [small])
