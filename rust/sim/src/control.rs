@@ -169,7 +169,7 @@ pub fn run_ticks(
     ctl: &ForceControl,
     phase: &mut Phase,
     st: &mut MechState,
-    segs: &mut Vec<Segment>,
+    segs: &mut [Segment],
     queue: &mut LeanQueue,
     chunk: &mut Chunk,
     samples: &mut usize,

@@ -394,10 +394,10 @@ fn guarded_move_stops_at_the_first_tick_over_the_threshold() {
             window_ns: 250_000_000,
             w_end_ns: i64::MIN,
         };
-        let (mut chunk, mut samples) = (Chunk::default(), 0);
+        let mut chunk = Chunk::default();
         let mut status = Status::Flush;
         while status == Status::Flush {
-            samples = 0;
+            let mut samples = 0;
             (status, _) = run_ticks(
                 &m,
                 &sensors,
