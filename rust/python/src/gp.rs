@@ -131,13 +131,13 @@ pub struct FitSettings {
 #[pymethods]
 impl FitSettings {
     #[new]
+    // No defaults here but the hyper-priors': aptkt.gp.DEFAULTS is the one source of the
+    // settings' defaults, and LaplaceGPC passes every one of them.
     #[pyo3(signature = (
-        *, modalities, signal_variance = 1.0, length_scales, weights,
-        free_signal_variance = true, free_length_scales = true, free_weights = true,
-        free_lambda = false, signal_variance_bounds = (1e-5, 1e5),
-        length_scale_bounds = (1e-5, 1e5), optimize = true, n_restarts = 2, seed = 0,
-        max_iter = 200, newton_max_iter = 100, newton_tol = 1e-10, max_jitter = 1e-6,
-        approximation = "erf".to_string(), n_threads = 0, prior_signal_variance = None,
+        *, modalities, signal_variance, length_scales, weights, free_signal_variance,
+        free_length_scales, free_weights, free_lambda, signal_variance_bounds,
+        length_scale_bounds, optimize, n_restarts, seed, max_iter, newton_max_iter, newton_tol,
+        max_jitter, approximation, n_threads, prior_signal_variance = None,
         prior_length_scale = None
     ))]
     #[allow(clippy::too_many_arguments)]
