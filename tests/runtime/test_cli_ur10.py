@@ -284,11 +284,17 @@ def test_a_signal_mid_press_retracts_and_keeps_the_data(cell, sig, code, word):
         "-o", str(data), "--no-progress",
     ]  # fmt: skip
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2] / "python")}
+    # In a process group of its own, signalled as a terminal's Ctrl-C or a job's end is: the
+    # whole group (the control client's process must not take the signal and leave the arm).
     proc = subprocess.Popen(
-        [sys.executable, "-m", "aptkt.cli", *argv], env=env, stderr=subprocess.PIPE, text=True
+        [sys.executable, "-m", "aptkt.cli", *argv],
+        env=env,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
     )
     # In the middle of the second press (block_b, trial 0), after block_a's trial completed.
-    watcher = on_press(lb, 2, lambda: proc.send_signal(sig))
+    watcher = on_press(lb, 2, lambda: os.killpg(proc.pid, sig))
     _, err = proc.communicate(timeout=180)
     watcher.join(timeout=5.0)
     assert proc.returncode == code, (err, lb.state()["text_log"][-15:])
@@ -331,9 +337,10 @@ def test_a_signal_mid_press_during_learn_retracts_and_keeps_the_data(
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
+        start_new_session=True,  # signalled as a group, as in the collect test
     )
     # In the middle of the second press of the initial round, after the first completed.
-    watcher = on_press(lb, 2, lambda: proc.send_signal(sig))
+    watcher = on_press(lb, 2, lambda: os.killpg(proc.pid, sig))
     _, err = proc.communicate(timeout=180)
     watcher.join(timeout=5.0)
     assert proc.returncode == code, (err, lb.state()["text_log"][-15:])
