@@ -433,20 +433,45 @@ pub struct KernelEval {
 
 impl KernelEval {
     pub fn new(dist: &PairDistances, h: &Hyper) -> Self {
-        let n = dist.n;
-        let parts: Vec<Mat<f64>> = dist
-            .per_modality
-            .iter()
-            .zip(h.length_scales.iter())
-            .map(|(d, &l)| rbf_from_sq_distances(d, l))
-            .collect();
-        let mut k = Mat::<f64>::zeros(n, n);
-        combine_parts(&mut k, &parts, h, &dist.coupling(h), &dist.task, &dist.task);
-        KernelEval {
-            k,
-            parts,
+        let mut eval = KernelEval {
+            k: Mat::<f64>::zeros(0, 0),
+            parts: Vec::new(),
             jitter: 0.0,
+        };
+        eval.recompute(dist, h);
+        eval
+    }
+
+    /// The kernel at other hyper-parameters, in the same buffers (an optimiser evaluates
+    /// many; a fresh n × n allocation each time costs page faults and zeroing).
+    pub fn recompute(&mut self, dist: &PairDistances, h: &Hyper) {
+        let n = dist.n;
+        let fresh = || Mat::<f64>::zeros(n, n);
+        self.parts.truncate(dist.per_modality.len());
+        self.parts.resize_with(dist.per_modality.len(), fresh);
+        for ((part, d), &l) in self
+            .parts
+            .iter_mut()
+            .zip(&dist.per_modality)
+            .zip(&h.length_scales)
+        {
+            if part.nrows() != n || part.ncols() != n {
+                *part = fresh();
+            }
+            rbf_into(part, d, l);
         }
+        if self.k.nrows() != n || self.k.ncols() != n {
+            self.k = fresh();
+        }
+        combine_parts(
+            &mut self.k,
+            &self.parts,
+            h,
+            &dist.coupling(h),
+            &dist.task,
+            &dist.task,
+        );
+        self.jitter = 0.0;
     }
 
     pub fn with_jitter(mut self, relative: f64, signal_variance: f64) -> Self {
@@ -515,14 +540,21 @@ impl KernelEval {
 
 /// `exp(-D / (2 ℓ²))` elementwise.
 pub fn rbf_from_sq_distances(d: &Mat<f64>, length_scale: f64) -> Mat<f64> {
+    let mut out = Mat::<f64>::zeros(d.nrows(), d.ncols());
+    rbf_into(&mut out, d, length_scale);
+    out
+}
+
+/// `out = exp(-D / (2 ℓ²))` elementwise, `out` of D's shape.
+fn rbf_into(out: &mut Mat<f64>, d: &Mat<f64>, length_scale: f64) {
     let c = -0.5 / (length_scale * length_scale);
-    let mut out = d.clone();
     for j in 0..out.ncols() {
         let col = out.col_as_slice_mut(j);
-        col.iter_mut().for_each(|v| *v *= c);
+        for (o, v) in col.iter_mut().zip(d.col_as_slice(j)) {
+            *o = v * c;
+        }
         exp_nonpositive_in_place(col);
     }
-    out
 }
 
 /// `out[i, j] = σ² Σ_m γ_m parts_m[i, j] · B[row_task[i], col_task[j]]`.

@@ -9,7 +9,7 @@ use faer::{Mat, MatRef};
 use crate::error::{GpError, GpResult};
 use crate::kernel::{Hyper, KernelEval, Layout, PairDistances};
 use crate::likelihood::{log_sigmoid, sigmoid};
-use crate::linalg;
+use crate::linalg::{self, InverseScratch};
 
 /// Newton mode-finding settings.
 #[derive(Debug, Clone)]
@@ -242,6 +242,7 @@ pub fn find_mode_in(
 
 /// Mode-finding with the jitter policy: if `B` cannot be factorised, add
 /// `jitter · σ²` to K's diagonal for jitter = 1e-10, 1e-8, ... up to `max_jitter`, then fail.
+/// `factor_buffer` (any size; resized if needed) receives B's factor, see [`find_mode_in`].
 pub fn find_mode_with_jitter(
     eval: KernelEval,
     signal_variance: f64,
@@ -249,6 +250,7 @@ pub fn find_mode_with_jitter(
     warm_a: Option<&[f64]>,
     cfg: &NewtonConfig,
     max_jitter: f64,
+    factor_buffer: Mat<f64>,
 ) -> GpResult<(KernelEval, Mode)> {
     if let Some(bad) = eval
         .k
@@ -262,8 +264,10 @@ pub fn find_mode_with_jitter(
     }
     let mut eval = eval;
     let mut jitter = 0.0;
+    let mut buffer = Some(factor_buffer);
     loop {
-        match find_mode(eval.k.as_ref(), y, warm_a, cfg) {
+        let buffer = buffer.take().unwrap_or_else(|| Mat::<f64>::zeros(0, 0));
+        match find_mode_in(eval.k.as_ref(), y, warm_a, cfg, buffer) {
             Ok(mode) => return Ok((eval, mode)),
             Err(ModeFailure::Cancelled) => return Err(GpError::Cancelled),
             Err(ModeFailure::Pivot(pivot)) => {
@@ -287,9 +291,22 @@ pub fn lml_gradient(
     eval: &KernelEval,
     mode: &Mode,
 ) -> Vec<f64> {
+    lml_gradient_in(layout, h, dist, eval, mode, &mut InverseScratch::default())
+}
+
+/// As [`lml_gradient`], with the n × n working matrices kept in `scratch` for the next call.
+pub fn lml_gradient_in(
+    layout: &Layout,
+    h: &Hyper,
+    dist: &PairDistances,
+    eval: &KernelEval,
+    mode: &Mode,
+    scratch: &mut InverseScratch,
+) -> Vec<f64> {
     let n = mode.f.len();
     let k = &eval.k;
-    let mut z = linalg::inverse_from_cholesky(mode.l.as_ref());
+    linalg::inverse_from_cholesky_in(mode.l.as_ref(), scratch);
+    let z = &mut scratch.out;
     // s2 = ∂LML/∂f̂ = -½ diag(Σ) ∘ ∂W/∂f, with Σ = (K⁻¹ + W)⁻¹ and, for the logistic,
     // ∂W_ii/∂f_i = π(1-π)(1-2π) (= -∇³ log p; GPML writes this factor as ∇³ log p).
     // Since W½ K W½ = B - I, Σ = W^-½ (I - B⁻¹) W^-½: diag(Σ)_j = (1 - B⁻¹_jj) / w_j, and w_j
@@ -310,7 +327,7 @@ pub fn lml_gradient(
     }
     // ∂LML/∂θ = ½ aᵀ C a - ½ tr(Z C) + s2ᵀ (b - K Z b), b = C ∇log p = C a at the mode, with
     // C = ∂K/∂θ; the first two terms are Σ_ij G_ij C_ij with G = ½ (a aᵀ - Z), formed on the fly.
-    let (s1, bs) = eval.contract_gradients(layout, h, dist, &z, &mode.a);
+    let (s1, bs) = eval.contract_gradients(layout, h, dist, z, &mode.a);
     let mut zb = vec![0.0; n];
     let mut kzb = vec![0.0; n];
     s1.iter()
@@ -495,7 +512,15 @@ mod tests {
             parts: vec![],
             jitter: 0.0,
         };
-        let r = find_mode_with_jitter(ev, 1.0, &[1.0, -1.0], None, &NewtonConfig::default(), 1e-6);
+        let r = find_mode_with_jitter(
+            ev,
+            1.0,
+            &[1.0, -1.0],
+            None,
+            &NewtonConfig::default(),
+            1e-6,
+            Mat::zeros(0, 0),
+        );
         assert!(
             matches!(r, Err(GpError::NotPositiveDefinite { .. })),
             "{:?}",
@@ -529,6 +554,7 @@ mod tests {
                 reuse_factorisation: true,
             },
             1e-6,
+            Mat::zeros(0, 0),
         );
         match r {
             Ok((ev, _)) => assert!(ev.jitter > 0.0 && ev.jitter <= 1e-6),
