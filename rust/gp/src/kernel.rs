@@ -501,25 +501,36 @@ impl KernelEval {
         let mut s1 = vec![0.0; p_len];
         let mut b = vec![vec![0.0; n]; p_len];
         let mut c = vec![0.0; p_len];
+        let mut bj = vec![0.0; p_len];
         let inv_l2: Vec<f64> = h.length_scales.iter().map(|l| 1.0 / (l * l)).collect();
         let sf2 = h.signal_variance;
         let coupling = dist.coupling(h);
         let n_lambdas = layout.n_lambdas;
+        // Every C_p, Z and G are symmetric: one triangle (i ≥ j) is visited, an off-diagonal
+        // element counting twice in s1 and reaching b through both (i, j) and (j, i).
         for j in 0..n {
             let vj = v[j];
             let tj = dist.task[j];
-            for i in 0..n {
+            let zj = z.col_as_slice(j);
+            let parts_j: Vec<&[f64]> = self.parts.iter().map(|p| p.col_as_slice(j)).collect();
+            let dist_j: Vec<&[f64]> = dist
+                .per_modality
+                .iter()
+                .map(|d| d.col_as_slice(j))
+                .collect();
+            bj.iter_mut().for_each(|x| *x = 0.0);
+            for i in j..n {
                 let ti = dist.task[i];
                 let mask = coupling.get(ti, tj);
                 let mut unit = 0.0;
                 for m in 0..n_mod {
-                    unit += h.weights[m] * self.parts[m][(i, j)];
+                    unit += h.weights[m] * parts_j[m][i];
                 }
                 c[Layout::SIGNAL] = sf2 * unit * mask;
                 for m in 0..n_mod {
-                    let km = self.parts[m][(i, j)];
+                    let km = parts_j[m][i];
                     c[layout.length_scale(m)] =
-                        sf2 * h.weights[m] * km * dist.per_modality[m][(i, j)] * inv_l2[m] * mask;
+                        sf2 * h.weights[m] * km * dist_j[m][i] * inv_l2[m] * mask;
                     if let Some(w) = layout.weight(m) {
                         c[w] = sf2 * h.weights[m] * (km - unit) * mask;
                     }
@@ -527,11 +538,23 @@ impl KernelEval {
                 for s in 0..n_lambdas {
                     c[layout.len() - n_lambdas + s] = sf2 * unit * coupling.derivative(s, ti, tj);
                 }
-                let gij = 0.5 * (v[i] * vj - z[(i, j)]);
-                for p in 0..p_len {
-                    s1[p] += gij * c[p];
-                    b[p][i] += c[p] * vj;
+                let vi = v[i];
+                let gij = 0.5 * (vi * vj - zj[i]);
+                if i == j {
+                    for p in 0..p_len {
+                        s1[p] += gij * c[p];
+                        bj[p] += c[p] * vj;
+                    }
+                } else {
+                    for p in 0..p_len {
+                        s1[p] += 2.0 * gij * c[p];
+                        b[p][i] += c[p] * vj;
+                        bj[p] += c[p] * vi;
+                    }
                 }
+            }
+            for p in 0..p_len {
+                b[p][j] += bj[p];
             }
         }
         (s1, b)
