@@ -223,7 +223,7 @@ fn samples(frames: &[Frames]) -> Vec<(i64, i64, Vec<f64>)> {
             })
         })
         .collect();
-    v.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
+    v.sort_by_key(|a| (a.0, a.1));
     v
 }
 
