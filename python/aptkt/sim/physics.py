@@ -51,6 +51,8 @@ _FLIP = np.diag([1.0, -1.0, -1.0])
 #: Random words per sample: 10 → 10 normals (force 3, acc 3, temp 2, proximity 1, spare 1),
 #: 1 uniform (arrival jitter), 1 spare.
 _NOISE_SLOTS = 12
+#: Key of (cell, sample time) pairs in one int64: sample times stay far below 2^52 ns (52 days).
+_KEY = np.int64(1 << 52)
 
 
 @dataclass(frozen=True)
@@ -115,16 +117,33 @@ class ForceTrace:
         """Total force at each tick: every cell's newest sample at or before the tick (``latest``
         holds each cell's force before this trace)."""
         ticks_ns = np.asarray(ticks_ns, dtype=np.int64)
+        n_cells = latest.shape[0]
+        if not self.force.size:
+            values = np.broadcast_to(latest[:, None], (n_cells, ticks_ns.shape[0]))
+        else:
+            values = self._values_at(ticks_ns, latest)
         total = np.zeros(ticks_ns.shape[0])
-        for c in range(latest.shape[0]):
-            m = self.cell_index == c
-            t, f = self.t_sample_ns[m], self.force[m]
-            if not f.size:
-                total += latest[c]
-                continue
-            idx = np.searchsorted(t, ticks_ns, side="right") - 1
-            total += np.where(idx >= 0, f[np.maximum(idx, 0)], latest[c])
+        for row in values:  # cell by cell, in the order the robot's sensing adds them
+            total += row
         return total
+
+    def _values_at(self, ticks_ns: np.ndarray, latest: np.ndarray) -> np.ndarray:
+        """(cells, ticks): each cell's newest force at or before each tick."""
+        n_cells = latest.shape[0]
+        # One search for every (cell, tick): the trace is cell-major and time-ordered within a
+        # cell, so (cell, time) pairs sort as one key.
+        cells = np.arange(n_cells)
+        starts = np.searchsorted(self.cell_index, cells, side="left")
+        idx = (
+            np.searchsorted(
+                self.cell_index * _KEY + self.t_sample_ns,
+                (cells[:, None] * _KEY + ticks_ns[None, :]).ravel(),
+                side="right",
+            ).reshape(n_cells, -1)
+            - 1
+        )
+        found = idx >= starts[:, None]
+        return np.where(found, self.force[np.maximum(idx, 0)], latest[:, None])
 
 
 @dataclass
@@ -244,9 +263,12 @@ class ContactPhysics:
         self._noise = CounterStream(_child(noise_seq, 2), _NOISE_SLOTS)
         self._sensor_xy = geometry.sensor_positions  # (C, 3, 2)
         self._centres = geometry.cell_centres  # (C, 2)
-        self._axes = np.stack(
-            [_FLIP @ imperfections.mount_rotation[c] for c in range(n)]
-        )  # cell axes in base
+        # Cell axes in base: _FLIP @ R for each cell, written as the row signs it is (a 3 × 3
+        # product per cell would wake BLAS's threads, which then spin for a while).
+        self._axes = (
+            np.asarray(imperfections.mount_rotation, dtype=np.float64)[:n]
+            * np.diag(_FLIP)[None, :, None]
+        )
         self.cell_ids = np.asarray(geometry.cell_ids, dtype=np.int64)
         self._latency_ns = int(round(k.link_latency * 1e9))
         self._gain_drift = np.asarray(

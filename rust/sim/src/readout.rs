@@ -15,7 +15,7 @@ use crate::philox::CounterStream;
 use crate::sensors::Sensors;
 use crate::slip::{run as slip_run, SlipCell, SlipParams};
 use crate::texture::{acceleration, Texture, TextureResponse};
-use crate::thermal::{heat, System};
+use crate::thermal::{heat_at, System};
 use crate::SimError;
 
 /// The per-trial constants of the readings (patch, object and trial).
@@ -311,14 +311,19 @@ impl Physics {
         if chunk.cells.iter().any(|&c| c < 0 || c as usize >= n) {
             return Err(SimError::invalid("finish: cell index out of range"));
         }
-        let config: Vec<usize> =
-            keys.iter()
-                .map(|k| {
-                    thermal.index.get(k).copied().ok_or_else(|| {
-                        SimError::invalid("finish: a thermal configuration is missing")
-                    })
-                })
-                .collect::<Result<_, _>>()?;
+        // Configurations come in runs: look each run's up once.
+        let mut config = Vec::with_capacity(m);
+        let mut last: Option<((i64, i64), usize)> = None;
+        for k in keys {
+            let i = match last {
+                Some((key, i)) if key == *k => i,
+                _ => *thermal.index.get(k).ok_or_else(|| {
+                    SimError::invalid("finish: a thermal configuration is missing")
+                })?,
+            };
+            last = Some((*k, i));
+            config.push(i);
+        }
         if m == 0 {
             return Ok((Frames::default(), Trace::default()));
         }
@@ -346,7 +351,14 @@ impl Physics {
         let speed: Vec<f64> = chunk.vel.iter().map(|v| v[0].hypot(v[1])).collect();
 
         // --- heat exchange, per cell and piecewise in (contact fraction, sliding speed)
-        let temps = heat(
+        let emitted: Option<Vec<bool>> = (!detail).then(|| {
+            let mut w = vec![false; m];
+            for &(_, _, b) in &blocks {
+                w[b - 1] = true;
+            }
+            w
+        });
+        let temps = heat_at(
             &thermal.systems,
             &thermal.sqrt_c,
             &chunk.cells,
@@ -354,6 +366,7 @@ impl Physics {
             &config,
             &mut st.thermal,
             &mut st.thermal_t,
+            emitted.as_deref(),
         )?;
 
         // --- stick-slip needs every sample (it has state); texture only the emitted ones
