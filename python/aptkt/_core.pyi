@@ -172,6 +172,10 @@ _Chunk = tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, ND
 _Frames = tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]
 _Trace = tuple[NDArray, NDArray, NDArray]
 
+class SimThermal:
+    def __init__(self, nodes: int) -> None: ...
+    def __len__(self) -> int: ...
+
 class SimContact:
     def __init__(
         self,
@@ -199,7 +203,9 @@ class SimContact:
         latency_ns: int,
         jitter_s: float,
         readout: dict[str, Any],
-        systems: Callable[[int, int], tuple[NDArray, NDArray, NDArray]],
+        thermal: SimThermal,
+        make: Callable[[int, int], tuple[NDArray, NDArray, NDArray, NDArray, NDArray]],
+        sources: tuple[float, float, float],
     ) -> None: ...
     def mechanics(
         self,

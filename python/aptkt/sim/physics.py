@@ -31,7 +31,7 @@ from aptkt.sim.texture import (
     texture_field,
     waviness_waves,
 )
-from aptkt.sim.thermal import CONTACT_STEPS, SPEED_STEP, CellThermal
+from aptkt.sim.thermal import CONTACT_STEPS, SPEED_STEP, CellThermal, ThermalNetwork
 from aptkt.sim.trial import TrialConditions
 
 __all__ = [
@@ -322,8 +322,9 @@ class ContactPhysics:
             "sqrt_c": np.sqrt(self.thermal.net.cap).tolist(),
         }
         #: The compiled core of this trial: mechanics, force-control ticks and every reading
-        #: (heat, stick-slip, texture, noise); it asks for the thermal solution operators of
-        #: each (contact, speed) configuration it meets (made and cached by ``CellThermal``).
+        #: (heat, stick-slip, texture, noise). The thermal solution operators of each
+        #: (contact, speed) configuration it meets come from the object's network: made by
+        #: ``ThermalNetwork.system`` and kept, converted, in ``ThermalNetwork.core``.
         self.core = SimContact(
             np.ascontiguousarray(imperfections.clock_rate, dtype=np.float64),
             np.ascontiguousarray(imperfections.clock_phase, dtype=np.float64),
@@ -349,8 +350,10 @@ class ContactPhysics:
             self._latency_ns,
             float(k.link_jitter),
             readout,
+            self.thermal.net.core,
             # Not a bound method of self: the core must not keep this object alive.
-            functools.partial(_thermal_system, self.thermal),
+            functools.partial(_object_system, self.thermal.net),
+            (float(k.heater_power), self.thermal.ambient, self.thermal.object_temperature),
         )
 
     # ---------------------------------------------------------------------------------------
@@ -450,11 +453,11 @@ def _runs(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return first, last, cells[first]
 
 
-def _thermal_system(thermal: CellThermal, phi_bin: int, speed_bin: int):
+def _object_system(net: ThermalNetwork, phi_bin: int, speed_bin: int):
     """The solution operator of one (contact, speed) configuration for the core: eigenvectors,
-    eigenvalues and the trial's steady state (cached per object and per trial)."""
-    sys_ = thermal.net.system(phi_bin, speed_bin)
-    return sys_.u, sys_.mu, thermal._t_ss_cached(phi_bin, speed_bin, sys_)
+    eigenvalues and the steady state per watt of heater, per kelvin of room and of object."""
+    x = net.system(phi_bin, speed_bin)
+    return x.u, x.mu, x.ss_heater, x.ss_ambient, x.ss_object
 
 
 def _child(seq: np.random.SeedSequence, n: int) -> np.random.SeedSequence:

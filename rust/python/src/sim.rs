@@ -4,12 +4,15 @@
 //! the per-trial state stays in the Python `PhysicsState`, read once per call into the core's
 //! `TrialState` and written back in place.
 
-use std::sync::Mutex;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 
 use aptkt_sim::control::{run_ticks, ForceControl, LeanQueue, Phase, Status};
 use aptkt_sim::mechanics::{Cells, Chunk, Law, MechState, Mechanics, Relaxation, Segment, Shape};
 use aptkt_sim::philox::CounterStream;
-use aptkt_sim::readout::{Frames, Physics, Readout, ThermalSystems, Trace, TrialState};
+use aptkt_sim::readout::{
+    Frames, ObjectSystem, Physics, Readout, ThermalSystems, Trace, TrialState,
+};
 use aptkt_sim::sensors::{Sensors, NORMALS};
 use aptkt_sim::slip::{run as slip_run, SlipCell, SlipParams};
 use aptkt_sim::texture::{acceleration, Texture, TextureResponse};
@@ -306,14 +309,50 @@ fn slip_params(c: [f64; 11]) -> SlipParams {
     }
 }
 
+/// The thermal solution operators of one object (`ThermalNetwork`), by (contact step, speed
+/// step), shared by the object's trials in this process: each is made once (on the Python
+/// side, an eigen-decomposition) and converted once.
+#[pyclass(module = "aptkt._core", frozen)]
+pub struct SimThermal {
+    nodes: usize,
+    systems: Mutex<HashMap<(i64, i64), Arc<ObjectSystem>>>,
+}
+
+#[pymethods]
+impl SimThermal {
+    #[new]
+    fn new(nodes: usize) -> PyResult<Self> {
+        if nodes < 2 {
+            return Err(PyValueError::new_err("a thermal network has >= 2 nodes"));
+        }
+        Ok(Self {
+            nodes,
+            systems: Mutex::new(HashMap::new()),
+        })
+    }
+
+    fn __len__(&self) -> PyResult<usize> {
+        Ok(lock(&self.systems)?.len())
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> PyResult<std::sync::MutexGuard<'_, T>> {
+    m.lock()
+        .map_err(|_| PyValueError::new_err("thermal systems: poisoned lock"))
+}
+
 /// The physics of one object in one trial: mechanics, force loop, heat, stick-slip, texture,
-/// noise and readings. The thermal solution operators come from `systems(phi_bin, v_bin) ->
-/// (u, mu, t_ss)` the first time a configuration is met (made and cached on the Python side).
+/// noise and readings. The thermal solution operators come from the object's `SimThermal`;
+/// those it lacks from `make(phi_bin, v_bin) -> (u, mu, ss_heater, ss_ambient, ss_object)`
+/// the first time a configuration is met in this process.
 #[pyclass(module = "aptkt._core", frozen)]
 pub struct SimContact {
     physics: Physics,
     thermal: Mutex<ThermalSystems>,
-    systems: Py<PyAny>,
+    shared: Py<SimThermal>,
+    make: Py<PyAny>,
+    /// heater power (W), room and object temperature (°C)
+    sources: (f64, f64, f64),
 }
 
 impl SimContact {
@@ -325,27 +364,43 @@ impl SimContact {
     fn thermal_keys(&self, py: Python<'_>, chunk: &Chunk) -> PyResult<Vec<(i64, i64)>> {
         let keys = self.physics.thermal_keys(chunk);
         let missing = self.lock()?.missing(&keys);
+        let shared = self.shared.get();
         for key in missing {
-            let got = self.systems.bind(py).call1(key)?;
-            let (u, mu, t_ss): (
-                PyReadonlyArray2<'_, f64>,
-                PyReadonlyArray1<'_, f64>,
-                PyReadonlyArray1<'_, f64>,
-            ) = got.extract()?;
-            let system = System {
-                u: flat(u.as_array()),
-                mu: vec1(&mu),
-                t_ss: vec1(&t_ss),
+            let known = lock(&shared.systems)?.get(&key).cloned();
+            let object = match known {
+                Some(o) => o,
+                None => {
+                    let got = self.make.bind(py).call1(key)?;
+                    let (u, mu, ss_h, ss_a, ss_o): (
+                        PyReadonlyArray2<'_, f64>,
+                        PyReadonlyArray1<'_, f64>,
+                        PyReadonlyArray1<'_, f64>,
+                        PyReadonlyArray1<'_, f64>,
+                        PyReadonlyArray1<'_, f64>,
+                    ) = got.extract()?;
+                    let o = ObjectSystem {
+                        u: flat(u.as_array()),
+                        mu: vec1(&mu),
+                        ss_heater: vec1(&ss_h),
+                        ss_ambient: vec1(&ss_a),
+                        ss_object: vec1(&ss_o),
+                    };
+                    o.check(shared.nodes).map_err(sim_err)?;
+                    let o = Arc::new(o);
+                    lock(&shared.systems)?.insert(key, o.clone());
+                    o
+                }
             };
-            self.lock()?.insert(key, system).map_err(sim_err)?;
+            let (hp, amb, obj) = self.sources;
+            self.lock()?
+                .insert(key, object.for_trial(hp, amb, obj))
+                .map_err(sim_err)?;
         }
         Ok(keys)
     }
 
     fn lock(&self) -> PyResult<std::sync::MutexGuard<'_, ThermalSystems>> {
-        self.thermal
-            .lock()
-            .map_err(|_| PyValueError::new_err("thermal systems: poisoned lock"))
+        lock(&self.thermal)
     }
 }
 
@@ -396,7 +451,7 @@ impl SimContact {
     #[pyo3(signature = (clock_rate, clock_phase, sensor_height, sensor_xy, centre, rotation,
         surface_z, tilt, crown_radius, waves, size, law_delta, law_sigma, skin_stiffness,
         relax_weights, relax_times, sensor_area, noise_key, force_gain, force_offset,
-        force_noise, latency_ns, jitter_s, readout, systems))]
+        force_noise, latency_ns, jitter_s, readout, thermal, make, sources))]
     fn new(
         clock_rate: PyReadonlyArray1<'_, f64>,
         clock_phase: PyReadonlyArray1<'_, f64>,
@@ -422,7 +477,9 @@ impl SimContact {
         latency_ns: i64,
         jitter_s: f64,
         readout: ReadoutArgs,
-        systems: Py<PyAny>,
+        thermal: Py<SimThermal>,
+        make: Py<PyAny>,
+        sources: (f64, f64, f64),
     ) -> PyResult<Self> {
         let xy = sensor_xy.as_array();
         if xy.shape()[1..] != [3, 2] {
@@ -497,11 +554,18 @@ impl SimContact {
             },
         )
         .map_err(sim_err)?;
-        let thermal = ThermalSystems::new(r.sqrt_c).map_err(sim_err)?;
+        let own = ThermalSystems::new(r.sqrt_c).map_err(sim_err)?;
+        if own.nodes() != thermal.get().nodes {
+            return Err(PyValueError::new_err(
+                "sqrt_c must have one entry per node of the thermal network",
+            ));
+        }
         Ok(Self {
             physics,
-            thermal: Mutex::new(thermal),
-            systems,
+            thermal: Mutex::new(own),
+            shared: thermal,
+            make,
+            sources,
         })
     }
 
@@ -925,6 +989,7 @@ fn sim_slip<'py>(
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<SimContact>()?;
+    m.add_class::<SimThermal>()?;
     m.add_function(wrap_pyfunction!(sim_heat, m)?)?;
     m.add_function(wrap_pyfunction!(sim_texture, m)?)?;
     m.add_function(wrap_pyfunction!(sim_slip, m)?)?;

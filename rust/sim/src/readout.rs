@@ -78,6 +78,49 @@ pub struct TrialState {
     pub slip: Vec<SlipCell>,
 }
 
+/// One (contact, speed) configuration's operator for an object, before a trial's temperatures:
+/// `u` (N×N row-major), `mu` (N) and the steady state per watt of heater power, per kelvin of
+/// room and per kelvin of object temperature (the steady state is linear in them).
+#[derive(Clone, Debug)]
+pub struct ObjectSystem {
+    pub u: Vec<f64>,
+    pub mu: Vec<f64>,
+    pub ss_heater: Vec<f64>,
+    pub ss_ambient: Vec<f64>,
+    pub ss_object: Vec<f64>,
+}
+
+impl ObjectSystem {
+    /// The operator under a trial's heater power (W), room and object temperatures (°C).
+    pub fn for_trial(&self, heater_power: f64, ambient: f64, object: f64) -> System {
+        let t_ss = (0..self.mu.len())
+            .map(|i| {
+                (heater_power * self.ss_heater[i] + ambient * self.ss_ambient[i])
+                    + object * self.ss_object[i]
+            })
+            .collect();
+        System {
+            u: self.u.clone(),
+            mu: self.mu.clone(),
+            t_ss,
+        }
+    }
+
+    pub fn check(&self, nodes: usize) -> Result<(), SimError> {
+        let n = nodes;
+        if self.u.len() != n * n
+            || [&self.mu, &self.ss_heater, &self.ss_ambient, &self.ss_object]
+                .iter()
+                .any(|v| v.len() != n)
+        {
+            return Err(SimError::invalid(
+                "thermal: a system must have the network's size",
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// The thermal solution operators met so far, by (contact step, speed step). They are made
 /// outside (an eigen-decomposition each) and added when a chunk needs one not yet here.
 #[derive(Clone, Debug)]
