@@ -6,10 +6,12 @@ transfer, positives-only sources, normalised relatedness with eps_neg 0.4, every
 prior's feature space, plain ML-II). Both readings are options of the learner, so the runs
 differ by the method alone (same data, groups, pool orders, exploration draws).
 
-    python benches/transfer_readings.py OUT new|old DATA.h5 [--repetitions 20]
+    python benches/transfer_readings.py OUT new|old DATA.h5 [--repetitions 20] [--cutoff paper]
 
 DATA.h5: a data set of all 15 objects and 7 actions (``aptkt dataset generate -n 20``). The
-numbers in docs/experiments.md ("The method's choices, measured") come from this script.
+numbers in docs/experiments.md ("The method's choices, measured" and "The evidence cut-off")
+come from this script. ``--cutoff paper`` runs the "new" reading with Eq. 3's ε_neg alone instead
+of the evidence test (LearnerConfig.cutoff).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ def main() -> None:
     p.add_argument("--repetitions", type=int, default=20)
     p.add_argument("--figures", default="fig7,fig9,fig11")
     p.add_argument("-j", "--jobs", type=int, default=2)
+    p.add_argument("--cutoff", choices=("evidence", "paper"), default=None)
     args = p.parse_args()
     scale = Scale.full().with_(
         name="mid",
@@ -42,9 +45,20 @@ def main() -> None:
         prior_counts=(3, 10),
         fig11_trials=3,
     )
+    if args.cutoff is not None:
+        methods = dict(base.METHODS)
+        for k, v in methods.items():
+            if v.get("transfer") in ("paper", "multi"):
+                methods[k] = {**v, "cutoff": args.cutoff}
+        base.METHODS = methods
     if args.reading == "old":
         scale = scale.with_(eps_neg=0.4)
-        old = {"source": "positives", "relatedness": "normalised", "feature_space": "prior"}
+        old = {
+            "source": "positives",
+            "relatedness": "normalised",
+            "feature_space": "prior",
+            "cutoff": "paper",
+        }
         methods = dict(base.METHODS)
         methods["baseline"] = {"transfer": "control"}
         for k in ("APTKT", "APTKT+aux", "APTKT-multi", base.STRESS_CUTOFF, base.STRESS_NO_CUTOFF):

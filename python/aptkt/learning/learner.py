@@ -154,6 +154,14 @@ class ActionLearner:
             X, np.where(mine, 1.0, -1.0), transfer_lambda=transfer_lambda, name=old_object
         )
 
+    def _evidence(self, X_prior: np.ndarray, positive: np.ndarray) -> Callable[[str, float], float]:
+        """The log Bayes factor of a transfer into one new object's classifier (``positive``:
+        its observations among every new one), judged in the prior's space by the old model."""
+        prior = self.prior
+        assert prior is not None  # only called when transferring
+        source = self.config.source
+        return lambda old, lam: prior.transfer_evidence(X_prior, positive, old, lam, source)
+
     # -- model -------------------------------------------------------------------------------
     def update(self, step: int) -> None:
         """Refit this action's model on everything observed so far (weights, λ, transfer)."""
@@ -176,6 +184,10 @@ class ActionLearner:
                     cfg.transfer,
                     choice=cfg.source_choice,
                     forced_lambda=cfg.forced_lambda,
+                    evidence=self._evidence(X_prior, obs.objects == obj)
+                    if cfg.cutoff == "evidence"
+                    else None,
+                    evidence_margin=cfg.evidence_margin,
                 )
                 self.decisions[obj] = decision
         pipeline = self._pipeline(any(d.transfers for d in self.decisions.values()))
