@@ -35,6 +35,8 @@ def main() -> None:
     p.add_argument("--figures", default="fig7,fig9,fig11")
     p.add_argument("-j", "--jobs", type=int, default=2)
     p.add_argument("--cutoff", choices=("evidence", "paper"), default=None)
+    p.add_argument("--evidence-margin", default=None, help="a number, or 'lnN' (None)")
+    p.add_argument("--fig11-trials", type=int, default=3)
     args = p.parse_args()
     scale = Scale.full().with_(
         name="mid",
@@ -43,13 +45,18 @@ def main() -> None:
         groups=3,
         trials=2,
         prior_counts=(3, 10),
-        fig11_trials=3,
+        fig11_trials=args.fig11_trials,
     )
-    if args.cutoff is not None:
+    if args.cutoff is not None or args.evidence_margin is not None:
+        over: dict = {} if args.cutoff is None else {"cutoff": args.cutoff}
+        if args.evidence_margin is not None:
+            m = args.evidence_margin
+            over["evidence_margin"] = None if m == "lnN" else float(m)
         methods = dict(base.METHODS)
         for k, v in methods.items():
-            if v.get("transfer") in ("paper", "multi"):
-                methods[k] = {**v, "cutoff": args.cutoff}
+            # The stress test without a cut-off stays without one.
+            if v.get("transfer") in ("paper", "multi") and k != base.STRESS_NO_CUTOFF:
+                methods[k] = {**v, **over}
         base.METHODS = methods
     if args.reading == "old":
         scale = scale.with_(eps_neg=0.4)

@@ -374,6 +374,20 @@ def test_cutoff_option_validates_and_round_trips():
         LearnerConfig(cutoff="support")
     with pytest.raises(ValueError, match="evidence_margin"):
         LearnerConfig(evidence_margin=float("nan"))
+    lnn = LearnerConfig(evidence_margin=None)
+    assert LearnerConfig.from_dict(lnn.to_dict()) == lnn
+
+
+def test_evidence_margin_none_is_ln_of_the_number_of_old_objects(world):
+    """None: prior odds 1/N_old of "like old object i" against "like none of them"."""
+    learner, _ = _run(world, transfer="paper", budget=0, evidence_margin=None)
+    for lrn in learner.learners.values():
+        assert lrn._evidence_margin() == pytest.approx(np.log(3))
+        for d in lrn.decisions.values():
+            for old, log_bf in d.evidence:
+                assert (old in d.sources) == (log_bf > np.log(3))
+    fixed, _ = _run(world, transfer="paper", budget=0, evidence_margin=0.25)
+    assert all(lrn._evidence_margin() == 0.25 for lrn in fixed.learners.values())
 
 
 def _laplace_log_evidence(K, y):

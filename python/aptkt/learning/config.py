@@ -120,7 +120,7 @@ class LearnerConfig:
     feature_space: str = "auto"
     relatedness: str = "binary"
     cutoff: str = "evidence"
-    evidence_margin: float = 0.0
+    evidence_margin: float | None = 0.0
     source_choice: str = "most"
     forced_lambda: float | None = None
     auxiliary: bool = False
@@ -144,8 +144,8 @@ class LearnerConfig:
             raise ValueError(
                 f"forced_lambda must be None or lie in [0, 1], got {self.forced_lambda}"
             )
-        if not np.isfinite(self.evidence_margin):
-            raise ValueError(f"evidence_margin must be finite, got {self.evidence_margin}")
+        if self.evidence_margin is not None and not np.isfinite(self.evidence_margin):
+            raise ValueError(f"evidence_margin must be None or finite, got {self.evidence_margin}")
         for name in ("eps_neg", "eps_explor"):
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:

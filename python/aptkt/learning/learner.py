@@ -154,6 +154,17 @@ class ActionLearner:
             X, np.where(mine, 1.0, -1.0), transfer_lambda=transfer_lambda, name=old_object
         )
 
+    def _evidence_margin(self) -> float:
+        """The log Bayes factor a transfer must exceed: ``config.evidence_margin``, or with
+        None ln N_old — prior odds of 1/N_old for "like old object i" against "like none of
+        them" (half the prior mass on "like none", the rest spread evenly over the old
+        objects)."""
+        margin = self.config.evidence_margin
+        if margin is not None:
+            return margin
+        assert self.prior is not None  # only called when transferring
+        return float(np.log(len(self.prior.objects)))
+
     def _evidence(self, X_prior: np.ndarray, positive: np.ndarray) -> Callable[[str, float], float]:
         """The log Bayes factor of a transfer into one new object's classifier (``positive``:
         its observations among every new one), judged in the prior's space by the old model."""
@@ -187,7 +198,7 @@ class ActionLearner:
                     evidence=self._evidence(X_prior, obs.objects == obj)
                     if cfg.cutoff == "evidence"
                     else None,
-                    evidence_margin=cfg.evidence_margin,
+                    evidence_margin=self._evidence_margin(),
                 )
                 self.decisions[obj] = decision
         pipeline = self._pipeline(any(d.transfers for d in self.decisions.values()))
