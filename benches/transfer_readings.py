@@ -37,6 +37,7 @@ def main() -> None:
     p.add_argument("--cutoff", choices=("evidence", "paper"), default=None)
     p.add_argument("--evidence-margin", default=None, help="a number, or 'lnN' (None)")
     p.add_argument("--fig11-trials", type=int, default=3)
+    p.add_argument("--feature-space", choices=("auto", "covered", "prior", "new"), default=None)
     args = p.parse_args()
     scale = Scale.full().with_(
         name="mid",
@@ -47,8 +48,10 @@ def main() -> None:
         prior_counts=(3, 10),
         fig11_trials=args.fig11_trials,
     )
-    if args.cutoff is not None or args.evidence_margin is not None:
+    if args.cutoff is not None or args.evidence_margin is not None or args.feature_space:
         over: dict = {} if args.cutoff is None else {"cutoff": args.cutoff}
+        if args.feature_space is not None:
+            over["feature_space"] = args.feature_space
         if args.evidence_margin is not None:
             m = args.evidence_margin
             over["evidence_margin"] = None if m == "lnN" else float(m)

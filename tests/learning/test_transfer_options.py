@@ -508,3 +508,21 @@ def test_evidence_keeps_transfer_from_the_old_object_a_new_one_is_like(world):
             p = paper.learners[a].decisions[o]
             assert d.transfers and (d.source, d.lambdas) == (p.source, p.lambdas)
             assert dict(d.evidence)[d.source] > 0.5
+
+
+def test_feature_space_covered_uses_the_prior_space_only_when_every_new_object_transfers(world):
+    """ "covered": the prior's space when every new object of the action has a source, the
+    baseline's otherwise; "auto" already when one has. ε_neg = 0.8 lets some new objects of
+    each action through and stops the others (p̄ between 0.58 and 0.94 here)."""
+    for space, partial_in_prior in (("auto", True), ("covered", False)):
+        learner, _ = _run(world, transfer="paper", budget=0, eps_neg=0.8, feature_space=space)
+        for a, lrn in learner.learners.items():
+            made = [d.transfers for d in lrn.decisions.values()]
+            assert any(made) and not all(made), (a, made)
+            assert lrn._test_cache is not None
+            assert (lrn._test_cache[0] is lrn.prior.pipeline) == partial_in_prior
+    # Every new object transfers: both use the prior's space.
+    learner, _ = _run(world, transfer="paper", budget=0, feature_space="covered")
+    for lrn in learner.learners.values():
+        assert all(d.transfers for d in lrn.decisions.values())
+        assert lrn._test_cache is not None and lrn._test_cache[0] is lrn.prior.pipeline

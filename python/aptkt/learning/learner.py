@@ -81,12 +81,13 @@ class ActionLearner:
         """The new objects' model space: the prior's, or fitted on the new objects' training
         observations so far (the baseline's). ``feature_space``: "prior" always the prior's
         (so does the control), "new" never, "auto" the prior's exactly when this update
-        transfers from at least one old object."""
+        transfers from at least one old object, "covered" when it transfers to every new
+        object."""
         cfg = self.config
         if self.prior is not None and (
             cfg.transfer == "control"
             or cfg.feature_space == "prior"
-            or (cfg.feature_space == "auto" and transfers)
+            or (cfg.feature_space in ("auto", "covered") and transfers)
         ):
             return self.prior.pipeline
         assert self.observations is not None  # update() checks every object was observed
@@ -201,7 +202,13 @@ class ActionLearner:
                     evidence_margin=self._evidence_margin(),
                 )
                 self.decisions[obj] = decision
-        pipeline = self._pipeline(any(d.transfers for d in self.decisions.values()))
+        # "auto": the prior's space when anything transfers; "covered": only when every new
+        # object has a source (each is like an old object, so the prior's transforms were fitted
+        # on a population that covers them all).
+        made = [d.transfers for d in self.decisions.values()]
+        pipeline = self._pipeline(
+            all(made) if cfg.feature_space == "covered" and made else any(made)
+        )
         X_full, groups_full = pipeline.transform(obs)
         X, groups = self._model_input(X_full, groups_full, X_prior)
         # Several sources ("multi") share one block kernel B ⊗ k with B = v vᵀ + diag(1 − λ_s²,
