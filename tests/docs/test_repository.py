@@ -82,8 +82,13 @@ def test_repository_paths_in_code_spans_exist(md):
         first = span.split("/", 1)[0]
         if "/" not in span or first not in TOP or any(c in span for c in "*<>{}"):
             continue
+        span, _, name = span.partition("::")  # `tests/x.py::test_name`: the test must exist too
         path = ROOT / span
         assert _inside(path) and path.exists(), f"{md.name}: `{span}` does not exist"
+        if name:
+            assert re.search(rf"^def {re.escape(name)}\(", path.read_text(), re.MULTILINE), (
+                f"{md.name}: `{span}` defines no {name}"
+            )
 
 
 def test_design_sections_cited_in_the_code_exist():

@@ -47,9 +47,8 @@ def _send(fd: int, message: dict[str, Any]) -> None:
 
 def main(argv: list[str]) -> None:
     host, frequency, request_fd, reply_fd, rtde_dir, parent = argv
-    # Ctrl-C and SIGTERM are the parent's to handle: it stops and retracts the arm through
-    # this process, and then ends it. (It also runs in a session of its own, so a terminal's
-    # signals do not reach it; a signal sent to it by pid is ignored too.)
+    # Ctrl-C and SIGTERM (a terminal's, or a job's, sent to the whole process group) are the
+    # parent's to handle: it stops and retracts the arm through this process, then ends it.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     _die_with_parent(int(parent))

@@ -83,10 +83,11 @@ class ControlProcess:
                 ],
                 pass_fds=(request_r, reply_w),
                 stdin=subprocess.DEVNULL,
-                # Not in our process group: Ctrl-C at a terminal (or a job's SIGTERM to the
-                # group) must reach only us, while we still need the client to stop and
-                # retract the arm. The process ends with us (see _control_child).
-                start_new_session=True,
+                # In our session and process group on purpose: a session of its own would be
+                # a scheduling group of its own (Linux autogroups), and ur_rtde's threads,
+                # which poll their sockets every 0.1 ms, would take CPU from everything else
+                # of ours on a loaded machine. Ctrl-C at a terminal and a job's SIGTERM to the
+                # group reach it too, and it ignores them (see _control_child).
             )
         except BaseException:
             for fd in (self._request_w, self._reply_r):
