@@ -1,7 +1,7 @@
 """Type stubs of the compiled extension ``aptkt._core`` (Rust). Use the Python wrappers
 (:mod:`aptkt.features`, :mod:`aptkt.gp`, :mod:`aptkt.skin`) rather than these functions."""
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -169,6 +169,12 @@ def encode_packet_bytes(header: int, payload: bytes) -> bytes: ...
 
 # --- simulated world (aptkt-sim) ---------------------------------------------------------
 _Chunk = tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]
+_Frames = tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]
+_Trace = tuple[NDArray, NDArray, NDArray]
+
+class SimThermal:
+    def __init__(self, nodes: int) -> None: ...
+    def __len__(self) -> int: ...
 
 class SimContact:
     def __init__(
@@ -196,30 +202,49 @@ class SimContact:
         force_noise: float,
         latency_ns: int,
         jitter_s: float,
+        readout: dict[str, Any],
+        thermal: SimThermal,
+        make: Callable[[int, int], tuple[NDArray, NDArray, NDArray, NDArray, NDArray]],
+        sources: tuple[float, float, float],
     ) -> None: ...
     def mechanics(
         self,
-        t_ns: int,
-        next_k: NDArray[np.int64],
-        relax_h: NDArray[np.float64],
-        relax_last: NDArray[np.float64],
-        latest_force: NDArray[np.float64],
+        state: Any,
         seg_t0: NDArray[np.int64],
         seg_p0: NDArray[np.float64],
         seg_v0: NDArray[np.float64],
         seg_a: NDArray[np.float64],
         t_end_ns: int,
-    ) -> tuple[int, _Chunk]: ...
+    ) -> _Chunk: ...
+    def finish(
+        self,
+        state: Any,
+        cells: NDArray[np.int64],
+        ks: NDArray[np.int64],
+        t_s: NDArray[np.float64],
+        t_ns: NDArray[np.int64],
+        pos: NDArray[np.float64],
+        vel: NDArray[np.float64],
+        acc: NDArray[np.float64],
+        sigma: NDArray[np.float64],
+        detail: bool,
+    ) -> tuple[_Frames, _Trace]: ...
+    def step(
+        self,
+        state: Any,
+        seg_t0: NDArray[np.int64],
+        seg_p0: NDArray[np.float64],
+        seg_v0: NDArray[np.float64],
+        seg_a: NDArray[np.float64],
+        t_end_ns: int,
+        detail: bool,
+    ) -> tuple[_Frames, _Trace]: ...
     def noise(
         self, ks: NDArray[np.int64], cells: NDArray[np.int64], t_ns: NDArray[np.int64]
     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]: ...
     def force_ticks(
         self,
-        t_ns: int,
-        next_k: NDArray[np.int64],
-        relax_h: NDArray[np.float64],
-        relax_last: NDArray[np.float64],
-        latest_force: NDArray[np.float64],
+        state: Any,
         seg_t0: NDArray[np.int64],
         seg_p0: NDArray[np.float64],
         seg_v0: NDArray[np.float64],

@@ -1,7 +1,9 @@
 """The numpy formulation of the simulator's per-sample loops, kept as the reference the compiled
 core (``aptkt_sim``) is tested against: the contact mechanics with relaxation (as
-``ContactPhysics.mechanics`` computed it before the loop moved to Rust) and the heat exchange
-run by run through :meth:`CellThermal.propagate_many`."""
+``ContactPhysics.mechanics`` computed it before the loop moved to Rust), the heat exchange
+run by run through :meth:`CellThermal.propagate_many`, the sensor noise, stick-slip, and the
+whole second half of a step (``ContactPhysics.finish`` as it was in numpy, built on them and on
+``texture_acceleration`` and ``SurfaceShape``)."""
 
 from __future__ import annotations
 
@@ -10,8 +12,10 @@ import math
 import numpy as np
 
 from aptkt.sim.kinematics import Trajectory
-from aptkt.sim.physics import ContactPhysics, MechChunk, PhysicsState, _runs
+from aptkt.sim.physics import GRAVITY, ContactPhysics, MechChunk, PhysicsState, _runs
 from aptkt.sim.recurrence import linear_recurrence_rows
+from aptkt.sim.texture import texture_acceleration
+from aptkt.sim.thermal import speed_bins
 
 
 def samples(ph: ContactPhysics, state: PhysicsState, t_end_ns: int):
@@ -182,3 +186,105 @@ def slip_run(ss, state, cell, t, path, force, speed):
         # Forget slips that have rung out (< 0.1 % of their peak).
         state.ringing[cell] = [e for e in ring if (t[-1] - e[0]) * ss._decay <= 7.0]
     return out
+
+
+def finish(ph: ContactPhysics, st: PhysicsState, chunk: MechChunk, *, detail: bool = True):
+    """``ContactPhysics.finish`` in numpy (the reference of ``aptkt_sim::readout``): heat,
+    stick-slip, texture, the arm's vibration, noise and readings of the samples of ``chunk``;
+    updates ``st`` in place. Returns the frames' fields (a dict, arrival order) and the force
+    trace (cells, t_ns, force)."""
+    k, imp = ph.k, ph.imp
+    cells, ks, t_s, t_ns = chunk.cells, chunk.ks, chunk.t_s, chunk.t_ns
+    pos, vel, acc, sigma = chunk.pos, chunk.vel, chunk.acc, chunk.sigma
+    first, last, present = _runs(cells)
+    f_true = sigma * k.sensor_area
+    f_cell = f_true.sum(axis=1)
+    pressure = sigma.mean(axis=1)
+
+    speed = np.hypot(vel[:, 0], vel[:, 1])
+    in_contact = pressure > 0
+    phi_bin = ph.thermal.contact_bins(pressure / (pressure + k.contact_pressure_half))
+    v_bin = np.where(in_contact, speed_bins(speed), 0)
+    temps = heat(ph, st, cells, t_s, phi_bin, v_bin)
+
+    centre = pos[:, :2] + ph._centres[cells]
+    prev = np.empty_like(centre)
+    prev[1:] = centre[:-1]
+    prev[first] = st.last_xy[present]
+    path = np.where(in_contact, np.hypot(*(centre - prev).T), 0.0)
+    st.last_xy[present] = centre[last]
+    slip = np.zeros(cells.size)
+    ss = ph.slip
+    v_c = (ss.mu_s - ss.mu_k) * f_cell / math.sqrt(k.tangential_stiffness * k.tangential_mass)
+    if any(st.slip.ringing) or np.any((speed < v_c) & (path > 0) & (f_cell > 0)):
+        for c, a0, b0 in zip(present, first, last + 1):
+            s = slice(a0, b0)
+            slip[s] = slip_run(ss, st.slip, int(c), t_s[s], path[s], f_cell[s], speed[s])
+    else:  # no slip possible: the springs carry the kinetic friction (or nothing)
+        f, p = f_cell[last], path[last]
+        st.slip.load[present] = np.where((f > 0) & (p > 0), ss.mu_k * f, 0.0)
+        st.slip.threshold[present] = np.inf
+
+    rows = np.arange(cells.size) if detail else last
+    c_e = cells[rows]
+    u = ph.shape.to_object(centre[rows])
+    w = ph.shape.to_object_direction(vel[rows, :2])
+    tex = texture_acceleration(ph.texture, k, u, w, pressure[rows], ph.top_modulus, ph.mu_k)
+    tex[:, 0] += slip[rows]
+    tex[:, 2] += 0.3 * slip[rows]
+    sp = speed[rows]
+    direction = np.where(
+        sp[:, None] > 1e-9, vel[rows, :2] / np.maximum(sp, 1e-12)[:, None], [1.0, 0.0]
+    )
+    world = acc[rows] + arm_vibration(ph, t_s[rows], vel[rows])
+    world[:, :2] += tex[:, 0:1] * direction + tex[:, 1:2] * np.stack(
+        [-direction[:, 1], direction[:, 0]], axis=1
+    )
+    world[:, 2] += tex[:, 2] + GRAVITY
+    acc_cell = np.einsum("mi,mij->mj", world, ph._axes[c_e]) / GRAVITY
+
+    noise, arrival = noise_and_arrival(ph, ks[rows], c_e, t_ns[rows])
+    gain = imp.force_gain[c_e] / ph._gain_drift[c_e][:, None]
+    force = imp.force_offset[c_e] + (f_true[rows] + k.force_noise * noise[:, 0:3]) / gain
+    acc_g = acc_cell + imp.acc_bias[c_e] + k.acc_noise * noise[:, 3:6]
+    temp = np.stack(
+        [
+            temps[rows, 1] + k.die_self_heating + k.die_temp_noise * noise[:, 6],
+            temps[rows, 0] + k.temp_noise * noise[:, 7],
+        ],
+        axis=1,
+    )
+    below = ph.shape.height(centre[rows])
+    on_face = np.isfinite(below)
+    gap = np.maximum(pos[rows, 2] - np.where(on_face, below, 0.0), 0.0)
+    refl = np.where(on_face, ph.obj.reflectivity, k.table_reflectivity)
+    prox = (
+        k.prox_dark
+        + k.prox_gain * refl / (1.0 + (gap / k.prox_distance) ** 2)
+        + k.prox_noise * noise[:, 8]
+    )
+    frames = {
+        "cell_index": c_e,
+        "cell_id": ph.cell_ids[c_e],
+        "t_sample_ns": t_ns[rows],
+        "t_ns": arrival,
+        "proximity": prox,
+        "acc": acc_g,
+        "temp": temp,
+        "force": force,
+        "force_true": f_cell[rows],
+    }
+    order = np.lexsort((c_e, arrival))
+    return {key: v[order] for key, v in frames.items()}, (cells, t_ns, f_cell)
+
+
+def arm_vibration(ph: ContactPhysics, t_s: np.ndarray, vel: np.ndarray) -> np.ndarray:
+    """The arm's own vibration while it moves (m/s^2, base frame)."""
+    cond = ph.cond
+    speed = np.linalg.norm(vel, axis=1)
+    if not np.any(speed > 1e-6) or cond.arm_vibration <= 0:
+        return np.zeros((t_s.size, 3))
+    modes = np.asarray(cond.arm_modes)  # (m, 5): Hz, phase, dx, dy, dz
+    amp = cond.arm_vibration * GRAVITY * np.sqrt(2.0 / len(modes)) * np.minimum(speed / 0.05, 2.0)
+    wave = np.sin(2 * np.pi * modes[:, 0][None, :] * t_s[:, None] + modes[:, 1][None, :])
+    return amp[:, None] * (wave @ modes[:, 2:5])

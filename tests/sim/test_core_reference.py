@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from aptkt._core import sim_texture
+from aptkt._core import sim_heat, sim_texture
 from aptkt.sim.kinematics import Trajectory
 from aptkt.sim.physics import ContactPhysics, ObjectPose
 from aptkt.sim.seeding import stable_words, trial_seed_sequence
@@ -73,6 +73,24 @@ def test_mechanics_matches_numpy(world, name, depth):
     assert a.t_ns == b.t_ns
 
 
+def compiled_heat(ph: ContactPhysics, st, cells, t_s, phi_bin, v_bin) -> np.ndarray:
+    """``aptkt_sim::thermal::heat`` through its binding, with the configurations' systems."""
+    keys = sorted(set(zip(phi_bin.tolist(), v_bin.tolist())))
+    index = {key: i for i, key in enumerate(keys)}
+    systems = [ph.thermal.net.system(p, v) for p, v in keys]
+    return sim_heat(
+        np.stack([x.u for x in systems]),
+        np.stack([x.mu for x in systems]),
+        np.stack([ph.thermal._t_ss_cached(p, v, x) for (p, v), x in zip(keys, systems)]),
+        systems[0].sqrt_c,
+        cells,
+        t_s,
+        np.array([index[key] for key in zip(phi_bin.tolist(), v_bin.tolist())], dtype=np.int64),
+        st.thermal,
+        st.thermal_t,
+    )
+
+
 @pytest.mark.parametrize("name", OBJECTS)
 def test_heat_matches_numpy(world, name):
     ph = physics(world, name)
@@ -85,7 +103,7 @@ def test_heat_matches_numpy(world, name):
     v_bin = np.where(pressure > 0, speed_bins(speed), 0)
     assert len(np.unique(phi)) > 3 and len(np.unique(v_bin)) > 3
     a, b = st0.copy(), st0.copy()
-    got = ph._heat(a, chunk.cells, chunk.t_s, phi, v_bin)
+    got = compiled_heat(ph, a, chunk.cells, chunk.t_s, phi, v_bin)
     want = ref.heat(ph, b, chunk.cells, chunk.t_s, phi, v_bin)
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
     np.testing.assert_allclose(a.thermal, b.thermal, rtol=0, atol=1e-9)
@@ -148,3 +166,65 @@ def test_stick_slip_matches_numpy(world, name):
     np.testing.assert_array_equal(a.load, b.load)
     np.testing.assert_array_equal(a.threshold, b.threshold)
     assert events > 20  # the stretches did slip
+
+
+def slow_slide(ph: ContactPhysics) -> Trajectory:
+    """Pressed 1 mm, then a slow slide (2 mm/s: sticking and slipping on grippy surfaces) and a
+    lift."""
+    x, y = OBJECT_SPOT
+    z = ph.shape.surface_z
+    tr = Trajectory.resting(0, np.array([x - 0.01, y, z + 0.002]))
+    tr.append(100_000_000, [x - 0.01, y, z + 0.002], [0, 0, -0.0075], [0, 0, 0])
+    tr.append(500_000_000, [x - 0.01, y, z - 0.001], [0, 0, 0], [0, 0, 0])
+    tr.append(800_000_000, [x - 0.01, y, z - 0.001], [0.002, 0.0, 0.0], [0, 0, 0])
+    tr.append(3_800_000_000, [x - 0.004, y, z - 0.001], [0.0, 0.0, 0.01], [0, 0, 0])
+    return tr
+
+
+@pytest.mark.parametrize(
+    "name, slow",
+    [
+        ("rough_sponge", False),
+        ("metal_toolbox", False),
+        ("rubber_mat", True),
+        ("ceramic_tile", True),
+    ],
+)
+@pytest.mark.parametrize("detail", [True, False])
+def test_finish_matches_numpy(world, name, slow, detail):
+    """The core's whole second half of a step (heat, stick-slip, texture, arm vibration, noise,
+    readings, arrival order) against the numpy formulation, over a trial's motion cut into
+    steps, the state carried from step to step on both sides."""
+    ph = physics(world, name)
+    tr = slow_slide(ph) if slow else press_and_slide(ph, 0.002)
+    start = ph.initial_state(0, tr.p0[0])
+    a, b = start.copy(), start.copy()
+    steps = [20_000_000, 400_000_000, 408_000_000, 1_000_000_000, 1_700_000_000, 4_000_000_000]
+    slips = moving = 0
+    for t_end in steps:
+        chunk = ph.mechanics(a, tr, t_end)
+        b.t_ns, b.next_k, b.relax_h = a.t_ns, a.next_k.copy(), a.relax_h.copy()
+        b.relax_last, b.latest_force = a.relax_last.copy(), a.latest_force.copy()
+        got, got_trace = ph.finish(a, chunk, detail=detail)
+        want, want_trace = ref.finish(ph, b, chunk, detail=detail)
+        for key in ("cell_index", "cell_id", "t_sample_ns", "t_ns"):
+            np.testing.assert_array_equal(getattr(got, key), want[key], err_msg=key)
+        for key in ("proximity", "acc", "temp", "force", "force_true"):
+            np.testing.assert_allclose(
+                getattr(got, key), want[key], rtol=1e-12, atol=1e-12, err_msg=key
+            )
+        for g, w in zip((got_trace.cell_index, got_trace.t_sample_ns), want_trace[:2]):
+            np.testing.assert_array_equal(g, w)
+        np.testing.assert_allclose(got_trace.force, want_trace[2], rtol=1e-13, atol=0)
+        np.testing.assert_allclose(a.thermal, b.thermal, rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(a.thermal_t, b.thermal_t)
+        np.testing.assert_array_equal(a.last_xy, b.last_xy)
+        np.testing.assert_allclose(a.slip.load, b.slip.load, rtol=1e-12, atol=1e-15)
+        np.testing.assert_array_equal(a.slip.threshold, b.slip.threshold)
+        np.testing.assert_array_equal(a.slip.events, b.slip.events)
+        assert a.slip.ringing == b.slip.ringing
+        slips = int(a.slip.events.sum())
+        moving += int(np.any(np.abs(chunk.vel[:, :2]) > 0))
+    assert moving >= 2  # the steps did slide
+    if slow and name == "rubber_mat":
+        assert slips > 0  # and the slow slide on rubber did stick and slip

@@ -266,12 +266,8 @@ class SimEngine:
             i = max(int(np.searchsorted(t0, st.t_ns, side="right")) - 1, 0)
             last = None if guard else i + 1
             before = st.t_ns
-            status, t_ns, carry, samples, seg, queue, err, parts = self.physics.core.force_ticks(
-                st.t_ns,
-                st.next_k,
-                st.relax_h,
-                st.relax_last,
-                st.latest_force,
+            status, carry, samples, seg, queue, err, parts = self.physics.core.force_ticks(
+                st,
                 t0[i:last],
                 p0[i:last],
                 v0[i:last],
@@ -286,7 +282,6 @@ class SimEngine:
                 phase,
                 lean.get("samples", 0),
             )
-            st.t_ns = int(t_ns)
             lean["queue_t"], lean["queue_c"], lean["queue_f"] = queue
             chunk = MechChunk(*parts)
             if chunk.size:

@@ -12,13 +12,14 @@ Units: SI inside; frames carry the protocol's physical units (g, °C, normalised
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from aptkt._core import SimContact, sim_heat, sim_texture
+from aptkt._core import SimContact
 from aptkt.sim.kinematics import Trajectory
 from aptkt.sim.mechanics import IndentationLaw, SurfaceShape
 from aptkt.sim.objects import ObjectSpec, Relaxation
@@ -30,7 +31,7 @@ from aptkt.sim.texture import (
     texture_field,
     waviness_waves,
 )
-from aptkt.sim.thermal import CellThermal, speed_bins
+from aptkt.sim.thermal import CONTACT_STEPS, SPEED_STEP, CellThermal, ThermalNetwork
 from aptkt.sim.trial import TrialConditions
 
 __all__ = [
@@ -50,6 +51,8 @@ _FLIP = np.diag([1.0, -1.0, -1.0])
 #: Random words per sample: 10 → 10 normals (force 3, acc 3, temp 2, proximity 1, spare 1),
 #: 1 uniform (arrival jitter), 1 spare.
 _NOISE_SLOTS = 12
+#: Key of (cell, sample time) pairs in one int64: sample times stay far below 2^52 ns (52 days).
+_KEY = np.int64(1 << 52)
 
 
 @dataclass(frozen=True)
@@ -114,16 +117,33 @@ class ForceTrace:
         """Total force at each tick: every cell's newest sample at or before the tick (``latest``
         holds each cell's force before this trace)."""
         ticks_ns = np.asarray(ticks_ns, dtype=np.int64)
+        n_cells = latest.shape[0]
+        if not self.force.size:
+            values = np.broadcast_to(latest[:, None], (n_cells, ticks_ns.shape[0]))
+        else:
+            values = self._values_at(ticks_ns, latest)
         total = np.zeros(ticks_ns.shape[0])
-        for c in range(latest.shape[0]):
-            m = self.cell_index == c
-            t, f = self.t_sample_ns[m], self.force[m]
-            if not f.size:
-                total += latest[c]
-                continue
-            idx = np.searchsorted(t, ticks_ns, side="right") - 1
-            total += np.where(idx >= 0, f[np.maximum(idx, 0)], latest[c])
+        for row in values:  # cell by cell, in the order the robot's sensing adds them
+            total += row
         return total
+
+    def _values_at(self, ticks_ns: np.ndarray, latest: np.ndarray) -> np.ndarray:
+        """(cells, ticks): each cell's newest force at or before each tick."""
+        n_cells = latest.shape[0]
+        # One search for every (cell, tick): the trace is cell-major and time-ordered within a
+        # cell, so (cell, time) pairs sort as one key.
+        cells = np.arange(n_cells)
+        starts = np.searchsorted(self.cell_index, cells, side="left")
+        idx = (
+            np.searchsorted(
+                self.cell_index * _KEY + self.t_sample_ns,
+                (cells[:, None] * _KEY + ticks_ns[None, :]).ravel(),
+                side="right",
+            ).reshape(n_cells, -1)
+            - 1
+        )
+        found = idx >= starts[:, None]
+        return np.where(found, self.force[np.maximum(idx, 0)], latest[:, None])
 
 
 @dataclass
@@ -243,9 +263,12 @@ class ContactPhysics:
         self._noise = CounterStream(_child(noise_seq, 2), _NOISE_SLOTS)
         self._sensor_xy = geometry.sensor_positions  # (C, 3, 2)
         self._centres = geometry.cell_centres  # (C, 2)
-        self._axes = np.stack(
-            [_FLIP @ imperfections.mount_rotation[c] for c in range(n)]
-        )  # cell axes in base
+        # Cell axes in base: _FLIP @ R for each cell, written as the row signs it is (a 3 × 3
+        # product per cell would wake BLAS's threads, which then spin for a while).
+        self._axes = (
+            np.asarray(imperfections.mount_rotation, dtype=np.float64)[:n]
+            * np.diag(_FLIP)[None, :, None]
+        )
         self.cell_ids = np.asarray(geometry.cell_ids, dtype=np.int64)
         self._latency_ns = int(round(k.link_latency * 1e9))
         self._gain_drift = np.asarray(
@@ -256,7 +279,52 @@ class ContactPhysics:
                 f"trial conditions are for {self._gain_drift.size} cells, the patch has {n}"
             )
         shape = self.shape
-        #: The compiled core of this trial (mechanics, sensor noise, force-control ticks).
+        self._texture_constants = [
+            k.cover_contact_length,
+            k.contact_resonance,
+            k.contact_damping,
+            k.acc_bandwidth,
+            k.coupling_modulus,
+            k.coupling_pressure,
+            k.tangential_coupling,
+            k.lateral_coupling,
+            self.top_modulus,
+            self.mu_k,
+        ]
+        readout = {
+            "centres": np.asarray(self._centres, dtype=np.float64).tolist(),
+            "axes": self._axes.tolist(),
+            "acc_bias": np.asarray(imperfections.acc_bias, dtype=np.float64).tolist(),
+            "cell_ids": self.cell_ids.tolist(),
+            "gravity": GRAVITY,
+            "acc_noise": k.acc_noise,
+            "die_self_heating": k.die_self_heating,
+            "die_temp_noise": k.die_temp_noise,
+            "temp_noise": k.temp_noise,
+            "prox_dark": k.prox_dark,
+            "prox_gain": k.prox_gain,
+            "prox_distance": k.prox_distance,
+            "prox_noise": k.prox_noise,
+            "reflectivity": obj.reflectivity,
+            "table_reflectivity": k.table_reflectivity,
+            "contact_pressure_half": k.contact_pressure_half,
+            "conductance_scale": self.thermal.conductance_scale,
+            "contact_steps": float(CONTACT_STEPS),
+            "speed_step": SPEED_STEP,
+            "arm_vibration": conditions.arm_vibration,
+            "arm_modes": [list(m) for m in conditions.arm_modes],
+            "texture_kvec": self.texture.kvec.tolist(),
+            "texture_amplitude": self.texture.amplitude.tolist(),
+            "texture_phase": self.texture.phase.tolist(),
+            "texture_constants": [float(x) for x in self._texture_constants],
+            "slip_params": self.slip._params,
+            "slip_keys": [tuple(int(w) for w in s.key) for s in self.slip._streams],
+            "sqrt_c": np.sqrt(self.thermal.net.cap).tolist(),
+        }
+        #: The compiled core of this trial: mechanics, force-control ticks and every reading
+        #: (heat, stick-slip, texture, noise). The thermal solution operators of each
+        #: (contact, speed) configuration it meets come from the object's network: made by
+        #: ``ThermalNetwork.system`` and kept, converted, in ``ThermalNetwork.core``.
         self.core = SimContact(
             np.ascontiguousarray(imperfections.clock_rate, dtype=np.float64),
             np.ascontiguousarray(imperfections.clock_phase, dtype=np.float64),
@@ -281,19 +349,12 @@ class ContactPhysics:
             float(k.force_noise),
             self._latency_ns,
             float(k.link_jitter),
+            readout,
+            self.thermal.net.core,
+            # Not a bound method of self: the core must not keep this object alive.
+            functools.partial(_object_system, self.thermal.net),
+            (float(k.heater_power), self.thermal.ambient, self.thermal.object_temperature),
         )
-        self._texture_constants = [
-            k.cover_contact_length,
-            k.contact_resonance,
-            k.contact_damping,
-            k.acc_bandwidth,
-            k.coupling_modulus,
-            k.coupling_pressure,
-            k.tangential_coupling,
-            k.lateral_coupling,
-            self.top_modulus,
-            self.mu_k,
-        ]
 
     # ---------------------------------------------------------------------------------------
     def initial_state(self, t_ns: int, position: np.ndarray) -> PhysicsState:
@@ -327,38 +388,25 @@ class ContactPhysics:
         every sample. With ``detail=False`` only each cell's newest sample becomes a frame (the
         state is integrated exactly all the same)."""
         st = state.copy()
-        chunk = self.mechanics(st, traj, t_end_ns)
-        frames, trace = self.finish(st, chunk, detail=detail)
-        return st, frames, trace
+        frames, trace = self.core.step(st, *traj.arrays(), int(t_end_ns), detail)
+        return st, Frames(*frames), ForceTrace(*trace)
 
     def mechanics(self, st: PhysicsState, traj: Trajectory, t_end_ns: int) -> MechChunk:
         """First half of a step (updates ``st`` in place): the samples due by ``t_end_ns``, the TCP
         motion at their times and the contact stress at every force sensor, with relaxation
         (the per-sample loop runs in the compiled core, ``aptkt_sim::mechanics``)."""
-        t0, p0, v0, a = traj.arrays()
-        st.t_ns, parts = self.core.mechanics(
-            st.t_ns,
-            st.next_k,
-            st.relax_h,
-            st.relax_last,
-            st.latest_force,
-            t0,
-            p0,
-            v0,
-            a,
-            int(t_end_ns),
-        )
-        return MechChunk(*parts)
+        return MechChunk(*self.core.mechanics(st, *traj.arrays(), int(t_end_ns)))
 
     def finish(
         self, st: PhysicsState, chunk: MechChunk, *, detail: bool = True
     ) -> tuple[Frames, ForceTrace]:
         """Second half of a step: heat, stick-slip, texture, sensor noise and readings for the
-        samples of ``chunk`` (which must follow ``st``'s non-mechanical state)."""
+        samples of ``chunk`` (which must follow ``st``'s non-mechanical state; ``aptkt_sim::
+        readout``, docs/simulation.md "Cost")."""
         if chunk.size == 0:
             return Frames.empty(), ForceTrace.empty()
-        k, imp = self.k, self.imp
-        cells, ks, t_s, t_ns, pos, vel, acc, sigma = (
+        frames, trace = self.core.finish(
+            st,
             chunk.cells,
             chunk.ks,
             chunk.t_s,
@@ -367,112 +415,9 @@ class ContactPhysics:
             chunk.vel,
             chunk.acc,
             chunk.sigma,
+            detail,
         )
-        first, last, present = _runs(cells)
-        f_true = sigma * k.sensor_area
-        f_cell = f_true.sum(axis=1)
-        trace = ForceTrace(cells, t_ns, f_cell)
-        pressure = sigma.mean(axis=1)
-
-        # --- heat exchange, per cell and piecewise in (contact fraction, sliding speed)
-        speed = np.hypot(vel[:, 0], vel[:, 1])
-        in_contact = pressure > 0
-        phi_bin = self.thermal.contact_bins(pressure / (pressure + k.contact_pressure_half))
-        v_bin = np.where(in_contact, speed_bins(speed), 0)
-        temps = self._heat(st, cells, t_s, phi_bin, v_bin)
-
-        # --- stick-slip needs every sample (it has state); texture only the emitted ones
-        centre = pos[:, :2] + self._centres[cells]
-        prev = np.empty_like(centre)
-        prev[1:] = centre[:-1]
-        prev[first] = st.last_xy[present]
-        path = np.where(in_contact, np.hypot(*(centre - prev).T), 0.0)
-        st.last_xy[present] = centre[last]
-        slip = np.zeros(cells.size)
-        if self.slip.may_slip(st.slip, f_cell, speed, path):
-            for c, a0, b0 in zip(present, first, last + 1):
-                slip[a0:b0] = self.slip.run(
-                    st.slip, int(c), t_s[a0:b0], path[a0:b0], f_cell[a0:b0], speed[a0:b0]
-                )
-        else:
-            self.slip.settle(st.slip, present, f_cell[last], path[last])
-
-        rows = np.arange(cells.size) if detail else last
-        c_e = cells[rows]
-        u = self.shape.to_object(centre[rows])
-        w = self.shape.to_object_direction(vel[rows, :2])
-        tex = sim_texture(
-            self.texture.kvec,
-            self.texture.amplitude,
-            self.texture.phase,
-            self._texture_constants,
-            np.ascontiguousarray(u),
-            np.ascontiguousarray(w),
-            np.ascontiguousarray(pressure[rows]),
-        )
-        tex[:, 0] += slip[rows]
-        tex[:, 2] += 0.3 * slip[rows]
-        sp = speed[rows]
-        direction = np.where(
-            sp[:, None] > 1e-9, vel[rows, :2] / np.maximum(sp, 1e-12)[:, None], [1.0, 0.0]
-        )
-        world = acc[rows] + self._arm_vibration(t_s[rows], vel[rows])
-        world[:, :2] += tex[:, 0:1] * direction + tex[:, 1:2] * np.stack(
-            [-direction[:, 1], direction[:, 0]], axis=1
-        )
-        world[:, 2] += tex[:, 2] + GRAVITY  # specific force: an accelerometer at rest reads +1 g up
-        acc_cell = np.einsum("mi,mij->mj", world, self._axes[c_e]) / GRAVITY
-
-        # --- sensor noise (addressed by sample index and cell) and readings
-        noise, arrival = self._noise_and_arrival(ks[rows], c_e, t_ns[rows])
-        force = self._force_reading(f_true[rows], noise, c_e)
-        acc_g = acc_cell + imp.acc_bias[c_e] + k.acc_noise * noise[:, 3:6]
-        temp = np.stack(
-            [
-                temps[rows, 1] + k.die_self_heating + k.die_temp_noise * noise[:, 6],
-                temps[rows, 0] + k.temp_noise * noise[:, 7],
-            ],
-            axis=1,
-        )
-        below = self.shape.height(centre[rows])
-        on_face = np.isfinite(below)
-        gap = np.maximum(pos[rows, 2] - np.where(on_face, below, 0.0), 0.0)
-        refl = np.where(on_face, self.obj.reflectivity, k.table_reflectivity)
-        prox = (
-            k.prox_dark
-            + k.prox_gain * refl / (1.0 + (gap / k.prox_distance) ** 2)
-            + k.prox_noise * noise[:, 8]
-        )
-        frames = Frames(
-            cell_index=c_e,
-            cell_id=self.cell_ids[c_e],
-            t_sample_ns=t_ns[rows],
-            t_ns=arrival,
-            proximity=prox,
-            acc=acc_g,
-            temp=temp,
-            force=force,
-            force_true=f_cell[rows],
-        )
-        return frames.take(np.lexsort((c_e, arrival))), trace
-
-    def _arm_vibration(self, t_s: np.ndarray, vel: np.ndarray) -> np.ndarray:
-        """The arm's own vibration while it moves (m/s^2, base frame): a few modes whose
-        amplitude grows with the TCP speed (reaching the trial's rms at 5 cm/s)."""
-        speed = np.linalg.norm(vel, axis=1)
-        if not np.any(speed > 1e-6) or self.cond.arm_vibration <= 0:
-            return np.zeros((t_s.size, 3))
-        modes = np.asarray(self.cond.arm_modes)  # (m, 5)
-        amp = (
-            self.cond.arm_vibration
-            * GRAVITY
-            * np.sqrt(2.0 / len(modes))
-            * np.minimum(speed / 0.05, 2.0)
-        )
-        wave = np.sin(
-            2 * np.pi * modes[:, 0][None, :] * t_s[:, None] + modes[:, 1][None, :]
-        )  # (n, m)
-        return amp[:, None] * (wave @ modes[:, 2:5])
+        return Frames(*frames), ForceTrace(*trace)
 
     def _noise_and_arrival(
         self, ks: np.ndarray, cells: np.ndarray, t_ns: np.ndarray
@@ -499,39 +444,6 @@ class ContactPhysics:
         noise, arrival = self._noise_and_arrival(chunk.ks, chunk.cells, chunk.t_ns)
         return arrival, self._force_reading(chunk.sigma * self.k.sensor_area, noise, chunk.cells)
 
-    def _heat(
-        self,
-        st: PhysicsState,
-        cells: np.ndarray,
-        t_s: np.ndarray,
-        phi_bin: np.ndarray,
-        v_bin: np.ndarray,
-    ) -> np.ndarray:
-        """[LM71, PCB] temperatures of every sample; updates the cells' thermal states.
-
-        Each cell's samples split into runs of constant (contact, speed) configuration, each
-        solved exactly from the cell's state (``aptkt_sim::thermal::heat``)."""
-        key = phi_bin * (1 << 20) + v_bin
-        uniq, config = np.unique(key, return_inverse=True)
-        systems = [self.thermal.net.system(int(q >> 20), int(q & ((1 << 20) - 1))) for q in uniq]
-        t_ss = np.stack(
-            [
-                self.thermal._t_ss_cached(int(q >> 20), int(q & ((1 << 20) - 1)), x)
-                for q, x in zip(uniq, systems)
-            ]
-        )
-        return sim_heat(
-            np.stack([x.u for x in systems]),
-            np.stack([x.mu for x in systems]),
-            t_ss,
-            systems[0].sqrt_c,
-            np.ascontiguousarray(cells, dtype=np.int64),
-            np.ascontiguousarray(t_s, dtype=np.float64),
-            config.astype(np.int64).reshape(-1),
-            st.thermal,
-            st.thermal_t,
-        )
-
 
 def _runs(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """First and last index of each cell's block in a cell-major array, and the cells present."""
@@ -539,6 +451,13 @@ def _runs(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     first = np.concatenate([[0], bounds])
     last = np.concatenate([bounds - 1, [cells.size - 1]])
     return first, last, cells[first]
+
+
+def _object_system(net: ThermalNetwork, phi_bin: int, speed_bin: int):
+    """The solution operator of one (contact, speed) configuration for the core: eigenvectors,
+    eigenvalues and the steady state per watt of heater, per kelvin of room and of object."""
+    x = net.system(phi_bin, speed_bin)
+    return x.u, x.mu, x.ss_heater, x.ss_ambient, x.ss_object
 
 
 def _child(seq: np.random.SeedSequence, n: int) -> np.random.SeedSequence:

@@ -212,26 +212,6 @@ class StickSlip:
             np.zeros(n), np.full(n, np.inf), np.zeros(n, dtype=np.int64), [[] for _ in range(n)]
         )
 
-    def may_slip(
-        self, state: StickSlipState, force: np.ndarray, speed: np.ndarray, path: np.ndarray
-    ) -> bool:
-        """Whether any sample of this stretch can slip (or a past slip still rings)."""
-        if any(state.ringing):
-            return True
-        v_c = (
-            (self.mu_s - self.mu_k)
-            * force
-            / math.sqrt(self.k.tangential_stiffness * self.k.tangential_mass)
-        )
-        return bool(np.any((speed < v_c) & (path > 0) & (force > 0)))
-
-    def settle(
-        self, state: StickSlipState, cells: np.ndarray, force: np.ndarray, path: np.ndarray
-    ) -> None:
-        """No slip possible: the springs of ``cells`` carry the kinetic friction (or nothing)."""
-        state.load[cells] = np.where((force > 0) & (path > 0), self.mu_k * force, 0.0)
-        state.threshold[cells] = np.inf
-
     def run(
         self,
         state: StickSlipState,

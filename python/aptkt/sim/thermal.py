@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aptkt._core import SimThermal
 from aptkt.sim.objects import Layer
 from aptkt.sim.patch import SkinConstants
 
@@ -119,6 +120,8 @@ class ThermalNetwork:
         self._g_cov_mid = constants.cover_conductivity * a / (constants.cover_thickness / 2)
         self._g_obj_half = self.kc * a / (self.d / 2)  # node centre to its faces
         self._cache: dict[tuple[int, int], _System] = {}
+        #: The same operators as the compiled core holds them (shared by the object's trials).
+        self.core = SimThermal(self.n)
 
     def _build(
         self, phi: float, speed: float

@@ -1,13 +1,15 @@
 //! The simulated world's per-sample loops, in plain Rust (no Python): contact mechanics and
 //! relaxation (`mechanics`), the slide's force-control ticks on the skin's reading
 //! (`control`), the sensors' noise and readings (`sensors`, on `philox` counter streams
-//! bit-identical to numpy's), the exact heat solution (`thermal`) and the texture response
-//! (`texture`). The model is documented in docs/simulation.md; the Python package keeps a numpy
-//! formulation of each loop that the tests compare against.
+//! bit-identical to numpy's), the exact heat solution (`thermal`), the texture response
+//! (`texture`) and, built on them, a whole time step's readings (`readout`). The model is
+//! documented in docs/simulation.md; the tests keep a numpy formulation of each loop to compare
+//! against.
 
 pub mod control;
 pub mod mechanics;
 pub mod philox;
+pub mod readout;
 pub mod sensors;
 pub mod slip;
 pub mod texture;

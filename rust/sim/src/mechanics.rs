@@ -119,6 +119,14 @@ impl Law {
     /// Elastic pressure (Pa) at local indentation `d` (m); 0 out of contact.
     #[inline]
     pub fn stress(&self, d: f64) -> f64 {
+        self.stress_near(d, &mut 0)
+    }
+
+    /// [`Law::stress`], looking first at the table interval `hint` (the previous sample's, which
+    /// the next one nearly always shares or neighbours) before searching the whole table; the
+    /// interval found is left in `hint`. The same interval, hence the same value, either way.
+    #[inline]
+    pub fn stress_near(&self, d: f64, hint: &mut usize) -> f64 {
         if d.is_nan() || d <= 0.0 {
             return 0.0;
         }
@@ -131,7 +139,17 @@ impl Law {
             return 0.0;
         }
         // Largest j with delta[j] <= d (as numpy's interp).
-        let j = self.delta.partition_point(|&x| x <= d) - 1;
+        let h = *hint;
+        let j = if h + 1 < n && self.delta[h] <= d && d < self.delta[h + 1] {
+            h
+        } else if h + 2 < n && self.delta[h + 1] <= d && d < self.delta[h + 2] {
+            h + 1
+        } else if h >= 1 && h < n && self.delta[h - 1] <= d && d < self.delta[h] {
+            h - 1
+        } else {
+            self.delta.partition_point(|&x| x <= d) - 1
+        };
+        *hint = j;
         if j == n - 1 || self.delta[j] == d {
             return self.sigma[j];
         }
@@ -324,6 +342,7 @@ impl Mechanics {
             // do not change (presses, holds and waits move along z or not at all).
             let mut last_xy = [f64::NAN; 2];
             let mut heights = [0.0; SENSORS];
+            let mut hints = [0usize; SENSORS];
             for k in k0..=last {
                 let t_s = phase + k as f64 / rate;
                 let t_ns = (t_s * 1e9).round_ties_even() as i64;
@@ -340,7 +359,7 @@ impl Mechanics {
                 for s in 0..SENSORS {
                     let depth = heights[s] - (p[2] + self.cells.sensor_height[c][s]);
                     let depth = if depth.is_finite() { depth } else { -1.0 };
-                    elastic[s] = self.law.stress(depth);
+                    elastic[s] = self.law.stress_near(depth, &mut hints[s]);
                 }
                 for s in 0..SENSORS {
                     let mut out_s = if terms == 0 {

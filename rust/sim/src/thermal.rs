@@ -29,9 +29,24 @@ pub fn heat(
     state: &mut [f64],
     state_t: &mut [f64],
 ) -> Result<Vec<[f64; 2]>, SimError> {
+    heat_at(systems, sqrt_c, cells, t_s, config, state, state_t, None)
+}
+
+/// [`heat`] with the temperatures computed only at the samples where `wanted` is true (zero
+/// elsewhere); the state is advanced over every sample all the same, with the same arithmetic.
+pub fn heat_at(
+    systems: &[System],
+    sqrt_c: &[f64],
+    cells: &[i64],
+    t_s: &[f64],
+    config: &[usize],
+    state: &mut [f64],
+    state_t: &mut [f64],
+    wanted: Option<&[bool]>,
+) -> Result<Vec<[f64; 2]>, SimError> {
     let n = sqrt_c.len();
     let m = cells.len();
-    if t_s.len() != m || config.len() != m {
+    if t_s.len() != m || config.len() != m || wanted.is_some_and(|w| w.len() != m) {
         return Err(SimError::invalid(
             "heat: cells, times and configurations differ in length",
         ));
@@ -102,6 +117,9 @@ pub fn heat(
                 for k in 0..n {
                     zd[k] *= factor[k];
                 }
+            }
+            if wanted.is_some_and(|w| !w[s]) {
+                continue;
             }
             let (mut a, mut b) = (0.0, 0.0);
             for k in 0..n {

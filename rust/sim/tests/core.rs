@@ -157,6 +157,16 @@ proptest! {
     }
 
     #[test]
+    fn a_hint_never_changes_the_stress(d in -1e-4f64..6e-3, hint in 0usize..4100) {
+        let l = law(2e5, 5e4, 0.01, 0.6);
+        let mut h = hint.min(4000);
+        prop_assert_eq!(l.stress_near(d, &mut h).to_bits(), l.stress(d).to_bits());
+        // and the hint found serves the next, nearby depth
+        let mut h2 = h;
+        prop_assert_eq!(l.stress_near(d * 1.001, &mut h2).to_bits(), l.stress(d * 1.001).to_bits());
+    }
+
+    #[test]
     fn stress_is_monotone_and_zero_out_of_contact(d1 in -1e-3f64..5e-3, d2 in -1e-3f64..5e-3) {
         let l = law(2e5, 5e4, 0.01, 0.6);
         let (lo, hi) = if d1 <= d2 { (d1, d2) } else { (d2, d1) };
