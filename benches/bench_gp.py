@@ -2,13 +2,16 @@
 
 Usage: python benches/bench_gp.py [--quick] [--skip-sklearn-opt-above N] [--single-thread]
        python benches/bench_gp.py --transfer-variants [bench_gp_transfer.py's options]
-       python benches/bench_gp.py --large [--sizes 1000,2000] [--n-jobs 1] [--other DIR]
+       python benches/bench_gp.py --large [--sizes 1000,2000] [--sklearn-max 1000] [--other DIR]
 
---large: a 3-class fit (6 features, random_state=0) at each size with today's defaults and with
-the former ones (length_scale=1.0, n_restarts=2, max_iter=200), each in a fresh process,
-reporting wall time, CPU time and peak resident memory (ru_maxrss, the data included). With
---other DIR (the python/ directory of another checkout, e.g. an older commit with its own
-compiled extension) the former settings also run on that implementation, side by side.
+--large: a 3-class fit (6 features, random_state=0) at each size, each in a fresh process:
+today's defaults on one thread (n_jobs=None) and on every core (n_jobs=-1), the former settings
+(length_scale=1.0, n_restarts=2, max_iter=200), and scikit-learn's GaussianProcessClassifier
+with as many starts (up to --sklearn-max rows: it is slow). Reports wall time, CPU time, the
+busiest thread's CPU time (what the fit takes on an idle machine with that many cores), peak
+resident memory (ru_maxrss, the data included) and the load average before and after. BLAS
+runs on one thread. With --other DIR (the python/ directory of another checkout, e.g. an older
+commit with its own compiled extension) the former settings also run on that implementation.
 
 By default each side runs as a user gets it: ours fits the one-vs-all classifiers in parallel on
 all cores, scikit-learn fits them one after the other with a multi-threaded BLAS. With
@@ -106,32 +109,74 @@ def run(n: int, d: int, sklearn_opt: bool, n_jobs: int | None = None) -> dict:
 
 
 LARGE_CHILD = """
-import resource, sys, time
+import os, resource, sys, threading, time
 import numpy as np
 from sklearn.datasets import make_classification
-from aptkt.gp import LaplaceGPC
-n, length_scale, restarts, max_iter = int(sys.argv[1]), sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
-length_scale = length_scale if length_scale == "auto" else float(length_scale)
+impl, n, length_scale, restarts, max_iter, n_jobs = sys.argv[1:7]
+n, restarts, max_iter = int(n), int(restarts), int(max_iter)
 X, y = make_classification(n_samples=n, n_features=6, n_informative=4, n_redundant=0,
                            n_classes=3, n_clusters_per_class=1, random_state=0)
+if impl == "sklearn":
+    from sklearn.gaussian_process import GaussianProcessClassifier
+    from sklearn.gaussian_process.kernels import RBF, ConstantKernel
+    model = GaussianProcessClassifier(ConstantKernel(1.0) * RBF(float(length_scale)),
+                                      n_restarts_optimizer=restarts, random_state=0)
+else:
+    from aptkt.gp import LaplaceGPC
+    length_scale = length_scale if length_scale == "auto" else float(length_scale)
+    model = LaplaceGPC(length_scale, n_restarts=restarts, max_iter=max_iter, random_state=0,
+                       n_jobs=None if n_jobs == "none" else int(n_jobs))
+
+# CPU seconds of every thread, sampled while the fit runs (the fit's threads end with it):
+# the busiest thread's figure is what the fit would take on an idle machine with that many
+# cores, whatever share of them the other jobs left us.
+ticks = os.sysconf("SC_CLK_TCK")
+def thread_cpu():
+    out = {}
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            fields = open(f"/proc/self/task/{tid}/stat").read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        out[tid] = (int(fields[11]) + int(fields[12])) / ticks
+    return out
+busy, done = {}, threading.Event()
+def sample():
+    while not done.wait(0.05):
+        busy.update(thread_cpu())
+before = thread_cpu()
+sampler = threading.Thread(target=sample, daemon=True)
+sampler.start()
+load0 = os.getloadavg()[0]
 t, c = time.perf_counter(), time.process_time()
-model = LaplaceGPC(length_scale, n_restarts=restarts, max_iter=max_iter, random_state=0,
-                   n_jobs=int(sys.argv[5])).fit(X, y)
+model.fit(X, y)
 wall, cpu = time.perf_counter() - t, time.process_time() - c
+done.set(); sampler.join()
+busy.update({tid: v for tid, v in thread_cpu().items() if tid in busy})
+busiest = max(v - before.get(tid, 0.0) for tid, v in busy.items())
+load1 = os.getloadavg()[0]
 peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-print(wall, cpu, peak, model.score(X, y), float(model.log_marginal_likelihood_.sum()))
+lml = (float(model.log_marginal_likelihood_.sum()) if impl != "sklearn" else
+       float(sum(e.log_marginal_likelihood_value_ for e in model.base_estimator_.estimators_)))
+print(wall, cpu, busiest, peak, model.score(X, y), lml, load0, load1)
 """
 
-#: (label, length_scale, n_restarts, max_iter): today's defaults and the former ones.
+#: (label, implementation, length_scale, n_restarts, max_iter, n_jobs): today's defaults on one
+#: thread (n_jobs=None, the default) and on every core, the former settings (length-scale 1.0,
+#: 2 restarts, 200 iterations), and scikit-learn with the same number of starts as our default
+#: (its optimiser from length-scale 1, then one random restart; its BLAS on one thread).
 LARGE_SETTINGS = (
-    ("default (auto, 1, 100)", "auto", 1, 100),
-    ("former (1.0, 2, 200)", "1.0", 2, 200),
+    ("default (auto, 1, 100), n_jobs=None", "this", "auto", 1, 100, "none"),
+    ("default (auto, 1, 100), n_jobs=-1", "this", "auto", 1, 100, "-1"),
+    ("former (1.0, 2, 200), n_jobs=None", "this", "1.0", 2, 200, "none"),
+    ("scikit-learn (1.0, 1 restart)", "sklearn", "1.0", 1, 0, "none"),
 )
 
 
-def run_large(sizes: list[int], other: str | None, n_jobs: int) -> None:
+def run_large(sizes: list[int], other: str | None, sklearn_max: int) -> None:
     """Each fit in a fresh process; with ``other`` (a python/ directory of another checkout)
-    the former settings also run on that implementation, side by side."""
+    the former settings also run on that implementation, side by side; scikit-learn only up
+    to ``sklearn_max`` rows (it is slow)."""
     import os
     import subprocess
     import sys
@@ -139,14 +184,13 @@ def run_large(sizes: list[int], other: str | None, n_jobs: int) -> None:
     rows = []
     here = str(Path(__file__).resolve().parents[1] / "python")
     for n in sizes:
-        runs = [("this", here, *cfg) for cfg in LARGE_SETTINGS]
+        runs = [(path_for, *cfg) for cfg in LARGE_SETTINGS for path_for in [here]]
+        runs = [r for r in runs if r[2] != "sklearn" or n <= sklearn_max]
         if other:
-            runs.append(("other", other, *LARGE_SETTINGS[1]))
-        for impl, path, label, ls, restarts, max_iter in runs:
-            env = {**os.environ, "PYTHONPATH": path}
-            args = [str(n), ls, str(restarts), str(max_iter), str(n_jobs)]
-            if impl == "other":
-                args[-1] = "1"  # its n_jobs: a thread count (None meant all cores)
+            runs.append((other, "former (1.0, 2, 200), n_jobs=1", "other", "1.0", 2, 200, "1"))
+        for path, label, impl, ls, restarts, max_iter, n_jobs in runs:
+            env = {**os.environ, "PYTHONPATH": path, "OPENBLAS_NUM_THREADS": "1"}
+            args = [impl, str(n), ls, str(restarts), str(max_iter), n_jobs]
             out = subprocess.run(
                 [sys.executable, "-c", LARGE_CHILD, *args],
                 capture_output=True,
@@ -154,42 +198,35 @@ def run_large(sizes: list[int], other: str | None, n_jobs: int) -> None:
                 check=True,
                 env=env,
             ).stdout.split()
-            wall, cpu, peak, acc, lml = map(float, out)
+            wall, cpu, busiest, peak, acc, lml, load0, load1 = map(float, out)
             row = {
                 "n": n,
                 "implementation": impl,
                 "settings": label,
                 "wall s": wall,
                 "cpu s": cpu,
+                "busiest thread cpu s": busiest,
                 "peak MB": peak,
+                "load": f"{load0:.1f}-{load1:.1f}",
                 "train acc": acc,
                 "LML (sum)": lml,
             }
             rows.append(row)
             print(row, flush=True)
-    cols = [
-        "n",
-        "implementation",
-        "settings",
-        "wall s",
-        "cpu s",
-        "peak MB",
-        "train acc",
-        "LML (sum)",
-    ]
-    print(table(rows, cols))
-    print("saved", save("gp-large", {"rows": rows, "n_jobs": n_jobs, "other": other}))
+    print(table(rows, list(rows[0])))
+    print("saved", save("gp-large", {"rows": rows, "other": other}))
 
 
 def main() -> None:
     import sys
 
     if "--large" in sys.argv:
-        opt = {"--sizes": "1000,2000", "--other": None, "--n-jobs": "1"}
+        opt = {"--sizes": "1000,2000", "--other": None, "--sklearn-max": "1000"}
         for key in opt:
             if key in sys.argv:
                 opt[key] = sys.argv[sys.argv.index(key) + 1]
-        run_large([int(v) for v in opt["--sizes"].split(",")], opt["--other"], int(opt["--n-jobs"]))
+        sizes = [int(v) for v in opt["--sizes"].split(",")]
+        run_large(sizes, opt["--other"], int(opt["--sklearn-max"]))
         return
 
     if "--transfer-variants" in sys.argv:  # the transfer kernels' own bench

@@ -65,5 +65,12 @@ def test_single_positive_source_reproduces_the_saved_paper_kernel():
         for key in ref.files:
             if key.startswith("fixed") or key.endswith("at_theta"):
                 np.testing.assert_allclose(got[key], ref[key], rtol=1e-11, atol=1e-13, err_msg=key)
-            else:  # optimised: same starts and steps, up to summation order
-                np.testing.assert_allclose(got[key], ref[key], rtol=1e-6, atol=1e-8, err_msg=key)
+            elif key == "fitted_lml":  # optimised: the same optimum...
+                np.testing.assert_allclose(got[key], ref[key], rtol=1e-9, err_msg=key)
+            else:
+                # ...reached from the same starts, but the Newton search now reuses
+                # factorisations (docs/gp.md), so the LML differs in its 12th digit and the
+                # optimiser stops elsewhere within its tolerance on a flat ridge: θ moves by
+                # ~1e-3 in directions the likelihood hardly sees, the predictions by ~1e-6.
+                tol = {"fitted_theta": 5e-3}.get(key, 1e-5)
+                np.testing.assert_allclose(got[key], ref[key], rtol=tol, atol=tol, err_msg=key)

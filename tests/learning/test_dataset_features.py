@@ -71,6 +71,26 @@ def test_loading_reads_only_and_the_cache_is_keyed_by_the_settings(tmp_path, dat
     )
 
 
+def test_recordings_added_after_extraction_make_the_features_stale(tmp_path, data):
+    """A data set completed after its features were stored (``dataset generate --resume``):
+    the stored features miss the new recordings, so they are stale, and loading extracts
+    rather than silently dropping the new recordings."""
+    path = tmp_path / "data.h5"
+    path.write_bytes(data.read_bytes())
+    extract_features(path, progress=False)
+    assert stale_features(path, [ACTION]) == []
+    with DatasetWriter(path, "a") as w:
+        w.append(SimWorld(seed=3).explore("towel", ACTION, 2))
+    assert stale_features(path, [ACTION]) == [ACTION]
+    with pytest.raises(DatasetError, match="every recording"):
+        load_observations(path, extract_missing=False)
+    table = load_observations(path)
+    assert sorted(table[ACTION].trials[table[ACTION].objects == "towel"]) == [0, 1, 2]
+    extract_features(path, progress=False)
+    assert stale_features(path, [ACTION]) == []
+    same(load_observations(path, extract_missing=False), table)
+
+
 def test_filters_pick_the_same_rows_from_memory_and_from_the_file(tmp_path, data):
     path = tmp_path / "data.h5"
     path.write_bytes(data.read_bytes())

@@ -267,7 +267,7 @@ def test_one_vs_all_sources_and_several_sources_reach_the_classifiers(world):
     """The default source task is the chosen old object's one-vs-all data; "multi" hands every
     old object above the cut-off to the classifier, each with its own λ."""
     prior = world["prior"]
-    learner, _ = _run(world, transfer="multi", budget=0, eps_neg=0.0)
+    learner, _ = _run(world, transfer="multi", budget=0, eps_neg=0.0, cutoff="paper")
     n_old = {a: len(prior[a].observations) for a in ACTIONS}
     for a, lrn in learner.learners.items():
         for c, d in lrn.decisions.items():
@@ -327,3 +327,202 @@ def _related():
         pool=draw(means, news, 10, seed=2),
         test=draw(means, news, 6, seed=3),
     )
+
+
+# -- the evidence cut-off ("like none of them") ---------------------------------------------------
+def test_evidence_filters_what_passed_eps_neg_and_paper_is_eq3_exactly():
+    p = np.array([[0.7, 0.5, 0.1, 0.45], [0.5, 0.5, 0.2, 0.35]])  # p̄ = 0.6, 0.5, 0.15, 0.4
+    asked = []
+
+    def evidence(old, lam):
+        asked.append((old, lam))
+        return {"a": -0.3, "b": 0.8, "c": -5.0, "d": 2.0}[old]
+
+    d = decide_transfer("n", OLD, p, eps_neg=0.4, mode="multi", evidence=evidence)
+    # Only the old objects that passed ε_neg are tested, each at its own λ.
+    assert asked == [
+        ("a", pytest.approx(0.6)),
+        ("b", pytest.approx(0.5)),
+        ("d", pytest.approx(0.4)),
+    ]
+    assert d.sources == ("b", "d") and d.lambdas == pytest.approx((0.5, 0.4))
+    assert d.as_dict()["log_bayes_factor"] == pytest.approx({"a": -0.3, "b": 0.8, "d": 2.0})
+    # The margin is a log Bayes factor the transfer must exceed.
+    assert decide_transfer(
+        "n", OLD, p, eps_neg=0.4, mode="multi", evidence=evidence, evidence_margin=1.0
+    ).sources == ("d",)
+    # The paper's mode: the most related object only; rejected by its evidence, nothing else
+    # is tried.
+    paper = decide_transfer("n", OLD, p, eps_neg=0.4, evidence=evidence)
+    assert not paper.transfers and paper.as_dict()["log_bayes_factor"] == {"a": -0.3}
+    # Without an evidence function Eq. 3 alone decides (cutoff="paper").
+    plain = decide_transfer("n", OLD, p, eps_neg=0.4)
+    assert plain.sources == ("a",) and plain.evidence == ()
+    # The stress test's forced λ is the one the evidence is asked about.
+    asked.clear()
+    stress = decide_transfer(
+        "n", OLD, p, eps_neg=0.0, choice="least", forced_lambda=1.0, evidence=evidence
+    )
+    assert asked == [("c", 1.0)] and not stress.transfers
+
+
+def test_cutoff_option_validates_and_round_trips():
+    cfg = LearnerConfig(cutoff="paper", evidence_margin=1.0)
+    assert LearnerConfig.from_dict(cfg.to_dict()) == cfg
+    assert LearnerConfig().cutoff == "evidence" and LearnerConfig().evidence_margin == 0.0
+    with pytest.raises(ValueError, match="cutoff"):
+        LearnerConfig(cutoff="support")
+    with pytest.raises(ValueError, match="evidence_margin"):
+        LearnerConfig(evidence_margin=float("nan"))
+    lnn = LearnerConfig(evidence_margin=None)
+    assert LearnerConfig.from_dict(lnn.to_dict()) == lnn
+
+
+def test_evidence_margin_none_is_ln_of_the_number_of_old_objects(world):
+    """None: prior odds 1/N_old of "like old object i" against "like none of them"."""
+    learner, _ = _run(world, transfer="paper", budget=0, evidence_margin=None)
+    for lrn in learner.learners.values():
+        assert lrn._evidence_margin() == pytest.approx(np.log(3))
+        for d in lrn.decisions.values():
+            for old, log_bf in d.evidence:
+                assert (old in d.sources) == (log_bf > np.log(3))
+    fixed, _ = _run(world, transfer="paper", budget=0, evidence_margin=0.25)
+    assert all(lrn._evidence_margin() == 0.25 for lrn in fixed.learners.values())
+
+
+def _laplace_log_evidence(K, y):
+    """Laplace approximation of log p(y | K) for a binary GPC with the logistic likelihood,
+    written out from Rasmussen & Williams Algorithm 3.1 and Eq. 3.32 (an independent check of
+    the core's)."""
+    n = len(y)
+    f = np.zeros(n)
+    for _ in range(200):
+        pi = 1.0 / (1.0 + np.exp(-f))
+        W = pi * (1 - pi)
+        sw = np.sqrt(W)
+        L = np.linalg.cholesky(np.eye(n) + sw[:, None] * K * sw[None, :])
+        b = W * f + (y + 1) / 2 - pi
+        a = b - sw * np.linalg.solve(L.T, np.linalg.solve(L, sw * (K @ b)))
+        f_new = K @ a
+        if np.max(np.abs(f_new - f)) < 1e-12:
+            f = f_new
+            break
+        f = f_new
+    log_lik = -np.sum(np.log1p(np.exp(-y * f)))
+    return -0.5 * a @ f + log_lik - np.sum(np.log(np.diag(L)))
+
+
+def test_transfer_evidence_is_the_laplace_bayes_factor(world):
+    """The evidence of a transfer, against an independent Laplace computation: log Z of the
+    joint (source, target) task with the cross block scaled by λ, minus log Z with λ = 0,
+    which is the source's log Z plus the target's."""
+    ap = world["prior"]["P1"]
+    new = world["pool"]["P1"]
+    X_new, _ = ap.features(new)
+    X_new, objects = X_new[::3], new.objects[::3]  # a few observations of each new object
+    positive = objects == world["news"][0]
+    old = ap.objects[0]
+    hp = ap.model.hyperparameters_[old]
+    X_old = ap.training_features()
+    y_old = np.where(ap.observations.objects == old, 1.0, -1.0)
+    y_new = np.where(positive, 1.0, -1.0)
+
+    def rbf(A, B):
+        k = 0.0
+        for m, cols in zip(ap.model.modality_names_, ap.model.modalities_):
+            d2 = ((A[:, None, cols] - B[None, :, cols]) ** 2).sum(-1)
+            k = k + hp["modality_weights"][m] * np.exp(-d2 / (2 * hp["length_scales"][m] ** 2))
+        return hp["signal_variance"] * k
+
+    def joint(lam):
+        K = np.block(
+            [
+                [rbf(X_old, X_old), lam * rbf(X_old, X_new)],
+                [lam * rbf(X_new, X_old), rbf(X_new, X_new)],
+            ]
+        )
+        return _laplace_log_evidence(K, np.concatenate([y_old, y_new]))
+
+    for lam in (0.3, 0.9):
+        expected = joint(lam) - joint(0.0)
+        got = ap.transfer_evidence(X_new, positive, old, lam)
+        assert got == pytest.approx(expected, abs=1e-6)
+    # λ = 0 is the independent model itself, and its evidence factorises.
+    assert ap.transfer_evidence(X_new, positive, old, 0.0) == pytest.approx(0.0, abs=1e-9)
+    sep = _laplace_log_evidence(rbf(X_old, X_old), y_old) + _laplace_log_evidence(
+        rbf(X_new, X_new), y_new
+    )
+    assert joint(0.0) == pytest.approx(sep, abs=1e-8)
+    with pytest.raises(ValueError, match="positive"):
+        ap.transfer_evidence(X_new, np.ones(len(X_new), bool), old, 0.5)
+
+
+def _beyond_world(far, seed=1):
+    """New objects like none of the old ones: each lies beyond old0, on the side away from the
+    other old objects (at ``far`` times old0's distance from them), scattered around that
+    point. Old0's one-vs-all classifier claims them all; none is like old0."""
+    priors, news, means = make_world(
+        n_prior=3, n_new=3, noise=1.0, separation=0.6, related=True, seed=seed
+    )
+    rng = np.random.default_rng(seed + 100)
+    for a, mods in ACTIONS.items():
+        for o in news:
+            means[(a, o)] = {}
+            for m in mods:
+                m0 = means[(a, priors[0])][m]
+                away = m0 - (means[(a, priors[1])][m] + means[(a, priors[2])][m]) / 2
+                means[(a, o)][m] = m0 + far * away + rng.normal(size=m0.size)
+    return dict(
+        news=news,
+        prior=PriorKnowledge.build(draw(means, priors, 12, seed=1), seed=0),
+        pool=draw(means, news, 10, seed=2),
+        test=draw(means, news, 6, seed=3),
+    )
+
+
+def test_evidence_stops_transfer_to_objects_like_none_of_the_old_ones():
+    far = _beyond_world(far=1.0)
+    paper, _ = _run(far, transfer="paper", budget=0, cutoff="paper")
+    evidence, run = _run(far, transfer="paper", budget=0, cutoff="evidence")
+    for a in ACTIONS:
+        # Eq. 3 alone: old0's classifier claims every new object (p̄ ≥ ε_neg) ...
+        for d in paper.learners[a].decisions.values():
+            assert d.source == "old0" and d.transfer_lambda >= 0.5, d.as_dict()
+        # ... the new objects' own labels do not favour it: no transfer.
+        for d in evidence.learners[a].decisions.values():
+            assert not d.transfers, d.as_dict()
+            ((old, log_bf),) = d.evidence
+            assert old == "old0" and log_bf < 0
+    # Nothing transferred: APTKT is the baseline.
+    _, base = _run(far, transfer="none", budget=0)
+    assert run.steps[0].mean_accuracy == base.steps[0].mean_accuracy
+
+
+def test_evidence_keeps_transfer_from_the_old_object_a_new_one_is_like(world):
+    """Each new object inside one old object's cluster: the evidence favours every transfer
+    Eq. 3 makes, and the decisions are Eq. 3's."""
+    paper, _ = _run(world, transfer="paper", budget=0, cutoff="paper")
+    evidence, _ = _run(world, transfer="paper", budget=0, cutoff="evidence")
+    for a in ACTIONS:
+        for o, d in evidence.learners[a].decisions.items():
+            p = paper.learners[a].decisions[o]
+            assert d.transfers and (d.source, d.lambdas) == (p.source, p.lambdas)
+            assert dict(d.evidence)[d.source] > 0.5
+
+
+def test_feature_space_covered_uses_the_prior_space_only_when_every_new_object_transfers(world):
+    """ "covered": the prior's space when every new object of the action has a source, the
+    baseline's otherwise; "auto" already when one has. ε_neg = 0.8 lets some new objects of
+    each action through and stops the others (p̄ between 0.58 and 0.94 here)."""
+    for space, partial_in_prior in (("auto", True), ("covered", False)):
+        learner, _ = _run(world, transfer="paper", budget=0, eps_neg=0.8, feature_space=space)
+        for a, lrn in learner.learners.items():
+            made = [d.transfers for d in lrn.decisions.values()]
+            assert any(made) and not all(made), (a, made)
+            assert lrn._test_cache is not None
+            assert (lrn._test_cache[0] is lrn.prior.pipeline) == partial_in_prior
+    # Every new object transfers: both use the prior's space.
+    learner, _ = _run(world, transfer="paper", budget=0, feature_space="covered")
+    for lrn in learner.learners.values():
+        assert all(d.transfers for d in lrn.decisions.values())
+        assert lrn._test_cache is not None and lrn._test_cache[0] is lrn.prior.pipeline

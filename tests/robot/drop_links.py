@@ -1,9 +1,12 @@
 """Drop the controller link in the middle of a press, ``N`` times, each followed by the close
 of the arm (``python drop_links.py N``; prints one line per survived drop). Run in its own
-process by ``test_link_drops.py``: a crash in a destructor kills the process, not the tests."""
+process by ``test_link_drops.py``: a crash kills the process, not the tests. A crash prints
+every thread's stack; a drop taking longer than ``PER_DROP_TIMEOUT`` s prints them and exits
+(code 1), so a hang is a failure with its cause, not a stuck run."""
 
 from __future__ import annotations
 
+import faulthandler
 import gc
 import sys
 import time
@@ -23,13 +26,18 @@ from aptkt.errors import RobotError
 from aptkt.robot import UR10, SafetyLimits
 from aptkt.sim.loopback import Loopback
 
+# One drop takes about 2 s (1 s of it waiting); 60 s means something hangs.
+PER_DROP_TIMEOUT = 60.0
+
 
 def main(n: int) -> None:
+    faulthandler.enable(all_threads=True)
     with Loopback(
         free_loopback_host(), contact=DEFAULT_CONTACT, start_pose=START_POSE, unlock_delay=0.0
     ) as lb:
         skin = FakeSkin(lb)
         for i in range(n):
+            faulthandler.dump_traceback_later(PER_DROP_TIMEOUT, exit=True)
             lb.reset(pose=START_POSE)
             lb.set_contact(DEFAULT_CONTACT)
             robot = UR10(lb.host, [PLACEMENT], SafetyLimits(**FAST))
@@ -46,6 +54,7 @@ def main(n: int) -> None:
             gc.collect()
             time.sleep(0.7)  # the crashes came 0.55 s after the drop
             print(f"drop {i + 1}: {reason}, survived", flush=True)
+        faulthandler.cancel_dump_traceback_later()
 
 
 if __name__ == "__main__":

@@ -349,24 +349,43 @@ def test_a_command_racing_a_program_stop_fails_fast(make_robot, loopback, skin):
     assert not loopback.state()["connections"].get("rtde")
 
 
-def test_abandoned_clients_are_destroyed_only_when_their_call_has_ended():
-    import threading
+def test_a_crash_of_the_control_client_is_a_lost_link_not_a_crash(make_robot, loopback, skin):
+    """ur_rtde's control client may crash when its link drops (its reconnect races our calls):
+    it runs in a process of its own, so that is a lost link; the arm stops and nothing hangs."""
+    import os
+    import signal
 
-    from aptkt.robot.ur10 import connection as ur10
+    robot = make_robot()
+    in_contact(robot, skin)
+    pid = robot._control.pid
+    fire_after(0.3, lambda: os.kill(pid, signal.SIGSEGV))
+    t0 = time.monotonic()
+    with pytest.raises(RobotConnectionError, match="control client process ended"):
+        robot.press(0.001, 3.0)
+    assert time.monotonic() - t0 < 1.5
+    time.sleep(0.7)  # the controller's RTDE watchdog stops the program
+    assert not loopback.state()["moving"]
+    robot.recover()  # a new control process
+    robot.move_above(PLACEMENT, 0.01)
+    assert at_rest(loopback)["pose"][2] == pytest.approx(0.01, abs=1e-6)
 
-    destroyed = []
 
-    class Client:
-        def __del__(self):
-            destroyed.append(threading.current_thread().name)
+def test_nothing_of_a_dropped_link_reconnects_behind_our_back(make_robot, loopback, skin):
+    """After a drop the controller accepts connections again at once: ur_rtde's control client
+    would reconnect by itself and keep the controller's command registers from the next
+    connection. Its process is killed instead, and the next connection gets the registers."""
+    import os
 
-    release = threading.Event()
-    stuck = threading.Thread(target=release.wait, name="stuck-call", daemon=True)
-    stuck.start()
-    ur10._bury(stuck, Client())
-    assert ur10._sweep_graveyard() == 0 and destroyed == []  # still in use: kept alive
-    release.set()
-    stuck.join()
-    assert destroyed == []  # the call ended, but nothing is destroyed behind our back ...
-    assert ur10._sweep_graveyard() == 1
-    assert destroyed == [threading.current_thread().name]  # ... only when swept, here
+    robot = make_robot()
+    in_contact(robot, skin)
+    pid = robot._control.pid
+    fire_after(0.3, lambda: loopback.drop_connections(refuse_for=0.0))
+    with pytest.raises(RobotConnectionError):
+        robot.press(0.001, 3.0)
+    with pytest.raises(ProcessLookupError):
+        os.kill(pid, 0)  # gone (and reaped) the moment the link was found lost
+    time.sleep(1.0)  # time for any reconnect attempt to show
+    assert not loopback.state()["connections"].get("rtde")
+    robot.close()
+    robot.connect()  # "input registers already in use" if anything had reconnected
+    robot.move_above(PLACEMENT, 0.01)

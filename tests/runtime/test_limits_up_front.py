@@ -85,3 +85,62 @@ def test_paper_actions_fit_the_default_limits_and_a_roomy_box():
     with pytest.raises(SafetyLimitError, match="action S1: .*box of object o"):
         small = Placement("o", 0.0, 0.0, 0.0, (-0.01, -0.01, -0.01), (0.01, 0.01, 0.1))
         check_action_limits(PAPER_ACTIONS["S1"], SafetyLimits(), [small])
+
+
+@pytest.fixture(scope="module")
+def prior_of_the_bad_names(tmp_path_factory):
+    """Prior knowledge of actions named like the bad ones, with parameters within the limits:
+    ``learn`` then gets past its prior checks, and only the actions file breaks a limit."""
+    from aptkt.learning import PriorKnowledge
+    from aptkt.learning.dataset import load_observations
+    from aptkt.runtime.generation import GenerationPlan, generate
+
+    d = tmp_path_factory.mktemp("learn_limits")
+    press = dict(movement=Movement.PRESS, depth=0.001, hold_time=0.2)
+    slide = dict(movement=Movement.SLIDE, normal_force=0.1, speed=0.01, slide_time=0.2)
+    actions = tuple(
+        ExploratoryAction(name, **(press if "press" in BAD_ACTIONS[name][0] else slide))
+        for name in sorted(BAD_ACTIONS)
+    )
+    objects = ("rough_sponge", "metal_toolbox")
+    generate(d / "p.h5", GenerationPlan(objects, actions, 3, seed=1), progress=False)
+    PriorKnowledge.build(load_observations(d / "p.h5")).save(d / "p.npz")
+    return d / "p.npz"
+
+
+@pytest.fixture(scope="module")
+def loopback():
+    """A live loopback controller with its pty skin: a command that moved the arm would be seen."""
+    from loopback_helpers import free_loopback_host
+
+    from aptkt.sim.loopback import Loopback
+
+    with Loopback(free_loopback_host(), skin={}, unlock_delay=0.0) as lb:
+        yield lb
+
+
+@pytest.mark.parametrize("name", sorted(BAD_ACTIONS))
+def test_learn_checks_the_limits_before_connecting(
+    tmp_path, capsys, prior_of_the_bad_names, loopback, name
+):
+    body, value, limit = BAD_ACTIONS[name]
+    cell = CELL.replace('"127.0.0.1"', f'"{loopback.host}"')
+    (tmp_path / "cell.toml").write_text(
+        cell + cell[cell.index("[[object]]") :].replace('"block"', '"block2"')
+    )
+    (tmp_path / "actions.toml").write_text(f'[[action]]\nname = "{name}"\n{body}\n')
+    before = loopback.state()
+    argv = [
+        "learn", "--robot", "ur10", "--workspace", str(tmp_path / "cell.toml"),
+        "--skin", loopback.skin_port, "--prior", str(prior_of_the_bad_names),
+        "--actions-file", str(tmp_path / "actions.toml"), "--actions", name,
+        "--objects", "block,block2", "--budget", "1", "-o", str(tmp_path / "out"),
+    ]  # fmt: skip
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("aptkt learn: error: "), err
+    assert f"action {name}" in lines[0] and value in lines[0] and limit in lines[0]
+    assert not (tmp_path / "out").exists()
+    after = loopback.state()  # never connected, never moved
+    assert not after["connections"] and after["pose"] == before["pose"], after

@@ -6,8 +6,11 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
+import numpy as np
+
 from aptkt.gp import DEFAULTS, LaplaceGPC
 from aptkt.learning.transfer import (
+    CUTOFFS,
     FEATURE_SPACES,
     RELATEDNESS,
     SOURCE_CHOICES,
@@ -88,6 +91,15 @@ class LearnerConfig:
         and auxiliary features (Eq. 5) in their own space.
     relatedness : p̄ of Eq. 3 from each old object's own binary classifier ("binary", paper
         §4.2) or from the normalised one-vs-all posterior ("normalised").
+    cutoff : "evidence" (default, beyond the paper): Eq. 3's ε_neg, and then the new
+        objects' own labels must favour the transfer — the log Bayes factor of the dependent
+        model (source coupled by λ) against λ = 0, under the old classifier's kernel, must
+        exceed ``evidence_margin``. p̄ says which old object the new one is most like among
+        the old ones; a one-vs-all classifier of the old objects also claims objects that are
+        like none of them, which the evidence test rejects. "paper": Eq. 3 exactly.
+    evidence_margin : the log Bayes factor a transfer must exceed under ``cutoff="evidence"``.
+        0 (default): equal prior odds of "related" and "unrelated" — transfer when the source
+        makes the new labels more probable than no source does.
     source_choice, forced_lambda : stress tests of the cut-off only — transfer the "least"
         related old object instead of the "most", and replace λ = p̄ by a fixed value once the
         cut-off has let the transfer through. None: λ = p̄ (the method).
@@ -107,6 +119,8 @@ class LearnerConfig:
     source: str = "one-vs-all"
     feature_space: str = "auto"
     relatedness: str = "binary"
+    cutoff: str = "evidence"
+    evidence_margin: float | None = 0.0
     source_choice: str = "most"
     forced_lambda: float | None = None
     auxiliary: bool = False
@@ -122,6 +136,7 @@ class LearnerConfig:
             ("feature_space", FEATURE_SPACES),
             ("relatedness", RELATEDNESS),
             ("source_choice", SOURCE_CHOICES),
+            ("cutoff", CUTOFFS),
         ):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"{name} must be one of {allowed}, got {getattr(self, name)!r}")
@@ -129,6 +144,8 @@ class LearnerConfig:
             raise ValueError(
                 f"forced_lambda must be None or lie in [0, 1], got {self.forced_lambda}"
             )
+        if self.evidence_margin is not None and not np.isfinite(self.evidence_margin):
+            raise ValueError(f"evidence_margin must be None or finite, got {self.evidence_margin}")
         for name in ("eps_neg", "eps_explor"):
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:

@@ -97,7 +97,20 @@ def stale_features(
     """Of ``actions``, those without stored features extracted with ``settings``."""
     key = (settings or ExtractionSettings()).to_dict()
     with DatasetReader(path) as rd:
-        return [a for a in actions if rd.feature_settings(a) != key]
+        return [a for a in actions if not _features_current(rd, a, key)]
+
+
+def _features_current(rd: DatasetReader, action: str, key: dict[str, Any]) -> bool:
+    """Whether the stored features of ``action`` were extracted with these settings *and* cover
+    every recording of it: recordings appended later (``dataset generate --resume``) have
+    none, and reading the stored ones alone would silently drop them."""
+    if rd.feature_settings(action) != key:
+        return False
+    modalities = rd.feature_names().get(action, [])
+    if not modalities:
+        return False
+    stored = {int(i) for i in rd.features(action, modalities[0])[0]}
+    return set(_rows_by_action(rd, [action]).get(action, [])) <= stored
 
 
 def extract_features(
@@ -164,11 +177,11 @@ def load_observations(
                 f"{', '.join(sorted(obj_filter - recorded_objects))}; "
                 f"it has {', '.join(sorted(recorded_objects))}"
             )
-        todo = [a for a in names if rd.feature_settings(a) != key]
+        todo = [a for a in names if not _features_current(rd, a, key)]
         if todo and not extract_missing:
             raise DatasetError(
-                f"{path} has no features stored with these extraction settings for {todo}; "
-                "run `aptkt dataset features`"
+                f"{path} has no features stored with these extraction settings for every "
+                f"recording of {todo}; run `aptkt dataset features`"
             )
 
         def wanted(i: int) -> bool:

@@ -81,12 +81,13 @@ class ActionLearner:
         """The new objects' model space: the prior's, or fitted on the new objects' training
         observations so far (the baseline's). ``feature_space``: "prior" always the prior's
         (so does the control), "new" never, "auto" the prior's exactly when this update
-        transfers from at least one old object."""
+        transfers from at least one old object, "covered" when it transfers to every new
+        object."""
         cfg = self.config
         if self.prior is not None and (
             cfg.transfer == "control"
             or cfg.feature_space == "prior"
-            or (cfg.feature_space == "auto" and transfers)
+            or (cfg.feature_space in ("auto", "covered") and transfers)
         ):
             return self.prior.pipeline
         assert self.observations is not None  # update() checks every object was observed
@@ -154,6 +155,25 @@ class ActionLearner:
             X, np.where(mine, 1.0, -1.0), transfer_lambda=transfer_lambda, name=old_object
         )
 
+    def _evidence_margin(self) -> float:
+        """The log Bayes factor a transfer must exceed: ``config.evidence_margin``, or with
+        None ln N_old — prior odds of 1/N_old for "like old object i" against "like none of
+        them" (half the prior mass on "like none", the rest spread evenly over the old
+        objects)."""
+        margin = self.config.evidence_margin
+        if margin is not None:
+            return margin
+        assert self.prior is not None  # only called when transferring
+        return float(np.log(len(self.prior.objects)))
+
+    def _evidence(self, X_prior: np.ndarray, positive: np.ndarray) -> Callable[[str, float], float]:
+        """The log Bayes factor of a transfer into one new object's classifier (``positive``:
+        its observations among every new one), judged in the prior's space by the old model."""
+        prior = self.prior
+        assert prior is not None  # only called when transferring
+        source = self.config.source
+        return lambda old, lam: prior.transfer_evidence(X_prior, positive, old, lam, source)
+
     # -- model -------------------------------------------------------------------------------
     def update(self, step: int) -> None:
         """Refit this action's model on everything observed so far (weights, λ, transfer)."""
@@ -176,9 +196,19 @@ class ActionLearner:
                     cfg.transfer,
                     choice=cfg.source_choice,
                     forced_lambda=cfg.forced_lambda,
+                    evidence=self._evidence(X_prior, obs.objects == obj)
+                    if cfg.cutoff == "evidence"
+                    else None,
+                    evidence_margin=self._evidence_margin(),
                 )
                 self.decisions[obj] = decision
-        pipeline = self._pipeline(any(d.transfers for d in self.decisions.values()))
+        # "auto": the prior's space when anything transfers; "covered": only when every new
+        # object has a source (each is like an old object, so the prior's transforms were fitted
+        # on a population that covers them all).
+        made = [d.transfers for d in self.decisions.values()]
+        pipeline = self._pipeline(
+            all(made) if cfg.feature_space == "covered" and made else any(made)
+        )
         X_full, groups_full = pipeline.transform(obs)
         X, groups = self._model_input(X_full, groups_full, X_prior)
         # Several sources ("multi") share one block kernel B ⊗ k with B = v vᵀ + diag(1 − λ_s²,

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +19,7 @@ import numpy as np
 
 from aptkt import __version__
 from aptkt.errors import PriorFileError
-from aptkt.gp import LaplaceGPC
+from aptkt.gp import LaplaceGPC, TransferSource
 from aptkt.learning.config import GPSettings
 from aptkt.learning.observations import Observations, ObservationTable
 from aptkt.learning.pipeline import FeaturePipeline, ModalityTransform
@@ -67,8 +68,63 @@ class ActionPrior:
     def training_features(self) -> np.ndarray:
         return self.pipeline.transform(self.observations)[0]
 
+    @cached_property
+    def _training_X(self) -> np.ndarray:
+        """The old observations in this prior's space, computed once (the evidence test reads
+        them at every update)."""
+        return self.training_features()
+
     def features_of(self, old_object: str) -> np.ndarray:
         return self.pipeline.transform(self.observations.of_objects([old_object]))[0]
+
+    def transfer_evidence(
+        self,
+        X_new: np.ndarray,
+        positive: np.ndarray,
+        old_object: str,
+        transfer_lambda: float,
+        source: str = "one-vs-all",
+    ) -> float:
+        """The log Bayes factor of transferring ``old_object`` into a new object's classifier.
+
+        ``X_new``: every new observation of this action so far, in this prior's feature space;
+        ``positive``: which of them belong to the new object (its binary task's +1 labels).
+        Model 1 couples the new object's latent function to the source task's (``source``:
+        the old object's one-vs-all task or its observations as positives) by λ, as Eq. 2
+        does; model 0 is the same with λ = 0 (the two tasks independent). Both use the old
+        object's own classifier's hyper-parameters, and no hyper-parameter is fitted, so the
+        factor compares the two hypotheses only. With λ = 0 the joint marginal likelihood is
+        the source's times the target's, so ``log Z(λ) − log Z(0) = log p(y_new | source, λ)
+        − log p(y_new)``: how much more probable the source makes the new labels (> 0: the
+        transfer is supported). Laplace approximations throughout.
+        """
+        hp = self.model.hyperparameters_[old_object]
+        names = list(self.model.modality_names_)
+        X_old = self._training_X
+        mine = np.asarray(self.observations.objects) == old_object
+        if source == "positives":
+            task = TransferSource(X_old[mine], transfer_lambda=transfer_lambda)
+        elif source == "one-vs-all":
+            task = TransferSource(X_old, np.where(mine, 1.0, -1.0), transfer_lambda=transfer_lambda)
+        else:
+            raise ValueError(f"source must be 'one-vs-all' or 'positives', got {source!r}")
+        positive = np.asarray(positive, dtype=bool)
+        if positive.shape != (X_new.shape[0],) or positive.all() or not positive.any():
+            raise ValueError("positive must mark some, not all, of the new observations")
+        labels = np.where(positive, 1, 0)
+        gpc = LaplaceGPC(
+            length_scale=[hp["length_scales"][m] for m in names],
+            signal_variance=hp["signal_variance"],
+            modality_weights=[hp["modality_weights"][m] for m in names],
+            modalities=dict(zip(names, self.model.modalities_)),
+            optimize=False,
+            approximation=self.model.approximation,
+        ).fit(X_new, labels, sources={1: task})
+        k = int(np.flatnonzero(gpc.classes_ == 1)[0])
+        independent = gpc.theta_.copy()
+        independent[:, -1] = 0.0  # λ: the last hyper-parameter (one source)
+        log_z0 = gpc.log_marginal_likelihood(independent)[k]
+        return float(gpc.log_marginal_likelihood_[k] - log_z0)
 
 
 def binary_probabilities(model: LaplaceGPC, X: np.ndarray) -> np.ndarray:

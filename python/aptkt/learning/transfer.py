@@ -13,6 +13,17 @@ Which probability (``relatedness``):
 * ``"normalised"``: the class posterior, the binary probabilities normalised to sum to 1. With
   N old objects ``p̄_max ≥ 1/N``, so a fixed ε_neg means something different for every N.
 
+Whether the chosen old object is relevant at all (``cutoff``):
+
+* ``"evidence"`` (default, beyond the paper): Eq. 3's ε_neg, and then the target task decides.
+  ``p̄`` only asks which old object the new one is most like *among the old ones*; a one-vs-all
+  classifier trained on the old objects alone also claims observations that are like none of
+  them, as long as they lie on its side of the others. The transfer is kept only if it makes
+  the new objects' labels more probable: the log Bayes factor of the dependent model (the
+  source task coupled by λ) against λ = 0, both under the old classifier's kernel, must exceed
+  ``evidence_margin`` (0: equal prior odds of "related" and "unrelated").
+* ``"paper"``: Eq. 3 exactly (``p̄ ≥ ε_neg``).
+
 Modes: ``"paper"`` transfers the single most related old object (Eq. 3); ``"multi"`` every old
 object whose ``p̄_i`` reaches ε_neg, each with its own λ = p̄_i; ``"none"`` (the baseline) and
 ``"control"`` (the prior's feature space without transfer) never transfer.
@@ -20,7 +31,7 @@ object whose ``p̄_i`` reaches ε_neg, each with its own λ = p̄_i; ``"none"`` 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +45,7 @@ __all__ = [
     "SOURCE_TASKS",
     "SOURCE_CHOICES",
     "FEATURE_SPACES",
+    "CUTOFFS",
 ]
 
 #: "paper": the single most related prior per new object (Eq. 2–3); "multi": every prior above
@@ -46,10 +58,13 @@ RELATEDNESS = ("binary", "normalised")
 #: objects' −1 ("one-vs-all"), or the chosen object's observations only, as positives.
 SOURCE_TASKS = ("one-vs-all", "positives")
 #: Where the new objects' models live (see LearnerConfig.feature_space).
-FEATURE_SPACES = ("auto", "prior", "new")
+FEATURE_SPACES = ("auto", "covered", "prior", "new")
 #: Which old object Eq. 3 picks: the most related (the method) or, for a stress test of the
 #: cut-off, the least related.
 SOURCE_CHOICES = ("most", "least")
+#: Whether Eq. 3's ε_neg alone decides ("paper") or the target task's evidence must also favour
+#: the transfer ("evidence"; see the module docstring).
+CUTOFFS = ("evidence", "paper")
 
 
 @dataclass(frozen=True)
@@ -58,6 +73,8 @@ class TransferDecision:
 
     ``sources`` and ``lambdas`` list the transferred old objects and their λ (one for
     ``"paper"``, any number for ``"multi"``, none when nothing passes the cut-off).
+    ``evidence`` holds, for every old object that passed ε_neg and was tested, the log Bayes
+    factor of transferring it (``cutoff="evidence"``; empty otherwise).
     """
 
     new_object: str
@@ -65,6 +82,7 @@ class TransferDecision:
     mean_posterior: tuple[float, ...]
     sources: tuple[str, ...] = ()
     lambdas: tuple[float, ...] = ()
+    evidence: tuple[tuple[str, float], ...] = ()
 
     @property
     def transfers(self) -> bool:
@@ -87,6 +105,7 @@ class TransferDecision:
             "lambda": self.transfer_lambda,
             "sources": dict(zip(self.sources, self.lambdas)),
             "mean_posterior": dict(zip(self.old_objects, self.mean_posterior)),
+            "log_bayes_factor": dict(self.evidence),
         }
 
 
@@ -109,6 +128,8 @@ def decide_transfer(
     *,
     choice: str = "most",
     forced_lambda: float | None = None,
+    evidence: Callable[[str, float], float] | None = None,
+    evidence_margin: float = 0.0,
 ) -> TransferDecision:
     """Eq. 3: transfer the most related old object if its mean probability reaches ``eps_neg``.
 
@@ -116,6 +137,10 @@ def decide_transfer(
     and ``forced_lambda`` exist for stress tests of the cut-off: the least related old object,
     and a λ that replaces ``p̄`` once the cut-off has let the transfer through (the cut-off
     always looks at the chosen object's own ``p̄``).
+
+    ``evidence(old_object, λ)``, if given, is the log Bayes factor of transferring that old
+    object with that λ (``cutoff="evidence"``); an old object that passed ε_neg is then kept
+    only if it exceeds ``evidence_margin``.
     """
     if mode not in TRANSFER_MODES:
         raise ValueError(f"transfer mode must be one of {TRANSFER_MODES}, got {mode!r}")
@@ -139,10 +164,21 @@ def decide_transfer(
         picked = [best] if p_bar[best] >= eps_neg else []
     else:
         picked = []
+    lambdas = {i: float(p_bar[i] if forced_lambda is None else forced_lambda) for i in picked}
+    tested: list[tuple[str, float]] = []
+    if evidence is not None:
+        kept = []
+        for i in picked:
+            log_bf = float(evidence(str(old_objects[i]), lambdas[i]))
+            tested.append((str(old_objects[i]), log_bf))
+            if log_bf > evidence_margin:
+                kept.append(i)
+        picked = kept
     return TransferDecision(
         new_object=str(new_object),
         old_objects=tuple(str(o) for o in old_objects),
         mean_posterior=tuple(float(v) for v in p_bar),
         sources=tuple(str(old_objects[i]) for i in picked),
-        lambdas=tuple(float(p_bar[i] if forced_lambda is None else forced_lambda) for i in picked),
+        lambdas=tuple(lambdas[i] for i in picked),
+        evidence=tuple(tested),
     )

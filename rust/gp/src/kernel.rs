@@ -433,20 +433,45 @@ pub struct KernelEval {
 
 impl KernelEval {
     pub fn new(dist: &PairDistances, h: &Hyper) -> Self {
-        let n = dist.n;
-        let parts: Vec<Mat<f64>> = dist
-            .per_modality
-            .iter()
-            .zip(h.length_scales.iter())
-            .map(|(d, &l)| rbf_from_sq_distances(d, l))
-            .collect();
-        let mut k = Mat::<f64>::zeros(n, n);
-        combine_parts(&mut k, &parts, h, &dist.coupling(h), &dist.task, &dist.task);
-        KernelEval {
-            k,
-            parts,
+        let mut eval = KernelEval {
+            k: Mat::<f64>::zeros(0, 0),
+            parts: Vec::new(),
             jitter: 0.0,
+        };
+        eval.recompute(dist, h);
+        eval
+    }
+
+    /// The kernel at other hyper-parameters, in the same buffers (an optimiser evaluates
+    /// many; a fresh n × n allocation each time costs page faults and zeroing).
+    pub fn recompute(&mut self, dist: &PairDistances, h: &Hyper) {
+        let n = dist.n;
+        let fresh = || Mat::<f64>::zeros(n, n);
+        self.parts.truncate(dist.per_modality.len());
+        self.parts.resize_with(dist.per_modality.len(), fresh);
+        for ((part, d), &l) in self
+            .parts
+            .iter_mut()
+            .zip(&dist.per_modality)
+            .zip(&h.length_scales)
+        {
+            if part.nrows() != n || part.ncols() != n {
+                *part = fresh();
+            }
+            rbf_into(part, d, l);
         }
+        if self.k.nrows() != n || self.k.ncols() != n {
+            self.k = fresh();
+        }
+        combine_parts(
+            &mut self.k,
+            &self.parts,
+            h,
+            &dist.coupling(h),
+            &dist.task,
+            &dist.task,
+        );
+        self.jitter = 0.0;
     }
 
     pub fn with_jitter(mut self, relative: f64, signal_variance: f64) -> Self {
@@ -476,25 +501,36 @@ impl KernelEval {
         let mut s1 = vec![0.0; p_len];
         let mut b = vec![vec![0.0; n]; p_len];
         let mut c = vec![0.0; p_len];
+        let mut bj = vec![0.0; p_len];
         let inv_l2: Vec<f64> = h.length_scales.iter().map(|l| 1.0 / (l * l)).collect();
         let sf2 = h.signal_variance;
         let coupling = dist.coupling(h);
         let n_lambdas = layout.n_lambdas;
+        // Every C_p, Z and G are symmetric: one triangle (i ≥ j) is visited, an off-diagonal
+        // element counting twice in s1 and reaching b through both (i, j) and (j, i).
         for j in 0..n {
             let vj = v[j];
             let tj = dist.task[j];
-            for i in 0..n {
+            let zj = z.col_as_slice(j);
+            let parts_j: Vec<&[f64]> = self.parts.iter().map(|p| p.col_as_slice(j)).collect();
+            let dist_j: Vec<&[f64]> = dist
+                .per_modality
+                .iter()
+                .map(|d| d.col_as_slice(j))
+                .collect();
+            bj.iter_mut().for_each(|x| *x = 0.0);
+            for i in j..n {
                 let ti = dist.task[i];
                 let mask = coupling.get(ti, tj);
                 let mut unit = 0.0;
                 for m in 0..n_mod {
-                    unit += h.weights[m] * self.parts[m][(i, j)];
+                    unit += h.weights[m] * parts_j[m][i];
                 }
                 c[Layout::SIGNAL] = sf2 * unit * mask;
                 for m in 0..n_mod {
-                    let km = self.parts[m][(i, j)];
+                    let km = parts_j[m][i];
                     c[layout.length_scale(m)] =
-                        sf2 * h.weights[m] * km * dist.per_modality[m][(i, j)] * inv_l2[m] * mask;
+                        sf2 * h.weights[m] * km * dist_j[m][i] * inv_l2[m] * mask;
                     if let Some(w) = layout.weight(m) {
                         c[w] = sf2 * h.weights[m] * (km - unit) * mask;
                     }
@@ -502,11 +538,23 @@ impl KernelEval {
                 for s in 0..n_lambdas {
                     c[layout.len() - n_lambdas + s] = sf2 * unit * coupling.derivative(s, ti, tj);
                 }
-                let gij = 0.5 * (v[i] * vj - z[(i, j)]);
-                for p in 0..p_len {
-                    s1[p] += gij * c[p];
-                    b[p][i] += c[p] * vj;
+                let vi = v[i];
+                let gij = 0.5 * (vi * vj - zj[i]);
+                if i == j {
+                    for p in 0..p_len {
+                        s1[p] += gij * c[p];
+                        bj[p] += c[p] * vj;
+                    }
+                } else {
+                    for p in 0..p_len {
+                        s1[p] += 2.0 * gij * c[p];
+                        b[p][i] += c[p] * vj;
+                        bj[p] += c[p] * vi;
+                    }
                 }
+            }
+            for p in 0..p_len {
+                b[p][j] += bj[p];
             }
         }
         (s1, b)
@@ -515,14 +563,21 @@ impl KernelEval {
 
 /// `exp(-D / (2 ℓ²))` elementwise.
 pub fn rbf_from_sq_distances(d: &Mat<f64>, length_scale: f64) -> Mat<f64> {
+    let mut out = Mat::<f64>::zeros(d.nrows(), d.ncols());
+    rbf_into(&mut out, d, length_scale);
+    out
+}
+
+/// `out = exp(-D / (2 ℓ²))` elementwise, `out` of D's shape.
+fn rbf_into(out: &mut Mat<f64>, d: &Mat<f64>, length_scale: f64) {
     let c = -0.5 / (length_scale * length_scale);
-    let mut out = d.clone();
     for j in 0..out.ncols() {
         let col = out.col_as_slice_mut(j);
-        col.iter_mut().for_each(|v| *v *= c);
+        for (o, v) in col.iter_mut().zip(d.col_as_slice(j)) {
+            *o = v * c;
+        }
         exp_nonpositive_in_place(col);
     }
-    out
 }
 
 /// `out[i, j] = σ² Σ_m γ_m parts_m[i, j] · B[row_task[i], col_task[j]]`.

@@ -9,7 +9,7 @@ use faer::{Mat, MatRef};
 use crate::error::{GpError, GpResult};
 use crate::kernel::{Hyper, KernelEval, Layout, PairDistances};
 use crate::likelihood::{log_sigmoid, sigmoid};
-use crate::linalg;
+use crate::linalg::{self, InverseScratch};
 
 /// Newton mode-finding settings.
 #[derive(Debug, Clone)]
@@ -19,6 +19,9 @@ pub struct NewtonConfig {
     pub tol: f64,
     /// Set from another thread to stop a fit between Newton iterations (e.g. on Ctrl-C).
     pub cancel: Option<Arc<AtomicBool>>,
+    /// Take steps on an earlier factorisation of B while they converge fast enough (see
+    /// [`find_mode`]); false: a factorisation per step (plain Newton).
+    pub reuse_factorisation: bool,
 }
 
 impl NewtonConfig {
@@ -35,6 +38,7 @@ impl Default for NewtonConfig {
             max_iter: 100,
             tol: 1e-10,
             cancel: None,
+            reuse_factorisation: true,
         }
     }
 }
@@ -58,7 +62,10 @@ pub struct Mode {
     /// Lower Cholesky factor of `B = I + W½ K W½`.
     pub l: Mat<f64>,
     pub lml: f64,
+    /// Steps taken (exact Newton steps and steps on a reused factorisation).
     pub iterations: usize,
+    /// Cholesky factorisations of B, the final one at the mode included.
+    pub factorisations: usize,
     pub converged: bool,
 }
 
@@ -92,14 +99,43 @@ fn factor_b(
     Ok((pi, sw))
 }
 
+/// Largest number of steps on one factorisation of B before it is renewed.
+const MAX_STEPS_PER_FACTOR: usize = 25;
+/// A step on an older factorisation must shrink the change of Ψ at least this much relative to
+/// the step before; otherwise B is factorised again at the current f.
+const REUSE_CONTRACTION: f64 = 0.25;
+
 /// Algorithm 3.1 with a step-halving safeguard (the plain Newton step can overshoot when the
 /// kernel is large), warm-started from `warm_a` when given and better than f = 0.
 /// Fails with the failing Cholesky pivot, or when the configuration's cancel flag is set.
+///
+/// **Steps on a reused factorisation.** Newton's step solves `(K⁻¹ + W) Δ = ∇Ψ` with W at the
+/// current f, which costs one Cholesky factorisation (n³/3) per iteration. Any fixed positive
+/// (semi-)definite W̃ in place of W gives an ascent direction of the concave Ψ whose fixed point
+/// is still the mode (`(K⁻¹ + W̃) f = W̃ f + ∇log p(y|f)` ⇔ `f = K ∇log p(y|f)`), converging
+/// linearly instead of quadratically: a "chord" (simplified Newton) step, O(n²) with the
+/// factor of `I + W̃½ K W̃½` kept from an earlier iterate. B is factorised again when such a
+/// step contracts too slowly, needed halving, or after [`MAX_STEPS_PER_FACTOR`] steps, and
+/// always before the step that may end the search: the search stops only after an **exact**
+/// Newton step changes Ψ by less than `tol`, as before, so the mode is as accurate as a pure
+/// Newton search's. `max_iter` caps the factorisations (the exact Newton iterations).
 pub fn find_mode(
     k: MatRef<'_, f64>,
     y: &[f64],
     warm_a: Option<&[f64]>,
     cfg: &NewtonConfig,
+) -> Result<Mode, ModeFailure> {
+    find_mode_in(k, y, warm_a, cfg, Mat::zeros(0, 0))
+}
+
+/// As [`find_mode`], writing B's factor into `buffer` (resized to n × n if needed), so that a
+/// caller evaluating many hyper-parameters reuses one allocation.
+pub fn find_mode_in(
+    k: MatRef<'_, f64>,
+    y: &[f64],
+    warm_a: Option<&[f64]>,
+    cfg: &NewtonConfig,
+    buffer: Mat<f64>,
 ) -> Result<Mode, ModeFailure> {
     let n = y.len();
     let mut a = vec![0.0; n];
@@ -115,26 +151,45 @@ pub fn find_mode(
             psi = psi_w;
         }
     }
+    let mut l = buffer;
+    if l.nrows() != n || l.ncols() != n {
+        l = Mat::<f64>::zeros(n, n);
+    }
     let mut converged = false;
     let mut iterations = 0;
+    let mut factorisations = 0;
     let mut kb = vec![0.0; n];
     let mut f_new = vec![0.0; n];
-    let mut l = Mat::<f64>::zeros(n, n);
-    for it in 0..cfg.max_iter {
+    // W̃½ of the factor held in `l`; valid once `factorisations > 0`.
+    let mut sw_fac = vec![0.0; n];
+    let mut refactor = true;
+    let mut steps_on_factor = 0;
+    let mut last_change = f64::INFINITY;
+    loop {
         if cfg.cancelled() {
             return Err(ModeFailure::Cancelled);
         }
-        iterations = it + 1;
-        let (pi, sw) = factor_b(k, &f, &mut l).map_err(ModeFailure::Pivot)?;
-        // b = W f + ∇log p(y|f), with ∇log p = t - π and t = (y + 1) / 2.
+        if refactor {
+            if factorisations == cfg.max_iter {
+                break;
+            }
+            let (_, sw) = factor_b(k, &f, &mut l).map_err(ModeFailure::Pivot)?;
+            sw_fac = sw;
+            factorisations += 1;
+            steps_on_factor = 0;
+        }
+        let exact = steps_on_factor == 0;
+        steps_on_factor += 1;
+        iterations += 1;
+        // b = W̃ f + ∇log p(y|f), with ∇log p = t - π(f) and t = (y + 1) / 2.
         let b: Vec<f64> = (0..n)
-            .map(|i| sw[i] * sw[i] * f[i] + (0.5 * (y[i] + 1.0) - pi[i]))
+            .map(|i| sw_fac[i] * sw_fac[i] * f[i] + (0.5 * (y[i] + 1.0) - sigmoid(f[i])))
             .collect();
         linalg::matvec(k, &b, &mut kb);
-        let mut v: Vec<f64> = (0..n).map(|i| sw[i] * kb[i]).collect();
+        let mut v: Vec<f64> = (0..n).map(|i| sw_fac[i] * kb[i]).collect();
         linalg::solve_lower(l.as_ref(), &mut v);
         linalg::solve_lower_transpose(l.as_ref(), &mut v);
-        let a_full: Vec<f64> = (0..n).map(|i| b[i] - sw[i] * v[i]).collect();
+        let a_full: Vec<f64> = (0..n).map(|i| b[i] - sw_fac[i] * v[i]).collect();
         // Halve the step in a-space until the objective does not decrease.
         let mut step = 1.0;
         let mut a_new = a_full.clone();
@@ -155,9 +210,19 @@ pub fn find_mode(
         std::mem::swap(&mut f, &mut f_new);
         psi = psi_new;
         if change < cfg.tol {
-            converged = true;
-            break;
+            if exact {
+                converged = true;
+                break;
+            }
+            // Only an exact Newton step may end the search.
+            refactor = true;
+        } else {
+            refactor = !cfg.reuse_factorisation
+                || step < 1.0
+                || (!exact && change > REUSE_CONTRACTION * last_change)
+                || steps_on_factor >= MAX_STEPS_PER_FACTOR;
         }
+        last_change = change;
     }
     let (pi, sw) = factor_b(k, &f, &mut l).map_err(ModeFailure::Pivot)?;
     let log_det_half: f64 = (0..n).map(|i| l[(i, i)].ln()).sum();
@@ -170,12 +235,14 @@ pub fn find_mode(
         l,
         lml,
         iterations,
+        factorisations: factorisations + 1,
         converged,
     })
 }
 
 /// Mode-finding with the jitter policy: if `B` cannot be factorised, add
 /// `jitter · σ²` to K's diagonal for jitter = 1e-10, 1e-8, ... up to `max_jitter`, then fail.
+/// `factor_buffer` (any size; resized if needed) receives B's factor, see [`find_mode_in`].
 pub fn find_mode_with_jitter(
     eval: KernelEval,
     signal_variance: f64,
@@ -183,6 +250,7 @@ pub fn find_mode_with_jitter(
     warm_a: Option<&[f64]>,
     cfg: &NewtonConfig,
     max_jitter: f64,
+    factor_buffer: Mat<f64>,
 ) -> GpResult<(KernelEval, Mode)> {
     if let Some(bad) = eval
         .k
@@ -196,8 +264,10 @@ pub fn find_mode_with_jitter(
     }
     let mut eval = eval;
     let mut jitter = 0.0;
+    let mut buffer = Some(factor_buffer);
     loop {
-        match find_mode(eval.k.as_ref(), y, warm_a, cfg) {
+        let buffer = buffer.take().unwrap_or_else(|| Mat::<f64>::zeros(0, 0));
+        match find_mode_in(eval.k.as_ref(), y, warm_a, cfg, buffer) {
             Ok(mode) => return Ok((eval, mode)),
             Err(ModeFailure::Cancelled) => return Err(GpError::Cancelled),
             Err(ModeFailure::Pivot(pivot)) => {
@@ -221,9 +291,22 @@ pub fn lml_gradient(
     eval: &KernelEval,
     mode: &Mode,
 ) -> Vec<f64> {
+    lml_gradient_in(layout, h, dist, eval, mode, &mut InverseScratch::default())
+}
+
+/// As [`lml_gradient`], with the n × n working matrices kept in `scratch` for the next call.
+pub fn lml_gradient_in(
+    layout: &Layout,
+    h: &Hyper,
+    dist: &PairDistances,
+    eval: &KernelEval,
+    mode: &Mode,
+    scratch: &mut InverseScratch,
+) -> Vec<f64> {
     let n = mode.f.len();
     let k = &eval.k;
-    let mut z = linalg::inverse_from_cholesky(mode.l.as_ref());
+    linalg::inverse_from_cholesky_in(mode.l.as_ref(), scratch);
+    let z = &mut scratch.out;
     // s2 = ∂LML/∂f̂ = -½ diag(Σ) ∘ ∂W/∂f, with Σ = (K⁻¹ + W)⁻¹ and, for the logistic,
     // ∂W_ii/∂f_i = π(1-π)(1-2π) (= -∇³ log p; GPML writes this factor as ∇³ log p).
     // Since W½ K W½ = B - I, Σ = W^-½ (I - B⁻¹) W^-½: diag(Σ)_j = (1 - B⁻¹_jj) / w_j, and w_j
@@ -244,7 +327,7 @@ pub fn lml_gradient(
     }
     // ∂LML/∂θ = ½ aᵀ C a - ½ tr(Z C) + s2ᵀ (b - K Z b), b = C ∇log p = C a at the mode, with
     // C = ∂K/∂θ; the first two terms are Σ_ij G_ij C_ij with G = ½ (a aᵀ - Z), formed on the fly.
-    let (s1, bs) = eval.contract_gradients(layout, h, dist, &z, &mode.a);
+    let (s1, bs) = eval.contract_gradients(layout, h, dist, z, &mode.a);
     let mut zb = vec![0.0; n];
     let mut kzb = vec![0.0; n];
     s1.iter()
@@ -299,6 +382,59 @@ mod tests {
     }
 
     #[test]
+    fn reused_factorisations_reach_the_plain_newton_mode_with_fewer_factorisations() {
+        let x = Data::new(
+            (0..240)
+                .map(|i| ((i * 13) as f64 * 0.23).sin() * 2.0)
+                .collect(),
+            80,
+            3,
+        )
+        .unwrap();
+        let y: Vec<f64> = (0..80)
+            .map(|i| if (i * 7) % 5 < 2 { 1.0 } else { -1.0 })
+            .collect();
+        let mods = Modalities::all_columns(3);
+        let dist = PairDistances::new(&x, &[], &mods, &crate::kernel::column_means(&x));
+        let layout = Layout {
+            n_modalities: 1,
+            n_lambdas: 0,
+        };
+        for theta in [[0.0, 0.0], [4.0, 0.5], [6.0, -0.5], [2.0, 1.5]] {
+            let ev = KernelEval::new(&dist, &layout.decode(&theta).unwrap());
+            let warm = find_mode(ev.k.as_ref(), &y, None, &NewtonConfig::default())
+                .unwrap()
+                .a
+                .iter()
+                .map(|v| v * 0.7)
+                .collect::<Vec<_>>();
+            for start in [None, Some(warm.as_slice())] {
+                let run = |reuse| {
+                    let cfg = NewtonConfig {
+                        reuse_factorisation: reuse,
+                        ..NewtonConfig::default()
+                    };
+                    find_mode(ev.k.as_ref(), &y, start, &cfg).unwrap()
+                };
+                let (plain, reused) = (run(false), run(true));
+                assert!(plain.converged && reused.converged);
+                assert_eq!(plain.factorisations, plain.iterations + 1);
+                assert!(reused.factorisations <= plain.factorisations, "{theta:?}");
+                assert!(
+                    (plain.lml - reused.lml).abs() < 1e-9 * plain.lml.abs(),
+                    "{theta:?}: {} vs {}",
+                    plain.lml,
+                    reused.lml
+                );
+                let scale = plain.f.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+                for (p, r) in plain.f.iter().zip(&reused.f) {
+                    assert!((p - r).abs() < 1e-6 * scale, "{theta:?}: f {p} vs {r}");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn gradient_matches_finite_differences() {
         let x = Data::new(
             (0..36)
@@ -331,6 +467,7 @@ mod tests {
                     max_iter: 200,
                     tol: 1e-14,
                     cancel: None,
+                    reuse_factorisation: true,
                 },
             )
             .unwrap()
@@ -346,6 +483,7 @@ mod tests {
                 max_iter: 200,
                 tol: 1e-14,
                 cancel: None,
+                reuse_factorisation: true,
             },
         )
         .unwrap();
@@ -374,7 +512,15 @@ mod tests {
             parts: vec![],
             jitter: 0.0,
         };
-        let r = find_mode_with_jitter(ev, 1.0, &[1.0, -1.0], None, &NewtonConfig::default(), 1e-6);
+        let r = find_mode_with_jitter(
+            ev,
+            1.0,
+            &[1.0, -1.0],
+            None,
+            &NewtonConfig::default(),
+            1e-6,
+            Mat::zeros(0, 0),
+        );
         assert!(
             matches!(r, Err(GpError::NotPositiveDefinite { .. })),
             "{:?}",
@@ -405,8 +551,10 @@ mod tests {
                 max_iter: 1,
                 tol: 1e-10,
                 cancel: None,
+                reuse_factorisation: true,
             },
             1e-6,
+            Mat::zeros(0, 0),
         );
         match r {
             Ok((ev, _)) => assert!(ev.jitter > 0.0 && ev.jitter <= 1e-6),

@@ -56,17 +56,48 @@ pub fn solve_lower_mat(l: MatRef<'_, f64>, rhs: MatMut<'_, f64>) {
 
 /// `(L Lᵀ)⁻¹` from the lower Cholesky factor, as a full symmetric matrix.
 pub fn inverse_from_cholesky(l: MatRef<'_, f64>) -> Mat<f64> {
+    let mut scratch = InverseScratch::default();
+    inverse_from_cholesky_in(l, &mut scratch);
+    scratch.out
+}
+
+/// The output and working memory of [`inverse_from_cholesky_in`], kept by a caller that
+/// inverts many n × n factors so that each inversion reuses them (two n × n buffers).
+pub struct InverseScratch {
+    pub out: Mat<f64>,
+    mem: Option<(usize, MemBuffer)>,
+}
+
+impl Default for InverseScratch {
+    fn default() -> Self {
+        InverseScratch {
+            out: Mat::zeros(0, 0),
+            mem: None,
+        }
+    }
+}
+
+/// `(L Lᵀ)⁻¹` into `scratch.out` (resized to n × n if needed), as a full symmetric matrix.
+pub fn inverse_from_cholesky_in(l: MatRef<'_, f64>, scratch: &mut InverseScratch) {
     let n = l.nrows();
-    let mut out = Mat::<f64>::zeros(n, n);
-    let mut buf = MemBuffer::new(llt::inverse::inverse_scratch::<f64>(n, Par::Seq));
-    let stack = MemStack::new(&mut buf);
+    if scratch.out.nrows() != n || scratch.out.ncols() != n {
+        scratch.out = Mat::<f64>::zeros(n, n);
+    }
+    if scratch.mem.as_ref().is_none_or(|(m, _)| *m != n) {
+        scratch.mem = Some((
+            n,
+            MemBuffer::new(llt::inverse::inverse_scratch::<f64>(n, Par::Seq)),
+        ));
+    }
+    let (_, buf) = scratch.mem.as_mut().expect("allocated above");
+    let stack = MemStack::new(buf);
+    let out = &mut scratch.out;
     llt::inverse::inverse(out.as_mut(), l, Par::Seq, stack);
     for j in 1..n {
         for i in 0..j {
             out[(i, j)] = out[(j, i)];
         }
     }
-    out
 }
 
 /// `y = A x` for a column-major square or rectangular `A`.

@@ -11,10 +11,11 @@ use crate::fastmath::exp_nonpositive_in_place;
 use crate::kernel::{
     column_means, row_tasks, Coupling, Data, Hyper, KernelEval, Layout, Modalities, PairDistances,
 };
-use crate::laplace::{find_mode_with_jitter, lml_gradient, Mode, NewtonConfig};
+use crate::laplace::{find_mode_with_jitter, lml_gradient_in, Mode, NewtonConfig};
 use crate::likelihood::{predictive_probability, Predictive};
 use crate::linalg;
-use crate::optimize::{minimize, LbfgsConfig};
+use crate::linalg::InverseScratch;
+use crate::optimize::{minimize, LbfgsConfig, OptResult};
 use crate::rng::SplitMix64;
 
 /// Which hyper-parameter groups the optimiser may change.
@@ -226,6 +227,24 @@ pub struct BinaryFit {
     pub iterations: usize,
 }
 
+/// The n × n buffers one optimiser start reuses from one evaluation to the next: the kernel
+/// (and its per-modality parts), B's factor and the inverse with its scratch. Without them each
+/// evaluation would allocate five n × n matrices afresh (page faults and zeroing: ~10 % of a fit
+/// at n = 1,000).
+#[derive(Default)]
+struct Workspace {
+    eval: Option<KernelEval>,
+    factor: Option<Mat<f64>>,
+    inverse: InverseScratch,
+}
+
+impl Workspace {
+    fn recycle(&mut self, eval: KernelEval, factor: Mat<f64>) {
+        self.eval = Some(eval);
+        self.factor = Some(factor);
+    }
+}
+
 struct BinaryProblem {
     x: Data,
     y: Vec<f64>,
@@ -302,6 +321,8 @@ impl BinaryProblem {
         terms
     }
 
+    /// The mode and (optionally) the LML gradient at `theta`, in buffers drawn from `ws`
+    /// (hand them back with [`Workspace::recycle`]).
     fn evaluate(
         &self,
         layout: &Layout,
@@ -309,9 +330,16 @@ impl BinaryProblem {
         theta: &[f64],
         warm: Option<&[f64]>,
         gradient: bool,
+        ws: &mut Workspace,
     ) -> GpResult<(KernelEval, Mode, Hyper, Option<Vec<f64>>)> {
         let h = layout.decode(theta)?;
-        let ev = KernelEval::new(&self.dist, &h);
+        let ev = match ws.eval.take() {
+            Some(mut ev) => {
+                ev.recompute(&self.dist, &h);
+                ev
+            }
+            None => KernelEval::new(&self.dist, &h),
+        };
         let (ev, mode) = find_mode_with_jitter(
             ev,
             h.signal_variance,
@@ -319,8 +347,10 @@ impl BinaryProblem {
             warm,
             &spec.newton,
             spec.max_jitter,
+            ws.factor.take().unwrap_or_else(|| Mat::zeros(0, 0)),
         )?;
-        let grad = gradient.then(|| lml_gradient(layout, &h, &self.dist, &ev, &mode));
+        let grad =
+            gradient.then(|| lml_gradient_in(layout, &h, &self.dist, &ev, &mode, &mut ws.inverse));
         Ok((ev, mode, h, grad))
     }
 
@@ -334,7 +364,8 @@ impl BinaryProblem {
         evaluations: usize,
         iterations: usize,
     ) -> GpResult<BinaryFit> {
-        let (ev, mode, hyper, _) = self.evaluate(layout, spec, &theta, None, false)?;
+        let (ev, mode, hyper, _) =
+            self.evaluate(layout, spec, &theta, None, false, &mut Workspace::default())?;
         let log_prior = log_prior(&prior, &theta).0;
         let grad_log_lik: Vec<f64> = (0..self.y.len())
             .map(|i| 0.5 * (self.y[i] + 1.0) - mode.pi[i])
@@ -542,38 +573,53 @@ fn fit_binary(
         starts.push(t);
     }
 
+    // The starts are independent: they run in parallel when the pool has threads to spare
+    // (each with its own buffers and warm start), and the best is chosen in start order, so
+    // the result does not depend on the number of threads.
+    let runs: Vec<(Option<OptResult>, Option<GpError>)> = starts
+        .par_iter()
+        .map(|t0| {
+            let mut warm: Option<Vec<f64>> = None;
+            let mut ws = Workspace::default();
+            let mut last_error = None;
+            // Minimises -(log p(y | θ) + log p(θ)); the prior term is absent for ML-II.
+            let objective = |t: &[f64]| -> Option<(f64, Vec<f64>)> {
+                if spec.newton.cancelled() {
+                    last_error = Some(GpError::Cancelled);
+                    return None;
+                }
+                match problem.evaluate(layout, spec, t, warm.as_deref(), true, &mut ws) {
+                    Ok((ev, mode, _, Some(mut g))) => {
+                        let mut value = mode.lml;
+                        warm = Some(mode.a);
+                        ws.recycle(ev, mode.l);
+                        if !prior.is_empty() {
+                            let (lp, gp) = log_prior(&prior, t);
+                            value += lp;
+                            g.iter_mut().zip(gp).for_each(|(a, b)| *a += b);
+                        }
+                        Some((-value, g.into_iter().map(|v| -v).collect()))
+                    }
+                    Ok(_) => None,
+                    Err(e) => {
+                        last_error = Some(e);
+                        None
+                    }
+                }
+            };
+            let result = minimize(objective, t0, &lo, &hi, &free, &spec.lbfgs);
+            (result, last_error)
+        })
+        .collect();
+    if spec.newton.cancelled() {
+        return Err(GpError::Cancelled);
+    }
     let mut best: Option<(f64, Vec<f64>, bool, usize)> = None;
     let mut evaluations = 0;
     let mut last_error = None;
-    for t0 in starts {
-        let mut warm: Option<Vec<f64>> = None;
-        // Minimises -(log p(y | θ) + log p(θ)); the prior term is absent for ML-II.
-        let objective = |t: &[f64]| -> Option<(f64, Vec<f64>)> {
-            if spec.newton.cancelled() {
-                last_error = Some(GpError::Cancelled);
-                return None;
-            }
-            match problem.evaluate(layout, spec, t, warm.as_deref(), true) {
-                Ok((_, mode, _, Some(mut g))) => {
-                    warm = Some(mode.a);
-                    let mut value = mode.lml;
-                    if !prior.is_empty() {
-                        let (lp, gp) = log_prior(&prior, t);
-                        value += lp;
-                        g.iter_mut().zip(gp).for_each(|(a, b)| *a += b);
-                    }
-                    Some((-value, g.into_iter().map(|v| -v).collect()))
-                }
-                Ok(_) => None,
-                Err(e) => {
-                    last_error = Some(e);
-                    None
-                }
-            }
-        };
-        let result = minimize(objective, &t0, &lo, &hi, &free, &spec.lbfgs);
-        if spec.newton.cancelled() {
-            return Err(GpError::Cancelled);
+    for (result, error) in runs {
+        if error.is_some() {
+            last_error = error;
         }
         if let Some(r) = result {
             evaluations += r.evaluations;
@@ -1007,8 +1053,14 @@ impl OneVsAll {
                     x: c.x.clone(),
                     y: c.y.clone(),
                 };
-                let (_, mode, _, mut g) =
-                    problem.evaluate(&self.layout, &self.spec, t, None, gradient)?;
+                let (_, mode, _, mut g) = problem.evaluate(
+                    &self.layout,
+                    &self.spec,
+                    t,
+                    None,
+                    gradient,
+                    &mut Workspace::default(),
+                )?;
                 let mut value = mode.lml;
                 if include_prior {
                     let (lp, gp) = log_prior(&c.prior, t);

@@ -10,8 +10,8 @@ use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArra
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::Duration;
 
 use crate::errors::gp_error;
 
@@ -32,26 +32,35 @@ fn matrix<'py>(
         .map_err(|e| PyValueError::new_err(format!("internal shape error: {e}")))
 }
 
-/// Runs `work` on a helper thread with the GIL released while this thread polls for Python
-/// signals every few milliseconds. If a signal handler raises (Ctrl-C: `KeyboardInterrupt`),
-/// `cancel` is set, the work (which checks the flag between iterations) is waited for, and the
-/// handler's exception is returned.
+/// Runs `work` on a helper thread with the GIL released while this thread waits for it, and
+/// looks for Python signals every [`POLL`]. If a signal handler raises (Ctrl-C:
+/// `KeyboardInterrupt`), `cancel` is set, the work (which checks the flag between iterations)
+/// is waited for, and the handler's exception is returned. The helper signals its end on a
+/// condition variable, so a short fit returns as soon as it is done (no sleep granularity).
 fn run_interruptible<T: Send>(
     py: Python<'_>,
     cancel: &AtomicBool,
     work: impl FnOnce() -> T + Send,
 ) -> PyResult<T> {
+    let signal = (Mutex::new(false), Condvar::new());
+    let signal = &signal;
     std::thread::scope(|scope| {
-        let handle = scope.spawn(work);
+        let handle = scope.spawn(move || {
+            let out = work();
+            *signal.0.lock().unwrap_or_else(|e| e.into_inner()) = true;
+            signal.1.notify_all();
+            out
+        });
         loop {
-            let finished = py.detach(|| {
-                let start = Instant::now();
-                while !handle.is_finished() && start.elapsed() < POLL {
-                    std::thread::sleep(Duration::from_millis(2));
-                }
-                handle.is_finished()
+            let ended = py.detach(|| {
+                let ended = signal.0.lock().unwrap_or_else(|e| e.into_inner());
+                let (ended, _) = signal
+                    .1
+                    .wait_timeout_while(ended, POLL, |ended| !*ended)
+                    .unwrap_or_else(|e| e.into_inner());
+                *ended || handle.is_finished()
             });
-            if finished {
+            if ended {
                 break;
             }
             if let Err(e) = py.check_signals() {
@@ -61,8 +70,7 @@ fn run_interruptible<T: Send>(
                 return Err(e);
             }
         }
-        handle
-            .join()
+        py.detach(|| handle.join())
             .map_err(|_| PyValueError::new_err("internal error: the fit's thread panicked"))
     })
 }

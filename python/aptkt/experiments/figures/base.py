@@ -28,7 +28,8 @@ STRESS_CUTOFF = "λ=1 least related, cut-off"
 #: posteriors as auxiliary features (Eq. 5). Beyond the paper: the control (the prior's feature
 #: space without transfer, so that it and APTKT differ by the transfer alone), transfer from
 #: every prior above ε_neg at once ("APTKT-multi", one multi-source kernel), and two stress
-#: tests of the cut-off: λ forced to 1 from the least related prior, without and with ε_neg.
+#: tests of the cut-off: λ forced to 1 from the least related prior, without any cut-off (ε_neg = 0
+#: and no evidence test) and with the learner's.
 METHODS: Mapping[str, Mapping[str, Any]] = {
     "baseline": {"transfer": "none"},
     "control": {"transfer": "control"},
@@ -40,6 +41,7 @@ METHODS: Mapping[str, Mapping[str, Any]] = {
         "source_choice": "least",
         "forced_lambda": 1.0,
         "eps_neg": 0.0,
+        "cutoff": "paper",
     },
     STRESS_CUTOFF: {"transfer": "paper", "source_choice": "least", "forced_lambda": 1.0},
 }

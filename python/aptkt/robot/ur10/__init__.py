@@ -20,8 +20,10 @@ during a movement only the supervision loop does, so a stalled loop stops the ar
 
 One module per concern, composed by :class:`UR10` (:mod:`~aptkt.robot.ur10.arm`):
 
-- :mod:`~aptkt.robot.ur10.connection`: ur_rtde's clients, the worker thread that calls
-  ``rtde_control``, link freshness, the controller's watchdog, abandoned clients;
+- :mod:`~aptkt.robot.ur10.connection`: ur_rtde's receive client, link freshness, the
+  controller's watchdog and its keep-alive, the one lock of every control call;
+- :mod:`~aptkt.robot.ur10.control`: ur_rtde's control client in a process of its own, killed
+  the moment the link is suspect (ur_rtde's own reconnect is not safe in-process);
 - :mod:`~aptkt.robot.ur10.supervisor`: the limit checks of every supervision cycle;
 - :mod:`~aptkt.robot.ur10.motions`: the Robot protocol's motions, fault stop and retract;
 - :mod:`~aptkt.robot.ur10.sampling`: the skin's force reading and the trace of samples.

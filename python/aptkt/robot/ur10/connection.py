@@ -1,24 +1,21 @@
-"""The link to one UR controller: ur_rtde's receive and control clients, the one worker thread
-that calls ``rtde_control``, the freshness of the robot data, and the controller's watchdog.
+"""The link to one UR controller: ur_rtde's receive client, its control client (in a process of
+its own, :mod:`aptkt.robot.ur10.control`), the freshness of the robot data, and the
+controller's watchdog.
 
 ur_rtde blocks on its own (possibly stale) state: a command sent as the link died may wait up
-to 300 s for a "done" that never shows. So every control call runs on a worker thread while
-the caller watches the link, and once the link is found lost nothing more is sent: the
-controller's own RTDE watchdog (armed at connect) stops the program on its side. While the arm
-is idle a keep-alive thread feeds that watchdog; during a movement the supervision loop does
-(:meth:`Connection.kick`), so a stalled loop stops the arm too.
+to 300 s for a "done" that never shows. So every control call is sent to the control process
+while the caller watches the link, and once the link is suspect (stale data, a closed
+connection, a call that does not return) the control process is killed and nothing more is
+sent: the controller's own RTDE watchdog (armed at connect) stops the program on its side.
+While the arm is idle a keep-alive thread feeds that watchdog; during a movement the
+supervision loop does (:meth:`Connection.kick`), so a stalled loop stops the arm too. One lock
+makes every control call exclusive, so the two never interleave.
 """
 
 from __future__ import annotations
 
-import atexit
-import ctypes
-import queue
 import threading
 import time
-from collections.abc import Callable
-from concurrent.futures import Future
-from concurrent.futures import TimeoutError as FutureTimeout
 from typing import Any
 
 import numpy as np
@@ -29,6 +26,7 @@ from aptkt.errors import (
     RobotConnectionError,
     RobotError,
 )
+from aptkt.robot.ur10.control import PENDING, ControlProcess
 
 __all__ = ["Connection", "RobotState"]
 
@@ -48,92 +46,6 @@ _RECEIVE_VARIABLES = [
 COMMAND_TIMEOUT = 10.0
 # Commands ur_rtde's control script executes every cycle without a done-handshake.
 _REALTIME_COMMANDS = frozenset({"speedL", "forceMode"})
-
-
-# Clients whose last call was abandoned on a dead link. The stuck call ends on ur_rtde's own
-# timeout (up to 300 s); the client must then not be destroyed wherever the last reference
-# happens to drop, because its destructor sleeps 0.5 s holding the GIL: that would freeze the
-# supervision of whatever moves at that moment. They are destroyed at idle moments instead
-# (connect/close), or never, if still in use when the interpreter exits.
-_graveyard: list[tuple[threading.Thread, Any]] = []
-_graveyard_lock = threading.Lock()
-
-
-def _bury(thread: threading.Thread, client: Any) -> None:
-    with _graveyard_lock:
-        _graveyard.append((thread, client))
-
-
-# Clients of a dropped link, kept until the process ends (see Connection.drop_clients).
-_abandoned: list[Any] = []
-
-
-def _abandon(*clients: Any) -> None:
-    for client in clients:
-        # Disconnecting ends the control client's attempts to reconnect, which would otherwise
-        # take the controller's input registers from the next connection.
-        try:
-            if client is not None:
-                client.disconnect()
-        except RuntimeError:
-            pass
-    with _graveyard_lock:
-        _abandoned.extend(c for c in clients if c is not None)
-
-
-def _sweep_graveyard() -> int:
-    """Destroy the buried clients whose stuck call has ended; returns how many."""
-    with _graveyard_lock:
-        done = [entry for entry in _graveyard if not entry[0].is_alive()]
-        _graveyard[:] = [entry for entry in _graveyard if entry[0].is_alive()]
-    count = len(done)
-    del done  # the destructors run here, at a moment chosen by the caller
-    return count
-
-
-@atexit.register
-def _leak_clients_in_use() -> None:
-    # A client still inside a stuck call must outlive the interpreter's clean-up: destroying
-    # it under the running call would be a use-after-free.
-    _sweep_graveyard()
-    with _graveyard_lock:
-        if _graveyard:
-            ctypes.pythonapi.Py_IncRef(ctypes.py_object(_graveyard))
-        if _abandoned:
-            ctypes.pythonapi.Py_IncRef(ctypes.py_object(_abandoned))
-
-
-class _Worker:
-    """The one thread that calls ``rtde_control``, so a call stuck on a dead link can be
-    abandoned: ur_rtde waits up to 300 s for a "done" that a stale state never shows."""
-
-    def __init__(self, name: str):
-        self._queue: queue.SimpleQueue[Any] = queue.SimpleQueue()
-        self.thread = threading.Thread(target=self._run, name=name, daemon=True)
-        self.thread.start()
-
-    def submit(self, fn: Callable[..., Any], *args: Any) -> Future[Any]:
-        future: Future[Any] = Future()
-        self._queue.put((future, fn, args))
-        return future
-
-    def close(self) -> None:
-        self._queue.put(None)
-
-    def _run(self) -> None:
-        while True:
-            item = self._queue.get()
-            if item is None:
-                return
-            future, fn, args = item
-            del item
-            if future.set_running_or_notify_cancel():
-                try:
-                    future.set_result(fn(*args))
-                except BaseException as exc:  # handed to the caller through the future
-                    future.set_exception(exc)
-            # Drop the bound method at once: a frame of this loop must not keep the client alive.
-            del future, fn, args
 
 
 class RobotState:
@@ -159,7 +71,11 @@ class Connection:
     lost; the controller's RTDE watchdog is armed at ``1 / watchdog_timeout`` Hz.
     ``frequency`` forces the RTDE rate (default: detected from the controller's timestamps).
 
-    No method keeps a client in a local variable: see :meth:`drop_clients`.
+    The link's states: closed (``control is None``) → open (``lost is None``) → lost (``lost``
+    says why; the control process is killed, nothing more is sent) → closed. Only
+    :meth:`open` leaves "lost", with new clients.
+
+    No method keeps the receive client in a local variable: see :meth:`drop_clients`.
     """
 
     def __init__(self, host: str, watchdog_timeout: float, frequency: float | None = None):
@@ -167,9 +83,8 @@ class Connection:
         self.watchdog_timeout = watchdog_timeout
         self._requested_frequency = frequency
         self.frequency = frequency or 125.0
-        self.control: Any = None
+        self.control: ControlProcess | None = None
         self.receive: Any = None
-        self._worker: _Worker | None = None
         #: Why the link was lost (None while it is fine): nothing more is sent once it is set.
         self.lost: str | None = None
         #: What the control script runs: "speed" | "force+speed" | "force" | "move" | None.
@@ -178,15 +93,18 @@ class Connection:
         self.hold: tuple[str, tuple[Any, ...]] | None = None
         #: Set while a movement is supervised: the keep-alive thread stays out of the way.
         self.in_motion = False
+        # Held for every exchange with the control process (the keep-alive thread and the
+        # supervision share it).
+        self._calls = threading.Lock()
         self._keepalive: threading.Thread | None = None
         self._keepalive_stop = threading.Event()
         self.reset_freshness()
 
     # ------------------------------------------------------------------ open / close
     def open(self) -> None:
-        """Create the clients (ur_rtde uploads its control script) and the worker thread."""
+        """Create the clients (ur_rtde uploads its control script)."""
         try:
-            import rtde_control  # optional dependency: the ur10 extra
+            import rtde_control  # noqa: F401 - optional dependency: the ur10 extra
             import rtde_receive
         except ImportError:
             raise RobotConnectionError(
@@ -195,14 +113,16 @@ class Connection:
         freq = -1.0 if self._requested_frequency is None else float(self._requested_frequency)
         try:
             self.receive = rtde_receive.RTDEReceiveInterface(self.host, freq, _RECEIVE_VARIABLES)
-            self.control = rtde_control.RTDEControlInterface(self.host, freq)
         except RuntimeError as exc:
-            self.drop_clients()
             raise RobotConnectionError(
                 f"cannot connect to the UR controller at {self.host}: {exc}"
             ) from None
+        try:
+            self.control = ControlProcess(self.host, freq)
+        except BaseException:
+            self.drop_clients()
+            raise
         self.lost = None
-        self._worker = _Worker(f"ur10-rtde-control-{self.host}")
         self.frequency = self._detect_frequency()
 
     def arm_watchdog(self) -> None:
@@ -231,40 +151,37 @@ class Connection:
         return 500.0 if min(steps) < 0.005 else 125.0
 
     def stop_keepalive(self) -> None:
+        """Stop the keep-alive thread; returns once it can make no further call."""
         self._keepalive_stop.set()
-        if self._keepalive is not None:
-            self._keepalive.join(timeout=2.0)
-            self._keepalive = None
+        thread, self._keepalive = self._keepalive, None
+        if thread is not None:
+            # Its one call at a time ends within a few control periods, or on the link check
+            # (the watchdog timeout), or it is cut short by the link being lost.
+            thread.join(timeout=COMMAND_TIMEOUT + 1.0)
 
     def disconnect(self) -> None:
-        """End the worker and destroy the clients (the arm must be stopped first)."""
-        if self._worker is not None:
-            self._worker.close()
-            # A call still spinning inside ur_rtde (it holds the client) would keep the old
-            # connection and its input registers alive: let it end (ur_rtde gives up after
-            # at most 4 s on a live link). An abandoned worker is not waited for.
-            self._worker.thread.join(timeout=COMMAND_TIMEOUT)
-            self._worker = None
+        """End the control process and destroy the receive client (the arm must be stopped
+        first; the keep-alive thread too)."""
         self.drop_clients()
-        _sweep_graveyard()
 
     def drop_clients(self) -> None:
-        if self.lost is not None and self.control is not None:
-            # After a dropped link ur_rtde's clients are never destroyed: their background
-            # threads (the receive loop, the control client's reconnect attempts) still use
-            # the client when the link drops, and its destructor tearing them down then crashed
-            # the process (SIGSEGV in 4 of 6 drops, about 0.5 s after the drop). A dead client
-            # holds a few kB and two sockets until the process ends.
-            _abandon(self.control, self.receive)
-            self.control = self.receive = None
-            return
-        # ur_rtde's destructors disconnect and sleep 0.5 s each *with the GIL held*; an
-        # explicit disconnect() first would only add another 0.5 s per client. They must run
-        # here: a client kept alive elsewhere (say, by a local variable of a frame in some
-        # exception's traceback) is destroyed later by the garbage collector, and that 0.5 s
-        # GIL stall inside another connection's supervision loop lets the controller's
-        # watchdog stop the arm. Hence no method keeps a client in a local variable.
-        self.control = self.receive = None
+        control, self.control = self.control, None
+        if control is not None:
+            if self.lost is not None:
+                control.kill()  # a suspect link: SIGKILL now, no ur_rtde code runs any more
+            with self._calls:  # a call still waiting on the process ends with it
+                if not control.ended:
+                    control.close(timeout=2.0)  # ur_rtde's own disconnect, in its process
+                control.release()
+        # ur_rtde's receive client never reconnects by itself: after a drop its thread has
+        # ended, so destroying it only joins that thread. Its destructor disconnects and
+        # sleeps 0.5 s *with the GIL held*; an explicit disconnect() first would only add
+        # another 0.5 s. It must run here: a client kept alive elsewhere (say, by a local
+        # variable of a frame in some exception's traceback) is destroyed later by the
+        # garbage collector, and that 0.5 s GIL stall inside another connection's
+        # supervision loop lets the controller's watchdog stop the arm. Hence no method keeps
+        # the client in a local variable.
+        self.receive = None
 
     @property
     def connected(self) -> bool:
@@ -283,13 +200,17 @@ class Connection:
                 f"the link to {self.host} was lost ({self.lost}); call recover()"
             )
 
+    def _control_up(self) -> bool:
+        control = self.control
+        return control is not None and control.connected and not control.ended
+
     def link_ok(self) -> bool:
         """Whether it is safe to send a command: one sent on a dead link blocks for minutes."""
         try:
-            if not (self.control.isConnected() and self.receive.isConnected()):
+            if not (self._control_up() and self.receive.isConnected()):
                 return False
             ts = float(self.receive.getTimestamp())
-        except RuntimeError:
+        except (RuntimeError, AttributeError):  # AttributeError: closed meanwhile
             return False
         now = time.monotonic()
         if ts != self.last_ts:
@@ -298,10 +219,15 @@ class Connection:
         return now - self.last_fresh <= self.watchdog_timeout
 
     def lose(self, why: str) -> RobotConnectionError:
-        """Mark the link lost (nothing more is sent) and return the error to raise."""
-        self.lost = why
+        """Mark the link lost, end the control process (nothing more is sent) and return the
+        error to raise."""
+        if self.lost is None:
+            self.lost = why
         self.mode = None
         self.hold = None
+        control = self.control
+        if control is not None:
+            control.kill()
         return RobotConnectionError(
             f"lost the link to the UR controller at {self.host}: {why}. No further commands are sent; "
             f"the controller's RTDE watchdog stops the program within {self.watchdog_timeout} s"
@@ -312,8 +238,10 @@ class Connection:
         stopped program."""
         now = time.monotonic()
         try:
-            if not (self.receive.isConnected() and self.control.isConnected()):
+            if not self.receive.isConnected():
                 raise self.lose("the RTDE connection closed")
+            if not self._control_up():
+                raise self.lose("the RTDE control connection closed")
             ts = float(self.receive.getTimestamp())
             fresh = ts != self.last_ts
             if fresh:
@@ -347,11 +275,9 @@ class Connection:
 
     def async_status(self) -> tuple[int, bool]:
         """``(operation id, still running)`` of the controller's last asynchronous command."""
-        try:
-            status = self.control.getAsyncOperationProgressEx()
-            return int(status.operationId()), bool(status.isAsyncOperationRunning())
-        except RuntimeError as exc:
-            raise self.lose(str(exc)) from None
+        self.require_link()
+        ident, running = self.call("asyncStatus")
+        return int(ident), bool(running)
 
     def protective_stopped(self) -> bool:
         try:
@@ -394,52 +320,52 @@ class Connection:
             self.explain(name)
 
     def call(self, name: str, *args: Any) -> Any:
-        """Run one rtde_control method on the worker thread while watching the link.
+        """Run one rtde_control method in the control process while watching the link.
 
         ur_rtde blocks on its own (possibly stale) state: a refused command returns within
         milliseconds, but one sent as the link died may wait up to 300 s, and one racing a
         program stop spins up to 4 s. So: give up at once when the link goes stale, and look
         at the controller state after a short grace period.
         """
-        worker = self._worker
-        if worker is None or self.control is None:
-            raise RobotConnectionError(f"not connected to the UR controller at {self.host}")
-        future = worker.submit(getattr(self.control, name), *args)
-        start = time.monotonic()
-        while True:
-            try:
-                return future.result(timeout=0.01)
-            except FutureTimeout:
-                pass
-            except RuntimeError as exc:
-                raise self.lose(f"{name} failed: {exc}") from None
-            waited = time.monotonic() - start
-            if not self.link_ok():
-                self._abandon_worker()
-                raise self.lose(f"{name} was sent on a link without fresh data")
-            if waited > 0.2:
-                try:
-                    if self.receive.isProtectiveStopped() or self.receive.isEmergencyStopped():
-                        raise ProtectiveStopError(
-                            f"the controller is in a protective/emergency stop ({name})"
-                        )
-                    if self.receive.getRuntimeState() != _PLAYING:
-                        raise ProgramStoppedError(
-                            f"the control program is not running on the controller ({name})"
-                        )
-                except RuntimeError as exc:
-                    raise self.lose(str(exc)) from None
-            if waited > COMMAND_TIMEOUT:
-                self._abandon_worker()
-                raise self.lose(f"{name} did not complete within {COMMAND_TIMEOUT:.0f} s")
+        if not self._calls.acquire(timeout=COMMAND_TIMEOUT + 1.0):
+            raise self.lose(f"{name}: the control client stayed busy")
+        try:
+            return self._call(name, args)
+        finally:
+            self._calls.release()
 
-    def _abandon_worker(self) -> None:
-        # The stuck call ends on ur_rtde's own timeout; its thread then exits. Nothing else
-        # is queued behind it: a lost link sends nothing more.
-        if self._worker is not None:
-            self._worker.close()
-            _bury(self._worker.thread, self.control)
-            self._worker = None
+    def _call(self, name: str, args: tuple[Any, ...]) -> Any:
+        control = self.control
+        if control is None:
+            raise RobotConnectionError(f"not connected to the UR controller at {self.host}")
+        if self.lost is not None or control.ended:
+            raise self.lose(self.lost or "the control client process has ended")
+        try:
+            control.request(name, *args)
+            start = time.monotonic()
+            while True:
+                result = control.reply(0.01)
+                if result is not PENDING:
+                    return result
+                waited = time.monotonic() - start
+                if not self.link_ok():
+                    raise self.lose(f"{name} was sent on a link without fresh data")
+                if waited > 0.2:
+                    try:
+                        if self.receive.isProtectiveStopped() or self.receive.isEmergencyStopped():
+                            raise ProtectiveStopError(
+                                f"the controller is in a protective/emergency stop ({name})"
+                            )
+                        if self.receive.getRuntimeState() != _PLAYING:
+                            raise ProgramStoppedError(
+                                f"the control program is not running on the controller ({name})"
+                            )
+                    except RuntimeError as exc:
+                        raise self.lose(str(exc)) from None
+                if waited > COMMAND_TIMEOUT:
+                    raise self.lose(f"{name} did not complete within {COMMAND_TIMEOUT:.0f} s")
+        except RuntimeError as exc:  # ur_rtde's error, or the process ended (crashed)
+            raise self.lose(f"{name} failed: {exc}") from None
 
     def explain(self, name: str) -> None:
         """A command was refused: say why as precisely as the controller lets us.
@@ -453,7 +379,7 @@ class Connection:
         first_ts: float | None = None
         while True:
             try:
-                if not (self.control.isConnected() and self.receive.isConnected()):
+                if not (self._control_up() and self.receive.isConnected()):
                     raise self.lose(f"the RTDE connection closed ({name} refused)")
                 ts = float(self.receive.getTimestamp())
                 first_ts = ts if first_ts is None else first_ts
@@ -463,16 +389,13 @@ class Connection:
                     )
                 # A protective stop pauses the program too: only call it a stopped program if
                 # no protective stop shows up within the grace period.
-                stopped = (
-                    self.receive.getRuntimeState() != _PLAYING
-                    or not self.control.isProgramRunning()
-                )
+                stopped = self.receive.getRuntimeState() != _PLAYING
             except RuntimeError as exc:
                 raise self.lose(str(exc)) from None
             if time.monotonic() > deadline:
                 if ts == first_ts:
                     raise self.lose(f"no fresh robot data after {name} was refused")
-                if stopped:
+                if stopped or not self.call("isProgramRunning"):
                     raise ProgramStoppedError(
                         f"the control program is not running on the controller ({name} refused)"
                     )
@@ -484,18 +407,18 @@ class Connection:
         # supervision loop feeds it, so a stalled loop lets the controller stop the arm.
         interval = self.watchdog_timeout / 5.0
         while not self._keepalive_stop.wait(interval):
-            worker = self._worker
-            if self.in_motion or self.lost is not None or worker is None:
+            if self.in_motion or self.lost is not None or self.control is None:
                 continue
             try:
                 if self.receive.getRuntimeState() != _PLAYING:
                     continue
-                # Through the worker, so it never interleaves with a command; never waits
-                # long: a stuck worker is the supervision's business.
-                worker.submit(self.control.kickWatchdog).result(timeout=interval)
-            except (
-                RuntimeError,
-                AttributeError,
-                FutureTimeout,
-            ):  # AttributeError: closed meanwhile
-                pass
+                # Never waits behind a command: the supervision's call feeds the watchdog too.
+                if not self._calls.acquire(blocking=False):
+                    continue
+                try:
+                    if not self._keepalive_stop.is_set() and not self.in_motion:
+                        self._call("kickWatchdog", ())
+                finally:
+                    self._calls.release()
+            except (RobotError, RuntimeError, AttributeError):  # AttributeError: closed meanwhile
+                pass  # a lost link is marked by the call itself; the next command reports it

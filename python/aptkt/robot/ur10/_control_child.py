@@ -1,0 +1,90 @@
+"""The process that owns ur_rtde's control client (run as a script by
+:class:`aptkt.robot.ur10.control.ControlProcess`; imports nothing of aptkt).
+
+Why a process of its own: ``RTDEControlInterface`` reconnects by itself when its link drops,
+on its own receive thread, while a call of ours may be running inside the same client on
+another thread; both then reset and reopen one unguarded socket and replace the state the
+other is reading (ur_rtde has no lock around them). In-process that ended in SIGSEGV or in a
+thread blocked for ever. Here a crash or a hang costs only this process, which the parent
+kills (SIGKILL: no ur_rtde code runs any more, the system closes its sockets) as soon as the
+link is suspect.
+
+Protocol: one JSON object per line. The parent sends ``{"id", "op", "args"}`` on the request
+pipe; the reply ``{"id", "ok" | "error", "type", "connected"}`` comes on the reply pipe
+(``connected``: the control connection's state after the call). The first reply, id 0, says
+whether the client could be created. Usage: ``_control_child.py HOST FREQUENCY REQUEST_FD
+REPLY_FD RTDE_DIR``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+from typing import Any
+
+
+def _die_with_parent() -> None:
+    # An orphaned client would keep the controller's input registers and feed its watchdog.
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def _send(fd: int, message: dict[str, Any]) -> None:
+    data = (json.dumps(message) + "\n").encode()
+    while data:
+        data = data[os.write(fd, data) :]
+
+
+def main(argv: list[str]) -> None:
+    host, frequency, request_fd, reply_fd, rtde_dir = argv
+    parent = os.getppid()
+    _die_with_parent()
+    if os.getppid() != parent:
+        os._exit(0)  # the parent died before the death signal was set up
+    sys.path.insert(0, rtde_dir)
+    import rtde_control
+
+    r_fd, w_fd = int(request_fd), int(reply_fd)
+    try:
+        control = rtde_control.RTDEControlInterface(host, float(frequency))
+    except Exception as exc:  # any failure to connect is the parent's RobotConnectionError
+        _send(w_fd, {"id": 0, "error": str(exc), "type": type(exc).__name__, "connected": False})
+        os._exit(1)
+    _send(w_fd, {"id": 0, "ok": "ready", "connected": True})
+    requests = os.fdopen(r_fd, "rb")
+    for line in requests:
+        request = json.loads(line)
+        op, args = request["op"], request["args"]
+        reply: dict[str, Any] = {"id": request["id"]}
+        try:
+            if op == "close":
+                control.disconnect()
+                reply["ok"] = None
+            elif not control.isConnected():
+                # Calling into a client that is reconnecting is exactly the race: refuse.
+                raise RuntimeError("the RTDE control connection is down")
+            elif op == "asyncStatus":
+                status = control.getAsyncOperationProgressEx()
+                reply["ok"] = [int(status.operationId()), bool(status.isAsyncOperationRunning())]
+            else:
+                reply["ok"] = getattr(control, op)(*args)
+        except Exception as exc:  # handed to the parent, which decides
+            reply["error"], reply["type"] = str(exc), type(exc).__name__
+        reply["connected"] = op != "close" and bool(control.isConnected())
+        _send(w_fd, reply)
+        if op == "close":
+            break
+    # Never ur_rtde's destructor: it disconnects again (0.5 s) and joins threads that may be
+    # reconnecting. The system closes the sockets.
+    os._exit(0)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
