@@ -181,3 +181,21 @@ def test_learn_refuses_a_corrupt_prior_before_anything_moves(good, tmp_path, cap
     assert not out.exists()
     assert main(["prior", "inspect", str(bad)]) == 1
     assert "a0/obs/objects" in capsys.readouterr().err
+
+
+def test_an_unknown_member_is_never_opened(good, tmp_path, monkeypatch):
+    # The report: 3.2 MB of compressed zeros (3 GB) made `inspect` and `learn` use 3.1 GB.
+    members = _members(good)
+    members["zeros"] = np.zeros(1000)
+    bad = _write(tmp_path / "zeros.npz", members)
+    opened = []
+    original = zipfile.ZipFile.open
+
+    def spy(self, name, *args, **kwargs):
+        opened.append(name if isinstance(name, str) else name.filename)
+        return original(self, name, *args, **kwargs)
+
+    monkeypatch.setattr(zipfile.ZipFile, "open", spy)
+    with pytest.raises(PriorFileError, match="zeros"):
+        PriorKnowledge.load(bad)
+    assert "zeros.npy" not in opened

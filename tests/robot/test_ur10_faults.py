@@ -389,3 +389,71 @@ def test_nothing_of_a_dropped_link_reconnects_behind_our_back(make_robot, loopba
     robot.close()
     robot.connect()  # "input registers already in use" if anything had reconnected
     robot.move_above(PLACEMENT, 0.01)
+
+
+def _gone(pid: int) -> str:
+    """ "gone", or "Z" for a zombie nobody reaps (an orphan's new parent may be a container's
+    init): either way the process runs no more."""
+    from pathlib import Path
+
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except FileNotFoundError:
+        return "gone"
+
+
+@pytest.mark.parametrize("stuck", [False, True], ids=["idle", "stuck-in-a-call"])
+def test_the_control_process_ends_with_ours(make_robot, loopback, stuck):
+    """SIGKILL cannot be caught: the control client's process must not outlive us, keeping the
+    controller's registers and feeding its watchdog — idle, or stuck in a call on a frozen
+    network (ur_rtde waits up to 300 s there)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    loopback.reset()
+    script = (
+        "import sys, time\n"
+        "from aptkt.robot import UR10\n"
+        f"robot = UR10({loopback.host!r})\n"
+        "print(robot._control.pid, flush=True)\n"
+        "sys.stdin.readline()\n"
+        "pose = list(robot._link.peek_pose())\n"
+        "robot._link.control.request('moveL', pose, 0.01, 0.1, False)\n"
+        "print('sent', flush=True)\n"
+        "time.sleep(60)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2] / "python")}
+    proc = subprocess.Popen(
+        [sys.executable, "-c", script],
+        env=env,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        child = int(proc.stdout.readline())
+        assert loopback.state()["connections"].get("rtde") == 2
+        if stuck:
+            loopback.freeze()
+            proc.stdin.write("go\n")
+            proc.stdin.flush()
+            assert proc.stdout.readline() == "sent\n"
+            time.sleep(0.3)  # the call waits for a "done" that never comes
+            assert _gone(child) not in ("gone", "Z", "X")
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    try:
+        deadline = time.monotonic() + 3.0
+        while time.monotonic() < deadline and _gone(child) not in ("gone", "Z", "X"):
+            time.sleep(0.05)
+        assert _gone(child) in ("gone", "Z", "X")
+    finally:
+        loopback.freeze(False)
+    deadline = time.monotonic() + 3.0
+    while time.monotonic() < deadline and loopback.state()["connections"].get("rtde"):
+        time.sleep(0.05)
+    assert not loopback.state()["connections"].get("rtde")

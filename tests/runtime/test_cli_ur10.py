@@ -4,6 +4,7 @@ real SerialSkin reads — hardware in the loop on one machine."""
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import signal
@@ -201,9 +202,10 @@ def test_collect_survives_faults_and_resumes_to_a_complete_data_set(cell, capsys
         assert all(not rec.metadata.get("aborted") for rec in rd)
 
 
-def test_learn_runs_live_through_the_loopback(cell, capsys):
-    d, lb = cell
-    # Prior knowledge of the same action on objects of the simulated world.
+@pytest.fixture(scope="module")
+def prior_npz(cell) -> Path:
+    """Prior knowledge of the same action on objects of the simulated world."""
+    d, _ = cell
     prior_data = d / "prior.h5"
     assert (
         main(
@@ -229,6 +231,11 @@ def test_learn_runs_live_through_the_loopback(cell, capsys):
         == 0
     )
     PriorKnowledge.build(load_observations(prior_data)).save(d / "prior.npz")
+    return d / "prior.npz"
+
+
+def test_learn_runs_live_through_the_loopback(cell, prior_npz, capsys):
+    d, lb = cell
     capsys.readouterr()
     out = d / "learn"
     assert (
@@ -236,7 +243,7 @@ def test_learn_runs_live_through_the_loopback(cell, capsys):
             cell,
             "learn",
             "--prior",
-            str(d / "prior.npz"),
+            str(prior_npz),
             "--objects",
             "block_a,block_b",
             "--budget",
@@ -277,14 +284,20 @@ def test_a_signal_mid_press_retracts_and_keeps_the_data(cell, sig, code, word):
         "-o", str(data), "--no-progress",
     ]  # fmt: skip
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2] / "python")}
+    # In a process group of its own, signalled as a terminal's Ctrl-C or a job's end is: the
+    # whole group (the control client's process must not take the signal and leave the arm).
     proc = subprocess.Popen(
-        [sys.executable, "-m", "aptkt.cli", *argv], env=env, stderr=subprocess.PIPE, text=True
+        [sys.executable, "-m", "aptkt.cli", *argv],
+        env=env,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
     )
     # In the middle of the second press (block_b, trial 0), after block_a's trial completed.
-    watcher = on_press(lb, 2, lambda: proc.send_signal(sig))
+    watcher = on_press(lb, 2, lambda: os.killpg(proc.pid, sig))
     _, err = proc.communicate(timeout=180)
     watcher.join(timeout=5.0)
-    assert proc.returncode == code, err
+    assert proc.returncode == code, (err, lb.state()["text_log"][-15:])
     assert word in err and "Traceback" not in err, err
     assert "block_b / Pq / trial 0" in err, err
     time.sleep(0.2)
@@ -296,6 +309,57 @@ def test_a_signal_mid_press_retracts_and_keeps_the_data(cell, sig, code, word):
     with DatasetReader(d / f"signal-{sig.name}.aborted.h5") as rd:
         assert rd.keys() == [("block_b", "Pq", 0)]
         assert len(rd.recording(0).samples) > 0
+
+
+@pytest.mark.parametrize(
+    ("sig", "code", "word"),
+    [(signal.SIGTERM, 143, "terminated (SIGTERM)"), (signal.SIGINT, 130, "interrupted")],
+    ids=["SIGTERM", "SIGINT"],
+)
+def test_a_signal_mid_press_during_learn_retracts_and_keeps_the_data(
+    cell, prior_npz, sig, code, word
+):
+    """``aptkt learn`` takes the same path as collect: the arm stops and retracts, the completed
+    recording and the partial one are kept, the run so far is written, one message, 143/130."""
+    d, lb = cell
+    lb.reset(pose=START)
+    out = d / f"learn-signal-{sig.name}"
+    argv = [
+        "learn", "--robot", "ur10", "--workspace", str(d / "cell.toml"), "--skin", lb.skin_port,
+        "--patch", str(d / "patch.toml"), "--actions-file", str(d / "actions.toml"),
+        "--actions", "Pq", "--thermal-wait", "0", "--prior", str(prior_npz),
+        "--objects", "block_a,block_b", "--budget", "1", "-o", str(out),
+    ]  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2] / "python")}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "aptkt.cli", *argv],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # signalled as a group, as in the collect test
+    )
+    # In the middle of the second press of the initial round, after the first completed.
+    watcher = on_press(lb, 2, lambda: os.killpg(proc.pid, sig))
+    _, err = proc.communicate(timeout=180)
+    watcher.join(timeout=5.0)
+    assert proc.returncode == code, (err, lb.state()["text_log"][-15:])
+    lines = [line for line in err.splitlines() if line.startswith("aptkt learn:")]
+    assert len(lines) == 1 and word in lines[0] and "Traceback" not in err, err
+    assert "/ Pq / trial 0" in lines[0] and "aborted" in lines[0], err
+    time.sleep(0.2)
+    state = lb.state()
+    assert not state["moving"] and state["normal_force"] == 0.0, state
+    assert state["pose"][2] > 0.003, state  # lifted off the object
+    with DatasetReader(out / "recordings.h5") as rd:
+        assert len(rd) == 1
+        (done,) = rd.keys()
+    with DatasetReader(out / "recordings.aborted.h5") as rd:
+        (partial,) = rd.keys()
+        assert len(rd.recording(0).samples) > 0
+    assert {done[0], partial[0]} == {"block_a", "block_b"}
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"].startswith("aborted: ") and run["fault"]["object"] == partial[0]
 
 
 def test_a_dropped_link_mid_press_is_a_fault_that_keeps_the_data(cell, capsys):

@@ -28,7 +28,7 @@ from aptkt.actions import ExploratoryAction
 from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, repair
 from aptkt.errors import AptktError, ConfigError
 from aptkt.runtime.grid import TrialGrid
-from aptkt.runtime.salvage import aborted_path, salvage, save_aborted
+from aptkt.runtime.salvage import aborted_path, note_interruption, salvage, save_aborted
 
 __all__ = ["CollectionPlan", "CollectionAborted", "collect", "aborted_path", "save_aborted"]
 
@@ -211,9 +211,7 @@ def _aborted(
     """Save what the failed trial recorded; the error to raise in its place."""
     kept = salvage(exc, writer, path)
     if isinstance(exc, KeyboardInterrupt):
-        note = f"interrupted at {obj} / {action.name} / trial {trial}; {kept.what}"
-        if sys.version_info >= (3, 11):  # notes on exceptions are new in 3.11
-            exc.add_note(note)
+        note_interruption(exc, f"{obj} / {action.name} / trial {trial}", kept)
         return exc
     cause = kept.cause
     message = (

@@ -37,7 +37,7 @@ from aptkt.learning.environment import RecordingEnvironment
 from aptkt.learning.learner import APTKT, StepRecord
 from aptkt.learning.observations import ObservationTable
 from aptkt.learning.prior import PriorKnowledge
-from aptkt.runtime.salvage import salvage
+from aptkt.runtime.salvage import note_interruption, salvage
 
 __all__ = ["LiveLearningAborted", "learn_live", "describe_step", "NO_TEST_NOTE"]
 
@@ -167,6 +167,7 @@ def learn_live(
                 cause=kept.cause,
                 saved=kept.saved,
                 what=kept.what,
+                kept=kept,
             )
             raise
 
@@ -199,6 +200,13 @@ def learn_live(
         }
         _finish(summary, steps, learner, config, output, status, t0, report)
         if isinstance(exc, KeyboardInterrupt):
+            note_interruption(
+                exc,
+                f"{failure['object']} / {failure['action']} / trial {failure['trial']}",
+                failure["kept"],
+                f"every completed recording is in {record}",
+                f"the run so far ({len(steps)} steps) is in {output}",
+            )
             raise
         raise LiveLearningAborted(
             f"{failure['object']} / {failure['action']} / trial {failure['trial']}: {type(cause).__name__}: {cause}. "

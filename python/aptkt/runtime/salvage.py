@@ -11,6 +11,7 @@ recording started leaves nothing to keep.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,7 +19,7 @@ from aptkt.data.store import DatasetError, DatasetWriter, recording_key
 from aptkt.errors import AptktError, TrialFault, TrialInterrupted
 from aptkt.skin.samples import Recording
 
-__all__ = ["Salvaged", "aborted_path", "save_aborted", "salvage"]
+__all__ = ["Salvaged", "aborted_path", "save_aborted", "salvage", "note_interruption"]
 
 
 def aborted_path(path: str | Path, attempt: int = 1) -> Path:
@@ -54,6 +55,13 @@ class Salvaged:
     cause: BaseException
     saved: Path | None
     what: str
+
+
+def note_interruption(exc: KeyboardInterrupt, where: str, kept: Salvaged, *more: str) -> None:
+    """Name the interrupted trial and where its recording went on the ``KeyboardInterrupt``
+    (SIGINT or SIGTERM) itself: the command line prints its notes in its one closing line."""
+    if sys.version_info >= (3, 11):  # notes on exceptions are new in 3.11
+        exc.add_note("; ".join((f"interrupted at {where}", kept.what, *more)))
 
 
 def salvage(exc: BaseException, writer: DatasetWriter, path: Path) -> Salvaged:

@@ -13,7 +13,7 @@ Protocol: one JSON object per line. The parent sends ``{"id", "op", "args"}`` on
 pipe; the reply ``{"id", "ok" | "error", "type", "connected"}`` comes on the reply pipe
 (``connected``: the control connection's state after the call). The first reply, id 0, says
 whether the client could be created. Usage: ``_control_child.py HOST FREQUENCY REQUEST_FD
-REPLY_FD RTDE_DIR``.
+REPLY_FD RTDE_DIR PARENT_PID``.
 """
 
 from __future__ import annotations
@@ -22,18 +22,21 @@ import json
 import os
 import signal
 import sys
+import threading
+import time
 from typing import Any
 
 
-def _die_with_parent() -> None:
+def _die_with_parent(parent: int) -> None:
     # An orphaned client would keep the controller's input registers and feed its watchdog.
-    try:
-        import ctypes
+    # (Not PR_SET_PDEATHSIG: that fires when the *thread* that started us ends.) A thread of
+    # Python can run meanwhile: ur_rtde's calls release the GIL.
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.2)
+        os._exit(0)
 
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
 
 
 def _send(fd: int, message: dict[str, Any]) -> None:
@@ -43,11 +46,13 @@ def _send(fd: int, message: dict[str, Any]) -> None:
 
 
 def main(argv: list[str]) -> None:
-    host, frequency, request_fd, reply_fd, rtde_dir = argv
-    parent = os.getppid()
-    _die_with_parent()
-    if os.getppid() != parent:
-        os._exit(0)  # the parent died before the death signal was set up
+    host, frequency, request_fd, reply_fd, rtde_dir, parent = argv
+    # Ctrl-C and SIGTERM are the parent's to handle: it stops and retracts the arm through
+    # this process, and then ends it. (It also runs in a session of its own, so a terminal's
+    # signals do not reach it; a signal sent to it by pid is ignored too.)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    _die_with_parent(int(parent))
     sys.path.insert(0, rtde_dir)
     import rtde_control
 

@@ -79,9 +79,14 @@ class ControlProcess:
                     str(request_r),
                     str(reply_w),
                     str(Path(rtde_control.__file__).parent),
+                    str(os.getpid()),
                 ],
                 pass_fds=(request_r, reply_w),
                 stdin=subprocess.DEVNULL,
+                # Not in our process group: Ctrl-C at a terminal (or a job's SIGTERM to the
+                # group) must reach only us, while we still need the client to stop and
+                # retract the arm. The process ends with us (see _control_child).
+                start_new_session=True,
             )
         except BaseException:
             for fd in (self._request_w, self._reply_r):
