@@ -15,28 +15,19 @@ from collections.abc import Callable, Iterator, Sequence
 from typing import Any, Protocol
 
 from aptkt.errors import ConfigError
+from aptkt.runtime.worker_start import limit_thread_pools
 
 __all__ = ["Executor", "LocalExecutor", "DaskExecutor", "make_executor"]
 
 # Spawned, never forked: a fork copies the compiled core's thread pool without its threads.
 _SPAWN = multiprocessing.get_context("spawn")
 
-# Thread pools a worker may start: the compiled core's (rayon) and the BLAS libraries'.
-_THREAD_POOL_VARIABLES = (
-    "RAYON_NUM_THREADS",
-    "OMP_NUM_THREADS",
-    "OPENBLAS_NUM_THREADS",
-    "MKL_NUM_THREADS",
-)
-
-
 def _share_cores(threads: int) -> None:
     """Worker initializer: each of ``jobs`` processes gets its share of the cores, so that
     ``jobs`` workers, each fitting its one-vs-all classifiers in parallel, do not run
     ``jobs × cores`` threads on ``cores`` cores. Runs before the first task, i.e. before any
     thread pool exists; a value the user set in the environment wins."""
-    for name in _THREAD_POOL_VARIABLES:
-        os.environ.setdefault(name, str(threads))
+    limit_thread_pools(threads)
 
 
 class Executor(Protocol):

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from aptkt.actions import PAPER_ACTIONS, ExploratoryAction
@@ -28,6 +29,7 @@ from aptkt.data.store import (
     repair,
 )
 from aptkt.runtime.grid import TrialGrid
+from aptkt.runtime.worker_start import start_worker
 from aptkt.sim.objects import default_library, load_library
 from aptkt.sim.world import SimWorld
 
@@ -167,12 +169,18 @@ def _run(
     work = [(o, a.to_dict(), t) for o, a, t in todo]
     if jobs <= 1:
         _init_world(*args)
-        for job in work:
-            yield _simulate(job)
+        # In this process BLAS has started already: limit it while simulating (see
+        # aptkt.runtime.worker_start for why).
+        with threadpool_limits(1, user_api="blas"):
+            for job in work:
+                yield _simulate(job)
         return
     # Results come back in plan order, whichever process computed them.
     with cf.ProcessPoolExecutor(
-        max_workers=jobs, mp_context=_SPAWN, initializer=_init_world, initargs=args
+        max_workers=jobs,
+        mp_context=_SPAWN,
+        initializer=start_worker,
+        initargs=("aptkt.runtime.generation:_init_world", *args),
     ) as pool:
         yield from pool.map(_simulate, work, chunksize=4)
 
