@@ -82,12 +82,14 @@ def test_repository_paths_in_code_spans_exist(md):
         first = span.split("/", 1)[0]
         if "/" not in span or first not in TOP or any(c in span for c in "*<>{}"):
             continue
-        span, _, name = span.partition("::")  # `tests/x.py::test_name`: the test must exist too
-        path = ROOT / span
+        # `tests/x.py::test_name` names a test: the file must exist and define it.
+        file, _, test = span.partition("::")
+        path = ROOT / file
         assert _inside(path) and path.exists(), f"{md.name}: `{span}` does not exist"
-        if name:
-            assert re.search(rf"^def {re.escape(name)}\(", path.read_text(), re.MULTILINE), (
-                f"{md.name}: `{span}` defines no {name}"
+        if test:
+            name = test.split("[", 1)[0]
+            assert re.search(rf"^\s*(async\s+)?def {re.escape(name)}\(", path.read_text(), re.M), (
+                f"{md.name}: `{span}` names a test that {file} does not define"
             )
 
 

@@ -14,20 +14,13 @@ import os
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, Protocol
 
-from aptkt.errors import ConfigError
+from aptkt.errors import ConfigError, WorkerDiedError
+from aptkt.runtime.worker_start import limit_thread_pools
 
 __all__ = ["Executor", "LocalExecutor", "DaskExecutor", "make_executor"]
 
 # Spawned, never forked: a fork copies the compiled core's thread pool without its threads.
 _SPAWN = multiprocessing.get_context("spawn")
-
-# Thread pools a worker may start: the compiled core's (rayon) and the BLAS libraries'.
-_THREAD_POOL_VARIABLES = (
-    "RAYON_NUM_THREADS",
-    "OMP_NUM_THREADS",
-    "OPENBLAS_NUM_THREADS",
-    "MKL_NUM_THREADS",
-)
 
 
 def _share_cores(threads: int) -> None:
@@ -35,8 +28,7 @@ def _share_cores(threads: int) -> None:
     ``jobs`` workers, each fitting its one-vs-all classifiers in parallel, do not run
     ``jobs × cores`` threads on ``cores`` cores. Runs before the first task, i.e. before any
     thread pool exists; a value the user set in the environment wins."""
-    for name in _THREAD_POOL_VARIABLES:
-        os.environ.setdefault(name, str(threads))
+    limit_thread_pools(threads)
 
 
 class Executor(Protocol):
@@ -83,7 +75,17 @@ class LocalExecutor:
         futures = {self._pool.submit(fn, item): i for i, item in enumerate(items)}
         try:
             for fut in cf.as_completed(futures):
-                yield futures[fut], fut.result()
+                try:
+                    result = fut.result()
+                except cf.process.BrokenProcessPool as exc:
+                    # Broken for good: the next batch starts a new pool.
+                    self._pool.shutdown(wait=False, cancel_futures=True)
+                    self._pool = None
+                    raise WorkerDiedError(
+                        "a worker process died abruptly (killed, out of memory or crashed); "
+                        "finished runs are kept: run the same command again to resume"
+                    ) from exc
+                yield futures[fut], result
         finally:
             # On an interruption or a failed task: drop what has not started.
             for fut in futures:

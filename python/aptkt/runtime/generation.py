@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from aptkt.actions import PAPER_ACTIONS, ExploratoryAction
@@ -27,7 +28,9 @@ from aptkt.data.store import (
     pack_recording,
     repair,
 )
+from aptkt.errors import WorkerDiedError
 from aptkt.runtime.grid import TrialGrid
+from aptkt.runtime.worker_start import start_worker
 from aptkt.sim.objects import default_library, load_library
 from aptkt.sim.world import SimWorld
 
@@ -142,7 +145,7 @@ def generate(
             smoothing=0.05,
         )
     try:
-        for rec in _run(plan, todo, jobs):
+        for rec in _run(plan, todo, jobs, lambda: len(writer), path):
             writer.append_packed(rec)
             if bar is not None:
                 bar.update(1)
@@ -161,20 +164,37 @@ def generate(
 
 
 def _run(
-    plan: GenerationPlan, todo: Sequence[tuple[str, ExploratoryAction, int]], jobs: int
+    plan: GenerationPlan,
+    todo: Sequence[tuple[str, ExploratoryAction, int]],
+    jobs: int,
+    written: Callable[[], int],
+    path: Path,
 ) -> Iterator[PackedRecording]:
     args = (plan.seed, plan.object_files, plan.world_options)
     work = [(o, a.to_dict(), t) for o, a, t in todo]
     if jobs <= 1:
         _init_world(*args)
-        for job in work:
-            yield _simulate(job)
+        # In this process BLAS has started already: limit it while simulating (see
+        # aptkt.runtime.worker_start for why).
+        with threadpool_limits(1, user_api="blas"):
+            for job in work:
+                yield _simulate(job)
         return
     # Results come back in plan order, whichever process computed them.
     with cf.ProcessPoolExecutor(
-        max_workers=jobs, mp_context=_SPAWN, initializer=_init_world, initargs=args
+        max_workers=jobs,
+        mp_context=_SPAWN,
+        initializer=start_worker,
+        initargs=("aptkt.runtime.generation:_init_world", *args),
     ) as pool:
-        yield from pool.map(_simulate, work, chunksize=4)
+        try:
+            yield from pool.map(_simulate, work, chunksize=4)
+        except cf.process.BrokenProcessPool as exc:
+            raise WorkerDiedError(
+                f"a simulation worker process died abruptly (killed, out of memory or crashed); "
+                f"{path} keeps the {written()} recordings written so far: run the same command "
+                "with --resume to complete it"
+            ) from exc
 
 
 def describe_summary(info: dict[str, Any]) -> str:

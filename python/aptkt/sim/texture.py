@@ -26,6 +26,7 @@ Stick-slip: a spring-block per cell (tangential stiffness k_t, mass m_t). Slow s
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -56,8 +57,10 @@ class TextureField:
         return float(np.sqrt(np.sum(self.amplitude**2) / 2.0))
 
 
+@functools.lru_cache(maxsize=256)
 def texture_field(obj: ObjectSpec) -> TextureField:
-    """The object's own texture: a property of the object, seeded by its name only."""
+    """The object's own texture: a property of the object, seeded by its name only (made once
+    per object and process; the arrays are read-only)."""
     rng = np.random.default_rng(seed_sequence(0, "texture", obj.name))
     s = obj.surface
     k, a, ph = [], [], []
@@ -80,11 +83,18 @@ def texture_field(obj: ObjectSpec) -> TextureField:
             ph.append(rng.uniform(0, 2 * np.pi))
     if not k:
         return TextureField(np.zeros((0, 2)), np.zeros(0), np.zeros(0))
-    return TextureField(np.array(k), np.array(a), np.array(ph))
+    return TextureField(_frozen(np.array(k)), _frozen(np.array(a)), _frozen(np.array(ph)))
 
 
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a
+
+
+@functools.lru_cache(maxsize=256)
 def waviness_waves(obj: ObjectSpec, n: int = 4) -> np.ndarray:
-    """Long-wavelength unevenness (wavelengths 10-60 mm) as rows (k_x, k_y, amplitude, phase)."""
+    """Long-wavelength unevenness (wavelengths 10-60 mm) as rows (k_x, k_y, amplitude, phase),
+    made once per object and process (read-only)."""
     if obj.waviness <= 0:
         return np.zeros((0, 4))
     rng = np.random.default_rng(seed_sequence(0, "waviness", obj.name))
@@ -92,8 +102,10 @@ def waviness_waves(obj: ObjectSpec, n: int = 4) -> np.ndarray:
     theta = rng.uniform(0, np.pi, n)
     amp = rng.uniform(0.5, 1.0, n)
     amp *= obj.waviness / np.sqrt(np.sum(amp**2) / 2.0)
-    return np.stack(
-        [np.cos(theta) / lam, np.sin(theta) / lam, amp, rng.uniform(0, 2 * np.pi, n)], axis=1
+    return _frozen(
+        np.stack(
+            [np.cos(theta) / lam, np.sin(theta) / lam, amp, rng.uniform(0, 2 * np.pi, n)], axis=1
+        )
     )
 
 

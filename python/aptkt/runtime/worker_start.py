@@ -1,0 +1,46 @@
+"""The start of a spawned worker process, in a module that imports no numpy.
+
+OpenBLAS starts its thread pool when numpy is imported, and its threads spin for a while after
+every call. A simulating worker calls BLAS only for small eigen-decompositions (the thermal
+networks, 30–40 nodes), where extra threads cannot help, but their spinning cost as much CPU as
+the simulation itself when two workers shared two cores (106 against 50 CPU-ms per trial).
+So the thread-pool sizes are set in the environment first, before anything imports numpy (a
+value the user set wins), and BLAS is limited to one thread again once it is loaded, in case
+the parent's main module had numpy imported already (a spawned worker imports it too).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from typing import Any
+
+__all__ = ["THREAD_POOL_VARIABLES", "limit_thread_pools", "start_worker"]
+
+#: Thread pools a worker may start: the compiled core's (rayon) and the BLAS libraries'.
+THREAD_POOL_VARIABLES = (
+    "RAYON_NUM_THREADS",
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+)
+
+
+def limit_thread_pools(threads: int) -> None:
+    """Set every thread pool's size to ``threads`` unless the user set it (effective only
+    before the pools start, i.e. before numpy or the core's parallel code is first used)."""
+    for name in THREAD_POOL_VARIABLES:
+        os.environ.setdefault(name, str(threads))
+
+
+def start_worker(target: str, *args: Any) -> None:
+    """Initializer of a simulating worker: one thread per pool, then ``target``
+    (``"module:function"``, imported only now) called with ``args``."""
+    limit_thread_pools(1)
+    # Imported here, after the limits: importing the target is what loads numpy and BLAS.
+    from threadpoolctl import threadpool_limits
+
+    module, _, name = target.partition(":")
+    init = getattr(importlib.import_module(module), name)
+    threadpool_limits(1, user_api="blas")  # for the rest of this worker's life
+    init(*args)
