@@ -22,6 +22,7 @@ __all__ = ["Executor", "LocalExecutor", "DaskExecutor", "make_executor"]
 # Spawned, never forked: a fork copies the compiled core's thread pool without its threads.
 _SPAWN = multiprocessing.get_context("spawn")
 
+
 def _share_cores(threads: int) -> None:
     """Worker initializer: each of ``jobs`` processes gets its share of the cores, so that
     ``jobs`` workers, each fitting its one-vs-all classifiers in parallel, do not run
