@@ -11,7 +11,7 @@ with as many starts (up to --sklearn-max rows: it is slow). Reports wall time, C
 busiest thread's CPU time (what the fit takes on an idle machine with that many cores), peak
 resident memory (ru_maxrss, the data included) and the load average before and after. BLAS
 runs on one thread. With --other DIR (the python/ directory of another checkout, e.g. an older
-commit with its own compiled extension) the former settings also run on that implementation.
+commit with its own compiled extension) the default settings also run on that implementation.
 
 By default each side runs as a user gets it: ours fits the one-vs-all classifiers in parallel on
 all cores, scikit-learn fits them one after the other with a multi-threaded BLAS. With
@@ -175,7 +175,7 @@ LARGE_SETTINGS = (
 
 def run_large(sizes: list[int], other: str | None, sklearn_max: int) -> None:
     """Each fit in a fresh process; with ``other`` (a python/ directory of another checkout)
-    the former settings also run on that implementation, side by side; scikit-learn only up
+    the default settings also run on that implementation, side by side; scikit-learn only up
     to ``sklearn_max`` rows (it is slow)."""
     import os
     import subprocess
@@ -187,7 +187,9 @@ def run_large(sizes: list[int], other: str | None, sklearn_max: int) -> None:
         runs = [(path_for, *cfg) for cfg in LARGE_SETTINGS for path_for in [here]]
         runs = [r for r in runs if r[2] != "sklearn" or n <= sklearn_max]
         if other:
-            runs.append((other, "former (1.0, 2, 200), n_jobs=1", "other", "1.0", 2, 200, "1"))
+            runs.append(
+                (other, "default (auto, 1, 100), n_jobs=None", "other", "auto", 1, 100, "none")
+            )
         for path, label, impl, ls, restarts, max_iter, n_jobs in runs:
             env = {**os.environ, "PYTHONPATH": path, "OPENBLAS_NUM_THREADS": "1"}
             args = [impl, str(n), ls, str(restarts), str(max_iter), n_jobs]

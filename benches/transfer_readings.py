@@ -37,7 +37,9 @@ def main() -> None:
     p.add_argument("--cutoff", choices=("evidence", "paper"), default=None)
     p.add_argument("--evidence-margin", default=None, help="a number, or 'lnN' (None)")
     p.add_argument("--fig11-trials", type=int, default=3)
-    p.add_argument("--feature-space", choices=("auto", "covered", "prior", "new"), default=None)
+    p.add_argument(
+        "--feature-space", choices=("auto", "covered", "prior", "new", "pooled"), default=None
+    )
     args = p.parse_args()
     scale = Scale.full().with_(
         name="mid",

@@ -25,6 +25,7 @@ __all__ = [
     "FeatureTableError",
     "PriorFileError",
     "Terminated",
+    "WorkerDiedError",
     "NotFittedError",
     "KernelNotPositiveDefiniteError",
 ]
@@ -46,6 +47,11 @@ class PriorFileError(AptktError, ValueError):
 class Terminated(KeyboardInterrupt):
     """SIGTERM (``kill``, a scheduler ending a job): handled exactly like Ctrl-C — the arm
     stops and retracts, the partial recording is saved — then the command exits with 143."""
+
+
+class WorkerDiedError(AptktError):
+    """A worker process ended abruptly (killed, out of memory, crashed) in the middle of a
+    task. What the main process had already written is kept; the message says how to go on."""
 
 
 class NotFittedError(AptktError, AttributeError):

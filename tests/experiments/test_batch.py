@@ -9,6 +9,7 @@ import sys
 
 import pytest
 
+from aptkt.errors import WorkerDiedError
 from aptkt.experiments.batch import build_priors, run_batch
 from aptkt.experiments.executors import LocalExecutor, make_executor
 from aptkt.experiments.figures import fig7, fig8
@@ -157,3 +158,14 @@ def test_a_thread_count_the_user_set_wins(monkeypatch):
         _in_workers(LocalExecutor(2), ["RAYON_NUM_THREADS", "OMP_NUM_THREADS"])["RAYON_NUM_THREADS"]
         == "3"
     )
+
+
+def test_a_worker_that_dies_is_a_typed_error_and_the_executor_recovers():
+    executor = LocalExecutor(2)
+    try:
+        # os._exit pickles by reference, like os.getenv above: the worker ends on the spot.
+        with pytest.raises(WorkerDiedError, match="worker process died"):
+            list(executor.imap_unordered(os._exit, [7, 7]))
+        assert dict(executor.imap_unordered(os.getenv, ["PATH", "HOME"])).keys() == {0, 1}
+    finally:
+        executor.close()

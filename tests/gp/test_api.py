@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 from sklearn.base import clone
+from sklearn.utils.multiclass import check_classification_targets
 
-from aptkt.gp import LaplaceGPC, TransferSource
+from aptkt.gp import LaplaceGPC, TransferSource, _check_classification_targets
 
 from .conftest import make_blobs
 
@@ -148,3 +149,35 @@ def test_save_and_load_round_trip(tmp_path):
         loaded.log_marginal_likelihood_, model.log_marginal_likelihood_, rtol=1e-12
     )
     assert loaded.get_params()["modalities"] == {"f": [0, 1], "t": [2, 3]}
+
+
+@pytest.mark.parametrize(
+    "y",
+    [
+        np.arange(12) % 3,
+        (np.arange(12) % 2).astype(np.uint8),
+        np.arange(12) % 2 == 0,
+        np.array(["a", "b", "c"] * 4),
+        np.array([7, 7, 7]),
+        np.arange(12) % 3 + 0.0,
+        np.linspace(0.1, 0.9, 12),
+        np.array(["a", 1, 2.5], dtype=object),
+        (np.arange(12) % 2).reshape(6, 2),
+    ],
+)
+def test_target_check_agrees_with_scikit_learn(y):
+    # fit skips scikit-learn's check for 1-D integer, boolean and string labels (always
+    # "binary" or "multiclass"); it must accept and refuse exactly what scikit-learn does.
+    try:
+        check_classification_targets(y)
+    except (ValueError, TypeError) as e:
+        with pytest.raises(type(e)):
+            _check_classification_targets(y)
+    else:
+        _check_classification_targets(y)
+
+
+def test_continuous_targets_are_still_refused():
+    X, _ = make_blobs(10, 2, 3, seed=1)
+    with pytest.raises(ValueError, match="Unknown label type"):
+        LaplaceGPC(optimize=False).fit(X, np.linspace(0.1, 0.9, len(X)))

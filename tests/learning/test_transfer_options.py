@@ -526,3 +526,73 @@ def test_feature_space_covered_uses_the_prior_space_only_when_every_new_object_t
     for lrn in learner.learners.values():
         assert all(d.transfers for d in lrn.decisions.values())
         assert lrn._test_cache is not None and lrn._test_cache[0] is lrn.prior.pipeline
+
+
+def test_feature_space_pooled_fits_the_transforms_on_old_and_new_observations(world):
+    """ "pooled": when the update transfers, the new objects' transforms are fitted on the old
+    objects' observations and the new objects' training observations together (each counted
+    once); scikit-learn's scaler and PCA on the concatenation are the reference. The source
+    tasks are the old observations mapped into that space, and relatedness is judged in the
+    prior's space, so the transfer decisions equal "auto"'s."""
+    from sklearn.decomposition import PCA
+    from sklearn.preprocessing import StandardScaler
+
+    pooled, _ = _run(world, transfer="paper", budget=2, feature_space="pooled")
+    auto, _ = _run(world, transfer="paper", budget=0, feature_space="auto")
+    step0, _ = _run(world, transfer="paper", budget=0, feature_space="pooled")
+    for a, lrn in step0.learners.items():
+        for o, d in lrn.decisions.items():
+            ref = auto.learners[a].decisions[o]
+            assert (d.sources, d.lambdas) == (ref.sources, ref.lambdas)
+    for a, lrn in pooled.learners.items():
+        assert any(d.transfers for d in lrn.decisions.values())
+        assert lrn._test_cache is not None
+        pipe = lrn._test_cache[0]
+        assert pipe is not lrn.prior.pipeline
+        old = world["prior"][a].observations
+        assert lrn.observations is not None and len(lrn.observations) > 0
+        for m in pipe.modality_names_:
+            X = np.vstack([old.modalities[m], lrn.observations.modalities[m]])
+            t = pipe.transforms[m]
+            if t.log_columns:
+                cols = list(t.log_columns)
+                X[:, cols] = np.log10(np.maximum(X[:, cols], 1e-12))
+            scaler = StandardScaler().fit(X)
+            np.testing.assert_allclose(t.mean_, scaler.mean_, rtol=1e-10, atol=1e-12)
+            np.testing.assert_allclose(t.scale_, scaler.scale_, rtol=1e-10)
+            # Neither population alone: the old observations' fit differs.
+            assert not np.allclose(t.mean_, lrn.prior.pipeline.transforms[m].mean_)
+            if t.components_ is not None:
+                pca = PCA(n_components=t.components_.shape[0]).fit(scaler.transform(X))
+                sign = np.sign(np.sum(pca.components_ * t.components_, axis=1))
+                np.testing.assert_allclose(
+                    t.components_ * sign[:, None], pca.components_, atol=1e-8
+                )
+                n = X.shape[0]
+                sd0 = np.sqrt(pca.explained_variance_[0] * (n - 1) / n)
+                assert t.pca_scale_ == pytest.approx(sd0, rel=1e-8)
+        # The source tasks: every old observation (one-vs-all), mapped into the pooled space.
+        X_old = pipe.transform(old)[0]
+        for _c, srcs in lrn.model.sources_.items():
+            for s in srcs:
+                np.testing.assert_allclose(s.X, X_old)
+
+
+def test_feature_space_pooled_is_the_baseline_when_nothing_transfers():
+    priors, news, means = make_world(n_prior=3, n_new=3, separation=0.6, related=False, seed=1)
+    far = dict(
+        news=news,
+        prior=PriorKnowledge.build(draw(means, priors, 12, seed=1), seed=0),
+        pool=draw(means, news, 10, seed=2),
+        test=draw(means, news, 6, seed=3),
+    )
+    aptkt, run = _run(far, transfer="paper", budget=3, feature_space="pooled")
+    assert all(not d.transfers for lrn in aptkt.learners.values() for d in lrn.decisions.values())
+    _, base = _run(far, transfer="none", budget=3)
+    keys = ("mean_accuracy", "fused_accuracy", "action")
+    strip = lambda rows: [{k: r[k] for k in keys} for r in rows]  # noqa: E731
+    assert strip(run.rows()) == strip(base.rows())
+    cfg = LearnerConfig(feature_space="pooled")
+    assert LearnerConfig.from_dict(cfg.to_dict()) == cfg
+    with pytest.raises(ValueError, match="feature_space"):
+        LearnerConfig(feature_space="union")

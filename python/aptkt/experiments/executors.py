@@ -14,7 +14,7 @@ import os
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, Protocol
 
-from aptkt.errors import ConfigError
+from aptkt.errors import ConfigError, WorkerDiedError
 from aptkt.runtime.worker_start import limit_thread_pools
 
 __all__ = ["Executor", "LocalExecutor", "DaskExecutor", "make_executor"]
@@ -75,7 +75,17 @@ class LocalExecutor:
         futures = {self._pool.submit(fn, item): i for i, item in enumerate(items)}
         try:
             for fut in cf.as_completed(futures):
-                yield futures[fut], fut.result()
+                try:
+                    result = fut.result()
+                except cf.process.BrokenProcessPool as exc:
+                    # Broken for good: the next batch starts a new pool.
+                    self._pool.shutdown(wait=False, cancel_futures=True)
+                    self._pool = None
+                    raise WorkerDiedError(
+                        "a worker process died abruptly (killed, out of memory or crashed); "
+                        "finished runs are kept: run the same command again to resume"
+                    ) from exc
+                yield futures[fut], result
         finally:
             # On an interruption or a failed task: drop what has not started.
             for fut in futures:

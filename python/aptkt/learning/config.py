@@ -89,7 +89,9 @@ class LearnerConfig:
         equals the baseline. "prior": always the prior's; "new": always the baseline's, with
         the old observations mapped into it; "covered": the prior's only when every new
         object transfers (the prior's transforms then come from a population that covers
-        them all). The old models always judge relatedness (Eq. 3)
+        them all); "pooled": when the update transfers, transforms fitted on the old and the
+        new observations together (the population the dependent kernel compares), the
+        baseline's otherwise. The old models always judge relatedness (Eq. 3)
         and auxiliary features (Eq. 5) in their own space.
     relatedness : p̄ of Eq. 3 from each old object's own binary classifier ("binary", paper
         §4.2) or from the normalised one-vs-all posterior ("normalised").

@@ -78,11 +78,12 @@ class ActionLearner:
 
     # -- features ----------------------------------------------------------------------------
     def _pipeline(self, transfers: bool) -> FeaturePipeline:
-        """The new objects' model space: the prior's, or fitted on the new objects' training
-        observations so far (the baseline's). ``feature_space``: "prior" always the prior's
-        (so does the control), "new" never, "auto" the prior's exactly when this update
-        transfers from at least one old object, "covered" when it transfers to every new
-        object."""
+        """The new objects' model space: the prior's, fitted on the new objects' training
+        observations so far (the baseline's), or fitted on both together ("pooled").
+        ``feature_space``: "prior" always the prior's (so does the control), "new" never,
+        "auto" the prior's exactly when this update transfers from at least one old object,
+        "covered" when it transfers to every new object, "pooled" the old and new
+        observations' joint transforms when it transfers (the baseline's otherwise)."""
         cfg = self.config
         if self.prior is not None and (
             cfg.transfer == "control"
@@ -91,6 +92,12 @@ class ActionLearner:
         ):
             return self.prior.pipeline
         assert self.observations is not None  # update() checks every object was observed
+        if self.prior is not None and cfg.feature_space == "pooled" and transfers:
+            # The population the dependent kernel compares: the source tasks' old
+            # observations beside the new ones, each observation counted once as it enters
+            # the Gram matrix.
+            both = Observations.concat([self.prior.observations, self.observations])
+            return FeaturePipeline().fit(both)
         return FeaturePipeline().fit(self.observations)
 
     def _features(

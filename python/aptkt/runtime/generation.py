@@ -28,6 +28,7 @@ from aptkt.data.store import (
     pack_recording,
     repair,
 )
+from aptkt.errors import WorkerDiedError
 from aptkt.runtime.grid import TrialGrid
 from aptkt.runtime.worker_start import start_worker
 from aptkt.sim.objects import default_library, load_library
@@ -144,7 +145,7 @@ def generate(
             smoothing=0.05,
         )
     try:
-        for rec in _run(plan, todo, jobs):
+        for rec in _run(plan, todo, jobs, lambda: len(writer), path):
             writer.append_packed(rec)
             if bar is not None:
                 bar.update(1)
@@ -163,7 +164,11 @@ def generate(
 
 
 def _run(
-    plan: GenerationPlan, todo: Sequence[tuple[str, ExploratoryAction, int]], jobs: int
+    plan: GenerationPlan,
+    todo: Sequence[tuple[str, ExploratoryAction, int]],
+    jobs: int,
+    written: Callable[[], int],
+    path: Path,
 ) -> Iterator[PackedRecording]:
     args = (plan.seed, plan.object_files, plan.world_options)
     work = [(o, a.to_dict(), t) for o, a, t in todo]
@@ -182,7 +187,14 @@ def _run(
         initializer=start_worker,
         initargs=("aptkt.runtime.generation:_init_world", *args),
     ) as pool:
-        yield from pool.map(_simulate, work, chunksize=4)
+        try:
+            yield from pool.map(_simulate, work, chunksize=4)
+        except cf.process.BrokenProcessPool as exc:
+            raise WorkerDiedError(
+                f"a simulation worker process died abruptly (killed, out of memory or crashed); "
+                f"{path} keeps the {written()} recordings written so far: run the same command "
+                "with --resume to complete it"
+            ) from exc
 
 
 def describe_summary(info: dict[str, Any]) -> str:

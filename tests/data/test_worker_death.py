@@ -1,0 +1,88 @@
+"""A worker process killed in the middle of a multi-process generation: the command ends in one
+error line (no traceback), the file keeps what was written, and ``--resume`` completes it to the
+same bytes as an undisturbed run."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from aptkt.data import DatasetReader
+
+ARGS = ["--objects", "towel,cork_board,rough_sponge", "--actions", "P1,S1", "-n", "6"]
+ARGS += ["--seed", "3", "--no-progress"]
+
+
+def _children(pid: int) -> list[int]:
+    kids = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            # The command name may hold spaces and parentheses: the fields follow the last ")".
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                kids.append(int(entry.name))
+    return kids
+
+
+def _aptkt(*argv: str) -> list[str]:
+    return [sys.executable, "-m", "aptkt.cli", "dataset", "generate", *argv]
+
+
+def _keys(path: Path) -> list[tuple[str, str, int]]:
+    with DatasetReader(path) as rd:
+        return sorted(rd.keys())
+
+
+def test_a_killed_worker_is_one_error_line_and_resume_completes_the_file(tmp_path):
+    out = tmp_path / "gen.h5"
+    proc = subprocess.Popen(
+        _aptkt("-o", str(out), "-j", "2", *ARGS),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    # Wait for the spawned workers (and the resource tracker) to appear, then kill one
+    # that is simulating: the first child whose command line is a multiprocessing spawn.
+    victim = None
+    deadline = time.monotonic() + 120
+    while victim is None and time.monotonic() < deadline and proc.poll() is None:
+        for kid in _children(proc.pid):
+            try:
+                cmd = (Path("/proc") / str(kid) / "cmdline").read_bytes()
+            except OSError:
+                continue
+            if b"spawn_main" in cmd:
+                victim = kid
+                break
+        time.sleep(0.05)
+    assert victim is not None, "no worker process appeared"
+    time.sleep(1.0)  # let it start simulating
+    os.kill(victim, signal.SIGKILL)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 1, err
+    assert "Traceback" not in err, err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("aptkt dataset generate: error: "), err
+    assert "worker process died" in lines[0] and "--resume" in lines[0], err
+
+    resumed = subprocess.run(_aptkt("-o", str(out), "--resume", *ARGS), capture_output=True)
+    assert resumed.returncode == 0, resumed.stderr
+    reference = tmp_path / "reference.h5"
+    subprocess.run(_aptkt("-o", str(reference), *ARGS), check=True, capture_output=True)
+    assert _keys(out) == _keys(reference) and len(_keys(out)) == 36
+    with DatasetReader(out) as a, DatasetReader(reference) as b:
+        where = {key: i for i, key in enumerate(a.keys())}
+        for j, key in enumerate(b.keys()):
+            i = where[key]
+            assert a.index[i]["start_ns"] == b.index[j]["start_ns"]
+            raw_a, raw_b = a.raw(i), b.raw(j)
+            assert raw_a.keys() == raw_b.keys()
+            for name in raw_b:
+                assert (raw_a[name] == raw_b[name]).all(), (key, name)
