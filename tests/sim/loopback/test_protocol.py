@@ -214,6 +214,9 @@ def test_drop_refuse_and_restore(server):
 def test_a_busy_port_is_a_clear_start_error():
     host = free_loopback_host()
     with socket.socket() as blocker:
+        # As the loopback does: an earlier test's connection to this port may linger in
+        # TIME_WAIT, which only a plain bind refuses; a listening socket still blocks the port.
+        blocker.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         blocker.bind((host, 29999))
         blocker.listen()
         with pytest.raises(LoopbackError, match=f"loopback on {host} failed to start: OSError"):
