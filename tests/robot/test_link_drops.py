@@ -42,4 +42,6 @@ def test_twenty_link_drops_do_not_crash():
     survived = [line for line in r.stdout.splitlines() if line.endswith("survived")]
     assert r.returncode == 0, f"exit {r.returncode} after {len(survived)} drops\n{r.stderr[-3000:]}"
     assert len(survived) == DROPS
-    assert all("RobotConnectionError" in line for line in survived)
+    # A dropped link is reported as a lost connection, not as some other robot fault.
+    others = [line for line in survived if "RobotConnectionError" not in line]
+    assert not others, "drops reported as another fault:\n" + "\n".join(others) + r.stderr[-3000:]
