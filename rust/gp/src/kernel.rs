@@ -458,19 +458,13 @@ impl KernelEval {
             if part.nrows() != n || part.ncols() != n {
                 *part = fresh();
             }
-            rbf_into(part, d, l);
+            // Only the lower triangle: the gradient reads no more of the parts.
+            rbf_lower_into(part, d, l);
         }
         if self.k.nrows() != n || self.k.ncols() != n {
             self.k = fresh();
         }
-        combine_parts(
-            &mut self.k,
-            &self.parts,
-            h,
-            &dist.coupling(h),
-            &dist.task,
-            &dist.task,
-        );
+        combine_parts_symmetric(&mut self.k, &self.parts, h, &dist.coupling(h), &dist.task);
         self.jitter = 0.0;
     }
 
@@ -577,6 +571,53 @@ fn rbf_into(out: &mut Mat<f64>, d: &Mat<f64>, length_scale: f64) {
             *o = v * c;
         }
         exp_nonpositive_in_place(col);
+    }
+}
+
+/// The lower triangle (i ≥ j) of [`rbf_into`]: half the `exp` calls for a symmetric D.
+fn rbf_lower_into(out: &mut Mat<f64>, d: &Mat<f64>, length_scale: f64) {
+    let c = -0.5 / (length_scale * length_scale);
+    for j in 0..out.ncols() {
+        let col = &mut out.col_as_slice_mut(j)[j..];
+        for (o, v) in col.iter_mut().zip(&d.col_as_slice(j)[j..]) {
+            *o = v * c;
+        }
+        exp_nonpositive_in_place(col);
+    }
+}
+
+/// [`combine_parts`] for the symmetric training kernel from the parts' lower triangles: the
+/// lower triangle computed as there (the same operations in the same order, so the same
+/// values), the upper one copied from it. D and B are exactly symmetric, so this is the very
+/// matrix the full computation gives.
+fn combine_parts_symmetric(
+    out: &mut Mat<f64>,
+    parts: &[Mat<f64>],
+    h: &Hyper,
+    coupling: &Coupling,
+    task: &[usize],
+) {
+    let n = out.ncols();
+    for j in 0..n {
+        let col = &mut out.col_as_slice_mut(j)[j..];
+        col.iter_mut().for_each(|v| *v = 0.0);
+        for (part, w) in parts.iter().zip(&h.weights) {
+            let scale = h.signal_variance * w;
+            for (o, p) in col.iter_mut().zip(&part.col_as_slice(j)[j..]) {
+                *o += scale * p;
+            }
+        }
+        if coupling.n_tasks > 1 {
+            let tj = task[j];
+            for (o, &ti) in col.iter_mut().zip(&task[j..]) {
+                *o *= coupling.get(ti, tj);
+            }
+        }
+    }
+    for j in 0..n {
+        for i in (j + 1)..n {
+            out[(j, i)] = out[(i, j)];
+        }
     }
 }
 
