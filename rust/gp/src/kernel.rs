@@ -786,11 +786,7 @@ fn combine_parts_symmetric(
             }
         }
     }
-    for j in 0..n {
-        for i in (j + 1)..n {
-            out[(j, i)] = out[(i, j)];
-        }
-    }
+    crate::linalg::mirror_lower(out);
 }
 
 /// `out[i, j] = σ² Σ_m γ_m parts_m[i, j] · B[row_task[i], col_task[j]]`.

@@ -93,9 +93,31 @@ pub fn inverse_from_cholesky_in(l: MatRef<'_, f64>, scratch: &mut InverseScratch
     let stack = MemStack::new(buf);
     let out = &mut scratch.out;
     llt::inverse::inverse(out.as_mut(), l, Par::Seq, stack);
-    for j in 1..n {
-        for i in 0..j {
-            out[(i, j)] = out[(j, i)];
+    mirror_lower(out);
+}
+
+/// Copies the strictly lower triangle of a square matrix onto the upper one, in tiles that
+/// stay in cache (an element-by-element copy along rows strides through memory).
+pub fn mirror_lower(a: &mut Mat<f64>) {
+    const TILE: usize = 32;
+    let n = a.nrows();
+    assert_eq!(n, a.ncols(), "mirror_lower needs a square matrix");
+    let stride = a.col_stride();
+    let base = a.as_ptr_mut();
+    for jb in (0..n).step_by(TILE) {
+        let j_end = (jb + TILE).min(n);
+        for ib in (jb..n).step_by(TILE) {
+            let i_end = (ib + TILE).min(n);
+            for j in jb..j_end {
+                for i in ib.max(j + 1)..i_end {
+                    // SAFETY: i, j < n index the n × n matrix (column stride `stride`, row
+                    // stride 1 as for every Mat); the two elements differ (i > j).
+                    unsafe {
+                        *base.offset(j as isize + i as isize * stride) =
+                            *base.offset(i as isize + j as isize * stride);
+                    }
+                }
+            }
         }
     }
 }
@@ -227,6 +249,23 @@ mod tests {
         matvec(a.as_ref(), &x, &mut back);
         for i in 0..12 {
             assert!((back[i] - b[i]).abs() < 1e-10);
+        }
+    }
+
+    #[test]
+    fn mirror_lower_copies_every_element_below_the_diagonal() {
+        for n in [1, 5, 31, 32, 33, 70] {
+            let mut a = Mat::<f64>::from_fn(
+                n,
+                n,
+                |i, j| if i >= j { (i * 100 + j) as f64 } else { -1.0 },
+            );
+            mirror_lower(&mut a);
+            for i in 0..n {
+                for j in 0..n {
+                    assert_eq!(a[(i, j)], (i.max(j) * 100 + i.min(j)) as f64);
+                }
+            }
         }
     }
 
