@@ -269,14 +269,15 @@ def _positive(value: Any, what: str) -> float:
     return v
 
 
-def _per_modality(values: Any, names: list[str], what: str) -> list[float]:
-    """Values by modality name (a mapping), or a sequence in modality order, or one scalar."""
+def _per_modality(values: Any, names: list[str], what: str, partial: bool = False) -> list[float]:
+    """Values by modality name (a mapping), or a sequence in modality order, or one scalar.
+    ``partial``: a mapping may leave modalities out (NaN for them)."""
     if isinstance(values, Mapping):
         missing = [n for n in names if n not in values]
         extra = [k for k in values if k not in names]
-        if missing or extra:
+        if (missing and not partial) or extra:
             raise ValueError(f"{what} must name the modalities {names}, got {list(values)}")
-        return [float(values[n]) for n in names]
+        return [float(values[n]) if n in values else float("nan") for n in names]
     arr = np.atleast_1d(np.asarray(values, dtype=np.float64))
     if arr.size == 1:
         arr = np.repeat(arr, len(names))
@@ -607,7 +608,8 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
 
         ``hyperparameters`` maps class labels to starting values for their classifier, in the
         form of ``hyperparameters_`` (keys ``signal_variance``, ``length_scales``,
-        ``modality_weights``, ``transfer_lambda``; any may be left out). Hyper-parameters that
+        ``modality_weights``, ``transfer_lambda``; any may be left out, and ``length_scales``
+        by name may leave modalities out). Hyper-parameters that
         are fixed stay at these values; the fixed λ always comes from the sources.
         """
         return self._fit(X, y, sources, thetas=None, starts=hyperparameters)
@@ -712,8 +714,15 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
                     np.log(_positive(given["signal_variance"], f"{what}.signal_variance"))
                 )
             if "length_scales" in given:
-                ls = _per_modality(given["length_scales"], names, f"{what}.length_scales")
-                row[1 : 1 + m] = [float(np.log(_positive(v, f"{what}.length_scales"))) for v in ls]
+                ls = _per_modality(
+                    given["length_scales"], names, f"{what}.length_scales", partial=True
+                )
+                row[1 : 1 + m] = [
+                    float("nan")
+                    if np.isnan(v)
+                    else float(np.log(_positive(v, f"{what}.length_scales")))
+                    for v in ls
+                ]
             if "modality_weights" in given and m > 1:
                 w = np.asarray(
                     _per_modality(given["modality_weights"], names, f"{what}.modality_weights"),

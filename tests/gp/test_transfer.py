@@ -384,3 +384,20 @@ def test_format_1_files_are_still_read(tmp_path):
     Xt = np.random.default_rng(1).normal(size=(10, 3))
     np.testing.assert_allclose(loaded.predict_proba(Xt), model.predict_proba(Xt), rtol=1e-12)
     assert loaded.sources_[1][0].transfer_lambda == 0.7
+
+
+def test_a_start_may_leave_length_scales_out():
+    X, y = make_blobs(6, 3, 4, seed=14)
+    mods = {"a": [0, 1], "b": [2, 3]}
+    auto = LaplaceGPC(modalities=mods, optimize=False).fit(X, y)
+    part = LaplaceGPC(modalities=mods, optimize=False).fit(
+        X, y, hyperparameters={1: {"length_scales": {"a": 0.5}}}
+    )
+    # The one left out keeps its data-scaled value.
+    assert part.hyperparameters_[1]["length_scales"] == pytest.approx(
+        {"a": 0.5, "b": auto.hyperparameters_[1]["length_scales"]["b"]}
+    )
+    with pytest.raises(ValueError, match="must name the modalities"):
+        LaplaceGPC(modalities=mods, optimize=False).fit(
+            X, y, hyperparameters={1: {"length_scales": {"c": 0.5}}}
+        )

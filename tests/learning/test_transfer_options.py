@@ -596,3 +596,69 @@ def test_feature_space_pooled_is_the_baseline_when_nothing_transfers():
     assert LearnerConfig.from_dict(cfg.to_dict()) == cfg
     with pytest.raises(ValueError, match="feature_space"):
         LearnerConfig(feature_space="union")
+
+
+def test_warm_start_is_off_by_default_and_not_in_the_recorded_config():
+    assert LearnerConfig().warm_start is None
+    # Absent at its default: run keys of results stored before the option stay valid.
+    assert "warm_start" not in LearnerConfig().to_dict()
+    cfg = LearnerConfig(warm_start="both")
+    assert LearnerConfig.from_dict(cfg.to_dict()) == cfg
+    with pytest.raises(ValueError, match="warm_start"):
+        LearnerConfig(warm_start="always")
+
+
+def _starts_seen(monkeypatch):
+    from aptkt.gp import LaplaceGPC
+
+    seen = []
+    fit = LaplaceGPC.fit
+
+    def spy(self, X, y, sources=None, *, hyperparameters=None):
+        seen.append(hyperparameters)
+        return fit(self, X, y, sources, hyperparameters=hyperparameters)
+
+    monkeypatch.setattr(LaplaceGPC, "fit", spy)
+    return seen
+
+
+def test_warm_start_previous_starts_each_class_at_its_last_optimum(world, monkeypatch):
+    seen = _starts_seen(monkeypatch)
+    learner, run = _run(world, transfer="none", budget=3, prior=None, warm_start="previous")
+    n_actions = len(ACTIONS)
+    assert seen[:n_actions] == [{}] * n_actions  # nothing earlier at the first update
+    # Every later update starts from the optimum that the step before recorded for its action.
+    for k, step in enumerate(run.steps[1:], start=1):
+        start = seen[n_actions + k - 1]
+        before = run.steps[k - 1].hyperparameters[step.action]
+        assert set(start) == set(world["news"])
+        for c, hp in start.items():
+            assert hp["signal_variance"] == pytest.approx(before[c]["signal_variance"])
+            for m, v in hp["length_scales"].items():
+                assert v == pytest.approx(before[c][f"length_scale[{m}]"])
+
+
+def test_warm_start_source_starts_a_transferring_class_at_its_old_object(world, monkeypatch):
+    seen = _starts_seen(monkeypatch)
+    learner, _ = _run(
+        world,
+        transfer="paper",
+        budget=0,
+        cutoff="paper",
+        eps_neg=0.0,
+        warm_start="source",
+        auxiliary=True,
+    )
+    prior = world["prior"]
+    for (a, lrn), start in zip(learner.learners.items(), seen):
+        old = prior[a].model.hyperparameters_
+        transferring = {c for c, d in lrn.decisions.items() if d.transfers}
+        assert transferring and set(start) == transferring
+        for c in transferring:
+            hp = old[lrn.decisions[c].sources[0]]
+            assert start[c]["signal_variance"] == hp["signal_variance"]
+            # The auxiliary modality is not the old classifier's: data-scaled, equal weight.
+            assert start[c]["length_scales"] == hp["length_scales"]
+            w = start[c]["modality_weights"]
+            assert w["auxiliary"] == pytest.approx(1 / len(w))
+            assert sum(w.values()) == pytest.approx(1.0)

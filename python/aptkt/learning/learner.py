@@ -227,13 +227,50 @@ class ActionLearner:
         }
         seed = (self.config.seed * 1_000_003 + zlib.crc32(self.action.encode()) + step) % 2**32
         model = self.config.gp.make(groups, random_state=seed)
-        self.model = model.fit(X, obs.objects, sources=sources or None)
+        starts = self._starts(list(groups), sources) if cfg.warm_start is not None else None
+        self.model = model.fit(X, obs.objects, sources=sources or None, hyperparameters=starts)
         self.train_entropy = entropy(self.model.predict_proba(X))
         self.n_updates += 1
         if self._test is not None:
             if self._test_cache is None or self._test_cache[0] is not pipeline:
                 self._test_cache = (pipeline, self._features(self._test, pipeline)[0])
             self.test_posteriors = self.model.predict_proba(self._test_cache[1])
+
+    def _starts(
+        self, names: list[str], sources: Mapping[str, list[TransferSource]]
+    ) -> dict[str, dict[str, Any]]:
+        """First starts by class for ``config.warm_start`` (see LearnerConfig)."""
+        mode = self.config.warm_start
+        keys = ("signal_variance", "length_scales", "modality_weights")
+        out: dict[str, dict[str, Any]] = {}
+        previous = self.model
+        if mode in ("previous", "both") and previous is not None:
+            if list(previous.modality_names_) == names:
+                for c, hp in previous.hyperparameters_.items():
+                    out[str(c)] = {k: hp[k] for k in keys}
+        if mode in ("source", "both") and self.prior is not None:
+            old_hp = self.prior.model.hyperparameters_
+            for obj, lst in sources.items():
+                hp = old_hp[max(lst, key=lambda s: s.transfer_lambda or 0.0).name]
+                shared = [m for m in names if m in hp["length_scales"]]
+                total = sum(hp["modality_weights"][m] for m in shared)
+                if not shared or total <= 0:
+                    continue
+                # A modality the old classifier lacks (the auxiliary one) keeps its
+                # data-scaled length-scale and gets an equal share of the weight.
+                rest = (len(names) - len(shared)) / len(names)
+                weights = {
+                    m: (1 - rest) * hp["modality_weights"][m] / total
+                    if m in shared
+                    else 1 / len(names)
+                    for m in names
+                }
+                out[obj] = {
+                    "signal_variance": hp["signal_variance"],
+                    "length_scales": {m: hp["length_scales"][m] for m in shared},
+                    "modality_weights": weights,
+                }
+        return out
 
     def hyperparameters(self) -> dict[str, dict[str, float]]:
         """The fitted hyper-parameters of each new object's classifier (see

@@ -458,19 +458,13 @@ impl KernelEval {
             if part.nrows() != n || part.ncols() != n {
                 *part = fresh();
             }
-            rbf_into(part, d, l);
+            // Only the lower triangle: the gradient reads no more of the parts.
+            rbf_lower_into(part, d, l);
         }
         if self.k.nrows() != n || self.k.ncols() != n {
             self.k = fresh();
         }
-        combine_parts(
-            &mut self.k,
-            &self.parts,
-            h,
-            &dist.coupling(h),
-            &dist.task,
-            &dist.task,
-        );
+        combine_parts_symmetric(&mut self.k, &self.parts, h, &dist.coupling(h), &dist.task);
         self.jitter = 0.0;
     }
 
@@ -484,9 +478,17 @@ impl KernelEval {
     }
 
     /// For every hyper-parameter p: `s1[p] = Σ_ij G_ij ∂K_ij/∂θ_p` with
-    /// `G = ½ (v vᵀ - Z)`, and `b[p] = (∂K/∂θ_p) v`. One pass over the matrix computes every
-    /// derivative element (and G's) on the fly, so neither G nor an n × n × p gradient tensor
-    /// is ever stored.
+    /// `G = ½ (v vᵀ - Z)`, and `b[p] = (∂K/∂θ_p) v`. Neither G nor an n × n × p gradient
+    /// tensor is ever stored.
+    ///
+    /// Every derivative is a combination of two matrices per modality, masked by the task
+    /// coupling (constant on each block of rows and columns of one task pair):
+    /// `∂K/∂log σ² = σ² Σ_m γ_m K_m ∘ B`, `∂K/∂log ℓ_m = σ² γ_m K_m ∘ D_m / ℓ_m² ∘ B`,
+    /// `∂K/∂η_m = σ² γ_m (K_m - Σ_k γ_k K_k) ∘ B` and `∂K/∂λ_s = σ² Σ_m γ_m K_m ∘ ∂B/∂λ_s`. So
+    /// one pass over the lower triangle gathers, per modality and task pair, the unmasked sums
+    /// `Σ G K_m` and `Σ G K_m D_m`, and per modality and column task the products of the
+    /// column blocks of `K_m` and `K_m ∘ D_m` with v; the couplings and scales are applied at
+    /// the end. The pass runs on vector instructions (see [`column_pass`]).
     pub fn contract_gradients(
         &self,
         layout: &Layout,
@@ -498,67 +500,231 @@ impl KernelEval {
         let n = dist.n;
         let p_len = layout.len();
         let n_mod = layout.n_modalities;
-        let mut s1 = vec![0.0; p_len];
-        let mut b = vec![vec![0.0; n]; p_len];
-        let mut c = vec![0.0; p_len];
-        let mut bj = vec![0.0; p_len];
-        let inv_l2: Vec<f64> = h.length_scales.iter().map(|l| 1.0 / (l * l)).collect();
-        let sf2 = h.signal_variance;
         let coupling = dist.coupling(h);
-        let n_lambdas = layout.n_lambdas;
-        // Every C_p, Z and G are symmetric: one triangle (i ≥ j) is visited, an off-diagonal
-        // element counting twice in s1 and reaching b through both (i, j) and (j, i).
+        let nt = coupling.n_tasks;
+        // Row range of each task (sources in order, the target last).
+        let mut ranges = Vec::with_capacity(nt);
+        let mut at = 0;
+        for &size in &dist.source_sizes {
+            ranges.push((at, at + size));
+            at += size;
+        }
+        ranges.push((at, n));
+        // e[m][a][b] = Σ G_ij K_m,ij and f[..] = Σ G_ij (K_m ∘ D_m)_ij over rows of task a and
+        // columns of task b (both triangles); pk[m][b] = K_m[:, task b] v[task b], pq likewise
+        // for K_m ∘ D_m.
+        let mut e = vec![0.0; n_mod * nt * nt];
+        let mut f = vec![0.0; n_mod * nt * nt];
+        let mut pk = vec![vec![0.0; n]; n_mod * nt];
+        let mut pq = vec![vec![0.0; n]; n_mod * nt];
+        let mut g = vec![0.0; n];
         for j in 0..n {
-            let vj = v[j];
             let tj = dist.task[j];
+            let vj = v[j];
             let zj = z.col_as_slice(j);
-            let parts_j: Vec<&[f64]> = self.parts.iter().map(|p| p.col_as_slice(j)).collect();
-            let dist_j: Vec<&[f64]> = dist
-                .per_modality
-                .iter()
-                .map(|d| d.col_as_slice(j))
-                .collect();
-            bj.iter_mut().for_each(|x| *x = 0.0);
             for i in j..n {
-                let ti = dist.task[i];
-                let mask = coupling.get(ti, tj);
-                let mut unit = 0.0;
-                for m in 0..n_mod {
-                    unit += h.weights[m] * parts_j[m][i];
-                }
-                c[Layout::SIGNAL] = sf2 * unit * mask;
-                for m in 0..n_mod {
-                    let km = parts_j[m][i];
-                    c[layout.length_scale(m)] =
-                        sf2 * h.weights[m] * km * dist_j[m][i] * inv_l2[m] * mask;
-                    if let Some(w) = layout.weight(m) {
-                        c[w] = sf2 * h.weights[m] * (km - unit) * mask;
+                g[i] = 0.5 * (v[i] * vj - zj[i]);
+            }
+            for m in 0..n_mod {
+                let kj = self.parts[m].col_as_slice(j);
+                let dj = dist.per_modality[m].col_as_slice(j);
+                // The diagonal element once.
+                let (k, kd) = (kj[j], kj[j] * dj[j]);
+                e[(m * nt + tj) * nt + tj] += g[j] * k;
+                f[(m * nt + tj) * nt + tj] += g[j] * kd;
+                pk[m * nt + tj][j] += k * vj;
+                pq[m * nt + tj][j] += kd * vj;
+                // Below the diagonal, block by block: (i, j) and its mirror (j, i).
+                for (a, &(lo, hi)) in ranges.iter().enumerate() {
+                    let lo = lo.max(j + 1);
+                    if lo >= hi {
+                        continue;
                     }
+                    let (pkb, pqb) = (m * nt + tj, m * nt + tj);
+                    let sums = column_pass(
+                        &kj[lo..hi],
+                        &dj[lo..hi],
+                        &g[lo..hi],
+                        &v[lo..hi],
+                        vj,
+                        &mut pk[pkb][lo..hi],
+                        &mut pq[pqb][lo..hi],
+                    );
+                    e[(m * nt + a) * nt + tj] += sums[0];
+                    e[(m * nt + tj) * nt + a] += sums[0];
+                    f[(m * nt + a) * nt + tj] += sums[1];
+                    f[(m * nt + tj) * nt + a] += sums[1];
+                    pk[m * nt + a][j] += sums[2];
+                    pq[m * nt + a][j] += sums[3];
                 }
-                for s in 0..n_lambdas {
-                    c[layout.len() - n_lambdas + s] = sf2 * unit * coupling.derivative(s, ti, tj);
-                }
-                let vi = v[i];
-                let gij = 0.5 * (vi * vj - zj[i]);
-                if i == j {
-                    for p in 0..p_len {
-                        s1[p] += gij * c[p];
-                        bj[p] += c[p] * vj;
-                    }
-                } else {
-                    for p in 0..p_len {
-                        s1[p] += 2.0 * gij * c[p];
-                        b[p][i] += c[p] * vj;
-                        bj[p] += c[p] * vi;
+            }
+        }
+        let sf2 = h.signal_variance;
+        let inv_l2: Vec<f64> = h.length_scales.iter().map(|l| 1.0 / (l * l)).collect();
+        let n_lambdas = layout.n_lambdas;
+        let lambda_index = |s: usize| p_len - n_lambdas + s;
+        // Masked sums per modality; per λ, the sums under ∂B/∂λ_s.
+        let mut se = vec![0.0; n_mod];
+        let mut sf = vec![0.0; n_mod];
+        let mut s1 = vec![0.0; p_len];
+        for m in 0..n_mod {
+            for a in 0..nt {
+                for b in 0..nt {
+                    let idx = (m * nt + a) * nt + b;
+                    se[m] += coupling.get(a, b) * e[idx];
+                    sf[m] += coupling.get(a, b) * f[idx];
+                    for s in 0..n_lambdas {
+                        s1[lambda_index(s)] +=
+                            sf2 * h.weights[m] * coupling.derivative(s, a, b) * e[idx];
                     }
                 }
             }
-            for p in 0..p_len {
-                b[p][j] += bj[p];
+        }
+        let unit_e: f64 = (0..n_mod).map(|m| h.weights[m] * se[m]).sum();
+        s1[Layout::SIGNAL] = sf2 * unit_e;
+        for m in 0..n_mod {
+            s1[layout.length_scale(m)] = sf2 * h.weights[m] * inv_l2[m] * sf[m];
+            if let Some(w) = layout.weight(m) {
+                s1[w] = sf2 * h.weights[m] * (se[m] - unit_e);
+            }
+        }
+        // b[p][i]: the column-block products combined with row i's couplings.
+        let mut b = vec![vec![0.0; n]; p_len];
+        let mut bk = vec![0.0; n_mod];
+        let mut bq = vec![0.0; n_mod];
+        let mut bl = vec![0.0; n_lambdas];
+        for i in 0..n {
+            let ti = dist.task[i];
+            bl.iter_mut().for_each(|x| *x = 0.0);
+            for m in 0..n_mod {
+                let (mut sk, mut sq) = (0.0, 0.0);
+                for t in 0..nt {
+                    let (kv, qv) = (pk[m * nt + t][i], pq[m * nt + t][i]);
+                    sk += coupling.get(ti, t) * kv;
+                    sq += coupling.get(ti, t) * qv;
+                    for (s, x) in bl.iter_mut().enumerate() {
+                        *x += h.weights[m] * coupling.derivative(s, ti, t) * kv;
+                    }
+                }
+                bk[m] = sk;
+                bq[m] = sq;
+            }
+            let unit_b: f64 = (0..n_mod).map(|m| h.weights[m] * bk[m]).sum();
+            b[Layout::SIGNAL][i] = sf2 * unit_b;
+            for m in 0..n_mod {
+                b[layout.length_scale(m)][i] = sf2 * h.weights[m] * inv_l2[m] * bq[m];
+                if let Some(w) = layout.weight(m) {
+                    b[w][i] = sf2 * h.weights[m] * (bk[m] - unit_b);
+                }
+            }
+            for (s, x) in bl.iter().enumerate() {
+                b[lambda_index(s)][i] = sf2 * x;
             }
         }
         (s1, b)
     }
+}
+
+/// One column block below the diagonal of one modality: returns `Σ g k`, `Σ g k d`, `Σ k v`
+/// and `Σ k d v` over the block and adds `k vj` to `pk` and `k d vj` to `pq`. Sums run in
+/// eight independent lanes so that they vectorise (a single running sum would pin the order of
+/// the additions); the widest instruction set the CPU offers is chosen at run time.
+fn column_pass(
+    k: &[f64],
+    d: &[f64],
+    g: &[f64],
+    v: &[f64],
+    vj: f64,
+    pk: &mut [f64],
+    pq: &mut [f64],
+) -> [f64; 4] {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU supports the features the function is compiled for.
+            return unsafe { column_pass_avx512(k, d, g, v, vj, pk, pq) };
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: as above.
+            return unsafe { column_pass_avx2(k, d, g, v, vj, pk, pq) };
+        }
+    }
+    column_pass_lanes(k, d, g, v, vj, pk, pq)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn column_pass_avx2(
+    k: &[f64],
+    d: &[f64],
+    g: &[f64],
+    v: &[f64],
+    vj: f64,
+    pk: &mut [f64],
+    pq: &mut [f64],
+) -> [f64; 4] {
+    column_pass_lanes(k, d, g, v, vj, pk, pq)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn column_pass_avx512(
+    k: &[f64],
+    d: &[f64],
+    g: &[f64],
+    v: &[f64],
+    vj: f64,
+    pk: &mut [f64],
+    pq: &mut [f64],
+) -> [f64; 4] {
+    column_pass_lanes(k, d, g, v, vj, pk, pq)
+}
+
+#[inline(always)]
+fn column_pass_lanes(
+    k: &[f64],
+    d: &[f64],
+    g: &[f64],
+    v: &[f64],
+    vj: f64,
+    pk: &mut [f64],
+    pq: &mut [f64],
+) -> [f64; 4] {
+    const L: usize = 8;
+    let n = k.len();
+    let (d, g, v) = (&d[..n], &g[..n], &v[..n]);
+    let (pk, pq) = (&mut pk[..n], &mut pq[..n]);
+    let mut acc = [[0.0; L]; 4];
+    let full = n - n % L;
+    for c in (0..full).step_by(L) {
+        let (kc, dc, gc, vc) = (&k[c..c + L], &d[c..c + L], &g[c..c + L], &v[c..c + L]);
+        let (pkc, pqc) = (&mut pk[c..c + L], &mut pq[c..c + L]);
+        for l in 0..L {
+            let kk = kc[l];
+            let kd = kk * dc[l];
+            acc[0][l] += gc[l] * kk;
+            acc[1][l] += gc[l] * kd;
+            acc[2][l] += kk * vc[l];
+            acc[3][l] += kd * vc[l];
+            pkc[l] += kk * vj;
+            pqc[l] += kd * vj;
+        }
+    }
+    for i in full..n {
+        let kk = k[i];
+        let kd = kk * d[i];
+        acc[0][0] += g[i] * kk;
+        acc[1][0] += g[i] * kd;
+        acc[2][0] += kk * v[i];
+        acc[3][0] += kd * v[i];
+        pk[i] += kk * vj;
+        pq[i] += kd * vj;
+    }
+    let mut out = [0.0; 4];
+    for (o, a) in out.iter_mut().zip(&acc) {
+        *o = a.iter().sum();
+    }
+    out
 }
 
 /// `exp(-D / (2 ℓ²))` elementwise.
@@ -578,6 +744,49 @@ fn rbf_into(out: &mut Mat<f64>, d: &Mat<f64>, length_scale: f64) {
         }
         exp_nonpositive_in_place(col);
     }
+}
+
+/// The lower triangle (i ≥ j) of [`rbf_into`]: half the `exp` calls for a symmetric D.
+fn rbf_lower_into(out: &mut Mat<f64>, d: &Mat<f64>, length_scale: f64) {
+    let c = -0.5 / (length_scale * length_scale);
+    for j in 0..out.ncols() {
+        let col = &mut out.col_as_slice_mut(j)[j..];
+        for (o, v) in col.iter_mut().zip(&d.col_as_slice(j)[j..]) {
+            *o = v * c;
+        }
+        exp_nonpositive_in_place(col);
+    }
+}
+
+/// [`combine_parts`] for the symmetric training kernel from the parts' lower triangles: the
+/// lower triangle computed as there (the same operations in the same order, so the same
+/// values), the upper one copied from it. D and B are exactly symmetric, so this is the very
+/// matrix the full computation gives.
+fn combine_parts_symmetric(
+    out: &mut Mat<f64>,
+    parts: &[Mat<f64>],
+    h: &Hyper,
+    coupling: &Coupling,
+    task: &[usize],
+) {
+    let n = out.ncols();
+    for j in 0..n {
+        let col = &mut out.col_as_slice_mut(j)[j..];
+        col.iter_mut().for_each(|v| *v = 0.0);
+        for (part, w) in parts.iter().zip(&h.weights) {
+            let scale = h.signal_variance * w;
+            for (o, p) in col.iter_mut().zip(&part.col_as_slice(j)[j..]) {
+                *o += scale * p;
+            }
+        }
+        if coupling.n_tasks > 1 {
+            let tj = task[j];
+            for (o, &ti) in col.iter_mut().zip(&task[j..]) {
+                *o *= coupling.get(ti, tj);
+            }
+        }
+    }
+    crate::linalg::mirror_lower(out);
 }
 
 /// `out[i, j] = σ² Σ_m γ_m parts_m[i, j] · B[row_task[i], col_task[j]]`.

@@ -332,16 +332,16 @@ pub fn lml_gradient_in(
     }
     // ∂LML/∂θ = ½ aᵀ C a - ½ tr(Z C) + s2ᵀ (b - K Z b), b = C ∇log p = C a at the mode, with
     // C = ∂K/∂θ; the first two terms are Σ_ij G_ij C_ij with G = ½ (a aᵀ - Z), formed on the fly.
+    // K and Z are symmetric, so s2ᵀ K Z b = (Z K s2)ᵀ b: one vector u = Z K s2 serves every θ
+    // (two matrix-vector products instead of two per hyper-parameter).
     let (s1, bs) = eval.contract_gradients(layout, h, dist, z, &mode.a);
-    let mut zb = vec![0.0; n];
-    let mut kzb = vec![0.0; n];
+    let mut ks2 = vec![0.0; n];
+    let mut u = vec![0.0; n];
+    linalg::matvec(k.as_ref(), &s2, &mut ks2);
+    linalg::matvec(z.as_ref(), &ks2, &mut u);
     s1.iter()
         .zip(bs.iter())
-        .map(|(s1p, b)| {
-            linalg::matvec(z.as_ref(), b, &mut zb);
-            linalg::matvec(k.as_ref(), &zb, &mut kzb);
-            s1p + (0..n).map(|i| s2[i] * (b[i] - kzb[i])).sum::<f64>()
-        })
+        .map(|(s1p, b)| s1p + (0..n).map(|i| (s2[i] - u[i]) * b[i]).sum::<f64>())
         .collect()
 }
 
