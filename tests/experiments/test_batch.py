@@ -94,6 +94,25 @@ def test_resume_after_interruption_equals_one_uninterrupted_run(design, uninterr
     assert len(resumed.steps) == len(specs)
 
 
+def test_batch_reads_rows_from_the_store_when_asked(design, uninterrupted, tmp_path):
+    """The batch keeps keys, not rows (a full-size reproduction's rows take gigabytes): what it
+    returns is what the store holds, read on access; a result file damaged afterwards is an
+    error naming it, not a silently missing run."""
+    specs, fp, _, _ = design
+    store = RunStore(tmp_path / "runs")
+    res = run_batch(specs, store, LocalExecutor(1), fp, progress=False)
+    assert canonical(res.steps) == canonical(uninterrupted.steps)
+    key = next(iter(res.steps))
+    assert res.steps[key] == store.load(key)
+    summed = sum(float(r["seconds"]) for k in res.steps for r in store.load(k))
+    assert res.run_seconds == pytest.approx(summed)
+    with pytest.raises(KeyError):
+        res.steps["not-a-run"]
+    store.path(key).write_text("{")
+    with pytest.raises(RuntimeError, match=key):
+        res.steps[key]
+
+
 def test_local_processes_give_the_same_results(design, uninterrupted, tmp_path):
     specs, fp, _, _ = design
     executor = LocalExecutor(2)

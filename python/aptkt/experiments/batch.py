@@ -4,7 +4,7 @@ as each one completes, so an interrupted batch loses at most the runs in flight.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,16 +16,48 @@ from aptkt.experiments.priors import PriorTask, build_prior
 from aptkt.experiments.run_store import RunStore, run_key
 from aptkt.experiments.runs import RunSpec, run_steps
 
-__all__ = ["BatchResult", "run_batch", "build_priors"]
+__all__ = ["BatchResult", "StoredSteps", "run_batch", "build_priors"]
+
+
+class StoredSteps(Mapping[str, list[dict[str, Any]]]):
+    """Run key → step rows, read from the store when asked for. A full-size reproduction's
+    rows (every classifier's hyper-parameters at every step of 3,650 runs) take gigabytes as
+    Python objects; read per figure, only one figure's rows are in memory at a time."""
+
+    def __init__(self, store: RunStore, keys: Sequence[str]) -> None:
+        self._store = store
+        self._keys = list(dict.fromkeys(keys))
+
+    def __getitem__(self, key: str) -> list[dict[str, Any]]:
+        if key not in self._keys:
+            raise KeyError(key)
+        rows = self._store.load(key)
+        if rows is None:
+            raise RuntimeError(
+                f"run {key}: its result file {self._store.path(key)} disappeared or was damaged "
+                "after the batch read it"
+            )
+        return rows
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._keys)
+
+    def __len__(self) -> int:
+        return len(self._keys)
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._keys
 
 
 @dataclass
 class BatchResult:
-    """Step rows per run key, and how many runs were computed now vs read back."""
+    """Step rows per run key (read from the store on access), how many runs were computed now
+    vs read back, and the runs' own time summed (their steps' wall time in the workers)."""
 
-    steps: dict[str, list[dict[str, Any]]]
+    steps: StoredSteps
     computed: int
     reused: int
+    run_seconds: float
 
 
 def _bar(progress: bool, total: int, initial: int, desc: str):
@@ -62,17 +94,19 @@ def run_batch(
     keys are computed once. ``task`` is the function that performs one run (tests substitute
     it to count or interrupt)."""
     keys = [run_key(s, fingerprint) for s in specs]
-    steps: dict[str, list[dict[str, Any]]] = {}
+    done: set[str] = set()
     todo: dict[str, RunSpec] = {}
+    run_seconds = 0.0
     for key, spec in zip(keys, specs):
-        if key in steps or key in todo:
+        if key in done or key in todo:
             continue
         stored = store.load(key)
         if stored is not None:
-            steps[key] = stored
+            done.add(key)
+            run_seconds += _seconds(stored)
         else:
             todo[key] = spec
-    reused = len(steps)
+    reused = len(done)
     bar = _bar(progress, reused + len(todo), reused, desc)
     order = list(todo)
     try:
@@ -85,8 +119,15 @@ def run_batch(
                 raise RuntimeError(
                     f"run {key}: its result file {store.path(key)} cannot be read back"
                 )
-            steps[key] = stored
+            done.add(key)
+            run_seconds += _seconds(stored)
             bar.update(1)
     finally:
         bar.close()
-    return BatchResult(steps, computed=len(todo), reused=reused)
+    return BatchResult(
+        StoredSteps(store, keys), computed=len(todo), reused=reused, run_seconds=run_seconds
+    )
+
+
+def _seconds(rows: list[dict[str, Any]]) -> float:
+    return sum(float(r.get("seconds") or 0) for r in rows)

@@ -183,6 +183,7 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
         plan = plans[name]
         rows = [r for sp in plan.specs for r in label(sp, batch.steps[run_key(sp, fingerprint)])]
         section = FIGURES[name].analyse(ctx, rows)
+        del rows  # one figure's rows in memory at a time (see StoredSteps)
         sections.append(section)
         fig_dir = ctx.figure_dir(name)
         with (fig_dir / "specs.jsonl").open("w") as fh:
@@ -255,9 +256,7 @@ def _flat_settings(
     flat["runs computed now / reused"] = f"{batch.computed} / {batch.reused}"
     # The runs' own time (their steps' wall time in the workers), kept with each stored run, so
     # it is known even when every run was read back from the store.
-    flat["run seconds, summed over runs"] = round(
-        sum(float(r.get("seconds") or 0) for rows in batch.steps.values() for r in rows), 1
-    )
+    flat["run seconds, summed over runs"] = round(batch.run_seconds, 1)
     flat.update({f"seconds.{k}": round(v, 1) for k, v in timings.items()})
     return flat
 

@@ -83,13 +83,15 @@ pub fn inverse_from_cholesky_in(l: MatRef<'_, f64>, scratch: &mut InverseScratch
     if scratch.out.nrows() != n || scratch.out.ncols() != n {
         scratch.out = Mat::<f64>::zeros(n, n);
     }
-    if scratch.mem.as_ref().is_none_or(|(m, _)| *m != n) {
-        scratch.mem = Some((
+    if scratch.mem.as_ref().is_some_and(|(m, _)| *m != n) {
+        scratch.mem = None;
+    }
+    let (_, buf) = scratch.mem.get_or_insert_with(|| {
+        (
             n,
             MemBuffer::new(llt::inverse::inverse_scratch::<f64>(n, Par::Seq)),
-        ));
-    }
-    let (_, buf) = scratch.mem.as_mut().expect("allocated above");
+        )
+    });
     let stack = MemStack::new(buf);
     let out = &mut scratch.out;
     llt::inverse::inverse(out.as_mut(), l, Par::Seq, stack);
