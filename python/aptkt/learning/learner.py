@@ -282,12 +282,13 @@ class ActionLearner:
         for name, pipeline in candidates.items():
             try:
                 model, X = self._fit(pipeline, step, X_prior)
+                evidence = label_evidence(model)
             except KernelNotPositiveDefiniteError as exc:
                 failure = exc
                 self.space_evidence[name] = float("nan")
                 continue
             fits[name] = (pipeline, model, X)
-            self.space_evidence[name] = label_evidence(model)
+            self.space_evidence[name] = evidence
         if not fits:
             assert failure is not None
             raise failure
