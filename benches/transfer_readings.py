@@ -11,7 +11,9 @@ differ by the method alone (same data, groups, pool orders, exploration draws).
 DATA.h5: a data set of all 15 objects and 7 actions (``aptkt dataset generate -n 20``). The
 numbers in docs/experiments.md ("The method's choices, measured" and "The evidence cut-off")
 come from this script. ``--cutoff paper`` runs the "new" reading with Eq. 3's ε_neg alone instead
-of the evidence test (LearnerConfig.cutoff).
+of the evidence test (LearnerConfig.cutoff); ``--feature-space`` sets
+LearnerConfig.feature_space of the transferring methods (with ``evidence``, APTKT-multi keeps
+``auto``: the evidence choice needs one source per classifier).
 """
 
 from __future__ import annotations
@@ -38,7 +40,9 @@ def main() -> None:
     p.add_argument("--evidence-margin", default=None, help="a number, or 'lnN' (None)")
     p.add_argument("--fig11-trials", type=int, default=3)
     p.add_argument(
-        "--feature-space", choices=("auto", "covered", "prior", "new", "pooled"), default=None
+        "--feature-space",
+        choices=("auto", "covered", "prior", "new", "pooled", "evidence"),
+        default=None,
     )
     args = p.parse_args()
     scale = Scale.full().with_(
@@ -62,6 +66,9 @@ def main() -> None:
             # The stress test without a cut-off stays without one.
             if v.get("transfer") in ("paper", "multi") and k != base.STRESS_NO_CUTOFF:
                 methods[k] = {**v, **over}
+                if v.get("transfer") == "multi" and over.get("feature_space") == "evidence":
+                    # The evidence choice needs one source per classifier: "multi" keeps "auto".
+                    methods[k].pop("feature_space")
         base.METHODS = methods
     if args.reading == "old":
         scale = scale.with_(eps_neg=0.4)

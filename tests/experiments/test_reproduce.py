@@ -65,6 +65,17 @@ def test_every_figure_writes_its_files_and_report(quick_run):
             taken[r["method"]] += int(r["transfers"])
     assert taken[STRESS_CUTOFF] <= taken[STRESS_NO_CUTOFF]
     assert taken[STRESS_NO_CUTOFF] > 0  # without the cut-off, something is always transferred
+    # Each step counts the models fitted and those in the prior's feature space: never for the
+    # baseline, always for the control.
+    assert "models in the prior's space" in fig11_report
+    fig7_rows = read(quick_run / "fig7" / "results.csv")
+    for r in rows + fig7_rows:
+        assert int(r["updates"]) >= 1 and 0 <= int(r["prior_space"]) <= int(r["updates"])
+        if r["method"] == "baseline":
+            assert int(r["prior_space"]) == 0
+        if r["method"] == "control":
+            assert int(r["prior_space"]) == int(r["updates"])
+    assert {r["method"] for r in fig7_rows} >= {"baseline", "control"}
 
 
 def test_per_trial_bookkeeping_in_the_results(quick_run):

@@ -69,7 +69,9 @@ def run_steps(spec: RunSpec) -> list[dict[str, Any]]:
     (``decisions``: every action's new objects at step 0, the updated action's afterwards),
     how many of them transferred a prior object (``transfers``), how many sources they
     transferred in all (``sources``: more than ``transfers`` only with ``transfer="multi"``)
-    and the mean λ over those sources (``mean_lambda``, NaN without a transfer).
+    and the mean λ over those sources (``mean_lambda``, NaN without a transfer); and how many
+    models were fitted at that step (``updates``) and how many of them in the prior's feature
+    space (``prior_space``; the others in the new objects' own or the pooled space).
     """
     pool = _table(spec.data, spec.new_objects, spec.pool_trials, spec.actions)
     test = _table(spec.data, spec.new_objects, spec.test_trials, spec.actions)
@@ -96,6 +98,8 @@ def step_rows(
         row["transfers"] = sum(1 for v in decisions if v["sources"])
         row["sources"] = len(lambdas)
         row["mean_lambda"] = sum(lambdas) / len(lambdas) if lambdas else float("nan")
+        row["updates"] = len(step.feature_space)
+        row["prior_space"] = sum(1 for v in step.feature_space.values() if v["space"] == "prior")
         rows.append(row)
     if rows and learner is not None:
         rows[-1]["confusion"] = final_confusion(learner, objects)

@@ -94,8 +94,14 @@ class LearnerConfig:
         object transfers (the prior's transforms then come from a population that covers
         them all); "pooled": when the update transfers, transforms fitted on the old and the
         new observations together (the population the dependent kernel compares), the
-        baseline's otherwise. The old models always judge relatedness (Eq. 3)
-        and auxiliary features (Eq. 5) in their own space.
+        baseline's otherwise; "evidence": when the update transfers, the model is fitted in
+        both the prior's space and the new objects' own, and the one under which the new
+        objects' labels are more probable is kept (Laplace evidence of each one-vs-all
+        classifier's labels given its source task, summed over the classifiers; ties and
+        failures keep the prior's space), the baseline's when nothing transfers — one more
+        fit per transferring update; not with ``transfer="multi"``. The old models always
+        judge relatedness (Eq. 3), the evidence cut-off and auxiliary features (Eq. 5) in
+        their own space.
     relatedness : p̄ of Eq. 3 from each old object's own binary classifier ("binary", paper
         §4.2) or from the normalised one-vs-all posterior ("normalised").
     cutoff : "evidence" (default, beyond the paper): Eq. 3's ε_neg, and then the new
@@ -156,6 +162,13 @@ class LearnerConfig:
                 raise ValueError(f"{name} must be one of {allowed}, got {getattr(self, name)!r}")
         if self.warm_start not in WARM_STARTS:
             raise ValueError(f"warm_start must be one of {WARM_STARTS}, got {self.warm_start!r}")
+        if self.feature_space == "evidence" and self.transfer == "multi":
+            # With λ = 0 several sources become independent of each other as well, so the
+            # evidence of the new labels given the sources has no factorisation to use.
+            raise ValueError(
+                "feature_space='evidence' needs one source per classifier; "
+                "it does not work with transfer='multi'"
+            )
         if self.forced_lambda is not None and not 0.0 <= self.forced_lambda <= 1.0:
             raise ValueError(
                 f"forced_lambda must be None or lie in [0, 1], got {self.forced_lambda}"

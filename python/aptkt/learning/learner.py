@@ -19,17 +19,18 @@ from __future__ import annotations
 
 import time
 import zlib
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from aptkt.gp import LaplaceGPC, TransferSource
+from aptkt.gp import KernelNotPositiveDefiniteError, LaplaceGPC, TransferSource
 from aptkt.learning.active import entropy, select_next
 from aptkt.learning.config import LearnerConfig
 from aptkt.learning.environment import Environment
 from aptkt.learning.evaluation import accuracy, fused_accuracy
+from aptkt.learning.evidence import label_evidence
 from aptkt.learning.observations import Observations, ObservationTable
 from aptkt.learning.pipeline import FeaturePipeline
 from aptkt.learning.prior import ActionPrior, PriorKnowledge
@@ -59,11 +60,18 @@ class ActionLearner:
         self.model: LaplaceGPC | None = None
         self.decisions: dict[str, TransferDecision] = {}
         self.train_entropy: np.ndarray = np.zeros(0)
+        #: The feature space of the current model ("prior", "new" or "pooled") and, under
+        #: ``feature_space="evidence"`` when the update transferred, each candidate space's
+        #: log evidence of the new labels.
+        self.space: str | None = None
+        self.space_evidence: dict[str, float] = {}
         self.n_updates = 0
         self._test = test
         self._test_cache: tuple[FeaturePipeline, np.ndarray] | None = None
         self.test_posteriors: np.ndarray | None = None
-        # Every old object's features and objects (the source tasks), computed once.
+        # Every old object's features and objects (the source tasks): in the prior's space,
+        # computed once; in the latest other space, until it changes.
+        self._old_prior: tuple[FeaturePipeline, np.ndarray, np.ndarray] | None = None
         self._old_cache: tuple[FeaturePipeline, np.ndarray, np.ndarray] | None = None
 
     # -- data --------------------------------------------------------------------------------
@@ -142,11 +150,17 @@ class ActionLearner:
     def _old_features(self, pipeline: FeaturePipeline) -> tuple[np.ndarray, np.ndarray]:
         """Every old object's observations in the model's input space, and their objects
         (kept while the model space stays the same)."""
-        if self._old_cache is None or self._old_cache[0] is not pipeline:
-            assert self.prior is not None  # sources come from the prior knowledge
+        assert self.prior is not None  # sources come from the prior knowledge
+        prior_space = pipeline is self.prior.pipeline
+        cached = self._old_prior if prior_space else self._old_cache
+        if cached is None or cached[0] is not pipeline:
             obs = self.prior.observations
-            self._old_cache = (pipeline, self._features(obs, pipeline)[0], np.asarray(obs.objects))
-        return self._old_cache[1], self._old_cache[2]
+            cached = (pipeline, self._features(obs, pipeline)[0], np.asarray(obs.objects))
+            if prior_space:
+                self._old_prior = cached
+            else:
+                self._old_cache = cached
+        return cached[1], cached[2]
 
     def _source(
         self, old_object: str, transfer_lambda: float, pipeline: FeaturePipeline
@@ -213,9 +227,29 @@ class ActionLearner:
         # object has a source (each is like an old object, so the prior's transforms were fitted
         # on a population that covers them all).
         made = [d.transfers for d in self.decisions.values()]
-        pipeline = self._pipeline(
-            all(made) if cfg.feature_space == "covered" and made else any(made)
-        )
+        self.space_evidence = {}
+        if cfg.feature_space == "evidence" and any(made):
+            pipeline, self.model, X = self._fit_by_evidence(step, X_prior)
+        else:
+            pipeline = self._pipeline(
+                all(made) if cfg.feature_space == "covered" and made else any(made)
+            )
+            self.model, X = self._fit(pipeline, step, X_prior)
+        self.space = self._space_name(pipeline)
+        self.train_entropy = entropy(self.model.predict_proba(X))
+        self.n_updates += 1
+        if self._test is not None:
+            if self._test_cache is None or self._test_cache[0] is not pipeline:
+                self._test_cache = (pipeline, self._features(self._test, pipeline)[0])
+            self.test_posteriors = self.model.predict_proba(self._test_cache[1])
+
+    def _fit(
+        self, pipeline: FeaturePipeline, step: int, X_prior: np.ndarray | None
+    ) -> tuple[LaplaceGPC, np.ndarray]:
+        """This action's model fitted in ``pipeline``'s space on everything observed, with the
+        current transfer decisions' sources mapped into that space; and its input rows."""
+        obs = self.observations
+        assert obs is not None  # update() checks every object was observed
         X_full, groups_full = pipeline.transform(obs)
         X, groups = self._model_input(X_full, groups_full, X_prior)
         # Several sources ("multi") share one block kernel B ⊗ k with B = v vᵀ + diag(1 − λ_s²,
@@ -227,14 +261,52 @@ class ActionLearner:
         }
         seed = (self.config.seed * 1_000_003 + zlib.crc32(self.action.encode()) + step) % 2**32
         model = self.config.gp.make(groups, random_state=seed)
-        starts = self._starts(list(groups), sources) if cfg.warm_start is not None else None
-        self.model = model.fit(X, obs.objects, sources=sources or None, hyperparameters=starts)
-        self.train_entropy = entropy(self.model.predict_proba(X))
-        self.n_updates += 1
-        if self._test is not None:
-            if self._test_cache is None or self._test_cache[0] is not pipeline:
-                self._test_cache = (pipeline, self._features(self._test, pipeline)[0])
-            self.test_posteriors = self.model.predict_proba(self._test_cache[1])
+        starts = self._starts(list(groups), sources) if self.config.warm_start is not None else None
+        return model.fit(X, obs.objects, sources=sources or None, hyperparameters=starts), X
+
+    def _fit_by_evidence(
+        self, step: int, X_prior: np.ndarray | None
+    ) -> tuple[FeaturePipeline, LaplaceGPC, np.ndarray]:
+        """``feature_space="evidence"``: the model fitted in the prior's space and in the new
+        objects' own (the baseline's transforms), with the same transfer decisions; kept is the
+        one under which the new objects' labels are more probable (``label_evidence``: each
+        one-vs-all classifier's labels given its source task, at its own fitted
+        hyper-parameters). A candidate whose fit fails or whose evidence is not finite loses;
+        a tie, or both failing to give a number, keeps the prior's space ("auto"'s choice)."""
+        assert self.prior is not None and self.observations is not None  # it transfers
+        candidates = {
+            "prior": self.prior.pipeline,
+            "new": FeaturePipeline().fit(self.observations),
+        }
+        fits: dict[str, tuple[FeaturePipeline, LaplaceGPC, np.ndarray]] = {}
+        failure: KernelNotPositiveDefiniteError | None = None
+        for name, pipeline in candidates.items():
+            try:
+                model, X = self._fit(pipeline, step, X_prior)
+                evidence = label_evidence(model)
+            except KernelNotPositiveDefiniteError as exc:
+                failure = exc
+                self.space_evidence[name] = float("nan")
+                continue
+            fits[name] = (pipeline, model, X)
+            self.space_evidence[name] = evidence
+        if not fits:
+            assert failure is not None
+            raise failure
+        return fits[choose_space(self.space_evidence, fits)]
+
+    def _space_name(self, pipeline: FeaturePipeline) -> str:
+        """Which feature space the model lives in: "prior" (the prior's transforms), "new" (the
+        new objects' own, the baseline's) or "pooled" (old and new observations together)."""
+        if self.prior is not None and pipeline is self.prior.pipeline:
+            return "prior"
+        if (
+            self.prior is not None
+            and self.config.feature_space == "pooled"
+            and any(d.transfers for d in self.decisions.values())
+        ):
+            return "pooled"
+        return "new"
 
     def _starts(
         self, names: list[str], sources: Mapping[str, list[TransferSource]]
@@ -300,6 +372,18 @@ class ActionLearner:
         )
 
 
+def choose_space(evidence: Mapping[str, float], available: Collection[str]) -> str:
+    """The candidate space with the larger finite log evidence among ``available``; "prior"
+    on a tie or when no candidate has a finite value (then the choice is "auto"'s)."""
+    finite = {k: v for k, v in evidence.items() if k in available and np.isfinite(v)}
+    if not finite:
+        return "prior" if "prior" in available else next(iter(available))
+    best = max(finite.values())
+    if finite.get("prior") == best:
+        return "prior"
+    return max(finite, key=lambda k: finite[k])
+
+
 def hyperparameters(model: LaplaceGPC) -> dict[str, dict[str, float]]:
     """Class -> the fitted hyper-parameters of that class's one-vs-all classifier, flat and by
     name: ``signal_variance``, ``length_scale[m]`` and (several modalities) ``weight[m]`` per
@@ -333,11 +417,18 @@ class StepRecord:
     seconds: float
     #: action -> class -> hyper-parameter name -> value, every action's current model.
     hyperparameters: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
+    #: action -> {"space": the feature space its model was fitted in at this step ("prior",
+    #: "new" or "pooled"), "evidence": candidate space -> log evidence of the new labels
+    #: (``feature_space="evidence"`` when the update transferred; empty otherwise)}, for the
+    #: actions updated at this step (every action at step 0), as ``transfer``.
+    feature_space: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def as_row(self) -> dict[str, Any]:
         """Flat: the step's fields, ``accuracy[a]`` per action, the medians of the fitted
-        signal variances and length-scales over every classifier, and each classifier's
-        hyper-parameters as ``hp[action][class].name``."""
+        signal variances and length-scales over every classifier, each classifier's
+        hyper-parameters as ``hp[action][class].name``, and per updated action the feature
+        space of its model (``space[action]``) with, under ``feature_space="evidence"``, each
+        candidate space's log evidence (``space_evidence[action].prior`` / ``.new``)."""
         row = {
             k: getattr(self, k)
             for k in (
@@ -353,6 +444,9 @@ class StepRecord:
             )
         }
         row.update({f"accuracy[{a}]": v for a, v in self.accuracy.items()})
+        for a, chosen in self.feature_space.items():
+            row[f"space[{a}]"] = chosen["space"]
+            row.update({f"space_evidence[{a}].{k}": v for k, v in chosen["evidence"].items()})
         hps = [hp for per in self.hyperparameters.values() for hp in per.values()]
         sv = [hp["signal_variance"] for hp in hps]
         ls = [v for hp in hps for k, v in hp.items() if k.startswith("length_scale[")]
@@ -517,6 +611,11 @@ class APTKT:
             mean_accuracy=float(np.mean(list(acc.values()))) if acc else float("nan"),
             fused_accuracy=fused,
             transfer=transfer,
+            feature_space={
+                a: {"space": lrn.space, "evidence": dict(lrn.space_evidence)}
+                for a, lrn in self.learners.items()
+                if updated is None or lrn is updated
+            },
             seconds=seconds,
             hyperparameters={a: lrn.hyperparameters() for a, lrn in self.learners.items()},
         )

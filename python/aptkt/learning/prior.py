@@ -21,6 +21,7 @@ from aptkt import __version__
 from aptkt.errors import PriorFileError
 from aptkt.gp import LaplaceGPC, TransferSource
 from aptkt.learning.config import GPSettings
+from aptkt.learning.evidence import coupling_evidence
 from aptkt.learning.observations import Observations, ObservationTable
 from aptkt.learning.pipeline import FeaturePipeline, ModalityTransform
 from aptkt.learning.prior_file import FORMAT as _FORMAT
@@ -120,11 +121,7 @@ class ActionPrior:
             optimize=False,
             approximation=self.model.approximation,
         ).fit(X_new, labels, sources={1: task})
-        k = int(np.flatnonzero(gpc.classes_ == 1)[0])
-        independent = gpc.theta_.copy()
-        independent[:, -1] = 0.0  # λ: the last hyper-parameter (one source)
-        log_z0 = gpc.log_marginal_likelihood(independent)[k]
-        return float(gpc.log_marginal_likelihood_[k] - log_z0)
+        return coupling_evidence(gpc, int(np.flatnonzero(gpc.classes_ == 1)[0]))
 
 
 def binary_probabilities(model: LaplaceGPC, X: np.ndarray) -> np.ndarray:

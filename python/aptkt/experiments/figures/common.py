@@ -21,6 +21,7 @@ __all__ = [
     "present",
     "gain_summary",
     "transfer_rate",
+    "prior_space_rate",
     "plot_panel",
 ]
 
@@ -91,6 +92,17 @@ def transfer_rate(rows: Iterable[Mapping[str, Any]], where: Mapping[str, Any]) -
             made += int(r.get("decisions", 0) or 0)
             taken += int(r.get("transfers", 0) or 0)
     return taken / made if made else float("nan")
+
+
+def prior_space_rate(rows: Iterable[Mapping[str, Any]], where: Mapping[str, Any]) -> float:
+    """Share of the model fits (every step) made in the prior's feature space; the others are
+    in the new objects' own (or the pooled) space. NaN for rows without the counts."""
+    fitted = prior = 0
+    for r in rows:
+        if all(r.get(k) == v for k, v in where.items()):
+            fitted += int(r.get("updates", 0) or 0)
+            prior += int(r.get("prior_space", 0) or 0)
+    return prior / fitted if fitted else float("nan")
 
 
 def plot_panel(

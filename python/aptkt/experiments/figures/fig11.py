@@ -34,6 +34,7 @@ from aptkt.experiments.figures.common import (
     method_curves,
     plot_panel,
     present,
+    prior_space_rate,
     transfer_rate,
 )
 from aptkt.experiments.plots import figure
@@ -105,11 +106,12 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     ncols = min(4, len(shown))
     nrows = math.ceil(len(shown) / ncols)
     fig, axes = figure(nrows, ncols, figsize=(4.2 * ncols, 3.8 * nrows), squeeze=False)
-    gains, rates, worst, curve_rows, tables = {}, {}, {}, [], []
+    gains, rates, spaces, worst, curve_rows, tables = {}, {}, {}, {}, [], []
     for i, (ax, key) in enumerate(zip(axes.ravel(), keys)):
         curves = method_curves(rows, {"panel": key}, METHODS)
         gains[key] = gain_summary(curves, "APTKT", steps=steps)
         rates[key] = transfer_rate(rows, {"method": "APTKT", "panel": key})
+        spaces[key] = prior_space_rate(rows, {"method": "APTKT", "panel": key})
         worst[key] = float(np.nanmin(gains[key].gain.mean()))
         label = "all actions" if key == fig10.ALL else key
         plot_panel(
@@ -229,6 +231,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                 "gain at step 0",
                 "worst step",
                 "transfer rate",
+                "models in the prior's space",
             ],
             [
                 [
@@ -239,6 +242,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                     ci(gains[k].at[0]) if 0 in gains[k].at else "",
                     pp(worst[k]),
                     f"{100 * rates[k]:.0f} %",
+                    f"{100 * spaces[k]:.0f} %",
                 ]
                 for k in keys
             ],
@@ -249,6 +253,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     numbers = {
         "gain": {k: g.as_dict() for k, g in gains.items()},
         "transfer_rate": rates,
+        "prior_space_rate": spaces,
         "worst_step_gain": worst,
         "stress": stress_numbers,
         "priors": {k: list(v[1]) for k, v in design.items()},

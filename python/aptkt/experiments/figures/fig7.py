@@ -22,6 +22,7 @@ from aptkt.experiments.figures.common import (
     present,
     prior_group_plan,
     prior_groups,
+    prior_space_rate,
     transfer_rate,
 )
 from aptkt.experiments.plots import canvas
@@ -47,6 +48,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     gain = gain_summary(curves, "APTKT", steps=steps)
     fused_gain = gain_summary(fused, "APTKT", steps=steps)
     rate = transfer_rate(rows, {"method": "APTKT"})
+    space_rate = prior_space_rate(rows, {"method": "APTKT"})
     groups = prior_groups(ctx, ctx.scale.n_priors)
 
     # Paper layout: one small panel per group (mean of its trials), a large panel of all runs.
@@ -119,7 +121,8 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             ],
         ),
         "",
-        f"APTKT transferred a prior object in {100 * rate:.1f} % of its transfer decisions (ε_neg = {ctx.scale.eps_neg}).",
+        f"APTKT transferred a prior object in {100 * rate:.1f} % of its transfer decisions (ε_neg = {ctx.scale.eps_neg}); "
+        f"{100 * space_rate:.1f} % of its models were fitted in the prior's feature space.",
         "",
         *_control_lines(curves, fused, steps),
         "",
@@ -153,6 +156,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         "gain": gain.as_dict(),
         "fused_gain": fused_gain.as_dict(),
         "transfer_rate": rate,
+        "prior_space_rate": space_rate,
         "per_group": {g: s.overall.as_dict() for g, _, s in per_group},
     }
     return Section(NAME, TITLE, headlines, "\n".join(body), files, numbers)

@@ -1,0 +1,93 @@
+"""Laplace evidence of a fitted one-vs-all classifier's own labels, with and without its source.
+
+A classifier with a source task is a joint GP over (source rows, target rows) with the cross
+block scaled by λ (Eq. 2). With λ = 0 the two tasks are independent and the joint marginal
+likelihood factorises, ``Z(0) = Z_source · Z_target``. Hence, at one set of hyper-parameters θ:
+
+* ``log Z(λ) − log Z(0)``: the log Bayes factor of the coupling — how much more probable the
+  source makes the target's labels than no source does (the evidence cut-off, see
+  :meth:`aptkt.learning.prior.ActionPrior.transfer_evidence`);
+* ``log Z(λ) − log Z_source = log Z(λ) − log Z(0) + log Z_target``: the target labels'
+  probability given the source task's, ``log p(y_target | y_source, θ)`` — what a model of the
+  target task predicted of its labels, with its source counted as given data (used to compare
+  feature spaces, ``LearnerConfig(feature_space="evidence")``).
+
+Every value is the Laplace approximation of the core (Rasmussen & Williams §3.4), at the
+classifier's own hyper-parameters: the hyper-prior of MAP-II shapes where those lie but is not a
+term here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from aptkt.gp import LaplaceGPC
+
+__all__ = ["coupling_evidence", "label_evidence", "target_evidence"]
+
+
+def _row(model: LaplaceGPC, k: int) -> tuple[int, object]:
+    """Classifier ``k``'s row of ``theta_`` and the class whose labels are its +1."""
+    single = model.theta_.shape[0] == 1
+    if not 0 <= k < model.theta_.shape[0]:
+        raise IndexError(f"classifier {k} of {model.theta_.shape[0]}")
+    return (0, model.classes_[1]) if single else (k, model.classes_[k])
+
+
+def _sources(model: LaplaceGPC, label: object) -> list:
+    return list(model.sources_.get(label, []))
+
+
+def coupling_evidence(model: LaplaceGPC, k: int) -> float:
+    """``log Z(λ) − log Z(0)`` of classifier ``k`` of a fitted model with one source task
+    (its fitted hyper-parameters; λ, the last of them, set to 0 for Z(0))."""
+    row, label = _row(model, k)
+    if len(_sources(model, label)) != 1:
+        raise ValueError(
+            f"classifier of class {label!r} has {len(_sources(model, label))} source tasks; "
+            "the coupling evidence needs exactly one"
+        )
+    independent = model.theta_.copy()
+    independent[row, -1] = 0.0  # λ: the last hyper-parameter (one source)
+    log_z0 = model.log_marginal_likelihood(independent)[row]
+    return float(model.log_marginal_likelihood_[row] - log_z0)
+
+
+def target_evidence(model: LaplaceGPC, k: int) -> float:
+    """``log Z_target``: the Laplace log marginal likelihood of classifier ``k``'s own labels
+    of the model's training rows alone, at its fitted hyper-parameters (without its source)."""
+    row, label = _row(model, k)
+    if not _sources(model, label):
+        return float(model.log_marginal_likelihood_[row])
+    hp = model.hyperparameters_[label]
+    names = list(model.modality_names_)
+    alone = LaplaceGPC(
+        length_scale=[hp["length_scales"][m] for m in names],
+        signal_variance=hp["signal_variance"],
+        modality_weights=[hp["modality_weights"][m] for m in names],
+        modalities=dict(zip(names, model.modalities_)),
+        optimize=False,
+        approximation=model.approximation,
+        newton_max_iter=model.newton_max_iter,
+        newton_tol=model.newton_tol,
+        max_jitter=model.max_jitter,
+    ).fit(model.X_train_, np.where(model.y_train_ == label, 1, 0))
+    return float(alone.log_marginal_likelihood_[0])
+
+
+def label_evidence(model: LaplaceGPC) -> float:
+    """``Σ_k log p(y_k | y_source_k, θ_k)`` over the one-vs-all classifiers of a fitted model:
+    each classifier's labels of the training rows given its source task (``log Z(λ) − log Z(0)
+    + log Z_target``), or its own log marginal likelihood where it has no source. The
+    classifiers are independent given their inputs, so the sum is the log evidence of the
+    whole model's labels. Several sources per classifier are refused: with λ = 0 they become
+    independent of each other too, and Z(0) is no longer the sources' joint evidence times the
+    target's."""
+    total = 0.0
+    for k in range(model.theta_.shape[0]):
+        _, label = _row(model, k)
+        if _sources(model, label):
+            total += coupling_evidence(model, k) + target_evidence(model, k)
+        else:
+            total += target_evidence(model, k)
+    return total
