@@ -14,18 +14,23 @@ paired difference variant − default with a 95 % interval (t, over runs).
 
 from __future__ import annotations
 
-import argparse
-import collections
-import dataclasses
-import glob
-import json
-import random
-import time
+from aptkt.runtime.worker_start import limit_thread_pools
 
-import numpy as np
-from _common import save
+# Before numpy is loaded: OpenBLAS's idle threads spin after every call and would be counted.
+limit_thread_pools(1)
 
-from aptkt.experiments.runs import RunSpec, _prior, _table, run_steps
+import argparse  # noqa: E402
+import collections  # noqa: E402
+import dataclasses  # noqa: E402
+import glob  # noqa: E402
+import json  # noqa: E402
+import random  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+from _common import save  # noqa: E402
+
+from aptkt.experiments.runs import RunSpec, _prior, _table, run_steps  # noqa: E402
 
 
 def _class_of(spec: dict) -> str:

@@ -1,0 +1,71 @@
+"""CPU per learning run by class, extrapolated to a whole run store (what `aptkt reproduce`
+spends on its learning runs).
+
+Usage: python benches/run_store_cpu.py RUNS_DIR [--per-class 2] [--seed 1] [--out NAME]
+
+RUNS_DIR: the ``runs/`` folder of a run store (each JSON holds a run's spec). Runs are grouped
+by (figure, method, number of priors, number of actions); ``--per-class`` of each are drawn at
+random (the same ones for the same seed and store), run one after the other in this process
+with one BLAS and one core thread (as ``aptkt reproduce`` limits its workers), and their mean
+CPU time (``time.process_time``) times the class's size gives its share of the total.
+"""
+
+from __future__ import annotations
+
+from aptkt.runtime.worker_start import limit_thread_pools
+
+# Before numpy is loaded: OpenBLAS's idle threads spin after every call and would be counted.
+limit_thread_pools(1)
+
+import argparse  # noqa: E402
+import collections  # noqa: E402
+import glob  # noqa: E402
+import json  # noqa: E402
+import random  # noqa: E402
+import time  # noqa: E402
+
+from _common import save  # noqa: E402
+
+from aptkt.experiments.runs import RunSpec, _prior, _table, run_steps  # noqa: E402
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("runs")
+    ap.add_argument("--per-class", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--out", default="run_store_cpu")
+    args = ap.parse_args()
+    rng = random.Random(args.seed)
+    classes = collections.defaultdict(list)
+    for f in sorted(glob.glob(f"{args.runs}/*.json")):
+        s = json.load(open(f))["spec"]
+        t = s["tags"]
+        key = f"{t.get('figure')}:{s['method']}:{t.get('n_priors')}:{len(s['actions'])}"
+        classes[key].append(s)
+    out, total = {}, 0.0
+    for key, specs in sorted(classes.items()):
+        cpu = 0.0
+        picked = rng.sample(specs, min(args.per_class, len(specs)))
+        for s in picked:
+            spec = RunSpec.from_dict(s)
+            # The observation tables and the prior are loaded once per worker: not timed.
+            _table(spec.data, spec.new_objects, spec.pool_trials, spec.actions)
+            _table(spec.data, spec.new_objects, spec.test_trials, spec.actions)
+            if spec.prior:
+                _prior(spec.prior)
+            t = time.process_time()
+            run_steps(spec)
+            cpu += time.process_time() - t
+        per_run = cpu / len(picked)
+        total += per_run * len(specs)
+        out[key] = {"runs": len(specs), "cpu_per_run": per_run, "cpu_total": per_run * len(specs)}
+        print(
+            f"{key:48s} {len(specs):5d} runs  {per_run:7.2f} CPU-s/run  {per_run * len(specs):7.0f}"
+        )
+    print(f"total {total:.0f} CPU-s")
+    print("saved", save(args.out, {"args": vars(args), "classes": out, "total": total}))
+
+
+if __name__ == "__main__":
+    main()
