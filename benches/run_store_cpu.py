@@ -2,12 +2,16 @@
 spends on its learning runs).
 
 Usage: python benches/run_store_cpu.py RUNS_DIR [--per-class 2] [--seed 1] [--out NAME]
+                                          [--compare OTHER.json]
 
 RUNS_DIR: the ``runs/`` folder of a run store (each JSON holds a run's spec). Runs are grouped
 by (figure, method, number of priors, number of actions); ``--per-class`` of each are drawn at
 random (the same ones for the same seed and store), run one after the other in this process
 with one BLAS and one core thread (as ``aptkt reproduce`` limits its workers), and their mean
 CPU time (``time.process_time``) times the class's size gives its share of the total.
+Each run's learning curve (mean and fused test accuracy at every step) is saved with it;
+``--compare`` names a result of another build (same store, sampling and seed) and counts the
+runs whose curves differ.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ def main() -> None:
     ap.add_argument("--per-class", type=int, default=2)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--out", default="run_store_cpu")
+    ap.add_argument("--compare", help="a result file of another build to compare curves with")
     args = ap.parse_args()
     rng = random.Random(args.seed)
     classes = collections.defaultdict(list)
@@ -43,11 +48,11 @@ def main() -> None:
         t = s["tags"]
         key = f"{t.get('figure')}:{s['method']}:{t.get('n_priors')}:{len(s['actions'])}"
         classes[key].append(s)
-    out, total = {}, 0.0
+    out, total, curves = {}, 0.0, {}
     for key, specs in sorted(classes.items()):
         cpu = 0.0
         picked = rng.sample(specs, min(args.per_class, len(specs)))
-        for s in picked:
+        for k, s in enumerate(picked):
             spec = RunSpec.from_dict(s)
             # The observation tables and the prior are loaded once per worker: not timed.
             _table(spec.data, spec.new_objects, spec.pool_trials, spec.actions)
@@ -55,8 +60,9 @@ def main() -> None:
             if spec.prior:
                 _prior(spec.prior)
             t = time.process_time()
-            run_steps(spec)
+            rows = run_steps(spec)
             cpu += time.process_time() - t
+            curves[f"{key}#{k}"] = [[r["mean_accuracy"], r["fused_accuracy"]] for r in rows]
         per_run = cpu / len(picked)
         total += per_run * len(specs)
         out[key] = {"runs": len(specs), "cpu_per_run": per_run, "cpu_total": per_run * len(specs)}
@@ -64,7 +70,16 @@ def main() -> None:
             f"{key:48s} {len(specs):5d} runs  {per_run:7.2f} CPU-s/run  {per_run * len(specs):7.0f}"
         )
     print(f"total {total:.0f} CPU-s")
-    print("saved", save(args.out, {"args": vars(args), "classes": out, "total": total}))
+    payload = {"args": vars(args), "classes": out, "total": total, "curves": curves}
+    if args.compare:
+        other = json.load(open(args.compare))["curves"]
+        # repr: NaN (a fused accuracy that cannot be formed) equals itself.
+        differ = sorted(k for k in curves if repr(other.get(k)) != repr(curves[k]))
+        payload["curves_differ"] = differ
+        print(
+            f"curves: {len(curves) - len(differ)} of {len(curves)} runs identical; differ: {differ}"
+        )
+    print("saved", save(args.out, payload))
 
 
 if __name__ == "__main__":
