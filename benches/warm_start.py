@@ -3,13 +3,16 @@ the default on the same runs: CPU per run and the accuracy difference.
 
 Usage: python benches/warm_start.py RUNS_DIR [--per-class 20] [--variants previous source]
                                       [--classes fig8:APTKT fig9:APTKT+aux:5 ...] [--seed 1]
+                                      [--variant-restarts N]
 
 RUNS_DIR: the ``runs/`` folder of a run store (``aptkt reproduce`` writes one; each JSON holds
 a run's spec). Per class (figure, method, number of priors), ``--per-class`` specs are drawn at
 random; each is run with the default and with every variant in the same process, one after
 the other (CPU by ``time.process_time``). Accuracy: the mean over steps of the mean test
 accuracy over actions (the area under the learning curve), and that at the last step; the
-paired difference variant − default with a 95 % interval (t, over runs).
+paired difference variant − default with a 95 % interval (t, over runs). A variant "off" is
+the default's start; ``--variant-restarts`` sets the random restarts of every variant (the
+default keeps the runs' own).
 """
 
 from __future__ import annotations
@@ -65,6 +68,7 @@ def main() -> None:
     ap.add_argument("--classes", nargs="+", required=True)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--out", default="warm_start")
+    ap.add_argument("--variant-restarts", type=int, default=None)
     args = ap.parse_args()
     by_class = collections.defaultdict(list)
     for f in sorted(glob.glob(f"{args.runs}/*.json")):
@@ -84,9 +88,11 @@ def main() -> None:
                 _prior(base.prior)
             row = {"default": _run(base)}
             for v in args.variants:
-                spec = dataclasses.replace(
-                    base, config=dataclasses.replace(base.config, warm_start=v)
-                )
+                cfg = dataclasses.replace(base.config, warm_start=None if v == "off" else v)
+                if args.variant_restarts is not None:
+                    gp = dataclasses.replace(cfg.gp, n_restarts=args.variant_restarts)
+                    cfg = dataclasses.replace(cfg, gp=gp)
+                spec = dataclasses.replace(base, config=cfg)
                 row[v] = _run(spec)
             rows.append(row)
             print(cls, {k: tuple(round(x, 3) for x in r) for k, r in row.items()}, flush=True)
