@@ -18,7 +18,12 @@ from aptkt.experiments.aggregate import (
     mean_over_panels,
     t_quantile,
 )
-from aptkt.experiments.figures.common import gain_summary, transfer_rate
+from aptkt.experiments.figures.common import (
+    gain_summary,
+    prior_space_rate,
+    share_text,
+    transfer_rate,
+)
 
 
 def rows_from(matrix, method="m", start_group=0, trials_per_group=2, **tags):
@@ -131,6 +136,17 @@ def test_transfer_rate_counts_decisions():
     ]
     assert transfer_rate(rows, {"method": "APTKT"}) == pytest.approx(12 / 40)
     assert math.isnan(transfer_rate(rows, {"method": "baseline"}))
+
+
+def test_prior_space_share_of_runs_stored_before_it_was_recorded_says_so():
+    rows = [
+        {"method": "APTKT", "updates": 8, "prior_space": 6},
+        {"method": "APTKT", "updates": 2, "prior_space": 0},
+        {"method": "old APTKT"},  # a run stored before the counts existed
+    ]
+    assert share_text(prior_space_rate(rows, {"method": "APTKT"})) == "60 %"
+    assert share_text(prior_space_rate(rows, {"method": "APTKT"}), 1) == "60.0 %"
+    assert share_text(prior_space_rate(rows, {"method": "old APTKT"})) == "not recorded"
 
 
 @settings(max_examples=40, deadline=None)

@@ -158,6 +158,7 @@ def test_hdf5_tables_are_checked_too(tmp_path, capsys):
         (["--test-trials", "2:1"], "--test-trials: need 0 <= FIRST < STOP"),
         (["--transfer", "none"], "--transfer: not with --table"),
         (["--eps-neg", "2"], "eps_neg must lie in [0, 1]"),
+        (["--evidence-margin", "nan"], "evidence_margin must be None or finite"),
     ],
 )
 def test_bad_options_give_one_line(tmp_path, capsys, args, message):
@@ -170,6 +171,35 @@ def test_live_options_are_not_mixed_up(capsys):
     assert main(["learn", "--objects", "a,b", "--prior", "p.npz", "--runs", "2"]) == 1
     err = capsys.readouterr().err
     assert "--robot is required (or learn offline with --table FILE)" in err
+
+
+def test_method_choices_reach_the_transferring_methods(tmp_path, capsys):
+    """--cutoff, --feature-space, --source, --relatedness and --evidence-margin set APTKT's and
+    APTKT+aux's learner (the baseline uses no prior); the chosen space is then recorded."""
+    table = _world_table(n_per=4)
+    path = write_feature_table(tmp_path / "t.csv", table)
+    out = tmp_path / "out"
+    args = ["learn", "--table", str(path), "--prior-objects", ",".join(PRIORS)]
+    args += ["--objects", ",".join(NEW), "--budget", "1", "--runs", "1", "-o", str(out)]
+    args += ["--cutoff", "paper", "--feature-space", "evidence", "--source", "positives"]
+    args += ["--relatedness", "normalised", "--evidence-margin", "lnN"]
+    assert main(args) == 0, capsys.readouterr().err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["settings"]["method"] == {
+        "cutoff": "paper",
+        "feature_space": "evidence",
+        "source": "positives",
+        "relatedness": "normalised",
+        "evidence_margin": None,
+    }
+    with (out / "results.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    # feature_space="evidence" weighs both spaces at step 0 (every action is updated then) and
+    # records their evidence; the baseline has no prior space to weigh.
+    for r in rows:
+        if r["step"] == "0":
+            weighed = [k for k, v in r.items() if k.startswith("space_evidence[") and v]
+            assert bool(weighed) == (r["method"] != "baseline"), r["method"]
 
 
 @pytest.mark.slow

@@ -192,6 +192,39 @@ MISTAKES = [
         "--resume and --overwrite",
     ),
     (["skin", "monitor"], "PORT"),
+    # the method's alternatives: an unreadable margin, a combination the learner refuses
+    (
+        [
+            "learn",
+            *SIM,
+            "--prior",
+            "{d}/p.npz",
+            "--objects",
+            "towel,cork_board",
+            "--evidence-margin",
+            "large",
+            "-o",
+            "{d}/new/l",
+        ],
+        "--evidence-margin must be a number or lnN",
+    ),
+    (
+        [
+            "learn",
+            *SIM,
+            "--prior",
+            "{d}/p.npz",
+            "--objects",
+            "towel,cork_board",
+            "--transfer",
+            "multi",
+            "--feature-space",
+            "evidence",
+            "-o",
+            "{d}/new/l",
+        ],
+        "does not work with transfer='multi'",
+    ),
 ]
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from aptkt.commands import learn_table
 from aptkt.commands._checks import at_least, input_file, output_dir, output_file
+from aptkt.commands._method import add_method_arguments, method_options
 from aptkt.commands._session import (
     add_action_arguments,
     add_session_arguments,
@@ -18,6 +19,7 @@ from aptkt.commands._session import (
 )
 from aptkt.errors import ConfigError
 from aptkt.learning.config import LearnerConfig
+from aptkt.learning.transfer import TRANSFER_MODES
 
 #: Exit code when a robot or skin fault stopped the run (1: bad input).
 EXIT_FAULT = 3
@@ -69,7 +71,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--transfer",
-        choices=("paper", "multi", "none", "control"),
+        choices=TRANSFER_MODES,
         default=None,
         help="paper: APTKT's transfer (Eq. 2-3); multi: from every prior above eps_neg; "
         "none: the baseline (nothing of the prior); control: the prior's feature space without "
@@ -80,6 +82,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="add the prior models' posteriors as a modality (Eq. 5)",
     )
+    add_method_arguments(p)
     p.add_argument(
         "--patience",
         type=int,
@@ -165,6 +168,7 @@ def run(args: argparse.Namespace) -> int:
             auxiliary=args.auxiliary,
             patience=args.patience,
             seed=args.seed,
+            **method_options(args),
         )
     except ValueError as exc:
         raise ConfigError(str(exc)) from None

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from aptkt.commands._method import method_options
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
 
@@ -90,12 +91,15 @@ def run(args: argparse.Namespace) -> int:
     if runs < 1:
         raise ConfigError("--runs must be >= 1")
     eps_neg = LearnerConfig.eps_neg if args.eps_neg is None else args.eps_neg
+    method = method_options(args)
     try:  # the learner's own checks of the shared options, as a one-line error
         LearnerConfig(
             eps_neg=eps_neg,
             eps_explor=args.eps_explor,
             budget=args.budget,
             patience=args.patience,
+            transfer="paper",  # what the options are checked against: APTKT's transfer
+            **method,
         )
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
@@ -112,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
         eps_explor=args.eps_explor,
         patience=args.patience,
         seed=args.seed,
+        method=method,
     )
     learn_from_table(settings, say=lambda line: print(line, flush=True))
     return 0

@@ -26,7 +26,7 @@ class StoredSteps(Mapping[str, list[dict[str, Any]]]):
 
     def __init__(self, store: RunStore, keys: Sequence[str]) -> None:
         self._store = store
-        self._keys = list(dict.fromkeys(keys))
+        self._keys = dict.fromkeys(keys)  # spec order, each run once, O(1) lookups
 
     def __getitem__(self, key: str) -> list[dict[str, Any]]:
         if key not in self._keys:

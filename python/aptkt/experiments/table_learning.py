@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import platform
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -44,6 +44,9 @@ class TableSettings:
     eps_explor: float = LearnerConfig.eps_explor
     patience: int | None = None
     seed: int = 0
+    #: LearnerConfig fields of the method's alternatives (cutoff, feature_space, source,
+    #: relatedness, evidence_margin) for APTKT and APTKT+aux; the baseline uses no prior.
+    method: dict[str, Any] = field(default_factory=dict)
 
 
 def _check_objects(table, s: TableSettings, actions: list[str]) -> None:
@@ -104,8 +107,8 @@ def learn_from_table(s: TableSettings, *, say=print) -> dict[str, Any]:
         )
 
     methods = {
-        "APTKT": config(transfer="paper", eps_neg=s.eps_neg),
-        "APTKT+aux": config(transfer="paper", auxiliary=True, eps_neg=s.eps_neg),
+        "APTKT": config(transfer="paper", eps_neg=s.eps_neg, **s.method),
+        "APTKT+aux": config(transfer="paper", auxiliary=True, eps_neg=s.eps_neg, **s.method),
         "baseline": config(transfer="none"),
     }
     say(

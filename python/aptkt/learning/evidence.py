@@ -38,19 +38,30 @@ def _sources(model: LaplaceGPC, label: object) -> list:
     return list(model.sources_.get(label, []))
 
 
+def _one_source(model: LaplaceGPC, label: object) -> None:
+    n = len(_sources(model, label))
+    if n != 1:
+        raise ValueError(
+            f"classifier of class {label!r} has {n} source tasks; the coupling evidence needs "
+            "exactly one"
+        )
+
+
+def _uncoupled(model: LaplaceGPC) -> np.ndarray:
+    """``log Z(0)`` of every classifier: one evaluation of the whole model with λ, the last
+    hyper-parameter (one source), set to 0 in every row (the core evaluates all rows at once,
+    so asking row by row would cost a Laplace search per classifier and row)."""
+    independent = model.theta_.copy()
+    independent[:, -1] = 0.0
+    return np.asarray(model.log_marginal_likelihood(independent))
+
+
 def coupling_evidence(model: LaplaceGPC, k: int) -> float:
     """``log Z(λ) − log Z(0)`` of classifier ``k`` of a fitted model with one source task
     (its fitted hyper-parameters; λ, the last of them, set to 0 for Z(0))."""
     row, label = _row(model, k)
-    if len(_sources(model, label)) != 1:
-        raise ValueError(
-            f"classifier of class {label!r} has {len(_sources(model, label))} source tasks; "
-            "the coupling evidence needs exactly one"
-        )
-    independent = model.theta_.copy()
-    independent[row, -1] = 0.0  # λ: the last hyper-parameter (one source)
-    log_z0 = model.log_marginal_likelihood(independent)[row]
-    return float(model.log_marginal_likelihood_[row] - log_z0)
+    _one_source(model, label)
+    return float(model.log_marginal_likelihood_[row] - _uncoupled(model)[row])
 
 
 def target_evidence(model: LaplaceGPC, k: int) -> float:
@@ -83,11 +94,15 @@ def label_evidence(model: LaplaceGPC) -> float:
     whole model's labels. Several sources per classifier are refused: with λ = 0 they become
     independent of each other too, and Z(0) is no longer the sources' joint evidence times the
     target's."""
-    total = 0.0
-    for k in range(model.theta_.shape[0]):
-        _, label = _row(model, k)
+    n = model.theta_.shape[0]
+    coupled = []
+    for k in range(n):
+        row, label = _row(model, k)
         if _sources(model, label):
-            total += coupling_evidence(model, k) + target_evidence(model, k)
-        else:
-            total += target_evidence(model, k)
-    return total
+            _one_source(model, label)
+            coupled.append(row)
+    total = sum(target_evidence(model, k) for k in range(n))
+    if coupled:
+        log_z0 = _uncoupled(model)
+        total += sum(float(model.log_marginal_likelihood_[r] - log_z0[r]) for r in coupled)
+    return float(total)

@@ -22,6 +22,7 @@ __all__ = [
     "gain_summary",
     "transfer_rate",
     "prior_space_rate",
+    "share_text",
     "plot_panel",
 ]
 
@@ -103,6 +104,12 @@ def prior_space_rate(rows: Iterable[Mapping[str, Any]], where: Mapping[str, Any]
             fitted += int(r.get("updates", 0) or 0)
             prior += int(r.get("prior_space", 0) or 0)
     return prior / fitted if fitted else float("nan")
+
+
+def share_text(rate: float, digits: int = 0) -> str:
+    """A share as "12 %"; "not recorded" where the rows lack the counts (runs stored by an
+    aptkt that did not record them are reused as they are)."""
+    return f"{100 * rate:.{digits}f} %" if np.isfinite(rate) else "not recorded"
 
 
 def plot_panel(

@@ -35,6 +35,7 @@ from aptkt.experiments.figures.common import (
     plot_panel,
     present,
     prior_space_rate,
+    share_text,
     transfer_rate,
 )
 from aptkt.experiments.plots import figure
@@ -242,7 +243,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                     ci(gains[k].at[0]) if 0 in gains[k].at else "",
                     pp(worst[k]),
                     f"{100 * rates[k]:.0f} %",
-                    f"{100 * spaces[k]:.0f} %",
+                    share_text(spaces[k]),
                 ]
                 for k in keys
             ],

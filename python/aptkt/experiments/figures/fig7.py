@@ -23,6 +23,7 @@ from aptkt.experiments.figures.common import (
     prior_group_plan,
     prior_groups,
     prior_space_rate,
+    share_text,
     transfer_rate,
 )
 from aptkt.experiments.plots import canvas
@@ -122,7 +123,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         ),
         "",
         f"APTKT transferred a prior object in {100 * rate:.1f} % of its transfer decisions (ε_neg = {ctx.scale.eps_neg}); "
-        f"{100 * space_rate:.1f} % of its models were fitted in the prior's feature space.",
+        f"share of its models fitted in the prior's feature space: {share_text(space_rate, 1)}.",
         "",
         *_control_lines(curves, fused, steps),
         "",

@@ -1,0 +1,78 @@
+"""The method's documented alternatives as command-line options, shared by live learning
+(``aptkt learn --robot``) and learning from a feature table (``aptkt learn --table``), where
+they are how the method is checked on another sensor's data."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from aptkt.errors import ConfigError
+from aptkt.learning.transfer import CUTOFFS, FEATURE_SPACES, RELATEDNESS, SOURCE_TASKS
+
+__all__ = ["add_method_arguments", "method_options"]
+
+
+def add_method_arguments(p: argparse.ArgumentParser) -> None:
+    """The method's documented alternatives (docs/method.md), for live and table learning:
+    each defaults to LearnerConfig's own default."""
+    g = p.add_argument_group(
+        "method choices (docs/method.md; each default is LearnerConfig's, named first)"
+    )
+    g.add_argument(
+        "--cutoff",
+        choices=CUTOFFS,
+        help="evidence: Eq. 3's eps_neg, then the new labels' evidence must favour the "
+        "transfer; paper: Eq. 3 alone",
+    )
+    g.add_argument(
+        "--evidence-margin",
+        metavar="M",
+        help="log Bayes factor a transfer must exceed with --cutoff evidence: a number "
+        "(default 0: equal prior odds) or lnN (ln of the number of prior objects)",
+    )
+    g.add_argument(
+        "--feature-space",
+        choices=FEATURE_SPACES,
+        help="where the new objects' models live: auto (the prior's scaling when anything "
+        "transfers), covered, prior, new, pooled, or evidence (chosen per update by the new "
+        "labels' evidence)",
+    )
+    g.add_argument(
+        "--source",
+        choices=SOURCE_TASKS,
+        help="the transferred old object's task: one-vs-all (its observations +1, the other "
+        "old objects' -1) or positives (its observations only)",
+    )
+    g.add_argument(
+        "--relatedness",
+        choices=RELATEDNESS,
+        help="p̄ from each old object's own binary classifier (binary) or from the normalised "
+        "class posterior (normalised)",
+    )
+
+
+def method_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The LearnerConfig fields the method options set (those given on the command line)."""
+    out: dict[str, Any] = {
+        field: value
+        for field, value in (
+            ("cutoff", args.cutoff),
+            ("feature_space", args.feature_space),
+            ("source", args.source),
+            ("relatedness", args.relatedness),
+        )
+        if value is not None
+    }
+    margin = args.evidence_margin
+    if margin is not None:
+        if margin.strip().lower() == "lnn":
+            out["evidence_margin"] = None  # LearnerConfig's spelling of ln N_old
+        else:
+            try:
+                out["evidence_margin"] = float(margin)
+            except ValueError:
+                raise ConfigError(
+                    f"--evidence-margin must be a number or lnN, got {margin!r}"
+                ) from None
+    return out
