@@ -662,3 +662,37 @@ def test_warm_start_source_starts_a_transferring_class_at_its_old_object(world, 
             w = start[c]["modality_weights"]
             assert w["auxiliary"] == pytest.approx(1 / len(w))
             assert sum(w.values()) == pytest.approx(1.0)
+
+
+def test_warm_starts_come_only_from_a_model_in_the_same_kind_of_space(world):
+    """Length-scales are distances in one feature space: neither the previous optimum nor the
+    old classifier's hyper-parameters seed a fit in another space."""
+    learner, _ = _run(
+        world,
+        transfer="paper",
+        budget=2,
+        cutoff="paper",
+        eps_neg=0.0,
+        warm_start="both",
+        feature_space="prior",
+    )
+    for lrn in learner.learners.values():
+        assert lrn.space == "prior" and lrn.model is not None
+        names = list(lrn.model.modality_names_)
+        new_space = FeaturePipeline().fit(lrn.observations)
+        in_prior = {
+            c: [lrn._source(d.sources[0], d.lambdas[0], lrn.prior.pipeline)]
+            for c, d in lrn.decisions.items()
+            if d.transfers
+        }
+        in_new = {
+            c: [lrn._source(d.sources[0], d.lambdas[0], new_space)]
+            for c, d in lrn.decisions.items()
+            if d.transfers
+        }
+        assert in_prior
+        # The prior's space: the previous optimum for every class, the old classifier's where
+        # a class transfers ("both").
+        assert set(lrn._starts(names, in_prior, lrn.prior.pipeline)) == set(lrn.new_objects)
+        # The new objects' own space: nothing to start from.
+        assert lrn._starts(names, in_new, new_space) == {}

@@ -261,7 +261,11 @@ class ActionLearner:
         }
         seed = (self.config.seed * 1_000_003 + zlib.crc32(self.action.encode()) + step) % 2**32
         model = self.config.gp.make(groups, random_state=seed)
-        starts = self._starts(list(groups), sources) if self.config.warm_start is not None else None
+        starts = (
+            self._starts(list(groups), sources, pipeline)
+            if self.config.warm_start is not None
+            else None
+        )
         return model.fit(X, obs.objects, sources=sources or None, hyperparameters=starts), X
 
     def _fit_by_evidence(
@@ -309,18 +313,26 @@ class ActionLearner:
         return "new"
 
     def _starts(
-        self, names: list[str], sources: Mapping[str, list[TransferSource]]
+        self,
+        names: list[str],
+        sources: Mapping[str, list[TransferSource]],
+        pipeline: FeaturePipeline,
     ) -> dict[str, dict[str, Any]]:
-        """First starts by class for ``config.warm_start`` (see LearnerConfig)."""
+        """First starts by class for ``config.warm_start`` (see LearnerConfig). Length-scales
+        are distances in a feature space: a start is taken only from a model fitted in the same
+        kind of space (the previous update's, if it lived in the space fitted now; the old
+        classifier's, only in the prior's space)."""
         mode = self.config.warm_start
         keys = ("signal_variance", "length_scales", "modality_weights")
         out: dict[str, dict[str, Any]] = {}
         previous = self.model
-        if mode in ("previous", "both") and previous is not None:
+        space = self._space_name(pipeline)
+        if mode in ("previous", "both") and previous is not None and self.space == space:
             if list(previous.modality_names_) == names:
                 for c, hp in previous.hyperparameters_.items():
                     out[str(c)] = {k: hp[k] for k in keys}
-        if mode in ("source", "both") and self.prior is not None:
+        in_prior_space = self.prior is not None and pipeline is self.prior.pipeline
+        if mode in ("source", "both") and self.prior is not None and in_prior_space:
             old_hp = self.prior.model.hyperparameters_
             for obj, lst in sources.items():
                 hp = old_hp[max(lst, key=lambda s: s.transfer_lambda or 0.0).name]
