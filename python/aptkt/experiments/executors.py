@@ -61,8 +61,14 @@ class LocalExecutor:
         self, fn: Callable[[Any], Any], items: Sequence[Any]
     ) -> Iterator[tuple[int, Any]]:
         if self.jobs == 1 or len(items) <= 1:
-            for i, item in enumerate(items):
-                yield i, fn(item)
+            # The tasks' numpy calls are small (a PCA of a few hundred rows per update), where
+            # BLAS threads cannot help but spin after every call, as in the spawned workers
+            # (runtime/worker_start.py); the core's own threads are not limited.
+            from threadpoolctl import threadpool_limits
+
+            with threadpool_limits(1, user_api="blas"):
+                for i, item in enumerate(items):
+                    yield i, fn(item)
             return
         if self._pool is None:
             threads = max(1, (os.cpu_count() or 1) // self.jobs)
