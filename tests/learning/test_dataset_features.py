@@ -109,3 +109,31 @@ def test_a_filter_that_matches_nothing_gives_an_empty_table(data):
         "force": 0,
         "thermal": 0,
     }
+
+
+def test_features_extracted_in_worker_processes_are_the_same(tmp_path, monkeypatch):
+    """Two actions, recordings in chunks that do not divide evenly (the chunk size made small),
+    spread over two spawned processes in completion order: the stored values are those of the
+    serial extraction, row for row."""
+    from aptkt.experiments.executors import LocalExecutor
+    from aptkt.learning import dataset
+
+    world = SimWorld(seed=5)
+    serial, parallel = tmp_path / "serial.h5", tmp_path / "parallel.h5"
+    with DatasetWriter(serial, "w") as w:
+        for obj in ("towel", "metal_toolbox", "cork_board"):
+            for action in ("P1", "S2"):
+                w.append(world.explore(obj, action, 0))
+    parallel.write_bytes(serial.read_bytes())
+    extract_features(serial, progress=False)
+    monkeypatch.setattr(dataset, "_CHUNK_ROWS", 2)  # 3 recordings per action: chunks of 2, 1
+    executor = LocalExecutor(2)
+    try:
+        counts = extract_features(parallel, progress=False, parallel_map=executor.imap_unordered)
+    finally:
+        executor.close()
+    assert counts == {"P1": 3, "S2": 3}
+    same(
+        load_observations(parallel, extract_missing=False),
+        load_observations(serial, extract_missing=False),
+    )

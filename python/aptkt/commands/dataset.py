@@ -88,6 +88,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     f.add_argument(
         "--actions", metavar="P1,S1,...", help="only these actions (default: all recorded)"
     )
+    f.add_argument(
+        "-j",
+        "--jobs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="extract in N processes (default %(default)s)",
+    )
     f.add_argument("--no-progress", action="store_true", help="no progress bar")
     f.set_defaults(func=run_features)
 
@@ -229,14 +237,22 @@ def run_info(args: argparse.Namespace) -> int:
 
 
 def run_features(args: argparse.Namespace) -> int:
+    from aptkt.experiments.executors import LocalExecutor
     from aptkt.learning.dataset import extract_features
 
     rewritable_file(args.file)
-    counts = extract_features(
-        args.file,
-        actions=split_names(args.actions, "--actions"),
-        progress=not args.no_progress and sys.stderr.isatty(),
-    )
+    if args.jobs < 1:
+        raise ConfigError("--jobs must be >= 1")
+    executor = LocalExecutor(args.jobs)
+    try:
+        counts = extract_features(
+            args.file,
+            actions=split_names(args.actions, "--actions"),
+            progress=not args.no_progress and sys.stderr.isatty(),
+            parallel_map=executor.imap_unordered if args.jobs > 1 else None,
+        )
+    finally:
+        executor.close()
     print(
         f"{args.file}: features of " + ", ".join(f"{a} ({n} recordings)" for a, n in counts.items())
     )

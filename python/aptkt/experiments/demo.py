@@ -32,6 +32,7 @@ from aptkt import __version__
 from aptkt.actions import PAPER_ACTIONS
 from aptkt.errors import ConfigError
 from aptkt.experiments.aggregate import mean_band
+from aptkt.experiments.executors import LocalExecutor
 from aptkt.experiments.plots import figure, learning_curves, save_figure
 from aptkt.experiments.runs import RunSpec, flatten, run_many
 from aptkt.experiments.tables import write_csv
@@ -106,59 +107,69 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
     _say("[2/5] extracting features")
     train_trials = tuple(range(s.train_reps))
     test_trials = tuple(range(s.train_reps, reps))
-    todo = stale_features(data, s.actions)
-    if todo:  # stored once, so the learning runs (and a re-run) read them
-        extract_features(data, actions=todo, progress=progress)
-    prior_table = load_observations(
-        data, actions=s.actions, objects=s.priors, trials=train_trials, progress=progress
-    )
-
-    _say(f"[3/5] building prior knowledge on {', '.join(s.priors)} -> {prior_path}")
-    gp = GPSettings()
-    prior = PriorKnowledge.build(prior_table, gp=gp, seed=s.seed)
-    prior.save(prior_path)
-    for row in prior.summary():
-        w = ", ".join(f"{m} {v:.2f}" for m, v in zip(row["modalities"], row["weights_mean"]))
-        _say(f"      {row['action']}: {row['observations']} observations, modality weights {w}")
-
-    _say(
-        f"[4/5] learning {len(s.new_objects)} new objects: APTKT (with and without auxiliary features) "
-        f"vs baseline, {s.trials} runs each, "
-        f"budget {s.budget}, on {s.jobs} process(es)"
-    )
-    methods = {
-        "APTKT": LearnerConfig(
-            transfer="paper", eps_neg=s.eps_neg, eps_explor=s.eps_explor, budget=s.budget, gp=gp
-        ),
-        "APTKT+aux": LearnerConfig(
-            transfer="paper",
-            auxiliary=True,
-            eps_neg=s.eps_neg,
-            eps_explor=s.eps_explor,
-            budget=s.budget,
-            gp=gp,
-        ),
-        "baseline": LearnerConfig(transfer="none", eps_explor=s.eps_explor, budget=s.budget, gp=gp),
-    }
-    specs = [
-        RunSpec(
-            method=name,
-            config=replace(cfg, seed=s.seed + t),
-            data=str(data),
-            actions=s.actions,
-            new_objects=s.new_objects,
-            pool_trials=train_trials,
-            test_trials=test_trials,
-            prior=str(prior_path),
-            pool_seed=s.seed + t,
-            tags={"trial": t},
+    # One pool of worker processes for the features and the learning runs, so that the runs
+    # start in workers that are already up.
+    executor = LocalExecutor(s.jobs)
+    try:
+        todo = stale_features(data, s.actions)
+        if todo:  # stored once, so the learning runs (and a re-run) read them
+            extract_features(
+                data, actions=todo, progress=progress, parallel_map=executor.imap_unordered
+            )
+        prior_table = load_observations(
+            data, actions=s.actions, objects=s.priors, trials=train_trials, progress=progress
         )
-        for t in range(s.trials)
-        for name, cfg in methods.items()
-    ]
-    bar = tqdm(total=len(specs), unit="run", desc="learning", disable=not progress)
-    results = run_many(specs, jobs=s.jobs, progress=bar.update)
-    bar.close()
+
+        _say(f"[3/5] building prior knowledge on {', '.join(s.priors)} -> {prior_path}")
+        gp = GPSettings()
+        prior = PriorKnowledge.build(prior_table, gp=gp, seed=s.seed)
+        prior.save(prior_path)
+        for row in prior.summary():
+            w = ", ".join(f"{m} {v:.2f}" for m, v in zip(row["modalities"], row["weights_mean"]))
+            _say(f"      {row['action']}: {row['observations']} observations, modality weights {w}")
+
+        _say(
+            f"[4/5] learning {len(s.new_objects)} new objects: APTKT (with and without auxiliary features) "
+            f"vs baseline, {s.trials} runs each, "
+            f"budget {s.budget}, on {s.jobs} process(es)"
+        )
+        methods = {
+            "APTKT": LearnerConfig(
+                transfer="paper", eps_neg=s.eps_neg, eps_explor=s.eps_explor, budget=s.budget, gp=gp
+            ),
+            "APTKT+aux": LearnerConfig(
+                transfer="paper",
+                auxiliary=True,
+                eps_neg=s.eps_neg,
+                eps_explor=s.eps_explor,
+                budget=s.budget,
+                gp=gp,
+            ),
+            "baseline": LearnerConfig(
+                transfer="none", eps_explor=s.eps_explor, budget=s.budget, gp=gp
+            ),
+        }
+        specs = [
+            RunSpec(
+                method=name,
+                config=replace(cfg, seed=s.seed + t),
+                data=str(data),
+                actions=s.actions,
+                new_objects=s.new_objects,
+                pool_trials=train_trials,
+                test_trials=test_trials,
+                prior=str(prior_path),
+                pool_seed=s.seed + t,
+                tags={"trial": t},
+            )
+            for t in range(s.trials)
+            for name, cfg in methods.items()
+        ]
+        bar = tqdm(total=len(specs), unit="run", desc="learning", disable=not progress)
+        results = run_many(specs, progress=bar.update, executor=executor)
+        bar.close()
+    finally:
+        executor.close()
     rows = flatten(results)
 
     _say("[5/5] results")

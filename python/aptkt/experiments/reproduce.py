@@ -30,7 +30,7 @@ from aptkt.actions import PAPER_ACTIONS
 from aptkt.data import DatasetReader
 from aptkt.errors import ConfigError
 from aptkt.experiments.batch import build_priors, run_batch
-from aptkt.experiments.executors import make_executor
+from aptkt.experiments.executors import Executor, make_executor
 from aptkt.experiments.figures import FIGURES
 from aptkt.experiments.figures.base import METHODS, Context
 from aptkt.experiments.report import markdown_table, render_report
@@ -85,7 +85,9 @@ def _paper_numbers(objects: Sequence[str]) -> dict[str, int]:
     return out
 
 
-def prepare_data(s: ReproduceSettings, scale: Scale) -> tuple[Path, dict[str, Any]]:
+def prepare_data(
+    s: ReproduceSettings, scale: Scale, executor: Executor | None = None
+) -> tuple[Path, dict[str, Any]]:
     """The data set to learn from (generated if none was given) with its features extracted."""
 
     info: dict[str, Any] = {}
@@ -128,7 +130,12 @@ def prepare_data(s: ReproduceSettings, scale: Scale) -> tuple[Path, dict[str, An
     if todo:
         _say(f"extracting features of {', '.join(todo)} into {path}")
         t0 = time.perf_counter()
-        extract_features(path, actions=todo, progress=s.progress)
+        extract_features(
+            path,
+            actions=todo,
+            progress=s.progress,
+            parallel_map=None if executor is None else executor.imap_unordered,
+        )
         info["feature_seconds"] = time.perf_counter() - t0
     return path, info
 
@@ -149,7 +156,7 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
     try:
         out.mkdir(parents=True, exist_ok=True)
         t0 = time.perf_counter()
-        data, data_info = prepare_data(s, scale)
+        data, data_info = prepare_data(s, scale, executor)
         fingerprint = data_fingerprint(data)
         timings["data"] = time.perf_counter() - t0
         ctx = Context(

@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 from typing import Any
 
-from aptkt.experiments.executors import LocalExecutor
+from aptkt.experiments.executors import Executor, LocalExecutor
 from aptkt.learning import APTKT, LearnerConfig, LearningRun, PoolEnvironment, PriorKnowledge
 from aptkt.learning.dataset import load_observations
 
@@ -138,18 +138,22 @@ def run_many(
     *,
     jobs: int | None = None,
     progress: Callable[[int], None] | None = None,
+    executor: Executor | None = None,
 ) -> list[list[dict[str, Any]]]:
-    """Execute runs on local processes (results in the order of ``specs``)."""
+    """Execute runs on local processes, or on ``executor`` (kept open), results in the order
+    of ``specs``."""
 
     results: list[list[dict[str, Any]] | None] = [None] * len(specs)
-    executor = LocalExecutor(jobs)
+    own = executor is None
+    runner: Executor = LocalExecutor(jobs) if executor is None else executor
     try:
-        for i, rows in executor.imap_unordered(execute, list(specs)):
+        for i, rows in runner.imap_unordered(execute, list(specs)):
             results[i] = rows
             if progress:
                 progress(1)
     finally:
-        executor.close()
+        if own:
+            runner.close()
     return [r for r in results if r is not None]
 
 

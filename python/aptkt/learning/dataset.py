@@ -9,7 +9,7 @@ extracts in memory, never writing into the file it reads.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -113,29 +113,84 @@ def _features_current(rd: DatasetReader, action: str, key: dict[str, Any]) -> bo
     return set(_rows_by_action(rd, [action]).get(action, [])) <= stored
 
 
+#: Runs ``fn`` on every item elsewhere (e.g. ``LocalExecutor(jobs).imap_unordered``), yielding
+#: ``(index, result)`` pairs in any order.
+ParallelMap = Callable[[Callable[[Any], Any], Sequence[Any]], Iterator[tuple[int, Any]]]
+
+#: Recordings per task when extracting in parallel: large enough that opening the file (a few
+#: ms per task) is noise, small enough to keep every process busy to the end.
+_CHUNK_ROWS = 32
+
+
+def _extract_chunk(task: tuple[str, str, list[int], ExtractionSettings]) -> dict[str, np.ndarray]:
+    """One action's feature values of some of its recordings, read from the file itself (a
+    worker process opens it read-only; the file must not be open for writing)."""
+    path, action, rows, settings = task
+    with DatasetReader(path) as rd:
+        return _extract(rd, {action: rows}, settings, False, "")[action]
+
+
 def extract_features(
     path: str | Path,
     *,
     actions: Iterable[str] | None = None,
     settings: ExtractionSettings | None = None,
     progress: bool = True,
+    parallel_map: ParallelMap | None = None,
 ) -> dict[str, int]:
     """Extract and store the feature observations of every recording (of ``actions``), keyed by
     ``settings``.
 
-    Returns the number of recordings per action. The file must not be open for writing.
+    ``parallel_map`` spreads the recordings over other processes in chunks (the stored values
+    are the same as without it). Returns the number of recordings per action. The file must
+    not be open for writing.
     """
     path = Path(path)
     settings = settings or ExtractionSettings()
     with DatasetReader(path) as rd:
         by_action = _rows_by_action(rd, actions)
-        values = _extract(rd, by_action, settings, progress, f"features {path.name}")
+        if parallel_map is None:
+            values = _extract(rd, by_action, settings, progress, f"features {path.name}")
+    if parallel_map is not None:
+        values = _extract_in_chunks(path, by_action, settings, progress, parallel_map)
     store_features(
         path,
         {name: (by_action[name], per_mod) for name, per_mod in values.items()},
         settings=settings.to_dict(),
     )
     return {name: len(rows) for name, rows in by_action.items()}
+
+
+def _extract_in_chunks(
+    path: Path,
+    by_action: dict[str, list[int]],
+    settings: ExtractionSettings,
+    progress: bool,
+    parallel_map: ParallelMap,
+) -> dict[str, dict[str, np.ndarray]]:
+    tasks = [
+        (str(path), name, rows[i : i + _CHUNK_ROWS], settings)
+        for name, rows in by_action.items()
+        for i in range(0, len(rows), _CHUNK_ROWS)
+    ]
+    parts: list[dict[str, np.ndarray] | None] = [None] * len(tasks)
+    total = sum(len(v) for v in by_action.values())
+    bar = tqdm(total=total, unit="rec", desc=f"features {path.name}") if progress else None
+    try:
+        for i, part in parallel_map(_extract_chunk, tasks):
+            parts[i] = part
+            if bar is not None:
+                bar.update(len(tasks[i][2]))
+    finally:
+        if bar is not None:
+            bar.close()
+    values: dict[str, dict[str, np.ndarray]] = {}
+    for name in by_action:
+        mine = [p for (_, n, _, _), p in zip(tasks, parts) if n == name and p is not None]
+        if len(mine) != sum(1 for t in tasks if t[1] == name):
+            raise RuntimeError(f"features of {name}: a parallel task returned no result")
+        values[name] = {m: np.concatenate([p[m] for p in mine]) for m in mine[0]}
+    return values
 
 
 def load_observations(
