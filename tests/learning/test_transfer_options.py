@@ -287,17 +287,22 @@ def test_one_vs_all_sources_and_several_sources_reach_the_classifiers(world):
             assert s.X.shape[0] == int(np.sum(prior[a].observations.objects == s.name))
 
 
-def test_feature_space_auto_uses_nothing_of_an_irrelevant_prior():
-    """feature_space="auto": when the cut-off stops every transfer, APTKT is the baseline
-    exactly; when something transfers, the model lives in the prior's feature space. "new"
-    never uses the prior's space, "prior" always does."""
+def _unrelated_world() -> dict:
+    """New objects like none of the 3 priors (their means drawn apart)."""
     priors, news, means = make_world(n_prior=3, n_new=3, separation=0.6, related=False, seed=1)
-    far = dict(
+    return dict(
         news=news,
         prior=PriorKnowledge.build(draw(means, priors, 12, seed=1), seed=0),
         pool=draw(means, news, 10, seed=2),
         test=draw(means, news, 6, seed=3),
     )
+
+
+def test_feature_space_auto_uses_nothing_of_an_irrelevant_prior():
+    """feature_space="auto": when the cut-off stops every transfer, APTKT is the baseline
+    exactly; when something transfers, the model lives in the prior's feature space. "new"
+    never uses the prior's space, "prior" always does."""
+    far = _unrelated_world()
     aptkt, run = _run(far, transfer="paper", budget=3)
     assert all(not d.transfers for lrn in aptkt.learners.values() for d in lrn.decisions.values())
     _, base = _run(far, transfer="none", budget=3)
@@ -579,13 +584,7 @@ def test_feature_space_pooled_fits_the_transforms_on_old_and_new_observations(wo
 
 
 def test_feature_space_pooled_is_the_baseline_when_nothing_transfers():
-    priors, news, means = make_world(n_prior=3, n_new=3, separation=0.6, related=False, seed=1)
-    far = dict(
-        news=news,
-        prior=PriorKnowledge.build(draw(means, priors, 12, seed=1), seed=0),
-        pool=draw(means, news, 10, seed=2),
-        test=draw(means, news, 6, seed=3),
-    )
+    far = _unrelated_world()
     aptkt, run = _run(far, transfer="paper", budget=3, feature_space="pooled")
     assert all(not d.transfers for lrn in aptkt.learners.values() for d in lrn.decisions.values())
     _, base = _run(far, transfer="none", budget=3)

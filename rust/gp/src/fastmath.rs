@@ -1,26 +1,12 @@
 //! A vectorisable `exp` for kernel matrices: every RBF evaluation is one `exp` of a
 //! non-positive argument, and calling libm per element dominated kernel construction.
 
-/// `exp(x)` for every element, in place, accurate to about 2 ulp for x in [-708, 0] and exact
-/// 0 below (the RBF's range). The loop has no calls or branches so the compiler vectorises it;
-/// on x86-64 it runs the widest instruction set the CPU offers (chosen at run time, so the
-/// wheel still runs on any x86-64).
-pub fn exp_nonpositive_in_place(xs: &mut [f64]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU supports the features the function is compiled for.
-            unsafe { exp_avx512(xs) };
-            return;
-        }
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-        {
-            // SAFETY: as above.
-            unsafe { exp_avx2(xs) };
-            return;
-        }
-    }
-    exp_slice(xs);
+crate::simd::widest_vectors! {
+    /// `exp(x)` for every element, in place, accurate to about 2 ulp for x in [-708, 0] and exact
+    /// 0 below (the RBF's range). The loop has no calls or branches so the compiler vectorises it;
+    /// on x86-64 it runs the widest instruction set the CPU offers (chosen at run time, so the
+    /// wheel still runs on any x86-64).
+    pub fn exp_nonpositive_in_place(xs: &mut [f64]) = exp_slice;
 }
 
 #[inline(always)]
@@ -28,18 +14,6 @@ fn exp_slice(xs: &mut [f64]) {
     for x in xs.iter_mut() {
         *x = exp_nonpositive(*x);
     }
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn exp_avx2(xs: &mut [f64]) {
-    exp_slice(xs);
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-unsafe fn exp_avx512(xs: &mut [f64]) {
-    exp_slice(xs);
 }
 
 #[inline(always)]

@@ -625,59 +625,20 @@ impl KernelEval {
     }
 }
 
-/// One column block below the diagonal of one modality: returns `Σ g k`, `Σ g k d`, `Σ k v`
-/// and `Σ k d v` over the block and adds `k vj` to `pk` and `k d vj` to `pq`. Sums run in
-/// eight independent lanes so that they vectorise (a single running sum would pin the order of
-/// the additions); the widest instruction set the CPU offers is chosen at run time.
-fn column_pass(
-    k: &[f64],
-    d: &[f64],
-    g: &[f64],
-    v: &[f64],
-    vj: f64,
-    pk: &mut [f64],
-    pq: &mut [f64],
-) -> [f64; 4] {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU supports the features the function is compiled for.
-            return unsafe { column_pass_avx512(k, d, g, v, vj, pk, pq) };
-        }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: as above.
-            return unsafe { column_pass_avx2(k, d, g, v, vj, pk, pq) };
-        }
-    }
-    column_pass_lanes(k, d, g, v, vj, pk, pq)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn column_pass_avx2(
-    k: &[f64],
-    d: &[f64],
-    g: &[f64],
-    v: &[f64],
-    vj: f64,
-    pk: &mut [f64],
-    pq: &mut [f64],
-) -> [f64; 4] {
-    column_pass_lanes(k, d, g, v, vj, pk, pq)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-unsafe fn column_pass_avx512(
-    k: &[f64],
-    d: &[f64],
-    g: &[f64],
-    v: &[f64],
-    vj: f64,
-    pk: &mut [f64],
-    pq: &mut [f64],
-) -> [f64; 4] {
-    column_pass_lanes(k, d, g, v, vj, pk, pq)
+crate::simd::widest_vectors! {
+    /// One column block below the diagonal of one modality: returns `Σ g k`, `Σ g k d`, `Σ k v`
+    /// and `Σ k d v` over the block and adds `k vj` to `pk` and `k d vj` to `pq`. Sums run in
+    /// eight independent lanes so that they vectorise (a single running sum would pin the order of
+    /// the additions); the widest instruction set the CPU offers is chosen at run time.
+    fn column_pass(
+        k: &[f64],
+        d: &[f64],
+        g: &[f64],
+        v: &[f64],
+        vj: f64,
+        pk: &mut [f64],
+        pq: &mut [f64],
+    ) -> [f64; 4] = column_pass_lanes;
 }
 
 #[inline(always)]

@@ -13,6 +13,7 @@ pub mod linalg;
 pub mod model;
 pub mod optimize;
 pub mod rng;
+mod simd;
 
 pub use error::{GpError, GpResult};
 pub use kernel::{Data, Hyper, Layout, Modalities};

@@ -133,20 +133,7 @@ pub fn mirror_lower(a: &mut Mat<f64>) {
 pub fn matvec(a: MatRef<'_, f64>, x: &[f64], y: &mut [f64]) {
     y.iter_mut().for_each(|v| *v = 0.0);
     if a.nrows() > 0 && a.row_stride() == 1 {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the CPU supports the features the function is compiled for.
-                unsafe { matvec_columns_avx512(a, x, y) };
-                return;
-            }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: as above.
-                unsafe { matvec_columns_avx2(a, x, y) };
-                return;
-            }
-        }
-        matvec_columns(a, x, y);
+        matvec_contiguous(a, x, y);
         return;
     }
     for (j, &xj) in x.iter().enumerate() {
@@ -176,16 +163,8 @@ fn matvec_columns(a: MatRef<'_, f64>, x: &[f64], y: &mut [f64]) {
     }
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn matvec_columns_avx2(a: MatRef<'_, f64>, x: &[f64], y: &mut [f64]) {
-    matvec_columns(a, x, y);
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-unsafe fn matvec_columns_avx512(a: MatRef<'_, f64>, x: &[f64], y: &mut [f64]) {
-    matvec_columns(a, x, y);
+crate::simd::widest_vectors! {
+    fn matvec_contiguous(a: MatRef<'_, f64>, x: &[f64], y: &mut [f64]) = matvec_columns;
 }
 
 /// `y = Aᵀ x`.

@@ -85,25 +85,27 @@ def gain_summary(
     )
 
 
-def transfer_rate(rows: Iterable[Mapping[str, Any]], where: Mapping[str, Any]) -> float:
-    """Share of the transfer decisions (Eq. 3, every step) that transferred a prior object."""
-    made = taken = 0
+def _share(
+    rows: Iterable[Mapping[str, Any]], where: Mapping[str, Any], part: str, whole: str
+) -> float:
+    """Σ part / Σ whole over the rows matching ``where``; NaN when the rows count nothing."""
+    total = counted = 0
     for r in rows:
         if all(r.get(k) == v for k, v in where.items()):
-            made += int(r.get("decisions", 0) or 0)
-            taken += int(r.get("transfers", 0) or 0)
-    return taken / made if made else float("nan")
+            total += int(r.get(whole, 0) or 0)
+            counted += int(r.get(part, 0) or 0)
+    return counted / total if total else float("nan")
+
+
+def transfer_rate(rows: Iterable[Mapping[str, Any]], where: Mapping[str, Any]) -> float:
+    """Share of the transfer decisions (Eq. 3, every step) that transferred a prior object."""
+    return _share(rows, where, "transfers", "decisions")
 
 
 def prior_space_rate(rows: Iterable[Mapping[str, Any]], where: Mapping[str, Any]) -> float:
     """Share of the model fits (every step) made in the prior's feature space; the others are
     in the new objects' own (or the pooled) space. NaN for rows without the counts."""
-    fitted = prior = 0
-    for r in rows:
-        if all(r.get(k) == v for k, v in where.items()):
-            fitted += int(r.get("updates", 0) or 0)
-            prior += int(r.get("prior_space", 0) or 0)
-    return prior / fitted if fitted else float("nan")
+    return _share(rows, where, "prior_space", "updates")
 
 
 def share_text(rate: float, digits: int = 0) -> str:
