@@ -13,7 +13,9 @@ numbers in docs/experiments.md ("The method's choices, measured" and "The eviden
 come from this script. ``--cutoff paper`` runs the "new" reading with Eq. 3's ε_neg alone instead
 of the evidence test (LearnerConfig.cutoff); ``--feature-space`` sets
 LearnerConfig.feature_space of the transferring methods (with ``evidence``, APTKT-multi keeps
-``auto``: the evidence choice needs one source per classifier).
+``auto``: the evidence choice needs one source per classifier). ``--class-prior uniform``
+combines every model's one-vs-all probabilities (the baseline's too) under equal class
+frequencies (GPSettings.class_prior).
 """
 
 from __future__ import annotations
@@ -43,6 +45,12 @@ def main() -> None:
         "--feature-space",
         choices=("auto", "covered", "prior", "new", "pooled", "evidence"),
         default=None,
+    )
+    p.add_argument(
+        "--class-prior",
+        choices=("training", "uniform"),
+        default=None,
+        help="how every model (baseline included) combines its one-vs-all probabilities",
     )
     args = p.parse_args()
     scale = Scale.full().with_(
@@ -89,6 +97,14 @@ def main() -> None:
             gp: GPSettings = field(default_factory=lambda: GPSettings(hyper_prior=None))
 
         rep.Context = OldContext
+    if args.class_prior is not None:
+        chosen = GPSettings(class_prior=args.class_prior)
+
+        @dataclass
+        class ClassPriorContext(base.Context):
+            gp: GPSettings = field(default_factory=lambda: chosen)
+
+        rep.Context = ClassPriorContext
     rep.reproduce(
         rep.ReproduceSettings(
             figures=tuple(args.figures.split(",")),

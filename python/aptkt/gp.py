@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.special import expit, logit
 from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.exceptions import NotFittedError as _SklearnNotFitted
 from sklearn.utils.multiclass import check_classification_targets
@@ -37,6 +38,7 @@ from aptkt import _core
 from aptkt.errors import KernelNotPositiveDefiniteError, NotFittedError
 
 __all__ = [
+    "CLASS_PRIORS",
     "DEFAULTS",
     "FitDefaults",
     "HyperPrior",
@@ -59,9 +61,11 @@ class FitDefaults:
     approximation: str = "erf"
     n_jobs: int | None = None
     hyper_prior: str | None = None
+    class_prior: str = "training"
 
 
 DEFAULTS = FitDefaults()
+CLASS_PRIORS = ("training", "uniform")
 
 _FIXABLE = ("signal_variance", "length_scale", "modality_weights", "transfer_lambda")
 _APPROXIMATIONS = ("erf", "quadrature")
@@ -425,6 +429,15 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
     hyper_prior : None, "weak" or HyperPrior
         None: plain ML-II (maximise the log marginal likelihood). Otherwise MAP-II with the
         given weak log-normal hyper-priors (see :class:`HyperPrior`).
+    class_prior : {"training", "uniform"}
+        How often each class is taken to occur when the one-vs-all probabilities are combined
+        into ``predict_proba``. "training" (default, as scikit-learn): as the classifiers
+        learnt it, i.e. as often as among the training labels. "uniform": each binary
+        classifier's odds are moved from its training labels' base rate n_c / n to 1 / K
+        before normalising (the prior-shift adjustment of Saerens, Latinne & Decaestecker,
+        2002) — for training sets whose class counts were chosen by whoever collected them
+        (an active learner), not drawn from the classes' frequencies. With equal class counts
+        both agree. ``predict_proba_binary`` is not adjusted.
 
     Attributes
     ----------
@@ -467,6 +480,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         approximation: str = DEFAULTS.approximation,
         n_jobs: int | None = DEFAULTS.n_jobs,
         hyper_prior: HyperPrior | str | None = DEFAULTS.hyper_prior,
+        class_prior: str = DEFAULTS.class_prior,
     ) -> None:
         self.length_scale = length_scale
         self.signal_variance = signal_variance
@@ -485,6 +499,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         self.approximation = approximation
         self.n_jobs = n_jobs
         self.hyper_prior = hyper_prior
+        self.class_prior = class_prior
 
     # -- scikit-learn conventions -------------------------------------------------------------
     # get_params / set_params / repr / score come from BaseEstimator and ClassifierMixin.
@@ -544,6 +559,8 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             raise ValueError(
                 f"fixed: unknown hyper-parameter(s) {sorted(unknown)}; choose from {list(_FIXABLE)}"
             )
+        if self.class_prior not in CLASS_PRIORS:
+            raise ValueError(f"class_prior must be one of {CLASS_PRIORS}, got {self.class_prior!r}")
         if self.approximation not in _APPROXIMATIONS:
             raise ValueError(
                 f"approximation must be one of {_APPROXIMATIONS}, got {self.approximation!r}"
@@ -626,7 +643,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         X, y = validate_data(self, X, y, dtype=np.float64, ensure_all_finite=False)
         X = np.ascontiguousarray(X)
         _check_classification_targets(y)
-        classes, labels = np.unique(y, return_inverse=True)
+        classes, labels, counts = np.unique(y, return_inverse=True, return_counts=True)
         if classes.size < 2:
             raise ValueError(
                 f"LaplaceGPC needs at least two classes in y, got only one class: "
@@ -658,6 +675,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         )
         self._model = model
         self.classes_ = classes
+        self.class_counts_ = counts
         self.n_features_in_ = X.shape[1]
         self.X_train_ = X
         self.y_train_ = y
@@ -822,8 +840,11 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         return np.asarray(self._model.predict_proba_binary(self._test_matrix(X)))
 
     def predict_proba(self, X: Any) -> np.ndarray:
-        """Class probabilities (n_samples, n_classes): one-vs-all probabilities normalised."""
+        """Class probabilities (n_samples, n_classes): one-vs-all probabilities normalised,
+        after the ``class_prior`` adjustment."""
         self._check_fitted()
+        if self.class_prior == "uniform":
+            return uniform_class_prior(self.predict_proba_binary(X), self.class_counts_)
         return np.asarray(self._model.predict_proba(self._test_matrix(X)))
 
     def predict(self, X: Any) -> np.ndarray:
@@ -941,6 +962,21 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             raise ValueError(f"{path}: not a saved LaplaceGPC (not an .npz archive)")
         with np.load(Path(path), allow_pickle=False) as data:
             return cls.from_state({k: data[k] for k in data.files})
+
+
+def uniform_class_prior(binary: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """One-vs-all probabilities (n_samples, K) of classifiers trained on ``counts`` labels per
+    class, with each classifier's base rate n_c / n replaced by 1 / K (in log-odds), then
+    normalised over the classes. A probability of exactly 0 or 1 stays there."""
+    counts = np.asarray(counts, dtype=np.float64)
+    k = counts.size
+    n = counts.sum()
+    shift = np.log(1.0 / (k - 1)) - np.log(counts / (n - counts))
+    adjusted = expit(logit(np.asarray(binary, dtype=np.float64)) + shift)
+    total = adjusted.sum(axis=1, keepdims=True)
+    uniform = np.full_like(adjusted, 1.0 / k)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(total > 0, adjusted / total, uniform)
 
 
 def _jsonable(value: Any) -> Any:

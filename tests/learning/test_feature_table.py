@@ -12,7 +12,7 @@ import pytest
 
 from aptkt.cli import main
 from aptkt.errors import FeatureTableError
-from aptkt.learning import Observations
+from aptkt.learning import Observations, PriorKnowledge
 from aptkt.learning.feature_table import (
     read_feature_table,
     split_held_out,
@@ -175,7 +175,8 @@ def test_live_options_are_not_mixed_up(capsys):
 
 def test_method_choices_reach_the_transferring_methods(tmp_path, capsys):
     """--cutoff, --feature-space, --source, --relatedness and --evidence-margin set APTKT's and
-    APTKT+aux's learner (the baseline uses no prior); the chosen space is then recorded."""
+    APTKT+aux's learner (the baseline uses no prior); the chosen space is then recorded.
+    --class-prior sets every model's."""
     table = _world_table(n_per=4)
     path = write_feature_table(tmp_path / "t.csv", table)
     out = tmp_path / "out"
@@ -183,6 +184,7 @@ def test_method_choices_reach_the_transferring_methods(tmp_path, capsys):
     args += ["--objects", ",".join(NEW), "--budget", "1", "--runs", "1", "-o", str(out)]
     args += ["--cutoff", "paper", "--feature-space", "evidence", "--source", "positives"]
     args += ["--relatedness", "normalised", "--evidence-margin", "lnN"]
+    args += ["--class-prior", "uniform"]
     assert main(args) == 0, capsys.readouterr().err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["settings"]["method"] == {
@@ -192,6 +194,11 @@ def test_method_choices_reach_the_transferring_methods(tmp_path, capsys):
         "relatedness": "normalised",
         "evidence_margin": None,
     }
+    # The class prior is every model's, the baseline's and the prior's too.
+    assert summary["settings"]["gp"] == {"class_prior": "uniform"}
+    assert summary["learner"]["baseline"]["gp"]["class_prior"] == "uniform"
+    prior = PriorKnowledge.load(out / "prior.npz")
+    assert {prior[a].model.class_prior for a in prior.actions} == {"uniform"}
     with (out / "results.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     # feature_space="evidence" weighs both spaces at step 0 (every action is updated then) and

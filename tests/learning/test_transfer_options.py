@@ -4,6 +4,7 @@ stress-test choices, several sources, and the hyper-parameters recorded per step
 import numpy as np
 import pytest
 
+from aptkt.gp import uniform_class_prior
 from aptkt.learning import (
     APTKT,
     FeaturePipeline,
@@ -695,3 +696,39 @@ def test_warm_starts_come_only_from_a_model_in_the_same_kind_of_space(world):
         assert set(lrn._starts(names, in_prior, lrn.prior.pipeline)) == set(lrn.new_objects)
         # The new objects' own space: nothing to start from.
         assert lrn._starts(names, in_new, new_space) == {}
+
+
+# -- the class posterior under actively chosen class counts ---------------------------------------
+def test_class_prior_is_training_by_default_and_not_in_the_recorded_config():
+    assert GPSettings().class_prior == "training"
+    # Absent at its default: run keys of results stored before the option stay valid.
+    assert "class_prior" not in LearnerConfig().to_dict()["gp"]
+    uniform = LearnerConfig(gp=GPSettings(class_prior="uniform"))
+    assert uniform.to_dict()["gp"]["class_prior"] == "uniform"
+    assert LearnerConfig.from_dict(uniform.to_dict()) == uniform
+    assert LearnerConfig.from_dict(LearnerConfig().to_dict()) == LearnerConfig()
+    with pytest.raises(ValueError, match="class_prior"):
+        GPSettings(class_prior="balanced")
+
+
+def test_the_learner_takes_the_actively_chosen_counts_out_of_its_posteriors(world):
+    for class_prior in ("uniform", "training"):
+        learner, run = _run(
+            world, transfer="none", budget=4, prior=None, gp=GPSettings(class_prior=class_prior)
+        )
+        for lrn in learner.learners.values():
+            assert lrn.model.class_prior == class_prior
+            X_test = lrn._test_cache[1]
+            binary = lrn.model.predict_proba_binary(X_test)
+            counts = np.array([np.sum(lrn.observations.objects == c) for c in lrn.model.classes_])
+            np.testing.assert_array_equal(lrn.model.class_counts_, counts)
+            expected = (
+                uniform_class_prior(binary, counts)
+                if class_prior == "uniform"
+                else binary / binary.sum(axis=1, keepdims=True)
+            )
+            np.testing.assert_allclose(lrn.test_posteriors, expected, rtol=1e-9)
+        # Four observations after the initial round over 2 actions × 3 objects: no split of 4
+        # gives every object of both actions the same count, so the counts are uneven
+        # somewhere and the two settings are not the same posterior there.
+        assert any(len(set(lrn.model.class_counts_)) > 1 for lrn in learner.learners.values())

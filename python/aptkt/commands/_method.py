@@ -8,9 +8,10 @@ import argparse
 from typing import Any
 
 from aptkt.errors import ConfigError
+from aptkt.gp import CLASS_PRIORS
 from aptkt.learning.transfer import CUTOFFS, FEATURE_SPACES, RELATEDNESS, SOURCE_TASKS
 
-__all__ = ["add_method_arguments", "method_options"]
+__all__ = ["add_method_arguments", "gp_options", "method_options"]
 
 
 def add_method_arguments(p: argparse.ArgumentParser) -> None:
@@ -50,6 +51,18 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
         help="p̄ from each old object's own binary classifier (binary) or from the normalised "
         "class posterior (normalised)",
     )
+    g.add_argument(
+        "--class-prior",
+        choices=CLASS_PRIORS,
+        help="every model's class posterior, the baseline's too: training (each object as "
+        "likely as it was observed) or uniform (equally likely, whatever the learner chose to "
+        "observe more often)",
+    )
+
+
+def gp_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The GPSettings fields the method options set (those given on the command line)."""
+    return {} if args.class_prior is None else {"class_prior": args.class_prior}
 
 
 def method_options(args: argparse.Namespace) -> dict[str, Any]:

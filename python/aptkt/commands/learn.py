@@ -8,7 +8,7 @@ from pathlib import Path
 
 from aptkt.commands import learn_table
 from aptkt.commands._checks import at_least, input_file, output_dir, output_file
-from aptkt.commands._method import add_method_arguments, method_options
+from aptkt.commands._method import add_method_arguments, gp_options, method_options
 from aptkt.commands._session import (
     add_action_arguments,
     add_session_arguments,
@@ -18,7 +18,7 @@ from aptkt.commands._session import (
     split_names,
 )
 from aptkt.errors import ConfigError
-from aptkt.learning.config import LearnerConfig
+from aptkt.learning.config import GPSettings, LearnerConfig
 from aptkt.learning.transfer import TRANSFER_MODES
 
 #: Exit code when a robot or skin fault stopped the run (1: bad input).
@@ -168,6 +168,7 @@ def run(args: argparse.Namespace) -> int:
             auxiliary=args.auxiliary,
             patience=args.patience,
             seed=args.seed,
+            gp=GPSettings(**gp_options(args)),
             **method_options(args),
         )
     except ValueError as exc:

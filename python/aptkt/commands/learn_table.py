@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from aptkt.commands._method import method_options
+from aptkt.commands._method import gp_options, method_options
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
 
@@ -92,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--runs must be >= 1")
     eps_neg = LearnerConfig.eps_neg if args.eps_neg is None else args.eps_neg
     method = method_options(args)
+    gp = gp_options(args)
     try:  # the learner's own checks of the shared options, as a one-line error
         LearnerConfig(
             eps_neg=eps_neg,
@@ -117,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
         patience=args.patience,
         seed=args.seed,
         method=method,
+        gp=gp,
     )
     learn_from_table(settings, say=lambda line: print(line, flush=True))
     return 0

@@ -47,6 +47,8 @@ class TableSettings:
     #: LearnerConfig fields of the method's alternatives (cutoff, feature_space, source,
     #: relatedness, evidence_margin) for APTKT and APTKT+aux; the baseline uses no prior.
     method: dict[str, Any] = field(default_factory=dict)
+    #: GPSettings fields for every model, the prior's and the baseline's too (class_prior).
+    gp: dict[str, Any] = field(default_factory=dict)
 
 
 def _check_objects(table, s: TableSettings, actions: list[str]) -> None:
@@ -95,7 +97,7 @@ def learn_from_table(s: TableSettings, *, say=print) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     prior_path = out / "prior.npz"
     say(f"[2/3] building prior knowledge on {', '.join(s.prior_objects)} -> {prior_path}")
-    gp = GPSettings()
+    gp = GPSettings(**s.gp)
     prior = PriorKnowledge.build(table.observations(actions, prior_rows), gp=gp, seed=s.seed)
     prior.save(prior_path)
     pool = table.observations(actions, pool_rows)

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.gp import DEFAULTS, LaplaceGPC
+from aptkt.gp import CLASS_PRIORS, DEFAULTS, LaplaceGPC
 from aptkt.learning.transfer import (
     CUTOFFS,
     FEATURE_SPACES,
@@ -35,6 +35,14 @@ class GPSettings:
         rows) from explaining its data by a flat latent function — an extremely long
         length-scale with a huge signal variance — under which λ carries no shape.
         None: plain ML-II, the paper's "maximising the log marginal likelihood".
+    class_prior : how the one-vs-all probabilities are combined into the class posterior
+        (decisions, entropy, fusion, accuracy). "training" (default): as fitted, so a class
+        counts as often as the learner happened to observe it. "uniform": each classifier's
+        base rate among the new objects' observations is replaced by 1/K first
+        (``aptkt.gp.LaplaceGPC``), since the active learner, not the world, chose those
+        counts. Measured both ways in docs/method.md; not the default because a GP
+        classifier's probabilities carry its base rate only near its data, so the exact
+        correction over-corrects elsewhere.
     """
 
     n_restarts: int = DEFAULTS.n_restarts
@@ -46,10 +54,13 @@ class GPSettings:
     # The learner's choice, deliberately not the estimator's default (plain ML-II, as
     # scikit-learn's): see the docstring and docs/method.md.
     hyper_prior: str | None = "weak"
+    class_prior: str = DEFAULTS.class_prior
 
     def __post_init__(self) -> None:
         if self.hyper_prior not in ("weak", None):
             raise ValueError(f"hyper_prior must be 'weak' or None, got {self.hyper_prior!r}")
+        if self.class_prior not in CLASS_PRIORS:
+            raise ValueError(f"class_prior must be one of {CLASS_PRIORS}, got {self.class_prior!r}")
 
     def make(self, modalities: Mapping[str, list[int]], random_state: int) -> LaplaceGPC:
         return LaplaceGPC(
@@ -62,6 +73,7 @@ class GPSettings:
             random_state=random_state,
             n_jobs=self.n_jobs,
             hyper_prior=self.hyper_prior,
+            class_prior=self.class_prior,
         )
 
 
@@ -203,6 +215,8 @@ class LearnerConfig:
         # existed stay valid (the key hashes this dict).
         if d["warm_start"] is None:
             del d["warm_start"]
+        if d["gp"]["class_prior"] == DEFAULTS.class_prior:
+            del d["gp"]["class_prior"]
         return d
 
     @classmethod
