@@ -8,10 +8,11 @@ from dataclasses import replace
 
 import pytest
 
+from aptkt.experiments.priors import PriorTask
 from aptkt.experiments.run_store import RunStore, run_key
 from aptkt.experiments.runs import RunSpec
 from aptkt.experiments.sampling import derive_seed, draw_groups
-from aptkt.learning import LearnerConfig
+from aptkt.learning import GPSettings, LearnerConfig
 
 
 def test_derived_seeds_are_stable_and_independent():
@@ -80,6 +81,37 @@ def test_run_key_covers_what_changes_the_result_and_nothing_else():
     ):
         assert run_key(changed, "fp") != k
     assert run_key(spec(), "other data") != k
+
+
+def test_settings_added_later_leave_stored_keys_as_they_were():
+    """Keys computed by aptkt 0.1.0 before warm_start and class_prior existed (commit 1fed19f):
+    a store or prior file from then must still be found, or a resumed run recomputes it all."""
+    spec = RunSpec(
+        method="APTKT",
+        config=LearnerConfig(),
+        data="/d/a.h5",
+        actions=("P1", "S1"),
+        new_objects=("a", "b"),
+        pool_trials=(0, 1),
+        test_trials=(2, 3),
+        prior="/p/prior-3-abc.npz",
+        pool_seed=5,
+    )
+    assert run_key(spec, "fp") == "8e960c17a32b727790d4f47b"
+    task = PriorTask(
+        fingerprint="fp",
+        data="/d/a.h5",
+        objects=("x", "y", "z"),
+        actions=("P1",),
+        trials=(0, 1, 2),
+        seed=3,
+        directory="/p",
+    )
+    assert task.key == "4596257baaf0144904e0"
+    # A non-default value is part of both keys.
+    uniform = GPSettings(class_prior="uniform")
+    assert run_key(replace(spec, config=LearnerConfig(gp=uniform)), "fp") != run_key(spec, "fp")
+    assert replace(task, gp={"class_prior": "uniform"}).key != task.key
 
 
 def test_store_round_trip_and_damaged_files(tmp_path):

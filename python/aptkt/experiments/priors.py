@@ -42,7 +42,7 @@ class PriorTask:
             "actions": list(self.actions),
             "trials": list(self.trials),
             "seed": self.seed,
-            "gp": self.gp_settings().__dict__,
+            "gp": self.gp_settings().to_dict(),
         }
         return hashlib.sha256(canonical_json(content).encode()).hexdigest()[:20]
 

@@ -62,6 +62,14 @@ class GPSettings:
         if self.class_prior not in CLASS_PRIORS:
             raise ValueError(f"class_prior must be one of {CLASS_PRIORS}, got {self.class_prior!r}")
 
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        # Left out at its default, so that the keys of runs and prior files stored before
+        # the setting existed stay valid (they hash this dict).
+        if d["class_prior"] == DEFAULTS.class_prior:
+            del d["class_prior"]
+        return d
+
     def make(self, modalities: Mapping[str, list[int]], random_state: int) -> LaplaceGPC:
         return LaplaceGPC(
             length_scale=self.length_scale,
@@ -215,8 +223,7 @@ class LearnerConfig:
         # existed stay valid (the key hashes this dict).
         if d["warm_start"] is None:
             del d["warm_start"]
-        if d["gp"]["class_prior"] == DEFAULTS.class_prior:
-            del d["gp"]["class_prior"]
+        d["gp"] = self.gp.to_dict()
         return d
 
     @classmethod
