@@ -29,10 +29,10 @@ from aptkt import __version__
 from aptkt.actions import PAPER_ACTIONS
 from aptkt.data import DatasetReader
 from aptkt.errors import ConfigError
-from aptkt.experiments.batch import build_priors, run_batch
+from aptkt.experiments.batch import StoredSteps, build_priors, run_batch
 from aptkt.experiments.executors import Executor, make_executor
 from aptkt.experiments.figures import FIGURES
-from aptkt.experiments.figures.base import METHODS, Context
+from aptkt.experiments.figures.base import METHODS, Context, Section
 from aptkt.experiments.report import markdown_table, render_report
 from aptkt.experiments.run_store import RunStore, data_fingerprint, run_key
 from aptkt.experiments.runs import label
@@ -140,6 +140,32 @@ def prepare_data(
     return path, info
 
 
+@dataclass
+class FigureTask:
+    """One figure's analysis after its runs: the context, its runs' specs, the run store."""
+
+    name: str
+    ctx: Context
+    specs: Sequence[Any]
+    store: str
+
+
+def analyse_figure(task: FigureTask) -> Section:
+    """A figure's plots, tables and report section from its stored runs (one figure's rows in
+    memory at a time, see StoredSteps), and its ``specs.jsonl``."""
+    store = RunStore(Path(task.store))
+    fingerprint = task.ctx.fingerprint
+    keys = [run_key(sp, fingerprint) for sp in task.specs]
+    steps = StoredSteps(store, keys)
+    rows = [r for sp, key in zip(task.specs, keys) for r in label(sp, steps[key])]
+    section = FIGURES[task.name].analyse(task.ctx, rows)
+    del rows
+    with (task.ctx.figure_dir(task.name) / "specs.jsonl").open("w") as fh:
+        for sp, key in zip(task.specs, keys):
+            fh.write(json.dumps({"key": key, **sp.to_dict()}) + "\n")
+    return section
+
+
 def reproduce(s: ReproduceSettings) -> dict[str, Any]:
     """Run the requested figures; returns the summary also written to ``summary.json``."""
     unknown = [f for f in s.figures if f not in FIGURES]
@@ -181,22 +207,20 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
             f"{len(specs)} runs ({len(batch.steps)} distinct): {batch.computed} computed now, {batch.reused} from "
             f"{out / 'runs'}"
         )
+        t0 = time.perf_counter()
+        # The figures are analysed side by side on the executor, the largest first: each
+        # reads its own runs from the store, so no rows travel between processes, and the
+        # analysis is no longer a serial tail after the parallel runs.
+        order = sorted(s.figures, key=lambda name: -len(plans[name].specs))
+        figure_tasks = [FigureTask(n, ctx, plans[n].specs, str(out / "runs")) for n in order]
+        by_name = {}
+        for i, section in executor.imap_unordered(analyse_figure, figure_tasks):
+            by_name[order[i]] = section
+            _say(f"analysed {order[i]} ({len(by_name)}/{len(order)})")
+        sections = [by_name[name] for name in s.figures]
+        timings["analysis"] = time.perf_counter() - t0
     finally:
         executor.close()
-
-    t0 = time.perf_counter()
-    sections = []
-    for name in s.figures:
-        plan = plans[name]
-        rows = [r for sp in plan.specs for r in label(sp, batch.steps[run_key(sp, fingerprint)])]
-        section = FIGURES[name].analyse(ctx, rows)
-        del rows  # one figure's rows in memory at a time (see StoredSteps)
-        sections.append(section)
-        fig_dir = ctx.figure_dir(name)
-        with (fig_dir / "specs.jsonl").open("w") as fh:
-            for sp in plan.specs:
-                fh.write(json.dumps({"key": run_key(sp, fingerprint), **sp.to_dict()}) + "\n")
-    timings["analysis"] = time.perf_counter() - t0
     seconds = time.perf_counter() - t_start
 
     config = _config(s, scale, ctx, data_info, plans)

@@ -24,10 +24,19 @@ def write_csv(path: str | Path, rows: Iterable[Mapping[str, Any]]) -> Path:
                 keys.append(k)
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
+    # Rows are sparse (a single-action run fills one action's columns of seven): filling a
+    # blank line from each row's own keys, rather than asking every row for every column as
+    # csv.DictWriter does, writes the same bytes at a fraction of the cost on full-size runs.
+    column = {k: i for i, k in enumerate(keys)}
+    blank = [""] * len(keys)
     with tmp.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys)
-        w.writeheader()
-        w.writerows(rows)
+        w = csv.writer(fh)
+        w.writerow(keys)
+        for r in rows:
+            line = blank.copy()
+            for k, v in r.items():
+                line[column[k]] = v
+            w.writerow(line)
     tmp.replace(path)
     return path
 
