@@ -150,9 +150,10 @@ class FigureTask:
     store: str
 
 
-def analyse_figure(task: FigureTask) -> Section:
+def analyse_figure(task: FigureTask) -> tuple[Section, float]:
     """A figure's plots, tables and report section from its stored runs (one figure's rows in
-    memory at a time, see StoredSteps), and its ``specs.jsonl``."""
+    memory at a time, see StoredSteps), and its ``specs.jsonl``; and the seconds it took."""
+    t0 = time.perf_counter()
     store = RunStore(Path(task.store))
     fingerprint = task.ctx.fingerprint
     keys = [run_key(sp, fingerprint) for sp in task.specs]
@@ -163,7 +164,7 @@ def analyse_figure(task: FigureTask) -> Section:
     with (task.ctx.figure_dir(task.name) / "specs.jsonl").open("w") as fh:
         for sp, key in zip(task.specs, keys):
             fh.write(json.dumps({"key": key, **sp.to_dict()}) + "\n")
-    return section
+    return section, time.perf_counter() - t0
 
 
 def reproduce(s: ReproduceSettings) -> dict[str, Any]:
@@ -208,15 +209,19 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
             f"{out / 'runs'}"
         )
         t0 = time.perf_counter()
-        # The figures are analysed side by side on the executor, the largest first: each
-        # reads its own runs from the store, so no rows travel between processes, and the
-        # analysis is no longer a serial tail after the parallel runs.
-        order = sorted(s.figures, key=lambda name: -len(plans[name].specs))
+        # The figures are analysed side by side on the executor, the largest first (a run's
+        # rows have columns for each of its actions): each reads its own runs from the store,
+        # so no rows travel between processes, and the analysis is no longer a serial tail
+        # after the parallel runs.
+        order = sorted(
+            s.figures, key=lambda name: -sum(len(sp.actions) for sp in plans[name].specs)
+        )
         figure_tasks = [FigureTask(n, ctx, plans[n].specs, str(out / "runs")) for n in order]
         by_name = {}
-        for i, section in executor.imap_unordered(analyse_figure, figure_tasks):
+        for i, (section, seconds) in executor.imap_unordered(analyse_figure, figure_tasks):
             by_name[order[i]] = section
-            _say(f"analysed {order[i]} ({len(by_name)}/{len(order)})")
+            timings[f"analysis_{order[i]}"] = seconds
+            _say(f"analysed {order[i]} in {seconds:.1f} s ({len(by_name)}/{len(order)})")
         sections = [by_name[name] for name in s.figures]
         timings["analysis"] = time.perf_counter() - t0
     finally:
