@@ -21,7 +21,7 @@ frequencies (GPSettings.class_prior).
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass, field
+from dataclasses import replace
 from pathlib import Path
 
 
@@ -78,6 +78,7 @@ def main() -> None:
                     # The evidence choice needs one source per classifier: "multi" keeps "auto".
                     methods[k].pop("feature_space")
         base.METHODS = methods
+    gp = GPSettings()
     if args.reading == "old":
         scale = scale.with_(eps_neg=0.4)
         old = {
@@ -91,20 +92,9 @@ def main() -> None:
         for k in ("APTKT", "APTKT+aux", "APTKT-multi", base.STRESS_CUTOFF, base.STRESS_NO_CUTOFF):
             methods[k] = {**methods[k], **old}
         base.METHODS = methods
-
-        @dataclass
-        class OldContext(base.Context):
-            gp: GPSettings = field(default_factory=lambda: GPSettings(hyper_prior=None))
-
-        rep.Context = OldContext
+        gp = GPSettings(hyper_prior=None)
     if args.class_prior is not None:
-        chosen = GPSettings(class_prior=args.class_prior)
-
-        @dataclass
-        class ClassPriorContext(base.Context):
-            gp: GPSettings = field(default_factory=lambda: chosen)
-
-        rep.Context = ClassPriorContext
+        gp = replace(gp, class_prior=args.class_prior)
     rep.reproduce(
         rep.ReproduceSettings(
             figures=tuple(args.figures.split(",")),
@@ -112,6 +102,7 @@ def main() -> None:
             data=args.data,
             jobs=args.jobs,
             scale=scale,
+            gp=gp,
             progress=False,
             command=f"benches/transfer_readings.py {args.output} {args.reading} {args.data}",
         )

@@ -843,6 +843,8 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         """Class probabilities (n_samples, n_classes): one-vs-all probabilities normalised,
         after the ``class_prior`` adjustment."""
         self._check_fitted()
+        if self.class_prior not in CLASS_PRIORS:  # set_params after fit
+            raise ValueError(f"class_prior must be one of {CLASS_PRIORS}, got {self.class_prior!r}")
         if self.class_prior == "uniform":
             return uniform_class_prior(self.predict_proba_binary(X), self.class_counts_)
         return np.asarray(self._model.predict_proba(self._test_matrix(X)))
@@ -911,7 +913,11 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         meta = {
             "format": _SAVE_FORMAT,
             "params": {
-                k: _jsonable(v) for k, v in self.get_params().items() if k != "random_state"
+                k: _jsonable(v)
+                for k, v in self.get_params().items()
+                # class_prior at its default is left out: files stay readable by the
+                # versions before it, which share this format (and the prior files' keys).
+                if k != "random_state" and not (k == "class_prior" and v == DEFAULTS.class_prior)
             },
             "classes": self.classes_.tolist(),
             "sources": source_meta,

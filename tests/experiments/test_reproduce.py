@@ -17,6 +17,7 @@ from aptkt.experiments.figures import FIGURES, fig7
 from aptkt.experiments.figures.base import STRESS_CUTOFF, STRESS_NO_CUTOFF, Context
 from aptkt.experiments.reproduce import _paper_numbers
 from aptkt.experiments.scale import Scale
+from aptkt.learning import PriorKnowledge
 
 FILES = {
     "fig6": ["fig6.png", "fig6.svg", "results.csv", "curves.csv", "specs.jsonl", "report.md"],
@@ -229,3 +230,21 @@ def test_figures_name_objects_and_show_chance_and_bands(quick_run):
     fig10_svg = (quick_run / "fig10" / "fig10.svg").read_text()
     assert "row: observations of this object" in fig10_svg
     assert "column: assigned to this object" in fig10_svg and "smooth sponge" in fig10_svg
+
+
+def test_the_class_prior_option_reaches_every_model_and_the_record(tmp_path, quick_data):
+    """--class-prior uniform: recorded in config.json and in the command line of the report,
+    and the prior files are those of that setting (their names hash it)."""
+    out = tmp_path / "u"
+    argv = ["reproduce", "fig7", "--quick", "--data", str(quick_data), "-o", str(out)]
+    assert main([*argv, "--class-prior", "uniform", "--jobs", "1", "--no-progress"]) == 0
+    config = json.loads((out / "config.json").read_text())
+    assert config["gp"]["class_prior"] == "uniform"
+    assert "--class-prior uniform" in (out / "report.md").read_text()
+    priors = list((out / "priors").glob("*.npz"))
+    assert priors
+    for path in priors:
+        prior = PriorKnowledge.load(path)
+        assert {prior[a].model.class_prior for a in prior.actions} == {"uniform"}
+    with (out / "fig7" / "specs.jsonl").open() as fh:
+        assert all(json.loads(line)["config"]["gp"]["class_prior"] == "uniform" for line in fh)

@@ -111,3 +111,22 @@ def test_bad_class_prior_is_refused_and_the_setting_survives_save_and_load(tmp_p
     assert loaded.class_prior == "uniform"
     np.testing.assert_array_equal(loaded.class_counts_, [6, 6, 2])
     np.testing.assert_allclose(loaded.predict_proba(X), model.predict_proba(X), rtol=1e-12)
+
+
+def test_default_class_prior_is_not_written_so_older_readers_still_load_the_file(tmp_path):
+    X, y = make_blobs(6, 3, 2, seed=4)
+    for value, written in (("training", False), ("uniform", True)):
+        model = LaplaceGPC(random_state=0, class_prior=value).fit(X, y)
+        model.save(tmp_path / "m.npz")
+        with np.load(tmp_path / "m.npz", allow_pickle=False) as data:
+            meta = bytes(data["meta"]).decode()
+        assert ('"class_prior"' in meta) is written
+        assert LaplaceGPC.load(tmp_path / "m.npz").class_prior == value
+
+
+def test_an_unknown_class_prior_set_after_fitting_is_refused_at_prediction():
+    X, y = make_blobs(6, 3, 2, seed=4)
+    model = LaplaceGPC(random_state=0).fit(X, y)
+    model.set_params(class_prior="balanced")
+    with pytest.raises(ValueError, match="class_prior must be one of"):
+        model.predict_proba(X)

@@ -54,7 +54,8 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--class-prior",
         choices=CLASS_PRIORS,
-        help="every model's class posterior, the baseline's too: training (each object as "
+        help="the new objects' models' class posterior, the baseline's too (with --table also "
+        "the prior's, built then; a loaded --prior keeps its own): training (each object as "
         "likely as it was observed) or uniform (equally likely, whatever the learner chose to "
         "observe more often)",
     )

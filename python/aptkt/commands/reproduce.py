@@ -7,6 +7,8 @@ import os
 import sys
 from pathlib import Path
 
+from aptkt.gp import CLASS_PRIORS, DEFAULTS
+
 NAMES = ("fig6", "fig7", "fig8", "fig9", "fig10", "fig11", "all")
 
 
@@ -58,6 +60,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=0,
         help="root seed of the data, the groups and the trials (default %(default)s)",
     )
+    p.add_argument(
+        "--class-prior",
+        choices=CLASS_PRIORS,
+        default=DEFAULTS.class_prior,
+        help="every model's class posterior: training (each object as likely as it was "
+        "observed; default) or uniform (equally likely, whatever the learner chose to observe "
+        "more often); see docs/method.md",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
@@ -66,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
     from aptkt.commands._checks import at_least, input_file, output_dir
     from aptkt.errors import ConfigError
     from aptkt.experiments.reproduce import FIGURE_NAMES, ReproduceSettings, reproduce
+    from aptkt.learning import GPSettings
 
     at_least(args.jobs, 1, "--jobs")
     at_least(args.seed, 0, "--seed")
@@ -89,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         seed=args.seed,
         progress=not args.no_progress and sys.stderr.isatty(),
+        gp=GPSettings(class_prior=args.class_prior),
         command=_command(args),
     )
     try:
@@ -113,4 +125,6 @@ def _command(args: argparse.Namespace) -> str:
     if args.scheduler:
         parts.append(f"--scheduler {args.scheduler}")
     parts.append(f"--seed {args.seed}")
+    if args.class_prior != DEFAULTS.class_prior:
+        parts.append(f"--class-prior {args.class_prior}")
     return " ".join(parts)

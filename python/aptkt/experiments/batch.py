@@ -22,7 +22,8 @@ __all__ = ["BatchResult", "StoredSteps", "run_batch", "build_priors"]
 class StoredSteps(Mapping[str, list[dict[str, Any]]]):
     """Run key → step rows, read from the store when asked for. A full-size reproduction's
     rows (every classifier's hyper-parameters at every step of 3,650 runs) take gigabytes as
-    Python objects; read per figure, only one figure's rows are in memory at a time."""
+    Python objects; read per figure, only the figures being analysed (one per worker) have
+    their rows in memory."""
 
     def __init__(self, store: RunStore, keys: Sequence[str]) -> None:
         self._store = store

@@ -37,6 +37,7 @@ from aptkt.experiments.report import markdown_table, render_report
 from aptkt.experiments.run_store import RunStore, data_fingerprint, run_key
 from aptkt.experiments.runs import label
 from aptkt.experiments.scale import Scale
+from aptkt.learning import GPSettings
 from aptkt.learning.dataset import extract_features, stale_features
 from aptkt.runtime.generation import GenerationPlan, generate
 from aptkt.sim.objects import default_library
@@ -59,6 +60,8 @@ class ReproduceSettings:
     seed: int = 0
     progress: bool = True
     scale: Scale | None = None  # overrides the full / quick size (tests, custom studies)
+    #: How every model is fitted (the prior's, the baseline's, APTKT's).
+    gp: GPSettings = field(default_factory=GPSettings)
     command: str = ""
 
     def resolved_scale(self) -> Scale:
@@ -151,8 +154,9 @@ class FigureTask:
 
 
 def analyse_figure(task: FigureTask) -> tuple[Section, float]:
-    """A figure's plots, tables and report section from its stored runs (one figure's rows in
-    memory at a time, see StoredSteps), and its ``specs.jsonl``; and the seconds it took."""
+    """A figure's plots, tables and report section from its stored runs (only this figure's
+    rows in this process's memory, see StoredSteps), and its ``specs.jsonl``; and the seconds
+    it took."""
     t0 = time.perf_counter()
     store = RunStore(Path(task.store))
     fingerprint = task.ctx.fingerprint
@@ -193,6 +197,7 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
             fingerprint=fingerprint,
             output=out.resolve(),
             index=_paper_numbers(scale.objects),
+            gp=s.gp,
         )
         _say(f"planning {', '.join(s.figures)} ({scale.name} size) on {executor.description}")
         plans = {name: FIGURES[name].plan(ctx) for name in s.figures}
