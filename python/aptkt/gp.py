@@ -559,8 +559,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             raise ValueError(
                 f"fixed: unknown hyper-parameter(s) {sorted(unknown)}; choose from {list(_FIXABLE)}"
             )
-        if self.class_prior not in CLASS_PRIORS:
-            raise ValueError(f"class_prior must be one of {CLASS_PRIORS}, got {self.class_prior!r}")
+        self._check_class_prior()
         if self.approximation not in _APPROXIMATIONS:
             raise ValueError(
                 f"approximation must be one of {_APPROXIMATIONS}, got {self.approximation!r}"
@@ -768,6 +767,10 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             names += [f"transfer_lambda[{s}]" for s in range(n_lambdas)]
         return names
 
+    def _check_class_prior(self) -> None:
+        if self.class_prior not in CLASS_PRIORS:
+            raise ValueError(f"class_prior must be one of {CLASS_PRIORS}, got {self.class_prior!r}")
+
     def _check_fitted(self) -> None:
         if not hasattr(self, "_model"):
             raise _NotFitted("this LaplaceGPC is not fitted yet; call fit(X, y) first")
@@ -843,8 +846,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         """Class probabilities (n_samples, n_classes): one-vs-all probabilities normalised,
         after the ``class_prior`` adjustment."""
         self._check_fitted()
-        if self.class_prior not in CLASS_PRIORS:  # set_params after fit
-            raise ValueError(f"class_prior must be one of {CLASS_PRIORS}, got {self.class_prior!r}")
+        self._check_class_prior()  # also after fit: set_params may have changed it
         if self.class_prior == "uniform":
             return uniform_class_prior(self.predict_proba_binary(X), self.class_counts_)
         return np.asarray(self._model.predict_proba(self._test_matrix(X)))
