@@ -75,6 +75,9 @@ _SAVE_FORMAT = "aptkt.LaplaceGPC/2"
 _OLD_FORMATS = ("aptkt.LaplaceGPC/1",)
 #: Width of the "weak" hyper-prior: one standard deviation of ln ℓ or ln σ² is a factor of 10.
 _WEAK_SD = float(np.log(10.0))
+#: The same width for the ratio of two modality weights: the logits η_m (γ = softmax(η)) are
+#: independent N(0, s²), so ln(γ_a / γ_b) = η_a − η_b has standard deviation √2 s = ln 10.
+_WEAK_WEIGHT_SD = _WEAK_SD / float(np.sqrt(2.0))
 
 
 class TransferSource:
@@ -169,22 +172,28 @@ class HyperPrior:
     distance of the new observations); the signal variance gets ``ln σ² ~
     N(ln signal_variance_centre, signal_variance_sd²)``. The optimiser then maximises
     ``log p(y | θ) + log p(θ)`` instead of ``log p(y | θ)``; the reported
-    ``log_marginal_likelihood_`` stays ``log p(y | θ)``. A width of None leaves that
-    hyper-parameter flat. ``HyperPrior.weak()`` (``hyper_prior="weak"``): centred on the data
-    scale and σ² = 1, one standard deviation a factor of 10 either way.
+    ``log_marginal_likelihood_`` stays ``log p(y | θ)``. With several modalities, each
+    modality-weight logit η_m (γ = softmax(η)) gets ``η_m ~ N(0, modality_weight_sd²)``:
+    centred on equal weights, so that a classifier with too few observations to tell the
+    modalities apart does not switch one off (its flat likelihood lets the optimiser drift to
+    weights of 10⁻⁶); it also fixes the softmax's redundant direction. A width of None leaves
+    that hyper-parameter flat. ``HyperPrior.weak()`` (``hyper_prior="weak"``): centred on the
+    data scale, σ² = 1 and equal weights, one standard deviation a factor of 10 either way (of
+    ℓ_m, of σ², and of the ratio of two weights).
     """
 
     length_scale_centre: float = 1.0
     length_scale_sd: float | None = _WEAK_SD
     signal_variance_centre: float = 1.0
     signal_variance_sd: float | None = _WEAK_SD
+    modality_weight_sd: float | None = _WEAK_WEIGHT_SD
 
     def __post_init__(self) -> None:
         for name in ("length_scale_centre", "signal_variance_centre"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0):
                 raise ValueError(f"HyperPrior.{name} must be a finite number > 0, got {v!r}")
-        for name in ("length_scale_sd", "signal_variance_sd"):
+        for name in ("length_scale_sd", "signal_variance_sd", "modality_weight_sd"):
             v = getattr(self, name)
             if v is not None and not (
                 isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0
@@ -221,6 +230,9 @@ class HyperPrior:
             "prior_length_scale": None
             if self.length_scale_sd is None
             else (float(self.length_scale_centre), float(self.length_scale_sd)),
+            "prior_weight_logit": None
+            if self.modality_weight_sd is None
+            else float(self.modality_weight_sd),
         }
 
 
@@ -939,7 +951,10 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         for key in ("length_scale_bounds", "signal_variance_bounds"):
             params[key] = tuple(params[key])
         if isinstance(params.get("hyper_prior"), Mapping):
-            params["hyper_prior"] = HyperPrior(**params["hyper_prior"])
+            # Files written before the modality-weight prior existed had flat weights.
+            params["hyper_prior"] = HyperPrior(
+                **{"modality_weight_sd": None, **params["hyper_prior"]}
+            )
         model = cls(**params)
         classes = np.asarray(meta["classes"])
         y = classes[np.asarray(arrays["y"])]

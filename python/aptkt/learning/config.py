@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
 
-from aptkt.gp import CLASS_PRIORS, DEFAULTS, LaplaceGPC
+from aptkt.gp import CLASS_PRIORS, DEFAULTS, HyperPrior, LaplaceGPC
 from aptkt.learning.transfer import (
     CUTOFFS,
     FEATURE_SPACES,
@@ -35,6 +35,12 @@ class GPSettings:
         rows) from explaining its data by a flat latent function — an extremely long
         length-scale with a huge signal variance — under which λ carries no shape.
         None: plain ML-II, the paper's "maximising the log marginal likelihood".
+    modality_weight_prior : with ``hyper_prior="weak"``, whether the modality weights γ get
+        their weak prior too (default True: normal logits centred on equal weights). With one
+        observation per object the likelihood barely depends on γ, and without it each
+        one-vs-all classifier drifts to weights of 10⁻⁶ on one modality or the other, so the
+        classifiers of one action model look at different sensors. False: flat weights, the
+        reading before this prior existed (its runs and prior files keep their keys).
     class_prior : how the one-vs-all probabilities are combined into the class posterior
         (decisions, entropy, fusion, accuracy). "training" (default): as fitted, so a class
         counts as often as the learner happened to observe it. "uniform": each classifier's
@@ -54,6 +60,7 @@ class GPSettings:
     # The learner's choice, deliberately not the estimator's default (plain ML-II, as
     # scikit-learn's): see the docstring and docs/method.md.
     hyper_prior: str | None = "weak"
+    modality_weight_prior: bool = True
     class_prior: str = DEFAULTS.class_prior
 
     def __post_init__(self) -> None:
@@ -61,6 +68,10 @@ class GPSettings:
             raise ValueError(f"hyper_prior must be 'weak' or None, got {self.hyper_prior!r}")
         if self.class_prior not in CLASS_PRIORS:
             raise ValueError(f"class_prior must be one of {CLASS_PRIORS}, got {self.class_prior!r}")
+        if not isinstance(self.modality_weight_prior, bool):
+            raise ValueError(
+                f"modality_weight_prior must be True or False, got {self.modality_weight_prior!r}"
+            )
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -68,7 +79,27 @@ class GPSettings:
         # the setting existed stay valid (they hash this dict).
         if d["class_prior"] == DEFAULTS.class_prior:
             del d["class_prior"]
+        # The keys of runs and prior files from before the weight prior describe flat weights:
+        # that reading leaves the field out, the new default puts it in (and so gets new keys).
+        if self.hyper_prior is None or not self.modality_weight_prior:
+            del d["modality_weight_prior"]
         return d
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> GPSettings:
+        """The inverse of :meth:`to_dict` (a dict without ``modality_weight_prior`` was written
+        with flat weights)."""
+        data = dict(data)
+        if data.get("hyper_prior", "weak") is not None:
+            data.setdefault("modality_weight_prior", False)
+        return cls(**data)
+
+    def resolved_hyper_prior(self) -> HyperPrior | None:
+        """The estimator's ``hyper_prior`` for these settings."""
+        if self.hyper_prior is None:
+            return None
+        weak = HyperPrior.weak()
+        return weak if self.modality_weight_prior else replace(weak, modality_weight_sd=None)
 
     def make(self, modalities: Mapping[str, list[int]], random_state: int) -> LaplaceGPC:
         return LaplaceGPC(
@@ -80,7 +111,7 @@ class GPSettings:
             approximation=self.approximation,
             random_state=random_state,
             n_jobs=self.n_jobs,
-            hyper_prior=self.hyper_prior,
+            hyper_prior=self.resolved_hyper_prior(),
             class_prior=self.class_prior,
         )
 
@@ -229,7 +260,7 @@ class LearnerConfig:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> LearnerConfig:
         data = dict(data)
-        gp = GPSettings(**data.pop("gp", {}))
+        gp = GPSettings.from_dict(data.pop("gp", {}))
         known = {f.name for f in fields(cls)}
         unknown = set(data) - known
         if unknown:

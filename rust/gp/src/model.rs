@@ -48,6 +48,10 @@ pub struct HyperPrior {
     /// Centre relative to each modality's data scale (the median pairwise distance of the
     /// target rows) and standard deviation of ln ℓ_m; None: flat.
     pub length_scale: Option<(f64, f64)>,
+    /// Standard deviation of each modality-weight logit η_m (γ = softmax(η)), centred on 0:
+    /// equal weights, each logit pinned so that the softmax's redundant direction is
+    /// determined. None: flat. Ignored with a single modality (no weights).
+    pub weight_logit: Option<f64>,
 }
 
 /// One normal term of the log hyper-prior: theta index, mean and standard deviation.
@@ -172,6 +176,13 @@ impl ModelSpec {
                             "the {name} hyper-prior needs a centre > 0 and a width > 0, got ({centre}, {sd})"
                         )));
                     }
+                }
+            }
+            if let Some(sd) = prior.weight_logit {
+                if !positive(sd) {
+                    return Err(GpError::InvalidInput(format!(
+                        "the modality-weight hyper-prior needs a width > 0, got {sd}"
+                    )));
                 }
             }
         }
@@ -316,6 +327,13 @@ impl BinaryProblem {
                     mean: (factor * self.dist.median_distance(m)).ln(),
                     sd,
                 });
+            }
+        }
+        if let Some(sd) = prior.weight_logit {
+            for m in 0..layout.n_modalities {
+                if let Some(index) = layout.weight(m) {
+                    terms.push(PriorTerm { index, mean: 0.0, sd });
+                }
             }
         }
         terms

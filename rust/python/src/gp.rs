@@ -134,6 +134,9 @@ pub struct FitSettings {
     /// MAP-II hyper-prior on each ℓ_m: (centre relative to the modality's data scale, sd of
     /// ln ℓ_m); None: flat.
     prior_length_scale: Option<(f64, f64)>,
+    /// MAP-II hyper-prior on each modality-weight logit: sd of a normal centred on 0 (equal
+    /// weights); None: flat.
+    prior_weight_logit: Option<f64>,
 }
 
 #[pymethods]
@@ -146,7 +149,7 @@ impl FitSettings {
         free_length_scales, free_weights, free_lambda, signal_variance_bounds,
         length_scale_bounds, optimize, n_restarts, seed, max_iter, newton_max_iter, newton_tol,
         max_jitter, approximation, n_threads, prior_signal_variance = None,
-        prior_length_scale = None
+        prior_length_scale = None, prior_weight_logit = None
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -171,6 +174,7 @@ impl FitSettings {
         n_threads: usize,
         prior_signal_variance: Option<(f64, f64)>,
         prior_length_scale: Option<(f64, f64)>,
+        prior_weight_logit: Option<f64>,
     ) -> Self {
         FitSettings {
             modalities,
@@ -194,6 +198,7 @@ impl FitSettings {
             n_threads,
             prior_signal_variance,
             prior_length_scale,
+            prior_weight_logit,
         }
     }
 
@@ -205,7 +210,7 @@ impl FitSettings {
              free_lambda={}, signal_variance_bounds={:?}, length_scale_bounds={:?}, \
              optimize={}, n_restarts={}, seed={}, max_iter={}, newton_max_iter={}, \
              newton_tol={:?}, max_jitter={:?}, approximation={:?}, n_threads={}, \
-             prior_signal_variance={}, prior_length_scale={})",
+             prior_signal_variance={}, prior_length_scale={}, prior_weight_logit={})",
             self.modalities,
             self.signal_variance,
             self.length_scales,
@@ -226,7 +231,9 @@ impl FitSettings {
             self.approximation,
             self.n_threads,
             py_pair(self.prior_signal_variance),
-            py_pair(self.prior_length_scale)
+            py_pair(self.prior_length_scale),
+            self.prior_weight_logit
+                .map_or_else(|| "None".to_string(), |sd| format!("{sd:?}"))
         )
     }
 }
@@ -262,10 +269,14 @@ impl FitSettings {
         spec.newton.tol = self.newton_tol;
         spec.max_jitter = self.max_jitter;
         spec.predictive = parse_predictive(&self.approximation)?;
-        if self.prior_signal_variance.is_some() || self.prior_length_scale.is_some() {
+        if self.prior_signal_variance.is_some()
+            || self.prior_length_scale.is_some()
+            || self.prior_weight_logit.is_some()
+        {
             spec.hyper_prior = Some(HyperPrior {
                 signal_variance: self.prior_signal_variance,
                 length_scale: self.prior_length_scale,
+                weight_logit: self.prior_weight_logit,
             });
         }
         Ok(spec)
