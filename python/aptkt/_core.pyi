@@ -91,6 +91,7 @@ class FitSettings:
     n_threads: int
     prior_signal_variance: tuple[float, float] | None
     prior_length_scale: tuple[float, float] | None
+    prior_weight_logit: float | None
     def __init__(
         self,
         *,
@@ -115,6 +116,7 @@ class FitSettings:
         n_threads: int,
         prior_signal_variance: tuple[float, float] | None = None,
         prior_length_scale: tuple[float, float] | None = None,
+        prior_weight_logit: float | None = None,
     ) -> None: ...
 
 def fit_gpc(

@@ -221,7 +221,7 @@ class HyperPrior:
             f"hyper_prior must be None, 'weak' or a HyperPrior, got {type(value).__name__}"
         )
 
-    def settings(self) -> dict[str, tuple[float, float] | None]:
+    def settings(self) -> dict[str, tuple[float, float] | float | None]:
         """The binding's fields."""
         return {
             "prior_signal_variance": None

@@ -84,11 +84,15 @@ def test_run_key_covers_what_changes_the_result_and_nothing_else():
 
 
 def test_settings_added_later_leave_stored_keys_as_they_were():
-    """Keys computed by aptkt 0.1.0 before warm_start and class_prior existed (commit 1fed19f):
-    a store or prior file from then must still be found, or a resumed run recomputes it all."""
+    """Keys computed by aptkt 0.1.0 before warm_start, class_prior and the modality-weight
+    prior existed (commit 1fed19f): a store or prior file from then must still be found, or a
+    resumed run recomputes it all. Those runs had flat modality weights, so their keys belong
+    to ``modality_weight_prior=False``; the new default must get keys of its own, or a resumed
+    store would hand out results computed without the prior."""
+    flat = GPSettings(modality_weight_prior=False)
     spec = RunSpec(
         method="APTKT",
-        config=LearnerConfig(),
+        config=LearnerConfig(gp=flat),
         data="/d/a.h5",
         actions=("P1", "S1"),
         new_objects=("a", "b"),
@@ -106,12 +110,18 @@ def test_settings_added_later_leave_stored_keys_as_they_were():
         trials=(0, 1, 2),
         seed=3,
         directory="/p",
+        gp={"modality_weight_prior": False},
     )
     assert task.key == "4596257baaf0144904e0"
+    default = replace(spec, config=LearnerConfig())
+    assert run_key(default, "fp") != run_key(spec, "fp")
+    assert replace(task, gp=None).key != task.key
     # A non-default value is part of both keys.
-    uniform = GPSettings(class_prior="uniform")
+    uniform = GPSettings(class_prior="uniform", modality_weight_prior=False)
     assert run_key(replace(spec, config=LearnerConfig(gp=uniform)), "fp") != run_key(spec, "fp")
-    assert replace(task, gp={"class_prior": "uniform"}).key != task.key
+    assert (
+        replace(task, gp={"class_prior": "uniform", "modality_weight_prior": False}).key != task.key
+    )
 
 
 def test_store_round_trip_and_damaged_files(tmp_path):

@@ -190,6 +190,8 @@ def test_log_hyper_prior_matches_its_formula():
     want = norm.logpdf(theta[0], 0.0, 1.5)
     for m, cols in enumerate([[0, 1], [2, 3]]):
         want += norm.logpdf(theta[1 + m], np.log(2.0 * _median_scale(X[:, cols])), 0.8)
+        # The weight logits (theta[3], theta[4]): centred on equal weights, ratio sd ln 10.
+        want += norm.logpdf(theta[3 + m], 0.0, np.log(10.0) / np.sqrt(2.0))
     np.testing.assert_allclose(model.log_hyper_prior_, want, rtol=1e-12)
     np.testing.assert_allclose(
         model.log_marginal_likelihood(include_prior=True),
@@ -252,6 +254,32 @@ def test_hyper_prior_values_are_checked():
     assert flat_sv.log_hyper_prior_[0] - both.log_hyper_prior_[0] == pytest.approx(
         -norm.logpdf(0.0, 0.0, np.log(10.0))
     )
+    with pytest.raises(ValueError, match="modality_weight_sd"):
+        HyperPrior(modality_weight_sd=0.0)
+
+
+def test_weak_weight_prior_keeps_an_ill_determined_model_on_both_modalities():
+    # One observation per class: the likelihood barely depends on the modality weights, and
+    # with flat weights the optimiser switches one modality off in some classifier.
+    X, y = make_blobs(1, 6, 4, spread=2.0, seed=3)
+    kw = dict(modalities=[[0, 1], [2, 3]], n_restarts=2, random_state=0)
+    flat = LaplaceGPC(hyper_prior=HyperPrior(modality_weight_sd=None), **kw).fit(X, y)
+    weak = LaplaceGPC(hyper_prior="weak", **kw).fit(X, y)
+
+    def smallest_weight(model):
+        return min(min(hp["modality_weights"].values()) for hp in model.hyperparameters_.values())
+
+    assert smallest_weight(flat) < 0.01
+    assert smallest_weight(weak) > 0.2
+    # Where the data do tell the modalities apart, the prior does not hide it: columns 2-3
+    # are pure noise, columns 0-1 separate the classes.
+    rng = np.random.default_rng(5)
+    Xi, yi = make_blobs(25, 2, 2, spread=0.4, seed=6)
+    Xd = np.hstack([Xi, rng.normal(size=(Xi.shape[0], 2))])
+    informed = LaplaceGPC(hyper_prior="weak", **kw).fit(Xd, yi)
+    weights = next(iter(informed.hyperparameters_.values()))["modality_weights"]
+    informative = list(weights.values())[0]
+    assert informative > 0.75, weights
 
 
 # -- named results, binary probabilities, starting values ------------------------------------
@@ -349,6 +377,14 @@ def test_save_round_trip_with_labelled_multi_sources_and_a_prior(tmp_path):
     np.testing.assert_allclose(loaded.log_hyper_prior_, model.log_hyper_prior_, rtol=1e-12)
     assert loaded.hyperparameters_ == model.hyperparameters_
     assert loaded.hyper_prior == model.hyper_prior
+    # A file from before the modality-weight prior: its hyper-prior had flat weights.
+    state = model.state()
+    meta = json.loads(bytes(state["meta"]).decode())
+    del meta["params"]["hyper_prior"]["modality_weight_sd"]
+    state["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+    older = LaplaceGPC.from_state(state)
+    assert older.hyper_prior.modality_weight_sd is None
+    assert older.hyper_prior.length_scale_sd == 1.0
 
 
 def _version_1_state(model):

@@ -711,6 +711,27 @@ def test_class_prior_is_training_by_default_and_not_in_the_recorded_config():
         GPSettings(class_prior="balanced")
 
 
+def test_modality_weight_prior_is_on_by_default_and_recorded_so_old_runs_keep_their_reading():
+    from aptkt.gp import HyperPrior
+
+    weak = GPSettings()
+    made = weak.make({"a": [0], "b": [1]}, random_state=0).hyper_prior
+    assert HyperPrior.resolve(made) == HyperPrior.weak()
+    assert HyperPrior.weak().modality_weight_sd == pytest.approx(np.log(10.0) / np.sqrt(2.0))
+    flat = GPSettings(modality_weight_prior=False)
+    made = flat.make({"a": [0], "b": [1]}, random_state=0).hyper_prior
+    assert made.modality_weight_sd is None
+    assert made.length_scale_sd == HyperPrior.weak().length_scale_sd
+    # Recorded at its default; a record without it was written with flat weights.
+    assert weak.to_dict()["modality_weight_prior"] is True
+    assert "modality_weight_prior" not in flat.to_dict()
+    for gp in (weak, flat, GPSettings(hyper_prior=None)):
+        cfg = LearnerConfig(gp=gp)
+        assert LearnerConfig.from_dict(cfg.to_dict()) == cfg
+    with pytest.raises(ValueError, match="modality_weight_prior"):
+        GPSettings(modality_weight_prior="yes")
+
+
 def test_the_learner_takes_the_actively_chosen_counts_out_of_its_posteriors(world):
     for class_prior in ("uniform", "training"):
         learner, run = _run(

@@ -94,12 +94,12 @@ class GPSettings:
             data.setdefault("modality_weight_prior", False)
         return cls(**data)
 
-    def resolved_hyper_prior(self) -> HyperPrior | None:
-        """The estimator's ``hyper_prior`` for these settings."""
-        if self.hyper_prior is None:
-            return None
-        weak = HyperPrior.weak()
-        return weak if self.modality_weight_prior else replace(weak, modality_weight_sd=None)
+    def resolved_hyper_prior(self) -> str | HyperPrior | None:
+        """The estimator's ``hyper_prior`` for these settings ("weak" by name at the default, so
+        that saved models stay readable by versions that know no other field)."""
+        if self.hyper_prior is None or self.modality_weight_prior:
+            return self.hyper_prior
+        return replace(HyperPrior.weak(), modality_weight_sd=None)
 
     def make(self, modalities: Mapping[str, list[int]], random_state: int) -> LaplaceGPC:
         return LaplaceGPC(
