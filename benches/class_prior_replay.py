@@ -56,7 +56,7 @@ def main() -> None:
                 classes = np.array([str(c) for c in lrn.model.classes_])
                 truth = np.array([str(o) for o in test[action].objects])
                 binary = lrn.model.predict_proba_binary(lrn._test_cache[1])
-                adjusted = uniform_class_prior(binary, lrn.model.class_counts_)
+                adjusted = uniform_class_prior(binary, lrn.model.base_rates_)
                 training[record.step].append(lrn.test_accuracy())
                 uniform[record.step].append(float(np.mean(classes[adjusted.argmax(1)] == truth)))
                 most = classes[np.argmax(lrn.model.class_counts_)]

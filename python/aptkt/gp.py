@@ -445,16 +445,25 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         How often each class is taken to occur when the one-vs-all probabilities are combined
         into ``predict_proba``. "training" (default, as scikit-learn): as the classifiers
         learnt it, i.e. as often as among the training labels. "uniform": each binary
-        classifier's odds are moved from its training labels' base rate n_c / n to 1 / K
-        before normalising (the prior-shift adjustment of Saerens, Latinne & Decaestecker,
-        2002) — for training sets whose class counts were chosen by whoever collected them
-        (an active learner), not drawn from the classes' frequencies. With equal class counts
-        both agree. ``predict_proba_binary`` is not adjusted.
+        classifier's odds are moved from its training labels' base rate to 1 / K before
+        normalising (the prior-shift adjustment of Saerens, Latinne & Decaestecker, 2002) — for
+        training sets whose class counts were chosen by whoever collected them (an active
+        learner), not drawn from the classes' frequencies. A classifier's base rate is the
+        share of positives among *all* the labels it was fitted on, its source tasks' rows
+        included (``base_rates_``). With equal class counts and no sources both settings agree.
+        ``predict_proba_binary`` is not adjusted, and ``predict_proba(X,
+        class_prior="training")`` gives the unadjusted posterior whatever the setting.
 
     Attributes
     ----------
     classes_ : ndarray
         Class labels in sorted order.
+    class_counts_ : ndarray of shape (n_classes,)
+        Training labels per class (the rows of ``X``; source rows not counted).
+    base_rates_ : ndarray of shape (n_classes,)
+        Each one-vs-all classifier's share of positive labels among all the rows it was fitted
+        on: its class's rows of ``X`` plus its source tasks' positives, over the rows of ``X``
+        plus its source tasks' rows. What ``class_prior="uniform"`` moves to 1 / K.
     theta_ : ndarray of shape (n_classifiers, n_hyperparameters)
         Fitted hyper-parameters in log space (see ``hyperparameter_names_``); one row per
         one-vs-all classifier (a single classifier when there are two classes and no transfer).
@@ -687,6 +696,13 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         self._model = model
         self.classes_ = classes
         self.class_counts_ = counts
+        positives = counts.astype(np.float64)
+        totals = np.full(classes.size, float(counts.sum()))
+        for label, lst in used.items():
+            k = int(np.flatnonzero(classes == label)[0])
+            positives[k] += sum(float((s.labels > 0).sum()) for s in lst)
+            totals[k] += sum(s.labels.size for s in lst)
+        self.base_rates_ = positives / totals
         self.n_features_in_ = X.shape[1]
         self.X_train_ = X
         self.y_train_ = y
@@ -779,9 +795,10 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             names += [f"transfer_lambda[{s}]" for s in range(n_lambdas)]
         return names
 
-    def _check_class_prior(self) -> None:
-        if self.class_prior not in CLASS_PRIORS:
-            raise ValueError(f"class_prior must be one of {CLASS_PRIORS}, got {self.class_prior!r}")
+    def _check_class_prior(self, override: str | None = None) -> None:
+        for value in (self.class_prior,) if override is None else (self.class_prior, override):
+            if value not in CLASS_PRIORS:
+                raise ValueError(f"class_prior must be one of {CLASS_PRIORS}, got {value!r}")
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "_model"):
@@ -854,13 +871,15 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         self._check_fitted()
         return np.asarray(self._model.predict_proba_binary(self._test_matrix(X)))
 
-    def predict_proba(self, X: Any) -> np.ndarray:
+    def predict_proba(self, X: Any, *, class_prior: str | None = None) -> np.ndarray:
         """Class probabilities (n_samples, n_classes): one-vs-all probabilities normalised,
-        after the ``class_prior`` adjustment."""
+        after the ``class_prior`` adjustment (the estimator's setting unless given here; the
+        training observations themselves, drawn with the training frequencies, are scored
+        with ``class_prior="training"``)."""
         self._check_fitted()
-        self._check_class_prior()  # also after fit: set_params may have changed it
-        if self.class_prior == "uniform":
-            return uniform_class_prior(self.predict_proba_binary(X), self.class_counts_)
+        self._check_class_prior(class_prior)  # also after fit: set_params may have changed it
+        if (self.class_prior if class_prior is None else class_prior) == "uniform":
+            return uniform_class_prior(self.predict_proba_binary(X), self.base_rates_)
         return np.asarray(self._model.predict_proba(self._test_matrix(X)))
 
     def predict(self, X: Any) -> np.ndarray:
@@ -987,14 +1006,16 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             return cls.from_state({k: data[k] for k in data.files})
 
 
-def uniform_class_prior(binary: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """One-vs-all probabilities (n_samples, K) of classifiers trained on ``counts`` labels per
-    class, with each classifier's base rate n_c / n replaced by 1 / K (in log-odds), then
-    normalised over the classes. A probability of exactly 0 or 1 stays there."""
-    counts = np.asarray(counts, dtype=np.float64)
-    k = counts.size
-    n = counts.sum()
-    shift = np.log(1.0 / (k - 1)) - np.log(counts / (n - counts))
+def uniform_class_prior(binary: np.ndarray, base_rates: np.ndarray) -> np.ndarray:
+    """One-vs-all probabilities (n_samples, K) of classifiers whose training labels were
+    positive at the rates ``base_rates`` (K,), each rate replaced by 1 / K (in log-odds), then
+    normalised over the classes. A probability of exactly 0 or 1 stays there. (Without source
+    tasks the rates are the class counts over their sum.)"""
+    rates = np.asarray(base_rates, dtype=np.float64)
+    if rates.ndim != 1 or not np.all((rates > 0) & (rates < 1)):
+        raise ValueError(f"base_rates must be K rates strictly between 0 and 1, got {rates}")
+    k = rates.size
+    shift = np.log(1.0 / (k - 1)) - np.log(rates / (1.0 - rates))
     adjusted = expit(logit(np.asarray(binary, dtype=np.float64)) + shift)
     total = adjusted.sum(axis=1, keepdims=True)
     uniform = np.full_like(adjusted, 1.0 / k)

@@ -11,14 +11,14 @@ from aptkt.gp import LaplaceGPC, uniform_class_prior
 from .conftest import make_blobs
 
 
-def bayes_reweighted(binary, counts):
+def bayes_reweighted(binary, counts, totals=None):
     """Reference: each binary posterior re-weighted by Bayes' rule from the training prior
-    π_c = n_c / n to π' = 1 / K (posterior ∝ likelihood × prior, for y = +1 and y = −1),
-    then normalised over the classes."""
+    π_c = n_c / n (positives over all labels of that classifier) to π' = 1 / K (posterior ∝
+    likelihood × prior, for y = +1 and y = −1), then normalised over the classes."""
     binary = np.asarray(binary, dtype=float)
     counts = np.asarray(counts, dtype=float)
     k = counts.size
-    pi = counts / counts.sum()
+    pi = counts / (counts.sum() if totals is None else np.asarray(totals, dtype=float))
     up = binary * (1 / k) / pi
     down = (1 - binary) * (1 - 1 / k) / (1 - pi)
     adjusted = up / (up + down)
@@ -37,13 +37,16 @@ probabilities = st.floats(1e-6, 1 - 1e-6)
 def test_adjustment_is_bayes_rule_from_training_to_uniform_base_rates(data, k, n_rows):
     binary = data.draw(hnp.arrays(np.float64, (n_rows, k), elements=probabilities))
     counts = np.array(data.draw(st.lists(st.integers(1, 30), min_size=k, max_size=k)))
-    out = uniform_class_prior(binary, counts)
+    out = uniform_class_prior(binary, counts / counts.sum())
     np.testing.assert_allclose(out, bayes_reweighted(binary, counts), rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(out.sum(axis=1), 1.0, rtol=1e-12)
     # Relabelling the classes relabels the output.
     perm = np.array(data.draw(st.permutations(range(k))))
     np.testing.assert_allclose(
-        uniform_class_prior(binary[:, perm], counts[perm]), out[:, perm], rtol=1e-9, atol=1e-12
+        uniform_class_prior(binary[:, perm], counts[perm] / counts.sum()),
+        out[:, perm],
+        rtol=1e-9,
+        atol=1e-12,
     )
 
 
@@ -57,15 +60,47 @@ def test_adjustment_is_bayes_rule_from_training_to_uniform_base_rates(data, k, n
 def test_equal_class_counts_leave_the_normalised_posterior_unchanged(binary, n):
     counts = np.full(binary.shape[1], n)
     np.testing.assert_allclose(
-        uniform_class_prior(binary, counts),
+        uniform_class_prior(binary, counts / counts.sum()),
         binary / binary.sum(axis=1, keepdims=True),
         rtol=1e-12,
     )
 
 
 def test_certain_classifiers_stay_certain_and_all_zero_rows_become_uniform():
-    out = uniform_class_prior(np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]), [5, 1, 1])
+    out = uniform_class_prior(np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]), [5 / 7, 1 / 7, 1 / 7])
     np.testing.assert_array_equal(out, [[1.0, 0.0, 0.0], [1 / 3, 1 / 3, 1 / 3]])
+    with pytest.raises(ValueError, match="base_rates"):
+        uniform_class_prior(np.full((1, 2), 0.5), [1.0, 0.0])
+
+
+def test_a_classifier_with_a_source_task_is_moved_from_the_base_rate_it_was_fitted_on():
+    # Class 0's classifier also learns from a source task (4 positives, 8 negatives): its
+    # labels are 2 + 4 positive of 6 + 12, not 2 of 6, and that is the rate Bayes' rule must
+    # move to 1/K. (Counting the new rows alone over-corrects a transferring classifier.)
+    from aptkt.gp import TransferSource
+
+    X, y = make_blobs(2, 3, 2, spread=1.0, seed=8)
+    Xs, _ = make_blobs(4, 3, 2, spread=1.0, seed=9)
+    ys = np.where(np.arange(12) < 4, 1.0, -1.0)
+    Xt = np.random.default_rng(3).normal(scale=2, size=(40, 2))
+    model = LaplaceGPC(random_state=0, class_prior="uniform").fit(
+        X, y, sources={0: TransferSource(Xs, ys, transfer_lambda=0.7)}
+    )
+    np.testing.assert_allclose(model.base_rates_, [6 / 18, 2 / 6, 2 / 6])
+    binary = model.predict_proba_binary(Xt)
+    np.testing.assert_allclose(
+        model.predict_proba(Xt),
+        bayes_reweighted(binary, [6, 2, 2], totals=[18, 6, 6]),
+        rtol=1e-9,
+    )
+    # The unadjusted posterior on request, whatever the setting.
+    np.testing.assert_allclose(
+        model.predict_proba(Xt, class_prior="training"),
+        binary / binary.sum(axis=1, keepdims=True),
+        rtol=1e-12,
+    )
+    with pytest.raises(ValueError, match="class_prior must be one of"):
+        model.predict_proba(Xt, class_prior="balanced")
 
 
 def test_balanced_labels_give_the_same_model_either_way():

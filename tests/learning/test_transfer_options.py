@@ -13,6 +13,7 @@ from aptkt.learning import (
     PoolEnvironment,
     PriorKnowledge,
 )
+from aptkt.learning.active import entropy
 from aptkt.learning.learner import hyperparameters
 from aptkt.learning.prior import binary_probabilities
 from aptkt.learning.transfer import decide_transfer
@@ -744,11 +745,20 @@ def test_the_learner_takes_the_actively_chosen_counts_out_of_its_posteriors(worl
             counts = np.array([np.sum(lrn.observations.objects == c) for c in lrn.model.classes_])
             np.testing.assert_array_equal(lrn.model.class_counts_, counts)
             expected = (
-                uniform_class_prior(binary, counts)
+                uniform_class_prior(binary, counts / counts.sum())
                 if class_prior == "uniform"
                 else binary / binary.sum(axis=1, keepdims=True)
             )
             np.testing.assert_allclose(lrn.test_posteriors, expected, rtol=1e-9)
+            # The selection scores the training observations under the frequencies they were
+            # drawn with, whatever the setting.
+            fitted = lrn.model.predict_proba_binary(lrn.model.X_train_)
+            np.testing.assert_allclose(
+                lrn.train_entropy,
+                entropy(fitted / fitted.sum(axis=1, keepdims=True)),
+                rtol=1e-9,
+                atol=1e-12,
+            )
         # Four observations after the initial round over 2 actions × 3 objects: no split of 4
         # gives every object of both actions the same count, so the counts are uneven
         # somewhere and the two settings are not the same posterior there.

@@ -236,7 +236,11 @@ class ActionLearner:
             )
             self.model, X = self._fit(pipeline, step, X_prior)
         self.space = self._space_name(pipeline)
-        self.train_entropy = entropy(self.model.predict_proba(X))
+        # The training observations were drawn with the training frequencies: their own
+        # posterior keeps them. Scoring them under the uniform prior would make the object the
+        # learner observed most look the least certain, and the learner would observe it again
+        # (measured: learning curves that stop rising).
+        self.train_entropy = entropy(self.model.predict_proba(X, class_prior="training"))
         self.n_updates += 1
         if self._test is not None:
             if self._test_cache is None or self._test_cache[0] is not pipeline:
