@@ -17,7 +17,7 @@ from aptkt.experiments.figures import FIGURES, fig7
 from aptkt.experiments.figures.base import STRESS_CUTOFF, STRESS_NO_CUTOFF, Context
 from aptkt.experiments.reproduce import _paper_numbers
 from aptkt.experiments.scale import Scale
-from aptkt.learning import PriorKnowledge
+from aptkt.learning import LearnerConfig, PriorKnowledge
 
 FILES = {
     "fig6": ["fig6.png", "fig6.svg", "results.csv", "curves.csv", "specs.jsonl", "report.md"],
@@ -233,18 +233,21 @@ def test_figures_name_objects_and_show_chance_and_bands(quick_run):
 
 
 def test_the_class_prior_option_reaches_every_model_and_the_record(tmp_path, quick_data):
-    """--class-prior uniform: recorded in config.json and in the command line of the report,
-    and the prior files are those of that setting (their names hash it)."""
-    out = tmp_path / "u"
+    """--class-prior training (the default is uniform): recorded in config.json and in the
+    command line of the report, and the prior files are those of that setting (their names
+    hash it)."""
+    out = tmp_path / "t"
     argv = ["reproduce", "fig7", "--quick", "--data", str(quick_data), "-o", str(out)]
-    assert main([*argv, "--class-prior", "uniform", "--jobs", "1", "--no-progress"]) == 0
+    assert main([*argv, "--class-prior", "training", "--jobs", "1", "--no-progress"]) == 0
     config = json.loads((out / "config.json").read_text())
-    assert config["gp"]["class_prior"] == "uniform"
-    assert "--class-prior uniform" in (out / "report.md").read_text()
+    assert config["gp"]["class_prior"] == "training"
+    assert "--class-prior training" in (out / "report.md").read_text()
     priors = list((out / "priors").glob("*.npz"))
     assert priors
     for path in priors:
         prior = PriorKnowledge.load(path)
-        assert {prior[a].model.class_prior for a in prior.actions} == {"uniform"}
+        assert {prior[a].model.class_prior for a in prior.actions} == {"training"}
     with (out / "fig7" / "specs.jsonl").open() as fh:
-        assert all(json.loads(line)["config"]["gp"]["class_prior"] == "uniform" for line in fh)
+        specs = [json.loads(line) for line in fh]
+    assert all(LearnerConfig.from_dict(s["config"]).gp.class_prior == "training" for s in specs)
+    assert all("class_prior" not in s["config"]["gp"] for s in specs)

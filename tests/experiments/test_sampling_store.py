@@ -86,10 +86,10 @@ def test_run_key_covers_what_changes_the_result_and_nothing_else():
 def test_settings_added_later_leave_stored_keys_as_they_were():
     """Keys computed by aptkt 0.1.0 before warm_start, class_prior and the modality-weight
     prior existed (commit 1fed19f): a store or prior file from then must still be found, or a
-    resumed run recomputes it all. Those runs had flat modality weights, so their keys belong
-    to ``modality_weight_prior=False``; the new default must get keys of its own, or a resumed
-    store would hand out results computed without the prior."""
-    flat = GPSettings(modality_weight_prior=False)
+    resumed run recomputes it all. Those runs had flat modality weights and the "training"
+    class posterior, so their keys belong to those settings; the new defaults must get keys of
+    their own, or a resumed store would hand out results computed the old way."""
+    flat = GPSettings(modality_weight_prior=False, class_prior="training")
     spec = RunSpec(
         method="APTKT",
         config=LearnerConfig(gp=flat),
@@ -110,14 +110,14 @@ def test_settings_added_later_leave_stored_keys_as_they_were():
         trials=(0, 1, 2),
         seed=3,
         directory="/p",
-        gp={"modality_weight_prior": False},
+        gp={"modality_weight_prior": False, "class_prior": "training"},
     )
     assert task.key == "4596257baaf0144904e0"
     default = replace(spec, config=LearnerConfig())
     assert run_key(default, "fp") != run_key(spec, "fp")
     assert replace(task, gp=None).key != task.key
-    # A non-default value is part of both keys.
-    uniform = GPSettings(class_prior="uniform", modality_weight_prior=False)
+    # Each later setting is part of both keys.
+    uniform = replace(flat, class_prior="uniform")
     assert run_key(replace(spec, config=LearnerConfig(gp=uniform)), "fp") != run_key(spec, "fp")
     assert (
         replace(task, gp={"class_prior": "uniform", "modality_weight_prior": False}).key != task.key

@@ -12,7 +12,7 @@ import pytest
 
 from aptkt.cli import main
 from aptkt.errors import FeatureTableError
-from aptkt.learning import Observations, PriorKnowledge
+from aptkt.learning import LearnerConfig, Observations, PriorKnowledge
 from aptkt.learning.feature_table import (
     read_feature_table,
     split_held_out,
@@ -184,7 +184,7 @@ def test_method_choices_reach_the_transferring_methods(tmp_path, capsys):
     args += ["--objects", ",".join(NEW), "--budget", "1", "--runs", "1", "-o", str(out)]
     args += ["--cutoff", "paper", "--feature-space", "evidence", "--source", "positives"]
     args += ["--relatedness", "normalised", "--evidence-margin", "lnN"]
-    args += ["--class-prior", "uniform"]
+    args += ["--class-prior", "training"]
     assert main(args) == 0, capsys.readouterr().err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["settings"]["method"] == {
@@ -195,10 +195,12 @@ def test_method_choices_reach_the_transferring_methods(tmp_path, capsys):
         "evidence_margin": None,
     }
     # The class prior is every model's, the baseline's and the prior's too.
-    assert summary["settings"]["gp"] == {"class_prior": "uniform"}
-    assert summary["learner"]["baseline"]["gp"]["class_prior"] == "uniform"
+    assert summary["settings"]["gp"] == {"class_prior": "training"}
+    # Recorded as "training" is recorded: by leaving the field out (see GPSettings.to_dict).
+    assert "class_prior" not in summary["learner"]["baseline"]["gp"]
+    assert LearnerConfig.from_dict(summary["learner"]["baseline"]).gp.class_prior == "training"
     prior = PriorKnowledge.load(out / "prior.npz")
-    assert {prior[a].model.class_prior for a in prior.actions} == {"uniform"}
+    assert {prior[a].model.class_prior for a in prior.actions} == {"training"}
     with (out / "results.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     # feature_space="evidence" weighs both spaces at step 0 (every action is updated then) and

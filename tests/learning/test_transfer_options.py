@@ -700,13 +700,14 @@ def test_warm_starts_come_only_from_a_model_in_the_same_kind_of_space(world):
 
 
 # -- the class posterior under actively chosen class counts ---------------------------------------
-def test_class_prior_is_training_by_default_and_not_in_the_recorded_config():
-    assert GPSettings().class_prior == "training"
-    # Absent at its default: run keys of results stored before the option stay valid.
-    assert "class_prior" not in LearnerConfig().to_dict()["gp"]
-    uniform = LearnerConfig(gp=GPSettings(class_prior="uniform"))
-    assert uniform.to_dict()["gp"]["class_prior"] == "uniform"
-    assert LearnerConfig.from_dict(uniform.to_dict()) == uniform
+def test_class_prior_is_uniform_by_default_and_training_is_recorded_as_before():
+    assert GPSettings().class_prior == "uniform"
+    assert LearnerConfig().to_dict()["gp"]["class_prior"] == "uniform"
+    # "training" is left out, as before the option existed: run keys of results stored then
+    # stay valid, and a record without the field reads back as "training".
+    training = LearnerConfig(gp=GPSettings(class_prior="training"))
+    assert "class_prior" not in training.to_dict()["gp"]
+    assert LearnerConfig.from_dict(training.to_dict()) == training
     assert LearnerConfig.from_dict(LearnerConfig().to_dict()) == LearnerConfig()
     with pytest.raises(ValueError, match="class_prior"):
         GPSettings(class_prior="balanced")

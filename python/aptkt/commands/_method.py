@@ -55,9 +55,9 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
         "--class-prior",
         choices=CLASS_PRIORS,
         help="the new objects' models' class posterior, the baseline's too (with --table also "
-        "the prior's, built then; a loaded --prior keeps its own): training (each object as "
-        "likely as it was observed) or uniform (equally likely, whatever the learner chose to "
-        "observe more often)",
+        "the prior's, built then; a loaded --prior keeps its own): uniform (each object "
+        "equally likely, whatever the learner chose to observe more often; default) or "
+        "training (each object as likely as it was observed)",
     )
 
 

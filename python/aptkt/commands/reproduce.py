@@ -7,7 +7,8 @@ import os
 import sys
 from pathlib import Path
 
-from aptkt.gp import CLASS_PRIORS, DEFAULTS
+from aptkt.gp import CLASS_PRIORS
+from aptkt.learning.config import GPSettings
 
 NAMES = ("fig6", "fig7", "fig8", "fig9", "fig10", "fig11", "all")
 
@@ -63,10 +64,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--class-prior",
         choices=CLASS_PRIORS,
-        default=DEFAULTS.class_prior,
-        help="every model's class posterior: training (each object as likely as it was "
-        "observed; default) or uniform (equally likely, whatever the learner chose to observe "
-        "more often); see docs/method.md",
+        default=GPSettings().class_prior,
+        help="every model's class posterior: uniform (each object equally likely, whatever the "
+        "learner chose to observe more often; default) or training (each object as likely as "
+        "it was observed); see docs/method.md",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
@@ -76,7 +77,6 @@ def run(args: argparse.Namespace) -> int:
     from aptkt.commands._checks import at_least, input_file, output_dir
     from aptkt.errors import ConfigError
     from aptkt.experiments.reproduce import FIGURE_NAMES, ReproduceSettings, reproduce
-    from aptkt.learning import GPSettings
 
     at_least(args.jobs, 1, "--jobs")
     at_least(args.seed, 0, "--seed")
@@ -125,6 +125,6 @@ def _command(args: argparse.Namespace) -> str:
     if args.scheduler:
         parts.append(f"--scheduler {args.scheduler}")
     parts.append(f"--seed {args.seed}")
-    if args.class_prior != DEFAULTS.class_prior:
+    if args.class_prior != GPSettings().class_prior:
         parts.append(f"--class-prior {args.class_prior}")
     return " ".join(parts)

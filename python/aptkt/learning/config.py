@@ -41,14 +41,15 @@ class GPSettings:
         one-vs-all classifier drifts to weights of 10⁻⁶ on one modality or the other, so the
         classifiers of one action model look at different sensors. False: flat weights, the
         reading before this prior existed (its runs and prior files keep their keys).
-    class_prior : how the one-vs-all probabilities are combined into the class posterior
-        (decisions, entropy, fusion, accuracy). "training" (default): as fitted, so a class
-        counts as often as the learner happened to observe it. "uniform": each classifier's
-        base rate among the new objects' observations is replaced by 1/K first
-        (``aptkt.gp.LaplaceGPC``), since the active learner, not the world, chose those
-        counts. Measured both ways in docs/method.md; not the default because a GP
-        classifier's probabilities carry its base rate only near its data, so the exact
-        correction over-corrects elsewhere.
+    class_prior : how the one-vs-all probabilities are combined into the class posterior of
+        new observations (decisions, fusion, accuracy). "uniform" (default): each classifier's
+        base rate — its share of positive labels, source rows included — is replaced by 1/K
+        first (``aptkt.gp.LaplaceGPC``): the active learner, not the world, chose how often each
+        object was observed, and every new object is equally likely to be met. "training": as
+        fitted, so an object counts as often as the learner happened to observe it (the
+        paper's normalised one-vs-all posterior). The selection's uncertainty scores the
+        training observations under the frequencies they were drawn with either way. Measured
+        both ways in docs/method.md.
     """
 
     n_restarts: int = DEFAULTS.n_restarts
@@ -61,7 +62,8 @@ class GPSettings:
     # scikit-learn's): see the docstring and docs/method.md.
     hyper_prior: str | None = "weak"
     modality_weight_prior: bool = True
-    class_prior: str = DEFAULTS.class_prior
+    # The learner's choice, not the estimator's default ("training", as scikit-learn's).
+    class_prior: str = "uniform"
 
     def __post_init__(self) -> None:
         if self.hyper_prior not in ("weak", None):
@@ -75,9 +77,9 @@ class GPSettings:
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
-        # Left out at its default, so that the keys of runs and prior files stored before
-        # the setting existed stay valid (they hash this dict).
-        if d["class_prior"] == DEFAULTS.class_prior:
+        # Left out at "training" (the reading before the setting existed), so that the keys of
+        # runs and prior files stored then stay valid (they hash this dict).
+        if d["class_prior"] == "training":
             del d["class_prior"]
         # The keys of runs and prior files from before the weight prior describe flat weights:
         # that reading leaves the field out, the new default puts it in (and so gets new keys).
@@ -88,10 +90,11 @@ class GPSettings:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> GPSettings:
         """The inverse of :meth:`to_dict` (a dict without ``modality_weight_prior`` was written
-        with flat weights)."""
+        with flat weights, one without ``class_prior`` with "training")."""
         data = dict(data)
         if data.get("hyper_prior", "weak") is not None:
             data.setdefault("modality_weight_prior", False)
+        data.setdefault("class_prior", "training")
         return cls(**data)
 
     def resolved_hyper_prior(self) -> str | HyperPrior | None:
