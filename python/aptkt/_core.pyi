@@ -51,6 +51,8 @@ class GpcModel:
     @property
     def log_marginal_likelihood_value(self) -> NDArray[np.float64]: ...
     @property
+    def latent_offset(self) -> NDArray[np.float64]: ...
+    @property
     def log_hyper_prior(self) -> NDArray[np.float64]: ...
     @property
     def jitter(self) -> NDArray[np.float64]: ...
@@ -92,6 +94,7 @@ class FitSettings:
     prior_signal_variance: tuple[float, float] | None
     prior_length_scale: tuple[float, float] | None
     prior_weight_logit: float | None
+    latent_mean: str
     def __init__(
         self,
         *,
@@ -117,6 +120,7 @@ class FitSettings:
         prior_signal_variance: tuple[float, float] | None = None,
         prior_length_scale: tuple[float, float] | None = None,
         prior_weight_logit: float | None = None,
+        latent_mean: str = "zero",
     ) -> None: ...
 
 def fit_gpc(

@@ -43,6 +43,7 @@ __all__ = [
     "FitDefaults",
     "HyperPrior",
     "KernelNotPositiveDefiniteError",
+    "LATENT_MEANS",
     "LaplaceGPC",
     "TransferSource",
     "kernel_matrix",
@@ -62,11 +63,15 @@ class FitDefaults:
     n_jobs: int | None = None
     hyper_prior: str | None = None
     class_prior: str = "training"
+    latent_mean: str = "zero"
 
 
 DEFAULTS = FitDefaults()
 CLASS_PRIORS = ("training", "uniform")
+LATENT_MEANS = ("zero", "base-rate")
 
+#: Parameters a saved model leaves out at their default (added after the format was fixed).
+_OMITTED_AT_DEFAULT = ("class_prior", "latent_mean")
 _FIXABLE = ("signal_variance", "length_scale", "modality_weights", "transfer_lambda")
 _APPROXIMATIONS = ("erf", "quadrature")
 _SAVE_FORMAT = "aptkt.LaplaceGPC/2"
@@ -453,6 +458,17 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         included (``base_rates_``). With equal class counts and no sources both settings agree.
         ``predict_proba_binary`` is not adjusted, and ``predict_proba(X,
         class_prior="training")`` gives the unadjusted posterior whatever the setting.
+    latent_mean : {"zero", "base-rate"}
+        The constant prior mean m of each binary classifier's latent function, f ~ GP(m, K).
+        "zero" (default, as scikit-learn): far from its training rows every classifier returns
+        ½, whatever its labels. "base-rate": m = logit ρ̃, the log-odds of the classifier's
+        share of positive labels (source rows included) under the Jeffreys prior, ρ̃ = (n₊ +
+        ½) / (n + 1): far from its data a classifier returns to the rate it was trained at
+        (widened by the latent variance σ²), so its probability carries its base rate
+        everywhere — what the "uniform" class prior's adjustment assumes, and what a binary
+        relatedness p(y = +1 | x) needs to stay low for observations unlike any of the class's.
+        m is a plug-in estimate, not optimised: the marginal likelihood and its gradient are
+        those of the GP with this fixed mean (``latent_offset_``).
 
     Attributes
     ----------
@@ -464,6 +480,8 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         Each one-vs-all classifier's share of positive labels among all the rows it was fitted
         on: its class's rows of ``X`` plus its source tasks' positives, over the rows of ``X``
         plus its source tasks' rows. What ``class_prior="uniform"`` moves to 1 / K.
+    latent_offset_ : ndarray of shape (n_classifiers,)
+        Each classifier's latent prior mean m (zeros with ``latent_mean="zero"``).
     theta_ : ndarray of shape (n_classifiers, n_hyperparameters)
         Fitted hyper-parameters in log space (see ``hyperparameter_names_``); one row per
         one-vs-all classifier (a single classifier when there are two classes and no transfer).
@@ -502,6 +520,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         n_jobs: int | None = DEFAULTS.n_jobs,
         hyper_prior: HyperPrior | str | None = DEFAULTS.hyper_prior,
         class_prior: str = DEFAULTS.class_prior,
+        latent_mean: str = DEFAULTS.latent_mean,
     ) -> None:
         self.length_scale = length_scale
         self.signal_variance = signal_variance
@@ -521,6 +540,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         self.n_jobs = n_jobs
         self.hyper_prior = hyper_prior
         self.class_prior = class_prior
+        self.latent_mean = latent_mean
 
     # -- scikit-learn conventions -------------------------------------------------------------
     # get_params / set_params / repr / score come from BaseEstimator and ClassifierMixin.
@@ -581,6 +601,8 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
                 f"fixed: unknown hyper-parameter(s) {sorted(unknown)}; choose from {list(_FIXABLE)}"
             )
         self._check_class_prior()
+        if self.latent_mean not in LATENT_MEANS:
+            raise ValueError(f"latent_mean must be one of {LATENT_MEANS}, got {self.latent_mean!r}")
         if self.approximation not in _APPROXIMATIONS:
             raise ValueError(
                 f"approximation must be one of {_APPROXIMATIONS}, got {self.approximation!r}"
@@ -625,6 +647,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             max_jitter=float(self.max_jitter),
             approximation=self.approximation,
             n_threads=_threads(self.n_jobs),
+            latent_mean=self.latent_mean,
             **(spec["hyper_prior"].settings() if spec["hyper_prior"] is not None else {}),
         )
 
@@ -702,7 +725,11 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             k = int(np.flatnonzero(classes == label)[0])
             positives[k] += sum(float((s.labels > 0).sum()) for s in lst)
             totals[k] += sum(s.labels.size for s in lst)
+        # The training frequencies themselves, whatever the latent mean: with equal counts the
+        # "uniform" adjustment must stay the identity (the Jeffreys-smoothed rate of the latent
+        # mean is a common shift that normalising would not undo).
         self.base_rates_ = positives / totals
+        self.latent_offset_ = np.asarray(model.latent_offset)
         self.n_features_in_ = X.shape[1]
         self.X_train_ = X
         self.y_train_ = y
@@ -948,9 +975,11 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             "params": {
                 k: _jsonable(v)
                 for k, v in self.get_params().items()
-                # class_prior at its default is left out: files stay readable by the
-                # versions before it, which share this format (and the prior files' keys).
-                if k != "random_state" and not (k == "class_prior" and v == DEFAULTS.class_prior)
+                # class_prior and latent_mean at their defaults are left out: files stay
+                # readable by the versions before them, which share this format (and the prior
+                # files' keys).
+                if k != "random_state"
+                and not (k in _OMITTED_AT_DEFAULT and v == getattr(DEFAULTS, k))
             },
             "classes": self.classes_.tolist(),
             "sources": source_meta,

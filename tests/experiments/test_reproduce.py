@@ -233,21 +233,28 @@ def test_figures_name_objects_and_show_chance_and_bands(quick_run):
 
 
 def test_the_class_prior_option_reaches_every_model_and_the_record(tmp_path, quick_data):
-    """--class-prior training (the default is uniform): recorded in config.json and in the
-    command line of the report, and the prior files are those of that setting (their names
-    hash it)."""
+    """--class-prior training and --latent-mean base-rate (the defaults are uniform and zero):
+    recorded in config.json and in the command line of the report, and the prior files are
+    those of these settings (their names hash them)."""
     out = tmp_path / "t"
     argv = ["reproduce", "fig7", "--quick", "--data", str(quick_data), "-o", str(out)]
-    assert main([*argv, "--class-prior", "training", "--jobs", "1", "--no-progress"]) == 0
+    argv += ["--class-prior", "training", "--latent-mean", "base-rate"]
+    assert main([*argv, "--jobs", "1", "--no-progress"]) == 0
     config = json.loads((out / "config.json").read_text())
     assert config["gp"]["class_prior"] == "training"
-    assert "--class-prior training" in (out / "report.md").read_text()
+    assert config["gp"]["latent_mean"] == "base-rate"
+    report = (out / "report.md").read_text()
+    assert "--class-prior training" in report and "--latent-mean base-rate" in report
     priors = list((out / "priors").glob("*.npz"))
     assert priors
     for path in priors:
         prior = PriorKnowledge.load(path)
-        assert {prior[a].model.class_prior for a in prior.actions} == {"training"}
+        models = [prior[a].model for a in prior.actions]
+        assert {m.class_prior for m in models} == {"training"}
+        assert {m.latent_mean for m in models} == {"base-rate"}
     with (out / "fig7" / "specs.jsonl").open() as fh:
         specs = [json.loads(line) for line in fh]
-    assert all(LearnerConfig.from_dict(s["config"]).gp.class_prior == "training" for s in specs)
+    configs = [LearnerConfig.from_dict(s["config"]) for s in specs]
+    assert all(c.gp.class_prior == "training" for c in configs)
+    assert all(c.gp.latent_mean == "base-rate" for c in configs)
     assert all("class_prior" not in s["config"]["gp"] for s in specs)

@@ -176,7 +176,7 @@ def test_live_options_are_not_mixed_up(capsys):
 def test_method_choices_reach_the_transferring_methods(tmp_path, capsys):
     """--cutoff, --feature-space, --source, --relatedness and --evidence-margin set APTKT's and
     APTKT+aux's learner (the baseline uses no prior); the chosen space is then recorded.
-    --class-prior sets every model's."""
+    --class-prior and --latent-mean set every model's."""
     table = _world_table(n_per=4)
     path = write_feature_table(tmp_path / "t.csv", table)
     out = tmp_path / "out"
@@ -184,7 +184,7 @@ def test_method_choices_reach_the_transferring_methods(tmp_path, capsys):
     args += ["--objects", ",".join(NEW), "--budget", "1", "--runs", "1", "-o", str(out)]
     args += ["--cutoff", "paper", "--feature-space", "evidence", "--source", "positives"]
     args += ["--relatedness", "normalised", "--evidence-margin", "lnN"]
-    args += ["--class-prior", "training"]
+    args += ["--class-prior", "training", "--latent-mean", "base-rate"]
     assert main(args) == 0, capsys.readouterr().err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["settings"]["method"] == {
@@ -195,12 +195,14 @@ def test_method_choices_reach_the_transferring_methods(tmp_path, capsys):
         "evidence_margin": None,
     }
     # The class prior is every model's, the baseline's and the prior's too.
-    assert summary["settings"]["gp"] == {"class_prior": "training"}
+    assert summary["settings"]["gp"] == {"class_prior": "training", "latent_mean": "base-rate"}
     # Recorded as "training" is recorded: by leaving the field out (see GPSettings.to_dict).
     assert "class_prior" not in summary["learner"]["baseline"]["gp"]
-    assert LearnerConfig.from_dict(summary["learner"]["baseline"]).gp.class_prior == "training"
+    baseline_gp = LearnerConfig.from_dict(summary["learner"]["baseline"]).gp
+    assert (baseline_gp.class_prior, baseline_gp.latent_mean) == ("training", "base-rate")
     prior = PriorKnowledge.load(out / "prior.npz")
     assert {prior[a].model.class_prior for a in prior.actions} == {"training"}
+    assert {prior[a].model.latent_mean for a in prior.actions} == {"base-rate"}
     with (out / "results.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     # feature_space="evidence" weighs both spaces at step 0 (every action is updated then) and

@@ -8,7 +8,7 @@ import argparse
 from typing import Any
 
 from aptkt.errors import ConfigError
-from aptkt.gp import CLASS_PRIORS
+from aptkt.gp import CLASS_PRIORS, LATENT_MEANS
 from aptkt.learning.transfer import CUTOFFS, FEATURE_SPACES, RELATEDNESS, SOURCE_TASKS
 
 __all__ = ["add_method_arguments", "gp_options", "method_options"]
@@ -59,11 +59,22 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
         "equally likely, whatever the learner chose to observe more often; default) or "
         "training (each object as likely as it was observed)",
     )
+    g.add_argument(
+        "--latent-mean",
+        choices=LATENT_MEANS,
+        help="the prior mean of every classifier's latent function, for the same models as "
+        "--class-prior: zero (far from its data a classifier returns to 1/2; default) or "
+        "base-rate (it returns to the rate of positives it was trained at)",
+    )
 
 
 def gp_options(args: argparse.Namespace) -> dict[str, Any]:
     """The GPSettings fields the method options set (those given on the command line)."""
-    return {} if args.class_prior is None else {"class_prior": args.class_prior}
+    return {
+        field: value
+        for field, value in (("class_prior", args.class_prior), ("latent_mean", args.latent_mean))
+        if value is not None
+    }
 
 
 def method_options(args: argparse.Namespace) -> dict[str, Any]:

@@ -7,7 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from aptkt.gp import CLASS_PRIORS
+from aptkt.gp import CLASS_PRIORS, LATENT_MEANS
 from aptkt.learning.config import GPSettings
 
 NAMES = ("fig6", "fig7", "fig8", "fig9", "fig10", "fig11", "all")
@@ -69,6 +69,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "learner chose to observe more often; default) or training (each object as likely as "
         "it was observed); see docs/method.md",
     )
+    p.add_argument(
+        "--latent-mean",
+        choices=LATENT_MEANS,
+        default=GPSettings().latent_mean,
+        help="every classifier's latent prior mean: zero (far from its data a classifier "
+        "returns to 1/2; default) or base-rate (it returns to the rate of positives it was "
+        "trained at); see docs/method.md",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
@@ -100,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         seed=args.seed,
         progress=not args.no_progress and sys.stderr.isatty(),
-        gp=GPSettings(class_prior=args.class_prior),
+        gp=GPSettings(class_prior=args.class_prior, latent_mean=args.latent_mean),
         command=_command(args),
     )
     try:
@@ -127,4 +135,6 @@ def _command(args: argparse.Namespace) -> str:
     parts.append(f"--seed {args.seed}")
     if args.class_prior != GPSettings().class_prior:
         parts.append(f"--class-prior {args.class_prior}")
+    if args.latent_mean != GPSettings().latent_mean:
+        parts.append(f"--latent-mean {args.latent_mean}")
     return " ".join(parts)

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.gp import CLASS_PRIORS, DEFAULTS, HyperPrior, LaplaceGPC
+from aptkt.gp import CLASS_PRIORS, DEFAULTS, LATENT_MEANS, HyperPrior, LaplaceGPC
 from aptkt.learning.transfer import (
     CUTOFFS,
     FEATURE_SPACES,
@@ -50,6 +50,16 @@ class GPSettings:
         paper's normalised one-vs-all posterior). The selection's uncertainty scores the
         training observations under the frequencies they were drawn with either way. Measured
         both ways in docs/method.md.
+    latent_mean : the constant prior mean of each one-vs-all classifier's latent function.
+        "zero" (default): the zero-mean GP, as in the paper; far from its data every classifier
+        returns to ½. "base-rate": the log-odds of its (smoothed) share of positive labels,
+        source rows included (``aptkt.gp.LaplaceGPC``), so that far from its data a classifier
+        returns to the rate it was trained at — what the "uniform" class prior's adjustment
+        assumes, and what keeps an old object's binary probability (the relatedness of Eq. 3)
+        below ½ for observations unlike any of its own. Measured at full size and not made the
+        default: it neither lowered the transfer rate with dissimilar priors nor repaired the
+        over-correction with many priors, and it cost the auxiliary features with 10 priors
+        4 pp at step 1 (docs/method.md).
     """
 
     n_restarts: int = DEFAULTS.n_restarts
@@ -64,12 +74,15 @@ class GPSettings:
     modality_weight_prior: bool = True
     # The learner's choice, not the estimator's default ("training", as scikit-learn's).
     class_prior: str = "uniform"
+    latent_mean: str = DEFAULTS.latent_mean
 
     def __post_init__(self) -> None:
         if self.hyper_prior not in ("weak", None):
             raise ValueError(f"hyper_prior must be 'weak' or None, got {self.hyper_prior!r}")
         if self.class_prior not in CLASS_PRIORS:
             raise ValueError(f"class_prior must be one of {CLASS_PRIORS}, got {self.class_prior!r}")
+        if self.latent_mean not in LATENT_MEANS:
+            raise ValueError(f"latent_mean must be one of {LATENT_MEANS}, got {self.latent_mean!r}")
         if not isinstance(self.modality_weight_prior, bool):
             raise ValueError(
                 f"modality_weight_prior must be True or False, got {self.modality_weight_prior!r}"
@@ -81,6 +94,8 @@ class GPSettings:
         # runs and prior files stored then stay valid (they hash this dict).
         if d["class_prior"] == "training":
             del d["class_prior"]
+        if d["latent_mean"] == "zero":  # likewise
+            del d["latent_mean"]
         # The keys of runs and prior files from before the weight prior describe flat weights:
         # that reading leaves the field out, the new default puts it in (and so gets new keys).
         if self.hyper_prior is None or not self.modality_weight_prior:
@@ -90,11 +105,13 @@ class GPSettings:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> GPSettings:
         """The inverse of :meth:`to_dict` (a dict without ``modality_weight_prior`` was written
-        with flat weights, one without ``class_prior`` with "training")."""
+        with flat weights, one without ``class_prior`` with "training", one without
+        ``latent_mean`` with "zero")."""
         data = dict(data)
         if data.get("hyper_prior", "weak") is not None:
             data.setdefault("modality_weight_prior", False)
         data.setdefault("class_prior", "training")
+        data.setdefault("latent_mean", "zero")
         return cls(**data)
 
     def resolved_hyper_prior(self) -> str | HyperPrior | None:
@@ -116,6 +133,7 @@ class GPSettings:
             n_jobs=self.n_jobs,
             hyper_prior=self.resolved_hyper_prior(),
             class_prior=self.class_prior,
+            latent_mean=self.latent_mean,
         )
 
 

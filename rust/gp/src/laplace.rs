@@ -1,5 +1,11 @@
 //! Binary Laplace-approximation GP classification with the logistic likelihood
 //! (Rasmussen & Williams, GPML, Algorithms 3.1, 3.2 and 5.1). Labels are ±1.
+//!
+//! The latent function is `f = m + g` with a constant prior mean `m` (the `offset`; 0 for the
+//! zero-mean GP) and `g ~ GP(0, K)`. The algorithms run on `g` unchanged, with the likelihood
+//! `p(y | g + m)`: every derivative of `log p(y | g + m)` with respect to `g` is the one with
+//! respect to `f`, so Algorithms 3.1 and 5.1 hold as written with `f` in the likelihood's place
+//! and `g` in the prior's (GPML §2.7, mean functions).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -55,8 +61,9 @@ pub enum ModeFailure {
 
 /// The posterior mode and everything Algorithms 3.2 and 5.1 reuse.
 pub struct Mode {
+    /// The mode of `g = f - m` (the latent function less its prior mean).
     pub f: Vec<f64>,
-    /// `a = K⁻¹ f`; at convergence it equals `∇ log p(y | f) = t - π`.
+    /// `a = K⁻¹ g`; at convergence it equals `∇ log p(y | f) = t - π`.
     pub a: Vec<f64>,
     pub pi: Vec<f64>,
     pub sw: Vec<f64>,
@@ -70,10 +77,14 @@ pub struct Mode {
     pub converged: bool,
 }
 
-/// `Ψ(f) = -½ aᵀ f + Σ log σ(y f)`.
-fn objective(a: &[f64], f: &[f64], y: &[f64]) -> f64 {
+/// `Ψ(g) = -½ aᵀ g + Σ log σ(y (g + m))`.
+fn objective(a: &[f64], f: &[f64], y: &[f64], offset: f64) -> f64 {
     let quad: f64 = a.iter().zip(f).map(|(a, f)| a * f).sum();
-    let lik: f64 = f.iter().zip(y).map(|(f, y)| log_sigmoid(y * f)).sum();
+    let lik: f64 = f
+        .iter()
+        .zip(y)
+        .map(|(f, y)| log_sigmoid(y * (f + offset)))
+        .sum();
     -0.5 * quad + lik
 }
 
@@ -83,10 +94,11 @@ fn objective(a: &[f64], f: &[f64], y: &[f64]) -> f64 {
 fn factor_b(
     k: MatRef<'_, f64>,
     f: &[f64],
+    offset: f64,
     b: &mut Mat<f64>,
 ) -> Result<(Vec<f64>, Vec<f64>), usize> {
     let n = f.len();
-    let pi: Vec<f64> = f.iter().map(|&v| sigmoid(v)).collect();
+    let pi: Vec<f64> = f.iter().map(|&v| sigmoid(v + offset)).collect();
     let sw: Vec<f64> = pi.iter().map(|p| (p * (1.0 - p)).sqrt()).collect();
     // Only the lower triangle is read; the factorisation zeroes the strictly upper one.
     for j in 0..n {
@@ -126,10 +138,11 @@ const REUSE_CONTRACTION: f64 = 0.25;
 pub fn find_mode(
     k: MatRef<'_, f64>,
     y: &[f64],
+    offset: f64,
     warm_a: Option<&[f64]>,
     cfg: &NewtonConfig,
 ) -> Result<Mode, ModeFailure> {
-    find_mode_in(k, y, warm_a, cfg, Mat::zeros(0, 0))
+    find_mode_in(k, y, offset, warm_a, cfg, Mat::zeros(0, 0))
 }
 
 /// As [`find_mode`], writing B's factor into `buffer` (resized to n × n if needed), so that a
@@ -137,6 +150,7 @@ pub fn find_mode(
 pub fn find_mode_in(
     k: MatRef<'_, f64>,
     y: &[f64],
+    offset: f64,
     warm_a: Option<&[f64]>,
     cfg: &NewtonConfig,
     buffer: Mat<f64>,
@@ -144,11 +158,11 @@ pub fn find_mode_in(
     let n = y.len();
     let mut a = vec![0.0; n];
     let mut f = vec![0.0; n];
-    let mut psi = objective(&a, &f, y);
+    let mut psi = objective(&a, &f, y, offset);
     if let Some(w) = warm_a {
         let mut fw = vec![0.0; n];
         linalg::matvec(k, w, &mut fw);
-        let psi_w = objective(w, &fw, y);
+        let psi_w = objective(w, &fw, y, offset);
         if psi_w > psi {
             a.copy_from_slice(w);
             f = fw;
@@ -178,7 +192,7 @@ pub fn find_mode_in(
             if factorisations == cfg.max_iter {
                 break;
             }
-            let (_, sw) = factor_b(k, &f, &mut l).map_err(ModeFailure::Pivot)?;
+            let (_, sw) = factor_b(k, &f, offset, &mut l).map_err(ModeFailure::Pivot)?;
             sw_fac = sw;
             factorisations += 1;
             steps_on_factor = 0;
@@ -186,9 +200,9 @@ pub fn find_mode_in(
         let exact = steps_on_factor == 0;
         steps_on_factor += 1;
         iterations += 1;
-        // b = W̃ f + ∇log p(y|f), with ∇log p = t - π(f) and t = (y + 1) / 2.
+        // b = W̃ g + ∇log p(y|f), with ∇log p = t - π(f), f = g + m and t = (y + 1) / 2.
         let b: Vec<f64> = (0..n)
-            .map(|i| sw_fac[i] * sw_fac[i] * f[i] + (0.5 * (y[i] + 1.0) - sigmoid(f[i])))
+            .map(|i| sw_fac[i] * sw_fac[i] * f[i] + (0.5 * (y[i] + 1.0) - sigmoid(f[i] + offset)))
             .collect();
         linalg::matvec(k, &b, &mut kb);
         let mut v: Vec<f64> = (0..n).map(|i| sw_fac[i] * kb[i]).collect();
@@ -201,7 +215,7 @@ pub fn find_mode_in(
         let mut psi_new;
         loop {
             linalg::matvec(k, &a_new, &mut f_new);
-            psi_new = objective(&a_new, &f_new, y);
+            psi_new = objective(&a_new, &f_new, y, offset);
             if psi_new >= psi - 1e-12 * psi.abs().max(1.0) || step < 1e-6 {
                 break;
             }
@@ -229,9 +243,9 @@ pub fn find_mode_in(
         }
         last_change = change;
     }
-    let (pi, sw) = factor_b(k, &f, &mut l).map_err(ModeFailure::Pivot)?;
+    let (pi, sw) = factor_b(k, &f, offset, &mut l).map_err(ModeFailure::Pivot)?;
     let log_det_half: f64 = (0..n).map(|i| l[(i, i)].ln()).sum();
-    let lml = objective(&a, &f, y) - log_det_half;
+    let lml = objective(&a, &f, y, offset) - log_det_half;
     Ok(Mode {
         f,
         a,
@@ -252,6 +266,7 @@ pub fn find_mode_with_jitter(
     eval: KernelEval,
     signal_variance: f64,
     y: &[f64],
+    offset: f64,
     warm_a: Option<&[f64]>,
     cfg: &NewtonConfig,
     max_jitter: f64,
@@ -272,7 +287,7 @@ pub fn find_mode_with_jitter(
     let mut buffer = Some(factor_buffer);
     loop {
         let buffer = buffer.take().unwrap_or_else(|| Mat::<f64>::zeros(0, 0));
-        match find_mode_in(eval.k.as_ref(), y, warm_a, cfg, buffer) {
+        match find_mode_in(eval.k.as_ref(), y, offset, warm_a, cfg, buffer) {
             Ok(mode) => return Ok((eval, mode)),
             Err(ModeFailure::Cancelled) => return Err(GpError::Cancelled),
             Err(ModeFailure::Pivot(pivot)) => {
@@ -352,7 +367,7 @@ mod tests {
 
     #[test]
     fn mode_satisfies_the_fixed_point() {
-        // At the mode, f = K ∇log p(y|f).
+        // At the mode, g = K ∇log p(y | g + m), for the zero mean and for a constant mean m.
         let x = Data::new(
             (0..20).map(|i| (i as f64 * 0.37).sin() * 2.0).collect(),
             10,
@@ -371,18 +386,43 @@ mod tests {
             lambdas: vec![],
         };
         let ev = KernelEval::new(&dist, &h);
-        let mode = find_mode(ev.k.as_ref(), &y, None, &NewtonConfig::default()).unwrap();
-        assert!(mode.converged);
-        let grad: Vec<f64> = (0..10).map(|i| 0.5 * (y[i] + 1.0) - mode.pi[i]).collect();
-        let mut kg = vec![0.0; 10];
-        linalg::matvec(ev.k.as_ref(), &grad, &mut kg);
-        for i in 0..10 {
-            assert!(
-                (kg[i] - mode.f[i]).abs() < 1e-6,
-                "{} vs {}",
-                kg[i],
-                mode.f[i]
-            );
+        for offset in [0.0, -1.3, 2.1] {
+            let mode =
+                find_mode(ev.k.as_ref(), &y, offset, None, &NewtonConfig::default()).unwrap();
+            assert!(mode.converged);
+            let grad: Vec<f64> = (0..10)
+                .map(|i| 0.5 * (y[i] + 1.0) - sigmoid(mode.f[i] + offset))
+                .collect();
+            let mut kg = vec![0.0; 10];
+            linalg::matvec(ev.k.as_ref(), &grad, &mut kg);
+            for i in 0..10 {
+                assert!(
+                    (kg[i] - mode.f[i]).abs() < 1e-6,
+                    "offset {offset}: {} vs {}",
+                    kg[i],
+                    mode.f[i]
+                );
+                assert!((mode.pi[i] - sigmoid(mode.f[i] + offset)).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn a_constant_mean_is_the_zero_mean_problem_with_a_shifted_likelihood() {
+        // With a kernel far smaller than the offset's effect the mode stays near g = 0, so the
+        // probabilities at the data are σ(m) and the LML tends to Σ log σ(y m).
+        let y = [1.0, -1.0, -1.0, -1.0];
+        let k = Mat::<f64>::from_fn(4, 4, |i, j| if i == j { 1e-9 } else { 0.0 });
+        let m = (1.5f64 / 3.5).ln();
+        let mode = find_mode(k.as_ref(), &y, m, None, &NewtonConfig::default()).unwrap();
+        let expected: f64 = y.iter().map(|v| log_sigmoid(v * m)).sum();
+        assert!(
+            (mode.lml - expected).abs() < 1e-8,
+            "{} vs {expected}",
+            mode.lml
+        );
+        for p in &mode.pi {
+            assert!((p - 1.5 / 5.0).abs() < 1e-8);
         }
     }
 
@@ -408,7 +448,7 @@ mod tests {
         };
         for theta in [[0.0, 0.0], [4.0, 0.5], [6.0, -0.5], [2.0, 1.5]] {
             let ev = KernelEval::new(&dist, &layout.decode(&theta).unwrap());
-            let warm = find_mode(ev.k.as_ref(), &y, None, &NewtonConfig::default())
+            let warm = find_mode(ev.k.as_ref(), &y, 0.0, None, &NewtonConfig::default())
                 .unwrap()
                 .a
                 .iter()
@@ -420,7 +460,7 @@ mod tests {
                         reuse_factorisation: reuse,
                         ..NewtonConfig::default()
                     };
-                    find_mode(ev.k.as_ref(), &y, start, &cfg).unwrap()
+                    find_mode(ev.k.as_ref(), &y, 0.0, start, &cfg).unwrap()
                 };
                 let (plain, reused) = (run(false), run(true));
                 assert!(plain.converged && reused.converged);
@@ -464,50 +504,38 @@ mod tests {
             n_lambdas: 2,
         };
         let theta = vec![1.1, -0.2, 0.4, 0.3, -0.5, 0.35, -0.6];
-        let lml = |t: &[f64]| {
-            let h = layout.decode(t).unwrap();
-            let ev = KernelEval::new(&dist, &h);
-            find_mode(
-                ev.k.as_ref(),
-                &y,
-                None,
-                &NewtonConfig {
-                    max_iter: 200,
-                    tol: 1e-14,
-                    cancel: None,
-                    reuse_factorisation: true,
-                },
-            )
-            .unwrap()
-            .lml
+        let cfg = NewtonConfig {
+            max_iter: 200,
+            tol: 1e-14,
+            cancel: None,
+            reuse_factorisation: true,
         };
-        let h = layout.decode(&theta).unwrap();
-        let ev = KernelEval::new(&dist, &h);
-        let mode = find_mode(
-            ev.k.as_ref(),
-            &y,
-            None,
-            &NewtonConfig {
-                max_iter: 200,
-                tol: 1e-14,
-                cancel: None,
-                reuse_factorisation: true,
-            },
-        )
-        .unwrap();
-        let grad = lml_gradient(&layout, &h, &dist, &ev, &mode);
-        for p in 0..theta.len() {
-            let e = 1e-5;
-            let mut tp = theta.clone();
-            let mut tm = theta.clone();
-            tp[p] += e;
-            tm[p] -= e;
-            let fd = (lml(&tp) - lml(&tm)) / (2.0 * e);
-            assert!(
-                (fd - grad[p]).abs() < 1e-6 * (1.0 + fd.abs()),
-                "param {p}: fd {fd} vs analytic {}",
-                grad[p]
-            );
+        // The zero mean and a constant mean (the gradient treats it as fixed).
+        for offset in [0.0, -1.7] {
+            let lml = |t: &[f64]| {
+                let h = layout.decode(t).unwrap();
+                let ev = KernelEval::new(&dist, &h);
+                find_mode(ev.k.as_ref(), &y, offset, None, &cfg)
+                    .unwrap()
+                    .lml
+            };
+            let h = layout.decode(&theta).unwrap();
+            let ev = KernelEval::new(&dist, &h);
+            let mode = find_mode(ev.k.as_ref(), &y, offset, None, &cfg).unwrap();
+            let grad = lml_gradient(&layout, &h, &dist, &ev, &mode);
+            for p in 0..theta.len() {
+                let e = 1e-5;
+                let mut tp = theta.clone();
+                let mut tm = theta.clone();
+                tp[p] += e;
+                tm[p] -= e;
+                let fd = (lml(&tp) - lml(&tm)) / (2.0 * e);
+                assert!(
+                    (fd - grad[p]).abs() < 1e-6 * (1.0 + fd.abs()),
+                    "offset {offset}, param {p}: fd {fd} vs analytic {}",
+                    grad[p]
+                );
+            }
         }
     }
 
@@ -524,6 +552,7 @@ mod tests {
             ev,
             1.0,
             &[1.0, -1.0],
+            0.0,
             None,
             &NewtonConfig::default(),
             1e-6,
@@ -554,6 +583,7 @@ mod tests {
             ev,
             1.0,
             &[1.0, -1.0],
+            0.0,
             None,
             &NewtonConfig {
                 max_iter: 1,

@@ -54,6 +54,27 @@ pub struct HyperPrior {
     pub weight_logit: Option<f64>,
 }
 
+/// The constant prior mean `m` of each binary classifier's latent function, `f ~ GP(m, K)`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LatentMean {
+    /// `m = 0`: far from its training rows a classifier returns ½ whatever its labels.
+    #[default]
+    Zero,
+    /// `m = logit ρ̃`, the log-odds of the classifier's share of positive labels over all its
+    /// rows (source tasks' included) under the Jeffreys prior, `ρ̃ = (n₊ + ½) / (n + 1)`: far
+    /// from its data a classifier returns the rate it was trained at, so that its probability
+    /// carries that base rate everywhere, not only near its rows. [`base_rate_offset`].
+    BaseRate,
+}
+
+/// `logit ρ̃ = ln((n₊ + ½) / (n₋ + ½))` of ±1 labels: finite for any counts (all one label
+/// included).
+pub fn base_rate_offset(y: &[f64]) -> f64 {
+    let positives = y.iter().filter(|&&v| v > 0.0).count() as f64;
+    let negatives = y.len() as f64 - positives;
+    ((positives + 0.5) / (negatives + 0.5)).ln()
+}
+
 /// One normal term of the log hyper-prior: theta index, mean and standard deviation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PriorTerm {
@@ -98,6 +119,7 @@ pub struct ModelSpec {
     pub predictive: Predictive,
     /// None: plain ML-II.
     pub hyper_prior: Option<HyperPrior>,
+    pub latent_mean: LatentMean,
 }
 
 impl ModelSpec {
@@ -119,6 +141,7 @@ impl ModelSpec {
             max_jitter: 1e-6,
             predictive: Predictive::ErfMixture,
             hyper_prior: None,
+            latent_mean: LatentMean::Zero,
         }
     }
 
@@ -227,6 +250,8 @@ pub struct BinaryFit {
     pub prior: Vec<PriorTerm>,
     pub log_prior: f64,
     pub jitter: f64,
+    /// The latent function's constant prior mean m (0 for [`LatentMean::Zero`]).
+    pub latent_offset: f64,
     /// ∇ log p(y | f̂) = t - π̂.
     grad_log_lik: Vec<f64>,
     sw: Vec<f64>,
@@ -259,6 +284,8 @@ impl Workspace {
 struct BinaryProblem {
     x: Data,
     y: Vec<f64>,
+    /// The latent prior mean m.
+    offset: f64,
     /// Shared by every classifier without sources (their rows are the same target rows).
     dist: Arc<PairDistances>,
 }
@@ -271,10 +298,11 @@ impl BinaryProblem {
         labels: &[usize],
         positive: usize,
         sources: &[Source],
-        modalities: &Modalities,
+        spec: &ModelSpec,
         center: &[f64],
         target_dist: &OnceLock<Arc<PairDistances>>,
     ) -> Self {
+        let modalities = &spec.modalities;
         let mut y: Vec<f64> = sources.iter().flat_map(|s| s.y.iter().copied()).collect();
         y.extend(
             labels
@@ -303,7 +331,11 @@ impl BinaryProblem {
             let sizes: Vec<usize> = sources.iter().map(|s| s.x.n).collect();
             Arc::new(PairDistances::new(&x, &sizes, modalities, center))
         };
-        BinaryProblem { x, y, dist }
+        let offset = match spec.latent_mean {
+            LatentMean::Zero => 0.0,
+            LatentMean::BaseRate => base_rate_offset(&y),
+        };
+        BinaryProblem { x, y, offset, dist }
     }
 
     /// The hyper-prior's terms: centred on σ² = the given centre and on each modality's data
@@ -366,6 +398,7 @@ impl BinaryProblem {
             ev,
             h.signal_variance,
             &self.y,
+            self.offset,
             warm,
             &spec.newton,
             spec.max_jitter,
@@ -403,6 +436,7 @@ impl BinaryProblem {
             prior,
             log_prior,
             jitter: ev.jitter,
+            latent_offset: self.offset,
             grad_log_lik,
             sw: mode.sw,
             l: mode.l,
@@ -725,7 +759,12 @@ impl BinaryFit {
                 .iter_mut()
                 .zip(&source_scale)
                 .for_each(|(c, s)| *c *= s);
-            mean[j] = col.iter().zip(&self.grad_log_lik).map(|(k, g)| k * g).sum();
+            mean[j] = self.latent_offset
+                + col
+                    .iter()
+                    .zip(&self.grad_log_lik)
+                    .map(|(k, g)| k * g)
+                    .sum::<f64>();
             for (c, s) in col.iter_mut().zip(&self.sw) {
                 *c *= s;
             }
@@ -932,8 +971,7 @@ fn fit_impl(
         .enumerate()
         .map(|(k, &c)| {
             let own = &sources[c];
-            let problem =
-                BinaryProblem::new(x, labels, c, own, &spec.modalities, &center, &target_dist);
+            let problem = BinaryProblem::new(x, labels, c, own, spec, &center, &target_dist);
             match &hypers {
                 Hypers::At(t) => {
                     let prior = problem.prior_terms(&layout, spec);
@@ -1074,6 +1112,7 @@ impl OneVsAll {
                     )),
                     x: c.x.clone(),
                     y: c.y.clone(),
+                    offset: c.latent_offset,
                 };
                 let (_, mode, _, mut g) = problem.evaluate(
                     &self.layout,
@@ -1271,5 +1310,55 @@ mod tests {
             with[0],
             plain[0]
         );
+    }
+
+    #[test]
+    fn base_rate_mean_returns_each_classifier_to_its_rate_far_from_its_data() {
+        // Four classes of 1, 2, 3 and 6 observations, with a 4-row source task on class 0.
+        let centers = [[0.0, 0.0], [3.0, 0.0], [0.0, 3.0], [3.0, 3.0]];
+        let mut v = Vec::new();
+        let mut y = Vec::new();
+        for (c, n) in [1usize, 2, 3, 6].into_iter().enumerate() {
+            let (b, _) = blobs(n, &centers[c..c + 1], 40 + c as u64);
+            v.extend(b.values);
+            y.extend(std::iter::repeat_n(c, n));
+        }
+        let x = Data::new(v, y.len(), 2).unwrap();
+        let (src_x, _) = blobs(4, &[[0.0, 0.0]], 50);
+        let src = Source {
+            x: src_x,
+            y: vec![1.0, -1.0, -1.0, -1.0],
+            lambda: 0.5,
+        };
+        let mut spec = ModelSpec::new(Modalities::all_columns(2));
+        spec.optimize = false;
+        spec.latent_mean = LatentMean::BaseRate;
+        let sources = [vec![src], vec![], vec![], vec![]];
+        let model = fit(&x, &y, 4, &sources, &spec).unwrap();
+        // Class 0: 1 of 12 target rows plus 1 of 4 source rows; the others k of 12.
+        let expected = [
+            (2.5f64 / 14.5).ln(),
+            (2.5f64 / 10.5).ln(),
+            (3.5f64 / 9.5).ln(),
+            (6.5f64 / 6.5).ln(),
+        ];
+        let far = Data::new(vec![1e3, -1e3], 1, 2).unwrap();
+        let (mean, var) = model.latent(&far).unwrap();
+        for c in 0..4 {
+            let m = model.classifiers[c].latent_offset;
+            assert!(
+                (m - expected[c]).abs() < 1e-12,
+                "class {c}: {m} vs {}",
+                expected[c]
+            );
+            // k* = 0 far away: the latent prior N(m, σ²) itself.
+            assert!((mean[c] - m).abs() < 1e-12, "class {c}: mean {}", mean[c]);
+            assert!((var[c] - spec.signal_variance).abs() < 1e-9);
+        }
+        // The zero mean returns every classifier to ½ there instead.
+        spec.latent_mean = LatentMean::Zero;
+        let zero = fit(&x, &y, 4, &sources, &spec).unwrap();
+        assert!(zero.latent(&far).unwrap().0.iter().all(|m| m.abs() < 1e-12));
+        assert!(zero.classifiers.iter().all(|c| c.latent_offset == 0.0));
     }
 }

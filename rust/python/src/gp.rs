@@ -4,7 +4,8 @@
 
 use aptkt_gp::kernel::{KernelEval, PairDistances};
 use aptkt_gp::{
-    Data, Free, GpError, HyperPrior, Layout, Modalities, ModelSpec, OneVsAll, Predictive, Source,
+    Data, Free, GpError, HyperPrior, LatentMean, Layout, Modalities, ModelSpec, OneVsAll,
+    Predictive, Source,
 };
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
@@ -137,19 +138,23 @@ pub struct FitSettings {
     /// MAP-II hyper-prior on each modality-weight logit: sd of a normal centred on 0 (equal
     /// weights); None: flat.
     prior_weight_logit: Option<f64>,
+    /// The latent function's constant prior mean: "zero" or "base-rate" (the log-odds of each
+    /// classifier's Jeffreys-smoothed share of positive labels).
+    latent_mean: String,
 }
 
 #[pymethods]
 impl FitSettings {
     #[new]
-    // No defaults here but the hyper-priors': aptkt.gp.DEFAULTS is the one source of the
-    // settings' defaults, and LaplaceGPC passes every one of them.
+    // No defaults here but those that switch an extension off (the hyper-priors, the latent
+    // mean): aptkt.gp.DEFAULTS is the one source of the settings' defaults, and LaplaceGPC
+    // passes every one of them.
     #[pyo3(signature = (
         *, modalities, signal_variance, length_scales, weights, free_signal_variance,
         free_length_scales, free_weights, free_lambda, signal_variance_bounds,
         length_scale_bounds, optimize, n_restarts, seed, max_iter, newton_max_iter, newton_tol,
         max_jitter, approximation, n_threads, prior_signal_variance = None,
-        prior_length_scale = None, prior_weight_logit = None
+        prior_length_scale = None, prior_weight_logit = None, latent_mean = "zero".to_string()
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -175,6 +180,7 @@ impl FitSettings {
         prior_signal_variance: Option<(f64, f64)>,
         prior_length_scale: Option<(f64, f64)>,
         prior_weight_logit: Option<f64>,
+        latent_mean: String,
     ) -> Self {
         FitSettings {
             modalities,
@@ -199,6 +205,7 @@ impl FitSettings {
             prior_signal_variance,
             prior_length_scale,
             prior_weight_logit,
+            latent_mean,
         }
     }
 
@@ -210,7 +217,8 @@ impl FitSettings {
              free_lambda={}, signal_variance_bounds={:?}, length_scale_bounds={:?}, \
              optimize={}, n_restarts={}, seed={}, max_iter={}, newton_max_iter={}, \
              newton_tol={:?}, max_jitter={:?}, approximation={:?}, n_threads={}, \
-             prior_signal_variance={}, prior_length_scale={}, prior_weight_logit={})",
+             prior_signal_variance={}, prior_length_scale={}, prior_weight_logit={}, \
+             latent_mean={:?})",
             self.modalities,
             self.signal_variance,
             self.length_scales,
@@ -233,7 +241,8 @@ impl FitSettings {
             py_pair(self.prior_signal_variance),
             py_pair(self.prior_length_scale),
             self.prior_weight_logit
-                .map_or_else(|| "None".to_string(), |sd| format!("{sd:?}"))
+                .map_or_else(|| "None".to_string(), |sd| format!("{sd:?}")),
+            self.latent_mean
         )
     }
 }
@@ -269,6 +278,7 @@ impl FitSettings {
         spec.newton.tol = self.newton_tol;
         spec.max_jitter = self.max_jitter;
         spec.predictive = parse_predictive(&self.approximation)?;
+        spec.latent_mean = parse_latent_mean(&self.latent_mean)?;
         if self.prior_signal_variance.is_some()
             || self.prior_length_scale.is_some()
             || self.prior_weight_logit.is_some()
@@ -351,6 +361,16 @@ fn parse_predictive(name: &str) -> PyResult<Predictive> {
         "quadrature" => Ok(Predictive::Quadrature),
         other => Err(PyValueError::new_err(format!(
             "approximation must be 'erf' or 'quadrature', got {other:?}"
+        ))),
+    }
+}
+
+fn parse_latent_mean(name: &str) -> PyResult<LatentMean> {
+    match name {
+        "zero" => Ok(LatentMean::Zero),
+        "base-rate" => Ok(LatentMean::BaseRate),
+        other => Err(PyValueError::new_err(format!(
+            "latent_mean must be 'zero' or 'base-rate', got {other:?}"
         ))),
     }
 }
@@ -451,6 +471,19 @@ impl GpcModel {
     #[getter]
     fn log_marginal_likelihood_value<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         PyArray1::from_vec(py, self.model.classifiers.iter().map(|c| c.lml).collect())
+    }
+
+    /// Each classifier's latent prior mean m (0 for the zero-mean GP).
+    #[getter]
+    fn latent_offset<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(
+            py,
+            self.model
+                .classifiers
+                .iter()
+                .map(|c| c.latent_offset)
+                .collect(),
+        )
     }
 
     /// Log hyper-prior density at the fitted theta per classifier (0 for ML-II).
