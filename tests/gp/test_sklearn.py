@@ -87,6 +87,11 @@ def test_learner_settings_take_their_defaults_from_the_gp_layer():
 
     settings = GPSettings()
     model = LaplaceGPC()
-    for name in ("n_restarts", "max_iter", "length_scale", "signal_variance", "approximation"):
+    for name in ("max_iter", "length_scale", "signal_variance", "approximation"):
         assert getattr(settings, name) == getattr(DEFAULTS, name) == getattr(model, name)
     assert settings.n_jobs == DEFAULTS.n_jobs == model.n_jobs
+    # The learner's deliberate departure (MAP-II: one start at the hyper-prior's centre), and
+    # the models it makes carry it.
+    assert model.n_restarts == DEFAULTS.n_restarts == 1
+    assert settings.n_restarts == 0
+    assert settings.make({"all": [0, 1]}, random_state=0).n_restarts == 0

@@ -10,6 +10,7 @@ from pathlib import Path
 from aptkt.commands._checks import at_least, input_file, output_file
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
+from aptkt.learning.config import GPSettings
 
 #: A modality's RBF kernel that varies by less than this over the training data (between the two
 #: most distant observations) is effectively constant: it cannot tell observations apart, so
@@ -43,7 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument(
         "--restarts",
         type=int,
-        default=1,
+        default=GPSettings().n_restarts,
         help="extra optimiser starts per model (default %(default)s)",
     )
     b.set_defaults(func=run_build)

@@ -28,6 +28,8 @@ WARM_STARTS = (None, "previous", "source", "both")
 class GPSettings:
     """How the observation models (one-vs-all Laplace GPCs) are fitted.
 
+    n_restarts : random starts of each classifier's hyper-parameter search besides the first
+        one at the hyper-prior's centre; 0 by default (see the comment at the field).
     hyper_prior : "weak" (default): MAP-II, the marginal likelihood times weak log-normal
         hyper-priors centred on the data's scale (length-scales) and on σ² = 1, one standard
         deviation a factor of 10 (``aptkt.gp.HyperPrior``). It keeps a classifier that has
@@ -62,7 +64,11 @@ class GPSettings:
         4 pp at step 1 (docs/method.md).
     """
 
-    n_restarts: int = DEFAULTS.n_restarts
+    # One start, at the hyper-prior's centre (data-scaled length-scales, σ² = 1, equal weights),
+    # not the estimator's extra random start: under MAP-II the random start found nothing better
+    # at full size and cost a third of the CPU (docs/method.md). With ``hyper_prior=None`` (ML-II,
+    # whose flat optima the random start was for) give n_restarts ≥ 1.
+    n_restarts: int = 0
     max_iter: int = DEFAULTS.max_iter
     length_scale: float | str = DEFAULTS.length_scale
     signal_variance: float = DEFAULTS.signal_variance
