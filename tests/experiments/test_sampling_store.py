@@ -85,11 +85,14 @@ def test_run_key_covers_what_changes_the_result_and_nothing_else():
 
 def test_settings_added_later_leave_stored_keys_as_they_were():
     """Keys computed by aptkt 0.1.0 before warm_start, class_prior, latent_mean and the
-    modality-weight prior existed (commit 1fed19f): a store or prior file from then must still be found, or a
-    resumed run recomputes it all. Those runs had flat modality weights and the "training"
-    class posterior, so their keys belong to those settings; the new defaults must get keys of
-    their own, or a resumed store would hand out results computed the old way."""
-    flat = GPSettings(modality_weight_prior=False, class_prior="training", latent_mean="zero")
+    modality-weight prior existed, when the learner searched from two starts (commit 1fed19f):
+    a store or prior file from then must still be found, or a resumed run recomputes it all.
+    Those runs had flat modality weights, the "training" class posterior and a random restart,
+    so their keys belong to those settings; the new defaults must get keys of their own, or a
+    resumed store would hand out results computed the old way."""
+    flat = GPSettings(
+        n_restarts=1, modality_weight_prior=False, class_prior="training", latent_mean="zero"
+    )
     spec = RunSpec(
         method="APTKT",
         config=LearnerConfig(gp=flat),
@@ -110,7 +113,12 @@ def test_settings_added_later_leave_stored_keys_as_they_were():
         trials=(0, 1, 2),
         seed=3,
         directory="/p",
-        gp={"modality_weight_prior": False, "class_prior": "training", "latent_mean": "zero"},
+        gp={
+            "n_restarts": 1,
+            "modality_weight_prior": False,
+            "class_prior": "training",
+            "latent_mean": "zero",
+        },
     )
     assert task.key == "4596257baaf0144904e0"
     default = replace(spec, config=LearnerConfig())
@@ -122,6 +130,8 @@ def test_settings_added_later_leave_stored_keys_as_they_were():
     assert (
         replace(task, gp={"class_prior": "uniform", "modality_weight_prior": False}).key != task.key
     )
+    one_start = replace(flat, n_restarts=0)
+    assert run_key(replace(spec, config=LearnerConfig(gp=one_start)), "fp") != run_key(spec, "fp")
     base_rate = replace(flat, latent_mean="base-rate")
     assert run_key(replace(spec, config=LearnerConfig(gp=base_rate)), "fp") != run_key(spec, "fp")
     assert base_rate.to_dict()["latent_mean"] == "base-rate"
