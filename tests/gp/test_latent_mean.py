@@ -1,6 +1,6 @@
 """The constant latent prior mean (``LaplaceGPC(latent_mean="base-rate")``), checked against an
 independent NumPy Laplace approximation written in f-space with the mean function (GPML §2.7,
-§3.4) and against closed forms."""
+§3.4) and against closed forms. (Its gradient against finite differences: test_transfer.py.)"""
 
 import numpy as np
 import pytest
@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from scipy import integrate
 from scipy.special import expit, log_expit
 
-from aptkt.gp import LaplaceGPC, TransferSource, kernel_matrix
+from aptkt.gp import LaplaceGPC, kernel_matrix
 from aptkt.learning.config import GPSettings
 
 from .conftest import make_blobs
@@ -82,34 +82,6 @@ def test_fit_and_predictions_match_an_independent_laplace_with_a_mean():
         laplace_with_mean(K, y_pm, 0.0)[3], rel=1e-9
     )
     assert np.all(zero.latent_offset_ == 0)
-
-
-def test_gradient_with_a_mean_matches_finite_differences():
-    X, y = make_blobs(8, 3, 4, seed=8)
-    X, y = X[:20], y[:20]
-    source = make_blobs(5, 1, 4, seed=9)[0]
-    model = LaplaceGPC(
-        modalities=[[0, 1], [2, 3]],
-        optimize=False,
-        hyper_prior="weak",
-        latent_mean="base-rate",
-        newton_tol=1e-14,
-        newton_max_iter=200,
-    ).fit(X, y, sources={1: TransferSource(source, transfer_lambda=0.6)})
-    assert np.all(model.latent_offset_ != 0)
-    theta = np.tile([0.9, 0.1, -0.2, 0.3, -0.3, 0.45], (3, 1))
-    _, grad = model.log_marginal_likelihood(theta, eval_gradient=True, include_prior=True)
-    eps = 1e-5
-    fd = np.zeros_like(theta)
-    for p in range(theta.shape[1]):
-        up, down = theta.copy(), theta.copy()
-        up[:, p] += eps
-        down[:, p] -= eps
-        fd[:, p] = (
-            model.log_marginal_likelihood(up, include_prior=True)
-            - model.log_marginal_likelihood(down, include_prior=True)
-        ) / (2 * eps)
-    np.testing.assert_allclose(grad, fd, rtol=1e-5, atol=1e-6)
 
 
 @settings(max_examples=25, deadline=None)

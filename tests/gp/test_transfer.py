@@ -199,16 +199,20 @@ def test_log_hyper_prior_matches_its_formula():
     )
 
 
-def test_map_objective_gradient_matches_finite_differences():
+@pytest.mark.parametrize("latent_mean", ["zero", "base-rate"])
+def test_map_objective_gradient_matches_finite_differences(latent_mean):
+    """With the zero mean and with a constant latent mean (the gradient treats it as fixed)."""
     X, y = make_blobs(10, 3, 4, seed=8)
     source = make_blobs(5, 1, 4, seed=9)[0]
     model = LaplaceGPC(
         modalities=[[0, 1], [2, 3]],
         optimize=False,
         hyper_prior="weak",
+        latent_mean=latent_mean,
         newton_tol=1e-14,
         newton_max_iter=200,
     ).fit(X, y, sources={1: TransferSource(source, transfer_lambda=0.6)})
+    assert np.all((model.latent_offset_ != 0) == (latent_mean == "base-rate"))
     theta = np.tile([0.9, 0.1, -0.2, 0.3, -0.3, 0.45], (3, 1))
     _, grad = model.log_marginal_likelihood(theta, eval_gradient=True, include_prior=True)
     eps = 1e-5

@@ -63,16 +63,23 @@ pub enum LatentMean {
     /// `m = logit ρ̃`, the log-odds of the classifier's share of positive labels over all its
     /// rows (source tasks' included) under the Jeffreys prior, `ρ̃ = (n₊ + ½) / (n + 1)`: far
     /// from its data a classifier returns the rate it was trained at, so that its probability
-    /// carries that base rate everywhere, not only near its rows. [`base_rate_offset`].
+    /// carries that base rate everywhere, not only near its rows.
     BaseRate,
 }
 
-/// `logit ρ̃ = ln((n₊ + ½) / (n₋ + ½))` of ±1 labels: finite for any counts (all one label
-/// included).
-pub fn base_rate_offset(y: &[f64]) -> f64 {
-    let positives = y.iter().filter(|&&v| v > 0.0).count() as f64;
-    let negatives = y.len() as f64 - positives;
-    ((positives + 0.5) / (negatives + 0.5)).ln()
+impl LatentMean {
+    /// `m` for a classifier with ±1 labels `y`; for the base rate `logit ρ̃ = ln((n₊ + ½) /
+    /// (n₋ + ½))`, finite for any counts (all one label included).
+    pub fn offset(self, y: &[f64]) -> f64 {
+        match self {
+            LatentMean::Zero => 0.0,
+            LatentMean::BaseRate => {
+                let positives = y.iter().filter(|&&v| v > 0.0).count() as f64;
+                let negatives = y.len() as f64 - positives;
+                ((positives + 0.5) / (negatives + 0.5)).ln()
+            }
+        }
+    }
 }
 
 /// One normal term of the log hyper-prior: theta index, mean and standard deviation.
@@ -331,10 +338,7 @@ impl BinaryProblem {
             let sizes: Vec<usize> = sources.iter().map(|s| s.x.n).collect();
             Arc::new(PairDistances::new(&x, &sizes, modalities, center))
         };
-        let offset = match spec.latent_mean {
-            LatentMean::Zero => 0.0,
-            LatentMean::BaseRate => base_rate_offset(&y),
-        };
+        let offset = spec.latent_mean.offset(&y);
         BinaryProblem { x, y, offset, dist }
     }
 
