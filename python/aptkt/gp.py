@@ -370,6 +370,49 @@ def _check_classification_targets(y: np.ndarray) -> None:
     check_classification_targets(y)
 
 
+#: ``_validate``'s "no target given" (``y=None`` is a user's mistake that scikit-learn reports).
+_NO_TARGET: Any = object()
+
+
+def _validate(estimator: BaseEstimator, X: Any, y: Any = _NO_TARGET, *, reset: bool) -> Any:
+    """scikit-learn's ``validate_data`` (float64, non-finite values allowed), without its cost
+    in the common case: a non-empty 2-D float64 ndarray, and for ``fit`` a 1-D array of
+    integers, booleans or strings of the same length. For those its checks reduce to the
+    number of features, and there are no feature names to record or compare; it costs
+    ~0.3 ms a call (dataframe detection), a sixth of a small run of the learning loop, which
+    validates at every refit and prediction. Anything else, and any estimator fitted with
+    feature names, goes through it."""
+    plain = (
+        type(X) is np.ndarray
+        and X.dtype == np.float64
+        and X.ndim == 2
+        and X.shape[0] > 0
+        and X.shape[1] > 0
+        and not hasattr(estimator, "feature_names_in_")
+    )
+    if y is not _NO_TARGET:
+        plain = plain and (
+            type(y) is np.ndarray
+            and y.ndim == 1
+            and y.dtype.kind in "biuU"
+            and y.shape[0] == X.shape[0]
+        )
+    if not plain:
+        if y is _NO_TARGET:
+            return validate_data(
+                estimator, X, reset=reset, dtype=np.float64, ensure_all_finite=False
+            )
+        return validate_data(estimator, X, y, dtype=np.float64, ensure_all_finite=False)
+    if reset:
+        estimator.n_features_in_ = X.shape[1]
+    elif X.shape[1] != estimator.n_features_in_:
+        raise ValueError(
+            f"X has {X.shape[1]} features, but {type(estimator).__name__} is expecting "
+            f"{estimator.n_features_in_} features as input."
+        )
+    return X if y is _NO_TARGET else (X, y)
+
+
 def _threads(n_jobs: Any) -> int:
     """Threads for ``n_jobs`` by joblib's convention: None -> 1, -1 -> every core, -2 -> all
     but one, and so on."""
@@ -683,7 +726,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         starts: Mapping[Any, Mapping[str, Any]] | None = None,
     ) -> LaplaceGPC:
         # Non-finite values are left to the core, whose message names the row and column.
-        X, y = validate_data(self, X, y, dtype=np.float64, ensure_all_finite=False)
+        X, y = _validate(self, X, y, reset=True)
         X = np.ascontiguousarray(X)
         _check_classification_targets(y)
         classes, labels, counts = np.unique(y, return_inverse=True, return_counts=True)
@@ -833,7 +876,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
 
     def _test_matrix(self, X: Any) -> np.ndarray:
         self._check_fitted()
-        X = validate_data(self, X, reset=False, dtype=np.float64, ensure_all_finite=False)
+        X = _validate(self, X, reset=False)
         return np.ascontiguousarray(X)
 
     # -- fitted views -------------------------------------------------------------------------

@@ -95,3 +95,26 @@ def test_learner_settings_take_their_defaults_from_the_gp_layer():
     assert model.n_restarts == DEFAULTS.n_restarts == 1
     assert settings.n_restarts == 0
     assert settings.make({"all": [0, 1]}, random_state=0).n_restarts == 0
+
+
+def test_plain_arrays_are_validated_as_scikit_learn_validates_them():
+    """The fast path for float64 ndarrays (gp._validate) against scikit-learn's own
+    validation, which lists still take: same fit, same fitted
+    attributes, the same error for a wrong number of features."""
+    X, y = make_blobs(12, 3, 4, spread=1.0, seed=3)
+    fast = LaplaceGPC(random_state=0).fit(X, y)
+    slow = LaplaceGPC(random_state=0).fit(X.tolist(), y.tolist())
+    assert fast.n_features_in_ == slow.n_features_in_ == 4
+    assert not hasattr(fast, "feature_names_in_")
+    np.testing.assert_array_equal(fast.theta_, slow.theta_)
+    np.testing.assert_array_equal(fast.predict_proba(X), slow.predict_proba(X.tolist()))
+    np.testing.assert_array_equal(fast.predict_proba(X), fast.predict_proba(np.asfortranarray(X)))
+    messages = []
+    for wrong in (X[:, :3], X[:, :3].tolist()):
+        with pytest.raises(ValueError) as err:
+            fast.predict_proba(wrong)
+        messages.append(str(err.value))
+    assert messages[0] == messages[1]
+    assert "X has 3 features, but LaplaceGPC is expecting 4 features as input" in messages[0]
+    with pytest.raises(ValueError, match="inconsistent numbers of samples"):
+        LaplaceGPC().fit(X, y[:-1])

@@ -23,7 +23,7 @@ import numpy as np
 
 from aptkt.gp import LaplaceGPC
 
-__all__ = ["coupling_evidence", "label_evidence", "target_evidence"]
+__all__ = ["coupling_evidence", "label_evidence", "target_evidence", "uncoupled_evidence"]
 
 
 def _row(model: LaplaceGPC, k: int) -> tuple[int, object]:
@@ -47,7 +47,7 @@ def _one_source(model: LaplaceGPC, label: object) -> None:
         )
 
 
-def _uncoupled(model: LaplaceGPC) -> np.ndarray:
+def uncoupled_evidence(model: LaplaceGPC) -> np.ndarray:
     """``log Z(0)`` of every classifier: one evaluation of the whole model with λ, the last
     hyper-parameter (one source), set to 0 in every row (the core evaluates all rows at once,
     so asking row by row would cost a Laplace search per classifier and row)."""
@@ -61,7 +61,7 @@ def coupling_evidence(model: LaplaceGPC, k: int) -> float:
     (its fitted hyper-parameters; λ, the last of them, set to 0 for Z(0))."""
     row, label = _row(model, k)
     _one_source(model, label)
-    return float(model.log_marginal_likelihood_[row] - _uncoupled(model)[row])
+    return float(model.log_marginal_likelihood_[row] - uncoupled_evidence(model)[row])
 
 
 def target_evidence(model: LaplaceGPC, k: int) -> float:
@@ -103,6 +103,6 @@ def label_evidence(model: LaplaceGPC) -> float:
             coupled.append(row)
     total = sum(target_evidence(model, k) for k in range(n))
     if coupled:
-        log_z0 = _uncoupled(model)
+        log_z0 = uncoupled_evidence(model)
         total += sum(float(model.log_marginal_likelihood_[r] - log_z0[r]) for r in coupled)
     return float(total)
