@@ -1,6 +1,6 @@
 """Fig. 11's APTKT runs re-run with other learner settings, paired with their baselines.
 
-    python benches/fig11_variants.py OUT [KEY=VALUE[,KEY=VALUE...] ...]
+    python benches/fig11_variants.py OUT [KEY=VALUE[,KEY=VALUE...] ...] [--figure fig7]
 
 OUT: a reproduction's output directory (``aptkt reproduce`` or benches/transfer_readings.py)
 holding ``fig11/specs.jsonl``. Each argument is one variant: LearnerConfig fields that replace
@@ -52,9 +52,12 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("output", type=Path)
     p.add_argument("variants", nargs="*", default=["-"])
+    p.add_argument(
+        "--figure", default="fig11", help="whose APTKT runs (e.g. fig7: its one panel, all runs)"
+    )
     args = p.parse_args()
     specs = []
-    for line in (args.output / "fig11" / "specs.jsonl").read_text().splitlines():
+    for line in (args.output / args.figure / "specs.jsonl").read_text().splitlines():
         d = json.loads(line)
         d.pop("key", None)
         specs.append(RunSpec.from_dict(d))

@@ -188,6 +188,11 @@ class LearnerConfig:
         exceed ``evidence_margin``. p̄ says which old object the new one is most like among
         the old ones; a one-vs-all classifier of the old objects also claims objects that are
         like none of them, which the evidence test rejects. "paper": Eq. 3 exactly.
+        "fitted" (experimental): Eq. 3's ε_neg, then each transfer is kept only if the fitted
+        transfer model makes the new object's labels more probable than the same classifier
+        fitted without the source (both at their own fitted hyper-parameters); one more fit
+        without sources per transferring update, and a refit when a transfer is dropped.
+        Only with ``transfer="paper"``.
     evidence_margin : the log Bayes factor a transfer must exceed under ``cutoff="evidence"``.
         0 (default): equal prior odds of "related" and "unrelated" — transfer when the source
         makes the new labels more probable than no source does.
@@ -238,6 +243,10 @@ class LearnerConfig:
         ):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"{name} must be one of {allowed}, got {getattr(self, name)!r}")
+        if self.cutoff == "fitted" and self.transfer == "multi":
+            raise ValueError(
+                'cutoff="fitted" judges one source per classifier; use it with transfer="paper"'
+            )
         if self.warm_start not in WARM_STARTS:
             raise ValueError(f"warm_start must be one of {WARM_STARTS}, got {self.warm_start!r}")
         if self.feature_space == "evidence" and self.transfer == "multi":

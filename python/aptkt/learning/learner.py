@@ -20,7 +20,7 @@ from __future__ import annotations
 import time
 import zlib
 from collections.abc import Callable, Collection, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -30,7 +30,7 @@ from aptkt.learning.active import entropy, select_next
 from aptkt.learning.config import LearnerConfig
 from aptkt.learning.environment import Environment
 from aptkt.learning.evaluation import accuracy, fused_accuracy
-from aptkt.learning.evidence import label_evidence
+from aptkt.learning.evidence import coupling_evidence, label_evidence, target_evidence
 from aptkt.learning.observations import Observations, ObservationTable
 from aptkt.learning.pipeline import FeaturePipeline
 from aptkt.learning.prior import ActionPrior, PriorKnowledge
@@ -235,6 +235,12 @@ class ActionLearner:
                 all(made) if cfg.feature_space == "covered" and made else any(made)
             )
             self.model, X = self._fit(pipeline, step, X_prior)
+            if cfg.cutoff == "fitted" and any(made) and self._reject_by_fitted_evidence(X, step):
+                made = [d.transfers for d in self.decisions.values()]
+                pipeline = self._pipeline(
+                    all(made) if cfg.feature_space == "covered" and made else any(made)
+                )
+                self.model, X = self._fit(pipeline, step, X_prior)
         self.space = self._space_name(pipeline)
         # The training observations were drawn with the training frequencies: their own
         # posterior keeps them. Scoring them under the uniform prior would make the object the
@@ -271,6 +277,41 @@ class ActionLearner:
             else None
         )
         return model.fit(X, obs.objects, sources=sources or None, hyperparameters=starts), X
+
+    def _reject_by_fitted_evidence(self, X: np.ndarray, step: int) -> bool:
+        """``cutoff="fitted"``: keep a transfer only if, at the fitted models' own
+        hyper-parameters, the new object's labels are more probable given the source than
+        without it. The fitted transfer model gives ``log p(y | source, θ̂)`` (its log Z minus
+        the source task's own at θ̂); the alternative is the same classifier fitted on the new
+        observations alone, ``log p(y | θ̂₀)``. Both fits choose their hyper-parameters, so a
+        source is judged by everything it does to the new model, its shaping of the
+        hyper-parameters included (the blind spot of ``cutoff="evidence"``). Records each log
+        Bayes factor in the decisions; returns whether any transfer was dropped."""
+        obs = self.observations
+        assert obs is not None and self.model is not None
+        model = self.model
+        alone = self.config.gp.make(
+            dict(zip(model.modality_names_, model.modalities_)),
+            random_state=int(model.random_state or 0),
+        ).fit(X, obs.objects)
+        classes = [str(c) for c in model.classes_]
+        rejected = False
+        for obj, decision in list(self.decisions.items()):
+            if not decision.transfers:
+                continue
+            k = classes.index(obj)
+            with_source = coupling_evidence(model, k) + target_evidence(model, k)
+            row = 0 if alone.theta_.shape[0] == 1 else k
+            log_bf = float(with_source - alone.log_marginal_likelihood_[row])
+            keep = np.isfinite(log_bf) and log_bf > self._evidence_margin()
+            self.decisions[obj] = replace(
+                decision,
+                sources=decision.sources if keep else (),
+                lambdas=decision.lambdas if keep else (),
+                evidence=((decision.sources[0], log_bf),),
+            )
+            rejected = rejected or not keep
+        return rejected
 
     def _fit_by_evidence(
         self, step: int, X_prior: np.ndarray | None

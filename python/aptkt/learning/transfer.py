@@ -64,7 +64,7 @@ FEATURE_SPACES = ("auto", "covered", "prior", "new", "pooled", "evidence")
 SOURCE_CHOICES = ("most", "least")
 #: Whether Eq. 3's ε_neg alone decides ("paper") or the target task's evidence must also favour
 #: the transfer ("evidence"; see the module docstring).
-CUTOFFS = ("evidence", "paper")
+CUTOFFS = ("evidence", "paper", "fitted")
 
 
 @dataclass(frozen=True)
