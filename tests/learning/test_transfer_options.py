@@ -764,3 +764,95 @@ def test_the_learner_takes_the_actively_chosen_counts_out_of_its_posteriors(worl
         # gives every object of both actions the same count, so the counts are uneven
         # somewhere and the two settings are not the same posterior there.
         assert any(len(set(lrn.model.class_counts_)) > 1 for lrn in learner.learners.values())
+
+
+def test_feature_space_blended_counts_each_old_object_as_one_observation(world):
+    """ "blended": when the update transfers, the transforms are those of the new training
+    observations (weight 1 each) together with the old objects, each old object's observations
+    sharing a weight of 1 — the mean against the formula, and the old objects' weight fading
+    as new observations accumulate."""
+    early, _ = _run(world, transfer="paper", budget=0, feature_space="blended")
+    late, _ = _run(world, transfer="paper", budget=6, feature_space="blended")
+    auto, _ = _run(world, transfer="paper", budget=0, feature_space="auto")
+    shares = []
+    for learner in (early, late):
+        for a, lrn in learner.learners.items():
+            if not any(d.transfers for d in lrn.decisions.values()):
+                continue
+            assert lrn.space == "blended"
+            pipe = lrn._test_cache[0]
+            old = world["prior"][a].observations
+            new = lrn.observations
+            objects, counts = np.unique(old.objects, return_counts=True)
+            per_row = 1.0 / counts[np.searchsorted(objects, old.objects)]
+            m = next(m for m in pipe.modality_names_ if not pipe.transforms[m].log_columns)
+            w = np.concatenate([per_row, np.ones(len(new.objects))])
+            X = np.vstack([old.modalities[m], new.modalities[m]])
+            np.testing.assert_allclose(pipe.transforms[m].mean_, w @ X / w.sum(), rtol=1e-10)
+            shares.append((learner is late, len(objects) / w.sum()))
+    assert shares
+    early_share = max(s for is_late, s in shares if not is_late)
+    late_share = min(s for is_late, s in shares if is_late)
+    assert late_share < early_share
+    # Relatedness is judged in the prior's space: the decisions at step 0 are "auto"'s.
+    for a, lrn in early.learners.items():
+        for o, d in lrn.decisions.items():
+            assert (d.sources, d.lambdas) == (
+                auto.learners[a].decisions[o].sources,
+                auto.learners[a].decisions[o].lambdas,
+            )
+    cfg = LearnerConfig(feature_space="blended")
+    assert LearnerConfig.from_dict(cfg.to_dict()) == cfg
+
+
+def test_fitted_cutoff_keeps_a_transfer_only_when_the_fitted_evidence_favours_it(world):
+    """cutoff="fitted": Eq. 3 decides the candidates, then each transfer stays only if the
+    fitted transfer model makes the new labels more probable than the classifier fitted without
+    the source. With a margin no evidence reaches, every transfer is dropped and the run is the
+    baseline's; with one every evidence passes, the run is Eq. 3's (cutoff="paper")."""
+    from aptkt.learning.evidence import coupling_evidence, target_evidence
+
+    keys = ("mean_accuracy", "fused_accuracy", "action")
+    strip = lambda rows: [{k: r[k] for k in keys} for r in rows]  # noqa: E731
+    none, _ = _run(world, transfer="paper", budget=2, cutoff="fitted", evidence_margin=1e9)
+    assert all(not d.transfers for lrn in none.learners.values() for d in lrn.decisions.values())
+    _, base = _run(world, transfer="none", budget=2)
+    assert strip(
+        _run(world, transfer="paper", budget=2, cutoff="fitted", evidence_margin=1e9)[1].rows()
+    ) == strip(base.rows())
+    every, run_every = _run(
+        world, transfer="paper", budget=2, cutoff="fitted", evidence_margin=-1e9
+    )
+    _, run_paper = _run(world, transfer="paper", budget=2, cutoff="paper")
+    assert strip(run_every.rows()) == strip(run_paper.rows())
+    # At the default margin (0), each recorded log Bayes factor is the fitted model's
+    # conditional evidence minus the source-free fit's, and decides the transfer.
+    default, _ = _run(world, transfer="paper", budget=0, cutoff="fitted")
+    checked = 0
+    for lrn in default.learners.values():
+        for obj, d in lrn.decisions.items():
+            if not d.evidence:
+                continue
+            ((_, log_bf),) = d.evidence
+            assert d.transfers == (log_bf > 0)
+            if d.transfers:
+                k = [str(c) for c in lrn.model.classes_].index(obj)
+                alone = (
+                    LearnerConfig()
+                    .gp.make(
+                        dict(zip(lrn.model.modality_names_, lrn.model.modalities_)),
+                        random_state=int(lrn.model.random_state),
+                    )
+                    .fit(lrn.model.X_train_, lrn.observations.objects)
+                )
+                row = 0 if alone.theta_.shape[0] == 1 else k
+                expected = (
+                    coupling_evidence(lrn.model, k)
+                    + target_evidence(lrn.model, k)
+                    - alone.log_marginal_likelihood_[row]
+                )
+                assert log_bf == pytest.approx(expected, abs=1e-8)
+                checked += 1
+    assert checked
+    with pytest.raises(ValueError, match="fitted"):
+        LearnerConfig(cutoff="fitted", transfer="multi")

@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from aptkt.learning import FeaturePipeline, ModalityTransform, Observations, decide_transfer
 from aptkt.learning.active import entropy, select_next, uncertainty
@@ -123,3 +125,39 @@ def test_accuracy_and_fusion():
     pb = np.array([[0.6, 0.4], [0.3, 0.7], [0.8, 0.2]])
     truth = {"A": np.array(["a", "b", "a"]), "B": np.array(["a", "b", "a"])}
     assert fused_accuracy({"A": pa, "B": pb}, truth, classes) == 1.0
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    counts=st.lists(st.integers(1, 3), min_size=4, max_size=12),
+    seed=st.integers(0, 2**16),
+    pca=st.sampled_from([None, 2, 10]),
+)
+def test_integer_weights_fit_as_repeated_rows(counts, seed, pca):
+    """A weighted transform is the transform of the population with each row repeated as
+    often as its weight says: integer weights against np.repeat, an independent reference."""
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(len(counts), 5)) * rng.uniform(0.1, 10.0, size=5)
+    weighted = ModalityTransform(pca_components=pca).fit(X, np.asarray(counts, dtype=float))
+    repeated = ModalityTransform(pca_components=pca).fit(np.repeat(X, counts, axis=0))
+    np.testing.assert_allclose(weighted.mean_, repeated.mean_, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(weighted.scale_, repeated.scale_, rtol=1e-10)
+    if pca is not None:
+        # The repeated rows may keep more components (their rank is higher): the first is
+        # the same axis with the same spread.
+        assert weighted.pca_scale_ == pytest.approx(repeated.pca_scale_, rel=1e-9)
+        sign = np.sign(np.sum(weighted.components_[:1] * repeated.components_[:1]))
+        np.testing.assert_allclose(
+            weighted.components_[:1] * sign, repeated.components_[:1], atol=1e-7
+        )
+    # Equal weights are no weights at all.
+    plain = ModalityTransform(pca_components=pca).fit(X)
+    ones = ModalityTransform(pca_components=pca).fit(X, np.full(len(counts), 2.5))
+    np.testing.assert_allclose(ones.transform(X), plain.transform(X), rtol=1e-9, atol=1e-9)
+
+
+def test_weights_are_checked():
+    X = np.arange(12.0).reshape(4, 3)
+    for bad in ([1.0, 1.0, 1.0], [1.0, -1.0, 1.0, 1.0], [0.0, 0.0, 0.0, 0.0]):
+        with pytest.raises(ValueError, match="weights"):
+            ModalityTransform().fit(X, np.asarray(bad))

@@ -177,7 +177,11 @@ class LearnerConfig:
         objects' labels are more probable is kept (Laplace evidence of each one-vs-all
         classifier's labels given its source task, summed over the classifiers; ties and
         failures keep the prior's space), the baseline's when nothing transfers — one more
-        fit per transferring update; not with ``transfer="multi"``. The old models always
+        fit per transferring update; not with ``transfer="multi"``. "blended" (experimental):
+        when the update transfers, transforms fitted on the new training observations (each
+        counted once) together with every old object as one more observation (its observations
+        share a weight of 1), so that the prior's population informs them while the new
+        observations are few and fades as they accumulate. The old models always
         judge relatedness (Eq. 3), the evidence cut-off and auxiliary features (Eq. 5) in
         their own space.
     relatedness : p̄ of Eq. 3 from each old object's own binary classifier ("binary", paper

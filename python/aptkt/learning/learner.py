@@ -106,6 +106,18 @@ class ActionLearner:
             # the Gram matrix.
             both = Observations.concat([self.prior.observations, self.observations])
             return FeaturePipeline().fit(both)
+        if self.prior is not None and cfg.feature_space == "blended" and transfers:
+            # The new observations, each counted once, with every old object as one more
+            # observation of the population (its observations share a weight of 1): the old
+            # objects inform the transforms while the new observations are few, and fade as
+            # they accumulate.
+            old = self.prior.observations
+            _, inverse, counts = np.unique(old.objects, return_inverse=True, return_counts=True)
+            weights = np.concatenate(
+                [1.0 / counts[inverse], np.ones(len(self.observations.objects))]
+            )
+            both = Observations.concat([old, self.observations])
+            return FeaturePipeline().fit(both, weights)
         return FeaturePipeline().fit(self.observations)
 
     def _features(
@@ -351,10 +363,10 @@ class ActionLearner:
             return "prior"
         if (
             self.prior is not None
-            and self.config.feature_space == "pooled"
+            and self.config.feature_space in ("pooled", "blended")
             and any(d.transfers for d in self.decisions.values())
         ):
-            return "pooled"
+            return self.config.feature_space
         return "new"
 
     def _starts(

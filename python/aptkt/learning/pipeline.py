@@ -41,12 +41,22 @@ class ModalityTransform:
             X[:, cols] = np.log10(np.maximum(X[:, cols], 1e-12))
         return X
 
-    def fit(self, X: np.ndarray) -> ModalityTransform:
+    def fit(self, X: np.ndarray, weights: np.ndarray | None = None) -> ModalityTransform:
+        """Fit on the rows of ``X``; ``weights`` (optional, ≥ 0) make the mean, the scales and
+        the PCA those of the weighted population."""
         X = self._prepare(X)
         if X.shape[0] < 1:
             raise ValueError("cannot fit a feature transform on zero observations")
-        self.mean_ = X.mean(axis=0)
-        scale = X.std(axis=0)
+        if weights is None:
+            self.mean_ = X.mean(axis=0)
+            scale = X.std(axis=0)
+        else:
+            w = np.asarray(weights, dtype=np.float64)
+            if w.shape != (X.shape[0],) or not np.all(w >= 0) or w.sum() <= 0:
+                raise ValueError("weights must be one non-negative number per row, not all 0")
+            w = w / w.sum()
+            self.mean_ = w @ X
+            scale = np.sqrt(w @ (X - self.mean_) ** 2)
         self.scale_ = np.where(scale > 1e-12, scale, 1.0)
         Z = (X - self.mean_) / self.scale_
         self.components_ = None
@@ -54,9 +64,14 @@ class ModalityTransform:
         if self.pca_components is not None:
             # Rank of centred data is at most n - 1; keep that many at most.
             k = max(1, min(self.pca_components, X.shape[0] - 1, X.shape[1]))
-            _, s, vt = np.linalg.svd(Z, full_matrices=False)
+            if weights is None:
+                _, s, vt = np.linalg.svd(Z, full_matrices=False)
+                first_sd = s[0] / np.sqrt(max(X.shape[0], 1)) if s.size else 0.0
+            else:
+                # Rows scaled by √w: the singular values are the weighted SDs along the axes.
+                _, s, vt = np.linalg.svd(np.sqrt(w)[:, None] * Z, full_matrices=False)
+                first_sd = s[0] if s.size else 0.0
             self.components_ = vt[:k]
-            first_sd = s[0] / np.sqrt(max(X.shape[0], 1)) if s.size else 0.0
             self.pca_scale_ = float(first_sd) if first_sd > 1e-12 else 1.0
         return self
 
@@ -124,13 +139,13 @@ class FeaturePipeline:
         self.transforms: dict[str, ModalityTransform] = {k: replace(v) for k, v in base.items()}
         self.modality_names_: tuple[str, ...] = ()
 
-    def fit(self, obs: Observations) -> FeaturePipeline:
-        """Fit on training observations (never on test data)."""
+    def fit(self, obs: Observations, weights: np.ndarray | None = None) -> FeaturePipeline:
+        """Fit on training observations (never on test data), optionally weighted by row."""
         fitted = {}
         for name in obs.modality_names:
             template = self.transforms.get(name, ModalityTransform())
             fitted[name] = replace(template, mean_=None, scale_=None, components_=None).fit(
-                obs.modalities[name]
+                obs.modalities[name], weights
             )
         self.transforms = fitted
         self.modality_names_ = obs.modality_names
