@@ -856,3 +856,30 @@ def test_fitted_cutoff_keeps_a_transfer_only_when_the_fitted_evidence_favours_it
     assert checked
     with pytest.raises(ValueError, match="fitted"):
         LearnerConfig(cutoff="fitted", transfer="multi")
+
+
+def test_feature_space_shrunk_weighs_the_old_population_by_its_evidence(world):
+    """ "shrunk": when the update transfers, each modality's transforms are fitted on the old
+    and new observations, the old ones together weighing κ = prior_weight(old, new) — the
+    weighted mean against the formula (κ μ_old + Σ x_new) / (κ + n_new)."""
+    from aptkt.learning.pipeline import prior_weight
+
+    learner, _ = _run(world, transfer="paper", budget=3, feature_space="shrunk")
+    checked = 0
+    for a, lrn in learner.learners.items():
+        if not any(d.transfers for d in lrn.decisions.values()):
+            continue
+        assert lrn.space == "shrunk"
+        pipe = lrn._test_cache[0]
+        old, new = world["prior"][a].observations, lrn.observations
+        for m in pipe.modality_names_:
+            t = pipe.transforms[m]
+            X_old, X_new = t._prepare(old.modalities[m]), t._prepare(new.modalities[m])
+            kappa = prior_weight(X_old, X_new)
+            assert pipe.prior_weights_[m] == pytest.approx(kappa, rel=1e-12)
+            expected = (kappa * X_old.mean(axis=0) + X_new.sum(axis=0)) / (kappa + len(X_new))
+            np.testing.assert_allclose(t.mean_, expected, rtol=1e-9, atol=1e-12)
+            checked += 1
+    assert checked
+    cfg = LearnerConfig(feature_space="shrunk")
+    assert LearnerConfig.from_dict(cfg.to_dict()) == cfg

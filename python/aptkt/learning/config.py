@@ -181,7 +181,10 @@ class LearnerConfig:
         when the update transfers, transforms fitted on the new training observations (each
         counted once) together with every old object as one more observation (its observations
         share a weight of 1), so that the prior's population informs them while the new
-        observations are few and fades as they accumulate. The old models always
+        observations are few and fades as they accumulate. "shrunk" (experimental): the
+        same with the old observations weighing κ per modality, chosen by the new
+        observations' evidence under a Normal-Gamma prior centred on the old population
+        (``pipeline.prior_weight``). The old models always
         judge relatedness (Eq. 3), the evidence cut-off and auxiliary features (Eq. 5) in
         their own space.
     relatedness : p̄ of Eq. 3 from each old object's own binary classifier ("binary", paper

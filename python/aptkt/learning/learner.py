@@ -106,6 +106,8 @@ class ActionLearner:
             # the Gram matrix.
             both = Observations.concat([self.prior.observations, self.observations])
             return FeaturePipeline().fit(both)
+        if self.prior is not None and cfg.feature_space == "shrunk" and transfers:
+            return FeaturePipeline().fit_shrunk(self.prior.observations, self.observations)
         if self.prior is not None and cfg.feature_space == "blended" and transfers:
             # The new observations, each counted once, with every old object as one more
             # observation of the population (its observations share a weight of 1): the old
@@ -363,7 +365,7 @@ class ActionLearner:
             return "prior"
         if (
             self.prior is not None
-            and self.config.feature_space in ("pooled", "blended")
+            and self.config.feature_space in ("pooled", "blended", "shrunk")
             and any(d.transfers for d in self.decisions.values())
         ):
             return self.config.feature_space

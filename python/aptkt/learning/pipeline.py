@@ -18,7 +18,13 @@ import numpy as np
 
 from aptkt.learning.observations import Observations
 
-__all__ = ["ModalityTransform", "FeaturePipeline", "DEFAULT_TRANSFORMS"]
+__all__ = [
+    "ModalityTransform",
+    "FeaturePipeline",
+    "DEFAULT_TRANSFORMS",
+    "normal_gamma_log_evidence",
+    "prior_weight",
+]
 
 
 @dataclass
@@ -139,17 +145,43 @@ class FeaturePipeline:
         self.transforms: dict[str, ModalityTransform] = {k: replace(v) for k, v in base.items()}
         self.modality_names_: tuple[str, ...] = ()
 
-    def fit(self, obs: Observations, weights: np.ndarray | None = None) -> FeaturePipeline:
-        """Fit on training observations (never on test data), optionally weighted by row."""
+    def fit(
+        self,
+        obs: Observations,
+        weights: np.ndarray | Mapping[str, np.ndarray] | None = None,
+    ) -> FeaturePipeline:
+        """Fit on training observations (never on test data), optionally weighted by row (one
+        weight vector for every modality, or one per modality)."""
         fitted = {}
         for name in obs.modality_names:
             template = self.transforms.get(name, ModalityTransform())
+            w = weights.get(name) if isinstance(weights, Mapping) else weights
             fitted[name] = replace(template, mean_=None, scale_=None, components_=None).fit(
-                obs.modalities[name], weights
+                obs.modalities[name], w
             )
         self.transforms = fitted
         self.modality_names_ = obs.modality_names
         return self
+
+    def fit_shrunk(self, old: Observations, new: Observations) -> FeaturePipeline:
+        """Fit on ``new`` observations shrunk towards the ``old`` population: per modality,
+        the old observations together weigh κ observations (``prior_weight``, chosen by the new
+        observations' evidence), each new one weighs 1. κ per modality in ``prior_weights_``."""
+        if old.modality_names != new.modality_names:
+            raise ValueError(
+                f"old observations have modalities {old.modality_names}, new {new.modality_names}"
+            )
+        n_old, n_new = len(old.objects), len(new.objects)
+        self.prior_weights_: dict[str, float] = {}
+        weights = {}
+        for name in new.modality_names:
+            template = self.transforms.get(name, ModalityTransform())
+            kappa = prior_weight(
+                template._prepare(old.modalities[name]), template._prepare(new.modalities[name])
+            )
+            self.prior_weights_[name] = kappa
+            weights[name] = np.concatenate([np.full(n_old, kappa / n_old), np.ones(n_new)])
+        return self.fit(Observations.concat([old, new]), weights)
 
     def transform(self, obs: Observations) -> tuple[np.ndarray, dict[str, list[int]]]:
         """Feature matrix and the column group of each modality (for the multi-modal kernel)."""
@@ -192,3 +224,62 @@ class FeaturePipeline:
         pipe.transforms = transforms
         pipe.modality_names_ = names
         return pipe
+
+
+#: The range of prior pseudo-observations ``prior_weight`` searches (natural log).
+_LOG_KAPPA_RANGE = (-5.0, 10.0)
+
+
+def normal_gamma_log_evidence(
+    new: np.ndarray, mean: np.ndarray, var: np.ndarray, kappa: float
+) -> float:
+    """log p(new) summed over columns, each column's values i.i.d. N(μ, σ²) with the
+    Normal-Gamma prior μ | σ² ~ N(``mean``, σ²/κ), 1/σ² ~ Gamma(κ/2, rate κ·``var``/2): κ
+    pseudo-observations with that mean and variance. Closed form
+    ``Γ(α_n)/Γ(α₀) · β₀^α₀/β_n^α_n · (κ/κ_n)^½ · (2π)^(−n/2)`` with κ_n = κ + n,
+    α₀ = κ/2, α_n = α₀ + n/2, β₀ = κ·var/2, β_n = β₀ + ½Σ(x − x̄)² + κn(x̄ − mean)²/(2κ_n)."""
+    from scipy.special import gammaln
+
+    new = np.asarray(new, dtype=np.float64)
+    n = new.shape[0]
+    xbar = new.mean(axis=0)
+    ss = ((new - xbar) ** 2).sum(axis=0)
+    a0, b0 = kappa / 2, kappa * np.asarray(var) / 2
+    kn, an = kappa + n, kappa / 2 + n / 2
+    bn = b0 + ss / 2 + kappa * n * (xbar - mean) ** 2 / (2 * kn)
+    per_column = (
+        gammaln(an)
+        - gammaln(a0)
+        + a0 * np.log(b0)
+        - an * np.log(bn)
+        + 0.5 * np.log(kappa / kn)
+        - 0.5 * n * np.log(2 * np.pi)
+    )
+    return float(per_column.sum())
+
+
+def prior_weight(old: np.ndarray, new: np.ndarray) -> float:
+    """How many observations the old population is worth as a prior for the new one: the κ of
+    ``normal_gamma_log_evidence`` (mean and variance of the old observations per column, one κ
+    for every column) under which the new observations are most probable — empirical Bayes,
+    searched over κ ∈ [e⁻⁵, e¹⁰]. New observations the old population describes well give a
+    large κ, ones it does not a small one."""
+    from scipy.optimize import minimize_scalar
+
+    old = np.asarray(old, dtype=np.float64)
+    new = np.asarray(new, dtype=np.float64)
+    if old.ndim != 2 or new.ndim != 2 or old.shape[1] != new.shape[1]:
+        raise ValueError(
+            f"old and new must be (n, d) with the same d, got {old.shape}, {new.shape}"
+        )
+    if old.shape[0] < 2 or new.shape[0] < 1:
+        raise ValueError("prior_weight needs at least 2 old and 1 new observation")
+    mean = old.mean(axis=0)
+    # A column constant among the old observations still needs a proper prior.
+    var = np.maximum(old.var(axis=0), 1e-12 * np.maximum(1.0, mean**2))
+    best = minimize_scalar(
+        lambda log_kappa: -normal_gamma_log_evidence(new, mean, var, float(np.exp(log_kappa))),
+        bounds=_LOG_KAPPA_RANGE,
+        method="bounded",
+    )
+    return float(np.exp(best.x))

@@ -58,7 +58,7 @@ RELATEDNESS = ("binary", "normalised")
 #: objects' −1 ("one-vs-all"), or the chosen object's observations only, as positives.
 SOURCE_TASKS = ("one-vs-all", "positives")
 #: Where the new objects' models live (see LearnerConfig.feature_space).
-FEATURE_SPACES = ("auto", "covered", "prior", "new", "pooled", "evidence", "blended")
+FEATURE_SPACES = ("auto", "covered", "prior", "new", "pooled", "evidence", "blended", "shrunk")
 #: Which old object Eq. 3 picks: the most related (the method) or, for a stress test of the
 #: cut-off, the least related.
 SOURCE_CHOICES = ("most", "least")
