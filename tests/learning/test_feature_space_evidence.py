@@ -75,6 +75,21 @@ def test_label_evidence_is_each_classifiers_labels_given_its_source():
         coupling_evidence(model, 1)  # class "b" has no source
 
 
+def test_the_target_evidence_with_a_source_needs_the_zero_mean():
+    """With the base-rate latent mean the coupled model's mean comes from source and target
+    labels together; the target's evidence alone at that mean is not what a target-only fit
+    gives, so it is refused rather than computed wrongly."""
+    rng = np.random.default_rng(1)
+    X, y = rng.normal(size=(8, 2)), np.repeat(["a", "b"], 4)
+    src = TransferSource(rng.normal(size=(10, 2)), np.repeat([1.0, -1.0], 5), transfer_lambda=0.6)
+    model = LaplaceGPC(latent_mean="base-rate", random_state=0).fit(X, y, sources={"a": src})
+    k = list(model.classes_).index("a")
+    with pytest.raises(ValueError, match="latent_mean"):
+        target_evidence(model, k)
+    with pytest.raises(ValueError, match="latent_mean"):
+        label_evidence(model)
+
+
 def test_several_sources_are_refused():
     rng = np.random.default_rng(0)
     X, y = rng.normal(size=(6, 2)), np.repeat(["a", "b"], 3)

@@ -158,7 +158,7 @@ def test_integer_weights_fit_as_repeated_rows(counts, seed, pca):
 
 def test_weights_are_checked():
     X = np.arange(12.0).reshape(4, 3)
-    for bad in ([1.0, 1.0, 1.0], [1.0, -1.0, 1.0, 1.0], [0.0, 0.0, 0.0, 0.0]):
+    for bad in ([1.0, 1.0, 1.0], [1.0, -1.0, 1.0, 1.0], [0.0, 0.0, 0.0, 0.0], [1, np.inf, 1, 1]):
         with pytest.raises(ValueError, match="weights"):
             ModalityTransform().fit(X, np.asarray(bad))
 

@@ -254,6 +254,20 @@ class LearnerConfig:
             raise ValueError(
                 'cutoff="fitted" judges one source per classifier; use it with transfer="paper"'
             )
+        if self.cutoff == "fitted" and self.feature_space in ("covered", "evidence"):
+            # "covered" may move the refit to another space than the one the kept transfers
+            # were judged in; "evidence" chooses the space by its own evidence comparison.
+            raise ValueError(
+                f'cutoff="fitted" cannot be combined with feature_space="{self.feature_space}"'
+            )
+        if (
+            self.cutoff == "fitted" or self.feature_space == "evidence"
+        ) and self.gp.latent_mean != "zero":
+            # Both need the target's own evidence at the coupled model's prior mean, which the
+            # base-rate mean takes from the source and target labels together.
+            raise ValueError(
+                'cutoff="fitted" and feature_space="evidence" need GPSettings(latent_mean="zero")'
+            )
         if self.warm_start not in WARM_STARTS:
             raise ValueError(f"warm_start must be one of {WARM_STARTS}, got {self.warm_start!r}")
         if self.feature_space == "evidence" and self.transfer == "multi":

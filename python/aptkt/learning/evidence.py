@@ -70,6 +70,11 @@ def target_evidence(model: LaplaceGPC, k: int) -> float:
     row, label = _row(model, k)
     if not _sources(model, label):
         return float(model.log_marginal_likelihood_[row])
+    if model.latent_mean != "zero":
+        # Z(0) = Z_source(m) · Z_target(m) at the coupled model's mean m, which the base-rate
+        # mean takes from source and target labels together; a fit of the target alone would
+        # take it from the target's.
+        raise ValueError("the target's evidence with a source needs latent_mean='zero'")
     hp = model.hyperparameters_[label]
     names = list(model.modality_names_)
     alone = LaplaceGPC(

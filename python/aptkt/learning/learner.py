@@ -60,7 +60,8 @@ class ActionLearner:
         self.model: LaplaceGPC | None = None
         self.decisions: dict[str, TransferDecision] = {}
         self.train_entropy: np.ndarray = np.zeros(0)
-        #: The feature space of the current model ("prior", "new" or "pooled") and, under
+        #: The feature space of the current model ("prior", "new", or with transfers "pooled",
+        #: "blended" or "shrunk") and, under
         #: ``feature_space="evidence"`` when the update transferred, each candidate space's
         #: log evidence of the new labels.
         self.space: str | None = None
@@ -248,8 +249,12 @@ class ActionLearner:
             pipeline = self._pipeline(
                 all(made) if cfg.feature_space == "covered" and made else any(made)
             )
+            previous = self.model
             self.model, X = self._fit(pipeline, step, X_prior)
-            if cfg.cutoff == "fitted" and any(made) and self._reject_by_fitted_evidence(X, step):
+            if cfg.cutoff == "fitted" and any(made) and self._reject_by_fitted_evidence(X):
+                # The refit starts (warm_start) from the previous update's model, as the first
+                # fit did, not from the transfer model it replaces.
+                self.model = previous
                 made = [d.transfers for d in self.decisions.values()]
                 pipeline = self._pipeline(
                     all(made) if cfg.feature_space == "covered" and made else any(made)
@@ -292,7 +297,7 @@ class ActionLearner:
         )
         return model.fit(X, obs.objects, sources=sources or None, hyperparameters=starts), X
 
-    def _reject_by_fitted_evidence(self, X: np.ndarray, step: int) -> bool:
+    def _reject_by_fitted_evidence(self, X: np.ndarray) -> bool:
         """``cutoff="fitted"``: keep a transfer only if, at the fitted models' own
         hyper-parameters, the new object's labels are more probable given the source than
         without it. The fitted transfer model gives ``log p(y | source, θ̂)`` (its log Z minus
@@ -360,7 +365,8 @@ class ActionLearner:
 
     def _space_name(self, pipeline: FeaturePipeline) -> str:
         """Which feature space the model lives in: "prior" (the prior's transforms), "new" (the
-        new objects' own, the baseline's) or "pooled" (old and new observations together)."""
+        new objects' own, the baseline's), or when the update transfers under those settings
+        "pooled", "blended" or "shrunk" (old and new observations together, see LearnerConfig)."""
         if self.prior is not None and pipeline is self.prior.pipeline:
             return "prior"
         if (

@@ -58,8 +58,15 @@ class ModalityTransform:
             scale = X.std(axis=0)
         else:
             w = np.asarray(weights, dtype=np.float64)
-            if w.shape != (X.shape[0],) or not np.all(w >= 0) or w.sum() <= 0:
-                raise ValueError("weights must be one non-negative number per row, not all 0")
+            if (
+                w.shape != (X.shape[0],)
+                or not np.all(np.isfinite(w))
+                or not np.all(w >= 0)
+                or w.sum() <= 0
+            ):
+                raise ValueError(
+                    "weights must be one finite, non-negative number per row, not all 0"
+                )
             w = w / w.sum()
             self.mean_ = w @ X
             scale = np.sqrt(w @ (X - self.mean_) ** 2)
