@@ -176,7 +176,8 @@ def test_live_options_are_not_mixed_up(capsys):
 def test_method_choices_reach_the_transferring_methods(tmp_path, capsys):
     """--cutoff, --feature-space, --source, --relatedness and --evidence-margin set APTKT's and
     APTKT+aux's learner (the baseline uses no prior); the chosen space is then recorded.
-    --class-prior and --latent-mean set every model's."""
+    --class-prior and --latent-mean set every model's; the base-rate mean is refused with
+    feature_space="evidence", whose evidence needs the zero mean."""
     table = _world_table(n_per=4)
     path = write_feature_table(tmp_path / "t.csv", table)
     out = tmp_path / "out"
@@ -184,7 +185,12 @@ def test_method_choices_reach_the_transferring_methods(tmp_path, capsys):
     args += ["--objects", ",".join(NEW), "--budget", "1", "--runs", "1", "-o", str(out)]
     args += ["--cutoff", "paper", "--feature-space", "evidence", "--source", "positives"]
     args += ["--relatedness", "normalised", "--evidence-margin", "lnN"]
-    args += ["--class-prior", "training", "--latent-mean", "base-rate"]
+    # The evidence of the new labels needs the zero latent mean: refused in one line.
+    assert main([*args, "--latent-mean", "base-rate"]) != 0
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("aptkt learn: error:"), err
+    assert "latent_mean" in err, err
+    args += ["--class-prior", "training"]
     assert main(args) == 0, capsys.readouterr().err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["settings"]["method"] == {
@@ -195,14 +201,13 @@ def test_method_choices_reach_the_transferring_methods(tmp_path, capsys):
         "evidence_margin": None,
     }
     # The class prior is every model's, the baseline's and the prior's too.
-    assert summary["settings"]["gp"] == {"class_prior": "training", "latent_mean": "base-rate"}
+    assert summary["settings"]["gp"] == {"class_prior": "training"}
     # Recorded as "training" is recorded: by leaving the field out (see GPSettings.to_dict).
     assert "class_prior" not in summary["learner"]["baseline"]["gp"]
     baseline_gp = LearnerConfig.from_dict(summary["learner"]["baseline"]).gp
-    assert (baseline_gp.class_prior, baseline_gp.latent_mean) == ("training", "base-rate")
+    assert baseline_gp.class_prior == "training"
     prior = PriorKnowledge.load(out / "prior.npz")
     assert {prior[a].model.class_prior for a in prior.actions} == {"training"}
-    assert {prior[a].model.latent_mean for a in prior.actions} == {"base-rate"}
     with (out / "results.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     # feature_space="evidence" weighs both spaces at step 0 (every action is updated then) and
@@ -211,6 +216,19 @@ def test_method_choices_reach_the_transferring_methods(tmp_path, capsys):
         if r["step"] == "0":
             weighed = [k for k, v in r.items() if k.startswith("space_evidence[") and v]
             assert bool(weighed) == (r["method"] != "baseline"), r["method"]
+    # --latent-mean is every model's too (here with a space that needs no evidence).
+    out2 = tmp_path / "out2"
+    args2 = ["learn", "--table", str(path), "--prior-objects", ",".join(PRIORS)]
+    args2 += ["--objects", ",".join(NEW), "--budget", "1", "--runs", "1", "-o", str(out2)]
+    args2 += ["--feature-space", "blended", "--latent-mean", "base-rate"]
+    assert main(args2) == 0, capsys.readouterr().err
+    summary = json.loads((out2 / "summary.json").read_text())
+    assert summary["settings"]["gp"] == {"latent_mean": "base-rate"}
+    assert summary["settings"]["method"]["feature_space"] == "blended"
+    baseline_gp = LearnerConfig.from_dict(summary["learner"]["baseline"]).gp
+    assert baseline_gp.latent_mean == "base-rate"
+    prior = PriorKnowledge.load(out2 / "prior.npz")
+    assert {prior[a].model.latent_mean for a in prior.actions} == {"base-rate"}
 
 
 @pytest.mark.slow

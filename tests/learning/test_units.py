@@ -217,3 +217,16 @@ def test_prior_weight_is_the_most_probable_kappa():
     assert alike > 10 * prior_weight(old, 2 + rng.normal(size=(12, 6)))
     with pytest.raises(ValueError, match="same d"):
         prior_weight(old, new[:, :3])
+
+
+def test_a_column_constant_to_its_last_bits_is_not_blown_up():
+    """A column constant up to rounding (1e5 ± one ulp) keeps scale 1: a tiny change of a test
+    value stays tiny instead of becoming a z-score of 1e8."""
+    X = np.full((6, 2), 1e5)
+    X[:, 1] = np.arange(6.0)
+    X[:, 0] += np.array([0, 1, 0, 1, 0, 1]) * np.spacing(1e5)
+    for weights in (None, np.ones(6)):
+        t = ModalityTransform().fit(X, weights)
+        assert t.scale_[0] == 1.0 and t.scale_[1] == pytest.approx(np.arange(6.0).std())
+        z = t.transform(X[:1] + [0.001, 0.0])
+        assert abs(z[0, 0]) < 0.01

@@ -65,7 +65,7 @@ def _trials(text: str) -> tuple[int, ...]:
 
 def run(args: argparse.Namespace) -> int:
     from aptkt.experiments.table_learning import TableSettings, learn_from_table
-    from aptkt.learning import LearnerConfig
+    from aptkt.learning import GPSettings, LearnerConfig
 
     live_only = [
         option
@@ -100,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
             budget=args.budget,
             patience=args.patience,
             transfer="paper",  # what the options are checked against: APTKT's transfer
+            gp=GPSettings(**gp),
             **method,
         )
     except ValueError as exc:

@@ -70,7 +70,9 @@ class ModalityTransform:
             w = w / w.sum()
             self.mean_ = w @ X
             scale = np.sqrt(w @ (X - self.mean_) ** 2)
-        self.scale_ = np.where(scale > 1e-12, scale, 1.0)
+        # A column whose spread is at the level of its values' rounding is constant: scaling
+        # by that spread would turn a change in the last digits into a huge z-score.
+        self.scale_ = np.where(scale > np.maximum(1e-12, 1e-9 * np.abs(self.mean_)), scale, 1.0)
         Z = (X - self.mean_) / self.scale_
         self.components_ = None
         self.pca_scale_ = 1.0
