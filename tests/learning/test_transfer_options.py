@@ -469,8 +469,8 @@ def test_transfer_evidence_reuses_only_the_source_factor(world):
     the old object and the kind of source only): interleaved calls with other new observations,
     other λ, other old objects and both kinds of source give what a fresh joint model at λ and
     at λ = 0 gives."""
-    from aptkt.gp import LaplaceGPC, TransferSource
-    from aptkt.learning.evidence import coupling_evidence
+    from aptkt.gp import TransferSource
+    from aptkt.learning.evidence import at_fitted_hyperparameters, coupling_evidence
     from aptkt.learning.prior import ActionPrior
 
     base = world["prior"]["P1"]
@@ -491,21 +491,15 @@ def test_transfer_evidence_reuses_only_the_source_factor(world):
         cases.append((X_new, positive, old, lam, source))
     for X_new, positive, old, lam, source in cases:
         got = ap.transfer_evidence(X_new, positive, old, lam, source)
-        hp = ap.model.hyperparameters_[old]
-        names = list(ap.model.modality_names_)
         mine = np.asarray(ap.observations.objects) == old
         task = (
             TransferSource(X_old[mine], transfer_lambda=lam)
             if source == "positives"
             else TransferSource(X_old, np.where(mine, 1.0, -1.0), transfer_lambda=lam)
         )
-        fresh = LaplaceGPC(
-            length_scale=[hp["length_scales"][m] for m in names],
-            signal_variance=hp["signal_variance"],
-            modality_weights=[hp["modality_weights"][m] for m in names],
-            modalities=dict(zip(names, ap.model.modalities_)),
-            optimize=False,
-        ).fit(X_new, positive.astype(int), sources={1: task})
+        fresh = at_fitted_hyperparameters(ap.model, old).fit(
+            X_new, positive.astype(int), sources={1: task}
+        )
         assert got == pytest.approx(
             coupling_evidence(fresh, 1 if fresh.theta_.shape[0] > 1 else 0), abs=1e-8
         )
@@ -858,7 +852,7 @@ def test_fitted_cutoff_keeps_a_transfer_only_when_the_fitted_evidence_favours_it
     fitted transfer model makes the new labels more probable than the classifier fitted without
     the source. With a margin no evidence reaches, every transfer is dropped and the run is the
     baseline's; with one every evidence passes, the run is Eq. 3's (cutoff="paper")."""
-    from aptkt.gp import LaplaceGPC
+    from aptkt.learning.evidence import at_fitted_hyperparameters
 
     keys = ("mean_accuracy", "fused_accuracy", "action")
     strip = lambda rows: [{k: r[k] for k in keys} for r in rows]  # noqa: E731
@@ -885,16 +879,11 @@ def test_fitted_cutoff_keeps_a_transfer_only_when_the_fitted_evidence_favours_it
                 continue
             model = lrn.model
             k = [str(c) for c in model.classes_].index(obj)
-            hp = model.hyperparameters_[obj]
             names = list(model.modality_names_)
             (source,) = model.sources_[obj]
-            source_alone = LaplaceGPC(
-                length_scale=[hp["length_scales"][m] for m in names],
-                signal_variance=hp["signal_variance"],
-                modality_weights=[hp["modality_weights"][m] for m in names],
-                modalities=dict(zip(names, model.modalities_)),
-                optimize=False,
-            ).fit(source.X, (np.asarray(source.y) > 0).astype(int))
+            source_alone = at_fitted_hyperparameters(model, obj).fit(
+                source.X, (np.asarray(source.y) > 0).astype(int)
+            )
             given_source = (
                 model.log_marginal_likelihood_[k] - source_alone.log_marginal_likelihood_[0]
             )

@@ -23,7 +23,14 @@ import numpy as np
 
 from aptkt.gp import LaplaceGPC
 
-__all__ = ["coupling_evidence", "label_evidence", "target_evidence", "uncoupled_evidence"]
+__all__ = [
+    "at_fitted_hyperparameters",
+    "coupling_evidence",
+    "label_evidence",
+    "label_evidences",
+    "target_evidence",
+    "uncoupled_evidence",
+]
 
 
 def _row(model: LaplaceGPC, k: int) -> tuple[int, object]:
@@ -75,9 +82,17 @@ def target_evidence(model: LaplaceGPC, k: int) -> float:
         # mean takes from source and target labels together; a fit of the target alone would
         # take it from the target's.
         raise ValueError("the target's evidence with a source needs latent_mean='zero'")
+    alone = at_fitted_hyperparameters(model, label)
+    alone.fit(model.X_train_, np.where(model.y_train_ == label, 1, 0))
+    return float(alone.log_marginal_likelihood_[0])
+
+
+def at_fitted_hyperparameters(model: LaplaceGPC, label: object) -> LaplaceGPC:
+    """An unfitted classifier with the fitted hyper-parameters of ``model``'s classifier of
+    class ``label``, none of them optimised, and the model's numerical settings."""
     hp = model.hyperparameters_[label]
     names = list(model.modality_names_)
-    alone = LaplaceGPC(
+    return LaplaceGPC(
         length_scale=[hp["length_scales"][m] for m in names],
         signal_variance=hp["signal_variance"],
         modality_weights=[hp["modality_weights"][m] for m in names],
@@ -87,27 +102,33 @@ def target_evidence(model: LaplaceGPC, k: int) -> float:
         newton_max_iter=model.newton_max_iter,
         newton_tol=model.newton_tol,
         max_jitter=model.max_jitter,
-    ).fit(model.X_train_, np.where(model.y_train_ == label, 1, 0))
-    return float(alone.log_marginal_likelihood_[0])
+    )
 
 
-def label_evidence(model: LaplaceGPC) -> float:
-    """``Σ_k log p(y_k | y_source_k, θ_k)`` over the one-vs-all classifiers of a fitted model:
-    each classifier's labels of the training rows given its source task (``log Z(λ) − log Z(0)
-    + log Z_target``), or its own log marginal likelihood where it has no source. The
-    classifiers are independent given their inputs, so the sum is the log evidence of the
-    whole model's labels. Several sources per classifier are refused: with λ = 0 they become
-    independent of each other too, and Z(0) is no longer the sources' joint evidence times the
-    target's."""
+def label_evidences(model: LaplaceGPC) -> np.ndarray:
+    """``log p(y_k | y_source_k, θ_k)`` of each one-vs-all classifier k of a fitted model:
+    its labels of the training rows given its source task (``log Z(λ) − log Z(0) +
+    log Z_target``), or its own log marginal likelihood where it has no source. Several sources
+    per classifier are refused: with λ = 0 they become independent of each other too, and Z(0)
+    is no longer the sources' joint evidence times the target's."""
     n = model.theta_.shape[0]
+    out = np.array([target_evidence(model, k) for k in range(n)])
     coupled = []
     for k in range(n):
         row, label = _row(model, k)
         if _sources(model, label):
             _one_source(model, label)
-            coupled.append(row)
-    total = sum(target_evidence(model, k) for k in range(n))
+            coupled.append((k, row))
     if coupled:
+        # One evaluation of the whole model at λ = 0 serves every classifier.
         log_z0 = uncoupled_evidence(model)
-        total += sum(float(model.log_marginal_likelihood_[r] - log_z0[r]) for r in coupled)
-    return float(total)
+        for k, row in coupled:
+            out[k] += model.log_marginal_likelihood_[row] - log_z0[row]
+    return out
+
+
+def label_evidence(model: LaplaceGPC) -> float:
+    """``Σ_k log p(y_k | y_source_k, θ_k)`` (``label_evidences``): the classifiers are
+    independent given their inputs, so the sum is the log evidence of the whole model's
+    labels."""
+    return float(label_evidences(model).sum())

@@ -30,11 +30,11 @@ from aptkt.learning.active import entropy, select_next
 from aptkt.learning.config import LearnerConfig
 from aptkt.learning.environment import Environment
 from aptkt.learning.evaluation import accuracy, fused_accuracy
-from aptkt.learning.evidence import coupling_evidence, label_evidence, target_evidence
+from aptkt.learning.evidence import label_evidence, label_evidences
 from aptkt.learning.observations import Observations, ObservationTable
 from aptkt.learning.pipeline import FeaturePipeline
 from aptkt.learning.prior import ActionPrior, PriorKnowledge
-from aptkt.learning.transfer import TransferDecision, decide_transfer
+from aptkt.learning.transfer import JOINT_SPACES, TransferDecision, decide_transfer
 
 __all__ = ["ActionLearner", "APTKT", "LearningRun", "StepRecord"]
 
@@ -91,8 +91,9 @@ class ActionLearner:
         observations so far (the baseline's), or fitted on both together ("pooled").
         ``feature_space``: "prior" always the prior's (so does the control), "new" never,
         "auto" the prior's exactly when this update transfers from at least one old object,
-        "covered" when it transfers to every new object, "pooled" the old and new
-        observations' joint transforms when it transfers (the baseline's otherwise)."""
+        "covered" when it transfers to every new object, "pooled", "blended" and "shrunk"
+        the old and new observations' joint transforms when it transfers (the baseline's
+        otherwise)."""
         cfg = self.config
         if self.prior is not None and (
             cfg.transfer == "control"
@@ -101,26 +102,16 @@ class ActionLearner:
         ):
             return self.prior.pipeline
         assert self.observations is not None  # update() checks every object was observed
-        if self.prior is not None and cfg.feature_space == "pooled" and transfers:
-            # The population the dependent kernel compares: the source tasks' old
-            # observations beside the new ones, each observation counted once as it enters
-            # the Gram matrix.
-            both = Observations.concat([self.prior.observations, self.observations])
-            return FeaturePipeline().fit(both)
-        if self.prior is not None and cfg.feature_space == "shrunk" and transfers:
-            return FeaturePipeline().fit_shrunk(self.prior.observations, self.observations)
-        if self.prior is not None and cfg.feature_space == "blended" and transfers:
-            # The new observations, each counted once, with every old object as one more
-            # observation of the population (its observations share a weight of 1): the old
-            # objects inform the transforms while the new observations are few, and fade as
-            # they accumulate.
-            old = self.prior.observations
-            _, inverse, counts = np.unique(old.objects, return_inverse=True, return_counts=True)
-            weights = np.concatenate(
-                [1.0 / counts[inverse], np.ones(len(self.observations.objects))]
-            )
-            both = Observations.concat([old, self.observations])
-            return FeaturePipeline().fit(both, weights)
+        if self.prior is not None and cfg.feature_space in JOINT_SPACES and transfers:
+            # Old and new observations together: "pooled" counts each once, as it enters the
+            # Gram matrix; "blended" counts each old object as one observation, "shrunk" weighs
+            # them by the new observations' evidence (FeaturePipeline).
+            old, new = self.prior.observations, self.observations
+            if cfg.feature_space == "blended":
+                return FeaturePipeline().fit_blended(old, new)
+            if cfg.feature_space == "shrunk":
+                return FeaturePipeline().fit_shrunk(old, new)
+            return FeaturePipeline().fit(Observations.concat([old, new]))
         return FeaturePipeline().fit(self.observations)
 
     def _features(
@@ -314,14 +305,14 @@ class ActionLearner:
             random_state=int(model.random_state or 0),
         ).fit(X, obs.objects)
         classes = [str(c) for c in model.classes_]
+        with_source = label_evidences(model)
         rejected = False
         for obj, decision in list(self.decisions.items()):
             if not decision.transfers:
                 continue
             k = classes.index(obj)
-            with_source = coupling_evidence(model, k) + target_evidence(model, k)
             row = 0 if alone.theta_.shape[0] == 1 else k
-            log_bf = float(with_source - alone.log_marginal_likelihood_[row])
+            log_bf = float(with_source[k] - alone.log_marginal_likelihood_[row])
             keep = np.isfinite(log_bf) and log_bf > self._evidence_margin()
             self.decisions[obj] = replace(
                 decision,
@@ -371,7 +362,7 @@ class ActionLearner:
             return "prior"
         if (
             self.prior is not None
-            and self.config.feature_space in ("pooled", "blended", "shrunk")
+            and self.config.feature_space in JOINT_SPACES
             and any(d.transfers for d in self.decisions.values())
         ):
             return self.config.feature_space

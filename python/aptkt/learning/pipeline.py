@@ -15,6 +15,8 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from scipy.optimize import minimize_scalar
+from scipy.special import gammaln
 
 from aptkt.learning.observations import Observations
 
@@ -172,6 +174,15 @@ class FeaturePipeline:
         self.modality_names_ = obs.modality_names
         return self
 
+    def fit_blended(self, old: Observations, new: Observations) -> FeaturePipeline:
+        """Fit on ``new`` observations (each counted once) together with every ``old`` object
+        as one more observation of the population (its observations share a weight of 1): the
+        old objects inform the transforms while the new observations are few, and fade as they
+        accumulate."""
+        _, inverse, counts = np.unique(old.objects, return_inverse=True, return_counts=True)
+        weights = np.concatenate([1.0 / counts[inverse], np.ones(len(new.objects))])
+        return self.fit(Observations.concat([old, new]), weights)
+
     def fit_shrunk(self, old: Observations, new: Observations) -> FeaturePipeline:
         """Fit on ``new`` observations shrunk towards the ``old`` population: per modality,
         the old observations together weigh κ observations (``prior_weight``, chosen by the new
@@ -247,8 +258,6 @@ def normal_gamma_log_evidence(
     pseudo-observations with that mean and variance. Closed form
     ``Γ(α_n)/Γ(α₀) · β₀^α₀/β_n^α_n · (κ/κ_n)^½ · (2π)^(−n/2)`` with κ_n = κ + n,
     α₀ = κ/2, α_n = α₀ + n/2, β₀ = κ·var/2, β_n = β₀ + ½Σ(x − x̄)² + κn(x̄ − mean)²/(2κ_n)."""
-    from scipy.special import gammaln
-
     new = np.asarray(new, dtype=np.float64)
     n = new.shape[0]
     xbar = new.mean(axis=0)
@@ -273,8 +282,6 @@ def prior_weight(old: np.ndarray, new: np.ndarray) -> float:
     for every column) under which the new observations are most probable — empirical Bayes,
     searched over κ ∈ [e⁻⁵, e¹⁰]. New observations the old population describes well give a
     large κ, ones it does not a small one."""
-    from scipy.optimize import minimize_scalar
-
     old = np.asarray(old, dtype=np.float64)
     new = np.asarray(new, dtype=np.float64)
     if old.ndim != 2 or new.ndim != 2 or old.shape[1] != new.shape[1]:

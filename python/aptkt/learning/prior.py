@@ -10,18 +10,19 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from sklearn.base import clone
 
 from aptkt import __version__
 from aptkt.errors import PriorFileError
 from aptkt.gp import LaplaceGPC, TransferSource
 from aptkt.learning.config import GPSettings
-from aptkt.learning.evidence import uncoupled_evidence as _uncoupled
+from aptkt.learning.evidence import at_fitted_hyperparameters, uncoupled_evidence
 from aptkt.learning.observations import Observations, ObservationTable
 from aptkt.learning.pipeline import FeaturePipeline, ModalityTransform
 from aptkt.learning.prior_file import FORMAT as _FORMAT
@@ -38,6 +39,10 @@ class ActionPrior:
     observations: Observations
     pipeline: FeaturePipeline
     model: LaplaceGPC
+    #: log Z of each source task the evidence test has judged, by (old object, source kind).
+    _source_evidence: dict[tuple[str, str], float] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
 
     @property
     def objects(self) -> list[str]:
@@ -111,38 +116,18 @@ class ActionPrior:
         if positive.shape != (X_new.shape[0],) or positive.all() or not positive.any():
             raise ValueError("positive must mark some, not all, of the new observations")
         labels = np.where(positive, 1, 0)
-        coupled = self._evidence_model(old_object).fit(X_new, labels, sources={1: task})
+        judge = at_fitted_hyperparameters(self.model, old_object)
+        coupled = clone(judge).fit(X_new, labels, sources={1: task})
         row = int(np.flatnonzero(coupled.classes_ == 1)[0])
         # log Z(0) = log Z_source + log Z_target. The source's factor is the same at every
         # update (the old object's own hyper-parameters, the same old rows): it is computed
         # once, from the first joint model at λ = 0, and only the small target task is
         # evaluated afresh. (The joint λ = 0 evaluation costs as much as the coupled fit.)
-        target = float(
-            self._evidence_model(old_object).fit(X_new, labels).log_marginal_likelihood_[0]
-        )
+        target = float(judge.fit(X_new, labels).log_marginal_likelihood_[0])
         key = (old_object, source)
         if key not in self._source_evidence:
-            self._source_evidence[key] = _uncoupled(coupled)[row] - target
+            self._source_evidence[key] = uncoupled_evidence(coupled)[row] - target
         return float(coupled.log_marginal_likelihood_[row] - self._source_evidence[key] - target)
-
-    def _evidence_model(self, old_object: str) -> LaplaceGPC:
-        """An unfitted classifier at ``old_object``'s own classifier's hyper-parameters (none
-        of them optimised): the model both hypotheses of the evidence test are judged by."""
-        hp = self.model.hyperparameters_[old_object]
-        names = list(self.model.modality_names_)
-        return LaplaceGPC(
-            length_scale=[hp["length_scales"][m] for m in names],
-            signal_variance=hp["signal_variance"],
-            modality_weights=[hp["modality_weights"][m] for m in names],
-            modalities=dict(zip(names, self.model.modalities_)),
-            optimize=False,
-            approximation=self.model.approximation,
-        )
-
-    @cached_property
-    def _source_evidence(self) -> dict[tuple[str, str], float]:
-        """log Z of each source task tested so far, by (old object, source kind)."""
-        return {}
 
 
 def binary_probabilities(model: LaplaceGPC, X: np.ndarray) -> np.ndarray:

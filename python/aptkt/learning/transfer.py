@@ -45,6 +45,7 @@ __all__ = [
     "SOURCE_TASKS",
     "SOURCE_CHOICES",
     "FEATURE_SPACES",
+    "JOINT_SPACES",
     "CUTOFFS",
 ]
 
@@ -59,6 +60,9 @@ RELATEDNESS = ("binary", "normalised")
 SOURCE_TASKS = ("one-vs-all", "positives")
 #: Where the new objects' models live (see LearnerConfig.feature_space).
 FEATURE_SPACES = ("auto", "covered", "prior", "new", "pooled", "evidence", "blended", "shrunk")
+#: The spaces whose transforms are fitted on old and new observations together when the update
+#: transfers (the baseline's otherwise).
+JOINT_SPACES = ("pooled", "blended", "shrunk")
 #: Which old object Eq. 3 picks: the most related (the method) or, for a stress test of the
 #: cut-off, the least related.
 SOURCE_CHOICES = ("most", "least")
