@@ -2,7 +2,7 @@
 spends on its learning runs).
 
 Usage: python benches/run_store_cpu.py RUNS_DIR [--per-class 2] [--seed 1] [--out NAME]
-                                          [--compare OTHER.json]
+                                          [--compare OTHER.json] [--gp NAME=VALUE ...]
 
 RUNS_DIR: the ``runs/`` folder of a run store (each JSON holds a run's spec). Runs are grouped
 by (figure, method, number of priors, number of actions); ``--per-class`` of each are drawn at
@@ -11,7 +11,8 @@ with one BLAS and one core thread (as ``aptkt reproduce`` limits its workers), a
 CPU time (``time.process_time``) times the class's size gives its share of the total.
 Each run's learning curve (mean and fused test accuracy at every step) is saved with it;
 ``--compare`` names a result of another build (same store, sampling and seed) and counts the
-runs whose curves differ.
+runs whose curves differ. ``--gp`` changes GP settings of every sampled run (a JSON value,
+e.g. ``--gp optimizer_tol=1e-6``), to measure a new default on the store's runs.
 """
 
 from __future__ import annotations
@@ -40,8 +41,10 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--out", default="run_store_cpu")
     ap.add_argument("--compare", help="a result file of another build to compare curves with")
+    ap.add_argument("--gp", nargs="*", default=[], metavar="NAME=VALUE")
     args = ap.parse_args()
     rng = random.Random(args.seed)
+    gp_changes = {k: json.loads(v) for k, v in (a.split("=", 1) for a in args.gp)}
     classes = collections.defaultdict(list)
     for f in sorted(glob.glob(f"{args.runs}/*.json")):
         s = json.load(open(f))["spec"]
@@ -53,6 +56,8 @@ def main() -> None:
         cpu = 0.0
         picked = rng.sample(specs, min(args.per_class, len(specs)))
         for k, s in enumerate(picked):
+            if gp_changes:
+                s = {**s, "config": {**s["config"], "gp": {**s["config"]["gp"], **gp_changes}}}
             spec = RunSpec.from_dict(s)
             # The observation tables and the prior are loaded once per worker: not timed.
             _table(spec.data, spec.new_objects, spec.pool_trials, spec.actions)

@@ -86,6 +86,7 @@ class FitSettings:
     n_restarts: int
     seed: int
     max_iter: int
+    optimizer_tol: float
     newton_max_iter: int
     newton_tol: float
     max_jitter: float
@@ -112,6 +113,7 @@ class FitSettings:
         n_restarts: int,
         seed: int,
         max_iter: int,
+        optimizer_tol: float,
         newton_max_iter: int,
         newton_tol: float,
         max_jitter: float,

@@ -59,6 +59,8 @@ class FitDefaults:
     signal_variance: float = 1.0
     n_restarts: int = 1
     max_iter: int = 100
+    # scipy's L-BFGS-B default (factr 1e7 times machine epsilon), which scikit-learn's GPC uses.
+    optimizer_tol: float = 1e7 * float(np.finfo(np.float64).eps)
     approximation: str = "erf"
     n_jobs: int | None = None
     hyper_prior: str | None = None
@@ -158,13 +160,14 @@ def _binary_labels(y: Any, n: int) -> np.ndarray:
     values = arr.astype(np.float64)
     if not np.all(np.isfinite(values)):
         raise ValueError("TransferSource.y contains a non-finite value")
-    seen = set(np.unique(values).tolist())
-    if seen <= {1.0, -1.0}:
+    positive = values == 1.0
+    if np.all(positive | (values == -1.0)):
         return values
-    if seen <= {0.0, 1.0}:
-        return np.where(values > 0, 1.0, -1.0)
+    if np.all(positive | (values == 0.0)):
+        return np.where(positive, 1.0, -1.0)
     raise ValueError(
-        f"TransferSource.y must be binary (+1/-1, 1/0 or booleans), got values {sorted(seen)}"
+        "TransferSource.y must be binary (+1/-1, 1/0 or booleans), got values "
+        f"{sorted(set(np.unique(values).tolist()))}"
     )
 
 
@@ -472,6 +475,11 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         Seeds the random starts; the fit is deterministic for a given value.
     max_iter : int
         Iterations of the quasi-Newton optimiser per start (default 100).
+    optimizer_tol : float
+        The optimiser stops when an iteration lowers the negative log marginal likelihood (or
+        posterior) by less than this fraction of its value; default 1e7·eps ≈ 2.2e-9, the
+        stopping rule of scipy's L-BFGS-B as scikit-learn calls it. (It also stops when the
+        projected gradient's largest component is below 1e-5.)
     length_scale_bounds, signal_variance_bounds : (float, float)
         Box constraints of the optimiser.
     newton_max_iter, newton_tol : int, float
@@ -554,6 +562,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         fixed: Iterable[str] = ("transfer_lambda",),
         random_state: Any = None,
         max_iter: int = DEFAULTS.max_iter,
+        optimizer_tol: float = DEFAULTS.optimizer_tol,
         length_scale_bounds: tuple[float, float] = (1e-5, 1e5),
         signal_variance_bounds: tuple[float, float] = (1e-5, 1e5),
         newton_max_iter: int = 100,
@@ -574,6 +583,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         self.fixed = fixed
         self.random_state = random_state
         self.max_iter = max_iter
+        self.optimizer_tol = optimizer_tol
         self.length_scale_bounds = length_scale_bounds
         self.signal_variance_bounds = signal_variance_bounds
         self.newton_max_iter = newton_max_iter
@@ -650,6 +660,13 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             raise ValueError(
                 f"approximation must be one of {_APPROXIMATIONS}, got {self.approximation!r}"
             )
+        tol = self.optimizer_tol
+        if (
+            isinstance(tol, bool)
+            or not isinstance(tol, (int, float, np.number))
+            or not (np.isfinite(tol) and tol >= 0)
+        ):
+            raise ValueError(f"optimizer_tol must be a finite number >= 0, got {tol!r}")
         for name in ("n_restarts", "max_iter", "newton_max_iter"):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < 0:
@@ -685,6 +702,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             n_restarts=int(self.n_restarts),
             seed=_seed(self.random_state),
             max_iter=int(self.max_iter),
+            optimizer_tol=float(self.optimizer_tol),
             newton_max_iter=int(self.newton_max_iter),
             newton_tol=float(self.newton_tol),
             max_jitter=float(self.max_jitter),

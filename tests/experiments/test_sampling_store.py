@@ -12,6 +12,7 @@ from aptkt.experiments.priors import PriorTask
 from aptkt.experiments.run_store import RunStore, run_key
 from aptkt.experiments.runs import RunSpec
 from aptkt.experiments.sampling import derive_seed, draw_groups
+from aptkt.gp import DEFAULTS
 from aptkt.learning import GPSettings, LearnerConfig
 
 
@@ -84,14 +85,18 @@ def test_run_key_covers_what_changes_the_result_and_nothing_else():
 
 
 def test_settings_added_later_leave_stored_keys_as_they_were():
-    """Keys computed by aptkt 0.1.0 before warm_start, class_prior, latent_mean and the
-    modality-weight prior existed, when the learner searched from two starts (commit 1fed19f):
+    """Keys computed by aptkt 0.1.0 before warm_start, class_prior, latent_mean, the
+    modality-weight prior and the optimiser's tolerance existed, when the learner searched from two starts (commit 1fed19f):
     a store or prior file from then must still be found, or a resumed run recomputes it all.
     Those runs had flat modality weights, the "training" class posterior and a random restart,
     so their keys belong to those settings; the new defaults must get keys of their own, or a
     resumed store would hand out results computed the old way."""
     flat = GPSettings(
-        n_restarts=1, modality_weight_prior=False, class_prior="training", latent_mean="zero"
+        n_restarts=1,
+        modality_weight_prior=False,
+        class_prior="training",
+        latent_mean="zero",
+        optimizer_tol=DEFAULTS.optimizer_tol,
     )
     spec = RunSpec(
         method="APTKT",
@@ -118,6 +123,7 @@ def test_settings_added_later_leave_stored_keys_as_they_were():
             "modality_weight_prior": False,
             "class_prior": "training",
             "latent_mean": "zero",
+            "optimizer_tol": DEFAULTS.optimizer_tol,
         },
     )
     assert task.key == "4596257baaf0144904e0"
@@ -135,6 +141,10 @@ def test_settings_added_later_leave_stored_keys_as_they_were():
     base_rate = replace(flat, latent_mean="base-rate")
     assert run_key(replace(spec, config=LearnerConfig(gp=base_rate)), "fp") != run_key(spec, "fp")
     assert base_rate.to_dict()["latent_mean"] == "base-rate"
+    loose = replace(flat, optimizer_tol=1e-6)
+    assert run_key(replace(spec, config=LearnerConfig(gp=loose)), "fp") != run_key(spec, "fp")
+    assert replace(task, gp={**task.gp, "optimizer_tol": 1e-6}).key != task.key
+    assert GPSettings.from_dict(loose.to_dict()) == loose
 
 
 def test_store_round_trip_and_damaged_files(tmp_path):

@@ -84,6 +84,28 @@ def test_bad_input_errors():
         LaplaceGPC(approximation="probit").fit(X, y)
     with pytest.raises(AttributeError, match="not fitted"):
         LaplaceGPC().predict(X)
+    for tol in (-1e-6, float("nan"), float("inf"), "1e-6", True):
+        with pytest.raises(ValueError, match="optimizer_tol"):
+            LaplaceGPC(optimizer_tol=tol).fit(X, y)
+
+
+def test_optimizer_tolerance_stops_the_search_earlier_and_only_where_it_barely_moves():
+    """scipy's rule by default; a looser relative tolerance takes fewer evaluations and ends
+    within that tolerance's reach of the tight optimum (MAP-II objective, which is concave
+    enough near the optimum for the bound to hold in this well-conditioned problem)."""
+    X, y = make_blobs(12, 3, 3, spread=1.0, seed=7)
+    common = dict(n_restarts=0, hyper_prior="weak", random_state=0)
+    tight = LaplaceGPC(**common).fit(X, y)
+    assert LaplaceGPC().optimizer_tol == pytest.approx(1e7 * np.finfo(float).eps)
+    loose = LaplaceGPC(optimizer_tol=1e-3, **common).fit(X, y)
+    assert loose.n_evaluations_.sum() < tight.n_evaluations_.sum()
+    objective = lambda m: m.log_marginal_likelihood_ + m.log_hyper_prior_  # noqa: E731
+    gap = objective(tight) - objective(loose)
+    assert np.all(gap >= -1e-9)  # the tight search is never worse
+    assert np.all(gap <= 0.05 * np.abs(objective(tight)))
+    # A tolerance nothing can meet stops each classifier after its first step.
+    first = LaplaceGPC(optimizer_tol=1e6, **common).fit(X, y)
+    assert np.all(first.n_iter_ <= 1)
 
 
 def test_lambda_zero_transfer_equals_no_transfer():

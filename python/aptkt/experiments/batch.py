@@ -110,24 +110,35 @@ def run_batch(
     reused = len(done)
     bar = _bar(progress, reused + len(todo), reused, desc)
     order = list(todo)
+    # Each worker stores its own run: the main process only counts. Sending every run's rows
+    # back for the main process to write kept the workers waiting on its pipe and its GIL
+    # (≈ 9 % of two cores idle in Fig. 6's 2,100 short runs) and made it the serial part.
+    stored_run = _StoredRun(str(store.directory), task)
     try:
-        for i, rows in executor.imap_unordered(task, [todo[k] for k in order]):
-            key = order[i]
-            store.save(key, todo[key], rows)
-            # Read back what was stored, so fresh and resumed results are the same values.
-            stored = store.load(key)
-            if stored is None:
-                raise RuntimeError(
-                    f"run {key}: its result file {store.path(key)} cannot be read back"
-                )
-            done.add(key)
-            run_seconds += _seconds(stored)
+        for i, seconds in executor.imap_unordered(stored_run, [(k, todo[k]) for k in order]):
+            done.add(order[i])
+            run_seconds += seconds
             bar.update(1)
     finally:
         bar.close()
     return BatchResult(
         StoredSteps(store, keys), computed=len(todo), reused=reused, run_seconds=run_seconds
     )
+
+
+@dataclass(frozen=True)
+class _StoredRun:
+    """One run, performed and stored where it runs (a worker process, a cluster node sharing
+    the output directory); returns the run's own seconds."""
+
+    directory: str
+    task: Callable[[RunSpec], list[dict[str, Any]]]
+
+    def __call__(self, item: tuple[str, RunSpec]) -> float:
+        key, spec = item
+        rows = self.task(spec)
+        RunStore(self.directory).save(key, spec, rows)
+        return _seconds(rows)
 
 
 def _seconds(rows: list[dict[str, Any]]) -> float:

@@ -185,6 +185,12 @@ impl ModelSpec {
                 self.weights
             )));
         }
+        if !(self.lbfgs.ftol.is_finite() && self.lbfgs.ftol >= 0.0) {
+            return Err(GpError::InvalidInput(format!(
+                "the optimiser's tolerance must be a finite number >= 0, got {}",
+                self.lbfgs.ftol
+            )));
+        }
         for (name, (lo, hi)) in [
             ("signal_variance", self.signal_variance_bounds),
             ("length_scale", self.length_scale_bounds),

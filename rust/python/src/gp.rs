@@ -123,6 +123,8 @@ pub struct FitSettings {
     n_restarts: usize,
     seed: u64,
     max_iter: usize,
+    /// The hyper-parameter search stops when the objective's relative decrease falls below it.
+    optimizer_tol: f64,
     newton_max_iter: usize,
     newton_tol: f64,
     max_jitter: f64,
@@ -152,8 +154,8 @@ impl FitSettings {
     #[pyo3(signature = (
         *, modalities, signal_variance, length_scales, weights, free_signal_variance,
         free_length_scales, free_weights, free_lambda, signal_variance_bounds,
-        length_scale_bounds, optimize, n_restarts, seed, max_iter, newton_max_iter, newton_tol,
-        max_jitter, approximation, n_threads, prior_signal_variance = None,
+        length_scale_bounds, optimize, n_restarts, seed, max_iter, optimizer_tol, newton_max_iter,
+        newton_tol, max_jitter, approximation, n_threads, prior_signal_variance = None,
         prior_length_scale = None, prior_weight_logit = None, latent_mean = "zero".to_string()
     ))]
     #[allow(clippy::too_many_arguments)]
@@ -172,6 +174,7 @@ impl FitSettings {
         n_restarts: usize,
         seed: u64,
         max_iter: usize,
+        optimizer_tol: f64,
         newton_max_iter: usize,
         newton_tol: f64,
         max_jitter: f64,
@@ -197,6 +200,7 @@ impl FitSettings {
             n_restarts,
             seed,
             max_iter,
+            optimizer_tol,
             newton_max_iter,
             newton_tol,
             max_jitter,
@@ -215,8 +219,8 @@ impl FitSettings {
             "FitSettings(modalities={:?}, signal_variance={:?}, length_scales={:?}, \
              weights={:?}, free_signal_variance={}, free_length_scales={}, free_weights={}, \
              free_lambda={}, signal_variance_bounds={:?}, length_scale_bounds={:?}, \
-             optimize={}, n_restarts={}, seed={}, max_iter={}, newton_max_iter={}, \
-             newton_tol={:?}, max_jitter={:?}, approximation={:?}, n_threads={}, \
+             optimize={}, n_restarts={}, seed={}, max_iter={}, optimizer_tol={:?}, \
+             newton_max_iter={}, newton_tol={:?}, max_jitter={:?}, approximation={:?}, n_threads={}, \
              prior_signal_variance={}, prior_length_scale={}, prior_weight_logit={}, \
              latent_mean={:?})",
             self.modalities,
@@ -233,6 +237,7 @@ impl FitSettings {
             self.n_restarts,
             self.seed,
             self.max_iter,
+            self.optimizer_tol,
             self.newton_max_iter,
             self.newton_tol,
             self.max_jitter,
@@ -274,6 +279,7 @@ impl FitSettings {
         spec.n_restarts = self.n_restarts;
         spec.seed = self.seed;
         spec.lbfgs.max_iter = self.max_iter;
+        spec.lbfgs.ftol = self.optimizer_tol;
         spec.newton.max_iter = self.newton_max_iter;
         spec.newton.tol = self.newton_tol;
         spec.max_jitter = self.max_jitter;
