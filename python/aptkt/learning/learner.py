@@ -70,6 +70,10 @@ class ActionLearner:
         self._test = test
         self._test_cache: tuple[FeaturePipeline, np.ndarray] | None = None
         self.test_posteriors: np.ndarray | None = None
+        # The current model's test accuracy and hyper-parameters, computed when first asked
+        # for: every step records them for every action, and only one action changed.
+        self._accuracy: float | None = None
+        self._hyperparameters: dict[str, dict[str, float]] | None = None
         # Every old object's features and objects (the source tasks): in the prior's space,
         # computed once; in the latest other space, until it changes.
         self._old_prior: tuple[FeaturePipeline, np.ndarray, np.ndarray] | None = None
@@ -208,6 +212,7 @@ class ActionLearner:
         missing = [o for o in self.new_objects if self.count(o) == 0]
         if missing or obs is None:
             raise RuntimeError(f"action {self.action!r}: no observation yet of {missing}")
+        self._accuracy = self._hyperparameters = None
         cfg = self.config
         # The old models judge the new observations in their own space.
         X_prior = None if self.prior is None else self.prior.pipeline.transform(obs)[0]
@@ -415,7 +420,12 @@ class ActionLearner:
     def hyperparameters(self) -> dict[str, dict[str, float]]:
         """The fitted hyper-parameters of each new object's classifier (see
         :func:`hyperparameters`)."""
-        return {} if self.model is None else hyperparameters(self.model)
+        if self.model is None:
+            return {}
+        if self._hyperparameters is None:
+            self._hyperparameters = hyperparameters(self.model)
+        # Copies: each step's record owns its values.
+        return {c: dict(hp) for c, hp in self._hyperparameters.items()}
 
     def uncertainty(self, obj: str) -> float:
         """UNC(α, c_j): mean entropy of the posterior over this pair's observations."""
@@ -433,11 +443,13 @@ class ActionLearner:
     def test_accuracy(self) -> float:
         if self._test is None or self.test_posteriors is None or self.model is None:
             raise RuntimeError("no test observations were given")
-        return accuracy(
-            self.test_posteriors,
-            [str(c) for c in self.model.classes_],
-            [str(o) for o in self._test.objects],
-        )
+        if self._accuracy is None:
+            self._accuracy = accuracy(
+                self.test_posteriors,
+                [str(c) for c in self.model.classes_],
+                [str(o) for o in self._test.objects],
+            )
+        return self._accuracy
 
 
 def choose_space(evidence: Mapping[str, float], available: Collection[str]) -> str:

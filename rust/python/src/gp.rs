@@ -10,8 +10,9 @@ use aptkt_gp::{
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Condvar, Mutex};
+use std::sync::{Arc, Condvar, Mutex, OnceLock};
 use std::time::Duration;
 
 use crate::errors::gp_error;
@@ -33,61 +34,109 @@ fn matrix<'py>(
         .map_err(|e| PyValueError::new_err(format!("internal shape error: {e}")))
 }
 
-/// Runs `work` on a helper thread with the GIL released while this thread waits for it, and
-/// looks for Python signals every [`POLL`]. If a signal handler raises (Ctrl-C:
-/// `KeyboardInterrupt`), `cancel` is set, the work (which checks the flag between iterations)
-/// is waited for, and the handler's exception is returned. The helper signals its end on a
-/// condition variable, so a short fit returns as soon as it is done (no sleep granularity).
+/// Where the work of [`run_interruptible`] leaves its result (or its panic).
+type Done<T> = (Mutex<Option<std::thread::Result<T>>>, Condvar);
+
+/// Runs `work` on a thread of the `n_threads` pool with the GIL released while this thread
+/// waits for it, and looks for Python signals every [`POLL`]. If a signal handler raises
+/// (Ctrl-C: `KeyboardInterrupt`), `cancel` is set, the work (which checks the flag between
+/// iterations) is waited for, and the handler's exception is returned. The work signals its end
+/// on a condition variable, so a short fit returns as soon as it is done (no sleep
+/// granularity). It runs as a task of the kept pool rather than on a thread started for it:
+/// starting and joining a thread per fit cost more than a small fit itself.
 fn run_interruptible<T: Send>(
     py: Python<'_>,
     cancel: &AtomicBool,
+    n_threads: usize,
     work: impl FnOnce() -> T + Send,
 ) -> PyResult<T> {
-    let signal = (Mutex::new(false), Condvar::new());
-    let signal = &signal;
-    std::thread::scope(|scope| {
-        let handle = scope.spawn(move || {
-            let out = work();
-            *signal.0.lock().unwrap_or_else(|e| e.into_inner()) = true;
-            signal.1.notify_all();
-            out
-        });
-        loop {
-            let ended = py.detach(|| {
-                let ended = signal.0.lock().unwrap_or_else(|e| e.into_inner());
-                let (ended, _) = signal
+    let done: Done<T> = (Mutex::new(None), Condvar::new());
+    if n_threads == 0 {
+        rayon::in_place_scope(|scope| spawn_and_poll(scope, py, cancel, &done, work))?;
+    } else {
+        let pool = pool(n_threads).map_err(gp_error)?;
+        pool.in_place_scope(|scope| spawn_and_poll(scope, py, cancel, &done, work))?;
+    }
+    let out = done.0.lock().unwrap_or_else(|e| e.into_inner()).take();
+    match out {
+        Some(Ok(value)) => Ok(value),
+        _ => Err(PyValueError::new_err(
+            "internal error: the fit's thread panicked",
+        )),
+    }
+}
+
+fn spawn_and_poll<'scope, T: Send + 'scope>(
+    scope: &rayon::Scope<'scope>,
+    py: Python<'_>,
+    cancel: &AtomicBool,
+    done: &'scope Done<T>,
+    work: impl FnOnce() -> T + Send + 'scope,
+) -> PyResult<()> {
+    scope.spawn(move |_| {
+        let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(work));
+        *done.0.lock().unwrap_or_else(|e| e.into_inner()) = Some(out);
+        done.1.notify_all();
+    });
+    // Whether the work has ended, waiting at most `timeout` (None: until it ends).
+    let ended = |timeout: Option<Duration>| {
+        py.detach(|| {
+            let slot = done.0.lock().unwrap_or_else(|e| e.into_inner());
+            let slot = match timeout {
+                Some(t) => {
+                    done.1
+                        .wait_timeout_while(slot, t, |s| s.is_none())
+                        .unwrap_or_else(|e| e.into_inner())
+                        .0
+                }
+                None => done
                     .1
-                    .wait_timeout_while(ended, POLL, |ended| !*ended)
-                    .unwrap_or_else(|e| e.into_inner());
-                *ended || handle.is_finished()
-            });
-            if ended {
-                break;
-            }
-            if let Err(e) = py.check_signals() {
-                cancel.store(true, Ordering::Relaxed);
-                // The result of a cancelled fit is of no use; only its end is waited for.
-                let _ = py.detach(|| handle.join());
-                return Err(e);
-            }
+                    .wait_while(slot, |s| s.is_none())
+                    .unwrap_or_else(|e| e.into_inner()),
+            };
+            slot.is_some()
+        })
+    };
+    while !ended(Some(POLL)) {
+        if let Err(e) = py.check_signals() {
+            cancel.store(true, Ordering::Relaxed);
+            // The result of a cancelled fit is of no use; only its end is waited for.
+            ended(None);
+            return Err(e);
         }
-        py.detach(|| handle.join())
-            .map_err(|_| PyValueError::new_err("internal error: the fit's thread panicked"))
-    })
+    }
+    Ok(())
 }
 
 /// How often a long fit looks for Ctrl-C.
 const POLL: Duration = Duration::from_millis(20);
 
+/// The process's thread pool of `n_threads` threads, built on first use and kept: building
+/// one per call started and stopped its threads every time, ≈ 0.1 ms of CPU per call, and a
+/// learning run makes hundreds of calls (6 % of a reproduction's CPU).
+fn pool(n_threads: usize) -> Result<Arc<rayon::ThreadPool>, GpError> {
+    static POOLS: OnceLock<Mutex<HashMap<usize, Arc<rayon::ThreadPool>>>> = OnceLock::new();
+    let mut pools = POOLS
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    if let Some(pool) = pools.get(&n_threads) {
+        return Ok(pool.clone());
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(n_threads)
+        .build()
+        .map(Arc::new)
+        .map_err(|e| GpError::InvalidInput(format!("cannot start {n_threads} threads: {e}")))?;
+    pools.insert(n_threads, pool.clone());
+    Ok(pool)
+}
+
 fn run_in_pool<T: Send>(n_threads: usize, f: impl FnOnce() -> T + Send) -> Result<T, GpError> {
     if n_threads == 0 {
         return Ok(f());
     }
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(n_threads)
-        .build()
-        .map(|pool| pool.install(f))
-        .map_err(|e| GpError::InvalidInput(format!("cannot start {n_threads} threads: {e}")))
+    Ok(pool(n_threads)?.install(f))
 }
 
 /// A fitted one-vs-all Laplace GPC. Built by `fit_gpc`; opaque to Python except through its
@@ -349,7 +398,7 @@ fn fit_gpc(
     let cancel = Arc::new(AtomicBool::new(false));
     spec.newton.cancel = Some(cancel.clone());
     let n_threads = settings.n_threads;
-    let model = run_interruptible(py, &cancel, || {
+    let model = run_interruptible(py, &cancel, n_threads, || {
         run_in_pool(n_threads, || match (&thetas, &starts) {
             (Some(t), _) => aptkt_gp::fit_at(&data, &labels, n_classes, &sources, &spec, t),
             (None, Some(s)) => aptkt_gp::fit_from(&data, &labels, n_classes, &sources, &spec, s),
