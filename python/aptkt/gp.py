@@ -73,7 +73,7 @@ CLASS_PRIORS = ("training", "uniform")
 LATENT_MEANS = ("zero", "base-rate")
 
 #: Parameters a saved model leaves out at their default (added after the format was fixed).
-_OMITTED_AT_DEFAULT = ("class_prior", "latent_mean")
+_OMITTED_AT_DEFAULT = ("class_prior", "latent_mean", "optimizer_tol")
 _FIXABLE = ("signal_variance", "length_scale", "modality_weights", "transfer_lambda")
 _APPROXIMATIONS = ("erf", "quadrature")
 _SAVE_FORMAT = "aptkt.LaplaceGPC/2"
@@ -1036,9 +1036,9 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             "params": {
                 k: _jsonable(v)
                 for k, v in self.get_params().items()
-                # class_prior and latent_mean at their defaults are left out: files stay
-                # readable by the versions before them, which share this format (and the prior
-                # files' keys).
+                # class_prior, latent_mean and optimizer_tol at their defaults are left out:
+                # files stay readable by the versions before them, which share this format (and
+                # the prior files' keys).
                 if k != "random_state"
                 and not (k in _OMITTED_AT_DEFAULT and v == getattr(DEFAULTS, k))
             },

@@ -80,7 +80,10 @@ CHILD = textwrap.dedent(
     try:
         model.fit(X, y)
     except KeyboardInterrupt:
-        print("interrupted", time.monotonic(), flush=True)
+        stamp = time.monotonic()
+        # The interrupted fit's thread pool is kept: it must serve the next fit.
+        LaplaceGPC(n_jobs=1, random_state=0).fit(X[:60], y[:60])
+        print("interrupted", stamp, flush=True)
         sys.exit(0)
     print("finished", time.monotonic(), flush=True)
     """
@@ -108,3 +111,69 @@ def test_ctrl_c_interrupts_a_long_fit_promptly():
     # The core checks its cancel flag between Newton iterations (a few tens of ms each at this
     # size); the bound is loose because the test machine may be loaded.
     assert latency < 3.0, f"Ctrl-C took {latency:.2f} s to stop the fit"
+
+
+def _fit_in_child(X, y, write_end: int) -> None:
+    """In a forked child: fit, send the probabilities to the parent, and leave at once."""
+    status = 1
+    try:
+        proba = LaplaceGPC(n_jobs=1, random_state=0).fit(X, y).predict_proba(X)
+        os.write(write_end, proba.astype(np.float64).tobytes())
+        status = 0
+    finally:
+        os._exit(status)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="os.fork is POSIX-only")
+def test_a_process_forked_after_a_fit_fits_too():
+    """The binding keeps its thread pools; a child forked after a fit has the parent's pools
+    but not their threads, and must build its own instead of waiting on them for ever."""
+    X, y = make_blobs(8, 3, 3, seed=5)
+    expected = LaplaceGPC(n_jobs=1, random_state=0).fit(X, y).predict_proba(X)
+    LaplaceGPC(n_jobs=2, optimize=False).fit(X, y)  # a second kept pool, of 2 threads
+    read_end, write_end = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        os.close(read_end)
+        _fit_in_child(X, y, write_end)
+    os.close(write_end)
+    deadline = time.monotonic() + 60
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        if time.monotonic() > deadline:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            pytest.fail("the forked child's fit did not end within 60 s (waiting on pools?)")
+        time.sleep(0.05)
+    data = b""
+    while chunk := os.read(read_end, 1 << 16):
+        data += chunk
+    os.close(read_end)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
+    got = np.frombuffer(data, dtype=np.float64).reshape(expected.shape)
+    np.testing.assert_array_equal(got, expected)
+
+
+def test_fits_from_several_threads_at_once_equal_fits_one_after_the_other():
+    """Each calling thread has its own kept pool: concurrent fits neither block on each other
+    for good nor mix their work."""
+    import threading
+
+    problems = [make_blobs(6, 3, 4, spread=s, seed=k) for k, s in enumerate((0.5, 1.0, 1.5))]
+    alone = [LaplaceGPC(random_state=0).fit(X, y).predict_proba(X) for X, y in problems]
+    together: list[np.ndarray | None] = [None] * len(problems)
+
+    def fit(k: int) -> None:
+        X, y = problems[k]
+        together[k] = LaplaceGPC(random_state=0).fit(X, y).predict_proba(X)
+
+    threads = [threading.Thread(target=fit, args=(k,)) for k in range(len(problems))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=60)
+    assert not any(t.is_alive() for t in threads), "a concurrent fit did not end"
+    for a, b in zip(alone, together):
+        np.testing.assert_array_equal(a, b)

@@ -780,6 +780,63 @@ def test_modality_weight_prior_is_on_by_default_and_recorded_so_old_runs_keep_th
         GPSettings(modality_weight_prior="yes")
 
 
+def test_optimizer_tolerance_is_the_learners_choice_recorded_and_checked():
+    from aptkt.gp import DEFAULTS, LaplaceGPC
+
+    assert GPSettings().optimizer_tol == 1e-6
+    assert GPSettings().make({"a": [0], "b": [1]}, random_state=0).optimizer_tol == 1e-6
+    assert LaplaceGPC().optimizer_tol == DEFAULTS.optimizer_tol
+    # Recorded at the learner's default; a record without it was fitted at scipy's rule.
+    assert GPSettings().to_dict()["optimizer_tol"] == 1e-6
+    scipy = GPSettings(optimizer_tol=DEFAULTS.optimizer_tol)
+    assert "optimizer_tol" not in scipy.to_dict()
+    assert GPSettings.from_dict(scipy.to_dict()) == scipy
+    for bad in (-1e-6, float("nan"), float("inf"), "1e-6", True, None):
+        with pytest.raises(ValueError, match="optimizer_tol"):
+            GPSettings(optimizer_tol=bad)
+    # A saved estimator at the default keeps the parameter out (files stay readable by the
+    # versions before it); another value is written.
+    X = np.array([[0.0], [0.1], [1.0], [1.1]])
+    y = np.array([0, 0, 1, 1])
+    assert "optimizer_tol" not in _saved_params(LaplaceGPC(optimize=False).fit(X, y))
+    loose = LaplaceGPC(optimize=False, optimizer_tol=1e-6).fit(X, y)
+    assert _saved_params(loose)["optimizer_tol"] == 1e-6
+    assert LaplaceGPC.from_state(loose.state()).optimizer_tol == 1e-6
+
+
+def _saved_params(model):
+    import json
+
+    return json.loads(model.state()["meta"].tobytes())["params"]
+
+
+def test_step_records_equal_values_computed_afresh_at_every_step(world):
+    """Each action's accuracy and hyper-parameters are kept until its next refit; every step's
+    record must still equal a fresh computation from the learners at that step, also when the
+    fitted cut-off replaces a model by a refit."""
+    from aptkt.learning.evaluation import accuracy
+
+    learner = APTKT(LearnerConfig(budget=6, seed=1, cutoff="fitted"), world["prior"])
+    checked = []
+
+    def compare(record):
+        for a, lrn in learner.learners.items():
+            classes = [str(c) for c in lrn.model.classes_]
+            fresh = accuracy(lrn.test_posteriors, classes, [str(o) for o in lrn.test_objects])
+            assert record.accuracy[a] == fresh
+            assert record.hyperparameters[a] == hyperparameters(lrn.model)
+        checked.append(record.step)
+
+    learner.run(
+        PoolEnvironment(world["pool"], seed=1),
+        list(ACTIONS),
+        world["news"],
+        world["test"],
+        on_step=compare,
+    )
+    assert checked == list(range(7))
+
+
 def test_the_learner_takes_the_actively_chosen_counts_out_of_its_posteriors(world):
     for class_prior in ("uniform", "training"):
         learner, run = _run(

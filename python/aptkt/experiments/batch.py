@@ -36,7 +36,7 @@ class StoredSteps(Mapping[str, list[dict[str, Any]]]):
         if rows is None:
             raise RuntimeError(
                 f"run {key}: its result file {self._store.path(key)} disappeared or was damaged "
-                "after the batch read it"
+                "after the batch stored or found it"
             )
         return rows
 
@@ -110,13 +110,21 @@ def run_batch(
     reused = len(done)
     bar = _bar(progress, reused + len(todo), reused, desc)
     order = list(todo)
-    # Each worker stores its own run: the main process only counts. Sending every run's rows
-    # back for the main process to write kept the workers waiting on its pipe and its GIL
-    # (≈ 9 % of two cores idle in Fig. 6's 2,100 short runs) and made it the serial part.
-    stored_run = _StoredRun(str(store.directory), task)
+    # Each worker stores its own run (an absolute path: a cluster's workers have their own
+    # working directories); the main process only counts, and checks that the file is there
+    # for it too. Receiving, writing and reading back every run's rows made the main process
+    # the serial part of a reproduction.
+    stored_run = _StoredRun(str(store.directory.resolve()), task)
     try:
         for i, seconds in executor.imap_unordered(stored_run, [(k, todo[k]) for k in order]):
-            done.add(order[i])
+            key = order[i]
+            if key not in store:
+                raise RuntimeError(
+                    f"run {key}: a worker stored it, but {store.path(key)} is not there for this "
+                    "process; with a cluster, the output directory must be on a file system the "
+                    "workers share"
+                )
+            done.add(key)
             run_seconds += seconds
             bar.update(1)
     finally:

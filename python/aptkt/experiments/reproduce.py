@@ -221,7 +221,7 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
         order = sorted(
             s.figures, key=lambda name: -sum(len(sp.actions) for sp in plans[name].specs)
         )
-        figure_tasks = [FigureTask(n, ctx, plans[n].specs, str(out / "runs")) for n in order]
+        figure_tasks = [FigureTask(n, ctx, plans[n].specs, str(ctx.output / "runs")) for n in order]
         by_name = {}
         for i, (section, seconds) in executor.imap_unordered(analyse_figure, figure_tasks):
             by_name[order[i]] = section

@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import uuid
 from collections.abc import Iterable
 from functools import lru_cache
 from pathlib import Path
@@ -114,7 +115,9 @@ class RunStore:
             "steps": list(steps),
         }
         final = self.path(key)
-        tmp = final.with_name(f".{final.name}.{os.getpid()}.tmp")
+        # Unique per write: workers on several hosts (same pid) or a retried task may save the
+        # same run at once; each renames its own complete file.
+        tmp = final.with_name(f".{final.name}.{os.getpid()}.{uuid.uuid4().hex[:12]}.tmp")
         # One C-encoded string: json.dump's streaming encoder is the pure-Python one (2× slower).
         text = json.dumps(doc)
         with tmp.open("w") as fh:

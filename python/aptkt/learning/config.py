@@ -54,11 +54,12 @@ class GPSettings:
         both ways in docs/method.md.
     optimizer_tol : the hyper-parameter search stops when an iteration lowers the negative log
         posterior by less than this fraction of it. 1e-6 by default, not scipy's 2.2e-9 (the
-        estimator's default): the objective is tens to hundreds of nats, so the last
-        iterations before 2.2e-9 move it by less than 10⁻⁴ nats — far below anything the
-        hyper-parameters' posterior can tell apart — and cost 8 % of a reproduction's CPU.
-        Measured on 87 sampled runs of the full-size store: 47 curves change, by +0.01 pp on
-        average over the curve (benches/README.md).
+        estimator's default): the objective is tens to hundreds of nats, so the search stops
+        once an iteration gains less than about 10⁻⁴ nats — far below anything the
+        hyper-parameters' posterior can tell apart — and the learning runs need 8–11 % less
+        CPU. What further iterations would have found is measured, not bounded: on 87 sampled
+        runs of the full-size store 47 curves change, by +0.01 pp on average over the curve
+        (docs/method.md, benches/README.md).
     latent_mean : the constant prior mean of each one-vs-all classifier's latent function.
         "zero" (default): the zero-mean GP, as in the paper; far from its data every classifier
         returns to ½. "base-rate": the log-odds of its (smoothed) share of positive labels,
@@ -97,10 +98,13 @@ class GPSettings:
             raise ValueError(f"class_prior must be one of {CLASS_PRIORS}, got {self.class_prior!r}")
         if self.latent_mean not in LATENT_MEANS:
             raise ValueError(f"latent_mean must be one of {LATENT_MEANS}, got {self.latent_mean!r}")
-        if not (np.isfinite(self.optimizer_tol) and self.optimizer_tol >= 0):
-            raise ValueError(
-                f"optimizer_tol must be a finite number >= 0, got {self.optimizer_tol!r}"
-            )
+        tol = self.optimizer_tol
+        if (
+            isinstance(tol, bool)
+            or not isinstance(tol, (int, float, np.number))
+            or not (np.isfinite(tol) and tol >= 0)
+        ):
+            raise ValueError(f"optimizer_tol must be a finite number >= 0, got {tol!r}")
         if not isinstance(self.modality_weight_prior, bool):
             raise ValueError(
                 f"modality_weight_prior must be True or False, got {self.modality_weight_prior!r}"

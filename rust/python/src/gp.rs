@@ -10,9 +10,10 @@ use aptkt_gp::{
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+use std::cell::RefCell;
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Condvar, Mutex, OnceLock};
+use std::sync::{Arc, Condvar, Mutex};
 use std::time::Duration;
 
 use crate::errors::gp_error;
@@ -111,25 +112,37 @@ fn spawn_and_poll<'scope, T: Send + 'scope>(
 /// How often a long fit looks for Ctrl-C.
 const POLL: Duration = Duration::from_millis(20);
 
-/// The process's thread pool of `n_threads` threads, built on first use and kept: building
-/// one per call started and stopped its threads every time, ≈ 0.1 ms of CPU per call, and a
-/// learning run makes hundreds of calls (6 % of a reproduction's CPU).
+thread_local! {
+    /// This thread's pools by thread count, with the process they were built in.
+    static POOLS: RefCell<(u32, HashMap<usize, Arc<rayon::ThreadPool>>)> =
+        RefCell::new((std::process::id(), HashMap::new()));
+}
+
+/// The calling thread's pool of `n_threads` threads, built on first use and kept: building one
+/// per call started and stopped its threads every time, ≈ 0.1 ms of CPU per call, and a
+/// learning run makes hundreds of calls. One per calling thread, so that fits from several
+/// Python threads (a Dask worker's) still run side by side; dropped with the thread. A forked
+/// child has the map but not the pools' threads: it starts afresh (the old pools are leaked,
+/// not dropped, since dropping would signal threads that do not exist there).
 fn pool(n_threads: usize) -> Result<Arc<rayon::ThreadPool>, GpError> {
-    static POOLS: OnceLock<Mutex<HashMap<usize, Arc<rayon::ThreadPool>>>> = OnceLock::new();
-    let mut pools = POOLS
-        .get_or_init(Default::default)
-        .lock()
-        .unwrap_or_else(|e| e.into_inner());
-    if let Some(pool) = pools.get(&n_threads) {
-        return Ok(pool.clone());
-    }
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(n_threads)
-        .build()
-        .map(Arc::new)
-        .map_err(|e| GpError::InvalidInput(format!("cannot start {n_threads} threads: {e}")))?;
-    pools.insert(n_threads, pool.clone());
-    Ok(pool)
+    POOLS.with(|cell| {
+        let mut pools = cell.borrow_mut();
+        let pid = std::process::id();
+        if pools.0 != pid {
+            let inherited = std::mem::replace(&mut *pools, (pid, HashMap::new()));
+            std::mem::forget(inherited);
+        }
+        if let Some(pool) = pools.1.get(&n_threads) {
+            return Ok(pool.clone());
+        }
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(n_threads)
+            .build()
+            .map(Arc::new)
+            .map_err(|e| GpError::InvalidInput(format!("cannot start {n_threads} threads: {e}")))?;
+        pools.1.insert(n_threads, pool.clone());
+        Ok(pool)
+    })
 }
 
 fn run_in_pool<T: Send>(n_threads: usize, f: impl FnOnce() -> T + Send) -> Result<T, GpError> {
@@ -398,14 +411,13 @@ fn fit_gpc(
     let cancel = Arc::new(AtomicBool::new(false));
     spec.newton.cancel = Some(cancel.clone());
     let n_threads = settings.n_threads;
-    let model = run_interruptible(py, &cancel, n_threads, || {
-        run_in_pool(n_threads, || match (&thetas, &starts) {
-            (Some(t), _) => aptkt_gp::fit_at(&data, &labels, n_classes, &sources, &spec, t),
-            (None, Some(s)) => aptkt_gp::fit_from(&data, &labels, n_classes, &sources, &spec, s),
-            (None, None) => aptkt_gp::fit(&data, &labels, n_classes, &sources, &spec),
-        })
+    // The work runs on a thread of the calling thread's pool, so the per-class fits inside it
+    // spread over that pool.
+    let model = run_interruptible(py, &cancel, n_threads, || match (&thetas, &starts) {
+        (Some(t), _) => aptkt_gp::fit_at(&data, &labels, n_classes, &sources, &spec, t),
+        (None, Some(s)) => aptkt_gp::fit_from(&data, &labels, n_classes, &sources, &spec, s),
+        (None, None) => aptkt_gp::fit(&data, &labels, n_classes, &sources, &spec),
     })?
-    .and_then(|r| r)
     .map_err(gp_error)?;
     Ok(GpcModel { model, n_threads })
 }
