@@ -46,6 +46,7 @@ __all__ = [
     "LATENT_MEANS",
     "LaplaceGPC",
     "TransferSource",
+    "check_optimizer_tol",
     "kernel_matrix",
 ]
 
@@ -428,6 +429,16 @@ def _threads(n_jobs: Any) -> int:
     return max(1, (os.cpu_count() or 1) + 1 + int(n_jobs))
 
 
+def check_optimizer_tol(value: Any) -> None:
+    """The optimiser's relative tolerance must be a finite real number >= 0 (not a bool)."""
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float, np.number))
+        or not (np.isfinite(value) and value >= 0)
+    ):
+        raise ValueError(f"optimizer_tol must be a finite number >= 0, got {value!r}")
+
+
 def _seed(random_state: Any) -> int:
     if random_state is None:
         return int(np.random.SeedSequence().generate_state(1, np.uint64)[0])
@@ -660,13 +671,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             raise ValueError(
                 f"approximation must be one of {_APPROXIMATIONS}, got {self.approximation!r}"
             )
-        tol = self.optimizer_tol
-        if (
-            isinstance(tol, bool)
-            or not isinstance(tol, (int, float, np.number))
-            or not (np.isfinite(tol) and tol >= 0)
-        ):
-            raise ValueError(f"optimizer_tol must be a finite number >= 0, got {tol!r}")
+        check_optimizer_tol(self.optimizer_tol)
         for name in ("n_restarts", "max_iter", "newton_max_iter"):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < 0:

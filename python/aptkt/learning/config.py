@@ -8,7 +8,14 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.gp import CLASS_PRIORS, DEFAULTS, LATENT_MEANS, HyperPrior, LaplaceGPC
+from aptkt.gp import (
+    CLASS_PRIORS,
+    DEFAULTS,
+    LATENT_MEANS,
+    HyperPrior,
+    LaplaceGPC,
+    check_optimizer_tol,
+)
 from aptkt.learning.transfer import (
     CUTOFFS,
     FEATURE_SPACES,
@@ -98,13 +105,7 @@ class GPSettings:
             raise ValueError(f"class_prior must be one of {CLASS_PRIORS}, got {self.class_prior!r}")
         if self.latent_mean not in LATENT_MEANS:
             raise ValueError(f"latent_mean must be one of {LATENT_MEANS}, got {self.latent_mean!r}")
-        tol = self.optimizer_tol
-        if (
-            isinstance(tol, bool)
-            or not isinstance(tol, (int, float, np.number))
-            or not (np.isfinite(tol) and tol >= 0)
-        ):
-            raise ValueError(f"optimizer_tol must be a finite number >= 0, got {tol!r}")
+        check_optimizer_tol(self.optimizer_tol)
         if not isinstance(self.modality_weight_prior, bool):
             raise ValueError(
                 f"modality_weight_prior must be True or False, got {self.modality_weight_prior!r}"
