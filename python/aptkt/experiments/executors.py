@@ -1,8 +1,8 @@
 """Where experiment tasks run: local processes (default) or a Dask distributed cluster.
 
 Both hand back results as they complete, as ``(index, result)`` pairs, so the caller can count
-(or store) each one at once. Tasks are top-level functions of plain data (run specs, prior-building
-tasks); with Dask, the data set and the output directory must be on a file system the workers
+(or store) each one at once. Tasks are top-level functions of plain data (run specs,
+prior-building tasks); with Dask, the data set and the output directory must be on a file system the workers
 share (their paths travel inside the tasks).
 """
 

@@ -118,6 +118,15 @@ class ActionLearner:
             return FeaturePipeline().fit(Observations.concat([old, new]))
         return FeaturePipeline().fit(self.observations)
 
+    def _decided_pipeline(self) -> FeaturePipeline:
+        """The feature space for the current transfer decisions. "auto": the prior's space when
+        anything transfers; "covered": only when every new object has a source (each is like
+        an old object, so the prior's transforms were fitted on a population that covers them
+        all)."""
+        made = [d.transfers for d in self.decisions.values()]
+        covered = self.config.feature_space == "covered" and bool(made)
+        return self._pipeline(all(made) if covered else any(made))
+
     def _features(
         self, obs: Observations, pipeline: FeaturePipeline
     ) -> tuple[np.ndarray, dict[str, list[int]]]:
@@ -234,27 +243,19 @@ class ActionLearner:
                     evidence_margin=self._evidence_margin(),
                 )
                 self.decisions[obj] = decision
-        # "auto": the prior's space when anything transfers; "covered": only when every new
-        # object has a source (each is like an old object, so the prior's transforms were fitted
-        # on a population that covers them all).
         made = [d.transfers for d in self.decisions.values()]
         self.space_evidence = {}
         if cfg.feature_space == "evidence" and any(made):
             pipeline, self.model, X = self._fit_by_evidence(step, X_prior)
         else:
-            pipeline = self._pipeline(
-                all(made) if cfg.feature_space == "covered" and made else any(made)
-            )
+            pipeline = self._decided_pipeline()
             previous = self.model
             self.model, X = self._fit(pipeline, step, X_prior)
             if cfg.cutoff == "fitted" and any(made) and self._reject_by_fitted_evidence(X):
                 # The refit starts (warm_start) from the previous update's model, as the first
                 # fit did, not from the transfer model it replaces.
                 self.model = previous
-                made = [d.transfers for d in self.decisions.values()]
-                pipeline = self._pipeline(
-                    all(made) if cfg.feature_space == "covered" and made else any(made)
-                )
+                pipeline = self._decided_pipeline()
                 self.model, X = self._fit(pipeline, step, X_prior)
         self.space = self._space_name(pipeline)
         # The training observations were drawn with the training frequencies: their own
