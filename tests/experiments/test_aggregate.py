@@ -19,7 +19,9 @@ from aptkt.experiments.aggregate import (
     t_quantile,
 )
 from aptkt.experiments.figures.common import (
+    error_removed,
     gain_summary,
+    mean_lambda,
     prior_space_rate,
     share_text,
     transfer_rate,
@@ -181,3 +183,31 @@ def test_mean_band_is_the_t_interval_of_the_mean():
         assert mean[j] == pytest.approx(v.mean())
         assert low[j] == pytest.approx(lo, abs=2e-3) and high[j] == pytest.approx(hi, abs=2e-3)
     assert mean[0] == pytest.approx(values[0, 0]) and np.isnan(low[0]) and np.isnan(high[0])
+
+
+def test_error_removed_reads_a_gain_against_the_baselines_room():
+    # Two runs per method; baseline means 0.5, 0.8 at steps 0, 1; APTKT 0.7, 0.9.
+    base = collect(rows_from([[0.4, 0.7], [0.6, 0.9]], method="baseline"), {"method": "baseline"})
+    aptkt = collect(rows_from([[0.6, 0.8], [0.8, 1.0]], method="APTKT"), {"method": "APTKT"})
+    curves = {"baseline": base, "APTKT": aptkt}
+    acc, share = error_removed(curves, "APTKT", step=0)
+    assert acc == pytest.approx(0.5) and share == pytest.approx(0.2 / 0.5)
+    acc, share = error_removed(curves, "APTKT", step=1)
+    assert acc == pytest.approx(0.8) and share == pytest.approx(0.1 / 0.2)
+    # Over the curve: mean accuracies 0.65 and 0.8, so 0.15 of the 0.35 left.
+    acc, share = error_removed(curves, "APTKT")
+    assert acc == pytest.approx(0.65) and share == pytest.approx(0.15 / 0.35)
+    # A perfect baseline leaves no room: no share, not a division by zero.
+    perfect = collect(rows_from([[1.0, 1.0]], method="baseline"), {"method": "baseline"})
+    assert math.isnan(error_removed({"baseline": perfect, "APTKT": perfect}, "APTKT")[1])
+
+
+def test_mean_lambda_weighs_each_row_by_its_sources():
+    rows = [
+        {"method": "APTKT", "sources": 3, "mean_lambda": 0.9},
+        {"method": "APTKT", "sources": 1, "mean_lambda": 0.5},
+        {"method": "APTKT", "sources": 0, "mean_lambda": float("nan")},
+        {"method": "baseline", "sources": 0, "mean_lambda": float("nan")},
+    ]
+    assert mean_lambda(rows, {"method": "APTKT"}) == pytest.approx((3 * 0.9 + 0.5) / 4)
+    assert math.isnan(mean_lambda(rows, {"method": "baseline"}))

@@ -83,6 +83,17 @@ def test_a_headline_on_too_few_runs_is_not_judged():
     text = render_report([S()], info)
     differs = text.split("## Where this run differs from the paper")[1].split("## fig9")[0]
     assert "Not judged" in differs and "- **fig9**" not in differs
+    # A difference carries what the run measured about it, when the figure measured something.
+    why = Headline("fig8", "claim", "yes", "ours", "differs: no", why="the baseline is at 0.9")
+    plain = Headline("fig11", "other", "yes", "ours", "differs: no")
+
+    class T:
+        figure, title, headlines, body, files = "fig8", "t", [why, plain], "", []
+
+    differs = render_report([T()], info).split("## Where this run differs")[1].split("## fig8")[0]
+    lines = [line for line in differs.splitlines() if line.startswith("- **")]
+    assert lines[0].endswith("*Why, measured in this run:* the baseline is at 0.9")
+    assert "Why" not in lines[1]
     assert "Per-action average" in text and "what the paper's figures show" in text
 
 

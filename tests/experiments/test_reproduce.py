@@ -132,6 +132,41 @@ def test_report_gain_is_computed_from_the_results_file(quick_run):
     assert f"{100 * gain:+.1f} pp [" in report
 
 
+def test_fig11_control_and_fig8_room_are_computed_from_the_results_file(quick_run):
+    """Fig. 11 runs the control (the prior's space, no transfer) in every setting, and its
+    reported gap to the baseline is the one in results.csv; Fig. 8's share of the baseline's
+    error removed likewise."""
+    summary = json.loads((quick_run / "summary.json").read_text())["numbers"]
+    rows = read(quick_run / "fig11" / "results.csv")
+    acc = defaultdict(dict)
+    for r in rows:
+        if r["panel"] != "stress":
+            acc[(r["panel"], r["method"], r["trial"])][int(r["step"])] = float(r["mean_accuracy"])
+    panels = {p for p, _, _ in acc}
+    assert panels == set(Scale.quick().actions) | {"all"}
+    for panel in panels:
+        trials = sorted({t for p, m, t in acc if p == panel and m == "control"})
+        assert trials == sorted({t for p, m, t in acc if p == panel and m == "baseline"})
+        gaps = [
+            np.mean([acc[(panel, "control", t)][s] - acc[(panel, "baseline", t)][s] for s in steps])
+            for t in trials
+            for steps in [sorted(acc[(panel, "baseline", t)])]
+        ]
+        reported = summary["fig11"]["control_vs_baseline"][panel]["overall"]["mean"]
+        assert reported == pytest.approx(np.mean(gaps), abs=1e-12), panel
+    assert all(int(r["transfers"]) == 0 for r in rows if r["method"] == "control")
+
+    rows8 = read(quick_run / "fig8" / "results.csv")
+    by = defaultdict(list)
+    for r in rows8:
+        if r["panel"] == "P2":
+            by[r["method"]].append(float(r["mean_accuracy"]))
+    base, aptkt = np.mean(by["baseline"]), np.mean(by["APTKT"])
+    room = summary["fig8"]["baseline_error_removed"]["P2"]["curve"]
+    assert room["baseline"] == pytest.approx(base, abs=1e-12)
+    assert room["share"] == pytest.approx((aptkt - base) / (1 - base), abs=1e-12)
+
+
 def test_rerun_resumes_everything_and_gives_the_same_results(quick_run, capsys):
     before = (quick_run / "fig9" / "results.csv").read_text()
     assert (

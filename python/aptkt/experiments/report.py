@@ -166,6 +166,7 @@ def render_report(sections: Sequence[Any], run_info: Mapping[str, Any]) -> str:
     if differ:
         out += [
             f"- **{h.figure}** — {h.claim}: paper {h.paper}; here {h.ours}. {h.verdict[0].upper()}{h.verdict[1:]}."
+            + (f" *Why, measured in this run:* {h.why}" if h.why else "")
             for h in differ
         ]
     elif undecided:

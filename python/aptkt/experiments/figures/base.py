@@ -171,6 +171,9 @@ class Headline:
     verdict: str
     #: The estimates the verdict rests on: if any has too few runs, the verdict says so instead.
     evidence: Sequence[Estimate] = ()
+    #: Where the claim differs: what this run measured that accounts for it (computed from its
+    #: own results, never a fixed text), or "" where the run holds no such measurement.
+    why: str = ""
 
     def __post_init__(self) -> None:
         if self.evidence and too_few(*self.evidence) and not self.undecided:

@@ -24,6 +24,8 @@ __all__ = [
     "prior_space_rate",
     "share_text",
     "plot_panel",
+    "error_removed",
+    "mean_lambda",
 ]
 
 XLABEL = "observations after the initial round"
@@ -106,6 +108,41 @@ def prior_space_rate(rows: Iterable[Mapping[str, Any]], where: Mapping[str, Any]
     """Share of the model fits (every step) made in the prior's feature space; the others are
     in the new objects' own (or the pooled) space. NaN for rows without the counts."""
     return _share(rows, where, "prior_space", "updates")
+
+
+def mean_lambda(rows: Iterable[Mapping[str, Any]], where: Mapping[str, Any]) -> float:
+    """The mean λ over every source transferred (every step) in the rows matching ``where``;
+    NaN when nothing was transferred."""
+    total = weight = 0.0
+    for r in rows:
+        if all(r.get(k) == v for k, v in where.items()):
+            n = int(r.get("sources", 0) or 0)
+            if n:
+                total += n * float(r["mean_lambda"])
+                weight += n
+    return total / weight if weight else float("nan")
+
+
+def error_removed(
+    curves: Mapping[str, Curves],
+    method: str,
+    base: str = "baseline",
+    step: int | None = None,
+) -> tuple[float, float]:
+    """The baseline's mean accuracy (at ``step``, or averaged over the curve) and the share of
+    its error, 1 − accuracy, that ``method``'s mean gain removes there.
+
+    A gain in percentage points is bounded by the error the baseline leaves: the same transfer
+    gains less where the baseline is already good. The share reads gains against that room.
+    """
+    b, m = curves[base], curves[method]
+    if step is None:
+        acc_b, acc_m = float(np.mean(b.mean())), float(np.mean(m.mean()))
+    else:
+        i = int(np.flatnonzero(b.x == step)[0])
+        acc_b, acc_m = float(b.mean()[i]), float(m.mean()[i])
+    error = 1.0 - acc_b
+    return acc_b, (acc_m - acc_b) / error if error > 0 else float("nan")
 
 
 def share_text(rate: float, digits: int = 0) -> str:

@@ -4,6 +4,9 @@ Per action (that action only, its own dissimilar priors) and for all actions (th
 dissimilar on average): APTKT vs the baseline, ``fig11_trials`` trials each (one prior group,
 so the trials — pool orders and exploration draws — are the only variation).
 
+Beside them, the control (beyond the paper): the prior's feature space without any transfer,
+which separates what the prior's transforms do to the new objects from what the transfers do.
+
 Stress panel (beyond the paper): on the all-actions setting, transfer with λ forced to 1 from
 the *least* related prior, without the cut-off (ε_neg = 0) and with it, beside the baseline and
 APTKT — the harm that transfer with teeth does from an irrelevant prior, and whether the
@@ -31,6 +34,7 @@ from aptkt.experiments.figures.common import (
     accuracy_table,
     gain_summary,
     key_steps,
+    mean_lambda,
     method_curves,
     plot_panel,
     present,
@@ -44,7 +48,7 @@ from aptkt.experiments.tables import curves_rows
 
 NAME = "fig11"
 TITLE = "negative-transfer test with dissimilar priors"
-METHODS = ("baseline", "APTKT")
+METHODS = ("baseline", "control", "APTKT")
 STRESS = "stress"
 STRESS_METHODS = ("baseline", "APTKT", STRESS_NO_CUTOFF, STRESS_CUTOFF)
 #: "Stopped transferring": at most this share of the transfer decisions chose a prior.
@@ -108,10 +112,17 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     nrows = math.ceil(len(shown) / ncols)
     fig, axes = figure(nrows, ncols, figsize=(4.2 * ncols, 3.8 * nrows), squeeze=False)
     gains, rates, spaces, worst, curve_rows, tables = {}, {}, {}, {}, [], []
+    control, control_worst, over_control, lambdas = {}, {}, {}, {}
+    methods = present([r for r in rows if r.get("panel") != STRESS], METHODS)
     for i, (ax, key) in enumerate(zip(axes.ravel(), keys)):
-        curves = method_curves(rows, {"panel": key}, METHODS)
+        curves = method_curves(rows, {"panel": key}, methods)
         gains[key] = gain_summary(curves, "APTKT", steps=steps)
+        if "control" in curves:
+            control[key] = gain_summary(curves, "control", steps=steps)
+            control_worst[key] = float(np.nanmin(control[key].gain.mean()))
+            over_control[key] = gain_summary(curves, "APTKT", base="control", steps=steps)
         rates[key] = transfer_rate(rows, {"method": "APTKT", "panel": key})
+        lambdas[key] = mean_lambda(rows, {"method": "APTKT", "panel": key})
         spaces[key] = prior_space_rate(rows, {"method": "APTKT", "panel": key})
         worst[key] = float(np.nanmin(gains[key].gain.mean()))
         label = "all actions" if key == fig10.ALL else key
@@ -126,7 +137,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             r for m, c in curves.items() for r in curves_rows({"panel": key, "method": m}, c)
         ]
         fused = (
-            method_curves(rows, {"panel": key}, METHODS, value="fused_accuracy")
+            method_curves(rows, {"panel": key}, methods, value="fused_accuracy")
             if key == fig10.ALL
             else None  # one action: fused is the action's own accuracy
         )
@@ -173,6 +184,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             if not harmed
             else "differs: negative transfer in " + ", ".join(harmed),
             evidence=[gains[k].overall for k in keys],
+            why=_space_text(harmed, gains, control, over_control),
         )
     ]
     # The paper explains the absence of harm by the cut-off: "stopped transferring". We read
@@ -189,6 +201,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             if len(stopped) == len(keys)
             else f"differs: APTKT kept transferring in {len(keys) - len(stopped)} of {len(keys)} settings — the absence of "
             "harm is not the cut-off's doing",
+            why=_rate_text(ctx, [k for k in keys if k not in stopped], lambdas, over_control),
         )
     )
     below = [k for k in keys if worst[k] < -HARM]
@@ -201,6 +214,16 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             f"{len(below)} of {len(keys)} settings{listed(below)}",
             "agrees" if not below else "differs: " + ", ".join(below),
             evidence=[gains[k].overall for k in keys],
+            why=(
+                "the control's (the prior's feature space, no transfer) worst step: "
+                + "; ".join(
+                    f"{k} {pp(control_worst[k])} (APTKT's {pp(worst[k])})"
+                    for k in below
+                    if k in control_worst
+                )
+                if any(k in control_worst for k in below)
+                else ""
+            ),
         )
     )
     if STRESS_NO_CUTOFF in stress_numbers and STRESS_CUTOFF in stress_numbers:
@@ -221,7 +244,9 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             )
         )
     body = [
-        f"{ctx.scale.fig11_trials} trials per setting; budget {ctx.scale.budget}.",
+        f"{ctx.scale.fig11_trials} trials per setting; budget {ctx.scale.budget}. The control "
+        "learns the new objects in the prior's feature space without any transfer: "
+        "control − baseline is what the prior's transforms alone do to them.",
         "",
         markdown_table(
             [
@@ -233,6 +258,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                 "worst step",
                 "transfer rate",
                 "models in the prior's space",
+                "control − baseline (curve / worst step)",
             ],
             [
                 [
@@ -244,6 +270,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                     pp(worst[k]),
                     f"{100 * rates[k]:.0f} %",
                     share_text(spaces[k]),
+                    f"{ci(control[k].overall)} / {pp(control_worst[k])}" if k in control else "",
                 ]
                 for k in keys
             ],
@@ -256,7 +283,56 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         "transfer_rate": rates,
         "prior_space_rate": spaces,
         "worst_step_gain": worst,
+        "mean_lambda": lambdas,
+        "control_vs_baseline": {k: g.as_dict() for k, g in control.items()},
+        "control_worst_step_gain": control_worst,
+        "APTKT_vs_control": {k: g.as_dict() for k, g in over_control.items()},
         "stress": stress_numbers,
         "priors": {k: list(v[1]) for k, v in design.items()},
     }
     return Section(NAME, TITLE, headlines, "\n".join(body), files, numbers)
+
+
+def _space_text(harmed, gains, control, over_control) -> str:
+    """Where APTKT is below the baseline: how far the prior's feature space alone (the control)
+    is below it, beside APTKT."""
+    shown = [k for k in harmed if k in control]
+    if not shown:
+        return ""
+    alone = [k for k in shown if control[k].overall.mean <= gains[k].overall.mean]
+    return (
+        "over the curve, against the baseline, the control (the prior's feature space without "
+        "any transfer) and APTKT: "
+        + "; ".join(
+            f"{k} {pp(control[k].overall.mean)} and {pp(gains[k].overall.mean)}" for k in shown
+        )
+        + f" — in {len(alone)} of {len(shown)} the prior's space alone is at least as far below "
+        "the baseline as APTKT"
+    )
+
+
+def _rate_text(ctx: Context, kept: Sequence[str], lambdas, over_control) -> str:
+    """Why the transfers went on: how strongly the old classifiers claimed the new objects, and
+    whether APTKT beat the same space without transfer."""
+    lams = [lambdas[k] for k in kept if math.isfinite(lambdas[k])]
+    if not lams:
+        return ""
+    text = (
+        f"in the settings that kept transferring the transferred priors' λ = p̄ averaged "
+        f"{span(lams, '{:.2f}', '')} (ε_neg = {ctx.scale.eps_neg}): the old objects' own "
+        "classifiers claimed the new objects' observations"
+    )
+    if ctx.learner("APTKT").cutoff == "evidence":
+        text += ", and the new objects' labels favoured the coupling (the evidence cut-off)"
+    beats = [k for k in kept if k in over_control and over_control[k].overall.mean > 0]
+    if any(k in over_control for k in kept):
+        text += (
+            f"; APTKT is above the control (the prior's space without transfer) over the curve "
+            f"in {len(beats)} of {len(kept)} of them: there, the transfers from these priors "
+            "helped more often than not, and a cut-off that judges by the new labels had little "
+            "reason to stop them"
+            if 2 * len(beats) > len(kept)
+            else f"; APTKT is above the control over the curve in only {len(beats)} of "
+            f"{len(kept)} of them"
+        )
+    return text

@@ -14,8 +14,10 @@ from typing import Any
 from aptkt.experiments.figures.base import Context, Headline, Plan, Section
 from aptkt.experiments.figures.common import (
     accuracy_table,
+    error_removed,
     gain_summary,
     key_steps,
+    mean_lambda,
     method_curves,
     plot_panel,
     present,
@@ -46,6 +48,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     steps = key_steps(ctx.scale.budget)
     fig, axes = figure(1, len(counts), figsize=(4.6 * len(counts), 4.2), squeeze=False)
     plain, aux, aux_vs_plain, rates, curve_rows, tables = {}, {}, {}, {}, [], []
+    lambdas, aux_room = {}, {}
     multi: dict[int, Any] = {}
     methods = present(rows, METHODS)
     for i, n in enumerate(counts):
@@ -59,6 +62,8 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         aux[n] = gain_summary(curves, "APTKT+aux", steps=steps)
         aux_vs_plain[n] = gain_summary(curves, "APTKT+aux", base="APTKT", steps=steps)
         rates[n] = transfer_rate(rows, {"method": "APTKT", "n_priors": n})
+        lambdas[n] = mean_lambda(rows, {"method": "APTKT", "n_priors": n})
+        aux_room[n] = error_removed(curves, "APTKT+aux", step=1 if 1 in curves["baseline"].x else 0)
         groups = len(prior_groups(ctx, n))
         plot_panel(
             axes[0, i],
@@ -85,7 +90,9 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             NAME,
             f"auxiliary features with {most} priors: gain over the baseline after one new observation",
             pp(PAPER["fig9_aux_gain_10_priors"]) + " (10 priors)",
-            ci(aux[most].at[one]) + f" (step {one})",
+            ci(aux[most].at[one])
+            + f" (step {one}; the baseline is at {aux_room[most][0]:.3f} there, and APTKT+aux "
+            f"removes {100 * aux_room[most][1]:.0f} % of its error)",
             gain_verdict(aux[most].at[one], PAPER["fig9_aux_gain_10_priors"]),
         )
     ]
@@ -104,6 +111,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                 else "differs: "
                 + ("the gain does not shrink" if not fades else "the transfer rate does not fall"),
                 evidence=[plain[fewest].overall, plain[most].overall],
+                why=_fade_text(ctx, fewest, most, lambdas, rates),
             )
         )
         more = [n for n in counts if n > fewest]
@@ -178,5 +186,36 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         "APTKT+aux": {n: g.as_dict() for n, g in aux.items()},
         "aux_vs_APTKT": {n: g.as_dict() for n, g in aux_vs_plain.items()},
         "transfer_rate": rates,
+        "mean_lambda": lambdas,
+        "aux_baseline_error_removed": {
+            n: {"baseline": b, "share": r} for n, (b, r) in aux_room.items()
+        },
     }
     return Section(NAME, TITLE, headlines, "\n".join(body), files, numbers)
+
+
+def _fade_text(
+    ctx: Context,
+    fewest: int,
+    most: int,
+    lambdas: Mapping[int, float],
+    rates: Mapping[int, float],
+) -> str:
+    """What the transfers' λ did as priors were added, and which relatedness made it."""
+    text = (
+        f"the transferred priors' λ = p̄ averages {lambdas[fewest]:.2f} with {fewest} and "
+        f"{lambdas[most]:.2f} with {most} priors (ε_neg = {ctx.scale.eps_neg})"
+    )
+    if rates[most] >= rates[fewest]:
+        text += (
+            "; with more old objects there are more candidates, and one of them passes ε_neg "
+            "as often or more"
+        )
+    if ctx.learner("APTKT").relatedness == "binary":
+        text += (
+            "; p̄ is each old object's own binary probability, which does not have to spread "
+            "over the old objects as they are added, as a probability normalised over them "
+            '(relatedness="normalised") does — the paper explains its fade by the old objects '
+            "becoming harder to tell apart"
+        )
+    return text
