@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from aptkt.cli import main
-from aptkt.experiments.figures import FIGURES, fig7
+from aptkt.experiments.figures import FIGURES, fig7, fig9
 from aptkt.experiments.figures.base import STRESS_CUTOFF, STRESS_NO_CUTOFF, Context
+from aptkt.experiments.figures.common import prior_groups
 from aptkt.experiments.reproduce import _paper_numbers
 from aptkt.experiments.scale import Scale
 from aptkt.learning import LearnerConfig, PriorKnowledge
@@ -244,6 +245,66 @@ def test_report_numbers_follow_hand_made_results(tmp_path, gain, expected):
     )
     assert (tmp_path / "fig7" / "fig7.svg").exists()
     assert not math.isnan(section.numbers["fused_gain"]["overall"]["mean"])
+
+
+@pytest.mark.parametrize(
+    "multi_gain, expected",
+    [
+        (0.0, "agrees: never significantly worse; no significant difference"),
+        (0.02, "agrees: never significantly worse; significantly better with 2, 4 priors"),
+        (-0.02, "differs: significantly worse with 2, 4 prior(s)"),
+    ],
+)
+def test_fig9_judges_several_sources_against_one(tmp_path, multi_gain, expected):
+    """transfer="multi" gets a verdict beside the paper's claims, whichever way it goes, and the
+    fade's explanation reports the transferred priors' λ."""
+    scale = dataclasses.replace(enough_groups(), trials=3)  # the one group of 4 priors: 3 runs
+    ctx = Context(
+        scale=scale,
+        seed=0,
+        data="",
+        fingerprint="",
+        output=tmp_path,
+        index=_paper_numbers(scale.objects),
+    )
+    rng = np.random.default_rng(1)
+    rows = []
+    for n in scale.prior_counts:
+        lam = 0.8 if n == min(scale.prior_counts) else 0.6
+        for g in range(len(prior_groups(ctx, n))):
+            for t in range(scale.trials):
+                for step in range(scale.budget + 1):
+                    base = 0.5 + 0.02 * step
+                    plain = base + 0.05
+                    for m, v in (
+                        ("baseline", base),
+                        ("APTKT", plain),
+                        ("APTKT+aux", plain + 0.03),
+                        ("APTKT-multi", plain + multi_gain + 0.002 * rng.normal()),
+                    ):
+                        transfers = 0 if m == "baseline" else 2
+                        rows.append(
+                            {
+                                "method": m,
+                                "n_priors": n,
+                                "group": g,
+                                "trial": t,
+                                "step": step,
+                                "mean_accuracy": v,
+                                "fused_accuracy": v,
+                                "decisions": 3,
+                                "transfers": transfers,
+                                "sources": transfers,
+                                "mean_lambda": lam if transfers else float("nan"),
+                            }
+                        )
+    section = fig9.analyse(ctx, rows)
+    multi = next(h for h in section.headlines if 'transfer="multi"' in h.claim)
+    assert multi.verdict.startswith(expected)
+    fade = next(h for h in section.headlines if "fades" in h.claim)
+    # The same gain and rate with more priors: the claim differs, and says what λ did.
+    assert not fade.agrees and "averages 0.80 with 2 and 0.60 with 4 priors" in fade.why
+    assert section.numbers["mean_lambda"] == {2: pytest.approx(0.8), 4: pytest.approx(0.6)}
 
 
 def test_quick_report_gives_no_verdict_it_cannot_support(quick_run):

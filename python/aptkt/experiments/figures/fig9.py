@@ -128,6 +128,32 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                 evidence=[aux_vs_plain[n].overall for n in more],
             )
         )
+    if multi:
+        better = [n for n, (g, _) in multi.items() if g.overall.significant_positive]
+        worse = [n for n, (g, _) in multi.items() if g.overall.significant_negative]
+        headlines.append(
+            Headline(
+                NAME,
+                "beyond the paper: transfer from every prior above ε_neg at once "
+                '(transfer="multi") is at least as good as the paper\'s single most related prior',
+                "not in the paper",
+                "; ".join(f"{n}: {ci(g.overall)}" for n, (g, _) in multi.items())
+                + " (APTKT-multi − APTKT over the curve, by number of priors)",
+                (
+                    "agrees: never significantly worse; "
+                    + (
+                        f"significantly better with {', '.join(map(str, better))} priors"
+                        if better
+                        else "no significant difference with any number of priors"
+                    )
+                )
+                if not worse
+                else "differs: significantly worse with "
+                + ", ".join(map(str, worse))
+                + " prior(s)",
+                evidence=[g.overall for g, _ in multi.values()],
+            )
+        )
     body = [
         f"Groups per count: {', '.join(f'{n}: {len(prior_groups(ctx, n))}' for n in counts)}; "
         f"{ctx.scale.trials} trials each; budget {ctx.scale.budget}.",
