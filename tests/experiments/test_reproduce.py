@@ -354,3 +354,41 @@ def test_the_class_prior_option_reaches_every_model_and_the_record(tmp_path, qui
     assert all(c.gp.class_prior == "training" for c in configs)
     assert all(c.gp.latent_mean == "base-rate" for c in configs)
     assert all("class_prior" not in s["config"]["gp"] for s in specs)
+
+
+def test_the_prior_feature_scale_option_reaches_the_prior_files(tmp_path, quick_data):
+    """--prior-feature-scale: the prior files' transforms divide by each column's within-object
+    noise (the default) or by its spread (recorded in config.json and the command line)."""
+    out = tmp_path / "n"
+    argv = ["reproduce", "fig7", "--quick", "--data", str(quick_data), "-o", str(out)]
+    assert main([*argv, "--prior-feature-scale", "spread", "--jobs", "1", "--no-progress"]) == 0
+    assert json.loads((out / "config.json").read_text())["gp"]["prior_feature_scale"] == "spread"
+    assert "--prior-feature-scale spread" in (out / "report.md").read_text()
+    for path in (out / "priors").glob("*.npz"):
+        prior = PriorKnowledge.load(path)
+        for a in prior.actions:
+            force = prior[a].pipeline.transforms.get("force")
+            if force is not None:
+                assert np.allclose(force.scale_, prior[a].observations.modalities["force"].std(0))
+    out = tmp_path / "d"
+    argv = ["reproduce", "fig7", "--quick", "--data", str(quick_data), "-o", str(out)]
+    assert main([*argv, "--jobs", "1", "--no-progress"]) == 0
+    config = json.loads((out / "config.json").read_text())
+    assert config["gp"]["prior_feature_scale"] == "noise"
+    assert "--prior-feature-scale" not in (out / "report.md").read_text()
+    priors = list((out / "priors").glob("*.npz"))
+    assert priors
+    for path in priors:
+        prior = PriorKnowledge.load(path)
+        for a in prior.actions:
+            obs = prior[a].observations
+            name = "force" if "force" in obs.modalities else "texture"
+            transform = prior[a].pipeline.transforms[name]
+            X = transform._prepare(obs.modalities[name])
+            objects = obs.objects
+            resid = np.vstack(
+                [X[objects == o] - X[objects == o].mean(axis=0) for o in set(objects)]
+            )
+            dof = len(X) - len(set(objects))
+            expected = np.sqrt((resid**2).sum(axis=0) / dof)
+            assert np.allclose(transform.scale_, expected), (path.name, a)

@@ -97,6 +97,7 @@ def test_settings_added_later_leave_stored_keys_as_they_were():
         class_prior="training",
         latent_mean="zero",
         optimizer_tol=DEFAULTS.optimizer_tol,
+        prior_feature_scale="spread",
     )
     spec = RunSpec(
         method="APTKT",
@@ -124,6 +125,7 @@ def test_settings_added_later_leave_stored_keys_as_they_were():
             "class_prior": "training",
             "latent_mean": "zero",
             "optimizer_tol": DEFAULTS.optimizer_tol,
+            "prior_feature_scale": "spread",
         },
     )
     assert task.key == "4596257baaf0144904e0"
@@ -145,6 +147,11 @@ def test_settings_added_later_leave_stored_keys_as_they_were():
     assert run_key(replace(spec, config=LearnerConfig(gp=loose)), "fp") != run_key(spec, "fp")
     assert replace(task, gp={**task.gp, "optimizer_tol": 1e-6}).key != task.key
     assert GPSettings.from_dict(loose.to_dict()) == loose
+    noise = replace(flat, prior_feature_scale="noise")  # the default since it was added
+    assert run_key(replace(spec, config=LearnerConfig(gp=noise)), "fp") != run_key(spec, "fp")
+    assert replace(task, gp={**task.gp, "prior_feature_scale": "noise"}).key != task.key
+    assert GPSettings.from_dict(noise.to_dict()) == noise
+    assert "prior_feature_scale" not in flat.to_dict()
 
 
 def test_store_round_trip_and_damaged_files(tmp_path):

@@ -230,3 +230,49 @@ def test_a_column_constant_to_its_last_bits_is_not_blown_up():
         assert t.scale_[0] == 1.0 and t.scale_[1] == pytest.approx(np.arange(6.0).std())
         z = t.transform(X[:1] + [0.001, 0.0])
         assert abs(z[0, 0]) < 0.01
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    sizes=st.lists(st.integers(1, 6), min_size=2, max_size=5),
+    seed=st.integers(0, 10_000),
+    shifts=st.lists(st.floats(-1e3, 1e3), min_size=5, max_size=5),
+)
+def test_noise_scale_is_the_pooled_within_object_sd(sizes, seed, shifts):
+    """scale="noise" divides by the residual SD of a one-way layout (least squares on object
+    indicators, an independent computation), which no shift of an object's observations moves."""
+    rng = np.random.default_rng(seed)
+    objects = np.repeat([f"o{i}" for i in range(len(sizes))], sizes)
+    X = rng.normal(size=(objects.size, 3)) * [1.0, 10.0, 0.1]
+    if objects.size == len(sizes):  # nobody observed twice: no noise to estimate
+        t = ModalityTransform().fit(X, objects=objects)
+        assert np.allclose(t.scale_, X.std(axis=0))
+        return
+    dummies = (objects[:, None] == np.unique(objects)[None, :]).astype(float)
+    residual = X - dummies @ np.linalg.lstsq(dummies, X, rcond=None)[0]
+    expected = np.sqrt((residual**2).sum(axis=0) / (objects.size - len(sizes)))
+    t = ModalityTransform().fit(X, objects=objects)
+    assert np.allclose(t.scale_, expected, rtol=1e-9)
+    shifted = X + dummies @ np.array(shifts[: len(sizes)])[:, None]
+    assert np.allclose(
+        ModalityTransform().fit(shifted, objects=objects).scale_, expected, rtol=1e-6
+    )
+
+
+def test_noise_scaled_pipeline_measures_distances_in_noise_units():
+    rng = np.random.default_rng(3)
+    objects = np.repeat(["a", "b", "c"], 20)
+    # Column 0: objects far apart, little noise; column 1: objects alike, much noise. Scaled by
+    # the spread both columns look alike; scaled by the noise, column 0 carries the objects.
+    X = np.column_stack(
+        [np.repeat([0.0, 5.0, 10.0], 20) + 0.1 * rng.normal(size=60), 3.0 * rng.normal(size=60)]
+    )
+    obs = Observations("P1", {"force": X}, objects)
+    spread, _ = FeaturePipeline().fit(obs).transform(obs)
+    noise, _ = FeaturePipeline().fit(obs, scale="noise").transform(obs)
+    assert spread[:, 0].std() == pytest.approx(1.0) and spread[:, 1].std() == pytest.approx(1.0)
+    assert noise[:, 0].std() > 30 * noise[:, 1].std()
+    with pytest.raises(ValueError, match="scale must be one of"):
+        FeaturePipeline().fit(obs, scale="total")
+    with pytest.raises(ValueError, match="weights or objects"):
+        ModalityTransform().fit(X, weights=np.ones(60), objects=objects)

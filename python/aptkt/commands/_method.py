@@ -9,6 +9,7 @@ from typing import Any
 
 from aptkt.errors import ConfigError
 from aptkt.gp import CLASS_PRIORS, LATENT_MEANS
+from aptkt.learning.pipeline import FEATURE_SCALES
 from aptkt.learning.transfer import CUTOFFS, FEATURE_SPACES, RELATEDNESS, SOURCE_TASKS
 
 __all__ = ["add_method_arguments", "gp_options", "method_options"]
@@ -67,12 +68,25 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
         "base-rate (it returns to the rate of positives it was trained at)",
     )
 
+    g.add_argument(
+        "--prior-feature-scale",
+        choices=FEATURE_SCALES,
+        help="how the prior's feature space z-scores each column (with --table, where the "
+        "prior is built; a loaded --prior keeps its own): spread (its spread over the old "
+        "objects' observations; default) or noise (its spread between repeated observations "
+        "of one object)",
+    )
+
 
 def gp_options(args: argparse.Namespace) -> dict[str, Any]:
     """The GPSettings fields the method options set (those given on the command line)."""
     return {
         field: value
-        for field, value in (("class_prior", args.class_prior), ("latent_mean", args.latent_mean))
+        for field, value in (
+            ("class_prior", args.class_prior),
+            ("latent_mean", args.latent_mean),
+            ("prior_feature_scale", args.prior_feature_scale),
+        )
         if value is not None
     }
 

@@ -11,6 +11,7 @@ from aptkt.commands._checks import at_least, input_file, output_file
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
 from aptkt.learning.config import GPSettings
+from aptkt.learning.pipeline import FEATURE_SCALES
 
 #: A modality's RBF kernel that varies by less than this over the training data (between the two
 #: most distant observations) is effectively constant: it cannot tell observations apart, so
@@ -46,6 +47,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=int,
         default=GPSettings().n_restarts,
         help="extra optimiser starts per model (default %(default)s)",
+    )
+    b.add_argument(
+        "--feature-scale",
+        choices=FEATURE_SCALES,
+        default=GPSettings().prior_feature_scale,
+        help="z-score each feature column by its spread over the observations or by its noise "
+        "between repeated observations of one object (default %(default)s; docs/method.md)",
     )
     b.set_defaults(func=run_build)
 
@@ -98,7 +106,10 @@ def run_build(args: argparse.Namespace) -> int:
         total=len(table), unit="action", desc="fitting", disable=not sys.stderr.isatty()
     ) as bar:
         prior = PriorKnowledge.build(
-            table, gp=GPSettings(n_restarts=args.restarts), seed=args.seed, progress=bar
+            table,
+            gp=GPSettings(n_restarts=args.restarts, prior_feature_scale=args.feature_scale),
+            seed=args.seed,
+            progress=bar,
         )
     prior.metadata.update(data=str(args.data), trials=args.trials)
     prior.save(args.output)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from aptkt.gp import CLASS_PRIORS, LATENT_MEANS
 from aptkt.learning.config import GPSettings
+from aptkt.learning.pipeline import FEATURE_SCALES
 
 NAMES = ("fig6", "fig7", "fig8", "fig9", "fig10", "fig11", "all")
 
@@ -77,6 +78,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "returns to 1/2; default) or base-rate (it returns to the rate of positives it was "
         "trained at); see docs/method.md",
     )
+    p.add_argument(
+        "--prior-feature-scale",
+        choices=FEATURE_SCALES,
+        default=GPSettings().prior_feature_scale,
+        help="how the prior's feature space z-scores each column: spread (its spread over the "
+        "old objects' observations) or noise (its spread between repeated observations of one "
+        "object); default %(default)s; see docs/method.md",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
@@ -108,7 +117,11 @@ def run(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         seed=args.seed,
         progress=not args.no_progress and sys.stderr.isatty(),
-        gp=GPSettings(class_prior=args.class_prior, latent_mean=args.latent_mean),
+        gp=GPSettings(
+            class_prior=args.class_prior,
+            latent_mean=args.latent_mean,
+            prior_feature_scale=args.prior_feature_scale,
+        ),
         command=_command(args),
     )
     try:
@@ -137,4 +150,6 @@ def _command(args: argparse.Namespace) -> str:
         parts.append(f"--class-prior {args.class_prior}")
     if args.latent_mean != GPSettings().latent_mean:
         parts.append(f"--latent-mean {args.latent_mean}")
+    if args.prior_feature_scale != GPSettings().prior_feature_scale:
+        parts.append(f"--prior-feature-scale {args.prior_feature_scale}")
     return " ".join(parts)

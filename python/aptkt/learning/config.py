@@ -16,6 +16,7 @@ from aptkt.gp import (
     LaplaceGPC,
     check_optimizer_tol,
 )
+from aptkt.learning.pipeline import FEATURE_SCALES
 from aptkt.learning.transfer import (
     CUTOFFS,
     FEATURE_SPACES,
@@ -77,6 +78,18 @@ class GPSettings:
         default: it neither lowered the transfer rate with dissimilar priors nor repaired the
         over-correction with many priors, and it cost the auxiliary features with 10 priors
         4 pp at step 1 (docs/method.md).
+    prior_feature_scale : how the prior's feature space z-scores each column (the transforms
+        fitted on the old objects' observations, in which the old models live and the
+        transferring new models are fitted). "noise" (default): by its pooled standard
+        deviation within each old object's repeated observations — the variation of the skin
+        and the action between observations of one object, a property of the sensor rather
+        than of the objects that happen to have been learned before; distances then count how
+        many noise levels two observations are apart (the within-class standardisation of
+        discriminant analysis). "spread": by its standard deviation over all the old
+        observations, which measures how different the chosen old objects are from each other
+        (the reading before this setting existed). The new objects' own space (the
+        baseline's) always uses the spread: with one observation per object it has no repeated
+        observations to estimate the noise from. Measured in docs/method.md.
     """
 
     # One start, at the hyper-prior's centre (data-scaled length-scales, σ² = 1, equal weights),
@@ -97,6 +110,8 @@ class GPSettings:
     # The learner's choice, not the estimator's default ("training", as scikit-learn's).
     class_prior: str = "uniform"
     latent_mean: str = DEFAULTS.latent_mean
+    # The learner's choice, not the pipeline's default ("spread"): see the docstring.
+    prior_feature_scale: str = "noise"
 
     def __post_init__(self) -> None:
         if self.hyper_prior not in ("weak", None):
@@ -106,6 +121,11 @@ class GPSettings:
         if self.latent_mean not in LATENT_MEANS:
             raise ValueError(f"latent_mean must be one of {LATENT_MEANS}, got {self.latent_mean!r}")
         check_optimizer_tol(self.optimizer_tol)
+        if self.prior_feature_scale not in FEATURE_SCALES:
+            raise ValueError(
+                f"prior_feature_scale must be one of {FEATURE_SCALES}, "
+                f"got {self.prior_feature_scale!r}"
+            )
         if not isinstance(self.modality_weight_prior, bool):
             raise ValueError(
                 f"modality_weight_prior must be True or False, got {self.modality_weight_prior!r}"
@@ -121,6 +141,8 @@ class GPSettings:
             del d["latent_mean"]
         if d["optimizer_tol"] == DEFAULTS.optimizer_tol:  # likewise
             del d["optimizer_tol"]
+        if d["prior_feature_scale"] == "spread":  # the reading before the setting: likewise
+            del d["prior_feature_scale"]
         # The keys of runs and prior files from before the weight prior describe flat weights:
         # that reading leaves the field out, the new default puts it in (and so gets new keys).
         if self.hyper_prior is None or not self.modality_weight_prior:
@@ -131,13 +153,15 @@ class GPSettings:
     def from_dict(cls, data: Mapping[str, Any]) -> GPSettings:
         """The inverse of :meth:`to_dict` (a dict without ``modality_weight_prior`` was written
         with flat weights, one without ``class_prior`` with "training", one without
-        ``latent_mean`` with "zero", one without ``optimizer_tol`` with scipy's tolerance)."""
+        ``latent_mean`` with "zero", one without ``optimizer_tol`` with scipy's tolerance, one
+        without ``prior_feature_scale`` with "spread")."""
         data = dict(data)
         if data.get("hyper_prior", "weak") is not None:
             data.setdefault("modality_weight_prior", False)
         data.setdefault("class_prior", "training")
         data.setdefault("latent_mean", "zero")
         data.setdefault("optimizer_tol", DEFAULTS.optimizer_tol)
+        data.setdefault("prior_feature_scale", "spread")
         return cls(**data)
 
     def resolved_hyper_prior(self) -> str | HyperPrior | None:

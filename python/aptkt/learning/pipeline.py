@@ -21,12 +21,19 @@ from scipy.special import gammaln
 from aptkt.learning.observations import Observations
 
 __all__ = [
+    "FEATURE_SCALES",
     "ModalityTransform",
     "FeaturePipeline",
     "DEFAULT_TRANSFORMS",
     "normal_gamma_log_evidence",
     "prior_weight",
 ]
+
+
+#: What z-scoring divides each column by: "spread", its standard deviation over all the rows
+#: fitted on; "noise", its pooled standard deviation within each object's rows (the sensor's
+#: variation between repeated observations of one object).
+FEATURE_SCALES = ("spread", "noise")
 
 
 @dataclass
@@ -49,15 +56,25 @@ class ModalityTransform:
             X[:, cols] = np.log10(np.maximum(X[:, cols], 1e-12))
         return X
 
-    def fit(self, X: np.ndarray, weights: np.ndarray | None = None) -> ModalityTransform:
+    def fit(
+        self,
+        X: np.ndarray,
+        weights: np.ndarray | None = None,
+        objects: np.ndarray | None = None,
+    ) -> ModalityTransform:
         """Fit on the rows of ``X``; ``weights`` (optional, ≥ 0) make the mean, the scales and
-        the PCA those of the weighted population."""
+        the PCA those of the weighted population. ``objects`` (optional, one label per row):
+        scale each column by its pooled within-object standard deviation — the noise of
+        repeated observations of one object — instead of its spread over all rows; where no
+        object was observed twice there is no noise to estimate, and the spread is used."""
         X = self._prepare(X)
         if X.shape[0] < 1:
             raise ValueError("cannot fit a feature transform on zero observations")
+        if objects is not None and weights is not None:
+            raise ValueError("give weights or objects, not both")
         if weights is None:
             self.mean_ = X.mean(axis=0)
-            scale = X.std(axis=0)
+            scale = X.std(axis=0) if objects is None else _noise_scale(X, objects)
         else:
             w = np.asarray(weights, dtype=np.float64)
             if (
@@ -138,6 +155,22 @@ class ModalityTransform:
         return t
 
 
+def _noise_scale(X: np.ndarray, objects: np.ndarray) -> np.ndarray:
+    """Each column's pooled within-object standard deviation (n − K degrees of freedom for n
+    rows of K objects); the plain spread when no object has two rows."""
+    labels = np.asarray(objects)
+    if labels.shape != (X.shape[0],):
+        raise ValueError(f"objects must hold one label per row ({X.shape[0]}), got {labels.shape}")
+    _, index = np.unique(labels, return_inverse=True)
+    dof = X.shape[0] - (index.max() + 1)
+    if dof < 1:
+        return X.std(axis=0)
+    means = np.zeros((index.max() + 1, X.shape[1]))
+    np.add.at(means, index, X)
+    means /= np.bincount(index)[:, None]
+    return np.sqrt(((X - means[index]) ** 2).sum(axis=0) / dof)
+
+
 #: Transforms used for the skin's modalities unless configured otherwise. Texture columns 0-2
 #: are the Hjorth activities (variances); the other modalities are z-scored as they are.
 DEFAULT_TRANSFORMS: Mapping[str, ModalityTransform] = {
@@ -160,15 +193,22 @@ class FeaturePipeline:
         self,
         obs: Observations,
         weights: np.ndarray | Mapping[str, np.ndarray] | None = None,
+        *,
+        scale: str = "spread",
     ) -> FeaturePipeline:
         """Fit on training observations (never on test data), optionally weighted by row (one
-        weight vector for every modality, or one per modality)."""
+        weight vector for every modality, or one per modality). ``scale`` (:data:`FEATURE_SCALES`):
+        z-score by each column's spread over the observations, or by its noise between
+        repeated observations of the same object."""
+        if scale not in FEATURE_SCALES:
+            raise ValueError(f"scale must be one of {FEATURE_SCALES}, got {scale!r}")
+        objects = obs.objects if scale == "noise" else None
         fitted = {}
         for name in obs.modality_names:
             template = self.transforms.get(name, ModalityTransform())
             w = weights.get(name) if isinstance(weights, Mapping) else weights
             fitted[name] = replace(template, mean_=None, scale_=None, components_=None).fit(
-                obs.modalities[name], w
+                obs.modalities[name], w, objects
             )
         self.transforms = fitted
         self.modality_names_ = obs.modality_names

@@ -182,7 +182,7 @@ class PriorKnowledge:
                 obs = obs.of_objects(objects)
             if len(obs.object_names) < 2:
                 raise ValueError(f"action {name!r}: prior knowledge needs at least two old objects")
-            pipeline = FeaturePipeline(transforms).fit(obs)
+            pipeline = FeaturePipeline(transforms).fit(obs, scale=gp.prior_feature_scale)
             X, groups = pipeline.transform(obs)
             model = gp.make(groups, random_state=seed + k).fit(X, obs.objects)
             actions[name] = ActionPrior(name, obs, pipeline, model)
