@@ -305,6 +305,8 @@ def test_fig9_judges_several_sources_against_one(tmp_path, multi_gain, expected)
     # The same gain and rate with more priors: the claim differs, and says what λ did.
     assert not fade.agrees and "averages 0.80 with 2 and 0.60 with 4 priors" in fade.why
     assert section.numbers["mean_lambda"] == {2: pytest.approx(0.8), 4: pytest.approx(0.6)}
+    aux = next(h for h in section.headlines if "auxiliary features beat" in h.claim)
+    assert aux.agrees and "+5.0 pp with 2, +5.0 pp with 4 priors" in aux.why
 
 
 def test_quick_report_gives_no_verdict_it_cannot_support(quick_run):

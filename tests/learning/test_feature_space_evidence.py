@@ -9,7 +9,14 @@ import pytest
 from aptkt.errors import KernelNotPositiveDefiniteError
 from aptkt.experiments.runs import step_rows
 from aptkt.gp import LaplaceGPC, TransferSource
-from aptkt.learning import APTKT, LearnerConfig, Observations, PoolEnvironment, PriorKnowledge
+from aptkt.learning import (
+    APTKT,
+    GPSettings,
+    LearnerConfig,
+    Observations,
+    PoolEnvironment,
+    PriorKnowledge,
+)
 from aptkt.learning.evidence import coupling_evidence, label_evidence, target_evidence
 from aptkt.learning.learner import ActionLearner, choose_space
 
@@ -116,7 +123,11 @@ def _table(spec, n, seed):
 
 
 def _learn(old, new, budget=3, **cfg):
-    prior = PriorKnowledge.build(_table(old, 12, seed=1), seed=0)
+    # The worlds below are built around the prior's space scaled by the old objects' spread
+    # (what the evidence must see through); the noise scale would remove part of the contrast.
+    prior = PriorKnowledge.build(
+        _table(old, 12, seed=1), gp=GPSettings(prior_feature_scale="spread"), seed=0
+    )
     config = LearnerConfig(
         **{"budget": budget, "seed": 1, "cutoff": "paper", "eps_neg": 0.0, **cfg}
     )

@@ -126,6 +126,14 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                 if len(restored) == len(more)
                 else f"differs: significantly better for {len(restored)} of {len(more)} prior counts",
                 evidence=[aux_vs_plain[n].overall for n in more],
+                why=(
+                    "the auxiliary features were to restore a transfer that fades with more "
+                    "priors; plain APTKT's gain over the baseline at step 0 is "
+                    + ", ".join(
+                        f"{pp(plain[n].at[0].mean)} with {n}" for n in counts if 0 in plain[n].at
+                    )
+                    + " priors"
+                ),
             )
         )
     if multi:

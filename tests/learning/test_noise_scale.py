@@ -1,0 +1,68 @@
+"""The prior's feature space scaled by the sensor's noise (``prior_feature_scale="noise"``): the
+old objects' between-object spread no longer sets the metric the new objects are judged in."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from aptkt.learning import (
+    APTKT,
+    GPSettings,
+    LearnerConfig,
+    Observations,
+    PoolEnvironment,
+    PriorKnowledge,
+)
+
+ACTION = "A"
+OLD = ["old0", "old1", "old2"]
+NEW = ["new0", "new1", "new2"]
+# Unit noise in both columns for every object. The old objects lie far apart along column 1
+# (±60) and together in column 0; the new objects lie 4 noise levels apart along column 1 and
+# together in column 0. Scaled by the old objects' spread, column 1 is divided by ≈ 50 and the
+# new objects' differences vanish under column 0's noise; scaled by the noise, they are 4 units.
+OLD_MEANS = {o: (0.0, c) for o, c in zip(OLD, (-60.0, 0.0, 60.0))}
+NEW_MEANS = {o: (0.0, c) for o, c in zip(NEW, (-4.0, 0.0, 4.0))}
+
+
+def _table(means, n, seed):
+    rng = np.random.default_rng(seed)
+    rows = [np.asarray(m) + rng.normal(size=(n, 2)) for m in means.values()]
+    objects = np.repeat(list(means), n)
+    return {ACTION: Observations(ACTION, {"shape": np.concatenate(rows)}, objects)}
+
+
+def _control_accuracy(scale: str, seed: int) -> float:
+    """Mean accuracy over the curve of the prior's space without transfer (the control)."""
+    prior = PriorKnowledge.build(
+        _table(OLD_MEANS, 15, seed), gp=GPSettings(prior_feature_scale=scale), seed=seed
+    )
+    learner = APTKT(LearnerConfig(transfer="control", budget=4, seed=seed), prior)
+    run = learner.run(
+        PoolEnvironment(_table(NEW_MEANS, 8, seed + 1), seed=seed),
+        [ACTION],
+        NEW,
+        _table(NEW_MEANS, 20, seed + 2),
+    )
+    return float(np.mean([s.mean_accuracy for s in run.steps]))
+
+
+def test_the_noise_scale_keeps_what_the_spread_squeezes():
+    spread = [_control_accuracy("spread", s) for s in range(3)]
+    noise = [_control_accuracy("noise", s) for s in range(3)]
+    # 4 noise levels apart with 3 objects: a nearest-mean rule is right ≈ 95 % of the time.
+    assert np.mean(noise) > 0.8
+    assert np.mean(noise) > np.mean(spread) + 0.15
+
+
+def test_the_prior_records_its_scale_and_the_transforms_hold_the_noise():
+    table = _table(OLD_MEANS, 15, 0)
+    noise = PriorKnowledge.build(table, seed=0)  # the learner's default
+    spread = PriorKnowledge.build(table, gp=GPSettings(prior_feature_scale="spread"), seed=0)
+    assert noise.metadata["gp"]["prior_feature_scale"] == "noise"
+    # Unit noise in each column; the spread of column 1 is that of the three clusters (≈ 49).
+    assert noise[ACTION].pipeline.transforms["shape"].scale_ == pytest.approx([1, 1], rel=0.25)
+    assert spread[ACTION].pipeline.transforms["shape"].scale_[1] > 40
+    with pytest.raises(ValueError, match="prior_feature_scale"):
+        GPSettings(prior_feature_scale="total")
