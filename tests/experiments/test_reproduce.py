@@ -194,7 +194,7 @@ def enough_groups() -> Scale:
     return dataclasses.replace(Scale.quick(), groups=4)
 
 
-def hand_made_rows(gain: float, noise: float = 0.0):
+def hand_made_rows(gain: float, noise: float = 0.0, control: float | None = None):
     s = enough_groups()
     rng = np.random.default_rng(0)
     rows = []
@@ -203,7 +203,10 @@ def hand_made_rows(gain: float, noise: float = 0.0):
             for step in range(s.budget + 1):
                 base = 0.5 + 0.02 * step
                 eps = noise * rng.normal()
-                for m, v in (("baseline", base), ("APTKT", base + gain + eps)):
+                methods = [("baseline", base), ("APTKT", base + gain + eps)]
+                if control is not None:
+                    methods.append(("control", base + control))
+                for m, v in methods:
                     rows.append(
                         {
                             "method": m,
@@ -307,6 +310,22 @@ def test_fig9_judges_several_sources_against_one(tmp_path, multi_gain, expected)
     assert section.numbers["mean_lambda"] == {2: pytest.approx(0.8), 4: pytest.approx(0.6)}
     aux = next(h for h in section.headlines if "auxiliary features beat" in h.claim)
     assert aux.agrees and "+5.0 pp with 2, +5.0 pp with 4 priors" in aux.why
+
+
+def test_fig7_splits_its_gain_into_the_space_and_the_transfer(tmp_path):
+    scale = enough_groups()
+    ctx = Context(
+        scale=scale,
+        seed=0,
+        data="",
+        fingerprint="",
+        output=tmp_path,
+        index=_paper_numbers(scale.objects),
+    )
+    head = fig7.analyse(ctx, hand_made_rows(0.30, control=0.22)).headlines[0]
+    assert "more than twice" in head.verdict
+    assert "accounts for +22.0 pp" in head.why and "APTKT − control) for +8.0 pp" in head.why
+    assert fig7.analyse(ctx, hand_made_rows(0.30)).headlines[0].why == ""
 
 
 def test_quick_report_gives_no_verdict_it_cannot_support(quick_run):

@@ -90,6 +90,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             pp(PAPER["fig7_gain"]),
             ci(gain.overall) + " (mean over steps)",
             gain_verdict(gain.overall, PAPER["fig7_gain"]),
+            why=_decomposition_text(curves, steps),
         ),
         Headline(
             NAME,
@@ -188,3 +189,17 @@ def _control_lines(curves, fused, steps) -> list[str]:
         "",
         markdown_table(["comparison", "step 0", "mean over all steps", "fused, all steps"], rows),
     ]
+
+
+def _decomposition_text(curves, steps) -> str:
+    """APTKT's gain split into the prior's feature space alone (the control) and the transfer
+    on top of it, over the curve — where the control was run."""
+    if "control" not in curves:
+        return ""
+    space = gain_summary(curves, "control", steps=steps).overall.mean
+    transfer = gain_summary(curves, "APTKT", base="control", steps=steps).overall.mean
+    return (
+        f"of the gain over the curve, the prior's feature space alone (the control: no transfer) "
+        f"accounts for {pp(space)} and the transfer on top of it (APTKT − control) for "
+        f"{pp(transfer)}"
+    )
