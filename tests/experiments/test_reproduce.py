@@ -385,7 +385,9 @@ def test_the_prior_feature_scale_option_reaches_the_prior_files(tmp_path, quick_
     assert main([*argv, "--prior-feature-scale", "spread", "--jobs", "1", "--no-progress"]) == 0
     assert json.loads((out / "config.json").read_text())["gp"]["prior_feature_scale"] == "spread"
     assert "--prior-feature-scale spread" in (out / "report.md").read_text()
-    for path in (out / "priors").glob("*.npz"):
+    spread_priors = list((out / "priors").glob("*.npz"))
+    assert spread_priors
+    for path in spread_priors:
         prior = PriorKnowledge.load(path)
         for a in prior.actions:
             force = prior[a].pipeline.transforms.get("force")

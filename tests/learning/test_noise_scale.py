@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from aptkt.cli import main
 from aptkt.learning import (
     APTKT,
     GPSettings,
@@ -66,3 +67,21 @@ def test_the_prior_records_its_scale_and_the_transforms_hold_the_noise():
     assert spread[ACTION].pipeline.transforms["shape"].scale_[1] > 40
     with pytest.raises(ValueError, match="prior_feature_scale"):
         GPSettings(prior_feature_scale="total")
+
+
+def test_a_prior_knows_its_scale_through_files_subsets_and_inspect(tmp_path, capsys):
+    table = _table(OLD_MEANS, 15, 0)
+    spread = PriorKnowledge.build(table, gp=GPSettings(prior_feature_scale="spread"), seed=0)
+    path = spread.save(tmp_path / "spread.npz")
+    loaded = PriorKnowledge.load(path)
+    assert loaded.feature_scale == "spread"
+    # A subset is rebuilt with the source's scale, not the default's.
+    sub = loaded.subset(OLD[:2])
+    assert sub.feature_scale == "spread"
+    assert sub[ACTION].pipeline.transforms["shape"].scale_[1] > 20  # two clusters 60 apart
+    assert PriorKnowledge.build(table, seed=0).subset(OLD[:2]).feature_scale == "noise"
+    # Files written before the setting existed carry no such field: they used the spread.
+    del loaded.metadata["gp"]["prior_feature_scale"]
+    assert loaded.feature_scale == "spread"
+    assert main(["prior", "inspect", str(path)]) == 0
+    assert "scaled by the spread of each column" in capsys.readouterr().out

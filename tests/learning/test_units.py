@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 from aptkt.learning import FeaturePipeline, ModalityTransform, Observations, decide_transfer
 from aptkt.learning.active import entropy, select_next, uncertainty
 from aptkt.learning.evaluation import accuracy, fused_accuracy
+from aptkt.learning.pipeline import MIN_NOISE_DOF
 from aptkt.learning.transfer import mean_posteriors
 
 
@@ -232,9 +233,9 @@ def test_a_column_constant_to_its_last_bits_is_not_blown_up():
         assert abs(z[0, 0]) < 0.01
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=60, deadline=None)
 @given(
-    sizes=st.lists(st.integers(1, 6), min_size=2, max_size=5),
+    sizes=st.lists(st.integers(1, 8), min_size=2, max_size=5),
     seed=st.integers(0, 10_000),
     shifts=st.lists(st.floats(-1e3, 1e3), min_size=5, max_size=5),
 )
@@ -244,7 +245,8 @@ def test_noise_scale_is_the_pooled_within_object_sd(sizes, seed, shifts):
     rng = np.random.default_rng(seed)
     objects = np.repeat([f"o{i}" for i in range(len(sizes))], sizes)
     X = rng.normal(size=(objects.size, 3)) * [1.0, 10.0, 0.1]
-    if objects.size == len(sizes):  # nobody observed twice: no noise to estimate
+    if objects.size - len(sizes) < max(MIN_NOISE_DOF, len(sizes)):
+        # Too few repeats to estimate a noise from: the spread, as without objects.
         t = ModalityTransform().fit(X, objects=objects)
         assert np.allclose(t.scale_, X.std(axis=0))
         return
@@ -274,5 +276,11 @@ def test_noise_scaled_pipeline_measures_distances_in_noise_units():
     assert noise[:, 0].std() > 30 * noise[:, 1].std()
     with pytest.raises(ValueError, match="scale must be one of"):
         FeaturePipeline().fit(obs, scale="total")
+    # A column that differs between objects but never within one has no noise: it keeps its
+    # spread (not a raw-unit scale of 1), and a constant column still gets 1.
+    per_object = np.column_stack([np.repeat([0.0, 500.0, 1000.0], 20), X[:, 1], np.full(60, 7.0)])
+    t = ModalityTransform().fit(per_object, objects=objects)
+    assert t.scale_[0] == pytest.approx(per_object[:, 0].std())
+    assert t.scale_[2] == 1.0
     with pytest.raises(ValueError, match="weights or objects"):
         ModalityTransform().fit(X, weights=np.ones(60), objects=objects)

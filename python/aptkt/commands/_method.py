@@ -71,10 +71,10 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--prior-feature-scale",
         choices=FEATURE_SCALES,
-        help="how the prior's feature space z-scores each column (with --table, where the "
-        "prior is built; a loaded --prior keeps its own): spread (its spread over the old "
-        "objects' observations; default) or noise (its spread between repeated observations "
-        "of one object)",
+        help="how a prior built here z-scores each column (with --table, and the learned "
+        "prior a live run saves; a loaded --prior keeps its own): noise (its spread between "
+        "repeated observations of one object; default) or spread (its spread over all the old "
+        "objects' observations)",
     )
 
 

@@ -141,6 +141,7 @@ def run_inspect(args: argparse.Namespace) -> int:
         )
         return 0
     print(f"{args.file}: {len(prior.objects)} prior objects: {', '.join(prior.objects)}")
+    print(f"  feature space scaled by the {prior.feature_scale} of each column")
     if prior.metadata:
         print(
             "  "

@@ -65,8 +65,10 @@ class ModalityTransform:
         """Fit on the rows of ``X``; ``weights`` (optional, ≥ 0) make the mean, the scales and
         the PCA those of the weighted population. ``objects`` (optional, one label per row):
         scale each column by its pooled within-object standard deviation — the noise of
-        repeated observations of one object — instead of its spread over all rows; where no
-        object was observed twice there is no noise to estimate, and the spread is used."""
+        repeated observations of one object — instead of its spread over all rows. The spread
+        is kept where the repeats are too few to estimate a noise (fewer degrees of freedom
+        than :data:`MIN_NOISE_DOF` or than objects) and for a column without any noise (one
+        that differs between objects but never within one)."""
         X = self._prepare(X)
         if X.shape[0] < 1:
             raise ValueError("cannot fit a feature transform on zero observations")
@@ -74,7 +76,12 @@ class ModalityTransform:
             raise ValueError("give weights or objects, not both")
         if weights is None:
             self.mean_ = X.mean(axis=0)
-            scale = X.std(axis=0) if objects is None else _noise_scale(X, objects)
+            scale = X.std(axis=0)
+            if objects is not None:
+                # Constancy is judged on the spread (below): a column that differs between
+                # objects but never within one has no noise, and keeps its spread.
+                noise = _noise_scale(X, objects)
+                scale = np.where(noise > _rounding_level(self.mean_), noise, scale)
         else:
             w = np.asarray(weights, dtype=np.float64)
             if (
@@ -91,7 +98,7 @@ class ModalityTransform:
             scale = np.sqrt(w @ (X - self.mean_) ** 2)
         # A column whose spread is at the level of its values' rounding is constant: scaling
         # by that spread would turn a change in the last digits into a huge z-score.
-        self.scale_ = np.where(scale > np.maximum(1e-12, 1e-9 * np.abs(self.mean_)), scale, 1.0)
+        self.scale_ = np.where(scale > _rounding_level(self.mean_), scale, 1.0)
         Z = (X - self.mean_) / self.scale_
         self.components_ = None
         self.pca_scale_ = 1.0
@@ -155,15 +162,28 @@ class ModalityTransform:
         return t
 
 
+#: Fewest degrees of freedom (repeated observations beyond each object's first) behind a noise
+#: estimate: a standard deviation from d degrees of freedom is uncertain by about 1/√(2d) of
+#: itself — ±32 % at 5 — and below that the spread is the safer scale.
+MIN_NOISE_DOF = 5
+
+
+def _rounding_level(mean: np.ndarray) -> np.ndarray:
+    """A scale at or below this is the rounding of the column's values, not a spread."""
+    return np.maximum(1e-12, 1e-9 * np.abs(mean))
+
+
 def _noise_scale(X: np.ndarray, objects: np.ndarray) -> np.ndarray:
     """Each column's pooled within-object standard deviation (n − K degrees of freedom for n
-    rows of K objects); the plain spread when no object has two rows."""
+    rows of K objects); the plain spread when the repeats give fewer than
+    :data:`MIN_NOISE_DOF` degrees of freedom, or fewer than there are objects."""
     labels = np.asarray(objects)
     if labels.shape != (X.shape[0],):
         raise ValueError(f"objects must hold one label per row ({X.shape[0]}), got {labels.shape}")
     _, index = np.unique(labels, return_inverse=True)
-    dof = X.shape[0] - (index.max() + 1)
-    if dof < 1:
+    n_objects = index.max() + 1
+    dof = X.shape[0] - n_objects
+    if dof < max(MIN_NOISE_DOF, n_objects):
         return X.std(axis=0)
     means = np.zeros((index.max() + 1, X.shape[1]))
     np.add.at(means, index, X)

@@ -270,6 +270,16 @@ class PriorKnowledge:
     def subset(
         self, objects: Sequence[str], *, gp: GPSettings | None = None, seed: int = 0
     ) -> PriorKnowledge:
-        """Prior knowledge rebuilt on a subset of the old objects (refits the models)."""
+        """Prior knowledge rebuilt on a subset of the old objects (refits the models); without
+        ``gp``, at the default settings with this prior's own feature scale."""
         table = {name: prior.observations for name, prior in self.actions.items()}
+        if gp is None:
+            gp = GPSettings(prior_feature_scale=self.feature_scale)
         return PriorKnowledge.build(table, objects, gp=gp, seed=seed)
+
+    @property
+    def feature_scale(self) -> str:
+        """How this prior's feature space z-scores its columns (``GPSettings.
+        prior_feature_scale``); files written before the setting existed used the spread."""
+        gp = self.metadata.get("gp")
+        return str(gp.get("prior_feature_scale", "spread")) if isinstance(gp, dict) else "spread"

@@ -130,6 +130,8 @@ def learn_live(
         "prior": {
             "objects": prior.objects if prior else [],
             "actions": list(prior.actions) if prior else [],
+            # The loaded file's own scale: config.gp's applies to the learned prior only.
+            "feature_scale": prior.feature_scale if prior else None,
             **dict((extra or {}).get("prior", {})),
         },
         "config": config.to_dict(),

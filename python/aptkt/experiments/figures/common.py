@@ -135,14 +135,15 @@ def error_removed(
     A gain in percentage points is bounded by the error the baseline leaves: the same transfer
     gains less where the baseline is already good. The share reads gains against that room.
     """
-    b, m = curves[base], curves[method]
+    b = curves[base]
+    gain = difference(curves[method], b)  # paired by run, as the gains reported beside it
     if step is None:
-        acc_b, acc_m = float(np.mean(b.mean())), float(np.mean(m.mean()))
+        acc_b, mean_gain = float(np.mean(b.mean())), float(np.mean(gain.mean()))
     else:
-        i = int(np.flatnonzero(b.x == step)[0])
-        acc_b, acc_m = float(b.mean()[i]), float(m.mean()[i])
+        acc_b = float(b.mean()[int(np.flatnonzero(b.x == step)[0])])
+        mean_gain = float(gain.mean()[int(np.flatnonzero(gain.x == step)[0])])
     error = 1.0 - acc_b
-    return acc_b, (acc_m - acc_b) / error if error > 0 else float("nan")
+    return acc_b, mean_gain / error if error > 0 else float("nan")
 
 
 def share_text(rate: float, digits: int = 0) -> str:

@@ -317,22 +317,30 @@ def _rate_text(ctx: Context, kept: Sequence[str], lambdas, over_control) -> str:
     lams = [lambdas[k] for k in kept if math.isfinite(lambdas[k])]
     if not lams:
         return ""
+    config = ctx.learner("APTKT")
+    whose = (
+        "the old objects' own classifiers"
+        if config.relatedness == "binary"
+        else "the old objects' normalised posteriors"
+    )
     text = (
         f"in the settings that kept transferring the transferred priors' λ = p̄ averaged "
-        f"{span(lams, '{:.2f}', '')} (ε_neg = {ctx.scale.eps_neg}): the old objects' own "
-        "classifiers claimed the new objects' observations"
+        f"{span(lams, '{:.2f}', '')} (ε_neg = {ctx.scale.eps_neg}): {whose} claimed the new "
+        "objects' observations"
     )
-    if ctx.learner("APTKT").cutoff == "evidence":
+    if config.cutoff == "evidence":
         text += ", and the new objects' labels favoured the coupling (the evidence cut-off)"
-    beats = [k for k in kept if k in over_control and over_control[k].overall.mean > 0]
-    if any(k in over_control for k in kept):
+    compared = [k for k in kept if k in over_control]
+    if compared:
+        beats = [k for k in compared if over_control[k].overall.mean > 0]
         text += (
             f"; APTKT is above the control (the prior's space without transfer) over the curve "
-            f"in {len(beats)} of {len(kept)} of them: there, the transfers from these priors "
-            "helped more often than not, and a cut-off that judges by the new labels had little "
-            "reason to stop them"
-            if 2 * len(beats) > len(kept)
-            else f"; APTKT is above the control over the curve in only {len(beats)} of "
-            f"{len(kept)} of them"
+            f"in {len(beats)} of the {len(compared)} of them"
         )
+        if 2 * len(beats) > len(compared):
+            text += ": there, the transfers from these priors helped more often than not"
+            if config.cutoff == "evidence":
+                text += (
+                    ", and a cut-off that judges by the new labels had little reason to stop them"
+                )
     return text

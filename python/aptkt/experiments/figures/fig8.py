@@ -134,13 +134,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                 f"mean gain {pp(mp)} vs {pp(ms)}",
                 "agrees" if mp > ms else "differs: the sliding actions gain as much or more",
                 evidence=[gains[a].overall for a in press + slide],
-                why=(
-                    f"the baselines' mean accuracy over the curve is {base_p:.3f} with the "
-                    f"pressing/static actions and {base_s:.3f} with the sliding ones, so a gain in "
-                    "pp has less room with the former; as a share of the baseline's error "
-                    f"APTKT removes {100 * share_p:.0f} % with the pressing/static actions and "
-                    f"{100 * share_s:.0f} % with the sliding ones (mean over actions)"
-                ),
+                why=_press_slide_text(base_p, base_s, share_p, share_s),
             )
         )
     pos = [a for a in actions if gains[a].overall.significant_positive]
@@ -179,7 +173,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                     ci(gains[a].at[1]) if 1 in gains[a].at else "",
                     gains[a].peak_step,
                     ci(gains[a].peak),
-                    f"{100 * removed[a]['curve'][1]:.0f} % / {100 * removed[a]['peak'][1]:.0f} %",
+                    f"{_percent(removed[a]['curve'][1])} / {_percent(removed[a]['peak'][1])}",
                     f"{100 * rates[a]:.0f} %",
                 ]
                 for a in actions
@@ -207,10 +201,25 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     return Section(NAME, TITLE, headlines, "\n".join(body), files, numbers)
 
 
+def _percent(share: float) -> str:
+    return f"{100 * share:.0f} %" if math.isfinite(share) else "n/a (no error left)"
+
+
 def _room_text(action: str, step: int, removed: Mapping[str, tuple[float, float]]) -> str:
     base, share = removed["peak"]
     return (
         f"the {action} baseline is at {base:.3f} at step {step}, so no method can gain more than "
-        f"{pp(1 - base)} there; APTKT removes {100 * share:.0f} % of the baseline's error at "
-        f"that step and {100 * removed['curve'][1]:.0f} % over the curve"
+        f"{pp(1 - base)} there; APTKT removes {_percent(share)} of the baseline's error at "
+        f"that step and {_percent(removed['curve'][1])} over the curve"
+    )
+
+
+def _press_slide_text(base_p: float, base_s: float, share_p: float, share_s: float) -> str:
+    higher = "pressing/static" if base_p > base_s else "sliding"
+    return (
+        f"the baselines' mean accuracy over the curve is {base_p:.3f} with the pressing/static "
+        f"actions and {base_s:.3f} with the sliding ones, so a gain in pp has less room with "
+        f"the {higher} ones; as a share of the baseline's error APTKT removes "
+        f"{_percent(share_p)} with the pressing/static actions and {_percent(share_s)} with "
+        "the sliding ones (mean over actions)"
     )

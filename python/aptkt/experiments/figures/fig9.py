@@ -8,6 +8,7 @@ exactly Fig. 7's (same groups, same seeds), plus APTKT+aux.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -236,6 +237,8 @@ def _fade_text(
     rates: Mapping[int, float],
 ) -> str:
     """What the transfers' λ did as priors were added, and which relatedness made it."""
+    if not (math.isfinite(lambdas[fewest]) and math.isfinite(lambdas[most])):
+        return ""  # nothing transferred, or runs stored before λ was counted
     text = (
         f"the transferred priors' λ = p̄ averages {lambdas[fewest]:.2f} with {fewest} and "
         f"{lambdas[most]:.2f} with {most} priors (ε_neg = {ctx.scale.eps_neg})"
