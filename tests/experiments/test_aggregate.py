@@ -189,17 +189,17 @@ def test_error_removed_reads_a_gain_against_the_baselines_room():
     # Two runs per method; baseline means 0.5, 0.8 at steps 0, 1; APTKT 0.7, 0.9.
     base = collect(rows_from([[0.4, 0.7], [0.6, 0.9]], method="baseline"), {"method": "baseline"})
     aptkt = collect(rows_from([[0.6, 0.8], [0.8, 1.0]], method="APTKT"), {"method": "APTKT"})
-    curves = {"baseline": base, "APTKT": aptkt}
-    acc, share = error_removed(curves, "APTKT", step=0)
+    gain = difference(aptkt, base)
+    acc, share = error_removed(base, gain, step=0)
     assert acc == pytest.approx(0.5) and share == pytest.approx(0.2 / 0.5)
-    acc, share = error_removed(curves, "APTKT", step=1)
+    acc, share = error_removed(base, gain, step=1)
     assert acc == pytest.approx(0.8) and share == pytest.approx(0.1 / 0.2)
     # Over the curve: mean accuracies 0.65 and 0.8, so 0.15 of the 0.35 left.
-    acc, share = error_removed(curves, "APTKT")
+    acc, share = error_removed(base, gain)
     assert acc == pytest.approx(0.65) and share == pytest.approx(0.15 / 0.35)
     # A perfect baseline leaves no room: no share, not a division by zero.
     perfect = collect(rows_from([[1.0, 1.0]], method="baseline"), {"method": "baseline"})
-    assert math.isnan(error_removed({"baseline": perfect, "APTKT": perfect}, "APTKT")[1])
+    assert math.isnan(error_removed(perfect, difference(perfect, perfect))[1])
 
 
 def test_mean_lambda_weighs_each_row_by_its_sources():

@@ -194,6 +194,18 @@ def enough_groups() -> Scale:
     return dataclasses.replace(Scale.quick(), groups=4)
 
 
+def hand_made_context(scale: Scale, output: Path) -> Context:
+    """A reproduction's context for analysing hand-made rows (no data set behind it)."""
+    return Context(
+        scale=scale,
+        seed=0,
+        data="",
+        fingerprint="",
+        output=output,
+        index=_paper_numbers(scale.objects),
+    )
+
+
 def hand_made_rows(gain: float, noise: float = 0.0, control: float | None = None):
     s = enough_groups()
     rng = np.random.default_rng(0)
@@ -228,14 +240,7 @@ def hand_made_rows(gain: float, noise: float = 0.0, control: float | None = None
 )
 def test_report_numbers_follow_hand_made_results(tmp_path, gain, expected):
     scale = enough_groups()
-    ctx = Context(
-        scale=scale,
-        seed=0,
-        data="",
-        fingerprint="",
-        output=tmp_path,
-        index=_paper_numbers(scale.objects),
-    )
+    ctx = hand_made_context(scale, tmp_path)
     section = fig7.analyse(ctx, hand_made_rows(gain, noise=0.01))
     head = section.headlines[0]
     measured = section.numbers["gain"]["overall"]["mean"]
@@ -262,14 +267,7 @@ def test_fig9_judges_several_sources_against_one(tmp_path, multi_gain, expected)
     """transfer="multi" gets a verdict beside the paper's claims, whichever way it goes, and the
     fade's explanation reports the transferred priors' λ."""
     scale = dataclasses.replace(enough_groups(), trials=3)  # the one group of 4 priors: 3 runs
-    ctx = Context(
-        scale=scale,
-        seed=0,
-        data="",
-        fingerprint="",
-        output=tmp_path,
-        index=_paper_numbers(scale.objects),
-    )
+    ctx = hand_made_context(scale, tmp_path)
     rng = np.random.default_rng(1)
     rows = []
     for n in scale.prior_counts:
@@ -314,14 +312,7 @@ def test_fig9_judges_several_sources_against_one(tmp_path, multi_gain, expected)
 
 def test_fig7_splits_its_gain_into_the_space_and_the_transfer(tmp_path):
     scale = enough_groups()
-    ctx = Context(
-        scale=scale,
-        seed=0,
-        data="",
-        fingerprint="",
-        output=tmp_path,
-        index=_paper_numbers(scale.objects),
-    )
+    ctx = hand_made_context(scale, tmp_path)
     head = fig7.analyse(ctx, hand_made_rows(0.30, control=0.22)).headlines[0]
     assert "more than twice" in head.verdict
     assert "accounts for +22.0 pp" in head.why and "APTKT − control) for +8.0 pp" in head.why

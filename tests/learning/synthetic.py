@@ -45,3 +45,21 @@ def draw(means, objects, n_per, noise=1.0, seed=0):
         }
         table[a] = Observations(a, data, objs)
     return table
+
+
+#: The constructed one-action worlds of the feature-space tests: one action, one two-column
+#: modality ("shape"), three old and three new objects.
+SHAPE_ACTION = "A"
+SHAPE_OLD = ["old0", "old1", "old2"]
+SHAPE_NEW = ["new0", "new1", "new2"]
+
+
+def shape_table(spec, n, seed):
+    """``n`` observations of each object of ``spec`` (object -> (mean, noise sd per column))."""
+    rng = np.random.default_rng(seed)
+    rows, objects = [], []
+    for o, (mean, sd) in spec.items():
+        rows.append(np.asarray(mean) + np.asarray(sd) * rng.normal(size=(n, 2)))
+        objects += [o] * n
+    obs = Observations(SHAPE_ACTION, {"shape": np.concatenate(rows)}, np.array(objects))
+    return {SHAPE_ACTION: obs}

@@ -13,18 +13,17 @@ from aptkt.learning import (
     APTKT,
     GPSettings,
     LearnerConfig,
-    Observations,
     PoolEnvironment,
     PriorKnowledge,
 )
 from aptkt.learning.evidence import coupling_evidence, label_evidence, target_evidence
 from aptkt.learning.learner import ActionLearner, choose_space
 
+from .synthetic import SHAPE_ACTION as ACTION
+from .synthetic import SHAPE_NEW as NEW
+from .synthetic import SHAPE_OLD as OLD
+from .synthetic import shape_table as _table
 from .test_transfer_options import _laplace_log_evidence
-
-ACTION = "A"
-OLD = ["old0", "old1", "old2"]
-NEW = ["new0", "new1", "new2"]
 
 
 # -- the evidence, against an independent Laplace computation -----------------------------------
@@ -112,16 +111,6 @@ def test_several_sources_are_refused():
 
 
 # -- the choice on constructed worlds -------------------------------------------------------------
-def _table(spec, n, seed):
-    """One action, one two-column modality; ``spec``: object -> (mean, noise sd per column)."""
-    rng = np.random.default_rng(seed)
-    rows, objects = [], []
-    for o, (mean, sd) in spec.items():
-        rows.append(np.asarray(mean) + np.asarray(sd) * rng.normal(size=(n, 2)))
-        objects += [o] * n
-    return {ACTION: Observations(ACTION, {"shape": np.concatenate(rows)}, np.array(objects))}
-
-
 def _learn(old, new, budget=3, **cfg):
     # The worlds below are built around the prior's space scaled by the old objects' spread
     # (what the evidence must see through); the noise scale would remove part of the contrast.

@@ -11,14 +11,15 @@ from aptkt.learning import (
     APTKT,
     GPSettings,
     LearnerConfig,
-    Observations,
     PoolEnvironment,
     PriorKnowledge,
 )
 
-ACTION = "A"
-OLD = ["old0", "old1", "old2"]
-NEW = ["new0", "new1", "new2"]
+from .synthetic import SHAPE_ACTION as ACTION
+from .synthetic import SHAPE_NEW as NEW
+from .synthetic import SHAPE_OLD as OLD
+from .synthetic import shape_table
+
 # Unit noise in both columns for every object. The old objects lie far apart along column 1
 # (±60) and together in column 0; the new objects lie 4 noise levels apart along column 1 and
 # together in column 0. Scaled by the old objects' spread, column 1 is divided by ≈ 50 and the
@@ -28,10 +29,8 @@ NEW_MEANS = {o: (0.0, c) for o, c in zip(NEW, (-4.0, 0.0, 4.0))}
 
 
 def _table(means, n, seed):
-    rng = np.random.default_rng(seed)
-    rows = [np.asarray(m) + rng.normal(size=(n, 2)) for m in means.values()]
-    objects = np.repeat(list(means), n)
-    return {ACTION: Observations(ACTION, {"shape": np.concatenate(rows)}, objects)}
+    """Unit noise in both columns for every object."""
+    return shape_table({o: (m, (1.0, 1.0)) for o, m in means.items()}, n, seed)
 
 
 def _control_accuracy(scale: str, seed: int) -> float:

@@ -123,24 +123,18 @@ def mean_lambda(rows: Iterable[Mapping[str, Any]], where: Mapping[str, Any]) -> 
     return total / weight if weight else float("nan")
 
 
-def error_removed(
-    curves: Mapping[str, Curves],
-    method: str,
-    base: str = "baseline",
-    step: int | None = None,
-) -> tuple[float, float]:
+def error_removed(baseline: Curves, gain: Curves, step: int | None = None) -> tuple[float, float]:
     """The baseline's mean accuracy (at ``step``, or averaged over the curve) and the share of
-    its error, 1 − accuracy, that ``method``'s mean gain removes there.
+    its error, 1 − accuracy, that the mean of ``gain`` (a method − baseline, paired by run, as
+    :class:`GainSummary` holds it) removes there.
 
     A gain in percentage points is bounded by the error the baseline leaves: the same transfer
     gains less where the baseline is already good. The share reads gains against that room.
     """
-    b = curves[base]
-    gain = difference(curves[method], b)  # paired by run, as the gains reported beside it
     if step is None:
-        acc_b, mean_gain = float(np.mean(b.mean())), float(np.mean(gain.mean()))
+        acc_b, mean_gain = float(np.mean(baseline.mean())), float(np.mean(gain.mean()))
     else:
-        acc_b = float(b.mean()[int(np.flatnonzero(b.x == step)[0])])
+        acc_b = float(baseline.mean()[int(np.flatnonzero(baseline.x == step)[0])])
         mean_gain = float(gain.mean()[int(np.flatnonzero(gain.x == step)[0])])
     error = 1.0 - acc_b
     return acc_b, mean_gain / error if error > 0 else float("nan")

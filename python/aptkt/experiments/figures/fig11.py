@@ -113,7 +113,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     fig, axes = figure(nrows, ncols, figsize=(4.2 * ncols, 3.8 * nrows), squeeze=False)
     gains, rates, spaces, worst, curve_rows, tables = {}, {}, {}, {}, [], []
     control, control_worst, over_control, lambdas = {}, {}, {}, {}
-    methods = present([r for r in rows if r.get("panel") != STRESS], METHODS)
+    methods = present(rows, METHODS)  # the control runs in the settings only, never in stress
     for i, (ax, key) in enumerate(zip(axes.ravel(), keys)):
         curves = method_curves(rows, {"panel": key}, methods)
         gains[key] = gain_summary(curves, "APTKT", steps=steps)

@@ -14,6 +14,7 @@ from typing import Any
 
 from aptkt.experiments.figures.base import Context, Headline, Plan, Section
 from aptkt.experiments.figures.common import (
+    GainSummary,
     accuracy_table,
     gain_summary,
     key_steps,
@@ -83,6 +84,15 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
     files = ctx.write_figure(NAME, fig, rows, curve_rows)
 
     mean_gain = gain.gain.mean()
+    # The control beside APTKT: the prior's feature space alone, and the transfer on top of it.
+    split = (
+        (
+            gain_summary(curves, "control", steps=steps),
+            gain_summary(curves, "APTKT", base="control", steps=steps),
+        )
+        if "control" in curves
+        else None
+    )
     headlines = [
         Headline(
             NAME,
@@ -90,7 +100,7 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             pp(PAPER["fig7_gain"]),
             ci(gain.overall) + " (mean over steps)",
             gain_verdict(gain.overall, PAPER["fig7_gain"]),
-            why=_decomposition_text(curves, steps),
+            why=_decomposition_text(split),
         ),
         Headline(
             NAME,
@@ -136,13 +146,8 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         ),
     ]
     control: dict[str, Any] = (
-        {
-            "control_vs_baseline": gain_summary(curves, "control", steps=steps).as_dict(),
-            "APTKT_vs_control": gain_summary(
-                curves, "APTKT", base="control", steps=steps
-            ).as_dict(),
-        }
-        if "control" in curves
+        {"control_vs_baseline": split[0].as_dict(), "APTKT_vs_control": split[1].as_dict()}
+        if split
         else {}
     )
     if "APTKT-multi" in curves:
@@ -191,13 +196,12 @@ def _control_lines(curves, fused, steps) -> list[str]:
     ]
 
 
-def _decomposition_text(curves, steps) -> str:
+def _decomposition_text(split: tuple[GainSummary, GainSummary] | None) -> str:
     """APTKT's gain split into the prior's feature space alone (the control) and the transfer
     on top of it, over the curve — where the control was run."""
-    if "control" not in curves:
+    if split is None:
         return ""
-    space = gain_summary(curves, "control", steps=steps).overall.mean
-    transfer = gain_summary(curves, "APTKT", base="control", steps=steps).overall.mean
+    space, transfer = (g.overall.mean for g in split)
     return (
         f"of the gain over the curve, the prior's feature space alone (the control: no transfer) "
         f"accounts for {pp(space)} and the transfer on top of it (APTKT − control) for "

@@ -57,8 +57,8 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         curves = method_curves(rows, {"panel": a}, METHODS)
         gains[a] = gain_summary(curves, "APTKT", steps=steps)
         removed[a] = {
-            "curve": error_removed(curves, "APTKT"),
-            "peak": error_removed(curves, "APTKT", step=gains[a].peak_step),
+            "curve": error_removed(curves["baseline"], gains[a].gain),
+            "peak": error_removed(curves["baseline"], gains[a].gain, step=gains[a].peak_step),
         }
         plot_panel(axes[i], curves, a, chance=ctx.chance, legend=(i == 0))
         curve_rows += [

@@ -64,7 +64,9 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
         aux_vs_plain[n] = gain_summary(curves, "APTKT+aux", base="APTKT", steps=steps)
         rates[n] = transfer_rate(rows, {"method": "APTKT", "n_priors": n})
         lambdas[n] = mean_lambda(rows, {"method": "APTKT", "n_priors": n})
-        aux_room[n] = error_removed(curves, "APTKT+aux", step=1 if 1 in curves["baseline"].x else 0)
+        aux_room[n] = error_removed(
+            curves["baseline"], aux[n].gain, step=1 if 1 in aux[n].at else 0
+        )
         groups = len(prior_groups(ctx, n))
         plot_panel(
             axes[0, i],
