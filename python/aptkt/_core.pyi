@@ -134,6 +134,18 @@ def fit_gpc(
     thetas: NDArray[np.float64] | None = None,
     starts: Sequence[Sequence[float] | None] | None = None,
 ) -> GpcModel: ...
+def fit_gpc_shared(
+    tasks: Sequence[
+        tuple[
+            NDArray[np.float64],
+            NDArray[np.int64],
+            int,
+            Sequence[Sequence[tuple[NDArray[np.float64], NDArray[np.float64], float]]],
+        ]
+    ],
+    target: int,
+    settings: FitSettings,
+) -> GpcModel: ...
 def kernel_matrix(
     x: NDArray[np.float64],
     theta: Sequence[float],

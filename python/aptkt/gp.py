@@ -42,6 +42,7 @@ __all__ = [
     "DEFAULTS",
     "FitDefaults",
     "HyperPrior",
+    "KERNELS",
     "KernelNotPositiveDefiniteError",
     "LATENT_MEANS",
     "LaplaceGPC",
@@ -67,14 +68,18 @@ class FitDefaults:
     hyper_prior: str | None = None
     class_prior: str = "training"
     latent_mean: str = "zero"
+    kernel: str = "per-classifier"
 
 
 DEFAULTS = FitDefaults()
 CLASS_PRIORS = ("training", "uniform")
+#: "per-classifier": each one-vs-all classifier fits its own kernel hyper-parameters (as
+#: scikit-learn's one-vs-rest GPC); "shared": one kernel for every classifier of the model.
+KERNELS = ("per-classifier", "shared")
 LATENT_MEANS = ("zero", "base-rate")
 
 #: Parameters a saved model leaves out at their default (added after the format was fixed).
-_OMITTED_AT_DEFAULT = ("class_prior", "latent_mean", "optimizer_tol")
+_OMITTED_AT_DEFAULT = ("class_prior", "latent_mean", "optimizer_tol", "kernel")
 _FIXABLE = ("signal_variance", "length_scale", "modality_weights", "transfer_lambda")
 _APPROXIMATIONS = ("erf", "quadrature")
 _SAVE_FORMAT = "aptkt.LaplaceGPC/2"
@@ -532,6 +537,17 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         m is a plug-in estimate, not optimised: the marginal likelihood and its gradient are
         those of the GP with this fixed mean (``latent_offset_``).
 
+    kernel : {"per-classifier", "shared"}
+        "per-classifier" (default, as scikit-learn's one-vs-rest GPC): each binary classifier
+        chooses its own hyper-parameters on its own labels. "shared": one set of kernel
+        hyper-parameters (σ², the length-scales, the modality weights) for every classifier,
+        chosen by maximising the sum of their log marginal likelihoods (plus the hyper-prior,
+        once) — the class posterior then compares classifiers that measure similarity the same
+        way, and every classifier's labels inform the kernel. Each classifier keeps its own
+        latent function and its sources' fixed λ (``fixed`` must include "transfer_lambda").
+        ``fit(..., kernel_tasks=...)`` adds other labelled data sets whose classifiers share the
+        kernel (and implies "shared").
+
     Attributes
     ----------
     classes_ : ndarray
@@ -584,6 +600,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         hyper_prior: HyperPrior | str | None = DEFAULTS.hyper_prior,
         class_prior: str = DEFAULTS.class_prior,
         latent_mean: str = DEFAULTS.latent_mean,
+        kernel: str = DEFAULTS.kernel,
     ) -> None:
         self.length_scale = length_scale
         self.signal_variance = signal_variance
@@ -605,6 +622,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         self.hyper_prior = hyper_prior
         self.class_prior = class_prior
         self.latent_mean = latent_mean
+        self.kernel = kernel
 
     # -- scikit-learn conventions -------------------------------------------------------------
     # get_params / set_params / repr / score come from BaseEstimator and ClassifierMixin.
@@ -724,6 +742,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         sources: Mapping[Any, Any] | None = None,
         *,
         hyperparameters: Mapping[Any, Mapping[str, Any]] | None = None,
+        kernel_tasks: Sequence[Sequence[Any]] | None = None,
     ) -> LaplaceGPC:
         """Fit one binary classifier per class (one in total for two classes without sources).
 
@@ -737,8 +756,17 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         ``modality_weights``, ``transfer_lambda``; any may be left out, and ``length_scales``
         by name may leave modalities out). Hyper-parameters that
         are fixed stay at these values; the fixed λ always comes from the sources.
+
+        ``kernel_tasks`` lists further labelled data sets ``(X_k, y_k)`` or ``(X_k, y_k,
+        sources_k)`` with the same columns, whose one-vs-all classifiers share this model's
+        kernel (``kernel="shared"``): their labels inform the hyper-parameters, the model
+        itself is fitted to ``X`` and ``y`` only. Their classes need not be this model's.
         """
-        return self._fit(X, y, sources, thetas=None, starts=hyperparameters)
+        if kernel_tasks is not None and hyperparameters is not None:
+            raise ValueError("hyperparameters (starts) cannot be combined with kernel_tasks")
+        return self._fit(
+            X, y, sources, thetas=None, starts=hyperparameters, kernel_tasks=kernel_tasks
+        )
 
     def _fit(
         self,
@@ -747,6 +775,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         sources: Any,
         thetas: np.ndarray | None,
         starts: Mapping[Any, Mapping[str, Any]] | None = None,
+        kernel_tasks: Sequence[Sequence[Any]] | None = None,
     ) -> LaplaceGPC:
         # Non-finite values are left to the core, whose message names the row and column.
         X, y = _validate(self, X, y, reset=True)
@@ -773,15 +802,30 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             start_rows = self._start_rows(
                 starts, classes, spec, transfer, n_lambdas, spec["free"]["transfer_lambda"]
             )
-        model = _core.fit_gpc(
-            X,
-            labels.astype(np.int64),
-            int(classes.size),
-            source_lists,
-            self._settings(spec),
-            None if thetas is None else np.ascontiguousarray(thetas, dtype=np.float64),
-            start_rows,
-        )
+        if self.kernel not in KERNELS:
+            raise ValueError(f"kernel must be one of {KERNELS}, got {self.kernel!r}")
+        shared = thetas is None and (self.kernel == "shared" or kernel_tasks is not None)
+        if shared and spec["free"]["transfer_lambda"]:
+            raise ValueError(
+                'a shared kernel keeps each classifier\'s λ fixed: include "transfer_lambda" '
+                "in fixed"
+            )
+        if shared and starts is not None:
+            raise ValueError('hyperparameters (starts) work with kernel="per-classifier" only')
+        if shared:
+            tasks = [(X, labels.astype(np.int64), int(classes.size), source_lists)]
+            tasks += self._kernel_tasks(kernel_tasks or (), X.shape[1])
+            model = _core.fit_gpc_shared(tasks, 0, self._settings(spec))
+        else:
+            model = _core.fit_gpc(
+                X,
+                labels.astype(np.int64),
+                int(classes.size),
+                source_lists,
+                self._settings(spec),
+                None if thetas is None else np.ascontiguousarray(thetas, dtype=np.float64),
+                start_rows,
+            )
         self._model = model
         self.classes_ = classes
         self.class_counts_ = counts
@@ -811,6 +855,35 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         self.n_iter_ = np.asarray(model.iterations)
         self.hyperparameter_names_ = self._names(model.n_lambdas)
         return self
+
+    def _kernel_tasks(
+        self, kernel_tasks: Sequence[Sequence[Any]], n_features: int
+    ) -> list[tuple[np.ndarray, np.ndarray, int, list[list[tuple[np.ndarray, np.ndarray, float]]]]]:
+        """The core's form of ``fit``'s ``kernel_tasks``, each checked like ``X`` and ``y``."""
+        out = []
+        for i, task in enumerate(kernel_tasks):
+            if not isinstance(task, (tuple, list)) or len(task) not in (2, 3):
+                raise ValueError(
+                    f"kernel_tasks[{i}] must be (X, y) or (X, y, sources), got {type(task).__name__}"
+                )
+            Xk = np.ascontiguousarray(_as_matrix(task[0], f"kernel_tasks[{i}] X", n_features))
+            yk = np.asarray(task[1])
+            if yk.ndim != 1 or yk.shape[0] != Xk.shape[0]:
+                raise ValueError(
+                    f"kernel_tasks[{i}]: X has {Xk.shape[0]} rows but y has shape {yk.shape}"
+                )
+            _check_classification_targets(yk)
+            classes, labels = np.unique(yk, return_inverse=True)
+            if classes.size < 2:
+                raise ValueError(f"kernel_tasks[{i}] needs at least two classes")
+            lists: list[list[tuple[np.ndarray, np.ndarray, float]]] = [[] for _ in classes]
+            if len(task) == 3 and task[2]:
+                used = _normalise_sources(task[2], classes, n_features, False)
+                for label, lst in used.items():
+                    k = int(np.flatnonzero(classes == label)[0])
+                    lists[k] = [(s.X, s.labels, _start_lambda(s)) for s in lst]
+            out.append((Xk, labels.astype(np.int64), int(classes.size), lists))
+        return out
 
     def _start_rows(
         self,

@@ -112,6 +112,10 @@ class GPSettings:
     latent_mean: str = DEFAULTS.latent_mean
     # The learner's choice, not the pipeline's default ("spread"): see the docstring.
     prior_feature_scale: str = "noise"
+    kernel: str = "per-classifier"
+    kernel_data: str = "new"
+    modality_weights: str = "fitted"
+    signal_variance_centre: float = 1.0
 
     def __post_init__(self) -> None:
         if self.hyper_prior not in ("weak", None):
@@ -172,7 +176,13 @@ class GPSettings:
         return replace(HyperPrior.weak(), modality_weight_sd=None)
 
     def make(self, modalities: Mapping[str, list[int]], random_state: int) -> LaplaceGPC:
+        hp = self.resolved_hyper_prior()
+        if hp is not None and self.signal_variance_centre != 1.0:
+            hp = replace(HyperPrior.resolve(hp), signal_variance_centre=self.signal_variance_centre)
+        fixed = ("transfer_lambda",) if self.modality_weights == "fitted" else ("transfer_lambda", "modality_weights")
         return LaplaceGPC(
+            fixed=fixed,
+            kernel=self.kernel,
             length_scale=self.length_scale,
             signal_variance=self.signal_variance,
             modalities=dict(modalities),
@@ -182,7 +192,7 @@ class GPSettings:
             approximation=self.approximation,
             random_state=random_state,
             n_jobs=self.n_jobs,
-            hyper_prior=self.resolved_hyper_prior(),
+            hyper_prior=hp,
             class_prior=self.class_prior,
             latent_mean=self.latent_mean,
         )

@@ -292,7 +292,16 @@ class ActionLearner:
             if self.config.warm_start is not None
             else None
         )
-        return model.fit(X, obs.objects, sources=sources or None, hyperparameters=starts), X
+        kernel_tasks = None
+        if (
+            self.config.gp.kernel_data == "old+new"
+            and self.prior is not None
+            and pipeline is self.prior.pipeline
+        ):
+            kernel_tasks = [self._old_features(pipeline)]
+        extra = {} if kernel_tasks is None else {"kernel_tasks": kernel_tasks}
+        fitted = model.fit(X, obs.objects, sources=sources or None, hyperparameters=starts, **extra)
+        return fitted, X
 
     def _reject_by_fitted_evidence(self, X: np.ndarray) -> bool:
         """``cutoff="fitted"``: keep a transfer only if, at the fitted models' own

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.special import gammaln
+from sklearn.covariance import ledoit_wolf_shrinkage
 
 from aptkt.learning.observations import Observations
 
@@ -30,10 +31,13 @@ __all__ = [
 ]
 
 
-#: What z-scoring divides each column by: "spread", its standard deviation over all the rows
-#: fitted on; "noise", its pooled standard deviation within each object's rows (the sensor's
-#: variation between repeated observations of one object).
-FEATURE_SCALES = ("spread", "noise")
+#: The metric of a feature space. "spread": each column divided by its standard deviation over
+#: all the rows fitted on; "noise": by its pooled standard deviation within each object's rows
+#: (the sensor's variation between repeated observations of one object); "whiten": "noise",
+#: then each modality's output multiplied by the inverse square root of its pooled
+#: within-object covariance (shrunk towards its diagonal), so that the sensor's noise is
+#: uncorrelated with unit variance in every direction — the Mahalanobis metric of the noise.
+FEATURE_SCALES = ("spread", "noise", "whiten")
 
 
 @dataclass
@@ -61,6 +65,7 @@ class ModalityTransform:
         X: np.ndarray,
         weights: np.ndarray | None = None,
         objects: np.ndarray | None = None,
+        whiten: bool = False,
     ) -> ModalityTransform:
         """Fit on the rows of ``X``; ``weights`` (optional, ≥ 0) make the mean, the scales and
         the PCA those of the weighted population. ``objects`` (optional, one label per row):
@@ -68,7 +73,9 @@ class ModalityTransform:
         repeated observations of one object — instead of its spread over all rows. The spread
         is kept where the repeats are too few to estimate a noise (fewer degrees of freedom
         than :data:`MIN_NOISE_DOF` or than objects) and for a column without any noise (one
-        that differs between objects but never within one)."""
+        that differs between objects but never within one). ``whiten`` (with ``objects``):
+        then multiply the output by the inverse square root of its pooled within-object
+        covariance (:func:`noise_whitener`)."""
         X = self._prepare(X)
         if X.shape[0] < 1:
             raise ValueError("cannot fit a feature transform on zero observations")
@@ -114,7 +121,28 @@ class ModalityTransform:
                 first_sd = s[0] if s.size else 0.0
             self.components_ = vt[:k]
             self.pca_scale_ = float(first_sd) if first_sd > 1e-12 else 1.0
+        if whiten:
+            if objects is None:
+                raise ValueError("whitening needs the objects of the rows (the noise's classes)")
+            whitener = noise_whitener(self.transform_prepared(X), objects)
+            if whitener is not None:
+                pca = (
+                    self.components_
+                    if self.components_ is not None
+                    else np.eye(self.mean_.shape[0])
+                )
+                # One linear map: the whitener after the PCA (and its scale), stored as the
+                # components, so that saved transforms keep their format.
+                self.components_ = whitener @ pca / self.pca_scale_
+                self.pca_scale_ = 1.0
         return self
+
+    def transform_prepared(self, X: np.ndarray) -> np.ndarray:
+        """``transform`` of rows that have been through ``_prepare`` already."""
+        Z = (X - self.mean_) / self.scale_
+        if self.components_ is not None:
+            Z = Z @ self.components_.T / self.pca_scale_
+        return Z
 
     @property
     def fitted(self) -> bool:
@@ -132,10 +160,7 @@ class ModalityTransform:
     def transform(self, X: np.ndarray) -> np.ndarray:
         if not self.fitted:
             raise RuntimeError("transform not fitted")
-        Z = (self._prepare(X) - self.mean_) / self.scale_
-        if self.components_ is not None:
-            Z = Z @ self.components_.T / self.pca_scale_
-        return Z
+        return self.transform_prepared(self._prepare(X))
 
     def state(self) -> dict[str, np.ndarray]:
         out: dict[str, Any] = {
@@ -191,6 +216,50 @@ def _noise_scale(X: np.ndarray, objects: np.ndarray) -> np.ndarray:
     return np.sqrt(((X - means[index]) ** 2).sum(axis=0) / dof)
 
 
+def within_object_residuals(X: np.ndarray, objects: np.ndarray) -> tuple[np.ndarray, int]:
+    """Each row minus its object's mean, and the degrees of freedom (rows − objects)."""
+    labels = np.asarray(objects)
+    if labels.shape != (X.shape[0],):
+        raise ValueError(f"objects must hold one label per row ({X.shape[0]}), got {labels.shape}")
+    _, index = np.unique(labels, return_inverse=True)
+    means = np.zeros((index.max() + 1, X.shape[1]))
+    np.add.at(means, index, X)
+    means /= np.bincount(index)[:, None]
+    return X - means[index], X.shape[0] - (index.max() + 1)
+
+
+def noise_whitener(Z: np.ndarray, objects: np.ndarray) -> np.ndarray | None:
+    """A matrix W with WᵀW the inverse of the pooled within-object covariance of ``Z``'s
+    columns (shrunk towards its diagonal), so that ``Z @ W.T`` has uncorrelated unit noise; None where the repeats give too few degrees of freedom
+    (:data:`MIN_NOISE_DOF`, and one per object) or no column varies within objects.
+
+    The shrinkage is Ledoit and Wolf's (2004) for the correlation matrix of the residuals,
+    towards the identity: the correlations of a few noise columns are estimated from tens of
+    repeats, and an unshrunk inverse square root would amplify the noisiest of them. Columns
+    without within-object variation pass through unchanged."""
+    R, dof = within_object_residuals(np.asarray(Z, dtype=np.float64), objects)
+    n_objects = R.shape[0] - dof
+    if dof < max(MIN_NOISE_DOF, n_objects) or R.shape[1] == 0:
+        return None
+    var = (R**2).sum(axis=0) / dof
+    noisy = var > 1e-24 * np.maximum(1.0, np.abs(Z).max(axis=0) ** 2)
+    if not noisy.any():
+        return None
+    sd = np.sqrt(var[noisy])
+    U = R[:, noisy] / sd
+    corr = U.T @ U / dof
+    # The residuals are centred per object: Ledoit-Wolf's intensity for centred data.
+    delta = ledoit_wolf_shrinkage(U, assume_centered=True) if U.shape[1] > 1 else 0.0
+    corr = (1.0 - delta) * corr + delta * np.eye(U.shape[1])
+    vals, vecs = np.linalg.eigh(corr)
+    floor = 1e-12 * vals.max()
+    inv_sqrt = vecs @ np.diag(1.0 / np.sqrt(np.maximum(vals, floor))) @ vecs.T
+    W = np.eye(Z.shape[1])
+    idx = np.flatnonzero(noisy)
+    W[np.ix_(idx, idx)] = inv_sqrt / sd[None, :]
+    return W
+
+
 #: Transforms used for the skin's modalities unless configured otherwise. Texture columns 0-2
 #: are the Hjorth activities (variances); the other modalities are z-scored as they are.
 DEFAULT_TRANSFORMS: Mapping[str, ModalityTransform] = {
@@ -222,13 +291,13 @@ class FeaturePipeline:
         repeated observations of the same object."""
         if scale not in FEATURE_SCALES:
             raise ValueError(f"scale must be one of {FEATURE_SCALES}, got {scale!r}")
-        objects = obs.objects if scale == "noise" else None
+        objects = obs.objects if scale in ("noise", "whiten") else None
         fitted = {}
         for name in obs.modality_names:
             template = self.transforms.get(name, ModalityTransform())
             w = weights.get(name) if isinstance(weights, Mapping) else weights
             fitted[name] = replace(template, mean_=None, scale_=None, components_=None).fit(
-                obs.modalities[name], w, objects
+                obs.modalities[name], w, objects, whiten=scale == "whiten"
             )
         self.transforms = fitted
         self.modality_names_ = obs.modality_names

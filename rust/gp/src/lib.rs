@@ -13,6 +13,7 @@ pub mod linalg;
 pub mod model;
 pub mod optimize;
 pub mod rng;
+pub mod shared;
 mod simd;
 
 pub use error::{GpError, GpResult};
@@ -22,3 +23,4 @@ pub use model::{
     fit, fit_at, fit_from, layout_for, Free, HyperPrior, LatentMean, ModelSpec, OneVsAll,
     PriorTerm, Source,
 };
+pub use shared::{fit_shared, KernelTask};

@@ -152,7 +152,7 @@ impl ModelSpec {
         }
     }
 
-    fn validate(&self) -> GpResult<()> {
+    pub(crate) fn validate(&self) -> GpResult<()> {
         let m = self.modalities.len();
         if self.length_scales.len() != m || self.weights.len() != m {
             return Err(GpError::InvalidInput(format!(
@@ -281,20 +281,20 @@ pub struct BinaryFit {
 /// evaluation would allocate five n × n matrices afresh (page faults and zeroing: ~10 % of a fit
 /// at n = 1,000).
 #[derive(Default)]
-struct Workspace {
+pub(crate) struct Workspace {
     eval: Option<KernelEval>,
     factor: Option<Mat<f64>>,
     inverse: InverseScratch,
 }
 
 impl Workspace {
-    fn recycle(&mut self, eval: KernelEval, factor: Mat<f64>) {
+    pub(crate) fn recycle(&mut self, eval: KernelEval, factor: Mat<f64>) {
         self.eval = Some(eval);
         self.factor = Some(factor);
     }
 }
 
-struct BinaryProblem {
+pub(crate) struct BinaryProblem {
     x: Data,
     y: Vec<f64>,
     /// The latent prior mean m.
@@ -306,7 +306,7 @@ struct BinaryProblem {
 impl BinaryProblem {
     /// The training rows of one binary classifier: every source task's rows in order, then the
     /// target rows labelled +1 for class `positive` and -1 otherwise.
-    fn new(
+    pub(crate) fn new(
         target: &Data,
         labels: &[usize],
         positive: usize,
@@ -350,7 +350,12 @@ impl BinaryProblem {
 
     /// The hyper-prior's terms: centred on σ² = the given centre and on each modality's data
     /// scale (median pairwise distance of the target rows) times the given factor.
-    fn prior_terms(&self, layout: &Layout, spec: &ModelSpec) -> Vec<PriorTerm> {
+    /// The median pairwise distance of the target rows in modality `m` (the data scale).
+    pub(crate) fn dist_median(&self, m: usize) -> f64 {
+        self.dist.median_distance(m)
+    }
+
+    pub(crate) fn prior_terms(&self, layout: &Layout, spec: &ModelSpec) -> Vec<PriorTerm> {
         let Some(prior) = spec.hyper_prior else {
             return Vec::new();
         };
@@ -387,7 +392,7 @@ impl BinaryProblem {
 
     /// The mode and (optionally) the LML gradient at `theta`, in buffers drawn from `ws`
     /// (hand them back with [`Workspace::recycle`]).
-    fn evaluate(
+    pub(crate) fn evaluate(
         &self,
         layout: &Layout,
         spec: &ModelSpec,
@@ -459,7 +464,7 @@ impl BinaryProblem {
 }
 
 /// Per-entry bounds and free flags of theta.
-fn theta_box(
+pub(crate) fn theta_box(
     layout: &Layout,
     spec: &ModelSpec,
     n_sources: usize,
@@ -905,15 +910,14 @@ fn check_sources(x: &Data, sources: &[Vec<Source>], n_classes: usize) -> GpResul
     Ok(())
 }
 
-fn fit_impl(
+/// Checks one labelled data set and its sources: labels per row and in range, at least two
+/// classes, finite data, well-formed sources.
+pub(crate) fn check_task(
     x: &Data,
     labels: &[usize],
     n_classes: usize,
     sources: &[Vec<Source>],
-    spec: &ModelSpec,
-    hypers: Hypers<'_>,
-) -> GpResult<OneVsAll> {
-    spec.validate()?;
+) -> GpResult<()> {
     if labels.len() != x.n {
         return Err(GpError::InvalidInput(format!(
             "X has {} rows but y has {} labels",
@@ -933,13 +937,32 @@ fn fit_impl(
     }
     x.check_finite("X")?;
     check_sources(x, sources, n_classes)?;
-    let layout = layout_for(spec, sources);
-    let center = column_means(x);
-    let positives: Vec<usize> = if n_classes == 2 && !layout.transfer() {
+    Ok(())
+}
+
+/// The class whose labels are +1 in each binary classifier: one classifier (class 1) for two
+/// classes without transfer, one per class otherwise.
+pub(crate) fn classifier_classes(n_classes: usize, layout: &Layout) -> Vec<usize> {
+    if n_classes == 2 && !layout.transfer() {
         vec![1]
     } else {
         (0..n_classes).collect()
-    };
+    }
+}
+
+fn fit_impl(
+    x: &Data,
+    labels: &[usize],
+    n_classes: usize,
+    sources: &[Vec<Source>],
+    spec: &ModelSpec,
+    hypers: Hypers<'_>,
+) -> GpResult<OneVsAll> {
+    spec.validate()?;
+    check_task(x, labels, n_classes, sources)?;
+    let layout = layout_for(spec, sources);
+    let center = column_means(x);
+    let positives = classifier_classes(n_classes, &layout);
     let rows = match &hypers {
         Hypers::At(t) => Some(t.len()),
         Hypers::Optimise(Some(s)) => Some(s.len()),

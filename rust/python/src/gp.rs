@@ -4,8 +4,8 @@
 
 use aptkt_gp::kernel::{KernelEval, PairDistances};
 use aptkt_gp::{
-    Data, Free, GpError, HyperPrior, LatentMean, Layout, Modalities, ModelSpec, OneVsAll,
-    Predictive, Source,
+    Data, Free, GpError, HyperPrior, KernelTask, LatentMean, Layout, Modalities, ModelSpec,
+    OneVsAll, Predictive, Source,
 };
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
@@ -384,15 +384,45 @@ fn fit_gpc(
     let thetas: Option<Vec<Vec<f64>>> =
         thetas.map(|t| t.as_array().outer_iter().map(|r| r.to_vec()).collect());
     let data = data_from(&x).map_err(gp_error)?;
-    let labels: Vec<usize> = labels
+    let labels = class_indices(&labels)?;
+    let sources = sources_from(&sources).map_err(gp_error)?;
+    let mut spec = settings.spec(data.d)?;
+    let cancel = Arc::new(AtomicBool::new(false));
+    spec.newton.cancel = Some(cancel.clone());
+    let n_threads = settings.n_threads;
+    // The work runs on a thread of the calling thread's pool, so the per-class fits inside it
+    // spread over that pool.
+    let model = run_interruptible(py, &cancel, n_threads, || match (&thetas, &starts) {
+        (Some(t), _) => aptkt_gp::fit_at(&data, &labels, n_classes, &sources, &spec, t),
+        (None, Some(s)) => aptkt_gp::fit_from(&data, &labels, n_classes, &sources, &spec, s),
+        (None, None) => aptkt_gp::fit(&data, &labels, n_classes, &sources, &spec),
+    })?
+    .map_err(gp_error)?;
+    Ok(GpcModel { model, n_threads })
+}
+
+/// One kernel task as handed over from Python: rows, class indices, the number of classes and
+/// one list of source tasks per class.
+type PyKernelTask<'py> = (
+    PyReadonlyArray2<'py, f64>,
+    PyReadonlyArray1<'py, i64>,
+    usize,
+    Vec<PySources<'py>>,
+);
+
+fn class_indices(labels: &PyReadonlyArray1<'_, i64>) -> PyResult<Vec<usize>> {
+    labels
         .as_array()
         .iter()
         .map(|&v| {
             usize::try_from(v)
                 .map_err(|_| PyValueError::new_err(format!("negative label index {v}")))
         })
-        .collect::<PyResult<_>>()?;
-    let sources: Vec<Vec<Source>> = sources
+        .collect()
+}
+
+fn sources_from(sources: &[PySources<'_>]) -> Result<Vec<Vec<Source>>, GpError> {
+    sources
         .iter()
         .map(|list| {
             list.iter()
@@ -405,18 +435,40 @@ fn fit_gpc(
                 })
                 .collect::<Result<Vec<_>, GpError>>()
         })
-        .collect::<Result<_, GpError>>()
-        .map_err(gp_error)?;
-    let mut spec = settings.spec(data.d)?;
+        .collect()
+}
+
+/// Fits one kernel shared by every one-vs-all classifier of every task (`(X, labels,
+/// n_classes, sources)`, as for `fit_gpc`) and returns the model of `tasks[target]` at it.
+#[pyfunction]
+fn fit_gpc_shared(
+    py: Python<'_>,
+    tasks: Vec<PyKernelTask<'_>>,
+    target: usize,
+    settings: PyRef<'_, FitSettings>,
+) -> PyResult<GpcModel> {
+    let mut owned = Vec::with_capacity(tasks.len());
+    for (x, labels, n_classes, sources) in &tasks {
+        let data = data_from(x).map_err(gp_error)?;
+        let sources = sources_from(sources).map_err(gp_error)?;
+        owned.push((data, class_indices(labels)?, *n_classes, sources));
+    }
+    let d = owned.get(target).map_or(0, |t| t.0.d);
+    let mut spec = settings.spec(d)?;
     let cancel = Arc::new(AtomicBool::new(false));
     spec.newton.cancel = Some(cancel.clone());
     let n_threads = settings.n_threads;
-    // The work runs on a thread of the calling thread's pool, so the per-class fits inside it
-    // spread over that pool.
-    let model = run_interruptible(py, &cancel, n_threads, || match (&thetas, &starts) {
-        (Some(t), _) => aptkt_gp::fit_at(&data, &labels, n_classes, &sources, &spec, t),
-        (None, Some(s)) => aptkt_gp::fit_from(&data, &labels, n_classes, &sources, &spec, s),
-        (None, None) => aptkt_gp::fit(&data, &labels, n_classes, &sources, &spec),
+    let model = run_interruptible(py, &cancel, n_threads, || {
+        let tasks: Vec<KernelTask<'_>> = owned
+            .iter()
+            .map(|(x, labels, n_classes, sources)| KernelTask {
+                x,
+                labels,
+                n_classes: *n_classes,
+                sources,
+            })
+            .collect();
+        aptkt_gp::fit_shared(&tasks, target, &spec)
     })?
     .map_err(gp_error)?;
     Ok(GpcModel { model, n_threads })
@@ -679,6 +731,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<FitSettings>()?;
     m.add_class::<GpcModel>()?;
     m.add_function(wrap_pyfunction!(fit_gpc, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_gpc_shared, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_matrix, m)?)?;
     Ok(())
 }
