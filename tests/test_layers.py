@@ -4,8 +4,8 @@ imports itself back through others (no cycles).
 Layers, low to high (a room may import from its own room and from lower layers only; rooms
 on one layer do not import each other, e.g. ``sim`` and ``learning`` stand side by side)::
 
-    _core | errors | skin, features, gp | robot, data | actions | sim, learning | runtime
-    | experiments | commands, cli
+    _core | errors | skin, features, gp | robot, data | actions | sim, learning
+    | runtime, importers | experiments | commands, cli
 
 Imports under ``if TYPE_CHECKING:`` are for annotations only and are not counted. Imports
 inside functions are: they are real dependencies, only deferred. The package root (``aptkt``,
@@ -28,7 +28,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("robot", "data"),
     ("actions",),
     ("sim", "learning"),
-    ("runtime",),
+    ("runtime", "importers"),
     ("experiments",),
     ("commands", "cli"),
 )

@@ -23,6 +23,7 @@ __all__ = [
     "TrialInterrupted",
     "ConfigError",
     "FeatureTableError",
+    "RawDataError",
     "PriorFileError",
     "Terminated",
     "WorkerDiedError",
@@ -37,6 +38,11 @@ class ConfigError(AptktError, ValueError):
 
 class FeatureTableError(ConfigError):
     """A feature table (CSV or HDF5) is malformed; the message names the file, row and column."""
+
+
+class RawDataError(ConfigError):
+    """An imported data set's raw files are missing or malformed; the message names the file and
+    the line."""
 
 
 class PriorFileError(AptktError, ValueError):

@@ -84,24 +84,13 @@ def test_run_key_covers_what_changes_the_result_and_nothing_else():
     assert run_key(spec(), "other data") != k
 
 
-def test_settings_added_later_leave_stored_keys_as_they_were():
-    """Keys computed by aptkt 0.1.0 before warm_start, class_prior, latent_mean, the
-    modality-weight prior and the optimiser's tolerance existed, when the learner searched from two starts (commit 1fed19f):
-    a store or prior file from then must still be found, or a resumed run recomputes it all.
-    Those runs had flat modality weights, the "training" class posterior and a random restart,
-    so their keys belong to those settings; the new defaults must get keys of their own, or a
-    resumed store would hand out results computed the old way."""
-    flat = GPSettings(
-        n_restarts=1,
-        modality_weight_prior=False,
-        class_prior="training",
-        latent_mean="zero",
-        optimizer_tol=DEFAULTS.optimizer_tol,
-        prior_feature_scale="spread",
-    )
+def test_every_learner_and_gp_setting_is_part_of_the_keys():
+    """A store or a prior file is found again only under the settings that computed it: a
+    resumed run must never hand out results computed another way. Every learner and GP setting
+    changes the run key, every GP setting the prior file's key, and the records round-trip."""
     spec = RunSpec(
         method="APTKT",
-        config=LearnerConfig(gp=flat),
+        config=LearnerConfig(),
         data="/d/a.h5",
         actions=("P1", "S1"),
         new_objects=("a", "b"),
@@ -110,7 +99,6 @@ def test_settings_added_later_leave_stored_keys_as_they_were():
         prior="/p/prior-3-abc.npz",
         pool_seed=5,
     )
-    assert run_key(spec, "fp") == "8e960c17a32b727790d4f47b"
     task = PriorTask(
         fingerprint="fp",
         data="/d/a.h5",
@@ -119,39 +107,31 @@ def test_settings_added_later_leave_stored_keys_as_they_were():
         trials=(0, 1, 2),
         seed=3,
         directory="/p",
-        gp={
-            "n_restarts": 1,
-            "modality_weight_prior": False,
-            "class_prior": "training",
-            "latent_mean": "zero",
-            "optimizer_tol": DEFAULTS.optimizer_tol,
-            "prior_feature_scale": "spread",
-        },
+        gp=GPSettings().to_dict(),
     )
-    assert task.key == "4596257baaf0144904e0"
-    default = replace(spec, config=LearnerConfig())
-    assert run_key(default, "fp") != run_key(spec, "fp")
-    assert replace(task, gp=None).key != task.key
-    # Each later setting is part of both keys.
-    uniform = replace(flat, class_prior="uniform")
-    assert run_key(replace(spec, config=LearnerConfig(gp=uniform)), "fp") != run_key(spec, "fp")
-    assert (
-        replace(task, gp={"class_prior": "uniform", "modality_weight_prior": False}).key != task.key
-    )
-    one_start = replace(flat, n_restarts=0)
-    assert run_key(replace(spec, config=LearnerConfig(gp=one_start)), "fp") != run_key(spec, "fp")
-    base_rate = replace(flat, latent_mean="base-rate")
-    assert run_key(replace(spec, config=LearnerConfig(gp=base_rate)), "fp") != run_key(spec, "fp")
-    assert base_rate.to_dict()["latent_mean"] == "base-rate"
-    loose = replace(flat, optimizer_tol=1e-6)
-    assert run_key(replace(spec, config=LearnerConfig(gp=loose)), "fp") != run_key(spec, "fp")
-    assert replace(task, gp={**task.gp, "optimizer_tol": 1e-6}).key != task.key
-    assert GPSettings.from_dict(loose.to_dict()) == loose
-    noise = replace(flat, prior_feature_scale="noise")  # the default since it was added
-    assert run_key(replace(spec, config=LearnerConfig(gp=noise)), "fp") != run_key(spec, "fp")
-    assert replace(task, gp={**task.gp, "prior_feature_scale": "noise"}).key != task.key
-    assert GPSettings.from_dict(noise.to_dict()) == noise
-    assert "prior_feature_scale" not in flat.to_dict()
+    base = run_key(spec, "fp")
+    gp_changes = {
+        "kernel": "per-classifier",
+        "modality_weights": "fitted",
+        "prior_feature_scale": "spread",
+        "hyper_prior": None,
+        "n_restarts": 1,
+        "optimizer_tol": DEFAULTS.optimizer_tol,
+    }
+    for field, value in gp_changes.items():
+        gp = replace(GPSettings(), **{field: value})
+        assert GPSettings.from_dict(gp.to_dict()) == gp
+        assert run_key(replace(spec, config=LearnerConfig(gp=gp)), "fp") != base, field
+        assert replace(task, gp=gp.to_dict()).key != task.key, field
+    for field, value in {
+        "cutoff": "paper",
+        "evidence_margin": 0.0,
+        "auxiliary": True,
+        "transfer": "control",
+    }.items():
+        config = replace(LearnerConfig(), **{field: value})
+        assert LearnerConfig.from_dict(config.to_dict()) == config
+        assert run_key(replace(spec, config=config), "fp") != base, field
 
 
 def test_store_round_trip_and_damaged_files(tmp_path):

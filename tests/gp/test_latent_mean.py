@@ -10,7 +10,6 @@ from scipy import integrate
 from scipy.special import expit, log_expit
 
 from aptkt.gp import LaplaceGPC, kernel_matrix
-from aptkt.learning.config import GPSettings
 
 from .conftest import make_blobs
 
@@ -138,8 +137,6 @@ def test_invalid_latent_mean_is_refused():
     X, y = make_blobs(3, 2, 2)
     with pytest.raises(ValueError, match="latent_mean must be one of"):
         LaplaceGPC(latent_mean="constant").fit(X, y)
-    with pytest.raises(ValueError, match="latent_mean must be one of"):
-        GPSettings(latent_mean="learned")
 
 
 def test_save_round_trip_keeps_the_mean_and_the_default_is_left_out(tmp_path):
@@ -160,13 +157,3 @@ def test_save_round_trip_keeps_the_mean_and_the_default_is_left_out(tmp_path):
     assert meta["params"]["latent_mean"] == "base-rate"
 
 
-def test_learner_settings_keep_the_zero_mean_and_record_the_base_rate_mean():
-    assert GPSettings().latent_mean == "zero"
-    # Left out at "zero" (run and prior keys from before the setting stay valid).
-    assert "latent_mean" not in GPSettings().to_dict()
-    base_rate = GPSettings(latent_mean="base-rate")
-    assert base_rate.to_dict()["latent_mean"] == "base-rate"
-    for gp in (GPSettings(), base_rate):
-        assert GPSettings.from_dict(gp.to_dict()) == gp
-        model = gp.make({"all": [0, 1]}, random_state=0)
-        assert model.latent_mean == gp.latent_mean

@@ -12,7 +12,7 @@ import pytest
 
 from aptkt.cli import main
 from aptkt.errors import FeatureTableError
-from aptkt.learning import LearnerConfig, Observations, PriorKnowledge
+from aptkt.learning import GPSettings, LearnerConfig, Observations, PriorKnowledge
 from aptkt.learning.feature_table import (
     read_feature_table,
     split_held_out,
@@ -158,7 +158,7 @@ def test_hdf5_tables_are_checked_too(tmp_path, capsys):
         (["--test-trials", "2:1"], "--test-trials: need 0 <= FIRST < STOP"),
         (["--transfer", "none"], "--transfer: not with --table"),
         (["--eps-neg", "2"], "eps_neg must lie in [0, 1]"),
-        (["--evidence-margin", "nan"], "evidence_margin must be None or finite"),
+        (["--evidence-margin", "nan"], "evidence_margin must be finite"),
     ],
 )
 def test_bad_options_give_one_line(tmp_path, capsys, args, message):
@@ -173,62 +173,37 @@ def test_live_options_are_not_mixed_up(capsys):
     assert "--robot is required (or learn offline with --table FILE)" in err
 
 
-def test_method_choices_reach_the_transferring_methods(tmp_path, capsys):
-    """--cutoff, --feature-space, --source, --relatedness and --evidence-margin set APTKT's and
-    APTKT+aux's learner (the baseline uses no prior); the chosen space is then recorded.
-    --class-prior and --latent-mean set every model's; the base-rate mean is refused with
-    feature_space="evidence", whose evidence needs the zero mean."""
+def test_method_choices_reach_every_method_and_the_prior(tmp_path, capsys):
+    """--reading paper picks the paper's whole reading; --cutoff and --evidence-margin set
+    APTKT's and APTKT+aux's learner, --kernel, --modality-weights and --prior-feature-scale the
+    GP settings of every model, the prior's too; a mistake is one line."""
     table = _world_table(n_per=4)
     path = write_feature_table(tmp_path / "t.csv", table)
     out = tmp_path / "out"
     args = ["learn", "--table", str(path), "--prior-objects", ",".join(PRIORS)]
     args += ["--objects", ",".join(NEW), "--budget", "1", "--runs", "1", "-o", str(out)]
-    args += ["--cutoff", "paper", "--feature-space", "evidence", "--source", "positives"]
-    args += ["--relatedness", "normalised", "--evidence-margin", "lnN"]
-    # The evidence of the new labels needs the zero latent mean: refused in one line.
-    assert main([*args, "--latent-mean", "base-rate"]) != 0
-    err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and err.startswith("aptkt learn: error:"), err
-    assert "latent_mean" in err, err
-    args += ["--class-prior", "training"]
-    assert main(args) == 0, capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:  # argparse's usage error: a number is needed
+        main([*args, "--evidence-margin", "lnN"])
+    assert usage.value.code == 2 and "--evidence-margin" in capsys.readouterr().err
+    assert main([*args, "--reading", "paper", "--evidence-margin", "1.5"]) == 0
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["settings"]["method"] == {
-        "cutoff": "paper",
-        "feature_space": "evidence",
-        "source": "positives",
-        "relatedness": "normalised",
-        "evidence_margin": None,
-    }
-    # The class prior is every model's, the baseline's and the prior's too.
-    assert summary["settings"]["gp"] == {"class_prior": "training"}
-    # Recorded as "training" is recorded: by leaving the field out (see GPSettings.to_dict).
-    assert "class_prior" not in summary["learner"]["baseline"]["gp"]
-    baseline_gp = LearnerConfig.from_dict(summary["learner"]["baseline"]).gp
-    assert baseline_gp.class_prior == "training"
+    aptkt = LearnerConfig.from_dict(summary["learner"]["APTKT"])
+    assert aptkt == LearnerConfig.paper(
+        budget=1, seed=0, evidence_margin=1.5, eps_neg=aptkt.eps_neg, eps_explor=aptkt.eps_explor
+    )
+    baseline = LearnerConfig.from_dict(summary["learner"]["baseline"])
+    assert baseline.transfer == "none" and baseline.gp == GPSettings.paper()
     prior = PriorKnowledge.load(out / "prior.npz")
-    assert {prior[a].model.class_prior for a in prior.actions} == {"training"}
-    with (out / "results.csv").open() as fh:
-        rows = list(csv.DictReader(fh))
-    # feature_space="evidence" weighs both spaces at step 0 (every action is updated then) and
-    # records their evidence; the baseline has no prior space to weigh.
-    for r in rows:
-        if r["step"] == "0":
-            weighed = [k for k, v in r.items() if k.startswith("space_evidence[") and v]
-            assert bool(weighed) == (r["method"] != "baseline"), r["method"]
-    # --latent-mean is every model's too (here with a space that needs no evidence).
+    assert prior.feature_scale == "spread"
+    assert {prior[a].model.kernel for a in prior.actions} == {"per-classifier"}
     out2 = tmp_path / "out2"
-    args2 = ["learn", "--table", str(path), "--prior-objects", ",".join(PRIORS)]
-    args2 += ["--objects", ",".join(NEW), "--budget", "1", "--runs", "1", "-o", str(out2)]
-    args2 += ["--feature-space", "blended", "--latent-mean", "base-rate"]
+    args2 = [a if a != str(out) else str(out2) for a in args]
+    args2 += ["--kernel", "per-classifier", "--prior-feature-scale", "spread"]
     assert main(args2) == 0, capsys.readouterr().err
     summary = json.loads((out2 / "summary.json").read_text())
-    assert summary["settings"]["gp"] == {"latent_mean": "base-rate"}
-    assert summary["settings"]["method"]["feature_space"] == "blended"
-    baseline_gp = LearnerConfig.from_dict(summary["learner"]["baseline"]).gp
-    assert baseline_gp.latent_mean == "base-rate"
-    prior = PriorKnowledge.load(out2 / "prior.npz")
-    assert {prior[a].model.latent_mean for a in prior.actions} == {"base-rate"}
+    gp = LearnerConfig.from_dict(summary["learner"]["APTKT+aux"]).gp
+    assert gp == GPSettings(kernel="per-classifier", prior_feature_scale="spread")
+    assert PriorKnowledge.load(out2 / "prior.npz").feature_scale == "spread"
 
 
 @pytest.mark.slow

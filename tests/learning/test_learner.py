@@ -76,8 +76,12 @@ def test_transfer_decisions_follow_relatedness(related_world):
                 assert d["lambda"] >= cfg.eps_neg
 
 
-def test_auxiliary_features_are_an_extra_modality(related_world):
-    cfg = LearnerConfig(auxiliary=True, budget=1)
+@pytest.mark.parametrize("margin", [-1e9, 1e9])
+def test_auxiliary_features_are_an_extra_modality_the_evidence_admits(related_world, margin):
+    """Eq. 5: the prior model's posteriors of each observation, in its own feature space, are
+    one more modality; the model keeps it only when the new labels' evidence favours it by the
+    margin (a margin below any evidence: always; above any: never)."""
+    cfg = LearnerConfig(auxiliary=True, budget=1, evidence_margin=margin)
     learner = APTKT(cfg, related_world["prior"])
     learner.run(
         PoolEnvironment(related_world["pool"]),
@@ -85,18 +89,20 @@ def test_auxiliary_features_are_an_extra_modality(related_world):
         related_world["news"],
         related_world["test"],
     )
-    model = learner.learners["P1"].model
-    assert model.modality_names_ == ["force", "thermal", "auxiliary"]
+    lrn = learner.learners["P1"]
+    X, groups = lrn._features(lrn.observations, lrn._pipeline())
+    assert list(groups) == ["force", "thermal", "auxiliary"]
     n_old = len(related_world["prior"].objects)
-    aux_cols = model.modalities_[-1]
-    assert len(aux_cols) == n_old
-    # The auxiliary columns are the prior model's posteriors of each observation (Eq. 5), in
-    # the prior's own feature space.
-    X = model.X_train_
+    assert len(groups["auxiliary"]) == n_old
     prior = related_world["prior"]["P1"]
-    in_prior = prior.pipeline.transform(learner.learners["P1"].observations)[0]
-    np.testing.assert_allclose(X[:, aux_cols], prior.posteriors(in_prior), atol=1e-12)
-    np.testing.assert_allclose(X[:, aux_cols].sum(axis=1), 1.0)
+    in_prior = prior.pipeline.transform(lrn.observations)[0]
+    np.testing.assert_allclose(X[:, groups["auxiliary"]], prior.posteriors(in_prior), atol=1e-12)
+    np.testing.assert_allclose(X[:, groups["auxiliary"]].sum(axis=1), 1.0)
+    assert lrn.uses_auxiliary == (margin < 0)
+    assert np.isfinite(lrn.auxiliary_evidence)
+    names = ["force", "thermal"] + (["auxiliary"] if margin < 0 else [])
+    assert lrn.model.modality_names_ == names
+    np.testing.assert_allclose(lrn.model.X_train_, X[:, : lrn.model.n_features_in_])
 
 
 def test_budget_steps_and_reproducibility(related_world):

@@ -192,7 +192,7 @@ MISTAKES = [
         "--resume and --overwrite",
     ),
     (["skin", "monitor"], "PORT"),
-    # the method's alternatives: an unreadable margin, a combination the learner refuses
+    # the method's alternatives: a value the learner refuses
     (
         [
             "learn",
@@ -202,28 +202,11 @@ MISTAKES = [
             "--objects",
             "towel,cork_board",
             "--evidence-margin",
-            "large",
+            "inf",
             "-o",
             "{d}/new/l",
         ],
-        "--evidence-margin must be a number or lnN",
-    ),
-    (
-        [
-            "learn",
-            *SIM,
-            "--prior",
-            "{d}/p.npz",
-            "--objects",
-            "towel,cork_board",
-            "--transfer",
-            "multi",
-            "--feature-space",
-            "evidence",
-            "-o",
-            "{d}/new/l",
-        ],
-        "does not work with transfer='multi'",
+        "evidence_margin must be finite",
     ),
 ]
 

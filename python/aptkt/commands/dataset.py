@@ -116,6 +116,26 @@ def register(sub: argparse._SubParsersAction) -> None:
     x.add_argument("--no-progress", action="store_true", help="no progress bar")
     x.set_defaults(func=run_export_features)
 
+    im = ds.add_parser(
+        "import",
+        help="turn a public tactile data set into a feature table (for aptkt learn --table)",
+        description="Read a public data set's raw files and write one feature-table row per "
+        "trial (docs/feature-tables.md). biotac-slide: the BioTac sliding set of 20 materials "
+        "x 50 trials (GitHub dexrob/BioTac_slide_20_50; give the clone or its raw_data folder); "
+        "its features are described in docs/real-data.md.",
+    )
+    im.add_argument("format", choices=["biotac-slide"], help="which data set DIR holds")
+    im.add_argument("directory", metavar="DIR", help="the data set's folder")
+    im.add_argument(
+        "-o", "--output", required=True, metavar="TABLE", help="table to write (.csv, .h5)"
+    )
+    im.add_argument(
+        "--materials", metavar="A,B,...", help="only these materials (default: every one found)"
+    )
+    im.add_argument("--force", action="store_true", help="replace an existing TABLE")
+    im.add_argument("--no-progress", action="store_true", help="no progress bar")
+    im.set_defaults(func=run_import)
+
     r = ds.add_parser(
         "repair",
         help="make a file whose writer died appendable again (keeps every complete recording)",
@@ -291,5 +311,41 @@ def run_repair(args: argparse.Namespace) -> int:
     print(
         f"{args.file}: repaired, {kept} readable recordings kept"
         + ("" if args.no_backup else f" (original kept as {args.file}.crashed)")
+    )
+    return 0
+
+
+def run_import(args: argparse.Namespace) -> int:
+    from aptkt.importers.biotac_slide import find_trials, import_biotac_slide
+    from aptkt.learning.feature_table import check_table_name, write_feature_table
+
+    output = output_file(args.output)
+    check_table_name(output)
+    if output.exists() and not args.force:
+        raise ConfigError(f"--output {output}: exists (give --force to replace it)")
+    materials = split_names(args.materials, "--materials")
+    total = len(find_trials(args.directory))
+    bar = None
+    if not args.no_progress and sys.stderr.isatty():
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, unit="trial", desc="importing", leave=False)
+    try:
+        observations = import_biotac_slide(
+            args.directory,
+            materials=materials,
+            on_trial=None if bar is None else (lambda _trial: bar.update(1)),
+        )
+    finally:
+        if bar is not None:
+            bar.close()
+    write_feature_table(output, {observations.action: observations})
+    objects = observations.object_names
+    print(
+        f"{output}: {len(observations)} rows, action {observations.action}, "
+        f"{len(objects)} materials, modalities "
+        + ", ".join(
+            f"{m} ({observations.modalities[m].shape[1]})" for m in observations.modality_names
+        )
     )
     return 0

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from aptkt.commands import learn_table
 from aptkt.commands._checks import at_least, input_file, output_dir, output_file
-from aptkt.commands._method import add_method_arguments, gp_options, method_options
+from aptkt.commands._method import add_method_arguments, learner_config
 from aptkt.commands._session import (
     add_action_arguments,
     add_session_arguments,
@@ -18,7 +18,7 @@ from aptkt.commands._session import (
     split_names,
 )
 from aptkt.errors import ConfigError
-from aptkt.learning.config import GPSettings, LearnerConfig
+from aptkt.learning.config import LearnerConfig
 from aptkt.learning.transfer import TRANSFER_MODES
 
 #: Exit code when a robot or skin fault stopped the run (1: bad input).
@@ -119,7 +119,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from aptkt.learning import LearnerConfig, PriorKnowledge
+    from aptkt.learning import PriorKnowledge
     from aptkt.runtime.live_learning import LiveLearningAborted, learn_live
 
     if args.table:
@@ -160,7 +160,8 @@ def run(args: argparse.Namespace) -> int:
         )
     actions = {a.name: a for a in pick_actions(names, available_actions(args))}
     try:
-        config = LearnerConfig(
+        config = learner_config(
+            args,
             **({} if args.eps_neg is None else {"eps_neg": args.eps_neg}),
             eps_explor=args.eps_explor,
             budget=args.budget,
@@ -168,8 +169,6 @@ def run(args: argparse.Namespace) -> int:
             auxiliary=args.auxiliary,
             patience=args.patience,
             seed=args.seed,
-            gp=GPSettings(**gp_options(args)),
-            **method_options(args),
         )
     except ValueError as exc:
         raise ConfigError(str(exc)) from None

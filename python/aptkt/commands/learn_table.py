@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from aptkt.commands._method import gp_options, method_options
+from aptkt.commands._method import learner_config
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
 
@@ -65,7 +65,6 @@ def _trials(text: str) -> tuple[int, ...]:
 
 def run(args: argparse.Namespace) -> int:
     from aptkt.experiments.table_learning import TableSettings, learn_from_table
-    from aptkt.learning import GPSettings, LearnerConfig
 
     live_only = [
         option
@@ -90,18 +89,14 @@ def run(args: argparse.Namespace) -> int:
     runs = DEFAULT_RUNS if args.runs is None else args.runs
     if runs < 1:
         raise ConfigError("--runs must be >= 1")
-    eps_neg = LearnerConfig.eps_neg if args.eps_neg is None else args.eps_neg
-    method = method_options(args)
-    gp = gp_options(args)
-    try:  # the learner's own checks of the shared options, as a one-line error
-        LearnerConfig(
-            eps_neg=eps_neg,
+    try:  # the learner's own checks of the options, as a one-line error
+        config = learner_config(
+            args,
+            **({} if args.eps_neg is None else {"eps_neg": args.eps_neg}),
             eps_explor=args.eps_explor,
             budget=args.budget,
             patience=args.patience,
-            transfer="paper",  # what the options are checked against: APTKT's transfer
-            gp=GPSettings(**gp),
-            **method,
+            seed=args.seed,
         )
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
@@ -113,13 +108,7 @@ def run(args: argparse.Namespace) -> int:
         test_trials=_trials(args.test_trials) if args.test_trials else None,
         output=args.output,
         runs=runs,
-        budget=args.budget,
-        eps_neg=eps_neg,
-        eps_explor=args.eps_explor,
-        patience=args.patience,
-        seed=args.seed,
-        method=method,
-        gp=gp,
+        config=config,
     )
     learn_from_table(settings, say=lambda line: print(line, flush=True))
     return 0

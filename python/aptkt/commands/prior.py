@@ -52,8 +52,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--feature-scale",
         choices=FEATURE_SCALES,
         default=GPSettings().prior_feature_scale,
-        help="z-score each feature column by its spread over the observations or by its noise "
-        "between repeated observations of one object (default %(default)s; docs/method.md)",
+        help="the prior's metric: whiten (the within-object noise of the observations, "
+        "whitened) or spread (each column z-scored over the observations); default "
+        "%(default)s; docs/method.md",
     )
     b.set_defaults(func=run_build)
 
@@ -141,7 +142,12 @@ def run_inspect(args: argparse.Namespace) -> int:
         )
         return 0
     print(f"{args.file}: {len(prior.objects)} prior objects: {', '.join(prior.objects)}")
-    print(f"  feature space scaled by the {prior.feature_scale} of each column")
+    metric = {
+        "whiten": "the old objects' within-object noise, whitened per modality",
+        "spread": "each column z-scored over the old objects' observations",
+    }
+    scale = prior.feature_scale
+    print(f"  feature space: {metric.get(scale, scale)}")
     if prior.metadata:
         print(
             "  "

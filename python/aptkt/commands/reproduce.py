@@ -7,9 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from aptkt.gp import CLASS_PRIORS, LATENT_MEANS
-from aptkt.learning.config import GPSettings
-from aptkt.learning.pipeline import FEATURE_SCALES
+from aptkt.commands._method import add_method_arguments, learner_config
 
 NAMES = ("fig6", "fig7", "fig8", "fig9", "fig10", "fig11", "all")
 
@@ -62,30 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=0,
         help="root seed of the data, the groups and the trials (default %(default)s)",
     )
-    p.add_argument(
-        "--class-prior",
-        choices=CLASS_PRIORS,
-        default=GPSettings().class_prior,
-        help="every model's class posterior: uniform (each object equally likely, whatever the "
-        "learner chose to observe more often; default) or training (each object as likely as "
-        "it was observed); see docs/method.md",
-    )
-    p.add_argument(
-        "--latent-mean",
-        choices=LATENT_MEANS,
-        default=GPSettings().latent_mean,
-        help="every classifier's latent prior mean: zero (far from its data a classifier "
-        "returns to 1/2; default) or base-rate (it returns to the rate of positives it was "
-        "trained at); see docs/method.md",
-    )
-    p.add_argument(
-        "--prior-feature-scale",
-        choices=FEATURE_SCALES,
-        default=GPSettings().prior_feature_scale,
-        help="how the prior's feature space z-scores each column: spread (its spread over the "
-        "old objects' observations) or noise (its spread between repeated observations of one "
-        "object); default %(default)s; see docs/method.md",
-    )
+    add_method_arguments(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
@@ -108,6 +83,10 @@ def run(args: argparse.Namespace) -> int:
                 "--scheduler needs dask[distributed]: pip install 'aptkt[dask]'"
             ) from None
     figures = FIGURE_NAMES if args.name == "all" else (args.name,)
+    try:
+        base = learner_config(args)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
     settings = ReproduceSettings(
         figures=figures,
         output=args.output,
@@ -117,11 +96,7 @@ def run(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         seed=args.seed,
         progress=not args.no_progress and sys.stderr.isatty(),
-        gp=GPSettings(
-            class_prior=args.class_prior,
-            latent_mean=args.latent_mean,
-            prior_feature_scale=args.prior_feature_scale,
-        ),
+        base=base,
         command=_command(args),
     )
     try:
@@ -146,10 +121,12 @@ def _command(args: argparse.Namespace) -> str:
     if args.scheduler:
         parts.append(f"--scheduler {args.scheduler}")
     parts.append(f"--seed {args.seed}")
-    if args.class_prior != GPSettings().class_prior:
-        parts.append(f"--class-prior {args.class_prior}")
-    if args.latent_mean != GPSettings().latent_mean:
-        parts.append(f"--latent-mean {args.latent_mean}")
-    if args.prior_feature_scale != GPSettings().prior_feature_scale:
+    if args.reading != "aptkt":
+        parts.append(f"--reading {args.reading}")
+    for option in ("cutoff", "evidence_margin", "kernel", "modality_weights"):
+        value = getattr(args, option)
+        if value is not None:
+            parts.append(f"--{option.replace('_', '-')} {value}")
+    if args.prior_feature_scale is not None:
         parts.append(f"--prior-feature-scale {args.prior_feature_scale}")
     return " ".join(parts)

@@ -37,7 +37,7 @@ from aptkt.experiments.report import markdown_table, render_report
 from aptkt.experiments.run_store import RunStore, data_fingerprint, run_key
 from aptkt.experiments.runs import label
 from aptkt.experiments.scale import Scale
-from aptkt.learning import GPSettings
+from aptkt.learning import LearnerConfig
 from aptkt.learning.dataset import extract_features, stale_features
 from aptkt.runtime.generation import GenerationPlan, generate
 from aptkt.sim.objects import default_library
@@ -61,7 +61,8 @@ class ReproduceSettings:
     progress: bool = True
     scale: Scale | None = None  # overrides the full / quick size (tests, custom studies)
     #: How every model is fitted (the prior's, the baseline's, APTKT's).
-    gp: GPSettings = field(default_factory=GPSettings)
+    #: The learner every method starts from (``--reading`` and the method options).
+    base: LearnerConfig = field(default_factory=LearnerConfig)
     command: str = ""
 
     def resolved_scale(self) -> Scale:
@@ -197,7 +198,7 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
             fingerprint=fingerprint,
             output=out.resolve(),
             index=_paper_numbers(scale.objects),
-            gp=s.gp,
+            base=s.base,
         )
         _say(f"planning {', '.join(s.figures)} ({scale.name} size) on {executor.description}")
         plans = {name: FIGURES[name].plan(ctx) for name in s.figures}
@@ -327,7 +328,7 @@ def _config(
         "output": str(ctx.output),
         "data": {"path": ctx.data, "fingerprint": ctx.fingerprint, **data_info},
         "scale": scale.to_dict(),
-        "gp": ctx.gp.__dict__,
+        "learner": ctx.base.to_dict(),
         "methods": {m: dict(v) for m, v in METHODS.items()},
         "object_numbers": dict(ctx.index),
         "figures_plan": {

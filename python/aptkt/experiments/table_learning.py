@@ -23,7 +23,7 @@ from aptkt import __version__
 from aptkt.errors import FeatureTableError
 from aptkt.experiments.demo import report_results
 from aptkt.experiments.runs import step_rows
-from aptkt.learning import APTKT, GPSettings, LearnerConfig, PoolEnvironment, PriorKnowledge
+from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import read_feature_table, split_held_out
 
 __all__ = ["TableSettings", "learn_from_table"]
@@ -39,16 +39,9 @@ class TableSettings:
     test_fraction: float = 0.5
     output: Path = Path("aptkt-learn")
     runs: int = 3
-    budget: int = 40
-    eps_neg: float = LearnerConfig.eps_neg
-    eps_explor: float = LearnerConfig.eps_explor
-    patience: int | None = None
-    seed: int = 0
-    #: LearnerConfig fields of the method's alternatives (cutoff, feature_space, source,
-    #: relatedness, evidence_margin) for APTKT and APTKT+aux; the baseline uses no prior.
-    method: dict[str, Any] = field(default_factory=dict)
-    #: GPSettings fields for every model, the prior's and the baseline's too (class_prior).
-    gp: dict[str, Any] = field(default_factory=dict)
+    #: APTKT's learner (its budget, seed and method choices); APTKT+aux adds the auxiliary
+    #: features, the baseline uses no prior.
+    config: LearnerConfig = field(default_factory=LearnerConfig)
 
 
 def _check_objects(table, s: TableSettings, actions: list[str]) -> None:
@@ -97,41 +90,39 @@ def learn_from_table(s: TableSettings, *, say=print) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     prior_path = out / "prior.npz"
     say(f"[2/3] building prior knowledge on {', '.join(s.prior_objects)} -> {prior_path}")
-    gp = GPSettings(**s.gp)
-    prior = PriorKnowledge.build(table.observations(actions, prior_rows), gp=gp, seed=s.seed)
+    cfg = s.config
+    prior = PriorKnowledge.build(table.observations(actions, prior_rows), gp=cfg.gp, seed=cfg.seed)
     prior.save(prior_path)
     pool = table.observations(actions, pool_rows)
     test = table.observations(actions, test_rows)
-
-    def config(**kw: Any) -> LearnerConfig:
-        return LearnerConfig(
-            eps_explor=s.eps_explor, budget=s.budget, patience=s.patience, gp=gp, **kw
-        )
-
     methods = {
-        "APTKT": config(transfer="paper", eps_neg=s.eps_neg, **s.method),
-        "APTKT+aux": config(transfer="paper", auxiliary=True, eps_neg=s.eps_neg, **s.method),
-        "baseline": config(transfer="none"),
+        "APTKT": replace(cfg, transfer="paper", auxiliary=False),
+        "APTKT+aux": replace(cfg, transfer="paper", auxiliary=True),
+        "baseline": replace(cfg, transfer="none", auxiliary=False),
     }
     say(
         f"[3/3] learning {', '.join(s.new_objects)}: APTKT (with and without auxiliary features) "
-        f"vs baseline, {s.runs} runs each, budget {s.budget}"
+        f"vs baseline, {s.runs} runs each, budget {cfg.budget}"
     )
     rows: list[dict[str, Any]] = []
     for t in range(s.runs):
-        for name, cfg in methods.items():
-            learner = APTKT(replace(cfg, seed=s.seed + t), prior)
-            run = learner.run(PoolEnvironment(pool, seed=s.seed + t), actions, s.new_objects, test)
+        for name, method in methods.items():
+            learner = APTKT(replace(method, seed=cfg.seed + t), prior)
+            run = learner.run(
+                PoolEnvironment(pool, seed=cfg.seed + t), actions, s.new_objects, test
+            )
             steps = step_rows(run, learner, s.new_objects)
             rows += [{"method": name, "trial": t, **r} for r in steps]
 
-    settings = {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(s).items()}
+    settings = {
+        k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(s).items() if k != "config"
+    }
     return report_results(
         out,
         rows,
         methods,
         tuple(s.new_objects),
-        budget=s.budget,
+        budget=cfg.budget,
         title=(
             f"{table.path.name}: {len(s.new_objects)} new objects, "
             f"priors: {', '.join(s.prior_objects)}"
@@ -141,7 +132,7 @@ def learn_from_table(s: TableSettings, *, say=print) -> dict[str, Any]:
             "python": platform.python_version(),
             "settings": settings,
             "actions": actions,
-            "learner": {name: cfg.to_dict() for name, cfg in methods.items()},
+            "learner": {name: m.to_dict() for name, m in methods.items()},
         },
         size="table",
         files={"table": str(table.path), "prior": str(prior_path)},

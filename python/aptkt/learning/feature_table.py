@@ -33,6 +33,7 @@ __all__ = [
     "read_feature_table",
     "split_held_out",
     "write_feature_table",
+    "check_table_name",
 ]
 
 ID_COLUMNS = ("object", "action", "trial")
@@ -296,12 +297,18 @@ def _check_rows(table: FeatureTable) -> None:
         keys[key] = i
 
 
+def check_table_name(path: str | Path) -> Path:
+    """A feature table's file name: its suffix says the format."""
+    path = Path(path)
+    if path.suffix.lower() not in _CSV + _HDF5:
+        raise _error(path, "a feature table is a .csv or an HDF5 (.h5, .hdf5) file")
+    return path
+
+
 def write_feature_table(path: str | Path, table: ObservationTable) -> Path:
     """Write an observation table as a feature table (CSV or HDF5, by the file's suffix)."""
-    path = Path(path)
+    path = check_table_name(path)
     suffix = path.suffix.lower()
-    if suffix not in _CSV + _HDF5:
-        raise _error(path, "a feature table is a .csv or an HDF5 (.h5, .hdf5) file")
     widths: dict[str, int] = {}
     for obs in table.values():
         for m, v in obs.modalities.items():

@@ -15,8 +15,6 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from scipy.optimize import minimize_scalar
-from scipy.special import gammaln
 from sklearn.covariance import ledoit_wolf_shrinkage
 
 from aptkt.learning.observations import Observations
@@ -26,18 +24,18 @@ __all__ = [
     "ModalityTransform",
     "FeaturePipeline",
     "DEFAULT_TRANSFORMS",
-    "normal_gamma_log_evidence",
-    "prior_weight",
+    "noise_whitener",
+    "within_object_residuals",
 ]
 
 
 #: The metric of a feature space. "spread": each column divided by its standard deviation over
-#: all the rows fitted on; "noise": by its pooled standard deviation within each object's rows
-#: (the sensor's variation between repeated observations of one object); "whiten": "noise",
+#: all the rows fitted on; "whiten": each column divided by its pooled standard deviation within
+#: each object's rows (the sensor's variation between repeated observations of one object),
 #: then each modality's output multiplied by the inverse square root of its pooled
 #: within-object covariance (shrunk towards its diagonal), so that the sensor's noise is
 #: uncorrelated with unit variance in every direction — the Mahalanobis metric of the noise.
-FEATURE_SCALES = ("spread", "noise", "whiten")
+FEATURE_SCALES = ("spread", "whiten")
 
 
 @dataclass
@@ -63,12 +61,10 @@ class ModalityTransform:
     def fit(
         self,
         X: np.ndarray,
-        weights: np.ndarray | None = None,
         objects: np.ndarray | None = None,
         whiten: bool = False,
     ) -> ModalityTransform:
-        """Fit on the rows of ``X``; ``weights`` (optional, ≥ 0) make the mean, the scales and
-        the PCA those of the weighted population. ``objects`` (optional, one label per row):
+        """Fit on the rows of ``X``. ``objects`` (optional, one label per row):
         scale each column by its pooled within-object standard deviation — the noise of
         repeated observations of one object — instead of its spread over all rows. The spread
         is kept where the repeats are too few to estimate a noise (fewer degrees of freedom
@@ -79,30 +75,13 @@ class ModalityTransform:
         X = self._prepare(X)
         if X.shape[0] < 1:
             raise ValueError("cannot fit a feature transform on zero observations")
-        if objects is not None and weights is not None:
-            raise ValueError("give weights or objects, not both")
-        if weights is None:
-            self.mean_ = X.mean(axis=0)
-            scale = X.std(axis=0)
-            if objects is not None:
-                # Constancy is judged on the spread (below): a column that differs between
-                # objects but never within one has no noise, and keeps its spread.
-                noise = _noise_scale(X, objects)
-                scale = np.where(noise > _rounding_level(self.mean_), noise, scale)
-        else:
-            w = np.asarray(weights, dtype=np.float64)
-            if (
-                w.shape != (X.shape[0],)
-                or not np.all(np.isfinite(w))
-                or not np.all(w >= 0)
-                or w.sum() <= 0
-            ):
-                raise ValueError(
-                    "weights must be one finite, non-negative number per row, not all 0"
-                )
-            w = w / w.sum()
-            self.mean_ = w @ X
-            scale = np.sqrt(w @ (X - self.mean_) ** 2)
+        self.mean_ = X.mean(axis=0)
+        scale = X.std(axis=0)
+        if objects is not None:
+            # Constancy is judged on the spread (below): a column that differs between
+            # objects but never within one has no noise, and keeps its spread.
+            noise = _noise_scale(X, objects)
+            scale = np.where(noise > _rounding_level(self.mean_), noise, scale)
         # A column whose spread is at the level of its values' rounding is constant: scaling
         # by that spread would turn a change in the last digits into a huge z-score.
         self.scale_ = np.where(scale > _rounding_level(self.mean_), scale, 1.0)
@@ -112,13 +91,8 @@ class ModalityTransform:
         if self.pca_components is not None:
             # Rank of centred data is at most n - 1; keep that many at most.
             k = max(1, min(self.pca_components, X.shape[0] - 1, X.shape[1]))
-            if weights is None:
-                _, s, vt = np.linalg.svd(Z, full_matrices=False)
-                first_sd = s[0] / np.sqrt(max(X.shape[0], 1)) if s.size else 0.0
-            else:
-                # Rows scaled by √w: the singular values are the weighted SDs along the axes.
-                _, s, vt = np.linalg.svd(np.sqrt(w)[:, None] * Z, full_matrices=False)
-                first_sd = s[0] if s.size else 0.0
+            _, sv, vt = np.linalg.svd(Z, full_matrices=False)
+            first_sd = sv[0] / np.sqrt(max(X.shape[0], 1)) if sv.size else 0.0
             self.components_ = vt[:k]
             self.pca_scale_ = float(first_sd) if first_sd > 1e-12 else 1.0
         if whiten:
@@ -278,59 +252,22 @@ class FeaturePipeline:
         self.transforms: dict[str, ModalityTransform] = {k: replace(v) for k, v in base.items()}
         self.modality_names_: tuple[str, ...] = ()
 
-    def fit(
-        self,
-        obs: Observations,
-        weights: np.ndarray | Mapping[str, np.ndarray] | None = None,
-        *,
-        scale: str = "spread",
-    ) -> FeaturePipeline:
-        """Fit on training observations (never on test data), optionally weighted by row (one
-        weight vector for every modality, or one per modality). ``scale`` (:data:`FEATURE_SCALES`):
-        z-score by each column's spread over the observations, or by its noise between
-        repeated observations of the same object."""
+    def fit(self, obs: Observations, *, scale: str = "spread") -> FeaturePipeline:
+        """Fit on training observations (never on test data). ``scale``
+        (:data:`FEATURE_SCALES`): the metric — each column by its spread over the observations,
+        or the noise between repeated observations of the same object, whitened."""
         if scale not in FEATURE_SCALES:
             raise ValueError(f"scale must be one of {FEATURE_SCALES}, got {scale!r}")
-        objects = obs.objects if scale in ("noise", "whiten") else None
+        objects = obs.objects if scale == "whiten" else None
         fitted = {}
         for name in obs.modality_names:
             template = self.transforms.get(name, ModalityTransform())
-            w = weights.get(name) if isinstance(weights, Mapping) else weights
             fitted[name] = replace(template, mean_=None, scale_=None, components_=None).fit(
-                obs.modalities[name], w, objects, whiten=scale == "whiten"
+                obs.modalities[name], objects, whiten=scale == "whiten"
             )
         self.transforms = fitted
         self.modality_names_ = obs.modality_names
         return self
-
-    def fit_blended(self, old: Observations, new: Observations) -> FeaturePipeline:
-        """Fit on ``new`` observations (each counted once) together with every ``old`` object
-        as one more observation of the population (its observations share a weight of 1): the
-        old objects inform the transforms while the new observations are few, and fade as they
-        accumulate."""
-        _, inverse, counts = np.unique(old.objects, return_inverse=True, return_counts=True)
-        weights = np.concatenate([1.0 / counts[inverse], np.ones(len(new.objects))])
-        return self.fit(Observations.concat([old, new]), weights)
-
-    def fit_shrunk(self, old: Observations, new: Observations) -> FeaturePipeline:
-        """Fit on ``new`` observations shrunk towards the ``old`` population: per modality,
-        the old observations together weigh κ observations (``prior_weight``, chosen by the new
-        observations' evidence), each new one weighs 1. κ per modality in ``prior_weights_``."""
-        if old.modality_names != new.modality_names:
-            raise ValueError(
-                f"old observations have modalities {old.modality_names}, new {new.modality_names}"
-            )
-        n_old, n_new = len(old.objects), len(new.objects)
-        self.prior_weights_: dict[str, float] = {}
-        weights = {}
-        for name in new.modality_names:
-            template = self.transforms.get(name, ModalityTransform())
-            kappa = prior_weight(
-                template._prepare(old.modalities[name]), template._prepare(new.modalities[name])
-            )
-            self.prior_weights_[name] = kappa
-            weights[name] = np.concatenate([np.full(n_old, kappa / n_old), np.ones(n_new)])
-        return self.fit(Observations.concat([old, new]), weights)
 
     def transform(self, obs: Observations) -> tuple[np.ndarray, dict[str, list[int]]]:
         """Feature matrix and the column group of each modality (for the multi-modal kernel)."""
@@ -373,58 +310,3 @@ class FeaturePipeline:
         pipe.transforms = transforms
         pipe.modality_names_ = names
         return pipe
-
-
-#: The range of prior pseudo-observations ``prior_weight`` searches (natural log).
-_LOG_KAPPA_RANGE = (-5.0, 10.0)
-
-
-def normal_gamma_log_evidence(
-    new: np.ndarray, mean: np.ndarray, var: np.ndarray, kappa: float
-) -> float:
-    """log p(new) summed over columns, each column's values i.i.d. N(μ, σ²) with the
-    Normal-Gamma prior μ | σ² ~ N(``mean``, σ²/κ), 1/σ² ~ Gamma(κ/2, rate κ·``var``/2): κ
-    pseudo-observations with that mean and variance. Closed form
-    ``Γ(α_n)/Γ(α₀) · β₀^α₀/β_n^α_n · (κ/κ_n)^½ · (2π)^(−n/2)`` with κ_n = κ + n,
-    α₀ = κ/2, α_n = α₀ + n/2, β₀ = κ·var/2, β_n = β₀ + ½Σ(x − x̄)² + κn(x̄ − mean)²/(2κ_n)."""
-    new = np.asarray(new, dtype=np.float64)
-    n = new.shape[0]
-    xbar = new.mean(axis=0)
-    ss = ((new - xbar) ** 2).sum(axis=0)
-    a0, b0 = kappa / 2, kappa * np.asarray(var) / 2
-    kn, an = kappa + n, kappa / 2 + n / 2
-    bn = b0 + ss / 2 + kappa * n * (xbar - mean) ** 2 / (2 * kn)
-    per_column = (
-        gammaln(an)
-        - gammaln(a0)
-        + a0 * np.log(b0)
-        - an * np.log(bn)
-        + 0.5 * np.log(kappa / kn)
-        - 0.5 * n * np.log(2 * np.pi)
-    )
-    return float(per_column.sum())
-
-
-def prior_weight(old: np.ndarray, new: np.ndarray) -> float:
-    """How many observations the old population is worth as a prior for the new one: the κ of
-    ``normal_gamma_log_evidence`` (mean and variance of the old observations per column, one κ
-    for every column) under which the new observations are most probable — empirical Bayes,
-    searched over κ ∈ [e⁻⁵, e¹⁰]. New observations the old population describes well give a
-    large κ, ones it does not a small one."""
-    old = np.asarray(old, dtype=np.float64)
-    new = np.asarray(new, dtype=np.float64)
-    if old.ndim != 2 or new.ndim != 2 or old.shape[1] != new.shape[1]:
-        raise ValueError(
-            f"old and new must be (n, d) with the same d, got {old.shape}, {new.shape}"
-        )
-    if old.shape[0] < 2 or new.shape[0] < 1:
-        raise ValueError("prior_weight needs at least 2 old and 1 new observation")
-    mean = old.mean(axis=0)
-    # A column constant among the old observations still needs a proper prior.
-    var = np.maximum(old.var(axis=0), 1e-12 * np.maximum(1.0, mean**2))
-    best = minimize_scalar(
-        lambda log_kappa: -normal_gamma_log_evidence(new, mean, var, float(np.exp(log_kappa))),
-        bounds=_LOG_KAPPA_RANGE,
-        method="bounded",
-    )
-    return float(np.exp(best.x))

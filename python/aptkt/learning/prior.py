@@ -38,10 +38,11 @@ class ActionPrior:
     observations: Observations
     pipeline: FeaturePipeline
     model: LaplaceGPC
-    #: log Z of each source task the evidence test has judged, by (old object, source kind).
-    _source_evidence: dict[tuple[str, str], float] = field(
+    #: log Z of each source task the evidence test has judged, by old object.
+    _source_evidence: dict[str, float] = field(
         default_factory=dict, init=False, repr=False, compare=False
     )
+    _loo: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def objects(self) -> list[str]:
@@ -62,13 +63,18 @@ class ActionPrior:
         the class posterior."""
         return binary_probabilities(self.model, X)
 
-    def relatedness(self, X: np.ndarray, kind: str) -> np.ndarray:
-        """The probabilities Eq. 3 averages: ``"binary"`` or ``"normalised"``."""
-        if kind == "binary":
-            return self.binary_probabilities(X)
-        if kind == "normalised":
-            return self.posteriors(X)
-        raise ValueError(f"relatedness must be 'binary' or 'normalised', got {kind!r}")
+    def loo_posteriors(self) -> np.ndarray:
+        """``p(c_i^old | v)`` of every old observation by the model fitted without it, (n,
+        n_old): its leave-one-out posterior, from each classifier's Laplace approximation
+        with that observation's own likelihood term removed (the cavity distribution, whose
+        predictive probability is taken as for a new observation). A model's posterior of
+        its own training observations is nearly one-hot, and as auxiliary features (Eq. 5) of
+        the old observations it would tell the shared kernel that the old model separates
+        everything; the new observations' auxiliary features are out of sample, so the old
+        ones must be too."""
+        if self._loo is None:
+            self._loo = leave_one_out_posteriors(self.model, self._training_X)
+        return self._loo
 
     def training_features(self) -> np.ndarray:
         return self.pipeline.transform(self.observations)[0]
@@ -88,29 +94,23 @@ class ActionPrior:
         positive: np.ndarray,
         old_object: str,
         transfer_lambda: float,
-        source: str = "one-vs-all",
     ) -> float:
         """The log Bayes factor of transferring ``old_object`` into a new object's classifier.
 
         ``X_new``: every new observation of this action so far, in this prior's feature space;
         ``positive``: which of them belong to the new object (its binary task's +1 labels).
-        Model 1 couples the new object's latent function to the source task's (``source``:
-        the old object's one-vs-all task or its observations as positives) by λ, as Eq. 2
-        does; model 0 is the same with λ = 0 (the two tasks independent). Both use the old
-        object's own classifier's hyper-parameters, and no hyper-parameter is fitted, so the
-        factor compares the two hypotheses only. With λ = 0 the joint marginal likelihood is
-        the source's times the target's, so ``log Z(λ) − log Z(0) = log p(y_new | source, λ)
-        − log p(y_new)``: how much more probable the source makes the new labels (> 0: the
-        transfer is supported). Laplace approximations throughout.
+        Model 1 couples the new object's latent function to the old object's one-vs-all task
+        (its observations +1, the other old objects' −1) by λ, as Eq. 2 does; model 0 is the
+        same with λ = 0 (the two tasks independent). Both use the old object's own
+        classifier's hyper-parameters, and no hyper-parameter is fitted, so the factor compares
+        the two hypotheses only. With λ = 0 the joint marginal likelihood is the source's times
+        the target's, so ``log Z(λ) − log Z(0) = log p(y_new | source, λ) − log p(y_new)``: how
+        much more probable the source makes the new labels (> 0: the transfer is supported).
+        Laplace approximations throughout.
         """
         X_old = self._training_X
         mine = np.asarray(self.observations.objects) == old_object
-        if source == "positives":
-            task = TransferSource(X_old[mine], transfer_lambda=transfer_lambda)
-        elif source == "one-vs-all":
-            task = TransferSource(X_old, np.where(mine, 1.0, -1.0), transfer_lambda=transfer_lambda)
-        else:
-            raise ValueError(f"source must be 'one-vs-all' or 'positives', got {source!r}")
+        task = TransferSource(X_old, np.where(mine, 1.0, -1.0), transfer_lambda=transfer_lambda)
         positive = np.asarray(positive, dtype=bool)
         if positive.shape != (X_new.shape[0],) or positive.all() or not positive.any():
             raise ValueError("positive must mark some, not all, of the new observations")
@@ -123,13 +123,45 @@ class ActionPrior:
         # log Z(0) = log Z_source + log Z_target. The source's factor is the same at every
         # update (the old object's own hyper-parameters, the same old rows): it is computed
         # once, from the first joint model at λ = 0, and only the small target task is
-        # evaluated afresh. (The joint λ = 0 evaluation costs as much as the coupled fit.)
+        # evaluated afresh.
         alone = at_fitted_hyperparameters(self.model, old_object).fit(X_new, labels)
         target = float(alone.log_marginal_likelihood_[0])
-        key = (old_object, source)
-        if key not in self._source_evidence:
-            self._source_evidence[key] = uncoupled_evidence(coupled)[row] - target
-        return float(coupled.log_marginal_likelihood_[row] - self._source_evidence[key] - target)
+        if old_object not in self._source_evidence:
+            self._source_evidence[old_object] = uncoupled_evidence(coupled)[row] - target
+        return float(
+            coupled.log_marginal_likelihood_[row] - self._source_evidence[old_object] - target
+        )
+
+
+def leave_one_out_posteriors(model: LaplaceGPC, X: np.ndarray) -> np.ndarray:
+    """The class posterior of each training row of ``model`` (fitted on ``X``, without
+    sources) by the model without that row: per binary classifier, the Laplace posterior of
+    the row's latent value, N(f̂, v), divided by the row's Gaussian likelihood site (precision
+    W = π̂(1 − π̂), linear coefficient W f̂ + t − π̂) gives the cavity N(μ₋, 1/τ₋); its
+    probability ∫ sigmoid(f) N(f | μ₋, 1/τ₋) df (probit approximation) is normalised over the
+    classifiers as :meth:`LaplaceGPC.predict_proba` does."""
+    mean, var = model.latent(X)
+    mean = np.asarray(mean, dtype=np.float64).reshape(X.shape[0], -1)
+    var = np.asarray(var, dtype=np.float64).reshape(X.shape[0], -1)
+    classes = np.asarray(model.classes_)
+    y = np.asarray(model.y_train_)
+    single = mean.shape[1] == 1
+    positives = [classes[1]] if single else list(classes)
+    t = np.column_stack([(y == c).astype(np.float64) for c in positives])
+    pi = 1.0 / (1.0 + np.exp(-mean))
+    w = pi * (1.0 - pi)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tau = 1.0 / var - w
+        mu = (mean / var - w * mean - (t - pi)) / tau
+    # A row whose site carries all its precision (tau ≤ 0 only by rounding) keeps its posterior.
+    bad = ~(np.isfinite(tau) & (tau > 0) & np.isfinite(mu))
+    s2 = np.where(bad, var, 1.0 / np.where(bad, 1.0, tau))
+    mu = np.where(bad, mean, mu)
+    p = 1.0 / (1.0 + np.exp(-mu / np.sqrt(1.0 + np.pi * s2 / 8.0)))
+    if single:
+        return np.column_stack([1.0 - p[:, 0], p[:, 0]])
+    total = p.sum(axis=1, keepdims=True)
+    return np.where(total > 0, p / np.where(total > 0, total, 1.0), 1.0 / p.shape[1])
 
 
 def binary_probabilities(model: LaplaceGPC, X: np.ndarray) -> np.ndarray:
@@ -184,11 +216,12 @@ class PriorKnowledge:
                 raise ValueError(f"action {name!r}: prior knowledge needs at least two old objects")
             pipeline = FeaturePipeline(transforms).fit(obs, scale=gp.prior_feature_scale)
             X, groups = pipeline.transform(obs)
-            model = gp.make(groups, random_state=seed + k).fit(X, obs.objects)
+            shared = gp.kernel == "shared"
+            model = gp.make(groups, random_state=seed + k, shared=shared).fit(X, obs.objects)
             actions[name] = ActionPrior(name, obs, pipeline, model)
             if progress is not None:
                 progress.update(1)
-        meta = {"software_version": __version__, "seed": seed, "gp": gp.__dict__}
+        meta = {"software_version": __version__, "seed": seed, "gp": gp.to_dict()}
         return cls(actions, meta)
 
     # -- persistence ---------------------------------------------------------------------------
@@ -274,8 +307,19 @@ class PriorKnowledge:
         ``gp``, at the default settings with this prior's own feature scale."""
         table = {name: prior.observations for name, prior in self.actions.items()}
         if gp is None:
-            gp = GPSettings(prior_feature_scale=self.feature_scale)
+            gp = self.gp_settings
         return PriorKnowledge.build(table, objects, gp=gp, seed=seed)
+
+    @property
+    def gp_settings(self) -> GPSettings:
+        """The settings this prior was built with (files from before the current settings:
+        the defaults with the file's own feature scale)."""
+        recorded = self.metadata.get("gp")
+        try:
+            return GPSettings.from_dict(recorded) if isinstance(recorded, dict) else GPSettings()
+        except (TypeError, ValueError):
+            scale = self.feature_scale
+            return GPSettings(prior_feature_scale=scale if scale == "spread" else "whiten")
 
     @property
     def feature_scale(self) -> str:

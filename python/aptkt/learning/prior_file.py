@@ -220,8 +220,9 @@ def check_action(path: Path, arrays: dict[str, np.ndarray], prefix: str, action:
                 _rows_of_width(d),
                 f" of shape (k, {d})",
             )
-            if pca < 0:
-                raise c.fail(f"pipeline/{m}/components", "present without pca_components")
+            # Without a PCA the components are the noise whitening: a map of all the columns.
+            if pca < 0 and comp.shape[0] != d:
+                raise c.fail(f"pipeline/{m}/components", f"a whitening map needs {d} rows (no PCA)")
             width += comp.shape[0]
         else:
             if pca >= 0:
@@ -255,5 +256,5 @@ def _vector_of(d: int) -> Callable[[tuple[int, ...]], bool]:
 
 
 def _rows_of_width(d: int) -> Callable[[tuple[int, ...]], bool]:
-    """Shape check: 1 to ``d`` rows of ``d`` values (PCA components)."""
+    """Shape check: 1 to ``d`` rows of ``d`` values (PCA components, or the whitening)."""
     return lambda shape: shape[1] == d and 1 <= shape[0] <= d

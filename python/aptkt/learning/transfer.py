@@ -5,13 +5,9 @@ observations, a probability per old object. Their mean ``p̄_i`` measures how mu
 old object i. The most related old object ``i* = argmax p̄_i`` is transferred with relatedness
 ``λ = p̄_i*`` unless ``p̄_i* < ε_neg``, in which case nothing is transferred.
 
-Which probability (``relatedness``):
-
-* ``"binary"`` (default, §4.2): old object i's own one-vs-all classifier's ``p(y=+1 | v)``. Each
-  is a probability in its own right, so ε_neg asks the same question ("does i's classifier
-  claim j's observations?") whatever the number of old objects.
-* ``"normalised"``: the class posterior, the binary probabilities normalised to sum to 1. With
-  N old objects ``p̄_max ≥ 1/N``, so a fixed ε_neg means something different for every N.
+The probability is old object i's own one-vs-all classifier's ``p(y=+1 | v)`` (§4.2): a
+probability in its own right, so ε_neg asks the same question ("does i's classifier claim j's
+observations?") whatever the number of old objects.
 
 Whether the chosen old object is relevant at all (``cutoff``):
 
@@ -21,12 +17,11 @@ Whether the chosen old object is relevant at all (``cutoff``):
   them, as long as they lie on its side of the others. The transfer is kept only if it makes
   the new objects' labels more probable: the log Bayes factor of the dependent model (the
   source task coupled by λ) against λ = 0, both under the old classifier's kernel, must exceed
-  ``evidence_margin`` (0: equal prior odds of "related" and "unrelated").
+  ``evidence_margin``.
 * ``"paper"``: Eq. 3 exactly (``p̄ ≥ ε_neg``).
 
-Modes: ``"paper"`` transfers the single most related old object (Eq. 3); ``"multi"`` every old
-object whose ``p̄_i`` reaches ε_neg, each with its own λ = p̄_i; ``"none"`` (the baseline) and
-``"control"`` (the prior's feature space without transfer) never transfer.
+Modes: ``"paper"`` transfers the single most related old object (Eq. 3); ``"none"`` (the
+baseline) and ``"control"`` (the prior's feature space without transfer) never transfer.
 """
 
 from __future__ import annotations
@@ -41,42 +36,28 @@ __all__ = [
     "mean_posteriors",
     "decide_transfer",
     "TRANSFER_MODES",
-    "RELATEDNESS",
-    "SOURCE_TASKS",
     "SOURCE_CHOICES",
-    "FEATURE_SPACES",
-    "JOINT_SPACES",
     "CUTOFFS",
 ]
 
-#: "paper": the single most related prior per new object (Eq. 2–3); "multi": every prior above
-#: ε_neg in one multi-source kernel; "none": the paper's baseline (nothing of the prior);
-#: "control": the prior's feature space, no transfer (isolates the transfer itself).
-TRANSFER_MODES = ("paper", "multi", "none", "control")
-#: Which probability of the old model measures relatedness (see the module docstring).
-RELATEDNESS = ("binary", "normalised")
-#: The source task's labels: the chosen old object's observations +1 and the other old
-#: objects' −1 ("one-vs-all"), or the chosen object's observations only, as positives.
-SOURCE_TASKS = ("one-vs-all", "positives")
-#: Where the new objects' models live (see LearnerConfig.feature_space).
-FEATURE_SPACES = ("auto", "covered", "prior", "new", "pooled", "evidence", "blended", "shrunk")
-#: The spaces whose transforms are fitted on old and new observations together when the update
-#: transfers (the baseline's otherwise).
-JOINT_SPACES = ("pooled", "blended", "shrunk")
+#: "paper": the single most related prior per new object (Eq. 2–3); "none": the paper's
+#: baseline (nothing of the prior); "control": the prior's feature space and kernel, no transfer
+#: (isolates the transfer itself).
+TRANSFER_MODES = ("paper", "none", "control")
 #: Which old object Eq. 3 picks: the most related (the method) or, for a stress test of the
 #: cut-off, the least related.
 SOURCE_CHOICES = ("most", "least")
 #: Whether Eq. 3's ε_neg alone decides ("paper") or the target task's evidence must also favour
 #: the transfer ("evidence"; see the module docstring).
-CUTOFFS = ("evidence", "paper", "fitted")
+CUTOFFS = ("evidence", "paper")
 
 
 @dataclass(frozen=True)
 class TransferDecision:
     """What one new object's classifier of one action receives from the prior knowledge.
 
-    ``sources`` and ``lambdas`` list the transferred old objects and their λ (one for
-    ``"paper"``, any number for ``"multi"``, none when nothing passes the cut-off).
+    ``sources`` and ``lambdas`` list the transferred old object and its λ (none when nothing
+    passes the cut-off).
     ``evidence`` holds, for every old object that passed ε_neg and was tested, the log Bayes
     factor of transferring it (``cutoff="evidence"``; empty otherwise).
     """
@@ -137,10 +118,9 @@ def decide_transfer(
 ) -> TransferDecision:
     """Eq. 3: transfer the most related old object if its mean probability reaches ``eps_neg``.
 
-    ``mode="multi"`` transfers every old object that reaches ``eps_neg``. ``choice="least"``
-    and ``forced_lambda`` exist for stress tests of the cut-off: the least related old object,
-    and a λ that replaces ``p̄`` once the cut-off has let the transfer through (the cut-off
-    always looks at the chosen object's own ``p̄``).
+    ``choice="least"`` and ``forced_lambda`` exist for stress tests of the cut-off: the least
+    related old object, and a λ that replaces ``p̄`` once the cut-off has let the transfer
+    through (the cut-off always looks at the chosen object's own ``p̄``).
 
     ``evidence(old_object, λ)``, if given, is the log Bayes factor of transferring that old
     object with that λ (``cutoff="evidence"``); an old object that passed ε_neg is then kept
@@ -157,17 +137,10 @@ def decide_transfer(
     p_bar = mean_posteriors(old_posteriors)
     if p_bar.shape[0] != len(old_objects):
         raise ValueError(f"{len(old_objects)} old objects but posteriors over {p_bar.shape[0]}")
-    if mode == "multi":
-        # Most related first; ties keep the old objects' order.
-        order = sorted(range(len(p_bar)), key=lambda i: (-p_bar[i], i))
-        if choice == "least":
-            order = order[::-1]
-        picked = [i for i in order if p_bar[i] >= eps_neg]
-    elif mode == "paper":
+    picked: list[int] = []
+    if mode == "paper":
         best = int(np.argmax(p_bar) if choice == "most" else np.argmin(p_bar))
         picked = [best] if p_bar[best] >= eps_neg else []
-    else:
-        picked = []
     lambdas = {i: float(p_bar[i] if forced_lambda is None else forced_lambda) for i in picked}
     tested: list[tuple[str, float]] = []
     if evidence is not None:

@@ -4,7 +4,7 @@ data, output directory), the learning methods, and how runs and prior knowledge 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,8 +26,7 @@ STRESS_CUTOFF = "λ=1 least related, cut-off"
 #: The compared learners (paper Fig. 9's names and colours): the baseline (the paper's: the
 #: multi-modal kernel and nothing of the prior), APTKT (Eq. 2–3), APTKT with the prior models'
 #: posteriors as auxiliary features (Eq. 5). Beyond the paper: the control (the prior's feature
-#: space without transfer, so that it and APTKT differ by the transfer alone), transfer from
-#: every prior above ε_neg at once ("APTKT-multi", one multi-source kernel), and two stress
+#: space without transfer, so that it and APTKT differ by the transfer alone), and two stress
 #: tests of the cut-off: λ forced to 1 from the least related prior, without any cut-off (ε_neg = 0
 #: and no evidence test) and with the learner's.
 METHODS: Mapping[str, Mapping[str, Any]] = {
@@ -35,7 +34,6 @@ METHODS: Mapping[str, Mapping[str, Any]] = {
     "control": {"transfer": "control"},
     "APTKT": {"transfer": "paper"},
     "APTKT+aux": {"transfer": "paper", "auxiliary": True},
-    "APTKT-multi": {"transfer": "multi"},
     STRESS_NO_CUTOFF: {
         "transfer": "paper",
         "source_choice": "least",
@@ -57,8 +55,13 @@ class Context:
     fingerprint: str
     output: Path
     index: Mapping[str, int]  # each object's number in the paper (1-10 priors, 11-15 new)
-    gp: GPSettings = field(default_factory=GPSettings)
+    #: The learner every method starts from (the reading and its choices; docs/method.md).
+    base: LearnerConfig = field(default_factory=LearnerConfig)
     cache: dict[str, Any] = field(default_factory=dict)  # results one figure computes for another
+
+    @property
+    def gp(self) -> GPSettings:
+        return self.base.gp
 
     def figure_dir(self, name: str) -> Path:
         d = self.output / name
@@ -94,7 +97,7 @@ class Context:
             trials=self.scale.pool_trials,
             seed=self.seed,
             directory=str(self.output / "priors"),
-            gp=dict(self.gp.__dict__),
+            gp=self.gp.to_dict(),
         )
 
     def learner(
@@ -105,11 +108,10 @@ class Context:
             "eps_explor": self.scale.eps_explor,
             "budget": self.scale.budget if budget is None else budget,
             "seed": seed,
-            "gp": self.gp,
             **METHODS.get(method, {}),
             **overrides,
         }
-        return LearnerConfig(**settings)
+        return replace(self.base, **settings)
 
     def spec(
         self,

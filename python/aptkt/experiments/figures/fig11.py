@@ -318,15 +318,10 @@ def _rate_text(ctx: Context, kept: Sequence[str], lambdas, over_control) -> str:
     if not lams:
         return ""
     config = ctx.learner("APTKT")
-    whose = (
-        "the old objects' own classifiers"
-        if config.relatedness == "binary"
-        else "the old objects' normalised posteriors"
-    )
     text = (
         f"in the settings that kept transferring the transferred priors' λ = p̄ averaged "
-        f"{span(lams, '{:.2f}', '')} (ε_neg = {ctx.scale.eps_neg}): {whose} claimed the new "
-        "objects' observations"
+        f"{span(lams, '{:.2f}', '')} (ε_neg = {ctx.scale.eps_neg}): the old objects' own "
+        "classifiers claimed the new objects' observations"
     )
     if config.cutoff == "evidence":
         text += ", and the new objects' labels favoured the coupling (the evidence cut-off)"

@@ -33,7 +33,7 @@ from aptkt.experiments.tables import curves_rows
 
 NAME = "fig7"
 TITLE = "transfer from 3 prior objects, all actions"
-METHODS = ("baseline", "control", "APTKT", "APTKT-multi")
+METHODS = ("baseline", "control", "APTKT")
 
 
 def plan(ctx: Context) -> Plan:

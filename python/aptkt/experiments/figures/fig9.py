@@ -32,7 +32,7 @@ from aptkt.experiments.tables import curves_rows
 
 NAME = "fig9"
 TITLE = "increasing the number of prior objects; auxiliary features"
-METHODS = ("baseline", "APTKT", "APTKT+aux", "APTKT-multi")
+METHODS = ("baseline", "APTKT", "APTKT+aux")
 
 
 def plan(ctx: Context) -> Plan:
@@ -250,11 +250,9 @@ def _fade_text(
             "; with more old objects there are more candidates, and one of them passes ε_neg "
             "as often or more"
         )
-    if ctx.learner("APTKT").relatedness == "binary":
-        text += (
-            "; p̄ is each old object's own binary probability, which does not have to spread "
-            "over the old objects as they are added, as a probability normalised over them "
-            '(relatedness="normalised") does — the paper explains its fade by the old objects '
-            "becoming harder to tell apart"
-        )
+    text += (
+        "; p̄ is each old object's own binary probability, which does not have to spread over "
+        "the old objects as they are added, as a probability normalised over them does — the "
+        "paper explains its fade by the old objects becoming harder to tell apart"
+    )
     return text

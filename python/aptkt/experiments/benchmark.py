@@ -1,0 +1,265 @@
+"""The real-data benchmark: APTKT against its baseline on any sensor's feature table.
+
+Protocol (the paper's Fig. 7 and Fig. 11 on recorded data): each of ``groups`` draws
+``new_objects`` new objects from the table's objects, and from the others ``prior_objects``
+prior objects three ways — at random, the most similar and the least similar to the new ones
+(:func:`prior_choices`). Each object's trials are split by trial number: the first half builds
+the prior knowledge and is the pool the learners observe, the second half is held out. Every
+learner starts with one observation of each new object per action (step 0) and then chooses
+``budget`` more. Methods: the baseline (nothing of the prior), APTKT, APTKT with auxiliary
+features, the control (the prior's feature space and kernel, no transfer), and at step 0 a
+1-nearest-neighbour rule on the same one-shot observations in the prior's feature space — the
+plainest use of that metric, which the fitted model should at least match. Methods are paired
+by group: the same new objects, the same pool order, the same first observations.
+"""
+
+from __future__ import annotations
+
+import time
+import zlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
+from aptkt.learning.feature_table import FeatureTable
+from aptkt.learning.observations import Observations, ObservationTable
+from aptkt.learning.pipeline import within_object_residuals
+
+__all__ = [
+    "PRIOR_CHOICES",
+    "METHODS",
+    "BenchmarkSettings",
+    "Group",
+    "draw_groups",
+    "prior_choices",
+    "split_trials",
+    "run_group",
+    "nearest_neighbour_accuracy",
+]
+
+#: How the prior objects of a group are chosen.
+PRIOR_CHOICES = ("random", "nearest", "farthest")
+#: The learners compared, by the name the results use.
+METHODS: dict[str, dict[str, Any]] = {
+    "baseline": {"transfer": "none"},
+    "APTKT": {},
+    "APTKT+aux": {"auxiliary": True},
+    "control": {"transfer": "control"},
+}
+#: The reference rule's name in the results.
+NEAREST_NEIGHBOUR = "1-NN"
+
+
+@dataclass(frozen=True)
+class BenchmarkSettings:
+    groups: int = 60
+    new_objects: int = 5
+    prior_objects: int = 3
+    budget: int = 20
+    seed: int = 0
+    choices: tuple[str, ...] = PRIOR_CHOICES
+    actions: tuple[str, ...] | None = None
+    config: LearnerConfig = LearnerConfig()
+
+    def __post_init__(self) -> None:
+        for name in ("groups", "new_objects", "prior_objects"):
+            if getattr(self, name) < (2 if name != "groups" else 1):
+                raise ValueError(f"{name} must be >= {2 if name != 'groups' else 1}")
+        if self.budget < 0:
+            raise ValueError(f"budget must be >= 0, got {self.budget}")
+        unknown = [c for c in self.choices if c not in PRIOR_CHOICES]
+        if unknown or not self.choices:
+            raise ValueError(f"choices must be among {PRIOR_CHOICES}, got {self.choices}")
+
+
+@dataclass(frozen=True)
+class Group:
+    index: int
+    new: tuple[str, ...]
+    priors: dict[str, tuple[str, ...]]
+
+
+def split_trials(table: FeatureTable, actions: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Row masks (learn, test): per action and object, the first half of its rows by trial
+    number (the prior's rows and the learners' pool) and the second half (held out)."""
+    learn = np.zeros(len(table.trials), dtype=bool)
+    for action in actions:
+        for obj in table.object_names:
+            rows = table.rows_of(obj, action)
+            if rows.size < 2:
+                raise ValueError(
+                    f"{table.path}: object {obj} has {rows.size} row(s) of action {action}; "
+                    "the benchmark needs at least 2 (one to learn from, one held out)"
+                )
+            rows = rows[np.argsort(table.trials[rows], kind="stable")]
+            learn[rows[: rows.size // 2]] = True
+    test = np.isin(table.actions, list(actions)) & ~learn
+    return learn, test
+
+
+def object_distances(learn: ObservationTable) -> tuple[list[str], np.ndarray]:
+    """How different every two objects are, independent of any model: the distance between
+    their mean observations with each column divided by its pooled within-object standard
+    deviation (how many noise levels apart), averaged over the actions."""
+    objects = sorted({str(o) for obs in learn.values() for o in obs.objects})
+    total = np.zeros((len(objects), len(objects)))
+    for obs in learn.values():
+        X = np.hstack([obs.modalities[m] for m in obs.modality_names])
+        R, dof = within_object_residuals(X, obs.objects)
+        noise = np.sqrt((R**2).sum(axis=0) / max(dof, 1))
+        noise = np.where(noise > 0, noise, 1.0)
+        means = np.array([X[obs.objects == o].mean(axis=0) for o in objects]) / noise
+        total += np.sqrt(((means[:, None, :] - means[None, :, :]) ** 2).sum(axis=-1))
+    return objects, total / len(learn)
+
+
+def prior_choices(
+    new: Sequence[str],
+    candidates: Sequence[str],
+    k: int,
+    distances: tuple[list[str], np.ndarray],
+    rng: np.random.Generator,
+) -> dict[str, tuple[str, ...]]:
+    """The three ways of choosing ``k`` prior objects among ``candidates``: at random; the
+    ``k`` whose distance to the nearest new object is smallest ("nearest") or largest
+    ("farthest")."""
+    names, d = distances
+    index = {o: i for i, o in enumerate(names)}
+    closeness = {c: min(d[index[c], index[n]] for n in new) for c in candidates}
+    order = sorted(candidates, key=lambda c: (closeness[c], c))
+    random = tuple(str(c) for c in rng.choice(list(candidates), size=k, replace=False))
+    return {"random": random, "nearest": tuple(order[:k]), "farthest": tuple(order[-k:])}
+
+
+def draw_groups(
+    objects: Sequence[str], distances: tuple[list[str], np.ndarray], s: BenchmarkSettings
+) -> list[Group]:
+    if len(objects) < s.new_objects + s.prior_objects:
+        raise ValueError(
+            f"{s.new_objects} new and {s.prior_objects} prior objects need at least "
+            f"{s.new_objects + s.prior_objects} objects; the table has {len(objects)}"
+        )
+    rng = np.random.default_rng(s.seed)
+    groups = []
+    for g in range(s.groups):
+        perm = [str(o) for o in rng.permutation(list(objects))]
+        new, rest = perm[: s.new_objects], perm[s.new_objects :]
+        choices = prior_choices(new, rest, s.prior_objects, distances, rng)
+        groups.append(Group(g, tuple(new), {c: choices[c] for c in s.choices}))
+    return groups
+
+
+def nearest_neighbour_accuracy(
+    prior: PriorKnowledge, first: ObservationTable, test: ObservationTable
+) -> float:
+    """Mean over actions of the test accuracy of 1-nearest-neighbour on the ``first``
+    observations, in the prior's feature space (Euclidean over all its columns)."""
+    accs = []
+    for action, obs in first.items():
+        X = prior[action].pipeline.transform(obs)[0]
+        T = prior[action].pipeline.transform(test[action])[0]
+        d = ((T[:, None, :] - X[None, :, :]) ** 2).sum(axis=-1)
+        accs.append(float(np.mean(obs.objects[d.argmin(axis=1)] == test[action].objects)))
+    return float(np.mean(accs))
+
+
+def _subset(table: ObservationTable, objects: Sequence[str]) -> dict[str, Observations]:
+    return {a: obs.of_objects(objects) for a, obs in table.items()}
+
+
+def run_group(
+    group: Group,
+    learn: ObservationTable,
+    test: ObservationTable,
+    s: BenchmarkSettings,
+    on_run: Callable[[], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Every method's learning curve for one group: one row per (prior choice, method, step).
+    The baseline uses no prior, so it runs once and serves every choice."""
+    actions = list(learn)
+    new = list(group.new)
+    pool = _subset(learn, new)
+    held = _subset(test, new)
+    seed = s.seed * 1_000_003 + group.index
+    rows: list[dict[str, Any]] = []
+
+    def run(cfg: LearnerConfig, prior: PriorKnowledge | None) -> tuple[list[float], APTKT]:
+        learner = APTKT(replace(cfg, budget=s.budget, seed=seed), prior)
+        result = learner.run(PoolEnvironment(pool, seed=seed), actions, new, test=held)
+        if on_run is not None:
+            on_run()
+        return [step.mean_accuracy for step in result.steps], learner
+
+    base_cfg = replace(s.config, **METHODS["baseline"])
+    baseline, base_learner = run(base_cfg, None)
+    # The initial round's observations: the first row of each new object in every action.
+    first = {
+        a: lrn.observations.take(np.arange(len(new)))
+        for a, lrn in base_learner.learners.items()
+        if lrn.observations is not None
+    }
+    for choice, priors in group.priors.items():
+        prior = PriorKnowledge.build(
+            _subset(learn, priors), gp=s.config.gp, seed=seed + zlib.crc32(choice.encode())
+        )
+        curves = {"baseline": baseline}
+        transfers: dict[str, list[int]] = {}
+        for name, overrides in METHODS.items():
+            if name == "baseline":
+                continue
+            curve, learner = run(replace(s.config, **overrides), prior)
+            curves[name] = curve
+            transfers[name] = [
+                sum(bool(d.sources) for d in lrn.decisions.values())
+                for lrn in learner.learners.values()
+            ]
+        nn = nearest_neighbour_accuracy(prior, first, held)
+        tags = {
+            "group": group.index,
+            "priors": choice,
+            "new_objects": ",".join(new),
+            "prior_objects": ",".join(priors),
+        }
+        for name, curve in curves.items():
+            rows += [
+                {**tags, "method": name, "step": k, "accuracy": v} for k, v in enumerate(curve)
+            ]
+        rows.append({**tags, "method": NEAREST_NEIGHBOUR, "step": 0, "accuracy": nn})
+    return rows
+
+
+def benchmark(
+    table: FeatureTable,
+    s: BenchmarkSettings,
+    *,
+    parallel_map: Callable[[Callable[[Any], Any], Sequence[Any]], Any] | None = None,
+    on_group: Callable[[int], None] | None = None,
+) -> tuple[list[dict[str, Any]], float]:
+    """Every group's rows (see :func:`run_group`) and the seconds it took."""
+    t0 = time.perf_counter()
+    actions = list(s.actions) if s.actions else table.action_names
+    learn_rows, test_rows = split_trials(table, actions)
+    learn = table.observations(actions, learn_rows)
+    test = table.observations(actions, test_rows)
+    distances = object_distances(learn)
+    groups = draw_groups(table.object_names, distances, s)
+    tasks = [(g, learn, test, s) for g in groups]
+    rows: list[dict[str, Any]] = []
+    results = (
+        ((i, _task(t)) for i, t in enumerate(tasks))
+        if parallel_map is None
+        else parallel_map(_task, tasks)
+    )
+    for i, r in results:
+        rows += r
+        if on_group is not None:
+            on_group(i)
+    rows.sort(key=lambda r: (r["group"], r["priors"], r["method"], r["step"]))
+    return rows, time.perf_counter() - t0
+
+
+def _task(task: tuple[Group, ObservationTable, ObservationTable, BenchmarkSettings]):
+    return run_group(*task)
