@@ -96,6 +96,7 @@ class FitSettings:
     prior_length_scale: tuple[float, float] | None
     prior_weight_logit: float | None
     latent_mean: str
+    tie_length_scales: bool
     def __init__(
         self,
         *,
@@ -123,6 +124,7 @@ class FitSettings:
         prior_length_scale: tuple[float, float] | None = None,
         prior_weight_logit: float | None = None,
         latent_mean: str = "zero",
+        tie_length_scales: bool = False,
     ) -> None: ...
 
 def fit_gpc(

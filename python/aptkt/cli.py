@@ -24,6 +24,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "aptkt.commands.collect",
     "aptkt.commands.learn",
     "aptkt.commands.reproduce",
+    "aptkt.commands.benchmark",
 )
 
 

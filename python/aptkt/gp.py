@@ -69,6 +69,7 @@ class FitDefaults:
     class_prior: str = "training"
     latent_mean: str = "zero"
     kernel: str = "per-classifier"
+    tie_length_scales: bool = False
 
 
 DEFAULTS = FitDefaults()
@@ -79,7 +80,7 @@ KERNELS = ("per-classifier", "shared")
 LATENT_MEANS = ("zero", "base-rate")
 
 #: Parameters a saved model leaves out at their default (added after the format was fixed).
-_OMITTED_AT_DEFAULT = ("class_prior", "latent_mean", "optimizer_tol", "kernel")
+_OMITTED_AT_DEFAULT = ("class_prior", "latent_mean", "optimizer_tol", "kernel", "tie_length_scales")
 _FIXABLE = ("signal_variance", "length_scale", "modality_weights", "transfer_lambda")
 _APPROXIMATIONS = ("erf", "quadrature")
 _SAVE_FORMAT = "aptkt.LaplaceGPC/2"
@@ -547,6 +548,11 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         latent function and its sources' fixed λ (``fixed`` must include "transfer_lambda").
         ``fit(..., kernel_tasks=...)`` adds other labelled data sets whose classifiers share the
         kernel (and implies "shared").
+    tie_length_scales : bool
+        With the shared kernel: one length-scale for every modality (default False) — for
+        features measured in one unit in every modality (e.g. the noise-whitened space of
+        :mod:`aptkt.learning`), where how far apart two observations may lie and still be alike
+        is one number. Not with the per-classifier kernel.
 
     Attributes
     ----------
@@ -601,6 +607,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         class_prior: str = DEFAULTS.class_prior,
         latent_mean: str = DEFAULTS.latent_mean,
         kernel: str = DEFAULTS.kernel,
+        tie_length_scales: bool = False,
     ) -> None:
         self.length_scale = length_scale
         self.signal_variance = signal_variance
@@ -623,6 +630,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         self.class_prior = class_prior
         self.latent_mean = latent_mean
         self.kernel = kernel
+        self.tie_length_scales = tie_length_scales
 
     # -- scikit-learn conventions -------------------------------------------------------------
     # get_params / set_params / repr / score come from BaseEstimator and ClassifierMixin.
@@ -732,6 +740,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             approximation=self.approximation,
             n_threads=_threads(self.n_jobs),
             latent_mean=self.latent_mean,
+            tie_length_scales=bool(self.tie_length_scales),
             **(spec["hyper_prior"].settings() if spec["hyper_prior"] is not None else {}),
         )
 
@@ -812,6 +821,8 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             )
         if shared and starts is not None:
             raise ValueError('hyperparameters (starts) work with kernel="per-classifier" only')
+        if self.tie_length_scales and thetas is None and not shared:
+            raise ValueError('tie_length_scales needs kernel="shared"')
         if shared:
             tasks = [(X, labels.astype(np.int64), int(classes.size), source_lists)]
             tasks += self._kernel_tasks(kernel_tasks or (), X.shape[1])

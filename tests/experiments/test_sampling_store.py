@@ -112,7 +112,6 @@ def test_every_learner_and_gp_setting_is_part_of_the_keys():
     base = run_key(spec, "fp")
     gp_changes = {
         "kernel": "per-classifier",
-        "modality_weights": "fitted",
         "prior_feature_scale": "spread",
         "hyper_prior": None,
         "n_restarts": 1,

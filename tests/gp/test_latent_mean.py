@@ -155,5 +155,3 @@ def test_save_round_trip_keeps_the_mean_and_the_default_is_left_out(tmp_path):
     assert "latent_mean" not in meta["params"]
     meta = json.loads(bytes(model.state()["meta"]).decode())
     assert meta["params"]["latent_mean"] == "base-rate"
-
-

@@ -175,7 +175,7 @@ def test_live_options_are_not_mixed_up(capsys):
 
 def test_method_choices_reach_every_method_and_the_prior(tmp_path, capsys):
     """--reading paper picks the paper's whole reading; --cutoff and --evidence-margin set
-    APTKT's and APTKT+aux's learner, --kernel, --modality-weights and --prior-feature-scale the
+    APTKT's and APTKT+aux's learner, --kernel and --prior-feature-scale the
     GP settings of every model, the prior's too; a mistake is one line."""
     table = _world_table(n_per=4)
     path = write_feature_table(tmp_path / "t.csv", table)

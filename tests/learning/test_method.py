@@ -81,11 +81,7 @@ def test_config_validates_round_trips_and_names_the_papers_reading():
     paper = LearnerConfig.paper(budget=5)
     assert paper.cutoff == "paper" and paper.budget == 5
     assert paper.gp == GPSettings(
-        n_restarts=1,
-        hyper_prior=None,
-        kernel="per-classifier",
-        modality_weights="fitted",
-        prior_feature_scale="spread",
+        n_restarts=1, hyper_prior=None, kernel="per-classifier", prior_feature_scale="spread"
     )
     for field, bad in (
         ("transfer", "multi"),
@@ -94,7 +90,7 @@ def test_config_validates_round_trips_and_names_the_papers_reading():
     ):
         with pytest.raises(ValueError, match=field):
             LearnerConfig(**{field: bad})
-    for field, bad in (("kernel", "joint"), ("modality_weights", "learned")):
+    for field, bad in (("kernel", "joint"), ("prior_feature_scale", "noise")):
         with pytest.raises(ValueError, match=field):
             GPSettings(**{field: bad})
     with pytest.raises(ValueError, match="forced_lambda"):
@@ -210,15 +206,19 @@ def test_control_learns_one_kernel_from_the_old_and_new_observations(world):
         assert not lrn.decisions and not lrn.model.sources_
         thetas = lrn.model.theta_
         assert np.all(thetas == thetas[0])
+        lengths = lrn.model.length_scales_[0]
+        assert np.allclose(lengths, lengths[0])  # one length-scale in noise units
+        assert np.allclose(lrn.model.modality_weights_[0], 1 / len(lengths))
         X, groups = prior.pipeline.transform(lrn.observations)
         X_old = prior.pipeline.transform(prior.observations)[0]
         again = LaplaceGPC(
             modalities=groups,
             n_restarts=0,
             optimizer_tol=1e-6,
-            hyper_prior=GPSettings().hyper_prior_for_fit(),
+            hyper_prior=GPSettings().hyper_prior_for_fit(shared=True),
             fixed=("transfer_lambda", "modality_weights"),
             kernel="shared",
+            tie_length_scales=True,
             random_state=lrn.model.random_state,
         ).fit(X, lrn.observations.objects, kernel_tasks=[(X_old, prior.observations.objects)])
         np.testing.assert_allclose(thetas, again.theta_, rtol=1e-9, atol=1e-12)
@@ -227,9 +227,10 @@ def test_control_learns_one_kernel_from_the_old_and_new_observations(world):
             modalities=groups,
             n_restarts=0,
             optimizer_tol=1e-6,
-            hyper_prior=GPSettings().hyper_prior_for_fit(),
+            hyper_prior=GPSettings().hyper_prior_for_fit(shared=True),
             fixed=("transfer_lambda", "modality_weights"),
             kernel="shared",
+            tie_length_scales=True,
         ).fit(X, lrn.observations.objects)
         assert not np.allclose(alone.theta_[0], thetas[0], atol=1e-3)
     assert all(not s.transfer or not any(s.transfer.values()) for s in run.steps)

@@ -9,7 +9,7 @@ import argparse
 from dataclasses import replace
 from typing import Any
 
-from aptkt.learning.config import KERNELS, MODALITY_WEIGHTS, READINGS, GPSettings, LearnerConfig
+from aptkt.learning.config import KERNELS, READINGS, GPSettings, LearnerConfig
 from aptkt.learning.pipeline import FEATURE_SCALES
 from aptkt.learning.transfer import CUTOFFS
 
@@ -47,13 +47,9 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--kernel",
         choices=KERNELS,
-        help="shared: one kernel per action, learned on the old and new objects' observations "
-        "together; per-classifier: each classifier its own",
-    )
-    g.add_argument(
-        "--modality-weights",
-        choices=MODALITY_WEIGHTS,
-        help="the weights of Eq. 1: equal, or fitted with the other hyper-parameters",
+        help="shared: one kernel per action (sigma^2 and one length-scale in noise units), "
+        "learned on the old and new objects' observations together; per-classifier: each "
+        "classifier its own (a length-scale per modality and the weights of Eq. 1)",
     )
     g.add_argument(
         "--prior-feature-scale",
@@ -71,7 +67,6 @@ def gp_settings(args: argparse.Namespace, **fixed: Any) -> GPSettings:
         name: value
         for name, value in (
             ("kernel", args.kernel),
-            ("modality_weights", args.modality_weights),
             ("prior_feature_scale", args.prior_feature_scale),
         )
         if value is not None

@@ -132,6 +132,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     im.add_argument(
         "--materials", metavar="A,B,...", help="only these materials (default: every one found)"
     )
+    im.add_argument(
+        "--modalities",
+        metavar="A,B,...",
+        help="only these modalities (biotac-slide: vibration, pressure, temperature, electrodes; "
+        "default: all)",
+    )
     im.add_argument("--force", action="store_true", help="replace an existing TABLE")
     im.add_argument("--no-progress", action="store_true", help="no progress bar")
     im.set_defaults(func=run_import)
@@ -334,6 +340,7 @@ def run_import(args: argparse.Namespace) -> int:
         observations = import_biotac_slide(
             args.directory,
             materials=materials,
+            modalities=split_names(args.modalities, "--modalities"),
             on_trial=None if bar is None else (lambda _trial: bar.update(1)),
         )
     finally:

@@ -123,7 +123,7 @@ def _command(args: argparse.Namespace) -> str:
     parts.append(f"--seed {args.seed}")
     if args.reading != "aptkt":
         parts.append(f"--reading {args.reading}")
-    for option in ("cutoff", "evidence_margin", "kernel", "modality_weights"):
+    for option in ("cutoff", "evidence_margin", "kernel"):
         value = getattr(args, option)
         if value is not None:
             parts.append(f"--{option.replace('_', '-')} {value}")

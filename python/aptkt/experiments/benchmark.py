@@ -15,10 +15,12 @@ by group: the same new objects, the same pool order, the same first observations
 
 from __future__ import annotations
 
+import json
 import time
 import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -38,6 +40,7 @@ __all__ = [
     "split_trials",
     "run_group",
     "nearest_neighbour_accuracy",
+    "run_benchmark",
 ]
 
 #: How the prior objects of a group are chosen.
@@ -263,3 +266,83 @@ def benchmark(
 
 def _task(task: tuple[Group, ObservationTable, ObservationTable, BenchmarkSettings]):
     return run_group(*task)
+
+
+def run_benchmark(
+    table: FeatureTable,
+    s: BenchmarkSettings,
+    *,
+    output: Path,
+    jobs: int = 1,
+    command: str = "",
+    progress: bool = False,
+    say: Callable[[str], None] = print,
+) -> dict[str, Any]:
+    """Run the benchmark and write its files to ``output``: results.csv (every group's curves),
+    summary.json (settings, mean curves, paired gains, checks), report.md and benchmark.png/.svg.
+    Returns the summary."""
+    from aptkt import __version__
+    from aptkt.experiments import benchmark_report as br
+    from aptkt.experiments.executors import LocalExecutor
+    from aptkt.experiments.plots import save_figure
+    from aptkt.experiments.tables import write_csv
+
+    actions = list(s.actions) if s.actions else table.action_names
+    say(
+        f"{table.path}: {len(table.object_names)} objects, action(s) {', '.join(actions)}; "
+        f"{s.groups} groups of {s.new_objects} new objects with {s.prior_objects} priors "
+        f"({', '.join(s.choices)}), budget {s.budget}, on {jobs} process(es)"
+    )
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=s.groups, unit="group", desc="benchmark", leave=False)
+    executor = LocalExecutor(jobs)
+    try:
+        rows, seconds = benchmark(
+            table,
+            s,
+            parallel_map=executor.imap_unordered if jobs > 1 else None,
+            on_group=None if bar is None else (lambda _i: bar.update(1)),
+        )
+    finally:
+        executor.close()
+        if bar is not None:
+            bar.close()
+    output.mkdir(parents=True, exist_ok=True)
+    write_csv(output / "results.csv", rows)
+    c = br.curves(rows)
+    found = br.checks(c)
+    head = {
+        "table": str(table.path),
+        "command": command,
+        "software_version": __version__,
+        "seconds": seconds,
+        "jobs": jobs,
+        "date": time.strftime("%Y-%m-%d"),
+        "objects": len(table.object_names),
+        "actions": actions,
+        "groups": s.groups,
+        "new": s.new_objects,
+        "priors": s.prior_objects,
+        "budget": s.budget,
+    }
+    chance = 1.0 / s.new_objects
+    save_figure(br.plot(c, chance), output / "benchmark")
+    summary = {
+        **head,
+        "learner": s.config.to_dict(),
+        "choices": list(s.choices),
+        "results": br.summary(c),
+        "checks": [{"claim": k.claim, "measured": k.measured, "holds": k.holds} for k in found],
+    }
+    (output / "summary.json").write_text(json.dumps(summary, indent=1))
+    (output / "report.md").write_text(br.report_markdown(c, head, found))
+    for k in found:
+        say(f"  {'holds' if k.holds else 'FAILS'}: {k.claim} — {k.measured}")
+    say(
+        f"done in {seconds:.0f} s: {output / 'report.md'}, {output / 'benchmark.png'}, "
+        f"{output / 'results.csv'}"
+    )
+    return summary

@@ -185,10 +185,19 @@ def import_biotac_slide(
     directory: str | Path,
     *,
     materials: Iterable[str] | None = None,
+    modalities: Iterable[str] | None = None,
     on_trial: Callable[[TrialFile], None] | None = None,
 ) -> Observations:
     """Every trial below ``directory`` (or of the given ``materials``) as observations of the
-    action ``slide``: objects ``matX``, trials ``N``."""
+    action ``slide``: objects ``matX``, trials ``N``; every modality of :data:`MODALITIES`, or
+    the given ones."""
+    chosen = list(MODALITIES) if modalities is None else list(dict.fromkeys(modalities))
+    unknown_modalities = [m for m in chosen if m not in MODALITIES]
+    if unknown_modalities or not chosen:
+        raise RawDataError(
+            f"unknown modalities {', '.join(unknown_modalities) or '(none given)'}; the BioTac "
+            f"sliding set has {', '.join(MODALITIES)}"
+        )
     trials = find_trials(directory)
     if materials is not None:
         wanted = list(dict.fromkeys(materials))
@@ -200,7 +209,7 @@ def import_biotac_slide(
                 f"{', '.join(sorted(known, key=lambda m: int(m[3:])))}"
             )
         trials = [t for t in trials if t.material in set(wanted)]
-    rows: dict[str, list[np.ndarray]] = {m: [] for m in MODALITIES}
+    rows: dict[str, list[np.ndarray]] = {m: [] for m in chosen}
     for trial in trials:
         try:
             features = trial_features(read_trial(trial.path))
@@ -209,7 +218,7 @@ def import_biotac_slide(
             raise RawDataError(
                 message if str(trial.path) in message else f"{trial.path}: {message}"
             ) from None
-        for m in MODALITIES:
+        for m in chosen:
             rows[m].append(features[m])
         if on_trial is not None:
             on_trial(trial)

@@ -17,7 +17,6 @@ __all__ = [
     "GPSettings",
     "KERNELS",
     "LearnerConfig",
-    "MODALITY_WEIGHTS",
     "READINGS",
     "recognisable_signal_variance",
 ]
@@ -26,8 +25,6 @@ __all__ = [
 #: new objects' observations together wherever the model lives in the prior's feature space;
 #: "per-classifier": each classifier fits its own on its own labels (the paper's reading).
 KERNELS = ("shared", "per-classifier")
-#: The modality weights γ of Eq. 1: "equal", or "fitted" with the other hyper-parameters.
-MODALITY_WEIGHTS = ("equal", "fitted")
 #: The method as this package implements it by default, or the paper's exact reading.
 READINGS = ("aptkt", "paper")
 
@@ -52,21 +49,20 @@ class GPSettings:
     """How the observation models (one-vs-all Laplace GPCs) are fitted.
 
     kernel : "shared" (default): where the new objects' model lives in the prior's feature space
-        (APTKT and the control), one kernel — σ², a length-scale per modality, the weights —
-        serves every one-vs-all classifier of the action and is chosen on the old and the new
-        objects' observations together (the sum of every classifier's Laplace evidence, the
-        old model's classifiers included). A kernel describes how one sensor's observations of
-        one action vary; the old objects, observed many times each, determine it where a
-        handful of new observations cannot, and as the new ones accumulate they weigh in. The
-        prior's own model uses the same shared kernel. Without prior observations (the
-        baseline) each classifier fits its own, as in the paper. "per-classifier": always
-        each classifier its own (the paper's reading).
-    modality_weights : "equal" (default): the weights γ of Eq. 1 stay equal. In the prior's
-        whitened space every modality is measured in noise units, and its length-scale already
-        sets how much its differences count; the weights that the old objects' evidence
-        chooses describe which modality separates *those* objects, and carried over they cost
-        2.6 pp at one shot on real data (docs/method.md). "fitted": chosen with the other
-        hyper-parameters (Eq. 1), under a weak prior centred on equal weights.
+        (APTKT and the control), one kernel serves every one-vs-all classifier of the action,
+        the old model's included, and is chosen on the old and the new objects' observations
+        together (the sum of every classifier's Laplace evidence). In that space every modality
+        is measured in the sensor's noise, so the kernel has two hyper-parameters: σ² and one
+        length-scale for all modalities, with equal weights. A kernel describes how one
+        sensor's observations of one action vary: the old objects, observed many times each,
+        determine it where a handful of new observations cannot, and as the new ones accumulate
+        they weigh in. Which modality separates objects is a property of the objects, not of
+        the sensor, so it is not carried over from the old ones (measured: per-modality
+        length-scales or fitted weights chosen on three old objects cost 1.6–3.4 pp at one
+        shot on real data; docs/method.md). "per-classifier": each classifier fits its own —
+        σ², a length-scale per modality and the weights γ of Eq. 1 — on its own labels (the
+        paper's reading). The baseline, which has no prior observations to share a kernel
+        with, always fits per classifier.
     hyper_prior : "weak" (default): MAP-II, the evidence times weak log-normal hyper-priors —
         length-scales centred on the data's scale, σ² centred on
         :func:`recognisable_signal_variance` (one isolated observation recognised with
@@ -97,31 +93,22 @@ class GPSettings:
     n_jobs: int | None = DEFAULTS.n_jobs
     hyper_prior: str | None = "weak"
     kernel: str = "shared"
-    modality_weights: str = "equal"
     prior_feature_scale: str = "whiten"
 
     def __post_init__(self) -> None:
         if self.hyper_prior not in ("weak", None):
             raise ValueError(f"hyper_prior must be 'weak' or None, got {self.hyper_prior!r}")
-        for name, allowed in (
-            ("kernel", KERNELS),
-            ("modality_weights", MODALITY_WEIGHTS),
-            ("prior_feature_scale", FEATURE_SCALES),
-        ):
+        for name, allowed in (("kernel", KERNELS), ("prior_feature_scale", FEATURE_SCALES)):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"{name} must be one of {allowed}, got {getattr(self, name)!r}")
         check_optimizer_tol(self.optimizer_tol)
 
     @classmethod
     def paper(cls, **changes: Any) -> GPSettings:
-        """The paper's reading: per-classifier ML-II with fitted weights (one random restart
-        against ML-II's flat optima) in a feature space z-scored by the old objects' spread."""
+        """The paper's reading: per-classifier ML-II (one random restart against ML-II's flat
+        optima) in a feature space z-scored by the old objects' spread."""
         base = cls(
-            n_restarts=1,
-            hyper_prior=None,
-            kernel="per-classifier",
-            modality_weights="fitted",
-            prior_feature_scale="spread",
+            n_restarts=1, hyper_prior=None, kernel="per-classifier", prior_feature_scale="spread"
         )
         return replace(base, **changes)
 
@@ -138,25 +125,23 @@ class GPSettings:
             )
         return cls(**data)
 
-    def hyper_prior_for_fit(self) -> HyperPrior | None:
-        """The estimator's hyper-prior for these settings."""
+    def hyper_prior_for_fit(self, shared: bool = False) -> HyperPrior | None:
+        """The estimator's hyper-prior for these settings (the weights' prior only where they
+        are fitted, i.e. not in the shared kernel)."""
         if self.hyper_prior is None:
             return None
+        weak = HyperPrior.weak()
         return replace(
-            HyperPrior.weak(),
+            weak,
             signal_variance_centre=recognisable_signal_variance(),
-            modality_weight_sd=HyperPrior.weak().modality_weight_sd
-            if self.modality_weights == "fitted"
-            else None,
+            modality_weight_sd=None if shared else weak.modality_weight_sd,
         )
 
     def make(
         self, modalities: Mapping[str, list[int]], random_state: int, *, shared: bool = False
     ) -> LaplaceGPC:
-        """An unfitted model; ``shared``: one kernel for its classifiers (and its kernel tasks)."""
-        fixed: tuple[str, ...] = ("transfer_lambda",)
-        if self.modality_weights == "equal":
-            fixed += ("modality_weights",)
+        """An unfitted model; ``shared``: the shared kernel (equal weights, one length-scale),
+        for its classifiers and its kernel tasks."""
         return LaplaceGPC(
             length_scale=self.length_scale,
             signal_variance=self.signal_variance,
@@ -167,9 +152,10 @@ class GPSettings:
             approximation=self.approximation,
             random_state=random_state,
             n_jobs=self.n_jobs,
-            hyper_prior=self.hyper_prior_for_fit(),
-            fixed=fixed,
+            hyper_prior=self.hyper_prior_for_fit(shared),
+            fixed=("transfer_lambda", "modality_weights") if shared else ("transfer_lambda",),
             kernel="shared" if shared else "per-classifier",
+            tie_length_scales=shared,
         )
 
 

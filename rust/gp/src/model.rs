@@ -127,6 +127,10 @@ pub struct ModelSpec {
     /// None: plain ML-II.
     pub hyper_prior: Option<HyperPrior>,
     pub latent_mean: LatentMean,
+    /// One length-scale for every modality (the shared kernel of [`crate::fit_shared`] only):
+    /// in a space where a unit means the same in every modality, how far apart two
+    /// observations may lie and still be alike is one number.
+    pub tie_length_scales: bool,
 }
 
 impl ModelSpec {
@@ -149,6 +153,7 @@ impl ModelSpec {
             predictive: Predictive::ErfMixture,
             hyper_prior: None,
             latent_mean: LatentMean::Zero,
+            tie_length_scales: false,
         }
     }
 
@@ -960,6 +965,11 @@ fn fit_impl(
 ) -> GpResult<OneVsAll> {
     spec.validate()?;
     check_task(x, labels, n_classes, sources)?;
+    if spec.tie_length_scales && spec.optimize && matches!(hypers, Hypers::Optimise(_)) {
+        return Err(GpError::InvalidInput(
+            "tied length-scales are fitted with the shared kernel only".into(),
+        ));
+    }
     let layout = layout_for(spec, sources);
     let center = column_means(x);
     let positives = classifier_classes(n_classes, &layout);

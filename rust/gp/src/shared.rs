@@ -211,7 +211,7 @@ impl Search<'_> {
                 .map(|_| (Workspace::default(), None))
                 .collect();
             let mut error = None;
-            let objective = |t: &[f64]| -> Option<(f64, Vec<f64>)> {
+            let mut objective = |t: &[f64]| -> Option<(f64, Vec<f64>)> {
                 if spec.newton.cancelled() {
                     error = Some(GpError::Cancelled);
                     return None;
@@ -252,7 +252,22 @@ impl Search<'_> {
                 grad.iter_mut().zip(gp).for_each(|(a, b)| *a += b);
                 Some((-value, grad.into_iter().map(|v| -v).collect()))
             };
-            let result = minimize(objective, &t0, lo, hi, free, &spec.lbfgs);
+            let tie = Tie::new(spec.tie_length_scales, m);
+            let (z0, z_lo, z_hi, z_free) = (
+                tie.reduce(&t0),
+                tie.reduce(lo),
+                tie.reduce(hi),
+                tie.reduce_free(free),
+            );
+            let mut reduced = |z: &[f64]| -> Option<(f64, Vec<f64>)> {
+                let (value, grad) = objective(&tie.expand(z))?;
+                Some((value, tie.contract(&grad)))
+            };
+            let result =
+                minimize(&mut reduced, &z0, &z_lo, &z_hi, &z_free, &spec.lbfgs).map(|mut r| {
+                    r.x = tie.expand(&r.x);
+                    r
+                });
             if spec.newton.cancelled() {
                 return Err(GpError::Cancelled);
             }
@@ -270,6 +285,58 @@ impl Search<'_> {
                 GpError::InvalidInput("no optimiser start could be evaluated".into())
             })
         })
+    }
+}
+
+/// The map between theta's shared entries and the variables the optimiser moves: the same
+/// entries, or with tied length-scales one length-scale for every modality (its log the mean
+/// of theirs at the start; its gradient the sum of theirs).
+struct Tie {
+    on: bool,
+    m: usize,
+}
+
+impl Tie {
+    fn new(on: bool, m: usize) -> Self {
+        Tie { on: on && m > 1, m }
+    }
+
+    fn reduce(&self, t: &[f64]) -> Vec<f64> {
+        if !self.on {
+            return t.to_vec();
+        }
+        let mean = t[1..1 + self.m].iter().sum::<f64>() / self.m as f64;
+        let mut z = vec![t[0], mean];
+        z.extend_from_slice(&t[1 + self.m..]);
+        z
+    }
+
+    fn reduce_free(&self, free: &[bool]) -> Vec<bool> {
+        if !self.on {
+            return free.to_vec();
+        }
+        let mut z = vec![free[0], free[1..1 + self.m].iter().any(|&f| f)];
+        z.extend_from_slice(&free[1 + self.m..]);
+        z
+    }
+
+    fn expand(&self, z: &[f64]) -> Vec<f64> {
+        if !self.on {
+            return z.to_vec();
+        }
+        let mut t = vec![z[0]];
+        t.extend(std::iter::repeat_n(z[1], self.m));
+        t.extend_from_slice(&z[2..]);
+        t
+    }
+
+    fn contract(&self, g: &[f64]) -> Vec<f64> {
+        if !self.on {
+            return g.to_vec();
+        }
+        let mut z = vec![g[0], g[1..1 + self.m].iter().sum()];
+        z.extend_from_slice(&g[1 + self.m..]);
+        z
     }
 }
 
@@ -424,6 +491,36 @@ mod tests {
             dist(a, b) < 0.25 * dist(c, b),
             "large {a:?}, joint {b:?}, tiny {c:?}"
         );
+    }
+
+    #[test]
+    fn tied_length_scales_are_one_length_scale_at_a_stationary_point() {
+        let (x, y) = blobs(6, &[[0.0, 0.0], [2.0, 1.0], [0.0, 2.5]], 0.7, 9);
+        let mut spec = spec(Modalities::new(vec![vec![0], vec![1]], 2).unwrap());
+        spec.tie_length_scales = true;
+        spec.free.weights = false;
+        let sources = no_sources(3);
+        let task = KernelTask {
+            x: &x,
+            labels: &y,
+            n_classes: 3,
+            sources: &sources,
+        };
+        let model = fit_shared(&[task], 0, &spec).unwrap();
+        let theta = model.classifiers[0].theta.clone();
+        assert_eq!(theta[1], theta[2], "{theta:?}");
+        // Along the tied direction (both length-scales together) and σ² the summed gradient
+        // vanishes; each length-scale alone need not.
+        let rows = vec![theta.clone(); model.classifiers.len()];
+        let mut total = vec![0.0; theta.len()];
+        for (_, g) in model.log_marginal_likelihood(&rows, true, false).unwrap() {
+            total.iter_mut().zip(g.unwrap()).for_each(|(a, b)| *a += b);
+        }
+        assert!(total[0].abs() < 1e-3, "{total:?}");
+        assert!((total[1] + total[2]).abs() < 1e-3, "{total:?}");
+        // A per-classifier fit cannot tie them.
+        let sources2 = no_sources(3);
+        assert!(crate::model::fit(&x, &y, 3, &sources2, &spec).is_err());
     }
 
     #[test]

@@ -205,6 +205,8 @@ pub struct FitSettings {
     /// The latent function's constant prior mean: "zero" or "base-rate" (the log-odds of each
     /// classifier's Jeffreys-smoothed share of positive labels).
     latent_mean: String,
+    /// One length-scale for every modality (the shared kernel only).
+    tie_length_scales: bool,
 }
 
 #[pymethods]
@@ -218,7 +220,8 @@ impl FitSettings {
         free_length_scales, free_weights, free_lambda, signal_variance_bounds,
         length_scale_bounds, optimize, n_restarts, seed, max_iter, optimizer_tol, newton_max_iter,
         newton_tol, max_jitter, approximation, n_threads, prior_signal_variance = None,
-        prior_length_scale = None, prior_weight_logit = None, latent_mean = "zero".to_string()
+        prior_length_scale = None, prior_weight_logit = None, latent_mean = "zero".to_string(),
+        tie_length_scales = false
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -246,6 +249,7 @@ impl FitSettings {
         prior_length_scale: Option<(f64, f64)>,
         prior_weight_logit: Option<f64>,
         latent_mean: String,
+        tie_length_scales: bool,
     ) -> Self {
         FitSettings {
             modalities,
@@ -272,6 +276,7 @@ impl FitSettings {
             prior_length_scale,
             prior_weight_logit,
             latent_mean,
+            tie_length_scales,
         }
     }
 
@@ -284,7 +289,7 @@ impl FitSettings {
              optimize={}, n_restarts={}, seed={}, max_iter={}, optimizer_tol={:?}, \
              newton_max_iter={}, newton_tol={:?}, max_jitter={:?}, approximation={:?}, n_threads={}, \
              prior_signal_variance={}, prior_length_scale={}, prior_weight_logit={}, \
-             latent_mean={:?})",
+             latent_mean={:?}, tie_length_scales={})",
             self.modalities,
             self.signal_variance,
             self.length_scales,
@@ -309,7 +314,8 @@ impl FitSettings {
             py_pair(self.prior_length_scale),
             self.prior_weight_logit
                 .map_or_else(|| "None".to_string(), |sd| format!("{sd:?}")),
-            self.latent_mean
+            self.latent_mean,
+            b(self.tie_length_scales)
         )
     }
 }
@@ -347,6 +353,7 @@ impl FitSettings {
         spec.max_jitter = self.max_jitter;
         spec.predictive = parse_predictive(&self.approximation)?;
         spec.latent_mean = parse_latent_mean(&self.latent_mean)?;
+        spec.tie_length_scales = self.tie_length_scales;
         if self.prior_signal_variance.is_some()
             || self.prior_length_scale.is_some()
             || self.prior_weight_logit.is_some()
