@@ -24,6 +24,7 @@ __all__ = [
     "ConfigError",
     "FeatureTableError",
     "PriorFileError",
+    "DatasetError",
     "Terminated",
     "WorkerDiedError",
     "NotFittedError",
@@ -42,6 +43,11 @@ class FeatureTableError(ConfigError):
 class PriorFileError(AptktError, ValueError):
     """A prior-knowledge file is not one, is damaged, or is inconsistent; the message names the
     file and the member."""
+
+
+class DatasetError(AptktError):
+    """A data set file is missing, not an aptkt data set, of another schema version, or
+    cannot be written (e.g. a writer died: run ``aptkt dataset repair``)."""
 
 
 class Terminated(KeyboardInterrupt):

@@ -214,7 +214,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _load_test(path: str, actions: list[str], objects: list[str]):  # -> ObservationTable
-    from aptkt.data.store import DatasetError
+    from aptkt.errors import DatasetError
     from aptkt.learning.dataset import load_observations
 
     try:
