@@ -39,7 +39,7 @@ class TableSettings:
     test_fraction: float = 0.5
     output: Path = Path("aptkt-learn")
     runs: int = 3
-    budget: int = 40
+    budget: int = LearnerConfig.budget
     eps_neg: float = LearnerConfig.eps_neg
     eps_explor: float = LearnerConfig.eps_explor
     patience: int | None = None
