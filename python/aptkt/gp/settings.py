@@ -115,19 +115,19 @@ class HyperPrior:
             f"hyper_prior must be None, 'weak' or a HyperPrior, got {type(value).__name__}"
         )
 
-    def settings(self) -> dict[str, tuple[float, float] | float | None]:
-        """The binding's fields."""
-        return {
-            "prior_signal_variance": None
+    def core(self) -> _core.HyperPriors:
+        """The priors as the compiled core takes them."""
+        return _core.HyperPriors(
+            signal_variance=None
             if self.signal_variance_sd is None
             else (float(self.signal_variance_centre), float(self.signal_variance_sd)),
-            "prior_length_scale": None
+            length_scale=None
             if self.length_scale_sd is None
             else (float(self.length_scale_centre), float(self.length_scale_sd)),
-            "prior_weight_logit": None
+            weight_logit=None
             if self.modality_weight_sd is None
             else float(self.modality_weight_sd),
-        }
+        )
 
 
 def check_optimizer_tol(value: Any) -> None:
@@ -207,29 +207,38 @@ def fit_spec(est: Any, n_features: int) -> dict[str, Any]:
 
 
 def core_settings(est: Any, spec: dict[str, Any]) -> _core.FitSettings:
-    """The binding's named settings object for this estimator's parameters."""
+    """The binding's settings object for this estimator's parameters."""
     free = spec["free"]
+    prior = spec["hyper_prior"]
     return _core.FitSettings(
-        modalities=spec["modalities"],
-        signal_variance=spec["signal_variance"],
-        length_scales=spec["length_scales"],
-        weights=spec["weights"],
-        free_signal_variance=free["signal_variance"],
-        free_length_scales=free["length_scale"],
-        free_weights=free["modality_weights"],
-        free_lambda=free["transfer_lambda"],
-        signal_variance_bounds=spec["signal_variance_bounds"],
-        length_scale_bounds=spec["length_scale_bounds"],
-        optimize=bool(est.optimize),
-        n_restarts=int(est.n_restarts),
-        seed=seed_of(est.random_state),
-        max_iter=int(est.max_iter),
-        optimizer_tol=float(est.optimizer_tol),
-        newton_max_iter=int(est.newton_max_iter),
-        newton_tol=float(est.newton_tol),
-        max_jitter=float(est.max_jitter),
-        approximation=est.approximation,
+        start=_core.KernelStart(
+            modalities=spec["modalities"],
+            signal_variance=spec["signal_variance"],
+            length_scales=spec["length_scales"],
+            weights=spec["weights"],
+        ),
+        free=_core.FreeHyperparameters(
+            signal_variance=free["signal_variance"],
+            length_scales=free["length_scale"],
+            weights=free["modality_weights"],
+            transfer_lambda=free["transfer_lambda"],
+        ),
+        search=_core.Search(
+            optimize=bool(est.optimize),
+            n_restarts=int(est.n_restarts),
+            seed=seed_of(est.random_state),
+            max_iter=int(est.max_iter),
+            optimizer_tol=float(est.optimizer_tol),
+            signal_variance_bounds=spec["signal_variance_bounds"],
+            length_scale_bounds=spec["length_scale_bounds"],
+        ),
+        laplace=_core.Laplace(
+            newton_max_iter=int(est.newton_max_iter),
+            newton_tol=float(est.newton_tol),
+            max_jitter=float(est.max_jitter),
+            approximation=est.approximation,
+            latent_mean=est.latent_mean,
+        ),
         n_threads=threads(est.n_jobs),
-        latent_mean=est.latent_mean,
-        **(spec["hyper_prior"].settings() if spec["hyper_prior"] is not None else {}),
+        hyper_prior=None if prior is None else prior.core(),
     )

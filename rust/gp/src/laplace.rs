@@ -259,17 +259,24 @@ pub fn find_mode_in(
     })
 }
 
+/// The jitter policy of [`find_mode_with_jitter`]: up to `max`, in units of the signal
+/// variance σ².
+#[derive(Clone, Copy, Debug)]
+pub struct Jitter {
+    pub max: f64,
+    pub signal_variance: f64,
+}
+
 /// Mode-finding with the jitter policy: if `B` cannot be factorised, add
-/// `jitter · σ²` to K's diagonal for jitter = 1e-10, 1e-8, ... up to `max_jitter`, then fail.
+/// `jitter · σ²` to K's diagonal for jitter = 1e-10, 1e-8, ... up to `jitter.max`, then fail.
 /// `factor_buffer` (any size; resized if needed) receives B's factor, see [`find_mode_in`].
 pub fn find_mode_with_jitter(
     eval: KernelEval,
-    signal_variance: f64,
     y: &[f64],
     offset: f64,
     warm_a: Option<&[f64]>,
     cfg: &NewtonConfig,
-    max_jitter: f64,
+    policy: Jitter,
     factor_buffer: Mat<f64>,
 ) -> GpResult<(KernelEval, Mode)> {
     if let Some(bad) = eval
@@ -292,11 +299,11 @@ pub fn find_mode_with_jitter(
             Err(ModeFailure::Cancelled) => return Err(GpError::Cancelled),
             Err(ModeFailure::Pivot(pivot)) => {
                 let next = if jitter == 0.0 { 1e-10 } else { jitter * 100.0 };
-                if next > max_jitter * (1.0 + 1e-12) {
+                if next > policy.max * (1.0 + 1e-12) {
                     return Err(GpError::NotPositiveDefinite { pivot, jitter });
                 }
                 jitter = next;
-                eval = eval.with_jitter(jitter, signal_variance);
+                eval = eval.with_jitter(jitter, policy.signal_variance);
             }
         }
     }
@@ -550,12 +557,14 @@ mod tests {
         };
         let r = find_mode_with_jitter(
             ev,
-            1.0,
             &[1.0, -1.0],
             0.0,
             None,
             &NewtonConfig::default(),
-            1e-6,
+            Jitter {
+                max: 1e-6,
+                signal_variance: 1.0,
+            },
             Mat::zeros(0, 0),
         );
         assert!(
@@ -581,7 +590,6 @@ mod tests {
         };
         let r = find_mode_with_jitter(
             ev,
-            1.0,
             &[1.0, -1.0],
             0.0,
             None,
@@ -591,7 +599,10 @@ mod tests {
                 cancel: None,
                 reuse_factorisation: true,
             },
-            1e-6,
+            Jitter {
+                max: 1e-6,
+                signal_variance: 1.0,
+            },
             Mat::zeros(0, 0),
         );
         match r {

@@ -7,6 +7,7 @@ use pyo3::prelude::*;
 mod errors;
 mod features;
 mod gp;
+mod settings;
 mod sim;
 mod skin;
 

@@ -2,12 +2,14 @@
 //! the mechanics, the relaxation's limits, the indentation law, the heat solution's steady
 //! state and the force loop's bookkeeping.
 
-use aptkt_sim::control::{numpy_sum, run_ticks, ForceControl, LeanQueue, Phase, Status};
+use aptkt_sim::control::{numpy_sum, run_ticks, ForceControl, LeanQueue, Phase, Status, TickRun};
 use aptkt_sim::mechanics::{Cells, Chunk, Law, MechState, Mechanics, Relaxation, Segment, Shape};
 use aptkt_sim::philox::{block, CounterStream};
 use aptkt_sim::sensors::Sensors;
-use aptkt_sim::texture::{acceleration, Texture, TextureResponse};
-use aptkt_sim::thermal::{heat, System};
+use aptkt_sim::texture::{
+    acceleration, ContactVibration, Texture, TextureCoupling, TextureResponse,
+};
+use aptkt_sim::thermal::{heat, HeatSamples, System};
 use proptest::prelude::*;
 
 #[test]
@@ -217,12 +219,12 @@ fn heat_reaches_the_steady_state_and_is_exact_in_time() {
     let cells = vec![0i64; t.len()];
     let mut state = vec![25.0, 10.0];
     let mut state_t = vec![0.0];
+    let config = vec![0; t.len()];
+    let samples = |cells, t_s, config| HeatSamples { cells, t_s, config };
     let out = heat(
         std::slice::from_ref(&sys),
         &sqrt_c,
-        &cells,
-        &t,
-        &vec![0; t.len()],
+        &samples(&cells, &t, &config),
         &mut state,
         &mut state_t,
     )
@@ -238,21 +240,18 @@ fn heat_reaches_the_steady_state_and_is_exact_in_time() {
         heat(
             std::slice::from_ref(&sys),
             &sqrt_c,
-            &cells[half.clone()],
-            &t[half.clone()],
-            &vec![0; 50],
+            &samples(&cells[half.clone()], &t[half.clone()], &config[..50]),
             &mut s2,
             &mut t2,
         )
         .unwrap();
     }
     assert!((s2[0] - state[0]).abs() < 1e-12 && (s2[1] - state[1]).abs() < 1e-12);
+    let missing = vec![1; t.len()];
     assert!(heat(
         &[sys],
         &sqrt_c,
-        &cells,
-        &t,
-        &vec![1; t.len()],
+        &samples(&cells, &t, &missing),
         &mut s2,
         &mut t2
     )
@@ -267,14 +266,18 @@ fn texture_is_silent_at_rest_and_scales_with_amplitude() {
         phase: vec![0.1, 0.2],
     };
     let k = TextureResponse {
-        cover_contact_length: 0.25e-3,
-        contact_resonance: 90.0,
-        contact_damping: 0.35,
-        acc_bandwidth: 125.0,
-        coupling_modulus: 1e5,
-        coupling_pressure: 150.0,
-        tangential_coupling: 1.2,
-        lateral_coupling: 0.35,
+        vibration: ContactVibration {
+            cover_contact_length: 0.25e-3,
+            contact_resonance: 90.0,
+            contact_damping: 0.35,
+            acc_bandwidth: 125.0,
+        },
+        coupling: TextureCoupling {
+            coupling_modulus: 1e5,
+            coupling_pressure: 150.0,
+            tangential_coupling: 1.2,
+            lateral_coupling: 0.35,
+        },
         top_modulus: 1e6,
         mu_kinetic: 0.5,
     };
@@ -308,7 +311,7 @@ fn force_loop_settles_on_the_target() {
     .unwrap();
     let mut st = rest_state(&m);
     // Start just touching the face.
-    let mut segs = vec![Segment {
+    let segs = vec![Segment {
         t0: 0,
         p0: [0.55, 0.0, 0.02],
         v0: [0.0; 3],
@@ -329,26 +332,21 @@ fn force_loop_settles_on_the_target() {
         tick_ns: 8_000_000,
         wrench_limit: 5.0,
     };
-    let mut phase = Phase::Settle {
-        t_limit_ns: 3_000_000_000,
-        settled: 0,
+    let mut run = TickRun {
+        phase: Phase::Settle {
+            t_limit_ns: 3_000_000_000,
+            settled: 0,
+        },
+        segs,
+        chunk: Chunk::default(),
+        samples: 0,
     };
-    let mut chunk = Chunk::default();
     let mut status = Status::Flush;
     while status == Status::Flush {
-        let mut samples = 0;
-        (status, _) = run_ticks(
-            &m,
-            &sensors,
-            &ctl,
-            &mut phase,
-            &mut st,
-            &mut segs,
-            &mut q,
-            &mut chunk,
-            &mut samples,
-        );
+        run.samples = 0;
+        (status, _) = run_ticks(&m, &sensors, &ctl, &mut st, &mut q, &mut run);
     }
+    let chunk = run.chunk;
     assert_eq!(status, Status::Done);
     assert!((q.reading() - 0.2).abs() < 0.02, "{}", q.reading());
     // Every sample is in the chunk exactly once.
@@ -391,34 +389,27 @@ fn guarded_move_stops_at_the_first_tick_over_the_threshold() {
     }];
     let run = |threshold: f64, t_end_ns: i64| {
         let mut st = rest_state(&m);
-        let mut segs = plan.clone();
         let mut q = LeanQueue {
             latest: vec![[0.0; 3]; n],
             cal_gain: vec![[0.5; 3]; n],
             cal_offset: vec![[1.0; 3]; n],
             ..Default::default()
         };
-        let mut phase = Phase::Guard {
-            t_end_ns,
-            threshold,
-            window_ns: 250_000_000,
-            w_end_ns: i64::MIN,
+        let mut run = TickRun {
+            phase: Phase::Guard {
+                t_end_ns,
+                threshold,
+                window_ns: 250_000_000,
+                w_end_ns: i64::MIN,
+            },
+            segs: plan.clone(),
+            chunk: Chunk::default(),
+            samples: 0,
         };
-        let mut chunk = Chunk::default();
         let mut status = Status::Flush;
         while status == Status::Flush {
-            let mut samples = 0;
-            (status, _) = run_ticks(
-                &m,
-                &sensors,
-                &ctl,
-                &mut phase,
-                &mut st,
-                &mut segs,
-                &mut q,
-                &mut chunk,
-                &mut samples,
-            );
+            run.samples = 0;
+            (status, _) = run_ticks(&m, &sensors, &ctl, &mut st, &mut q, &mut run);
         }
         (status, st.t_ns, q.reading())
     };

@@ -3,10 +3,7 @@
 //! releases the GIL and maps errors.
 
 use aptkt_gp::kernel::{KernelEval, PairDistances};
-use aptkt_gp::{
-    Data, Free, GpError, HyperPrior, LatentMean, Layout, Modalities, ModelSpec, OneVsAll,
-    Predictive, Source,
-};
+use aptkt_gp::{Data, GpError, Layout, Modalities, OneVsAll, Source};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -17,6 +14,10 @@ use std::sync::{Arc, Condvar, Mutex};
 use std::time::Duration;
 
 use crate::errors::gp_error;
+
+mod settings;
+
+use settings::FitSettings;
 
 fn data_from(x: &PyReadonlyArray2<'_, f64>) -> Result<Data, GpError> {
     let view = x.as_array();
@@ -160,207 +161,6 @@ pub struct GpcModel {
     n_threads: usize,
 }
 
-/// Everything that defines a fit except the data: the hyper-parameters' starting values, which
-/// of them are free, their bounds, and the optimiser's and Newton iteration's limits. Built
-/// with keywords only (`FitSettings(modalities=[[0, 1]], n_restarts=2, ...)`); every field is
-/// a readable and writable attribute.
-#[pyclass(module = "aptkt._core", get_all, set_all)]
-#[derive(Clone)]
-pub struct FitSettings {
-    /// Feature columns of each modality.
-    modalities: Vec<Vec<usize>>,
-    /// Initial signal variance σ².
-    signal_variance: f64,
-    /// Initial length-scale per modality; NaN: scaled to the data (median pairwise distance).
-    length_scales: Vec<f64>,
-    /// Initial modality weights γ (normalised).
-    weights: Vec<f64>,
-    free_signal_variance: bool,
-    free_length_scales: bool,
-    free_weights: bool,
-    free_lambda: bool,
-    signal_variance_bounds: (f64, f64),
-    length_scale_bounds: (f64, f64),
-    optimize: bool,
-    n_restarts: usize,
-    seed: u64,
-    max_iter: usize,
-    /// The hyper-parameter search stops when the objective's relative decrease falls below it.
-    optimizer_tol: f64,
-    newton_max_iter: usize,
-    newton_tol: f64,
-    max_jitter: f64,
-    /// Predictive integral: "erf" or "quadrature".
-    approximation: String,
-    /// Threads for the per-class fits; 0: rayon's default (all cores).
-    n_threads: usize,
-    /// MAP-II hyper-prior on σ²: (centre, sd of ln σ²); None: flat.
-    prior_signal_variance: Option<(f64, f64)>,
-    /// MAP-II hyper-prior on each ℓ_m: (centre relative to the modality's data scale, sd of
-    /// ln ℓ_m); None: flat.
-    prior_length_scale: Option<(f64, f64)>,
-    /// MAP-II hyper-prior on each modality-weight logit: sd of a normal centred on 0 (equal
-    /// weights); None: flat.
-    prior_weight_logit: Option<f64>,
-    /// The latent function's constant prior mean: "zero" or "base-rate" (the log-odds of each
-    /// classifier's Jeffreys-smoothed share of positive labels).
-    latent_mean: String,
-}
-
-#[pymethods]
-impl FitSettings {
-    #[new]
-    // No defaults here but those that switch an extension off (the hyper-priors, the latent
-    // mean): aptkt.gp.DEFAULTS is the one source of the settings' defaults, and LaplaceGPC
-    // passes every one of them.
-    #[pyo3(signature = (
-        *, modalities, signal_variance, length_scales, weights, free_signal_variance,
-        free_length_scales, free_weights, free_lambda, signal_variance_bounds,
-        length_scale_bounds, optimize, n_restarts, seed, max_iter, optimizer_tol, newton_max_iter,
-        newton_tol, max_jitter, approximation, n_threads, prior_signal_variance = None,
-        prior_length_scale = None, prior_weight_logit = None, latent_mean = "zero".to_string()
-    ))]
-    #[allow(clippy::too_many_arguments)]
-    fn new(
-        modalities: Vec<Vec<usize>>,
-        signal_variance: f64,
-        length_scales: Vec<f64>,
-        weights: Vec<f64>,
-        free_signal_variance: bool,
-        free_length_scales: bool,
-        free_weights: bool,
-        free_lambda: bool,
-        signal_variance_bounds: (f64, f64),
-        length_scale_bounds: (f64, f64),
-        optimize: bool,
-        n_restarts: usize,
-        seed: u64,
-        max_iter: usize,
-        optimizer_tol: f64,
-        newton_max_iter: usize,
-        newton_tol: f64,
-        max_jitter: f64,
-        approximation: String,
-        n_threads: usize,
-        prior_signal_variance: Option<(f64, f64)>,
-        prior_length_scale: Option<(f64, f64)>,
-        prior_weight_logit: Option<f64>,
-        latent_mean: String,
-    ) -> Self {
-        FitSettings {
-            modalities,
-            signal_variance,
-            length_scales,
-            weights,
-            free_signal_variance,
-            free_length_scales,
-            free_weights,
-            free_lambda,
-            signal_variance_bounds,
-            length_scale_bounds,
-            optimize,
-            n_restarts,
-            seed,
-            max_iter,
-            optimizer_tol,
-            newton_max_iter,
-            newton_tol,
-            max_jitter,
-            approximation,
-            n_threads,
-            prior_signal_variance,
-            prior_length_scale,
-            prior_weight_logit,
-            latent_mean,
-        }
-    }
-
-    fn __repr__(&self) -> String {
-        let b = |v: bool| if v { "True" } else { "False" };
-        format!(
-            "FitSettings(modalities={:?}, signal_variance={:?}, length_scales={:?}, \
-             weights={:?}, free_signal_variance={}, free_length_scales={}, free_weights={}, \
-             free_lambda={}, signal_variance_bounds={:?}, length_scale_bounds={:?}, \
-             optimize={}, n_restarts={}, seed={}, max_iter={}, optimizer_tol={:?}, \
-             newton_max_iter={}, newton_tol={:?}, max_jitter={:?}, approximation={:?}, n_threads={}, \
-             prior_signal_variance={}, prior_length_scale={}, prior_weight_logit={}, \
-             latent_mean={:?})",
-            self.modalities,
-            self.signal_variance,
-            self.length_scales,
-            self.weights,
-            b(self.free_signal_variance),
-            b(self.free_length_scales),
-            b(self.free_weights),
-            b(self.free_lambda),
-            self.signal_variance_bounds,
-            self.length_scale_bounds,
-            b(self.optimize),
-            self.n_restarts,
-            self.seed,
-            self.max_iter,
-            self.optimizer_tol,
-            self.newton_max_iter,
-            self.newton_tol,
-            self.max_jitter,
-            self.approximation,
-            self.n_threads,
-            py_pair(self.prior_signal_variance),
-            py_pair(self.prior_length_scale),
-            self.prior_weight_logit
-                .map_or_else(|| "None".to_string(), |sd| format!("{sd:?}")),
-            self.latent_mean
-        )
-    }
-}
-
-fn py_pair(p: Option<(f64, f64)>) -> String {
-    match p {
-        Some((a, b)) => format!("({a:?}, {b:?})"),
-        None => "None".to_string(),
-    }
-}
-
-impl FitSettings {
-    /// The core's model specification for data with `d` columns.
-    fn spec(&self, d: usize) -> PyResult<ModelSpec> {
-        let mut spec =
-            ModelSpec::new(Modalities::new(self.modalities.clone(), d).map_err(gp_error)?);
-        spec.signal_variance = self.signal_variance;
-        spec.length_scales = self.length_scales.clone();
-        spec.weights = self.weights.clone();
-        spec.free = Free {
-            signal_variance: self.free_signal_variance,
-            length_scales: self.free_length_scales,
-            weights: self.free_weights,
-            lambda: self.free_lambda,
-        };
-        spec.signal_variance_bounds = self.signal_variance_bounds;
-        spec.length_scale_bounds = self.length_scale_bounds;
-        spec.optimize = self.optimize;
-        spec.n_restarts = self.n_restarts;
-        spec.seed = self.seed;
-        spec.lbfgs.max_iter = self.max_iter;
-        spec.lbfgs.ftol = self.optimizer_tol;
-        spec.newton.max_iter = self.newton_max_iter;
-        spec.newton.tol = self.newton_tol;
-        spec.max_jitter = self.max_jitter;
-        spec.predictive = parse_predictive(&self.approximation)?;
-        spec.latent_mean = parse_latent_mean(&self.latent_mean)?;
-        if self.prior_signal_variance.is_some()
-            || self.prior_length_scale.is_some()
-            || self.prior_weight_logit.is_some()
-        {
-            spec.hyper_prior = Some(HyperPrior {
-                signal_variance: self.prior_signal_variance,
-                length_scale: self.prior_length_scale,
-                weight_logit: self.prior_weight_logit,
-            });
-        }
-        Ok(spec)
-    }
-}
-
 /// One class's source tasks as (X, labels ±1, λ).
 type PySources<'py> = Vec<(PyReadonlyArray2<'py, f64>, PyReadonlyArray1<'py, f64>, f64)>;
 
@@ -370,9 +170,7 @@ type PySources<'py> = Vec<(PyReadonlyArray2<'py, f64>, PyReadonlyArray1<'py, f64
 /// without optimising; `starts` gives per-classifier starting rows (None: the settings').
 #[pyfunction]
 #[pyo3(signature = (x, labels, n_classes, sources, settings, thetas = None, starts = None))]
-#[allow(clippy::too_many_arguments)]
 fn fit_gpc(
-    py: Python<'_>,
     x: PyReadonlyArray2<'_, f64>,
     labels: PyReadonlyArray1<'_, i64>,
     n_classes: usize,
@@ -381,6 +179,7 @@ fn fit_gpc(
     thetas: Option<PyReadonlyArray2<'_, f64>>,
     starts: Option<Vec<Option<Vec<f64>>>>,
 ) -> PyResult<GpcModel> {
+    let py = x.py();
     let thetas: Option<Vec<Vec<f64>>> =
         thetas.map(|t| t.as_array().outer_iter().map(|r| r.to_vec()).collect());
     let data = data_from(&x).map_err(gp_error)?;
@@ -420,26 +219,6 @@ fn fit_gpc(
     })?
     .map_err(gp_error)?;
     Ok(GpcModel { model, n_threads })
-}
-
-fn parse_predictive(name: &str) -> PyResult<Predictive> {
-    match name {
-        "erf" => Ok(Predictive::ErfMixture),
-        "quadrature" => Ok(Predictive::Quadrature),
-        other => Err(PyValueError::new_err(format!(
-            "approximation must be 'erf' or 'quadrature', got {other:?}"
-        ))),
-    }
-}
-
-fn parse_latent_mean(name: &str) -> PyResult<LatentMean> {
-    match name {
-        "zero" => Ok(LatentMean::Zero),
-        "base-rate" => Ok(LatentMean::BaseRate),
-        other => Err(PyValueError::new_err(format!(
-            "latent_mean must be 'zero' or 'base-rate', got {other:?}"
-        ))),
-    }
 }
 
 #[pymethods]
@@ -676,7 +455,7 @@ fn kernel_matrix<'py>(
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<FitSettings>()?;
+    settings::register(m)?;
     m.add_class::<GpcModel>()?;
     m.add_function(wrap_pyfunction!(fit_gpc, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_matrix, m)?)?;
