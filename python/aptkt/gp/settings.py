@@ -224,21 +224,22 @@ def core_settings(est: Any, spec: dict[str, Any]) -> _core.FitSettings:
             transfer_lambda=free["transfer_lambda"],
         ),
         search=_core.Search(
-            optimize=bool(est.optimize),
-            n_restarts=int(est.n_restarts),
+            **_typed(est, optimize=bool, n_restarts=int, max_iter=int, optimizer_tol=float),
             seed=seed_of(est.random_state),
-            max_iter=int(est.max_iter),
-            optimizer_tol=float(est.optimizer_tol),
             signal_variance_bounds=spec["signal_variance_bounds"],
             length_scale_bounds=spec["length_scale_bounds"],
         ),
         laplace=_core.Laplace(
-            newton_max_iter=int(est.newton_max_iter),
-            newton_tol=float(est.newton_tol),
-            max_jitter=float(est.max_jitter),
+            **_typed(est, newton_max_iter=int, newton_tol=float, max_jitter=float),
             approximation=est.approximation,
             latent_mean=est.latent_mean,
         ),
         n_threads=threads(est.n_jobs),
         hyper_prior=None if prior is None else prior.core(),
     )
+
+
+def _typed(est: Any, **types: type) -> dict[str, Any]:
+    """The estimator's parameters of these names as the given types (numpy scalars and other
+    numbers a user may pass become plain ones)."""
+    return {name: kind(getattr(est, name)) for name, kind in types.items()}

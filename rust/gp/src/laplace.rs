@@ -546,27 +546,25 @@ mod tests {
         }
     }
 
-    #[test]
-    fn indefinite_kernel_raises_after_jitter() {
-        // A kernel with a large negative eigenvalue cannot be rescued by small jitter.
-        let k = Mat::<f64>::from_fn(2, 2, |i, j| if i == j { 1.0 } else { 30.0 });
+    /// The mode of labels (+1, -1) on the 2 × 2 kernel `k`, with jitter up to 1e-6 σ².
+    fn mode_with_jitter(k: Mat<f64>, cfg: &NewtonConfig) -> GpResult<(KernelEval, Mode)> {
         let ev = KernelEval {
             k,
             parts: vec![],
             jitter: 0.0,
         };
-        let r = find_mode_with_jitter(
-            ev,
-            &[1.0, -1.0],
-            0.0,
-            None,
-            &NewtonConfig::default(),
-            Jitter {
-                max: 1e-6,
-                signal_variance: 1.0,
-            },
-            Mat::zeros(0, 0),
-        );
+        let policy = Jitter {
+            max: 1e-6,
+            signal_variance: 1.0,
+        };
+        find_mode_with_jitter(ev, &[1.0, -1.0], 0.0, None, cfg, policy, Mat::zeros(0, 0))
+    }
+
+    #[test]
+    fn indefinite_kernel_raises_after_jitter() {
+        // A kernel with a large negative eigenvalue cannot be rescued by small jitter.
+        let k = Mat::<f64>::from_fn(2, 2, |i, j| if i == j { 1.0 } else { 30.0 });
+        let r = mode_with_jitter(k, &NewtonConfig::default());
         assert!(
             matches!(r, Err(GpError::NotPositiveDefinite { .. })),
             "{:?}",
@@ -583,28 +581,13 @@ mod tests {
             (1, 1) => 1.0,
             _ => 0.0,
         });
-        let ev = KernelEval {
-            k,
-            parts: vec![],
-            jitter: 0.0,
+        let cfg = NewtonConfig {
+            max_iter: 1,
+            tol: 1e-10,
+            cancel: None,
+            reuse_factorisation: true,
         };
-        let r = find_mode_with_jitter(
-            ev,
-            &[1.0, -1.0],
-            0.0,
-            None,
-            &NewtonConfig {
-                max_iter: 1,
-                tol: 1e-10,
-                cancel: None,
-                reuse_factorisation: true,
-            },
-            Jitter {
-                max: 1e-6,
-                signal_variance: 1.0,
-            },
-            Mat::zeros(0, 0),
-        );
+        let r = mode_with_jitter(k, &cfg);
         match r {
             Ok((ev, _)) => assert!(ev.jitter > 0.0 && ev.jitter <= 1e-6),
             Err(e) => panic!("expected jitter to rescue the factorisation: {e}"),

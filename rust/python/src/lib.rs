@@ -28,7 +28,7 @@ fn fix_mmap_threshold() {
     const M_TRIM_THRESHOLD: i32 = -1;
     const M_MMAP_THRESHOLD: i32 = -3;
     const MMAP_THRESHOLD: i32 = 4 << 20; // 4 MiB
-    // SAFETY: mallopt only changes allocator settings; it is safe to call at any time.
+                                         // SAFETY: mallopt only changes allocator settings; it is safe to call at any time.
     unsafe {
         mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD);
         mallopt(M_TRIM_THRESHOLD, 2 * MMAP_THRESHOLD);

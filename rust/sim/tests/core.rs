@@ -3,7 +3,7 @@
 //! state and the force loop's bookkeeping.
 
 use aptkt_sim::control::{numpy_sum, run_ticks, ForceControl, LeanQueue, Phase, Status, TickRun};
-use aptkt_sim::mechanics::{Cells, Chunk, Law, MechState, Mechanics, Relaxation, Segment, Shape};
+use aptkt_sim::mechanics::{Chunk, Law, MechState, Mechanics, Relaxation, Segment, Shape};
 use aptkt_sim::philox::{block, CounterStream};
 use aptkt_sim::sensors::Sensors;
 use aptkt_sim::texture::{
@@ -11,6 +11,8 @@ use aptkt_sim::texture::{
 };
 use aptkt_sim::thermal::{heat, HeatSamples, System};
 use proptest::prelude::*;
+
+mod common;
 
 #[test]
 fn philox_matches_numpy() {
@@ -69,18 +71,7 @@ fn law(k_skin: f64, e: f64, h: f64, eps_d: f64) -> Law {
 }
 
 fn mechanics(weights: Vec<f64>, times: Vec<f64>) -> Mechanics {
-    let n = 3;
-    let cells = Cells {
-        clock_rate: vec![250.0, 250.3, 249.8],
-        clock_phase: vec![0.0011, 0.0023, 0.0007],
-        sensor_height: vec![[1e-6, -2e-6, 0.0]; n],
-        sensor_xy: (0..n)
-            .map(|c| {
-                let x = c as f64 * 0.01;
-                [[x, 0.002], [x - 0.002, -0.001], [x + 0.002, -0.001]]
-            })
-            .collect(),
-    };
+    let cells = common::cells([1e-6, -2e-6, 0.0]);
     let shape = Shape {
         centre: [0.55, 0.0],
         rotation: 0.3,
@@ -296,19 +287,34 @@ fn texture_is_silent_at_rest_and_scales_with_amplitude() {
     }
 }
 
-#[test]
-fn force_loop_settles_on_the_target() {
-    let m = mechanics(vec![0.3], vec![0.2]);
-    let n = m.cells.len();
-    let sensors = Sensors::new(
-        [1, 2],
+/// The patch's force sensors (gain 0.5, offset 1, a little noise, 0.8 ms latency).
+fn patch_sensors(key: [u64; 2], n: usize) -> Sensors {
+    Sensors::new(
+        key,
         vec![[0.5; 3]; n],
         vec![[1.0; 3]; n],
         1e-3,
         800_000,
         6e-4,
     )
-    .unwrap();
+    .unwrap()
+}
+
+/// A skin calibration of gain 0.5 and offset 1, every cell reading 0 N.
+fn lean_queue(n: usize) -> LeanQueue {
+    LeanQueue {
+        latest: vec![[0.0; 3]; n],
+        cal_gain: vec![[0.5; 3]; n],
+        cal_offset: vec![[1.0; 3]; n],
+        ..Default::default()
+    }
+}
+
+#[test]
+fn force_loop_settles_on_the_target() {
+    let m = mechanics(vec![0.3], vec![0.2]);
+    let n = m.cells.len();
+    let sensors = patch_sensors([1, 2], n);
     let mut st = rest_state(&m);
     // Start just touching the face.
     let segs = vec![Segment {
@@ -317,12 +323,7 @@ fn force_loop_settles_on_the_target() {
         v0: [0.0; 3],
         a: [0.0; 3],
     }];
-    let mut q = LeanQueue {
-        latest: vec![[0.0; 3]; n],
-        cal_gain: vec![[0.5; 3]; n],
-        cal_offset: vec![[1.0; 3]; n],
-        ..Default::default()
-    };
+    let mut q = lean_queue(n);
     let ctl = ForceControl {
         target: 0.2,
         gain: 0.02,
@@ -362,15 +363,7 @@ fn force_loop_settles_on_the_target() {
 fn guarded_move_stops_at_the_first_tick_over_the_threshold() {
     let m = mechanics(vec![0.3], vec![0.2]);
     let n = m.cells.len();
-    let sensors = Sensors::new(
-        [3, 4],
-        vec![[0.5; 3]; n],
-        vec![[1.0; 3]; n],
-        1e-3,
-        800_000,
-        6e-4,
-    )
-    .unwrap();
+    let sensors = patch_sensors([3, 4], n);
     let ctl = ForceControl {
         target: 0.0,
         gain: 0.0,
@@ -389,12 +382,7 @@ fn guarded_move_stops_at_the_first_tick_over_the_threshold() {
     }];
     let run = |threshold: f64, t_end_ns: i64| {
         let mut st = rest_state(&m);
-        let mut q = LeanQueue {
-            latest: vec![[0.0; 3]; n],
-            cal_gain: vec![[0.5; 3]; n],
-            cal_offset: vec![[1.0; 3]; n],
-            ..Default::default()
-        };
+        let mut q = lean_queue(n);
         let mut run = TickRun {
             phase: Phase::Guard {
                 t_end_ns,

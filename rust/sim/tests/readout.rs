@@ -2,7 +2,7 @@
 //! thermal systems asked for before anything changes, and steps that do not depend on how a
 //! motion is cut. The numpy formulation it replaced is compared in tests/sim.
 
-use aptkt_sim::mechanics::{Cells, Chunk, Law, MechState, Mechanics, Relaxation, Segment, Shape};
+use aptkt_sim::mechanics::{Chunk, Law, MechState, Mechanics, Relaxation, Segment, Shape};
 use aptkt_sim::readout::{
     Accelerometers, CellFrames, ContactHeat, Frames, Physics, Proximity, Readout, ThermalSystems,
     Thermometers, TrialState,
@@ -12,6 +12,8 @@ use aptkt_sim::slip::{Ringing, SlipCell, SlipParams};
 use aptkt_sim::texture::{ContactVibration, Texture, TextureCoupling, TextureResponse};
 use aptkt_sim::thermal::System;
 use proptest::prelude::*;
+
+mod common;
 
 const N: usize = 3;
 const G: f64 = 9.80665;
@@ -24,17 +26,7 @@ fn physics(noise: f64, mu_s: f64) -> Physics {
         sigma.push(10f64.powf(-4.0 + 10.0 * i as f64 / 1999.0));
     }
     let delta = sigma.iter().map(|s| s / 2e7 + 0.01 * s / 5e4).collect();
-    let cells = Cells {
-        clock_rate: vec![250.0, 250.3, 249.8],
-        clock_phase: vec![0.0011, 0.0023, 0.0007],
-        sensor_height: vec![[0.0; 3]; N],
-        sensor_xy: (0..N)
-            .map(|c| {
-                let x = c as f64 * 0.01;
-                [[x, 0.002], [x - 0.002, -0.001], [x + 0.002, -0.001]]
-            })
-            .collect(),
-    };
+    let cells = common::cells([0.0; 3]);
     let shape = Shape {
         centre: [0.55, 0.0],
         rotation: 0.0,

@@ -30,6 +30,12 @@ class Analysis:
         #: The curves the figure shows, one row per (panel, method, x): ``curves.csv``.
         self.curve_rows: list[dict[str, Any]] = []
 
+    @classmethod
+    def analyse(cls, ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
+        """The figure's report section from its runs' result rows (a figure module's
+        ``analyse``)."""
+        return cls(ctx, rows).section()
+
     def section(self) -> Section:
         self.measure()
         files = self.draw()

@@ -10,14 +10,13 @@ confusion matrices, rescaled.
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from aptkt.experiments.figures.analysis import Analysis, hide_unused, panel_grid
-from aptkt.experiments.figures.base import Context, Headline, Plan, Section
+from aptkt.experiments.figures.base import Context, Headline, Plan
 from aptkt.experiments.plots import save_figure
 from aptkt.experiments.report import PAPER, markdown_table
 from aptkt.experiments.similarity import (
@@ -86,10 +85,6 @@ def similarity(ctx: Context) -> dict[str, Any]:
 
 def plan(ctx: Context) -> Plan:
     return Plan()  # no learning runs: the analysis reads the data set
-
-
-def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    return _Fig10(ctx, rows).section()
 
 
 class _Fig10(Analysis):
@@ -235,3 +230,6 @@ class _Fig10(Analysis):
             "em": self.sim["em"],
             "same_as_paper": same,
         }
+
+
+analyse = _Fig10.analyse

@@ -16,7 +16,7 @@ cut-off prevents it.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -29,7 +29,6 @@ from aptkt.experiments.figures.base import (
     Context,
     Headline,
     Plan,
-    Section,
 )
 from aptkt.experiments.figures.common import (
     GainSummary,
@@ -91,10 +90,6 @@ def plan(ctx: Context) -> Plan:
             }
             add_runs(ctx, plan, methods, actions, task, seed, tags)
     return plan
-
-
-def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    return _Fig11(ctx, rows).section()
 
 
 class _Fig11(Analysis):
@@ -308,6 +303,9 @@ class _Fig11(Analysis):
             "stress": self.stress_numbers,
             "priors": {k: list(v[1]) for k, v in self.design.items()},
         }
+
+
+analyse = _Fig11.analyse
 
 
 def _label(key: str) -> str:

@@ -10,7 +10,7 @@ every model sees exactly the same observations and the comparison is of the mode
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -18,7 +18,7 @@ import numpy as np
 from aptkt.actions import PAPER_ACTIONS
 from aptkt.experiments.aggregate import collect, difference, estimate, mean_over_panels
 from aptkt.experiments.figures.analysis import Analysis, hide_unused, panel_grid
-from aptkt.experiments.figures.base import Context, Headline, Plan, Section
+from aptkt.experiments.figures.base import Context, Headline, Plan
 from aptkt.experiments.figures.common import plot_panel
 from aptkt.experiments.report import PAPER, ci, listed, markdown_table
 from aptkt.experiments.sampling import draw_groups
@@ -75,10 +75,6 @@ def _category(e) -> str:
     if not math.isfinite(e.low):
         return "n/a"
     return "beats" if e.significant_positive else "worse" if e.significant_negative else "matches"
-
-
-def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    return _Fig6(ctx, rows).section()
 
 
 class _Fig6(Analysis):
@@ -214,3 +210,6 @@ class _Fig6(Analysis):
             }
             for a, d in self.per_action.items()
         }
+
+
+analyse = _Fig6.analyse

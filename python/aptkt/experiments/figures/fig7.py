@@ -9,11 +9,10 @@ mean curves; large panel: every run.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
 from typing import Any
 
 from aptkt.experiments.figures.analysis import Analysis
-from aptkt.experiments.figures.base import Context, Headline, Plan, Section
+from aptkt.experiments.figures.base import Context, Headline, Plan
 from aptkt.experiments.figures.common import (
     GainSummary,
     accuracy_table,
@@ -38,10 +37,6 @@ METHODS = ("baseline", "control", "APTKT", "APTKT-multi")
 
 def plan(ctx: Context) -> Plan:
     return prior_group_plan(ctx, NAME, ctx.scale.n_priors, METHODS, {"all": ctx.scale.actions})
-
-
-def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    return _Fig7(ctx, rows).section()
 
 
 class _Fig7(Analysis):
@@ -186,6 +181,9 @@ class _Fig7(Analysis):
             "prior_space_rate": self.space_rate,
             "per_group": {g: sm.overall.as_dict() for g, _, sm in self.per_group},
         }
+
+
+analyse = _Fig7.analyse
 
 
 def _control_lines(curves, fused, steps) -> list[str]:

@@ -7,13 +7,13 @@ action: the initial round observes it once on every new object, then ``budget`` 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from aptkt.experiments.figures.analysis import Analysis, hide_unused, panel_grid
-from aptkt.experiments.figures.base import Context, Headline, Plan, Section
+from aptkt.experiments.figures.base import Context, Headline, Plan
 from aptkt.experiments.figures.common import (
     accuracy_table,
     error_removed,
@@ -37,10 +37,6 @@ def plan(ctx: Context) -> Plan:
     return prior_group_plan(
         ctx, NAME, ctx.scale.n_priors, METHODS, {a: (a,) for a in ctx.scale.actions}
     )
-
-
-def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    return _Fig8(ctx, rows).section()
 
 
 class _Fig8(Analysis):
@@ -215,6 +211,9 @@ class _Fig8(Analysis):
                 for a, r in self.removed.items()
             },
         }
+
+
+analyse = _Fig8.analyse
 
 
 def _percent(share: float) -> str:

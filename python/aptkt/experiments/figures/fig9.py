@@ -9,11 +9,11 @@ exactly Fig. 7's (same groups, same seeds), plus APTKT+aux.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 from aptkt.experiments.figures.analysis import Analysis, panel_grid
-from aptkt.experiments.figures.base import Context, Headline, Plan, Section
+from aptkt.experiments.figures.base import Context, Headline, Plan
 from aptkt.experiments.figures.common import (
     accuracy_table,
     error_removed,
@@ -41,10 +41,6 @@ def plan(ctx: Context) -> Plan:
         plan.priors += part.priors
         plan.specs += part.specs
     return plan
-
-
-def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    return _Fig9(ctx, rows).section()
 
 
 class _Fig9(Analysis):
@@ -245,6 +241,9 @@ class _Fig9(Analysis):
                 n: {"baseline": b, "share": r} for n, (b, r) in self.aux_room.items()
             },
         }
+
+
+analyse = _Fig9.analyse
 
 
 def _fade_text(

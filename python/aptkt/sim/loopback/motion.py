@@ -15,6 +15,11 @@ from aptkt.sim.loopback.rotvec import interpolate_rotvec, limit_norm, rotvec_to_
 
 __all__ = ["Motion", "ForceMode", "braking_speed", "contact_wrench", "local_stiffness"]
 
+#: A translation's part along the axes the force controller does not own.
+Free = Callable[[np.ndarray], np.ndarray]
+#: A cycle of a motion: the linear velocity, the orientation to set (or None), whether it ended.
+Step = tuple[np.ndarray, np.ndarray | None, bool]
+
 
 @dataclass
 class Motion:
@@ -40,7 +45,7 @@ class Motion:
         v: float,
         a: float,
         asynchronous: bool,
-        free: Callable[[np.ndarray], np.ndarray],
+        free: Free,
     ) -> Motion:
         """A straight line from ``pose`` to ``target`` at up to ``v`` (its length along the
         axes ``free`` keeps, or its rotation when it does not translate)."""
@@ -58,13 +63,7 @@ class Motion:
             asynchronous=asynchronous,
         )
 
-    def step(
-        self,
-        pose: np.ndarray,
-        velocity: np.ndarray,
-        dt: float,
-        free: Callable[[np.ndarray], np.ndarray],
-    ) -> tuple[np.ndarray, np.ndarray | None, bool]:
+    def step(self, pose: np.ndarray, velocity: np.ndarray, dt: float, free: Free) -> Step:
         """The linear velocity (3) of this cycle, the orientation to set (or None) and whether
         the motion ended in it; sets the angular part of ``velocity`` in place."""
         lin = velocity[:3].copy()
@@ -83,13 +82,7 @@ class Motion:
             return lin, None, not np.any(lin) and not np.any(omega)
         return self._movel_step(pose, velocity, dt, free)
 
-    def _movel_step(
-        self,
-        pose: np.ndarray,
-        velocity: np.ndarray,
-        dt: float,
-        free: Callable[[np.ndarray], np.ndarray],
-    ) -> tuple[np.ndarray, np.ndarray | None, bool]:
+    def _movel_step(self, pose: np.ndarray, velocity: np.ndarray, dt: float, free: Free) -> Step:
         """moveL: an online trapezoid along the straight line to the target."""
         assert self.target is not None and self.start is not None
         velocity[3:] = 0.0

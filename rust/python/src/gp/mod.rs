@@ -3,7 +3,7 @@
 //! releases the GIL and maps errors.
 
 use aptkt_gp::kernel::{KernelEval, PairDistances};
-use aptkt_gp::{Data, GpError, Layout, Modalities, OneVsAll, Source};
+use aptkt_gp::{BinaryFit, Data, GpError, Layout, Modalities, OneVsAll, Source};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -221,6 +221,13 @@ fn fit_gpc(
     Ok(GpcModel { model, n_threads })
 }
 
+impl GpcModel {
+    /// One value per classifier.
+    fn each<T>(&self, value: impl Fn(&BinaryFit) -> T) -> Vec<T> {
+        self.model.classifiers.iter().map(value).collect()
+    }
+}
+
 #[pymethods]
 impl GpcModel {
     /// Class probabilities, shape (n, n_classes).
@@ -316,74 +323,45 @@ impl GpcModel {
 
     #[getter]
     fn log_marginal_likelihood_value<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_vec(py, self.model.classifiers.iter().map(|c| c.lml).collect())
+        PyArray1::from_vec(py, self.each(|c| c.lml))
     }
 
     /// Each classifier's latent prior mean m (0 for the zero-mean GP).
     #[getter]
     fn latent_offset<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_vec(
-            py,
-            self.model
-                .classifiers
-                .iter()
-                .map(|c| c.latent_offset)
-                .collect(),
-        )
+        PyArray1::from_vec(py, self.each(|c| c.latent_offset))
     }
 
     /// Log hyper-prior density at the fitted theta per classifier (0 for ML-II).
     #[getter]
     fn log_hyper_prior<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_vec(
-            py,
-            self.model.classifiers.iter().map(|c| c.log_prior).collect(),
-        )
+        PyArray1::from_vec(py, self.each(|c| c.log_prior))
     }
 
     #[getter]
     fn jitter<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_vec(
-            py,
-            self.model.classifiers.iter().map(|c| c.jitter).collect(),
-        )
+        PyArray1::from_vec(py, self.each(|c| c.jitter))
     }
 
     #[getter]
     fn optimizer_converged(&self) -> Vec<bool> {
-        self.model
-            .classifiers
-            .iter()
-            .map(|c| c.optimizer_converged)
-            .collect()
+        self.each(|c| c.optimizer_converged)
     }
 
     #[getter]
     fn newton_converged(&self) -> Vec<bool> {
-        self.model
-            .classifiers
-            .iter()
-            .map(|c| c.newton_converged)
-            .collect()
+        self.each(|c| c.newton_converged)
     }
 
     #[getter]
     fn evaluations(&self) -> Vec<usize> {
-        self.model
-            .classifiers
-            .iter()
-            .map(|c| c.evaluations)
-            .collect()
+        self.each(|c| c.evaluations)
     }
 
     /// Quasi-Newton iterations of the start that gave each classifier's theta.
     #[getter]
     fn iterations(&self) -> Vec<usize> {
-        self.model
-            .classifiers
-            .iter()
-            .map(|c| c.iterations)
-            .collect()
+        self.each(|c| c.iterations)
     }
 
     #[getter]
