@@ -22,10 +22,9 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import tempfile
 from collections import Counter
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -53,7 +52,6 @@ from aptkt.data.hdf5 import (
     readable_prefix,
     refused_for_writer_mark,
     while_locked,
-    writer_mark,
 )
 from aptkt.data.schema import INDEX_DTYPE, READABLE_VERSIONS, SAMPLE_FIELDS, SCHEMA, SCHEMA_VERSION
 from aptkt.errors import DatasetError
@@ -67,8 +65,6 @@ __all__ = [
     "PackedRecording",
     "pack_recording",
     "repair",
-    "store_features",
-    "write_features",
     "recording_key",
     "samples_to_raw",
     "raw_to_samples",
@@ -95,62 +91,13 @@ class DatasetWriter:
         if mode not in ("w", "a"):
             raise ValueError("mode must be 'w' or 'a'")
         if mode == "a" and self.path.exists():
-            try:
-                self._f = while_locked(lambda: h5py.File(self.path, "a", libver="latest"))
-            except OSError as exc:
-                if "already open" in str(exc) or "consistency flags" in str(exc):
-                    raise DatasetError(
-                        f"{self.path}: a writer of this file did not close it (crashed or "
-                        f"still running); run 'aptkt dataset repair {self.path}' first"
-                    ) from exc
-                raise DatasetError(f"{self.path}: cannot open for appending: {exc}") from exc
-            _check_schema(self._f, self.path, for_writing=True)
+            self._f = self._open_for_appending()
         else:
             if self.path.exists() and not overwrite:
                 raise DatasetError(
                     f"{self.path} exists (use overwrite=True / --overwrite, or append)"
                 )
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._f = while_locked(
-                lambda: h5py.File(self.path, "w", libver="latest", track_order=False)
-            )
-            f = self._f
-            f.attrs["schema"] = SCHEMA
-            f.attrs["schema_version"] = SCHEMA_VERSION
-            f.attrs["software_version"] = __version__
-            f.attrs["description"] = json.dumps(
-                dict(description or {}), sort_keys=True, default=json_default
-            )
-            g = f.create_group("recordings")
-            g.create_dataset(
-                "index",
-                shape=(0,),
-                maxshape=(None,),
-                dtype=INDEX_DTYPE,
-                chunks=(256,),
-                track_times=False,
-            )
-            g.create_dataset(
-                "metadata",
-                shape=(0,),
-                maxshape=(None,),
-                dtype=np.uint8,
-                chunks=(META_CHUNK_BYTES,),
-                track_times=False,
-                **COMPRESSION,
-            )
-            s = g.create_group("samples")
-            for name, (tail, dtype) in SAMPLE_FIELDS.items():
-                s.create_dataset(
-                    name,
-                    shape=(0, *tail),
-                    maxshape=(None, *tail),
-                    dtype=dtype,
-                    chunks=(CHUNK_ROWS, *tail),
-                    track_times=False,
-                    **COMPRESSION,
-                )
-            f.flush()
+            self._f = self._create(description)
         try:
             while_locked(self._start_swmr)
         except RuntimeError as exc:
@@ -166,6 +113,62 @@ class DatasetWriter:
         self._keys = {
             (r["object"].decode(), r["action"].decode(), int(r["trial"])) for r in self._index[...]
         }
+
+    def _open_for_appending(self) -> h5py.File:
+        try:
+            f = while_locked(lambda: h5py.File(self.path, "a", libver="latest"))
+        except OSError as exc:
+            if "already open" in str(exc) or "consistency flags" in str(exc):
+                raise DatasetError(
+                    f"{self.path}: a writer of this file did not close it (crashed or "
+                    f"still running); run 'aptkt dataset repair {self.path}' first"
+                ) from exc
+            raise DatasetError(f"{self.path}: cannot open for appending: {exc}") from exc
+        check_schema(f, self.path, for_writing=True)
+        return f
+
+    def _create(self, description: Mapping[str, Any] | None) -> h5py.File:
+        """A new file with every dataset of the layout, empty (created before the first
+        recording: SWMR mode cannot create datasets)."""
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        f = while_locked(lambda: h5py.File(self.path, "w", libver="latest", track_order=False))
+        f.attrs["schema"] = SCHEMA
+        f.attrs["schema_version"] = SCHEMA_VERSION
+        f.attrs["software_version"] = __version__
+        f.attrs["description"] = json.dumps(
+            dict(description or {}), sort_keys=True, default=json_default
+        )
+        g = f.create_group("recordings")
+        g.create_dataset(
+            "index",
+            shape=(0,),
+            maxshape=(None,),
+            dtype=INDEX_DTYPE,
+            chunks=(256,),
+            track_times=False,
+        )
+        g.create_dataset(
+            "metadata",
+            shape=(0,),
+            maxshape=(None,),
+            dtype=np.uint8,
+            chunks=(META_CHUNK_BYTES,),
+            track_times=False,
+            **COMPRESSION,
+        )
+        s = g.create_group("samples")
+        for name, (tail, dtype) in SAMPLE_FIELDS.items():
+            s.create_dataset(
+                name,
+                shape=(0, *tail),
+                maxshape=(None, *tail),
+                dtype=dtype,
+                chunks=(CHUNK_ROWS, *tail),
+                track_times=False,
+                **COMPRESSION,
+            )
+        f.flush()
+        return f
 
     def _start_swmr(self) -> None:
         self._f.swmr_mode = True
@@ -251,7 +254,7 @@ class DatasetWriter:
             self._f.close()
 
 
-def _check_schema(f: h5py.File, path: Path, *, for_writing: bool = False) -> int:
+def check_schema(f: h5py.File, path: Path, *, for_writing: bool = False) -> int:
     """The file's schema version; a DatasetError if this aptkt cannot read (or append to) it."""
     schema = f.attrs.get("schema")
     version = f.attrs.get("schema_version")
@@ -290,7 +293,7 @@ class DatasetReader:
                 raise DatasetError(f"{self.path}: not a readable HDF5 data set: {exc}") from exc
             self._f = self._open_private_copy()
         try:
-            self.version = _check_schema(self._f, self.path)
+            self.version = check_schema(self._f, self.path)
             self._meta = self._f["recordings/metadata"]
             self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
             # A snapshot: recordings appended after opening are not seen (reopen to see them).
@@ -488,85 +491,6 @@ class DatasetReader:
             "features": self.feature_names(),
             "description": self.description,
         }
-
-
-def write_features(
-    path: str | Path,
-    action: str,
-    modality: str,
-    recordings: Sequence[int],
-    values: np.ndarray,
-    *,
-    settings: Mapping[str, Any] | None = None,
-) -> None:
-    """Store a feature matrix (one row per recording number) under ``/features/<action>``
-    (see :func:`store_features`)."""
-    store_features(path, {action: (recordings, {modality: values})}, settings=settings)
-
-
-def store_features(
-    path: str | Path,
-    features: Mapping[str, tuple[Sequence[int], Mapping[str, np.ndarray]]],
-    *,
-    settings: Mapping[str, Any] | None = None,
-) -> None:
-    """Store feature matrices: ``{action: (recording numbers, {modality: values})}``, keyed by
-    the extraction ``settings`` they were computed with (JSON, see
-    :meth:`DatasetReader.feature_settings`; None: unknown settings).
-
-    The file is never modified in place: the features are written into a copy that then
-    replaces it (a rename), so a kill at any moment leaves the file as it was, or with all the
-    features. No writer may be running (the copy would miss its later appends)."""
-    path = Path(path)
-    checked = {}
-    for action, (recordings, mods) in features.items():
-        recs = np.asarray(recordings, dtype=np.int64)
-        vals = {m: np.asarray(v, dtype=np.float64) for m, v in mods.items()}
-        for v in vals.values():
-            if v.ndim != 2 or v.shape[0] != recs.shape[0]:
-                raise ValueError(
-                    "values must be (n_recordings, dim) with one row per recording number"
-                )
-        checked[action] = (recs, vals)
-    if writer_mark(path):
-        raise DatasetError(
-            f"{path}: a writer has the file open, or died without closing it; wait for it to "
-            f"finish, or run 'aptkt dataset repair {path}' first"
-        )
-    tmp = path.with_name(path.name + ".features-tmp")
-    try:
-        shutil.copyfile(path, tmp)
-        with h5py.File(tmp, "a", libver="latest") as f:
-            _check_schema(f, path)
-            n = f["recordings/index"].shape[0]
-            for action, (recs, vals) in checked.items():
-                if recs.size and (recs.min() < 0 or recs.max() >= n):
-                    raise ValueError(f"recording numbers must be in 0..{n - 1}")
-                g = f.require_group(f"features/{action}")
-                if "recording" in g and not np.array_equal(g["recording"][...], recs):
-                    if not set(vals) >= set(g) - {"recording"}:
-                        raise ValueError(
-                            f"features of {action!r} exist for other recordings; write all "
-                            "modalities together"
-                        )
-                    del g["recording"]
-                    for m in [k for k in g if k != "recording"]:
-                        del g[m]
-                if "recording" not in g:
-                    g.create_dataset("recording", data=recs, track_times=False)
-                for modality, values in vals.items():
-                    if modality in g:
-                        del g[modality]
-                    g.create_dataset(modality, data=values, track_times=False)
-                if settings is None:
-                    g.attrs.pop("extraction", None)
-                else:
-                    g.attrs["extraction"] = json.dumps(dict(settings), sort_keys=True)
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def repair(path: str | Path, *, backup: bool = True) -> int:

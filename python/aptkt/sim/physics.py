@@ -220,16 +220,21 @@ class ContactPhysics:
         #: (heat, stick-slip, texture, noise). The thermal solution operators of each
         #: (contact, speed) configuration it meets come from the object's network: made by
         #: ``ThermalNetwork.system`` and kept, converted, in ``ThermalNetwork.core``.
-        self.core = _core.SimContact(
+        self.core = self._compile()
+
+    def _compile(self) -> _core.SimContact:
+        """The compiled core from this trial's settings, one object per core struct."""
+        k, imp, shape = self.k, self.imp, self.shape
+        return _core.SimContact(
             self._patch_cells(),
             _core.SurfaceShape(
-                _pair(self.shape.centre),
-                float(self.shape.rotation),
-                float(self.shape.surface_z),
-                _pair(self.shape.tilt),
-                float(self.shape.crown_radius),
-                np.reshape(self.shape.waves, (-1, 4)).tolist(),
-                _pair(self.shape.size),
+                _pair(shape.centre),
+                float(shape.rotation),
+                float(shape.surface_z),
+                _pair(shape.tilt),
+                float(shape.crown_radius),
+                np.reshape(shape.waves, (-1, 4)).tolist(),
+                _pair(shape.size),
             ),
             _core.ContactLaw(
                 self.law.table[0].tolist(),
@@ -241,8 +246,8 @@ class ContactPhysics:
             ),
             _core.ForceSensors(
                 (int(self._noise.key[0]), int(self._noise.key[1])),
-                (imperfections.force_gain / self._gain_drift[:, None]).tolist(),
-                np.asarray(imperfections.force_offset, dtype=np.float64).tolist(),
+                (imp.force_gain / self._gain_drift[:, None]).tolist(),
+                np.asarray(imp.force_offset, dtype=np.float64).tolist(),
                 float(k.force_noise),
                 self._latency_ns,
                 float(k.link_jitter),
