@@ -3,7 +3,7 @@
 //! releases the GIL and maps errors.
 
 use aptkt_gp::kernel::{KernelEval, PairDistances};
-use aptkt_gp::{BinaryFit, Data, GpError, Layout, Modalities, OneVsAll, Source};
+use aptkt_gp::{BinaryFit, Data, GpError, GpResult, Layout, Modalities, OneVsAll, Source};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -222,6 +222,21 @@ fn fit_gpc(
 }
 
 impl GpcModel {
+    /// `predict(model, x)` (n × n_classes, row-major) on this model's pool, the GIL released.
+    fn per_class<'py>(
+        &self,
+        py: Python<'py>,
+        x: &PyReadonlyArray2<'py, f64>,
+        predict: fn(&OneVsAll, &Data) -> GpResult<Vec<f64>>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let data = data_from(x).map_err(gp_error)?;
+        let probs = py
+            .detach(|| run_in_pool(self.n_threads, || predict(&self.model, &data)))
+            .and_then(|r| r)
+            .map_err(gp_error)?;
+        matrix(py, probs, data.n, self.model.n_classes)
+    }
+
     /// One value per classifier.
     fn each<T>(&self, value: impl Fn(&BinaryFit) -> T) -> Vec<T> {
         self.model.classifiers.iter().map(value).collect()
@@ -236,12 +251,7 @@ impl GpcModel {
         py: Python<'py>,
         x: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let data = data_from(&x).map_err(gp_error)?;
-        let probs = py
-            .detach(|| run_in_pool(self.n_threads, || self.model.predict_proba(&data)))
-            .and_then(|r| r)
-            .map_err(gp_error)?;
-        matrix(py, probs, data.n, self.model.n_classes)
+        self.per_class(py, &x, OneVsAll::predict_proba)
     }
 
     /// Each one-vs-all classifier's own p(y = +1 | x), shape (n, n_classes), not normalised.
@@ -250,12 +260,7 @@ impl GpcModel {
         py: Python<'py>,
         x: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let data = data_from(&x).map_err(gp_error)?;
-        let probs = py
-            .detach(|| run_in_pool(self.n_threads, || self.model.predict_binary(&data)))
-            .and_then(|r| r)
-            .map_err(gp_error)?;
-        matrix(py, probs, data.n, self.model.n_classes)
+        self.per_class(py, &x, OneVsAll::predict_binary)
     }
 
     /// Latent predictive means and variances, each (n, n_classifiers).
