@@ -1,6 +1,7 @@
-//! The `aptkt._core` extension: a thin layer over the pure-Rust crates. It converts numpy
-//! arrays to and from Rust types, releases the GIL around numerical work and maps core errors
-//! to typed Python exceptions. No numerics live here.
+//! The `aptkt._core` extension over the pure-Rust crates. It defines the typed classes Python
+//! builds and reads (settings built by keyword, state the core advances in place), converts
+//! numpy arrays to and from Rust types, releases the GIL around numerical work and maps core
+//! errors to typed Python exceptions. No numerics live here.
 
 use pyo3::prelude::*;
 
