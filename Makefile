@@ -46,20 +46,14 @@ wheel: venv
 	rm -f dist/aptkt-*.whl
 	$(PY) -m maturin build --release --interpreter $(PY) --out dist
 
-# Clippy lints that argue with the numerical kernels' idioms, allowed for the workspace:
-# index loops over several parallel arrays, `!(a > b)` comparisons that reject NaN on purpose,
-# kernels that take each array as its own argument, constants written with the digits they were
-# published with, and the nested slice types of the kernel interfaces.
-CLIPPY_ALLOW := -A clippy::needless_range_loop -A clippy::neg_cmp_op_on_partial_ord \
-	-A clippy::too_many_arguments -A clippy::excessive_precision -A clippy::type_complexity
-
 # Static gates. mypy reads python/aptkt with the core's stub (_core.pyi), so it needs the
-# package's dependencies (numpy's types) but not the compiled extension.
+# package's dependencies (numpy's types) but not the compiled extension. Clippy's lints are
+# configured in Cargo.toml ([workspace.lints]).
 lint: install-lint
 	$(VENV)/bin/ruff check python tests benches
 	$(VENV)/bin/ruff format --check python tests benches
 	$(VENV)/bin/mypy
-	cargo clippy --workspace --all-targets -- -D warnings $(CLIPPY_ALLOW)
+	cargo clippy --workspace --all-targets -- -D warnings
 	cargo fmt --all -- --check
 
 test-rust:

@@ -71,60 +71,65 @@ class GpcModel:
     @property
     def n_lambdas(self) -> int: ...
 
-class FitSettings:
-    modalities: list[list[int]]
-    signal_variance: float
-    length_scales: list[float]
-    weights: list[float]
-    free_signal_variance: bool
-    free_length_scales: bool
-    free_weights: bool
-    free_lambda: bool
-    signal_variance_bounds: tuple[float, float]
-    length_scale_bounds: tuple[float, float]
-    optimize: bool
-    n_restarts: int
-    seed: int
-    max_iter: int
-    optimizer_tol: float
-    newton_max_iter: int
-    newton_tol: float
-    max_jitter: float
-    approximation: str
-    n_threads: int
-    prior_signal_variance: tuple[float, float] | None
-    prior_length_scale: tuple[float, float] | None
-    prior_weight_logit: float | None
-    latent_mean: str
-    tie_length_scales: bool
+class KernelStart:
     def __init__(
         self,
-        *,
         modalities: Sequence[Sequence[int]],
         signal_variance: float,
         length_scales: Sequence[float],
         weights: Sequence[float],
-        free_signal_variance: bool,
-        free_length_scales: bool,
-        free_weights: bool,
-        free_lambda: bool,
-        signal_variance_bounds: tuple[float, float],
-        length_scale_bounds: tuple[float, float],
+    ) -> None: ...
+
+class FreeHyperparameters:
+    def __init__(
+        self,
+        signal_variance: bool,
+        length_scales: bool,
+        weights: bool,
+        transfer_lambda: bool,
+        tie_length_scales: bool = False,
+    ) -> None: ...
+
+class Search:
+    def __init__(
+        self,
         optimize: bool,
         n_restarts: int,
         seed: int,
         max_iter: int,
         optimizer_tol: float,
+        signal_variance_bounds: tuple[float, float],
+        length_scale_bounds: tuple[float, float],
+    ) -> None: ...
+
+class Laplace:
+    def __init__(
+        self,
         newton_max_iter: int,
         newton_tol: float,
         max_jitter: float,
         approximation: str,
+        latent_mean: str,
+    ) -> None: ...
+
+class HyperPriors:
+    def __init__(
+        self,
+        signal_variance: tuple[float, float] | None,
+        length_scale: tuple[float, float] | None,
+        weight_logit: float | None,
+    ) -> None: ...
+
+class FitSettings:
+    def __init__(
+        self,
+        *,
+        start: KernelStart,
+        free: FreeHyperparameters,
+        search: Search,
+        laplace: Laplace,
         n_threads: int,
-        prior_signal_variance: tuple[float, float] | None = None,
-        prior_length_scale: tuple[float, float] | None = None,
-        prior_weight_logit: float | None = None,
-        latent_mean: str = "zero",
-        tie_length_scales: bool = False,
+        hyper_prior: HyperPriors | None = None,
     ) -> None: ...
 
 def fit_gpc(
@@ -190,129 +195,381 @@ def _encode_sensor_packets(
 def encode_packet_bytes(header: int, payload: bytes) -> bytes: ...
 
 # --- simulated world (aptkt-sim) ---------------------------------------------------------
-_Chunk = tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]
-_Frames = tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]
-_Trace = tuple[NDArray, NDArray, NDArray]
+_Rows = Sequence[Sequence[float]]
 
 def _flush_subnormals(on: bool, previous: int | None = None) -> int: ...
 
-class SimThermal:
-    def __init__(self, nodes: int) -> None: ...
-    def __len__(self) -> int: ...
-
-class SimContact:
+# Settings of one trial's physics (frozen; by keyword or position).
+class PatchCells:
     def __init__(
         self,
-        clock_rate: NDArray[np.float64],
-        clock_phase: NDArray[np.float64],
-        sensor_height: NDArray[np.float64],
-        sensor_xy: NDArray[np.float64],
+        clock_rate: Sequence[float],
+        clock_phase: Sequence[float],
+        sensor_height: _Rows,
+        sensor_xy: Sequence[_Rows],
+    ) -> None: ...
+
+class SurfaceShape:
+    def __init__(
+        self,
         centre: tuple[float, float],
         rotation: float,
         surface_z: float,
         tilt: tuple[float, float],
         crown_radius: float,
-        waves: NDArray[np.float64],
+        waves: _Rows,
         size: tuple[float, float],
-        law_delta: NDArray[np.float64],
-        law_sigma: NDArray[np.float64],
+    ) -> None: ...
+
+class ContactLaw:
+    def __init__(
+        self,
+        delta: Sequence[float],
+        sigma: Sequence[float],
         skin_stiffness: float,
-        relax_weights: list[float],
-        relax_times: list[float],
+        relax_weights: Sequence[float],
+        relax_times: Sequence[float],
         sensor_area: float,
+    ) -> None: ...
+
+class ForceSensors:
+    def __init__(
+        self,
         noise_key: tuple[int, int],
-        force_gain: NDArray[np.float64],
-        force_offset: NDArray[np.float64],
+        gain: _Rows,
+        offset: _Rows,
         force_noise: float,
         latency_ns: int,
         jitter_s: float,
-        readout: dict[str, Any],
-        thermal: SimThermal,
-        make: Callable[[int, int], tuple[NDArray, NDArray, NDArray, NDArray, NDArray]],
-        sources: tuple[float, float, float],
     ) -> None: ...
-    def mechanics(
+
+class TextureField:
+    def __init__(self, kvec: _Rows, amplitude: Sequence[float], phase: Sequence[float]) -> None: ...
+
+class ContactVibration:
+    def __init__(
         self,
-        state: Any,
-        seg_t0: NDArray[np.int64],
-        seg_p0: NDArray[np.float64],
-        seg_v0: NDArray[np.float64],
-        seg_a: NDArray[np.float64],
-        t_end_ns: int,
-    ) -> _Chunk: ...
+        cover_contact_length: float,
+        contact_resonance: float,
+        contact_damping: float,
+        acc_bandwidth: float,
+    ) -> None: ...
+
+class TextureCoupling:
+    def __init__(
+        self,
+        coupling_modulus: float,
+        coupling_pressure: float,
+        tangential_coupling: float,
+        lateral_coupling: float,
+    ) -> None: ...
+
+class TextureResponse:
+    def __init__(
+        self,
+        vibration: ContactVibration,
+        coupling: TextureCoupling,
+        top_modulus: float,
+        mu_kinetic: float,
+    ) -> None: ...
+
+class Ringing:
+    def __init__(
+        self, coupling: float, omega: float, decay: float, gain: float, lag: float
+    ) -> None: ...
+
+class SlipParams:
+    def __init__(
+        self,
+        mu_s: float,
+        mu_k: float,
+        tangential_stiffness: float,
+        tangential_mass: float,
+        threshold_sd: float,
+        rate_hz: float,
+        ring: Ringing,
+    ) -> None: ...
+
+class Surface:
+    def __init__(
+        self,
+        texture: TextureField,
+        response: TextureResponse,
+        slip: SlipParams,
+        slip_keys: Sequence[tuple[int, int]],
+    ) -> None: ...
+
+class CellFrames:
+    def __init__(
+        self,
+        centres: _Rows,
+        axes: Sequence[_Rows],
+        acc_bias: _Rows,
+        cell_ids: Sequence[int],
+    ) -> None: ...
+
+class Accelerometers:
+    def __init__(
+        self, gravity: float, acc_noise: float, arm_vibration: float, arm_modes: _Rows
+    ) -> None: ...
+
+class Thermometers:
+    def __init__(
+        self, die_self_heating: float, die_temp_noise: float, temp_noise: float
+    ) -> None: ...
+
+class Proximity:
+    def __init__(
+        self,
+        prox_dark: float,
+        prox_gain: float,
+        prox_distance: float,
+        prox_noise: float,
+        reflectivity: float,
+        table_reflectivity: float,
+    ) -> None: ...
+
+class ContactHeat:
+    def __init__(
+        self,
+        contact_pressure_half: float,
+        conductance_scale: float,
+        contact_steps: float,
+        speed_step: float,
+    ) -> None: ...
+
+class Readout:
+    def __init__(
+        self,
+        cells: CellFrames,
+        acc: Accelerometers,
+        temp: Thermometers,
+        prox: Proximity,
+        heat: ContactHeat,
+    ) -> None: ...
+
+class SimThermal:
+    def __init__(self, nodes: int) -> None: ...
+    def __len__(self) -> int: ...
+
+class ThermalSystem:
+    def __init__(
+        self,
+        u: NDArray[np.float64],
+        mu: NDArray[np.float64],
+        ss_heater: NDArray[np.float64],
+        ss_ambient: NDArray[np.float64],
+        ss_object: NDArray[np.float64],
+    ) -> None: ...
+
+class ThermalContact:
+    def __init__(
+        self,
+        network: SimThermal,
+        make: Callable[[int, int], ThermalSystem],
+        sqrt_c: Sequence[float],
+        heater_power: float,
+        ambient: float,
+        object_temperature: float,
+    ) -> None: ...
+
+# A trial's state, its samples, its trajectory.
+class PhysicsState:
+    def copy(self) -> PhysicsState: ...
+    @property
+    def t_ns(self) -> int: ...
+    @property
+    def next_k(self) -> NDArray[np.int64]: ...
+    @property
+    def relax_h(self) -> NDArray[np.float64]: ...
+    @property
+    def relax_last(self) -> NDArray[np.float64]: ...
+    @property
+    def latest_force(self) -> NDArray[np.float64]: ...
+    @property
+    def thermal(self) -> NDArray[np.float64]: ...
+    @property
+    def thermal_t(self) -> NDArray[np.float64]: ...
+    @property
+    def last_xy(self) -> NDArray[np.float64]: ...
+    @property
+    def slip_load(self) -> NDArray[np.float64]: ...
+    @property
+    def slip_threshold(self) -> NDArray[np.float64]: ...
+    @property
+    def slip_events(self) -> NDArray[np.int64]: ...
+    @property
+    def slip_ringing(self) -> list[list[tuple[float, float]]]: ...
+
+class MechChunk:
+    @staticmethod
+    def concat(chunks: Sequence[MechChunk]) -> MechChunk: ...
+    def __len__(self) -> int: ...
+    @property
+    def size(self) -> int: ...
+    @property
+    def cells(self) -> NDArray[np.int64]: ...
+    @property
+    def ks(self) -> NDArray[np.int64]: ...
+    @property
+    def t_s(self) -> NDArray[np.float64]: ...
+    @property
+    def t_ns(self) -> NDArray[np.int64]: ...
+    @property
+    def pos(self) -> NDArray[np.float64]: ...
+    @property
+    def vel(self) -> NDArray[np.float64]: ...
+    @property
+    def acc(self) -> NDArray[np.float64]: ...
+    @property
+    def sigma(self) -> NDArray[np.float64]: ...
+
+class Segments:
+    def __init__(
+        self,
+        t0: NDArray[np.int64],
+        p0: NDArray[np.float64],
+        v0: NDArray[np.float64],
+        a: NDArray[np.float64],
+    ) -> None: ...
+    def __len__(self) -> int: ...
+    @property
+    def t0(self) -> NDArray[np.int64]: ...
+    @property
+    def p0(self) -> NDArray[np.float64]: ...
+    @property
+    def v0(self) -> NDArray[np.float64]: ...
+    @property
+    def a(self) -> NDArray[np.float64]: ...
+
+# The force loop.
+class ForceControl:
+    def __init__(
+        self,
+        target: float,
+        gain: float,
+        max_vz: float,
+        contact_z: float,
+        max_depth: float,
+        tick_ns: int,
+        wrench_limit: float,
+    ) -> None: ...
+
+class ForcePhase:
+    @staticmethod
+    def settle(t_limit_ns: int) -> ForcePhase: ...
+    @staticmethod
+    def ramp(
+        t_start_ns: int, t_stop_ns: int, v: float, acc: float, direction: tuple[float, float]
+    ) -> ForcePhase: ...
+    @staticmethod
+    def guard(t_end_ns: int, threshold: float, window_ns: int) -> ForcePhase: ...
+    @property
+    def guarded(self) -> bool: ...
+
+class LeanQueue:
+    samples: int
+    def __init__(
+        self,
+        cal_gain: NDArray[np.float64],
+        cal_offset: NDArray[np.float64],
+        latest: NDArray[np.float64],
+    ) -> None: ...
+    def push(
+        self, t_ns: NDArray[np.int64], cells: NDArray[np.int64], force_norm: NDArray[np.float64]
+    ) -> None: ...
+    def deliver(self, t_ns: int) -> None: ...
+    def reading(self) -> float: ...
+    @property
+    def latest(self) -> NDArray[np.float64]: ...
+    def __len__(self) -> int: ...
+
+class TickOutcome:
+    status: str
+    error: float
+    segment: Segments
+    chunk: MechChunk
+
+_Arrays = dict[str, NDArray[Any]]
+
+class SimContact:
+    def __init__(
+        self,
+        cells: PatchCells,
+        shape: SurfaceShape,
+        law: ContactLaw,
+        sensors: ForceSensors,
+        surface: Surface,
+        readout: Readout,
+        thermal: ThermalContact,
+    ) -> None: ...
+    def rest_state(
+        self,
+        t_ns: int,
+        next_k: Sequence[int],
+        thermal: Sequence[float],
+        last_xy: _Rows,
+    ) -> PhysicsState: ...
+    def mechanics(self, state: PhysicsState, segments: Segments, t_end_ns: int) -> MechChunk: ...
     def finish(
-        self,
-        state: Any,
-        cells: NDArray[np.int64],
-        ks: NDArray[np.int64],
-        t_s: NDArray[np.float64],
-        t_ns: NDArray[np.int64],
-        pos: NDArray[np.float64],
-        vel: NDArray[np.float64],
-        acc: NDArray[np.float64],
-        sigma: NDArray[np.float64],
-        detail: bool,
-    ) -> tuple[_Frames, _Trace]: ...
+        self, state: PhysicsState, chunk: MechChunk, detail: bool
+    ) -> tuple[_Arrays, _Arrays]: ...
     def step(
-        self,
-        state: Any,
-        seg_t0: NDArray[np.int64],
-        seg_p0: NDArray[np.float64],
-        seg_v0: NDArray[np.float64],
-        seg_a: NDArray[np.float64],
-        t_end_ns: int,
-        detail: bool,
-    ) -> tuple[_Frames, _Trace]: ...
+        self, state: PhysicsState, segments: Segments, t_end_ns: int, detail: bool
+    ) -> tuple[_Arrays, _Arrays]: ...
     def noise(
         self, ks: NDArray[np.int64], cells: NDArray[np.int64], t_ns: NDArray[np.int64]
     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]: ...
     def force_ticks(
         self,
-        state: Any,
-        seg_t0: NDArray[np.int64],
-        seg_p0: NDArray[np.float64],
-        seg_v0: NDArray[np.float64],
-        seg_a: NDArray[np.float64],
-        queue_t: NDArray[np.int64],
-        queue_c: NDArray[np.int64],
-        queue_f: NDArray[np.float64],
-        latest: NDArray[np.float64],
-        cal_gain: NDArray[np.float64],
-        cal_offset: NDArray[np.float64],
-        control: tuple[float, float, float, float, float, int, float],
-        phase: tuple[Any, ...],
-        samples: int,
-    ) -> tuple[Any, ...]: ...
+        state: PhysicsState,
+        segments: Segments,
+        queue: LeanQueue,
+        control: ForceControl,
+        phase: ForcePhase,
+    ) -> TickOutcome: ...
 
-def sim_heat(
-    u: NDArray[np.float64],
-    mu: NDArray[np.float64],
-    t_ss: NDArray[np.float64],
-    sqrt_c: NDArray[np.float64],
-    cells: NDArray[np.int64],
-    t_s: NDArray[np.float64],
-    config: NDArray[np.int64],
-    state: NDArray[np.float64],
-    state_t: NDArray[np.float64],
-) -> NDArray[np.float64]: ...
+# The loops on their own (the tests compare them with numpy).
+class HeatKernel:
+    def __init__(
+        self,
+        u: NDArray[np.float64],
+        mu: NDArray[np.float64],
+        t_ss: NDArray[np.float64],
+        sqrt_c: NDArray[np.float64],
+    ) -> None: ...
+    def heat(
+        self,
+        cells: NDArray[np.int64],
+        t_s: NDArray[np.float64],
+        config: NDArray[np.int64],
+        state: NDArray[np.float64],
+        state_t: NDArray[np.float64],
+    ) -> NDArray[np.float64]: ...
+
 def sim_texture(
-    kvec: NDArray[np.float64],
-    amplitude: NDArray[np.float64],
-    phase: NDArray[np.float64],
-    constants: list[float],
+    texture: TextureField,
+    response: TextureResponse,
     u: NDArray[np.float64],
     w: NDArray[np.float64],
     pressure: NDArray[np.float64],
 ) -> NDArray[np.float64]: ...
+
+class SlipState:
+    load: float
+    threshold: float
+    events: int
+    ring: list[tuple[float, float]]
+    def __init__(
+        self, load: float, threshold: float, events: int, ring: Sequence[tuple[float, float]]
+    ) -> None: ...
+
 def sim_slip(
-    params: list[float],
+    params: SlipParams,
     key: tuple[int, int],
-    load: float,
-    threshold: float,
-    events: int,
-    ring: NDArray[np.float64],
+    cell: SlipState,
     t: NDArray[np.float64],
     path: NDArray[np.float64],
     force: NDArray[np.float64],
     speed: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], float, float, int, NDArray[np.float64]]: ...
+) -> NDArray[np.float64]: ...

@@ -25,6 +25,7 @@ __all__ = [
     "FeatureTableError",
     "RawDataError",
     "PriorFileError",
+    "DatasetError",
     "Terminated",
     "WorkerDiedError",
     "NotFittedError",
@@ -48,6 +49,11 @@ class RawDataError(ConfigError):
 class PriorFileError(AptktError, ValueError):
     """A prior-knowledge file is not one, is damaged, or is inconsistent; the message names the
     file and the member."""
+
+
+class DatasetError(AptktError):
+    """A data set file is missing, not an aptkt data set, of another schema version, or
+    cannot be written (e.g. a writer died: run ``aptkt dataset repair``)."""
 
 
 class Terminated(KeyboardInterrupt):

@@ -76,7 +76,11 @@ def _same_params(stub, compiled) -> bool:
 
 
 def _is_property(fn: ast.FunctionDef) -> bool:
-    return any(isinstance(d, ast.Name) and d.id == "property" for d in fn.decorator_list)
+    return _decorated(fn, "property")
+
+
+def _decorated(fn: ast.FunctionDef, name: str) -> bool:
+    return any(isinstance(d, ast.Name) and d.id == name for d in fn.decorator_list)
 
 
 def _declared_members(cls: ast.ClassDef) -> dict[str, ast.AST]:
@@ -157,10 +161,14 @@ def test_classes_match(name):
             continue
         attr = vars(cls)[member]
         is_data = isinstance(decl, ast.AnnAssign) or _is_property(decl)
-        assert inspect.isgetsetdescriptor(attr) == is_data, f"{name}.{member}: kind differs"
+        # A field read straight from the object (a pyclass's `Py<...>`) is a member descriptor.
+        compiled_data = inspect.isgetsetdescriptor(attr) or inspect.ismemberdescriptor(attr)
+        assert compiled_data == is_data, f"{name}.{member}: kind differs"
         if not is_data:
+            static = _decorated(decl, "staticmethod")
+            assert static == isinstance(attr, staticmethod), f"{name}.{member}: static differs"
             assert _same_params(
-                _stub_params(decl, method=True), _compiled_params(attr, method=True)
+                _stub_params(decl, method=not static), _compiled_params(attr, method=not static)
             ), f"{name}.{member}: stub vs compiled {inspect.signature(attr)}"
     if "__init__" not in declared:
         assert _compiled_params(cls, method=False) == [], f"{name}: constructor not declared"

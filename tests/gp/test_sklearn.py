@@ -13,7 +13,8 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from aptkt.errors import NotFittedError
-from aptkt.gp import DEFAULTS, LaplaceGPC, _threads
+from aptkt.gp import DEFAULTS, LaplaceGPC
+from aptkt.gp.inputs import threads
 
 from .conftest import make_blobs
 
@@ -68,14 +69,14 @@ def test_pickle_round_trip_for_joblib():
 
 def test_n_jobs_follows_joblib():
     cores = os.cpu_count() or 1
-    assert _threads(None) == 1
-    assert _threads(3) == 3
-    assert _threads(-1) == cores
-    assert _threads(-2) == max(1, cores - 1)
-    assert _threads(-10_000) == 1
+    assert threads(None) == 1
+    assert threads(3) == 3
+    assert threads(-1) == cores
+    assert threads(-2) == max(1, cores - 1)
+    assert threads(-10_000) == 1
     for bad in (0, 1.5, "2", True):
         with pytest.raises(ValueError, match="n_jobs"):
-            _threads(bad)
+            threads(bad)
     X, y = make_blobs(6, 3, 3, seed=4)
     a = LaplaceGPC(random_state=0, n_jobs=-1).fit(X, y)
     b = LaplaceGPC(random_state=0, n_jobs=None).fit(X, y)
@@ -98,7 +99,7 @@ def test_learner_settings_take_their_defaults_from_the_gp_layer():
 
 
 def test_plain_arrays_are_validated_as_scikit_learn_validates_them():
-    """The fast path for float64 ndarrays (gp._validate) against scikit-learn's own
+    """The fast path for float64 ndarrays (gp.inputs.validate) against scikit-learn's own
     validation, which lists still take: same fit, same fitted
     attributes, the same error for a wrong number of features."""
     X, y = make_blobs(12, 3, 4, spread=1.0, seed=3)

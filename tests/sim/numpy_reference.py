@@ -8,17 +8,67 @@ whole second half of a step (``ContactPhysics.finish`` as it was in numpy, built
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from aptkt.sim.kinematics import Trajectory
-from aptkt.sim.physics import GRAVITY, ContactPhysics, MechChunk, PhysicsState, _runs
+from aptkt.sim.physics import GRAVITY, ContactPhysics, PhysicsState, _runs
 from aptkt.sim.recurrence import linear_recurrence_rows
-from aptkt.sim.texture import texture_acceleration
+from aptkt.sim.texture import StickSlipState, texture_acceleration
 from aptkt.sim.thermal import speed_bins
 
 
-def samples(ph: ContactPhysics, state: PhysicsState, t_end_ns: int):
+@dataclass
+class RefState:
+    """The core's ``PhysicsState`` as numpy arrays the reference updates in place."""
+
+    t_ns: int
+    next_k: np.ndarray
+    relax_h: np.ndarray
+    relax_last: np.ndarray
+    thermal: np.ndarray
+    thermal_t: np.ndarray
+    last_xy: np.ndarray
+    latest_force: np.ndarray
+    slip: StickSlipState
+
+    @classmethod
+    def of(cls, st: PhysicsState) -> RefState:
+        return cls(
+            st.t_ns,
+            st.next_k,
+            st.relax_h,
+            st.relax_last,
+            st.thermal,
+            st.thermal_t,
+            st.last_xy,
+            st.latest_force,
+            StickSlipState(st.slip_load, st.slip_threshold, st.slip_events, st.slip_ringing),
+        )
+
+
+@dataclass
+class RefChunk:
+    """The samples of a stretch of time as the reference's mechanics produces them."""
+
+    cells: np.ndarray
+    ks: np.ndarray
+    t_s: np.ndarray
+    t_ns: np.ndarray
+    pos: np.ndarray
+    vel: np.ndarray
+    acc: np.ndarray
+    sigma: np.ndarray
+
+    @classmethod
+    def empty(cls) -> RefChunk:
+        z = np.zeros
+        i = np.int64
+        return cls(z(0, i), z(0, i), z(0), z(0, i), z((0, 3)), z((0, 3)), z((0, 3)), z((0, 3)))
+
+
+def samples(ph: ContactPhysics, state: RefState, t_end_ns: int):
     """Cell index and sample index of every sample in ``(state.t, t_end]``, cell-major."""
     rate, phase = ph.imp.clock_rate, ph.imp.clock_phase
     last = np.floor((t_end_ns * 1e-9 - phase) * rate).astype(np.int64)
@@ -31,11 +81,11 @@ def samples(ph: ContactPhysics, state: PhysicsState, t_end_ns: int):
     return cells, starts + offsets
 
 
-def mechanics(ph: ContactPhysics, st: PhysicsState, traj: Trajectory, t_end_ns: int) -> MechChunk:
+def mechanics(ph: ContactPhysics, st: RefState, traj: Trajectory, t_end_ns: int) -> RefChunk:
     st.t_ns = max(int(t_end_ns), st.t_ns)
     cells, ks = samples(ph, st, st.t_ns)
     if cells.size == 0:
-        return MechChunk.empty()
+        return RefChunk.empty()
     imp = ph.imp
     t_s = imp.clock_phase[cells] + ks / imp.clock_rate[cells]
     t_ns = np.rint(t_s * 1e9).astype(np.int64)
@@ -47,7 +97,7 @@ def mechanics(ph: ContactPhysics, st: PhysicsState, traj: Trajectory, t_end_ns: 
     elastic = ph.law.stress(np.where(np.isfinite(depth), depth, -1.0))
     sigma = np.maximum(relax(ph, st, elastic, cells, first, last, present), 0.0)
     st.latest_force[present] = (sigma * ph.k.sensor_area)[last].sum(axis=1)
-    return MechChunk(cells, ks, t_s, t_ns, pos, vel, acc, sigma)
+    return RefChunk(cells, ks, t_s, t_ns, pos, vel, acc, sigma)
 
 
 def relax(ph, st, elastic, cells, first, last, present):
@@ -77,7 +127,7 @@ def relax(ph, st, elastic, cells, first, last, present):
     return out
 
 
-def heat(ph: ContactPhysics, st: PhysicsState, cells, t_s, phi_bin, v_bin) -> np.ndarray:
+def heat(ph: ContactPhysics, st: RefState, cells, t_s, phi_bin, v_bin) -> np.ndarray:
     """[LM71, PCB] temperatures, cell by cell and run by run (one exact LTI solution per run)."""
     temps = np.empty((t_s.shape[0], 2))
     first, last, present = _runs(cells)
@@ -188,7 +238,7 @@ def slip_run(ss, state, cell, t, path, force, speed):
     return out
 
 
-def finish(ph: ContactPhysics, st: PhysicsState, chunk: MechChunk, *, detail: bool = True):
+def finish(ph: ContactPhysics, st: RefState, chunk, *, detail: bool = True):
     """``ContactPhysics.finish`` in numpy (the reference of ``aptkt_sim::readout``): heat,
     stick-slip, texture, the arm's vibration, noise and readings of the samples of ``chunk``;
     updates ``st`` in place. Returns the frames' fields (a dict, arrival order) and the force

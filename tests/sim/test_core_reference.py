@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from aptkt._core import sim_heat, sim_texture
+from aptkt._core import HeatKernel, LeanQueue, TextureField, sim_texture
 from aptkt.sim.kinematics import Trajectory
 from aptkt.sim.physics import ContactPhysics, ObjectPose
 from aptkt.sim.seeding import stable_words, trial_seed_sequence
@@ -17,6 +17,7 @@ from aptkt.sim.texture import texture_acceleration
 from aptkt.sim.thermal import speed_bins
 from aptkt.sim.trial import TrialConditions
 from aptkt.sim.world import OBJECT_SPOT
+from aptkt.skin.protocol import RAW_RANGES, SCALE, to_physical
 
 from . import numpy_reference as ref
 
@@ -52,7 +53,7 @@ def test_mechanics_matches_numpy(world, name, depth):
     ph = physics(world, name)
     tr = press_and_slide(ph, depth)
     start = ph.initial_state(0, tr.p0[0])
-    a, b = start.copy(), start.copy()
+    a, b = start.copy(), ref.RefState.of(start)
     peak = 0.0
     for t_end in [20_000_000, 400_000_000, 408_000_000, 1_000_000_000, 2_600_000_000]:
         got = ph.mechanics(a, tr, t_end)
@@ -78,11 +79,13 @@ def compiled_heat(ph: ContactPhysics, st, cells, t_s, phi_bin, v_bin) -> np.ndar
     keys = sorted(set(zip(phi_bin.tolist(), v_bin.tolist())))
     index = {key: i for i, key in enumerate(keys)}
     systems = [ph.thermal.net.system(p, v) for p, v in keys]
-    return sim_heat(
+    kernel = HeatKernel(
         np.stack([x.u for x in systems]),
         np.stack([x.mu for x in systems]),
         np.stack([ph.thermal._t_ss_cached(p, v, x) for (p, v), x in zip(keys, systems)]),
         systems[0].sqrt_c,
+    )
+    return kernel.heat(
         cells,
         t_s,
         np.array([index[key] for key in zip(phi_bin.tolist(), v_bin.tolist())], dtype=np.int64),
@@ -102,7 +105,7 @@ def test_heat_matches_numpy(world, name):
     speed = np.hypot(chunk.vel[:, 0], chunk.vel[:, 1])
     v_bin = np.where(pressure > 0, speed_bins(speed), 0)
     assert len(np.unique(phi)) > 3 and len(np.unique(v_bin)) > 3
-    a, b = st0.copy(), st0.copy()
+    a, b = ref.RefState.of(st0), ref.RefState.of(st0)
     got = compiled_heat(ph, a, chunk.cells, chunk.t_s, phi, v_bin)
     want = ref.heat(ph, b, chunk.cells, chunk.t_s, phi, v_bin)
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
@@ -135,9 +138,10 @@ def test_texture_matches_numpy(world, speed, angle, pressure, x):
     u = np.array([[x, 0.3 * x], [0.01, -0.02]])
     w = speed * np.array([[np.cos(angle), np.sin(angle)], [0.0, 1.0]])
     p = np.array([pressure, 0.5 * pressure])
-    got = sim_texture(
-        ph.texture.kvec, ph.texture.amplitude, ph.texture.phase, ph._texture_constants, u, w, p
+    field = TextureField(
+        ph.texture.kvec.tolist(), ph.texture.amplitude.tolist(), ph.texture.phase.tolist()
     )
+    got = sim_texture(field, ph.texture_response, u, w, p)
     want = texture_acceleration(ph.texture, ph.k, u, w, p, ph.top_modulus, ph.mu_k)
     scale = max(float(np.abs(want).max()), 1e-12)
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-10 * scale)
@@ -198,7 +202,7 @@ def test_finish_matches_numpy(world, name, slow, detail):
     ph = physics(world, name)
     tr = slow_slide(ph) if slow else press_and_slide(ph, 0.002)
     start = ph.initial_state(0, tr.p0[0])
-    a, b = start.copy(), start.copy()
+    a, b = start.copy(), ref.RefState.of(start)
     steps = [20_000_000, 400_000_000, 408_000_000, 1_000_000_000, 1_700_000_000, 4_000_000_000]
     slips = moving = 0
     for t_end in steps:
@@ -219,12 +223,47 @@ def test_finish_matches_numpy(world, name, slow, detail):
         np.testing.assert_allclose(a.thermal, b.thermal, rtol=0, atol=1e-9)
         np.testing.assert_array_equal(a.thermal_t, b.thermal_t)
         np.testing.assert_array_equal(a.last_xy, b.last_xy)
-        np.testing.assert_allclose(a.slip.load, b.slip.load, rtol=1e-12, atol=1e-15)
-        np.testing.assert_array_equal(a.slip.threshold, b.slip.threshold)
-        np.testing.assert_array_equal(a.slip.events, b.slip.events)
-        assert a.slip.ringing == b.slip.ringing
-        slips = int(a.slip.events.sum())
+        np.testing.assert_allclose(a.slip_load, b.slip.load, rtol=1e-12, atol=1e-15)
+        np.testing.assert_array_equal(a.slip_threshold, b.slip.threshold)
+        np.testing.assert_array_equal(a.slip_events, b.slip.events)
+        assert a.slip_ringing == b.slip.ringing
+        slips = int(a.slip_events.sum())
         moving += int(np.any(np.abs(chunk.vel[:, :2]) > 0))
     assert moving >= 2  # the steps did slide
     if slow and name == "rubber_mat":
         assert slips > 0  # and the slow slide on rubber did stick and slip
+
+
+def test_the_lean_queue_reads_what_the_skin_reads():
+    """The force loop's reading from the packets in flight (``aptkt_sim::control::LeanQueue``)
+    against the skin source's arithmetic in numpy: each packet's force fields quantised to the
+    wire's grid and calibrated, the newest packet of each cell by arrival, summed as numpy
+    sums."""
+    ((scale, _),) = SCALE["force"]
+    (lo_hi,) = RAW_RANGES["force"]
+    rng = np.random.default_rng(7)
+    n = 7
+    gain, offset = rng.uniform(0.5, 2.0, (n, 3)), rng.uniform(0.0, 0.2, (n, 3))
+    latest = rng.uniform(0.0, 0.3, (n, 3))
+    queue = LeanQueue(gain, offset, latest)
+    q_t, q_c, q_f = np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))
+    for step in range(60):
+        m = int(rng.integers(0, 25))
+        t = rng.integers(0, 3, m).astype(np.int64) * 400_000 + step * 1_000_000
+        cells = rng.integers(0, n, m).astype(np.int64)
+        force = rng.uniform(-0.1, 4.5, (m, 3))  # beyond the field's range at both ends
+        queue.push(t, cells, force)
+        raw = np.clip(np.rint(force / scale), *lo_hi)
+        newtons = gain[cells] * (to_physical("force", raw) - offset[cells])
+        order = np.argsort(np.concatenate([q_t, t]), kind="stable")
+        q_t = np.concatenate([q_t, t])[order]
+        q_c = np.concatenate([q_c, cells])[order]
+        q_f = np.concatenate([q_f, newtons])[order]
+        now = step * 1_000_000 + 500_000
+        queue.deliver(now)
+        due = int(np.searchsorted(q_t, now, side="right"))
+        latest[q_c[:due]] = q_f[:due]
+        q_t, q_c, q_f = q_t[due:], q_c[due:], q_f[due:]
+        assert len(queue) == q_t.size
+        np.testing.assert_array_equal(queue.latest, latest)
+        assert queue.reading() == float(latest.sum())

@@ -10,6 +10,10 @@ from aptkt.actions.executor import ExplorationSettings
 from aptkt.commands._checks import at_least, input_file
 from aptkt.errors import ConfigError
 
+#: Exit code of `aptkt collect` and `aptkt learn` when a robot or skin fault stopped the
+#: session mid-trial (1: bad input).
+EXIT_FAULT = 3
+
 
 def add_session_arguments(p: argparse.ArgumentParser, *, robot_required: bool = True) -> None:
     g = p.add_argument_group("robot and skin")

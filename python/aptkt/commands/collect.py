@@ -9,6 +9,7 @@ from pathlib import Path
 
 from aptkt.commands._checks import at_least, output_file, resume_or_overwrite
 from aptkt.commands._session import (
+    EXIT_FAULT,
     add_action_arguments,
     add_session_arguments,
     available_actions,
@@ -18,9 +19,6 @@ from aptkt.commands._session import (
 )
 from aptkt.errors import ConfigError
 
-#: Exit code when a robot or skin fault stopped the collection mid-trial (1: bad input).
-EXIT_FAULT = 3
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -29,7 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Apply every action N times to every object and store each recording in a crash-safe "
         "HDF5 data set, trial by trial (a killed run keeps every completed trial; --resume completes the "
         "file). On a robot or skin fault the arm is stopped, the partial recording goes to "
-        "<output>.aborted.h5, and the command exits with code 3 naming the object, action and trial.",
+        f"<output>.aborted.h5, and the command exits with code {EXIT_FAULT} naming the object, action "
+        "and trial.",
     )
     add_session_arguments(p)
     p.add_argument(

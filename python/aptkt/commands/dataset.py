@@ -286,7 +286,7 @@ def run_features(args: argparse.Namespace) -> int:
 
 
 def run_export_features(args: argparse.Namespace) -> int:
-    from aptkt.data.store import DatasetError
+    from aptkt.errors import DatasetError
     from aptkt.learning.dataset import load_observations
     from aptkt.learning.feature_table import write_feature_table
 

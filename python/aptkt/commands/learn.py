@@ -10,6 +10,7 @@ from aptkt.commands import learn_table
 from aptkt.commands._checks import at_least, input_file, output_dir, output_file
 from aptkt.commands._method import add_method_arguments, learner_config
 from aptkt.commands._session import (
+    EXIT_FAULT,
     add_action_arguments,
     add_session_arguments,
     available_actions,
@@ -20,9 +21,6 @@ from aptkt.commands._session import (
 from aptkt.errors import ConfigError
 from aptkt.learning.config import LearnerConfig
 from aptkt.learning.transfer import TRANSFER_MODES
-
-#: Exit code when a robot or skin fault stopped the run (1: bad input).
-EXIT_FAULT = 3
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -213,7 +211,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _load_test(path: str, actions: list[str], objects: list[str]):  # -> ObservationTable
-    from aptkt.data.store import DatasetError
+    from aptkt.errors import DatasetError
     from aptkt.learning.dataset import load_observations
 
     try:

@@ -20,36 +20,44 @@ file whose writer died, :func:`repair` first copies its complete recordings into
 
 from __future__ import annotations
 
-import ctypes
-import functools
 import json
 import os
-import shutil
 import tempfile
-import time
-import zlib
 from collections import Counter
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 import h5py
 import numpy as np
 
 from aptkt import __version__
-from aptkt.data.schema import (
-    INDEX_DTYPE,
-    READABLE_VERSIONS,
-    SAMPLE_FIELDS,
-    SCHEMA,
-    SCHEMA_VERSION,
+from aptkt.data.codec import (
+    CHUNK_ROWS,
+    COMPRESSION,
+    META_CHUNK_BYTES,
+    PackedRecording,
+    json_default,
+    next_chunk_start,
+    pack_raw,
+    pack_recording,
+    raw_to_samples,
+    recording_key,
+    samples_to_raw,
 )
-from aptkt.errors import AptktError
-from aptkt.skin.config import ForceCalibration
-from aptkt.skin.protocol import RAW_FIELDS, SCALE, to_physical
-from aptkt.skin.samples import Recording, SkinSamples
+from aptkt.data.hdf5 import (
+    copy_without_writer_mark,
+    cut_short,
+    open_swmr_read,
+    readable_prefix,
+    refused_for_writer_mark,
+    while_locked,
+)
+from aptkt.data.schema import INDEX_DTYPE, READABLE_VERSIONS, SAMPLE_FIELDS, SCHEMA, SCHEMA_VERSION
+from aptkt.errors import DatasetError
+from aptkt.skin.samples import Recording
 
+# DatasetError lives with the other errors; the codec's names are importable from here too.
 __all__ = [
     "DatasetError",
     "DatasetWriter",
@@ -57,370 +65,10 @@ __all__ = [
     "PackedRecording",
     "pack_recording",
     "repair",
-    "write_features",
     "recording_key",
     "samples_to_raw",
     "raw_to_samples",
 ]
-
-_CHUNK_ROWS = 16384
-_META_CHUNK_BYTES = 4096  # a recording's metadata is ≈ 3 KB of JSON
-#: Level 1: the samples are small integers after the byte shuffle; higher levels cost several
-#: times the CPU for a few percent of file size.
-_GZIP_LEVEL = 1
-_COMPRESSION = {"compression": "gzip", "compression_opts": _GZIP_LEVEL, "shuffle": True}
-_LOCK_PATIENCE_S = 2.0
-
-_T = TypeVar("_T")
-
-
-def _while_locked(step: Callable[[], _T]) -> _T:
-    """Run an HDF5 open or create (or the switch to SWMR writing), retrying while another process
-    holds the file's lock for a moment. A reader opening the file as the writer starts takes the lock
-    briefly, and the writer's switch to SWMR mode would otherwise fail with errno 11 and end a
-    collection before its first trial (measured: 3 of 60 starts with a reader polling)."""
-    deadline = time.monotonic() + _LOCK_PATIENCE_S
-    delay = 0.002
-    while True:
-        try:
-            return step()
-        except (OSError, RuntimeError) as exc:
-            if "unable to lock file" not in str(exc) or time.monotonic() > deadline:
-                raise
-        time.sleep(delay)
-        delay = min(2 * delay, 0.05)
-
-
-# A SWMR reader retries a metadata read whose checksum fails (the writer may be rewriting that
-# block at this moment); HDF5's default of 100 attempts backs off exponentially, so on a file
-# that is really damaged (truncated) a single read took minutes. A handful of quick attempts
-# covers a block caught mid-write.
-_SWMR_READ_ATTEMPTS = 12
-
-
-@functools.cache
-def _hdf5_library() -> ctypes.CDLL | None:
-    """The HDF5 library h5py runs on (for the one setting h5py does not expose)."""
-    candidates = sorted((Path(h5py.__file__).parent.parent / "h5py.libs").glob("libhdf5-*"))
-    if not candidates:
-        try:
-            with open("/proc/self/maps") as fh:
-                candidates = sorted(
-                    {
-                        Path(line.split()[-1])
-                        for line in fh
-                        if "/libhdf5." in line or "/libhdf5-" in line
-                    }
-                )
-        except OSError:
-            return None
-    for lib in candidates:
-        try:
-            handle = ctypes.CDLL(str(lib))
-            handle.H5Pset_metadata_read_attempts.argtypes = [ctypes.c_int64, ctypes.c_uint]
-            return handle
-        except (OSError, AttributeError):
-            continue
-    return None
-
-
-def _open_swmr_read(path: Path) -> h5py.File:
-    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
-    lib = _hdf5_library()
-    if lib is not None:
-        lib.H5Pset_metadata_read_attempts(fapl.id, _SWMR_READ_ATTEMPTS)
-    fid = h5py.h5f.open(os.fsencode(path), h5py.h5f.ACC_RDONLY | h5py.h5f.ACC_SWMR_READ, fapl=fapl)
-    return h5py.File(fid)
-
-
-# -- files whose writer died outside SWMR mode ---------------------------------------------------
-# HDF5 marks a file "open for writing" in its superblock while a writer has it open. A writer in
-# SWMR mode marks it "SWMR writing" too, and SWMR readers accept it even after that writer died.
-# A writer killed *outside* SWMR mode (between opening a file and switching to SWMR, or any
-# older aptkt writing features in place) leaves a mark every HDF5 open then refuses. What it
-# wrote is intact: the reader works on a private copy whose mark is cleared (what HDF5's own
-# h5clear does), never touching the file itself.
-
-_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
-
-
-def _lookup3(data: bytes) -> int:
-    """Bob Jenkins' lookup3 ``hashlittle`` with seed 0: HDF5's metadata checksum."""
-    mask = 0xFFFFFFFF
-
-    def rot(x: int, k: int) -> int:
-        return ((x << k) | (x >> (32 - k))) & mask
-
-    n = len(data)
-    a = b = c = (0xDEADBEEF + n) & mask
-    k = 0
-    while n > 12:
-        a = (a + int.from_bytes(data[k : k + 4], "little")) & mask
-        b = (b + int.from_bytes(data[k + 4 : k + 8], "little")) & mask
-        c = (c + int.from_bytes(data[k + 8 : k + 12], "little")) & mask
-        a = (a - c) & mask ^ rot(c, 4)
-        c = (c + b) & mask
-        b = (b - a) & mask ^ rot(a, 6)
-        a = (a + c) & mask
-        c = (c - b) & mask ^ rot(b, 8)
-        b = (b + a) & mask
-        a = (a - c) & mask ^ rot(c, 16)
-        c = (c + b) & mask
-        b = (b - a) & mask ^ rot(a, 19)
-        a = (a + c) & mask
-        c = (c - b) & mask ^ rot(b, 4)
-        b = (b + a) & mask
-        n -= 12
-        k += 12
-    if n == 0:
-        return c
-    tail = data[k:] + bytes(12 - n)
-    a = (a + int.from_bytes(tail[0:4], "little")) & mask
-    b = (b + int.from_bytes(tail[4:8], "little")) & mask
-    c = (c + int.from_bytes(tail[8:12], "little")) & mask
-    c = (c ^ b) - rot(b, 14) & mask
-    a = (a ^ c) - rot(c, 11) & mask
-    b = (b ^ a) - rot(a, 25) & mask
-    c = (c ^ b) - rot(b, 16) & mask
-    a = (a ^ c) - rot(c, 4) & mask
-    b = (b ^ a) - rot(a, 14) & mask
-    c = (c ^ b) - rot(b, 24) & mask
-    return c
-
-
-def _superblock(fh: Any) -> tuple[int, bytearray] | None:
-    """Offset and bytes of a version 2 or 3 superblock (the only ones with writer marks); HDF5
-    looks for it at 0, 512, 1024, 2048, ..."""
-    size = os.fstat(fh.fileno()).st_size
-    offset = 0
-    while offset + 12 <= size:
-        fh.seek(offset)
-        head = fh.read(12)
-        if head[:8] == _HDF5_SIGNATURE:
-            if head[8] not in (2, 3):
-                return None
-            fh.seek(offset)
-            return offset, bytearray(fh.read(12 + 4 * head[9] + 4))
-        offset = 512 if offset == 0 else 2 * offset
-    return None
-
-
-def _writer_mark(path: Path) -> int:
-    """The superblock's file consistency flags (0: no writer has it open)."""
-    try:
-        with open(path, "rb") as fh:
-            sb = _superblock(fh)
-    except OSError:
-        return 0
-    return 0 if sb is None else sb[1][11]
-
-
-def _cut_short(path: Path) -> bool:
-    """Whether the file is shorter than the end its superblock records (truncated)."""
-    try:
-        with open(path, "rb") as fh:
-            found = _superblock(fh)
-            size = os.fstat(fh.fileno()).st_size
-    except OSError:
-        return False
-    if found is None:
-        return False
-    sb, n = found[1], found[1][9]  # n: the size of a file address
-    return size < found[0] + int.from_bytes(sb[12 + 2 * n : 12 + 3 * n], "little")
-
-
-def _copy_without_writer_mark(path: Path, dest: Path) -> None:
-    shutil.copyfile(path, dest)
-    with open(dest, "r+b") as fh:
-        found = _superblock(fh)
-        if found is None:
-            return
-        offset, sb = found
-        sb[11] = 0
-        sb[-4:] = _lookup3(bytes(sb[:-4])).to_bytes(4, "little")
-        fh.seek(offset)
-        fh.write(sb)
-
-
-def _refused_for_writer_mark(exc: BaseException) -> bool:
-    text = str(exc)
-    return "not already open for SWMR writing" in text or "already open for write" in text
-
-
-class DatasetError(AptktError):
-    """A data set file is missing, not an aptkt data set, of another schema version, or
-    cannot be written (e.g. a writer died: run ``aptkt dataset repair``)."""
-
-
-def recording_key(rec: Recording) -> tuple[str, str, int]:
-    """``(object, action, trial)`` of a recording, from its metadata."""
-    meta = rec.metadata
-    action = meta.get("action")
-    name = action.get("name") if isinstance(action, Mapping) else action
-    if (
-        not isinstance(meta.get("object"), str)
-        or not isinstance(name, str)
-        or not isinstance(meta.get("trial"), int)
-    ):
-        raise ValueError(
-            "recording metadata needs 'object' (str), 'action' (name or dict with 'name') and 'trial' (int)"
-        )
-    return meta["object"], name, int(meta["trial"])
-
-
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.floating):
-        return float(obj)
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, (tuple, set)):
-        return list(obj)
-    raise TypeError(f"metadata value of type {type(obj).__name__} is not JSON-serialisable")
-
-
-def _to_raw(name: str, values: np.ndarray, column: int = 0) -> np.ndarray:
-    scale, offset = SCALE[name][column]
-    raw = np.rint((values - offset) / scale)
-    off_grid = (raw * scale + offset) != values
-    if np.any(off_grid):
-        bad = int(np.flatnonzero(off_grid.reshape(off_grid.shape[0], -1).any(axis=1))[0])
-        raise ValueError(
-            f"{name}: values are not on the protocol's grid (row {bad}); only skin data can be stored raw"
-        )
-    return raw
-
-
-def _calibration_of(metadata: Mapping[str, Any]) -> ForceCalibration:
-    try:
-        return ForceCalibration.from_metadata(metadata.get("calibration"))
-    except ValueError as exc:
-        raise ValueError(f"{exc} (needed to store and read raw forces)") from None
-
-
-def samples_to_raw(samples: SkinSamples, metadata: Mapping[str, Any]) -> dict[str, np.ndarray]:
-    """Samples → the stored columns: the raw integers of the wire.
-
-    Samples that came off the wire keep those integers (``samples.raw``): they are stored as
-    they are. Samples made otherwise are mapped back onto the wire's grid, exactly (raises if
-    they are not on it).
-    """
-    fields = {name: dtype for name, (_, dtype) in SAMPLE_FIELDS.items()}
-    out = {"t_ns": samples.t_ns.astype(fields["t_ns"])}
-    if samples.raw is not None:
-        out.update({name: col.astype(fields[name]) for name, col in samples.raw.items()})
-        return {name: out[name] for name in SAMPLE_FIELDS}
-    if len(samples):
-        cal = _calibration_of(metadata)
-        force_norm = cal.to_normalised(samples.cell_id, samples.force)
-    else:
-        cal, force_norm = None, np.zeros((0, 3))
-    ((force_scale, _),) = SCALE["force"]
-    force = np.rint(force_norm / force_scale)
-    if cal is not None:
-        back = cal.to_newtons(samples.cell_id, force * force_scale)
-        if not np.allclose(back, samples.force, rtol=1e-9, atol=1e-12):
-            raise ValueError(
-                "force: calibrated values do not come from 12-bit readings with this calibration"
-            )
-    out.update(
-        cell_id=samples.cell_id.astype(fields["cell_id"]),
-        proximity=_to_raw("proximity", samples.proximity).astype(fields["proximity"]),
-        acc=_to_raw("acc", samples.acc).astype(fields["acc"]),
-        temp=np.stack(
-            [_to_raw("temp", samples.temp[:, 0], 0), _to_raw("temp", samples.temp[:, 1], 1)], axis=1
-        ).astype(fields["temp"]),
-        force=force.astype(fields["force"]),
-    )
-    return {name: out[name] for name in SAMPLE_FIELDS}
-
-
-def raw_to_samples(raw: Mapping[str, np.ndarray], metadata: Mapping[str, Any]) -> SkinSamples:
-    """Stored raw integers → physical samples, with the same arithmetic as the skin sources
-    (the integers stay with the samples, see :class:`~aptkt.skin.SkinSamples`)."""
-    cells = np.asarray(raw["cell_id"], dtype=np.uint16)
-    force_norm = to_physical("force", raw["force"])
-    force = _calibration_of(metadata).to_newtons(cells, force_norm) if len(cells) else force_norm
-    return SkinSamples(
-        cell_id=cells,
-        t_ns=np.asarray(raw["t_ns"], dtype=np.int64),
-        proximity=to_physical("proximity", raw["proximity"]),
-        acc=to_physical("acc", raw["acc"]),
-        temp=to_physical("temp", raw["temp"]),
-        force=force,
-        raw={name: raw[name] for name in RAW_FIELDS},
-    )
-
-
-@dataclass(frozen=True)
-class PackedRecording:
-    """A recording as the writer stores it: its key, times, metadata JSON and, per sample field,
-    the compressed HDF5 chunks of its raw integers (byte shuffle + deflate, exactly the
-    datasets' filter pipeline), ready to be placed. Compact and cheap to pass between
-    processes, so that data set generation compresses in its workers and the single writer
-    only places chunks."""
-
-    key: tuple[str, str, int]
-    start_ns: int
-    stop_ns: int
-    rows: int
-    meta_json: str
-    chunks: dict[str, tuple[bytes, ...]]
-
-
-def _compress_chunks(
-    values: np.ndarray, tail: tuple[int, ...], dtype: np.dtype
-) -> tuple[bytes, ...]:
-    """The chunks of one field: rows padded with zeros to whole chunks, each chunk's bytes
-    shuffled (byte j of every element together, as HDF5's shuffle filter) and deflated."""
-    n = values.shape[0]
-    padded = np.zeros((_next_chunk_start(n, _CHUNK_ROWS), *tail), dtype=dtype)
-    padded[:n] = values
-    out = []
-    for start in range(0, padded.shape[0], _CHUNK_ROWS):
-        block = padded[start : start + _CHUNK_ROWS].reshape(-1).view(np.uint8)
-        shuffled = block.reshape(-1, dtype.itemsize).T.tobytes()
-        out.append(zlib.compress(shuffled, _GZIP_LEVEL))
-    return tuple(out)
-
-
-def pack_raw(
-    key: tuple[str, str, int],
-    start_ns: int,
-    stop_ns: int,
-    raw: Mapping[str, np.ndarray],
-    meta_json: str,
-) -> PackedRecording:
-    """Raw sample fields (see :data:`SAMPLE_FIELDS`) and metadata → a :class:`PackedRecording`."""
-    obj, action, trial = key
-    if len(obj.encode()) > 64 or len(action.encode()) > 32:
-        raise ValueError("object names are limited to 64 bytes and action names to 32")
-    n = int(np.asarray(raw["cell_id"]).shape[0])
-    chunks = {}
-    for name, (tail, dtype) in SAMPLE_FIELDS.items():
-        values = np.asarray(raw[name])
-        if values.shape != (n, *tail):
-            raise ValueError(f"{name}: expected shape {(n, *tail)}, got {values.shape}")
-        chunks[name] = _compress_chunks(values.astype(dtype, copy=False), tail, dtype)
-    return PackedRecording(
-        (str(obj), str(action), int(trial)), int(start_ns), int(stop_ns), n, meta_json, chunks
-    )
-
-
-def pack_recording(rec: Recording) -> PackedRecording:
-    """A recording → a :class:`PackedRecording` (raw integers of the wire, exact)."""
-    meta = dict(rec.metadata)
-    meta.setdefault("cells", list(rec.cells))
-    meta["silent_cells"] = list(rec.silent_cells)
-    raw = samples_to_raw(rec.samples, meta)
-    return pack_raw(
-        recording_key(rec),
-        rec.start_ns,
-        rec.stop_ns,
-        raw,
-        json.dumps(meta, sort_keys=True, default=_json_default),
-    )
 
 
 class DatasetWriter:
@@ -443,64 +91,15 @@ class DatasetWriter:
         if mode not in ("w", "a"):
             raise ValueError("mode must be 'w' or 'a'")
         if mode == "a" and self.path.exists():
-            try:
-                self._f = _while_locked(lambda: h5py.File(self.path, "a", libver="latest"))
-            except OSError as exc:
-                if "already open" in str(exc) or "consistency flags" in str(exc):
-                    raise DatasetError(
-                        f"{self.path}: a writer of this file did not close it (crashed or "
-                        f"still running); run 'aptkt dataset repair {self.path}' first"
-                    ) from exc
-                raise DatasetError(f"{self.path}: cannot open for appending: {exc}") from exc
-            _check_schema(self._f, self.path, for_writing=True)
+            self._f = self._open_for_appending()
         else:
             if self.path.exists() and not overwrite:
                 raise DatasetError(
                     f"{self.path} exists (use overwrite=True / --overwrite, or append)"
                 )
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._f = _while_locked(
-                lambda: h5py.File(self.path, "w", libver="latest", track_order=False)
-            )
-            f = self._f
-            f.attrs["schema"] = SCHEMA
-            f.attrs["schema_version"] = SCHEMA_VERSION
-            f.attrs["software_version"] = __version__
-            f.attrs["description"] = json.dumps(
-                dict(description or {}), sort_keys=True, default=_json_default
-            )
-            g = f.create_group("recordings")
-            g.create_dataset(
-                "index",
-                shape=(0,),
-                maxshape=(None,),
-                dtype=INDEX_DTYPE,
-                chunks=(256,),
-                track_times=False,
-            )
-            g.create_dataset(
-                "metadata",
-                shape=(0,),
-                maxshape=(None,),
-                dtype=np.uint8,
-                chunks=(_META_CHUNK_BYTES,),
-                track_times=False,
-                **_COMPRESSION,
-            )
-            s = g.create_group("samples")
-            for name, (tail, dtype) in SAMPLE_FIELDS.items():
-                s.create_dataset(
-                    name,
-                    shape=(0, *tail),
-                    maxshape=(None, *tail),
-                    dtype=dtype,
-                    chunks=(_CHUNK_ROWS, *tail),
-                    track_times=False,
-                    **_COMPRESSION,
-                )
-            f.flush()
+            self._f = self._create(description)
         try:
-            _while_locked(self._start_swmr)
+            while_locked(self._start_swmr)
         except RuntimeError as exc:
             self._f.close()
             raise DatasetError(
@@ -514,6 +113,62 @@ class DatasetWriter:
         self._keys = {
             (r["object"].decode(), r["action"].decode(), int(r["trial"])) for r in self._index[...]
         }
+
+    def _open_for_appending(self) -> h5py.File:
+        try:
+            f = while_locked(lambda: h5py.File(self.path, "a", libver="latest"))
+        except OSError as exc:
+            if "already open" in str(exc) or "consistency flags" in str(exc):
+                raise DatasetError(
+                    f"{self.path}: a writer of this file did not close it (crashed or "
+                    f"still running); run 'aptkt dataset repair {self.path}' first"
+                ) from exc
+            raise DatasetError(f"{self.path}: cannot open for appending: {exc}") from exc
+        check_schema(f, self.path, for_writing=True)
+        return f
+
+    def _create(self, description: Mapping[str, Any] | None) -> h5py.File:
+        """A new file with every dataset of the layout, empty (created before the first
+        recording: SWMR mode cannot create datasets)."""
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        f = while_locked(lambda: h5py.File(self.path, "w", libver="latest", track_order=False))
+        f.attrs["schema"] = SCHEMA
+        f.attrs["schema_version"] = SCHEMA_VERSION
+        f.attrs["software_version"] = __version__
+        f.attrs["description"] = json.dumps(
+            dict(description or {}), sort_keys=True, default=json_default
+        )
+        g = f.create_group("recordings")
+        g.create_dataset(
+            "index",
+            shape=(0,),
+            maxshape=(None,),
+            dtype=INDEX_DTYPE,
+            chunks=(256,),
+            track_times=False,
+        )
+        g.create_dataset(
+            "metadata",
+            shape=(0,),
+            maxshape=(None,),
+            dtype=np.uint8,
+            chunks=(META_CHUNK_BYTES,),
+            track_times=False,
+            **COMPRESSION,
+        )
+        s = g.create_group("samples")
+        for name, (tail, dtype) in SAMPLE_FIELDS.items():
+            s.create_dataset(
+                name,
+                shape=(0, *tail),
+                maxshape=(None, *tail),
+                dtype=dtype,
+                chunks=(CHUNK_ROWS, *tail),
+                track_times=False,
+                **COMPRESSION,
+            )
+        f.flush()
+        return f
 
     def _start_swmr(self) -> None:
         self._f.swmr_mode = True
@@ -552,22 +207,22 @@ class DatasetWriter:
         if key in self._keys:
             raise DatasetError(f"{self.path}: {obj}/{action}/trial {trial} is already stored")
         n = rec.rows
-        want = _next_chunk_start(n, _CHUNK_ROWS) // _CHUNK_ROWS
+        want = next_chunk_start(n, CHUNK_ROWS) // CHUNK_ROWS
         if any(len(rec.chunks.get(name, ())) != want for name in self._samples):
             raise ValueError(f"packed recording {key}: expected {want} chunks per field")
         # Each recording starts on a fresh chunk of every dataset: chunks are then written once,
         # never rewritten by a later append — a rewritten compressed chunk moves, and a writer
         # killed before the move is on disk must not take an earlier recording with it. The
         # zero padding between recordings compresses to almost nothing; no index row points at it.
-        row0 = _next_chunk_start(self._samples["cell_id"].shape[0], _CHUNK_ROWS)
+        row0 = next_chunk_start(self._samples["cell_id"].shape[0], CHUNK_ROWS)
         # Samples first, then the metadata, the index row last: the index defines what exists.
         for name, ds in self._samples.items():
             ds.resize(row0 + n, axis=0)
             for j, data in enumerate(rec.chunks[name]):
-                offset = (row0 + j * _CHUNK_ROWS,) + (0,) * (ds.ndim - 1)
+                offset = (row0 + j * CHUNK_ROWS,) + (0,) * (ds.ndim - 1)
                 ds.id.write_direct_chunk(offset, data)
         meta_bytes = np.frombuffer(rec.meta_json.encode("utf-8"), dtype=np.uint8)
-        meta0 = _next_chunk_start(self._meta.shape[0], _META_CHUNK_BYTES)
+        meta0 = next_chunk_start(self._meta.shape[0], META_CHUNK_BYTES)
         self._meta.resize(meta0 + meta_bytes.size, axis=0)
         self._meta[meta0 : meta0 + meta_bytes.size] = meta_bytes
         i = len(self)
@@ -599,11 +254,7 @@ class DatasetWriter:
             self._f.close()
 
 
-def _next_chunk_start(length: int, chunk: int) -> int:
-    return -(-int(length) // chunk) * chunk
-
-
-def _check_schema(f: h5py.File, path: Path, *, for_writing: bool = False) -> int:
+def check_schema(f: h5py.File, path: Path, *, for_writing: bool = False) -> int:
     """The file's schema version; a DatasetError if this aptkt cannot read (or append to) it."""
     schema = f.attrs.get("schema")
     version = f.attrs.get("schema_version")
@@ -636,17 +287,17 @@ class DatasetReader:
         self._copy: Path | None = None
         self._damaged: list[int] | None = None
         try:
-            self._f = _while_locked(lambda: _open_swmr_read(self.path))
+            self._f = while_locked(lambda: open_swmr_read(self.path))
         except OSError as exc:
-            if not _refused_for_writer_mark(exc):
+            if not refused_for_writer_mark(exc):
                 raise DatasetError(f"{self.path}: not a readable HDF5 data set: {exc}") from exc
             self._f = self._open_private_copy()
         try:
-            self.version = _check_schema(self._f, self.path)
+            self.version = check_schema(self._f, self.path)
             self._meta = self._f["recordings/metadata"]
             self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
             # A snapshot: recordings appended after opening are not seen (reopen to see them).
-            index = _readable_prefix(self._f["recordings/index"])
+            index = readable_prefix(self._f["recordings/index"])
         except (OSError, KeyError) as exc:
             self.close()
             raise DatasetError(
@@ -656,7 +307,7 @@ class DatasetReader:
         self.index = index[: self._complete(index)]
         #: Index rows of an append that was cut short (a writer killed mid-append, or one
         #: still running), left out: 0 or 1.
-        # (A last index chunk past the end of the file is dropped by _readable_prefix and not
+        # (A last index chunk past the end of the file is dropped by readable_prefix and not
         # counted: it can only hold that same in-flight row.)
         self.incomplete = len(index) - len(self.index)
 
@@ -665,8 +316,8 @@ class DatasetReader:
         os.close(fd)
         self._copy = Path(name)
         try:
-            _copy_without_writer_mark(self.path, self._copy)
-            f = _open_swmr_read(self._copy)
+            copy_without_writer_mark(self.path, self._copy)
+            f = open_swmr_read(self._copy)
         except OSError as exc:
             self._copy.unlink(missing_ok=True)
             raise DatasetError(f"{self.path}: not a readable HDF5 data set: {exc}") from exc
@@ -801,7 +452,7 @@ class DatasetReader:
         recording is read once to find out — only when the file is shorter than HDF5 recorded
         (cut short) or its writer died, unless ``full`` (a file damaged in its middle on disk
         is then found too; it costs about 8 ms per recording)."""
-        if not (full or self.writer_died or _cut_short(self.path)):
+        if not (full or self.writer_died or cut_short(self.path)):
             return []
         if self._damaged is None:
             bad = []
@@ -842,95 +493,6 @@ class DatasetReader:
         }
 
 
-def write_features(
-    path: str | Path,
-    action: str,
-    modality: str,
-    recordings: Sequence[int],
-    values: np.ndarray,
-    *,
-    settings: Mapping[str, Any] | None = None,
-) -> None:
-    """Store a feature matrix (one row per recording number) under ``/features/<action>``
-    (see :func:`store_features`)."""
-    store_features(path, {action: (recordings, {modality: values})}, settings=settings)
-
-
-def store_features(
-    path: str | Path,
-    features: Mapping[str, tuple[Sequence[int], Mapping[str, np.ndarray]]],
-    *,
-    settings: Mapping[str, Any] | None = None,
-) -> None:
-    """Store feature matrices: ``{action: (recording numbers, {modality: values})}``, keyed by
-    the extraction ``settings`` they were computed with (JSON, see
-    :meth:`DatasetReader.feature_settings`; None: unknown settings).
-
-    The file is never modified in place: the features are written into a copy that then
-    replaces it (a rename), so a kill at any moment leaves the file as it was, or with all the
-    features. No writer may be running (the copy would miss its later appends)."""
-    path = Path(path)
-    checked = {}
-    for action, (recordings, mods) in features.items():
-        recs = np.asarray(recordings, dtype=np.int64)
-        vals = {m: np.asarray(v, dtype=np.float64) for m, v in mods.items()}
-        for v in vals.values():
-            if v.ndim != 2 or v.shape[0] != recs.shape[0]:
-                raise ValueError(
-                    "values must be (n_recordings, dim) with one row per recording number"
-                )
-        checked[action] = (recs, vals)
-    if _writer_mark(path):
-        raise DatasetError(
-            f"{path}: a writer has the file open, or died without closing it; wait for it to "
-            f"finish, or run 'aptkt dataset repair {path}' first"
-        )
-    tmp = path.with_name(path.name + ".features-tmp")
-    try:
-        shutil.copyfile(path, tmp)
-        with h5py.File(tmp, "a", libver="latest") as f:
-            _check_schema(f, path)
-            n = f["recordings/index"].shape[0]
-            for action, (recs, vals) in checked.items():
-                if recs.size and (recs.min() < 0 or recs.max() >= n):
-                    raise ValueError(f"recording numbers must be in 0..{n - 1}")
-                g = f.require_group(f"features/{action}")
-                if "recording" in g and not np.array_equal(g["recording"][...], recs):
-                    if not set(vals) >= set(g) - {"recording"}:
-                        raise ValueError(
-                            f"features of {action!r} exist for other recordings; write all "
-                            "modalities together"
-                        )
-                    del g["recording"]
-                    for m in [k for k in g if k != "recording"]:
-                        del g[m]
-                if "recording" not in g:
-                    g.create_dataset("recording", data=recs, track_times=False)
-                for modality, values in vals.items():
-                    if modality in g:
-                        del g[modality]
-                    g.create_dataset(modality, data=values, track_times=False)
-                if settings is None:
-                    g.attrs.pop("extraction", None)
-                else:
-                    g.attrs["extraction"] = json.dumps(dict(settings), sort_keys=True)
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-def _readable_prefix(ds: h5py.Dataset) -> np.ndarray:
-    """All of a dataset, or, when its last chunk lies past the end of a file whose writer was
-    killed (that chunk belongs to the append in flight), everything before that chunk."""
-    try:
-        return ds[...]
-    except OSError:
-        chunk = ds.chunks[0] if ds.chunks else 1
-        return ds[: max(0, (ds.shape[0] - 1) // chunk * chunk)]
-
-
 def repair(path: str | Path, *, backup: bool = True) -> int:
     """Make a file whose writer died appendable again: copy every readable recording into a
     fresh file and put that in its place (the original is kept as ``<name>.crashed`` when
@@ -951,7 +513,7 @@ def repair(path: str | Path, *, backup: bool = True) -> int:
                     except (OSError, ValueError):  # damaged (e.g. lies past a truncation)
                         continue
                     r = src.index[i]
-                    meta_json = json.dumps(meta, sort_keys=True, default=_json_default)
+                    meta_json = json.dumps(meta, sort_keys=True, default=json_default)
                     dst._append_raw(
                         src.key(i), int(r["start_ns"]), int(r["stop_ns"]), raw, meta_json
                     )

@@ -90,81 +90,23 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     data = out / "data.h5"
     prior_path = out / "prior.npz"
-    reps = s.train_reps + s.test_reps
-    objects = tuple(s.priors) + tuple(s.new_objects)
-    actions = tuple(PAPER_ACTIONS[a] for a in s.actions)
-
-    _say(
-        f"[1/5] simulating {len(objects)} objects x {len(actions)} actions x {reps} trials -> {data}"
-    )
-    plan = GenerationPlan(objects, actions, reps, s.seed)
-    info = generate(data, plan, jobs=s.jobs, resume=data.exists(), progress=progress)
-    _say(
-        f"      {info['recordings']} recordings, {info['file_bytes'] / 1e6:.1f} MB "
-        f"({info['simulated']} simulated now, {info['wall_seconds']:.0f} s)"
-    )
+    _simulate(s, data, progress)
 
     _say("[2/5] extracting features")
-    train_trials = tuple(range(s.train_reps))
-    test_trials = tuple(range(s.train_reps, reps))
+    trials = (tuple(range(s.train_reps)), tuple(range(s.train_reps, s.train_reps + s.test_reps)))
     # One pool of worker processes for the features and the learning runs, so that the runs
     # start in workers that are already up.
     executor = LocalExecutor(s.jobs)
     try:
-        todo = stale_features(data, s.actions)
-        if todo:  # stored once, so the learning runs (and a re-run) read them
-            extract_features(
-                data, actions=todo, progress=progress, parallel_map=executor.imap_unordered
-            )
-        prior_table = load_observations(
-            data, actions=s.actions, objects=s.priors, trials=train_trials, progress=progress
-        )
-
-        _say(f"[3/5] building prior knowledge on {', '.join(s.priors)} -> {prior_path}")
         gp = GPSettings()
-        prior = PriorKnowledge.build(prior_table, gp=gp, seed=s.seed)
-        prior.save(prior_path)
-        for row in prior.summary():
-            w = ", ".join(f"{m} {v:.2f}" for m, v in zip(row["modalities"], row["weights_mean"]))
-            _say(f"      {row['action']}: {row['observations']} observations, modality weights {w}")
-
+        _build_prior(s, data, prior_path, trials[0], gp, executor, progress)
         _say(
             f"[4/5] learning {len(s.new_objects)} new objects: APTKT (with and without auxiliary features) "
             f"vs baseline, {s.trials} runs each, "
             f"budget {s.budget}, on {s.jobs} process(es)"
         )
-        methods = {
-            "APTKT": LearnerConfig(
-                transfer="paper", eps_neg=s.eps_neg, eps_explor=s.eps_explor, budget=s.budget, gp=gp
-            ),
-            "APTKT+aux": LearnerConfig(
-                transfer="paper",
-                auxiliary=True,
-                eps_neg=s.eps_neg,
-                eps_explor=s.eps_explor,
-                budget=s.budget,
-                gp=gp,
-            ),
-            "baseline": LearnerConfig(
-                transfer="none", eps_explor=s.eps_explor, budget=s.budget, gp=gp
-            ),
-        }
-        specs = [
-            RunSpec(
-                method=name,
-                config=replace(cfg, seed=s.seed + t),
-                data=str(data),
-                actions=s.actions,
-                new_objects=s.new_objects,
-                pool_trials=train_trials,
-                test_trials=test_trials,
-                prior=str(prior_path),
-                pool_seed=s.seed + t,
-                tags={"trial": t},
-            )
-            for t in range(s.trials)
-            for name, cfg in methods.items()
-        ]
+        methods = _methods(s, gp)
+        specs = _specs(s, methods, data, prior_path, trials)
         bar = tqdm(total=len(specs), unit="run", desc="learning", disable=not progress)
         results = run_many(specs, progress=bar.update, executor=executor)
         bar.close()
@@ -192,6 +134,86 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
     )
     _say(f"      done in {summary['seconds']:.0f} s")
     return summary
+
+
+def _simulate(s: DemoSettings, data: Path, progress: bool) -> None:
+    """Step 1: the demo's data set on the simulated world (completed if it exists)."""
+    reps = s.train_reps + s.test_reps
+    objects = tuple(s.priors) + tuple(s.new_objects)
+    actions = tuple(PAPER_ACTIONS[a] for a in s.actions)
+    _say(
+        f"[1/5] simulating {len(objects)} objects x {len(actions)} actions x {reps} trials -> {data}"
+    )
+    plan = GenerationPlan(objects, actions, reps, s.seed)
+    info = generate(data, plan, jobs=s.jobs, resume=data.exists(), progress=progress)
+    _say(
+        f"      {info['recordings']} recordings, {info['file_bytes'] / 1e6:.1f} MB "
+        f"({info['simulated']} simulated now, {info['wall_seconds']:.0f} s)"
+    )
+
+
+def _build_prior(
+    s: DemoSettings,
+    data: Path,
+    prior_path: Path,
+    train_trials: tuple[int, ...],
+    gp: GPSettings,
+    executor: LocalExecutor,
+    progress: bool,
+) -> None:
+    """Steps 2 and 3: the features, stored in the data set, and the prior knowledge."""
+    todo = stale_features(data, s.actions)
+    if todo:  # stored once, so the learning runs (and a re-run) read them
+        extract_features(
+            data, actions=todo, progress=progress, parallel_map=executor.imap_unordered
+        )
+    prior_table = load_observations(
+        data, actions=s.actions, objects=s.priors, trials=train_trials, progress=progress
+    )
+    _say(f"[3/5] building prior knowledge on {', '.join(s.priors)} -> {prior_path}")
+    prior = PriorKnowledge.build(prior_table, gp=gp, seed=s.seed)
+    prior.save(prior_path)
+    for row in prior.summary():
+        w = ", ".join(f"{m} {v:.2f}" for m, v in zip(row["modalities"], row["weights_mean"]))
+        _say(f"      {row['action']}: {row['observations']} observations, modality weights {w}")
+
+
+def _methods(s: DemoSettings, gp: GPSettings) -> dict[str, LearnerConfig]:
+    """The compared learners: APTKT with and without auxiliary features, and the baseline."""
+    aptkt = LearnerConfig(
+        transfer="paper", eps_neg=s.eps_neg, eps_explor=s.eps_explor, budget=s.budget, gp=gp
+    )
+    return {
+        "APTKT": aptkt,
+        "APTKT+aux": replace(aptkt, auxiliary=True),
+        "baseline": LearnerConfig(transfer="none", eps_explor=s.eps_explor, budget=s.budget, gp=gp),
+    }
+
+
+def _specs(
+    s: DemoSettings,
+    methods: dict[str, LearnerConfig],
+    data: Path,
+    prior_path: Path,
+    trials: tuple[tuple[int, ...], tuple[int, ...]],
+) -> list[RunSpec]:
+    """Every run: each method on each trial's pool order (the trial's seed)."""
+    return [
+        RunSpec(
+            method=name,
+            config=replace(cfg, seed=s.seed + t),
+            data=str(data),
+            actions=s.actions,
+            new_objects=s.new_objects,
+            pool_trials=trials[0],
+            test_trials=trials[1],
+            prior=str(prior_path),
+            pool_seed=s.seed + t,
+            tags={"trial": t},
+        )
+        for t in range(s.trials)
+        for name, cfg in methods.items()
+    ]
 
 
 def report_results(

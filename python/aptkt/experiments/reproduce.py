@@ -172,6 +172,20 @@ def analyse_figure(task: FigureTask) -> tuple[Section, float]:
     return section, time.perf_counter() - t0
 
 
+@dataclass
+class _Done:
+    """What a reproduction computed, before its report is written."""
+
+    ctx: Context
+    data: Path
+    data_info: dict[str, Any]
+    plans: dict[str, Any]
+    specs: list[Any]
+    batch: Any
+    sections: list[Section]
+    timings: dict[str, float]
+
+
 def reproduce(s: ReproduceSettings) -> dict[str, Any]:
     """Run the requested figures; returns the summary also written to ``summary.json``."""
     unknown = [f for f in s.figures if f not in FIGURES]
@@ -180,61 +194,81 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
     if s.seed < 0:
         raise ConfigError("--seed must be >= 0")
     t_start = time.perf_counter()
-    timings: dict[str, float] = {}
     scale = s.resolved_scale()
     out = Path(s.output)
     # The executor first: an unreachable cluster is reported before minutes of simulation.
     executor = make_executor(s.jobs, s.scheduler)
     try:
         out.mkdir(parents=True, exist_ok=True)
-        t0 = time.perf_counter()
-        data, data_info = prepare_data(s, scale, executor)
-        fingerprint = data_fingerprint(data)
-        timings["data"] = time.perf_counter() - t0
-        ctx = Context(
-            scale=scale,
-            seed=s.seed,
-            data=str(data.resolve()),
-            fingerprint=fingerprint,
-            output=out.resolve(),
-            index=_paper_numbers(scale.objects),
-            base=s.base,
-        )
-        _say(f"planning {', '.join(s.figures)} ({scale.name} size) on {executor.description}")
-        plans = {name: FIGURES[name].plan(ctx) for name in s.figures}
-        tasks = {t.key: t for p in plans.values() for t in p.priors}
-        t0 = time.perf_counter()
-        build_priors(list(tasks.values()), executor, progress=s.progress)
-        timings["prior_knowledge"] = time.perf_counter() - t0
-        specs = [sp for p in plans.values() for sp in p.specs]
-        t0 = time.perf_counter()
-        batch = run_batch(specs, RunStore(out / "runs"), executor, fingerprint, progress=s.progress)
-        timings["runs"] = time.perf_counter() - t0
-        _say(
-            f"{len(specs)} runs ({len(batch.steps)} distinct): {batch.computed} computed now, {batch.reused} from "
-            f"{out / 'runs'}"
-        )
-        t0 = time.perf_counter()
-        # The figures are analysed side by side on the executor, the largest first (a run's
-        # rows have columns for each of its actions): each reads its own runs from the store,
-        # so no rows travel between processes, and the analysis is no longer a serial tail
-        # after the parallel runs.
-        order = sorted(
-            s.figures, key=lambda name: -sum(len(sp.actions) for sp in plans[name].specs)
-        )
-        figure_tasks = [FigureTask(n, ctx, plans[n].specs, str(ctx.output / "runs")) for n in order]
-        by_name = {}
-        for i, (section, seconds) in executor.imap_unordered(analyse_figure, figure_tasks):
-            by_name[order[i]] = section
-            timings[f"analysis_{order[i]}"] = seconds
-            _say(f"analysed {order[i]} in {seconds:.1f} s ({len(by_name)}/{len(order)})")
-        sections = [by_name[name] for name in s.figures]
-        timings["analysis"] = time.perf_counter() - t0
+        done = _compute(s, scale, out, executor)
     finally:
         executor.close()
-    seconds = time.perf_counter() - t_start
+    return _write(s, scale, done, executor, time.perf_counter() - t_start)
 
-    config = _config(s, scale, ctx, data_info, plans)
+
+def _compute(s: ReproduceSettings, scale: Scale, out: Path, executor: Executor) -> _Done:
+    """The data, the plans, the prior knowledge, the runs and every figure's analysis."""
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    data, data_info = prepare_data(s, scale, executor)
+    fingerprint = data_fingerprint(data)
+    timings["data"] = time.perf_counter() - t0
+    ctx = Context(
+        scale=scale,
+        seed=s.seed,
+        data=str(data.resolve()),
+        fingerprint=fingerprint,
+        output=out.resolve(),
+        index=_paper_numbers(scale.objects),
+        base=s.base,
+    )
+    _say(f"planning {', '.join(s.figures)} ({scale.name} size) on {executor.description}")
+    plans = {name: FIGURES[name].plan(ctx) for name in s.figures}
+    tasks = {t.key: t for p in plans.values() for t in p.priors}
+    t0 = time.perf_counter()
+    build_priors(list(tasks.values()), executor, progress=s.progress)
+    timings["prior_knowledge"] = time.perf_counter() - t0
+    specs = [sp for p in plans.values() for sp in p.specs]
+    t0 = time.perf_counter()
+    batch = run_batch(specs, RunStore(out / "runs"), executor, fingerprint, progress=s.progress)
+    timings["runs"] = time.perf_counter() - t0
+    _say(
+        f"{len(specs)} runs ({len(batch.steps)} distinct): {batch.computed} computed now, {batch.reused} from "
+        f"{out / 'runs'}"
+    )
+    t0 = time.perf_counter()
+    sections = _analyse(s.figures, ctx, plans, executor, timings)
+    timings["analysis"] = time.perf_counter() - t0
+    return _Done(ctx, data, data_info, plans, specs, batch, sections, timings)
+
+
+def _analyse(
+    figures: Sequence[str],
+    ctx: Context,
+    plans: dict[str, Any],
+    executor: Executor,
+    timings: dict[str, float],
+) -> list[Section]:
+    """The figures' sections, analysed side by side on the executor, the largest first (a
+    run's rows have columns for each of its actions): each reads its own runs from the store,
+    so no rows travel between processes, and the analysis is no longer a serial tail after
+    the parallel runs."""
+    order = sorted(figures, key=lambda name: -sum(len(sp.actions) for sp in plans[name].specs))
+    figure_tasks = [FigureTask(n, ctx, plans[n].specs, str(ctx.output / "runs")) for n in order]
+    by_name = {}
+    for i, (section, seconds) in executor.imap_unordered(analyse_figure, figure_tasks):
+        by_name[order[i]] = section
+        timings[f"analysis_{order[i]}"] = seconds
+        _say(f"analysed {order[i]} in {seconds:.1f} s ({len(by_name)}/{len(order)})")
+    return [by_name[name] for name in figures]
+
+
+def _write(
+    s: ReproduceSettings, scale: Scale, done: _Done, executor: Executor, seconds: float
+) -> dict[str, Any]:
+    """config.json, the report (whole and per figure) and summary.json."""
+    ctx, sections, batch, out = done.ctx, done.sections, done.batch, Path(s.output)
+    config = _config(s, scale, ctx, done.data_info, done.plans)
     (out / "config.json").write_text(json.dumps(config, indent=2, default=str))
     run_info: dict[str, Any] = {
         "command": s.command or f"aptkt reproduce {' '.join(s.figures)}",
@@ -242,14 +276,13 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
         "seconds": seconds,
         "executor": executor.description,
-        "data": str(data),
-        "fingerprint": fingerprint,
+        "data": str(done.data),
+        "fingerprint": ctx.fingerprint,
         "seed": s.seed,
         "scale": scale.name,
-        "settings": _flat_settings(scale, s, timings, batch),
+        "settings": _flat_settings(scale, s, done.timings, batch),
     }
-    report = render_report(sections, run_info)
-    (out / "report.md").write_text(report)
+    (out / "report.md").write_text(render_report(sections, run_info))
     for section in sections:
         (ctx.figure_dir(section.figure) / "report.md").write_text(
             render_report([section], run_info)
@@ -258,9 +291,9 @@ def reproduce(s: ReproduceSettings) -> dict[str, Any]:
         "software_version": __version__,
         "figures": list(s.figures),
         "seconds": seconds,
-        "timings": timings,
+        "timings": done.timings,
         "runs": {
-            "total": len(specs),
+            "total": len(done.specs),
             "distinct": len(batch.steps),
             "computed": batch.computed,
             "reused": batch.reused,

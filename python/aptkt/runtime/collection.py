@@ -22,13 +22,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
-
 from aptkt.actions import ExploratoryAction
-from aptkt.data.store import DatasetError, DatasetReader, DatasetWriter, repair
+from aptkt.data.store import DatasetWriter
 from aptkt.errors import AptktError, ConfigError
 from aptkt.runtime.grid import TrialGrid
 from aptkt.runtime.salvage import aborted_path, note_interruption, salvage, save_aborted
+from aptkt.runtime.trial_file import TrialFile
 
 __all__ = ["CollectionPlan", "CollectionAborted", "collect", "aborted_path", "save_aborted"]
 
@@ -87,9 +86,9 @@ class CollectionAborted(AptktError):
         self.cause, self.saved, self.completed = cause, saved, completed
 
 
-def _check_resumable(path: Path, plan: CollectionPlan, session: Mapping[str, Any]) -> None:
-    with DatasetReader(path) as rd:
-        desc = rd.description
+def _check_resumable(
+    path: Path, desc: Mapping[str, Any], plan: CollectionPlan, session: Mapping[str, Any]
+) -> None:
     stored = desc.get("session", {})
     if stored.get("robot") and stored.get("robot") != session.get("robot"):
         raise ConfigError(
@@ -127,39 +126,22 @@ def collect(
     (e.g. to let an operator re-place the objects). Returns a summary of the file. Raises
     :class:`CollectionAborted` on a fault mid-trial.
     """
-    path = Path(path)
     t0 = time.perf_counter()
     session_desc = session.describe()
     description = {"collector": "aptkt collect", "session": session_desc, **plan.describe()}
-    repaired = None
-    if resume and path.exists():
-        _check_resumable(path, plan, session_desc)
-        try:
-            writer = DatasetWriter(path, "a")
-        except DatasetError:
-            repaired = repair(path)  # its writer died: keep every complete recording
-            writer = DatasetWriter(path, "a")
-    else:
-        if path.exists() and not overwrite:
-            raise DatasetError(
-                f"{path} exists: use --resume to complete it or --overwrite to replace it"
-            )
-        writer = DatasetWriter(path, "w", description=description, overwrite=overwrite)
-    done = writer.keys()
-    todo = [(o, a, t) for o, a, t in plan.trials() if (o, a.name, t) not in done]
-    bar = None
-    if progress is True:
-        bar = tqdm(
-            total=len(plan),
-            initial=len(plan) - len(todo),
-            unit="trial",
-            desc=path.name,
-            file=sys.stderr,
-        )
     collected = 0
     current_round: int | None = None
-    try:
-        for obj, action, trial in todo:
+    with TrialFile(
+        path,
+        plan,
+        description=description,
+        resume=resume,
+        overwrite=overwrite,
+        check=lambda stored: _check_resumable(Path(path), stored, plan, session_desc),
+        bar={"file": sys.stderr} if progress is True else None,
+    ) as out:
+        writer, bar = out.writer, out.bar
+        for obj, action, trial in out.todo:
             if trial != current_round:
                 if current_round is not None and between_trials is not None:
                     if bar is not None:
@@ -171,10 +153,10 @@ def collect(
             try:
                 rec = session.explore(obj, action, trial)
             except KeyboardInterrupt as exc:
-                _aborted(path, writer, obj, action, trial, exc)
+                _aborted(out.path, writer, obj, action, trial, exc)
                 raise
             except AptktError as exc:
-                raise _aborted(path, writer, obj, action, trial, exc) from exc
+                raise _aborted(out.path, writer, obj, action, trial, exc) from exc
             writer.append(rec)
             collected += 1
             if bar is not None:
@@ -184,20 +166,12 @@ def collect(
                     f"[{len(writer)}/{len(plan)}] {obj} {action.name} trial {trial}: "
                     f"{len(rec.samples)} samples, {rec.duration:.2f} s"
                 )
-    finally:
-        if bar is not None:
-            bar.close()
-        writer.close()
-    with DatasetReader(path) as rd:
-        info = rd.info()
-    info.update(
+    return out.summary(
         collected=collected,
-        skipped=len(plan) - len(todo),
+        skipped=len(plan) - len(out.todo),
         planned=len(plan),
         wall_seconds=time.perf_counter() - t0,
-        repaired=repaired,
     )
-    return info
 
 
 def _aborted(

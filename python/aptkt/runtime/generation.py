@@ -17,19 +17,12 @@ from pathlib import Path
 from typing import Any
 
 from threadpoolctl import threadpool_limits
-from tqdm import tqdm
 
 from aptkt.actions import PAPER_ACTIONS, ExploratoryAction
-from aptkt.data.store import (
-    DatasetError,
-    DatasetReader,
-    DatasetWriter,
-    PackedRecording,
-    pack_recording,
-    repair,
-)
-from aptkt.errors import WorkerDiedError
+from aptkt.data.codec import PackedRecording, pack_recording
+from aptkt.errors import DatasetError, WorkerDiedError
 from aptkt.runtime.grid import TrialGrid
+from aptkt.runtime.trial_file import TrialFile
 from aptkt.runtime.worker_start import start_worker
 from aptkt.sim.objects import default_library, load_library
 from aptkt.sim.world import SimWorld
@@ -117,50 +110,31 @@ def generate(
     """Simulate ``plan`` into ``path``. With ``resume`` an existing file is completed (trials
     already stored are skipped; a file whose writer died is repaired first). Returns a summary
     with the wall time and the file size."""
-    path = Path(path)
     t0 = time.perf_counter()
-    repaired = None
-    if resume and path.exists():
-        try:
-            writer = DatasetWriter(path, "a")
-        except DatasetError:
-            repaired = repair(path)
-            writer = DatasetWriter(path, "a")
-        with DatasetReader(path) as rd:
-            stored_plan = rd.description.get("seed")
-        if stored_plan is not None and stored_plan != plan.seed:
-            writer.close()
-            raise DatasetError(f"{path} was generated with seed {stored_plan}, not {plan.seed}")
-    else:
-        writer = DatasetWriter(path, "w", description=plan.describe(), overwrite=overwrite)
-    done = writer.keys()
-    todo = [(o, a, t) for o, a, t in plan.trials() if (o, a.name, t) not in done]
-    bar = None
-    if progress is True:
-        bar = tqdm(
-            total=len(plan),
-            initial=len(plan) - len(todo),
-            unit="trial",
-            desc=path.name,
-            smoothing=0.05,
-        )
-    try:
-        for rec in _run(plan, todo, jobs, lambda: len(writer), path):
+
+    def same_seed(description: dict[str, Any]) -> None:
+        stored = description.get("seed")
+        if stored is not None and stored != plan.seed:
+            raise DatasetError(f"{path} was generated with seed {stored}, not {plan.seed}")
+
+    with TrialFile(
+        path,
+        plan,
+        description=plan.describe(),
+        resume=resume,
+        overwrite=overwrite,
+        check=same_seed,
+        bar={"smoothing": 0.05} if progress is True else None,
+    ) as out:
+        writer, bar = out.writer, out.bar
+        for rec in _run(plan, out.todo, jobs, lambda: len(writer), out.path):
             writer.append_packed(rec)
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix_str(f"{rec.key[0]} {rec.key[1]}", refresh=False)
             elif callable(progress):
                 progress(len(writer), len(plan))
-    finally:
-        if bar is not None:
-            bar.close()
-        writer.close()
-    elapsed = time.perf_counter() - t0
-    with DatasetReader(path) as rd:
-        info = rd.info()
-    info.update(wall_seconds=elapsed, simulated=len(todo), repaired=repaired)
-    return info
+    return out.summary(wall_seconds=time.perf_counter() - t0, simulated=len(out.todo))
 
 
 def _run(

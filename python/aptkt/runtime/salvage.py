@@ -15,8 +15,9 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from aptkt.data.store import DatasetError, DatasetWriter, recording_key
-from aptkt.errors import AptktError, TrialFault, TrialInterrupted
+from aptkt.data.codec import recording_key
+from aptkt.data.store import DatasetWriter
+from aptkt.errors import AptktError, DatasetError, TrialFault, TrialInterrupted
 from aptkt.skin.samples import Recording
 
 __all__ = ["Salvaged", "aborted_path", "save_aborted", "salvage", "note_interruption"]

@@ -18,17 +18,14 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager, nullcontext
-from typing import Any, Protocol
+from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
+from aptkt._core import ForceControl, ForcePhase, LeanQueue
 from aptkt.sim.kinematics import Trajectory
 from aptkt.sim.physics import ContactPhysics, ForceTrace, Frames, MechChunk
-from aptkt.skin.protocol import RAW_RANGES, SCALE, to_physical
-
-# The wire's force field (from the protocol's one table): the lean force loop quantises to it.
-((_FORCE_SCALE, _),) = SCALE["force"]
-(_FORCE_RANGE,) = RAW_RANGES["force"]
 
 __all__ = ["FrameSink", "SimEngine", "Driver", "FastDriver", "RealTimeDriver", "StopReason"]
 
@@ -67,7 +64,7 @@ class SimEngine:
         self.state = physics.initial_state(t0_ns, np.asarray(start_position, dtype=np.float64))
         self.trajectory = Trajectory.resting(t0_ns, start_position)
         self._pending = Frames.empty()
-        self._lean: dict[str, Any] | None = None
+        self._lean: _Lean | None = None
         self.lock = threading.RLock()
 
     @property
@@ -191,30 +188,15 @@ class SimEngine:
         """
         if self._lean is not None:
             raise RuntimeError("lean force control is already running")
-        self._lean = {
-            "chunks": [],
-            "gain": np.asarray(calibration_gain, dtype=np.float64),
-            "offset": np.asarray(calibration_offset, dtype=np.float64),
-            "latest": np.array(latest_force, dtype=np.float64),
-            "queue_t": np.zeros(0, dtype=np.int64),
-            "queue_c": np.zeros(0, dtype=np.int64),
-            "queue_f": np.zeros((0, 3)),
-        }
+        self._lean = _Lean(
+            LeanQueue(
+                np.ascontiguousarray(calibration_gain, dtype=np.float64),
+                np.ascontiguousarray(calibration_offset, dtype=np.float64),
+                np.ascontiguousarray(latest_force, dtype=np.float64),
+            )
+        )
         if len(self._pending):
-            self._lean_queue(self._pending.t_ns, self._pending.cell_index, self._pending.force)
-
-    def _lean_queue(self, t_ns: np.ndarray, cells: np.ndarray, force_norm: np.ndarray) -> None:
-        lean = self._lean
-        assert lean is not None  # between lean_begin and lean_end
-        raw = np.clip(
-            np.rint(np.asarray(force_norm) / _FORCE_SCALE), *_FORCE_RANGE
-        )  # the wire's field
-        newtons = lean["gain"][cells] * (to_physical("force", raw) - lean["offset"][cells])
-        t = np.concatenate([lean["queue_t"], t_ns])
-        order = np.argsort(t, kind="stable")
-        lean["queue_t"] = t[order]
-        lean["queue_c"] = np.concatenate([lean["queue_c"], cells])[order]
-        lean["queue_f"] = np.concatenate([lean["queue_f"], newtons])[order]
+            self._lean.queue.push(self._pending.t_ns, self._pending.cell_index, self._pending.force)
 
     def lean_advance(self, t_end_ns: int, wrench_limit: float | None = None) -> str:
         """Advance the mechanics to ``t_end_ns`` (one control tick) without making packets."""
@@ -222,94 +204,63 @@ class SimEngine:
         assert lean is not None  # between lean_begin and lean_end
         chunk = self.physics.mechanics(self.state, self.trajectory, t_end_ns)
         if chunk.size:
-            lean["chunks"].append(chunk)
-            lean["samples"] = lean.get("samples", 0) + chunk.size
+            lean.chunks.append(chunk)
+            lean.queue.samples += chunk.size
             arrival, force_norm = self.physics.force_readings(chunk)
-            self._lean_queue(arrival, chunk.cells, force_norm)
-        due = int(np.searchsorted(lean["queue_t"], t_end_ns, side="right"))
-        if due:
-            # Newest packet of each cell wins, as in the skin's latest values.
-            lean["latest"][lean["queue_c"][:due]] = lean["queue_f"][:due]
-            for key in ("queue_t", "queue_c", "queue_f"):
-                lean[key] = lean[key][due:]
-        if lean.get("samples", 0) > _FLUSH_SAMPLES:  # keep the window bounded; packets every ~1 s
+            lean.queue.push(arrival, chunk.cells, force_norm)
+        lean.queue.deliver(t_end_ns)  # the newest packet of each cell wins, as in the skin
+        if lean.queue.samples > _FLUSH_SAMPLES:  # keep the window bounded; packets every ~1 s
             self.lean_flush()
-            lean["samples"] = 0
+            lean.queue.samples = 0
         self.trajectory.forget_before(self.now_ns)  # the chunks hold the motion they need
         # Each cell's newest sample is at or before the tick: the wrench now is their sum.
         if wrench_limit is not None and self.wrench() > wrench_limit:
             return StopReason.WRENCH
         return StopReason.DONE
 
-    def lean_ticks(
-        self,
-        control: tuple[float, float, float, float, float, int, float],
-        phase: tuple,
-    ) -> tuple[str, float]:
+    def lean_ticks(self, control: ForceControl, phase: ForcePhase) -> tuple[str, float]:
         """Run force-control ticks in the compiled core (``aptkt_sim::control``): the same
         admittance law, mechanics, packets' force fields and flushes as ticking through
         :meth:`lean_advance` from Python, one call per phase instead of one per tick.
 
-        ``control`` is (target N, gain m/s/N, max |v_z|, contact z, max depth, tick ns, wrench
-        limit N); ``phase`` ("settle", t_limit_ns, 0), ("ramp", t_start_ns, t_stop_ns, v, acc,
-        dx, dy) or ("guard", t_end_ns, threshold N, window_ns, 0): a guarded move on the planned
-        trajectory, ticked as :meth:`run` ticks it. Returns the status ("done", "timeout",
-        "too_deep", "wrench", "triggered") and the force error of the last tick."""
+        ``phase`` settles on the target force, ramps along a direction, or is a guarded move
+        on the planned trajectory, ticked as :meth:`run` ticks it. Returns the status ("done",
+        "timeout", "too_deep", "wrench", "triggered") and the force error of the last tick."""
         lean = self._lean
         if lean is None:
             raise RuntimeError("lean_ticks needs a running lean force loop")
         st = self.state
-        guard = phase[0] == "guard"
         while True:
-            t0, p0, v0, a = self.trajectory.arrays()
             # Force phases start from the segment in force; a guard follows the plan from it.
-            i = max(int(np.searchsorted(t0, st.t_ns, side="right")) - 1, 0)
-            last = None if guard else i + 1
+            i = max(int(np.searchsorted(self.trajectory.t0, st.t_ns, side="right")) - 1, 0)
             before = st.t_ns
-            status, carry, samples, seg, queue, err, parts = self.physics.core.force_ticks(
-                st,
-                t0[i:last],
-                p0[i:last],
-                v0[i:last],
-                a[i:last],
-                lean["queue_t"],
-                lean["queue_c"],
-                lean["queue_f"],
-                lean["latest"],
-                lean["gain"],
-                lean["offset"],
-                control,
-                phase,
-                lean.get("samples", 0),
-            )
-            lean["queue_t"], lean["queue_c"], lean["queue_f"] = queue
-            chunk = MechChunk(*parts)
-            if chunk.size:
-                lean["chunks"].append(chunk)
-            if st.t_ns != before and not guard:
-                self.trajectory.append(*seg)
-            lean["samples"] = samples
-            if samples > _FLUSH_SAMPLES:
+            segments = self.trajectory.segments(i, None if phase.guarded else i + 1)
+            out = self.physics.core.force_ticks(st, segments, lean.queue, control, phase)
+            if out.chunk.size:
+                lean.chunks.append(out.chunk)
+            if st.t_ns != before and not phase.guarded:
+                seg = out.segment
+                self.trajectory.append(int(seg.t0[0]), seg.p0[0], seg.v0[0], seg.a[0])
+            if lean.queue.samples > _FLUSH_SAMPLES:
                 self.lean_flush()
-                lean["samples"] = 0
+                lean.queue.samples = 0
             self.trajectory.forget_before(st.t_ns)
-            if status != "flush":
-                return status, float(err)
-            # Carry the phase's progress (settled ticks, the current speculation window).
-            phase = (*phase[:-1], int(carry)) if phase[0] in ("settle", "guard") else phase
+            if out.status != "flush":
+                return out.status, float(out.error)
+            # The phase carries its progress (settled ticks, the current speculation window).
 
     def lean_reading(self) -> float:
         """The skin's total normal force as it reads now (same arithmetic as the skin source)."""
         assert self._lean is not None  # between lean_begin and lean_end
-        return float(self._lean["latest"].sum())
+        return self._lean.queue.reading()
 
     def lean_flush(self) -> None:
         """Make the packets of the stretch so far and deliver those that have arrived."""
         lean = self._lean
-        if lean is None or not lean["chunks"]:
+        if lean is None or not lean.chunks:
             return
-        chunk = MechChunk.concat(lean["chunks"])
-        lean["chunks"] = []
+        chunk = MechChunk.concat(lean.chunks)
+        lean.chunks = []
         frames, _ = self.physics.finish(self.state, chunk, detail=True)
         self._deliver_until(frames, self.now_ns)
         self.trajectory.forget_before(self.now_ns)
@@ -317,6 +268,15 @@ class SimEngine:
     def lean_end(self) -> None:
         self.lean_flush()
         self._lean = None
+
+
+@dataclass
+class _Lean:
+    """A lean force loop's state: the skin's reading from the packets in flight, and the
+    mechanics' samples whose packets are not made yet."""
+
+    queue: LeanQueue
+    chunks: list[MechChunk] = field(default_factory=list)
 
 
 def _merge(a: Frames, b: Frames) -> Frames:
@@ -382,7 +342,7 @@ class FastDriver:
             return self.engine.now_ns, why
         return self.engine.run(t_end_ns, tick_ns, stop=stop, wrench_limit=wrench_limit)
 
-    def force_ticks(self, control: tuple, phase: tuple) -> tuple[str, float]:
+    def force_ticks(self, control: ForceControl, phase: ForcePhase) -> tuple[str, float]:
         """A whole phase of a lean force loop in the compiled core (see SimEngine.lean_ticks)."""
         return self.engine.lean_ticks(control, phase)
 
@@ -392,8 +352,8 @@ class FastDriver:
         """A guarded move on the planned trajectory inside a lean force loop, in the compiled
         core: the same ticks, stop and wrench checks as :meth:`run` with a stop predicate on the
         skin's reading. Returns the StopReason."""
-        control = (0.0, 0.0, 0.0, 0.0, 0.0, int(tick_ns), float(wrench_limit))
-        phase = ("guard", int(t_end_ns), float(threshold), _GUARD_WINDOW_NS, -(2**62))
+        control = ForceControl(0.0, 0.0, 0.0, 0.0, 0.0, int(tick_ns), float(wrench_limit))
+        phase = ForcePhase.guard(int(t_end_ns), float(threshold), _GUARD_WINDOW_NS)
         why, _ = self.engine.lean_ticks(control, phase)
         return {"triggered": StopReason.PREDICATE, "wrench": StopReason.WRENCH}.get(
             why, StopReason.DONE

@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from aptkt._core import Segments
+
 __all__ = ["Trajectory", "trapezoid"]
 
 
@@ -52,6 +54,12 @@ class Trajectory:
             np.asarray(self.v0, dtype=np.float64),
             np.asarray(self.a, dtype=np.float64),
         )
+
+    def segments(self, first: int = 0, stop: int | None = None) -> Segments:
+        """Segments ``first`` to ``stop`` (exclusive; None: the last) as the compiled core
+        takes them."""
+        t0, p0, v0, a = self.arrays()
+        return Segments(t0[first:stop], p0[first:stop], v0[first:stop], a[first:stop])
 
     def forget_before(self, t_ns: int) -> None:
         """Drop segments that ended before ``t_ns`` (keeps memory bounded in long sessions)."""

@@ -14,11 +14,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from aptkt.sim.seeding import seed_sequence, spawn_generators
-from aptkt.skin.protocol import PACKET_RATE_HZ
+from aptkt.skin.protocol import PACKET_RATE_HZ, RAW_RANGES
 
 __all__ = ["SkinConstants", "PatchGeometry", "PatchImperfections", "DEFAULT_CELL_IDS"]
 
-#: Cell ids of the default simulated patch (any 14-bit ids other than 0 and 0x3FFF work).
+#: Cell ids of the default simulated patch (any ids the wire carries but 0 and the broadcast id).
 DEFAULT_CELL_IDS: tuple[int, ...] = (1, 2, 3, 4, 5, 6, 7)
 
 
@@ -107,8 +107,9 @@ class PatchGeometry:
     def __post_init__(self) -> None:
         ids = tuple(int(c) for c in self.cell_ids)
         object.__setattr__(self, "cell_ids", ids)
-        if not ids or len(set(ids)) != len(ids) or not all(0 < c < 0x3FFF for c in ids):
-            raise ValueError(f"cell ids must be distinct, in 1..16382, got {ids}")
+        ((_, broadcast),) = RAW_RANGES["cell_id"]
+        if not ids or len(set(ids)) != len(ids) or not all(0 < c < broadcast for c in ids):
+            raise ValueError(f"cell ids must be distinct, in 1..{broadcast - 1}, got {ids}")
         if not self.centres:
             p = self.constants.pitch
             ring = [

@@ -19,18 +19,14 @@ from typing import Any
 
 import numpy as np
 
-from aptkt._core import SimContact
+from aptkt import _core
+from aptkt._core import MechChunk, PhysicsState
 from aptkt.sim.kinematics import Trajectory
 from aptkt.sim.mechanics import IndentationLaw, SurfaceShape
 from aptkt.sim.objects import ObjectSpec, Relaxation
 from aptkt.sim.patch import PatchGeometry, PatchImperfections
 from aptkt.sim.seeding import CounterStream
-from aptkt.sim.texture import (
-    StickSlip,
-    StickSlipState,
-    texture_field,
-    waviness_waves,
-)
+from aptkt.sim.texture import StickSlip, texture_field, waviness_waves
 from aptkt.sim.thermal import CONTACT_STEPS, SPEED_STEP, CellThermal, ThermalNetwork
 from aptkt.sim.trial import TrialConditions
 
@@ -146,76 +142,6 @@ class ForceTrace:
         return np.where(found, self.force[np.maximum(idx, 0)], latest[:, None])
 
 
-@dataclass
-class MechChunk:
-    """Samples of a stretch of time with the TCP motion and the contact stress at their times
-    (cell-major: all samples of a cell together, in sample order)."""
-
-    cells: np.ndarray  # (m,)
-    ks: np.ndarray  # (m,)
-    t_s: np.ndarray  # (m,)
-    t_ns: np.ndarray  # (m,)
-    pos: np.ndarray  # (m, 3)
-    vel: np.ndarray  # (m, 3)
-    acc: np.ndarray  # (m, 3)
-    sigma: np.ndarray  # (m, 3) Pa at the force sensors
-
-    @property
-    def size(self) -> int:
-        return int(self.cells.size)
-
-    @classmethod
-    def empty(cls) -> MechChunk:
-        z = np.zeros
-        return cls(
-            z(0, np.int64),
-            z(0, np.int64),
-            z(0),
-            z(0, np.int64),
-            z((0, 3)),
-            z((0, 3)),
-            z((0, 3)),
-            z((0, 3)),
-        )
-
-    @classmethod
-    def concat(cls, chunks: list[MechChunk]) -> MechChunk:
-        """Chunks in time order → one cell-major chunk."""
-        chunks = [c for c in chunks if c.size]
-        if not chunks:
-            return cls.empty()
-        fields = cls.__dataclass_fields__
-        joined = {f: np.concatenate([getattr(c, f) for c in chunks]) for f in fields}
-        order = np.lexsort((joined["ks"], joined["cells"]))
-        return cls(**{f: v[order] for f, v in joined.items()})
-
-
-@dataclass
-class PhysicsState:
-    t_ns: int  # everything with sample time <= t_ns has been produced
-    next_k: np.ndarray  # (C,) next sample index of each cell
-    relax_h: np.ndarray  # (terms, C, 3) relaxing parts of the stress
-    relax_last: np.ndarray  # (C, 3) elastic stress at each cell's previous sample
-    thermal: np.ndarray  # (C, N)
-    thermal_t: np.ndarray  # (C,) s, time of the thermal state (the cell's last sample)
-    last_xy: np.ndarray  # (C, 2) cell centre at its last sample (for sliding distances)
-    latest_force: np.ndarray  # (C,) N, true force on each cell at its last sample
-    slip: StickSlipState
-
-    def copy(self) -> PhysicsState:
-        return PhysicsState(
-            self.t_ns,
-            self.next_k.copy(),
-            self.relax_h.copy(),
-            self.relax_last.copy(),
-            self.thermal.copy(),
-            self.thermal_t.copy(),
-            self.last_xy.copy(),
-            self.latest_force.copy(),
-            self.slip.copy(),
-        )
-
-
 class ContactPhysics:
     """Physics of one object in one trial against the simulated patch."""
 
@@ -278,82 +204,112 @@ class ContactPhysics:
             raise ValueError(
                 f"trial conditions are for {self._gain_drift.size} cells, the patch has {n}"
             )
-        shape = self.shape
-        self._texture_constants = [
-            k.cover_contact_length,
-            k.contact_resonance,
-            k.contact_damping,
-            k.acc_bandwidth,
-            k.coupling_modulus,
-            k.coupling_pressure,
-            k.tangential_coupling,
-            k.lateral_coupling,
-            self.top_modulus,
-            self.mu_k,
-        ]
-        readout = {
-            "centres": np.asarray(self._centres, dtype=np.float64).tolist(),
-            "axes": self._axes.tolist(),
-            "acc_bias": np.asarray(imperfections.acc_bias, dtype=np.float64).tolist(),
-            "cell_ids": self.cell_ids.tolist(),
-            "gravity": GRAVITY,
-            "acc_noise": k.acc_noise,
-            "die_self_heating": k.die_self_heating,
-            "die_temp_noise": k.die_temp_noise,
-            "temp_noise": k.temp_noise,
-            "prox_dark": k.prox_dark,
-            "prox_gain": k.prox_gain,
-            "prox_distance": k.prox_distance,
-            "prox_noise": k.prox_noise,
-            "reflectivity": obj.reflectivity,
-            "table_reflectivity": k.table_reflectivity,
-            "contact_pressure_half": k.contact_pressure_half,
-            "conductance_scale": self.thermal.conductance_scale,
-            "contact_steps": float(CONTACT_STEPS),
-            "speed_step": SPEED_STEP,
-            "arm_vibration": conditions.arm_vibration,
-            "arm_modes": [list(m) for m in conditions.arm_modes],
-            "texture_kvec": self.texture.kvec.tolist(),
-            "texture_amplitude": self.texture.amplitude.tolist(),
-            "texture_phase": self.texture.phase.tolist(),
-            "texture_constants": [float(x) for x in self._texture_constants],
-            "slip_params": self.slip._params,
-            "slip_keys": [tuple(int(w) for w in s.key) for s in self.slip._streams],
-            "sqrt_c": np.sqrt(self.thermal.net.cap).tolist(),
-        }
+        #: How the skin's accelerometers respond to this object's texture (the compiled core's
+        #: settings; also what ``aptkt._core.sim_texture`` takes).
+        self.texture_response = _core.TextureResponse(
+            _core.ContactVibration(
+                k.cover_contact_length, k.contact_resonance, k.contact_damping, k.acc_bandwidth
+            ),
+            _core.TextureCoupling(
+                k.coupling_modulus, k.coupling_pressure, k.tangential_coupling, k.lateral_coupling
+            ),
+            float(self.top_modulus),
+            float(self.mu_k),
+        )
         #: The compiled core of this trial: mechanics, force-control ticks and every reading
         #: (heat, stick-slip, texture, noise). The thermal solution operators of each
         #: (contact, speed) configuration it meets come from the object's network: made by
         #: ``ThermalNetwork.system`` and kept, converted, in ``ThermalNetwork.core``.
-        self.core = SimContact(
-            np.ascontiguousarray(imperfections.clock_rate, dtype=np.float64),
-            np.ascontiguousarray(imperfections.clock_phase, dtype=np.float64),
-            np.ascontiguousarray(imperfections.sensor_height, dtype=np.float64),
-            np.ascontiguousarray(self._sensor_xy, dtype=np.float64),
-            _pair(shape.centre),
-            float(shape.rotation),
-            float(shape.surface_z),
-            _pair(shape.tilt),
-            float(shape.crown_radius),
-            np.ascontiguousarray(np.reshape(shape.waves, (-1, 4)), dtype=np.float64),
-            _pair(shape.size),
-            self.law.table[0],
-            self.law.table[1],
-            self.law.skin_stiffness,
-            [float(w) for w in self.relaxation.weights],
-            [float(t) for t in self.relaxation.times],
-            float(k.sensor_area),
-            (int(self._noise.key[0]), int(self._noise.key[1])),
-            np.ascontiguousarray(imperfections.force_gain / self._gain_drift[:, None]),
-            np.ascontiguousarray(imperfections.force_offset, dtype=np.float64),
-            float(k.force_noise),
-            self._latency_ns,
-            float(k.link_jitter),
-            readout,
-            self.thermal.net.core,
-            # Not a bound method of self: the core must not keep this object alive.
-            functools.partial(_object_system, self.thermal.net),
-            (float(k.heater_power), self.thermal.ambient, self.thermal.object_temperature),
+        self.core = self._compile()
+
+    def _compile(self) -> _core.SimContact:
+        """The compiled core from this trial's settings, one object per core struct."""
+        k, imp, shape = self.k, self.imp, self.shape
+        return _core.SimContact(
+            self._patch_cells(),
+            _core.SurfaceShape(
+                _pair(shape.centre),
+                float(shape.rotation),
+                float(shape.surface_z),
+                _pair(shape.tilt),
+                float(shape.crown_radius),
+                np.reshape(shape.waves, (-1, 4)).tolist(),
+                _pair(shape.size),
+            ),
+            _core.ContactLaw(
+                self.law.table[0].tolist(),
+                self.law.table[1].tolist(),
+                self.law.skin_stiffness,
+                [float(w) for w in self.relaxation.weights],
+                [float(t) for t in self.relaxation.times],
+                float(k.sensor_area),
+            ),
+            _core.ForceSensors(
+                (int(self._noise.key[0]), int(self._noise.key[1])),
+                (imp.force_gain / self._gain_drift[:, None]).tolist(),
+                np.asarray(imp.force_offset, dtype=np.float64).tolist(),
+                float(k.force_noise),
+                self._latency_ns,
+                float(k.link_jitter),
+            ),
+            _core.Surface(
+                _core.TextureField(
+                    self.texture.kvec.tolist(),
+                    self.texture.amplitude.tolist(),
+                    self.texture.phase.tolist(),
+                ),
+                self.texture_response,
+                self.slip.params,
+                [s.key for s in self.slip._streams],
+            ),
+            self._readout(),
+            _core.ThermalContact(
+                self.thermal.net.core,
+                # Not a bound method of self: the core must not keep this object alive.
+                functools.partial(_object_system, self.thermal.net),
+                np.sqrt(self.thermal.net.cap).tolist(),
+                float(k.heater_power),
+                self.thermal.ambient,
+                self.thermal.object_temperature,
+            ),
+        )
+
+    def _patch_cells(self) -> _core.PatchCells:
+        imp = self.imp
+        return _core.PatchCells(
+            np.asarray(imp.clock_rate, dtype=np.float64).tolist(),
+            np.asarray(imp.clock_phase, dtype=np.float64).tolist(),
+            np.asarray(imp.sensor_height, dtype=np.float64).tolist(),
+            np.asarray(self._sensor_xy, dtype=np.float64).tolist(),
+        )
+
+    def _readout(self) -> _core.Readout:
+        k, cond = self.k, self.cond
+        return _core.Readout(
+            _core.CellFrames(
+                np.asarray(self._centres, dtype=np.float64).tolist(),
+                self._axes.tolist(),
+                np.asarray(self.imp.acc_bias, dtype=np.float64).tolist(),
+                self.cell_ids.tolist(),
+            ),
+            _core.Accelerometers(
+                GRAVITY, k.acc_noise, cond.arm_vibration, [list(m) for m in cond.arm_modes]
+            ),
+            _core.Thermometers(k.die_self_heating, k.die_temp_noise, k.temp_noise),
+            _core.Proximity(
+                k.prox_dark,
+                k.prox_gain,
+                k.prox_distance,
+                k.prox_noise,
+                self.obj.reflectivity,
+                k.table_reflectivity,
+            ),
+            _core.ContactHeat(
+                k.contact_pressure_half,
+                self.thermal.conductance_scale,
+                float(CONTACT_STEPS),
+                SPEED_STEP,
+            ),
         )
 
     # ---------------------------------------------------------------------------------------
@@ -361,24 +317,16 @@ class ContactPhysics:
         """At rest at ``position`` (out of contact), skin in its steady state plus the trial's offset."""
         start = self.thermal.initial_state(self.cond.skin_offset)
         t_s = t_ns * 1e-9
-        next_k = np.array(
-            [
-                max(0, math.floor((t_s - self.imp.clock_phase[c]) * self.imp.clock_rate[c]) + 1)
-                for c in range(self.n)
-            ],
-            dtype=np.int64,
-        )
-        terms = len(self.relaxation.weights)
-        return PhysicsState(
-            t_ns=int(t_ns),
-            next_k=next_k,
-            relax_h=np.zeros((terms, self.n, 3)),
-            relax_last=np.zeros((self.n, 3)),
-            thermal=np.tile(start, (self.n, 1)),
-            thermal_t=np.full(self.n, t_s),
-            last_xy=np.asarray(position[:2], dtype=np.float64) + self._centres,
-            latest_force=np.zeros(self.n),
-            slip=self.slip.rest(),
+        next_k = [
+            max(0, math.floor((t_s - self.imp.clock_phase[c]) * self.imp.clock_rate[c]) + 1)
+            for c in range(self.n)
+        ]
+        last_xy = np.asarray(position[:2], dtype=np.float64) + self._centres
+        return self.core.rest_state(
+            int(t_ns),
+            [int(k) for k in next_k],
+            np.asarray(start, dtype=np.float64).tolist(),
+            last_xy.tolist(),
         )
 
     def step(
@@ -388,14 +336,14 @@ class ContactPhysics:
         every sample. With ``detail=False`` only each cell's newest sample becomes a frame (the
         state is integrated exactly all the same)."""
         st = state.copy()
-        frames, trace = self.core.step(st, *traj.arrays(), int(t_end_ns), detail)
-        return st, Frames(*frames), ForceTrace(*trace)
+        frames, trace = self.core.step(st, traj.segments(), int(t_end_ns), detail)
+        return st, Frames(**frames), ForceTrace(**trace)
 
     def mechanics(self, st: PhysicsState, traj: Trajectory, t_end_ns: int) -> MechChunk:
         """First half of a step (updates ``st`` in place): the samples due by ``t_end_ns``, the TCP
         motion at their times and the contact stress at every force sensor, with relaxation
         (the per-sample loop runs in the compiled core, ``aptkt_sim::mechanics``)."""
-        return MechChunk(*self.core.mechanics(st, *traj.arrays(), int(t_end_ns)))
+        return self.core.mechanics(st, traj.segments(), int(t_end_ns))
 
     def finish(
         self, st: PhysicsState, chunk: MechChunk, *, detail: bool = True
@@ -405,19 +353,8 @@ class ContactPhysics:
         readout``, docs/simulation.md "Cost")."""
         if chunk.size == 0:
             return Frames.empty(), ForceTrace.empty()
-        frames, trace = self.core.finish(
-            st,
-            chunk.cells,
-            chunk.ks,
-            chunk.t_s,
-            chunk.t_ns,
-            chunk.pos,
-            chunk.vel,
-            chunk.acc,
-            chunk.sigma,
-            detail,
-        )
-        return Frames(*frames), ForceTrace(*trace)
+        frames, trace = self.core.finish(st, chunk, detail)
+        return Frames(**frames), ForceTrace(**trace)
 
     def _noise_and_arrival(
         self, ks: np.ndarray, cells: np.ndarray, t_ns: np.ndarray
@@ -441,8 +378,9 @@ class ContactPhysics:
         """Arrival times and normalised force readings (n, 3) of every sample of ``chunk``: the
         force part of the packets :meth:`finish` will produce, for a controller that needs it
         before the rest of the packets is computed."""
-        noise, arrival = self._noise_and_arrival(chunk.ks, chunk.cells, chunk.t_ns)
-        return arrival, self._force_reading(chunk.sigma * self.k.sensor_area, noise, chunk.cells)
+        cells = chunk.cells
+        noise, arrival = self._noise_and_arrival(chunk.ks, cells, chunk.t_ns)
+        return arrival, self._force_reading(chunk.sigma * self.k.sensor_area, noise, cells)
 
 
 def _runs(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -453,11 +391,11 @@ def _runs(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return first, last, cells[first]
 
 
-def _object_system(net: ThermalNetwork, phi_bin: int, speed_bin: int):
+def _object_system(net: ThermalNetwork, phi_bin: int, speed_bin: int) -> _core.ThermalSystem:
     """The solution operator of one (contact, speed) configuration for the core: eigenvectors,
     eigenvalues and the steady state per watt of heater, per kelvin of room and of object."""
     x = net.system(phi_bin, speed_bin)
-    return x.u, x.mu, x.ss_heater, x.ss_ambient, x.ss_object
+    return _core.ThermalSystem(x.u, x.mu, x.ss_heater, x.ss_ambient, x.ss_object)
 
 
 def _child(seq: np.random.SeedSequence, n: int) -> np.random.SeedSequence:

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from aptkt._core import ForceControl, ForcePhase
 from aptkt.errors import RobotError, SafetyLimitError
 from aptkt.robot.base import ForceReading, Placement, SafetyLimits
 from aptkt.sim.engine import Driver, StopReason
@@ -276,7 +277,7 @@ class SimRobot:
         and errors as the Python loop in :meth:`slide` (which the tests compare it with)."""
         lim = self.limits
         assert self._contact_z is not None
-        control = (
+        control = ForceControl(
             float(normal_force),
             float(self.force_gain),
             float(lim.approach_speed),
@@ -304,16 +305,13 @@ class SimRobot:
                 )
 
         fast: Any = self.driver  # a driver with force_ticks (the caller checked)
-        check(*fast.force_ticks(control, ("settle", self.now_ns() + int(3e9), 0)))
+        check(*fast.force_ticks(control, ForcePhase.settle(self.now_ns() + int(3e9))))
         v = 0.0
         for k, (span, acc) in enumerate(phases):
             t_start = self.now_ns()
             t_stop = t_start + int(round(span * 1e9))
-            check(
-                *fast.force_ticks(
-                    control, ("ramp", t_start, t_stop, v, acc, float(d[0]), float(d[1]))
-                )
-            )
+            ramp = ForcePhase.ramp(t_start, t_stop, v, acc, (float(d[0]), float(d[1])))
+            check(*fast.force_ticks(control, ramp))
             v = max(v + acc * span, 0.0)
             if k == 1:
                 self.action_window_ns = (t_start, t_stop)

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from aptkt._core import sim_slip
+from aptkt import _core
 from aptkt.sim.objects import ObjectSpec
 from aptkt.sim.patch import SkinConstants
 from aptkt.sim.seeding import CounterStream, seed_sequence
@@ -201,22 +201,22 @@ class StickSlip:
         self._decay = k.slip_ring_damping * self._omega
         h = 1.0 / (1 + 1j * k.slip_ring_frequency / k.acc_bandwidth)
         self._gain, self._lag = abs(h), float(np.angle(h))
-        self._params = [
-            float(x)
-            for x in (
-                mu_static,
-                mu_kinetic,
-                k.tangential_stiffness,
-                k.tangential_mass,
-                k.slip_threshold_sd,
-                k.slip_coupling,
-                k.rate_hz,
-                self._omega,
-                self._decay,
-                self._gain,
-                self._lag,
-            )
-        ]
+        #: The spring-block and its ringing as the compiled core takes them.
+        self.params = _core.SlipParams(
+            float(mu_static),
+            float(mu_kinetic),
+            float(k.tangential_stiffness),
+            float(k.tangential_mass),
+            float(k.slip_threshold_sd),
+            float(k.rate_hz),
+            _core.Ringing(
+                float(k.slip_coupling),
+                float(self._omega),
+                float(self._decay),
+                float(self._gain),
+                float(self._lag),
+            ),
+        )
 
     def rest(self) -> StickSlipState:
         n = self.n_cells
@@ -240,19 +240,25 @@ class StickSlip:
         The loop runs in the compiled core (``aptkt_sim::slip``); its numpy formulation is the
         tests' reference (tests/sim/numpy_reference.py).
         """
-        ring = np.asarray(state.ringing[cell], dtype=np.float64).reshape(-1, 2)
-        out, load, threshold, events, ring = sim_slip(
-            self._params,
-            self._streams[cell].key,
+        one = _core.SlipState(
             float(state.load[cell]),
             float(state.threshold[cell]),
             int(state.events[cell]),
-            ring,
+            [(float(a), float(b)) for a, b in state.ringing[cell]],
+        )
+        out = _core.sim_slip(
+            self.params,
+            self._streams[cell].key,
+            one,
             np.ascontiguousarray(t, dtype=np.float64),
             np.ascontiguousarray(path, dtype=np.float64),
             np.ascontiguousarray(force, dtype=np.float64),
             np.ascontiguousarray(speed, dtype=np.float64),
         )
-        state.load[cell], state.threshold[cell], state.events[cell] = load, threshold, events
-        state.ringing[cell] = [(float(a), float(b)) for a, b in ring]
+        state.load[cell], state.threshold[cell], state.events[cell] = (
+            one.load,
+            one.threshold,
+            one.events,
+        )
+        state.ringing[cell] = list(one.ring)
         return out

@@ -32,6 +32,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from aptkt.errors import ConfigError
+from aptkt.skin.protocol import RAW_RANGES
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -50,7 +51,8 @@ __all__ = [
 #: Name of the default patch file shipped in the package (``aptkt/skin/data``).
 DEFAULT_PATCH_FILE = "patch_7cells.toml"
 
-_MAX_CELL_ID = 0x3FFF
+#: The largest cell id the wire carries (the protocol's table; it is the broadcast id).
+((_, _MAX_CELL_ID),) = RAW_RANGES["cell_id"]
 
 
 @dataclass(frozen=True)

@@ -259,17 +259,24 @@ pub fn find_mode_in(
     })
 }
 
+/// The jitter policy of [`find_mode_with_jitter`]: up to `max`, in units of the signal
+/// variance σ².
+#[derive(Clone, Copy, Debug)]
+pub struct Jitter {
+    pub max: f64,
+    pub signal_variance: f64,
+}
+
 /// Mode-finding with the jitter policy: if `B` cannot be factorised, add
-/// `jitter · σ²` to K's diagonal for jitter = 1e-10, 1e-8, ... up to `max_jitter`, then fail.
+/// `jitter · σ²` to K's diagonal for jitter = 1e-10, 1e-8, ... up to `jitter.max`, then fail.
 /// `factor_buffer` (any size; resized if needed) receives B's factor, see [`find_mode_in`].
 pub fn find_mode_with_jitter(
     eval: KernelEval,
-    signal_variance: f64,
     y: &[f64],
     offset: f64,
     warm_a: Option<&[f64]>,
     cfg: &NewtonConfig,
-    max_jitter: f64,
+    policy: Jitter,
     factor_buffer: Mat<f64>,
 ) -> GpResult<(KernelEval, Mode)> {
     if let Some(bad) = eval
@@ -292,11 +299,11 @@ pub fn find_mode_with_jitter(
             Err(ModeFailure::Cancelled) => return Err(GpError::Cancelled),
             Err(ModeFailure::Pivot(pivot)) => {
                 let next = if jitter == 0.0 { 1e-10 } else { jitter * 100.0 };
-                if next > max_jitter * (1.0 + 1e-12) {
+                if next > policy.max * (1.0 + 1e-12) {
                     return Err(GpError::NotPositiveDefinite { pivot, jitter });
                 }
                 jitter = next;
-                eval = eval.with_jitter(jitter, signal_variance);
+                eval = eval.with_jitter(jitter, policy.signal_variance);
             }
         }
     }
@@ -539,25 +546,25 @@ mod tests {
         }
     }
 
-    #[test]
-    fn indefinite_kernel_raises_after_jitter() {
-        // A kernel with a large negative eigenvalue cannot be rescued by small jitter.
-        let k = Mat::<f64>::from_fn(2, 2, |i, j| if i == j { 1.0 } else { 30.0 });
+    /// The mode of labels (+1, -1) on the 2 × 2 kernel `k`, with jitter up to 1e-6 σ².
+    fn mode_with_jitter(k: Mat<f64>, cfg: &NewtonConfig) -> GpResult<(KernelEval, Mode)> {
         let ev = KernelEval {
             k,
             parts: vec![],
             jitter: 0.0,
         };
-        let r = find_mode_with_jitter(
-            ev,
-            1.0,
-            &[1.0, -1.0],
-            0.0,
-            None,
-            &NewtonConfig::default(),
-            1e-6,
-            Mat::zeros(0, 0),
-        );
+        let policy = Jitter {
+            max: 1e-6,
+            signal_variance: 1.0,
+        };
+        find_mode_with_jitter(ev, &[1.0, -1.0], 0.0, None, cfg, policy, Mat::zeros(0, 0))
+    }
+
+    #[test]
+    fn indefinite_kernel_raises_after_jitter() {
+        // A kernel with a large negative eigenvalue cannot be rescued by small jitter.
+        let k = Mat::<f64>::from_fn(2, 2, |i, j| if i == j { 1.0 } else { 30.0 });
+        let r = mode_with_jitter(k, &NewtonConfig::default());
         assert!(
             matches!(r, Err(GpError::NotPositiveDefinite { .. })),
             "{:?}",
@@ -574,26 +581,13 @@ mod tests {
             (1, 1) => 1.0,
             _ => 0.0,
         });
-        let ev = KernelEval {
-            k,
-            parts: vec![],
-            jitter: 0.0,
+        let cfg = NewtonConfig {
+            max_iter: 1,
+            tol: 1e-10,
+            cancel: None,
+            reuse_factorisation: true,
         };
-        let r = find_mode_with_jitter(
-            ev,
-            1.0,
-            &[1.0, -1.0],
-            0.0,
-            None,
-            &NewtonConfig {
-                max_iter: 1,
-                tol: 1e-10,
-                cancel: None,
-                reuse_factorisation: true,
-            },
-            1e-6,
-            Mat::zeros(0, 0),
-        );
+        let r = mode_with_jitter(k, &cfg);
         match r {
             Ok((ev, _)) => assert!(ev.jitter > 0.0 && ev.jitter <= 1e-6),
             Err(e) => panic!("expected jitter to rescue the factorisation: {e}"),

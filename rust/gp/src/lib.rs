@@ -20,7 +20,7 @@ pub use error::{GpError, GpResult};
 pub use kernel::{Data, Hyper, Layout, Modalities};
 pub use likelihood::Predictive;
 pub use model::{
-    fit, fit_at, fit_from, layout_for, Free, HyperPrior, LatentMean, ModelSpec, OneVsAll,
-    PriorTerm, Source,
+    fit, fit_at, fit_from, layout_for, BinaryFit, Free, HyperPrior, LatentMean, ModelSpec,
+    OneVsAll, PriorTerm, Source,
 };
 pub use shared::{fit_shared, KernelTask};

@@ -11,7 +11,7 @@ use crate::fastmath::exp_nonpositive_in_place;
 use crate::kernel::{
     column_means, row_tasks, Coupling, Data, Hyper, KernelEval, Layout, Modalities, PairDistances,
 };
-use crate::laplace::{find_mode_with_jitter, lml_gradient_in, Mode, NewtonConfig};
+use crate::laplace::{find_mode_with_jitter, lml_gradient_in, Jitter, Mode, NewtonConfig};
 use crate::likelihood::{predictive_probability, Predictive};
 use crate::linalg;
 use crate::linalg::InverseScratch;
@@ -414,14 +414,17 @@ impl BinaryProblem {
             }
             None => KernelEval::new(&self.dist, &h),
         };
+        let jitter = Jitter {
+            max: spec.max_jitter,
+            signal_variance: h.signal_variance,
+        };
         let (ev, mode) = find_mode_with_jitter(
             ev,
-            h.signal_variance,
             &self.y,
             self.offset,
             warm,
             &spec.newton,
-            spec.max_jitter,
+            jitter,
             ws.factor.take().unwrap_or_else(|| Mat::zeros(0, 0)),
         )?;
         let grad =
@@ -435,9 +438,7 @@ impl BinaryProblem {
         spec: &ModelSpec,
         theta: Vec<f64>,
         prior: Vec<PriorTerm>,
-        optimizer_converged: bool,
-        evaluations: usize,
-        iterations: usize,
+        search: Search,
     ) -> GpResult<BinaryFit> {
         let (ev, mode, hyper, _) =
             self.evaluate(layout, spec, &theta, None, false, &mut Workspace::default())?;
@@ -461,11 +462,30 @@ impl BinaryProblem {
             sw: mode.sw,
             l: mode.l,
             newton_converged: mode.converged,
-            optimizer_converged,
-            evaluations,
-            iterations,
+            optimizer_converged: search.converged,
+            evaluations: search.evaluations,
+            iterations: search.iterations,
         })
     }
+}
+
+/// How the hyper-parameter search that found a classifier's theta went.
+#[derive(Clone, Copy, Debug)]
+struct Search {
+    converged: bool,
+    /// Objective evaluations over every start.
+    evaluations: usize,
+    /// Iterations of the start that gave theta.
+    iterations: usize,
+}
+
+impl Search {
+    /// Theta given, or nothing free to optimise: one evaluation, no iteration.
+    const NOT_OPTIMISED: Search = Search {
+        converged: true,
+        evaluations: 1,
+        iterations: 0,
+    };
 }
 
 /// Per-entry bounds and free flags of theta.
@@ -610,7 +630,7 @@ fn fit_binary(
     check_in_bounds(layout, &theta0, &given, &lo, &hi)?;
     clip(&mut theta0);
     if !spec.optimize || !free.iter().any(|&f| f) {
-        return problem.finish(layout, spec, theta0, prior, true, 1, 0);
+        return problem.finish(layout, spec, theta0, prior, Search::NOT_OPTIMISED);
     }
 
     // Starting points: the given hyper-parameters, then one scaled to the data (unless the
@@ -710,9 +730,11 @@ fn fit_binary(
             spec,
             theta,
             prior,
-            converged,
-            evaluations,
-            iterations,
+            Search {
+                converged,
+                evaluations,
+                iterations,
+            },
         ),
         None => Err(last_error.unwrap_or_else(|| {
             GpError::InvalidInput("no optimiser start could be evaluated".into())
@@ -1018,7 +1040,7 @@ fn fit_impl(
             match &hypers {
                 Hypers::At(t) => {
                     let prior = problem.prior_terms(&layout, spec);
-                    problem.finish(&layout, spec, t[k].clone(), prior, true, 1, 0)
+                    problem.finish(&layout, spec, t[k].clone(), prior, Search::NOT_OPTIMISED)
                 }
                 Hypers::Optimise(starts) => {
                     let mut lambdas: Vec<f64> = own.iter().map(|s| s.lambda).collect();

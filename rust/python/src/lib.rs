@@ -1,12 +1,14 @@
-//! The `aptkt._core` extension: a thin layer over the pure-Rust crates. It converts numpy
-//! arrays to and from Rust types, releases the GIL around numerical work and maps core errors
-//! to typed Python exceptions. No numerics live here.
+//! The `aptkt._core` extension over the pure-Rust crates. It defines the typed classes Python
+//! builds and reads (settings built by keyword, state the core advances in place), converts
+//! numpy arrays to and from Rust types, releases the GIL around numerical work and maps core
+//! errors to typed Python exceptions. No numerics live here.
 
 use pyo3::prelude::*;
 
 mod errors;
 mod features;
 mod gp;
+mod settings;
 mod sim;
 mod skin;
 
@@ -26,8 +28,8 @@ fn fix_mmap_threshold() {
     }
     const M_TRIM_THRESHOLD: i32 = -1;
     const M_MMAP_THRESHOLD: i32 = -3;
-    const MMAP_THRESHOLD: i32 = 4 * 1024 * 1024;
-    // SAFETY: mallopt only changes allocator settings; it is safe to call at any time.
+    const MMAP_THRESHOLD: i32 = 4 << 20; // 4 MiB
+                                         // SAFETY: mallopt only changes allocator settings; it is safe to call at any time.
     unsafe {
         mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD);
         mallopt(M_TRIM_THRESHOLD, 2 * MMAP_THRESHOLD);

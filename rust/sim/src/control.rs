@@ -3,6 +3,8 @@
 //! they are made (`SimEngine.lean_*`): the force fields quantised to the wire's 12 bits,
 //! calibrated with the skin's calibration, newest packet per cell by arrival time.
 
+use aptkt_skin::{scale, RANGE_FORCE};
+
 use crate::mechanics::{Chunk, MechState, Mechanics, Segment, SENSORS};
 use crate::sensors::Sensors;
 
@@ -30,17 +32,24 @@ impl LeanQueue {
                 f_true[s] = chunk.sigma[i][s] * mech.sensor_area;
             }
             let norm = sensors.reading(c, f_true, &z);
-            let mut newtons = [0.0; SENSORS];
-            for s in 0..SENSORS {
-                let raw = (norm[s] * 1024.0).round_ties_even().clamp(0.0, 4095.0);
-                newtons[s] = self.cal_gain[c][s] * (raw * (1.0 / 1024.0) - self.cal_offset[c][s]);
-            }
-            // Insert after every entry with an arrival at or before this one (stable order).
-            let at = self.t.partition_point(|&t| t <= arrival);
-            self.t.insert(at, arrival);
-            self.cell.insert(at, c as i64);
-            self.force.insert(at, newtons);
+            self.push(arrival, c, norm);
         }
+    }
+
+    /// Queue one packet's normalised force readings `norm` of cell `c`, arriving at
+    /// `arrival`, as the skin reads them: quantised to the wire's force field, calibrated with
+    /// the skin's calibration (after every packet queued with an arrival at or before it).
+    pub fn push(&mut self, arrival: i64, c: usize, norm: [f64; SENSORS]) {
+        let (lo, hi) = (*RANGE_FORCE.start() as f64, *RANGE_FORCE.end() as f64);
+        let mut newtons = [0.0; SENSORS];
+        for s in 0..SENSORS {
+            let raw = (norm[s] / scale::FORCE).round_ties_even().clamp(lo, hi);
+            newtons[s] = self.cal_gain[c][s] * (raw * scale::FORCE - self.cal_offset[c][s]);
+        }
+        let at = self.t.partition_point(|&t| t <= arrival);
+        self.t.insert(at, arrival);
+        self.cell.insert(at, c as i64);
+        self.force.insert(at, newtons);
     }
 
     /// Apply the packets that have arrived by `t_ns` (the newest of each cell wins).
@@ -157,23 +166,35 @@ pub enum Status {
 /// Samples after which the packets of a stretch are made (`SimEngine.lean_advance`).
 pub const FLUSH_SAMPLES: usize = 2000;
 
-/// Run control ticks from `st.t_ns`. Force phases (settle, ramp) start from the trajectory's
-/// current segment `segs[0]` and replace it by each tick's motion; a guard follows the planned
-/// segments `segs`. New samples are appended to `chunk`; `samples` counts the samples since
-/// the last flush. Returns the status and the force error of the last tick (guard: the reading
-/// minus the threshold).
-#[allow(clippy::too_many_arguments)]
+/// A run of control ticks: the phase (and its progress), the trajectory it moves on, the
+/// samples it made and how many were made since the last flush.
+#[derive(Clone, Debug)]
+pub struct TickRun {
+    pub phase: Phase,
+    /// Force phases (settle, ramp): the segment in force, replaced by each tick's motion; a
+    /// guard: the planned segments.
+    pub segs: Vec<Segment>,
+    /// The new samples, appended.
+    pub chunk: Chunk,
+    pub samples: usize,
+}
+
+/// Run control ticks from `st.t_ns`, the packets' readings in `queue`. Returns the status and
+/// the force error of the last tick (guard: the reading minus the threshold).
 pub fn run_ticks(
     mech: &Mechanics,
     sensors: &Sensors,
     ctl: &ForceControl,
-    phase: &mut Phase,
     st: &mut MechState,
-    segs: &mut [Segment],
     queue: &mut LeanQueue,
-    chunk: &mut Chunk,
-    samples: &mut usize,
+    run: &mut TickRun,
 ) -> (Status, f64) {
+    let TickRun {
+        phase,
+        segs,
+        chunk,
+        samples,
+    } = run;
     let mut err = f64::NAN;
     if segs.is_empty() {
         return (Status::Done, err);

@@ -225,6 +225,30 @@ impl Chunk {
     pub fn is_empty(&self) -> bool {
         self.cells.is_empty()
     }
+
+    /// Chunks of consecutive stretches of time as one cell-major chunk: every sample of a cell
+    /// together, in sample order.
+    pub fn concat(chunks: &[&Chunk]) -> Chunk {
+        let mut order: Vec<(usize, usize)> = chunks
+            .iter()
+            .enumerate()
+            .flat_map(|(c, chunk)| (0..chunk.len()).map(move |i| (c, i)))
+            .collect();
+        order.sort_by_key(|&(c, i)| (chunks[c].cells[i], chunks[c].ks[i]));
+        let mut out = Chunk::default();
+        for (c, i) in order {
+            let ch = chunks[c];
+            out.cells.push(ch.cells[i]);
+            out.ks.push(ch.ks[i]);
+            out.t_s.push(ch.t_s[i]);
+            out.t_ns.push(ch.t_ns[i]);
+            out.pos.push(ch.pos[i]);
+            out.vel.push(ch.vel[i]);
+            out.acc.push(ch.acc[i]);
+            out.sigma.push(ch.sigma[i]);
+        }
+        out
+    }
 }
 
 /// Contact mechanics of one object in one trial.

@@ -15,12 +15,22 @@ use crate::philox::CounterStream;
 use crate::sensors::Sensors;
 use crate::slip::{run as slip_run, SlipCell, SlipParams};
 use crate::texture::{acceleration, Texture, TextureResponse};
-use crate::thermal::{heat_at, System};
+use crate::thermal::{heat_at, HeatSamples, System};
 use crate::SimError;
 
-/// The per-trial constants of the readings (patch, object and trial).
+/// The per-trial constants of the readings (patch, object and trial), by sensor.
 #[derive(Clone, Debug)]
 pub struct Readout {
+    pub cells: CellFrames,
+    pub acc: Accelerometers,
+    pub temp: Thermometers,
+    pub prox: Proximity,
+    pub heat: ContactHeat,
+}
+
+/// Where each cell sits and how its accelerometer is mounted.
+#[derive(Clone, Debug)]
+pub struct CellFrames {
     /// (C, 2) cell centres relative to the TCP (m)
     pub centres: Vec<[f64; 2]>,
     /// (C, 3, 3) cell accelerometer axes in the base frame: `acc_c[j] = Σ_i world[i] axes[i][j]`
@@ -28,28 +38,47 @@ pub struct Readout {
     /// (C, 3) zero-g offsets (g)
     pub acc_bias: Vec<[f64; 3]>,
     pub cell_ids: Vec<i64>,
+}
+
+/// The accelerometers: gravity, their noise, and the arm's own vibration.
+#[derive(Clone, Debug)]
+pub struct Accelerometers {
     /// standard gravity (m/s²): accelerometers report specific force in g
     pub gravity: f64,
     pub acc_noise: f64,
+    /// the arm's own vibration: g rms at 5 cm/s, modes (Hz, phase, dx, dy, dz)
+    pub arm_vibration: f64,
+    pub arm_modes: Vec<[f64; 5]>,
+}
+
+/// The temperature sensors: the accelerometer die's self-heating and noise, the LM71's noise.
+#[derive(Clone, Copy, Debug)]
+pub struct Thermometers {
     pub die_self_heating: f64,
     pub die_temp_noise: f64,
     pub temp_noise: f64,
+}
+
+/// The proximity sensor: dark reading, gain, distance scale, noise, and the reflectivity of
+/// the object and of the table.
+#[derive(Clone, Copy, Debug)]
+pub struct Proximity {
     pub prox_dark: f64,
     pub prox_gain: f64,
     pub prox_distance: f64,
     pub prox_noise: f64,
     pub reflectivity: f64,
     pub table_reflectivity: f64,
-    /// contact fraction φ = p / (p + p½)
+}
+
+/// The heat exchange's contact: contact fraction φ = p / (p + p½), the trial's contact quality
+/// (scales φ), and the quantisation of the thermal configurations (φ steps, speed step m/s).
+#[derive(Clone, Copy, Debug)]
+pub struct ContactHeat {
     pub contact_pressure_half: f64,
-    /// the trial's contact quality (scales φ for the heat)
     pub conductance_scale: f64,
-    /// quantisation of the thermal configurations: φ steps, speed step (m/s)
     pub contact_steps: f64,
     pub speed_step: f64,
-    /// the arm's own vibration: g rms at 5 cm/s, modes (Hz, phase, dx, dy, dz)
-    pub arm_vibration: f64,
-    pub arm_modes: Vec<[f64; 5]>,
 }
 
 /// Everything one trial's physics needs (one object under one trial's conditions).
@@ -233,10 +262,10 @@ impl Physics {
         let r = &readout;
         if sensors.n_cells != n
             || slip_keys.len() != n
-            || r.centres.len() != n
-            || r.axes.len() != n
-            || r.acc_bias.len() != n
-            || r.cell_ids.len() != n
+            || r.cells.centres.len() != n
+            || r.cells.axes.len() != n
+            || r.cells.acc_bias.len() != n
+            || r.cells.cell_ids.len() != n
         {
             return Err(SimError::invalid(
                 "physics: sensors, slip streams, centres, axes, biases and ids need one row per cell",
@@ -249,10 +278,10 @@ impl Physics {
                 "texture: kvec, amplitude and phase need one row per wave",
             ));
         }
-        if !(r.contact_steps > 0.0
-            && r.speed_step > 0.0
-            && r.prox_distance > 0.0
-            && r.gravity > 0.0)
+        if !(r.heat.contact_steps > 0.0
+            && r.heat.speed_step > 0.0
+            && r.prox.prox_distance > 0.0
+            && r.acc.gravity > 0.0)
         {
             return Err(SimError::invalid(
                 "readout: contact steps, speed step, proximity distance and gravity must be > 0",
@@ -300,14 +329,14 @@ impl Physics {
         (0..chunk.len())
             .map(|i| {
                 let p = Self::pressure(&chunk.sigma[i]);
-                let phi = p / (p + r.contact_pressure_half);
-                let phi = (phi * r.conductance_scale).min(1.0);
-                let phi_bin = (phi * r.contact_steps)
+                let phi = p / (p + r.heat.contact_pressure_half);
+                let phi = (phi * r.heat.conductance_scale).min(1.0);
+                let phi_bin = (phi * r.heat.contact_steps)
                     .round_ties_even()
-                    .clamp(0.0, r.contact_steps) as i64;
+                    .clamp(0.0, r.heat.contact_steps) as i64;
                 let v_bin = if p > 0.0 {
                     let v = chunk.vel[i];
-                    (v[0].hypot(v[1]) / r.speed_step).round_ties_even() as i64
+                    (v[0].hypot(v[1]) / r.heat.speed_step).round_ties_even() as i64
                 } else {
                     0
                 };
@@ -401,12 +430,15 @@ impl Physics {
             }
             w
         });
+        let samples = HeatSamples {
+            cells: &chunk.cells,
+            t_s: &chunk.t_s,
+            config: &config,
+        };
         let temps = heat_at(
             &thermal.systems,
             &thermal.sqrt_c,
-            &chunk.cells,
-            &chunk.t_s,
-            &config,
+            &samples,
             &mut st.thermal,
             &mut st.thermal_t,
             emitted.as_deref(),
@@ -417,8 +449,8 @@ impl Physics {
             .map(|i| {
                 let c = chunk.cells[i] as usize;
                 [
-                    chunk.pos[i][0] + r.centres[c][0],
-                    chunk.pos[i][1] + r.centres[c][1],
+                    chunk.pos[i][0] + r.cells.centres[c][0],
+                    chunk.pos[i][1] + r.cells.centres[c][1],
                 ]
             })
             .collect();
@@ -508,12 +540,12 @@ impl Physics {
             world[0] += t[0] * dir[0] + t[1] * -dir[1];
             world[1] += t[0] * dir[1] + t[1] * dir[0];
             // Specific force: an accelerometer at rest reads +1 g up.
-            world[2] += t[2] + r.gravity;
-            let ax = &r.axes[c];
+            world[2] += t[2] + r.acc.gravity;
+            let ax = &r.cells.axes[c];
             let mut acc_cell = [0.0; 3];
             for (j, out) in acc_cell.iter_mut().enumerate() {
-                *out =
-                    ((world[0] * ax[0][j] + world[1] * ax[1][j]) + world[2] * ax[2][j]) / r.gravity;
+                *out = ((world[0] * ax[0][j] + world[1] * ax[1][j]) + world[2] * ax[2][j])
+                    / r.acc.gravity;
             }
             // --- sensor noise (addressed by sample index and cell) and readings
             let (z, arrival) = self
@@ -522,24 +554,25 @@ impl Physics {
             let force = self.sensors.reading(c, f_true[i], &z);
             let mut acc_g = [0.0; 3];
             for j in 0..3 {
-                acc_g[j] = (acc_cell[j] + r.acc_bias[c][j]) + r.acc_noise * z[3 + j];
+                acc_g[j] = (acc_cell[j] + r.cells.acc_bias[c][j]) + r.acc.acc_noise * z[3 + j];
             }
             let temp = [
-                (temps[i][1] + r.die_self_heating) + r.die_temp_noise * z[6],
-                temps[i][0] + r.temp_noise * z[7],
+                (temps[i][1] + r.temp.die_self_heating) + r.temp.die_temp_noise * z[6],
+                temps[i][0] + r.temp.temp_noise * z[7],
             ];
             let below = shape.height(centre[i]);
             let on_face = below.is_finite();
             let gap = (chunk.pos[i][2] - if on_face { below } else { 0.0 }).max(0.0);
             let refl = if on_face {
-                r.reflectivity
+                r.prox.reflectivity
             } else {
-                r.table_reflectivity
+                r.prox.table_reflectivity
             };
-            let g = gap / r.prox_distance;
-            let prox = (r.prox_dark + r.prox_gain * refl / (1.0 + g * g)) + r.prox_noise * z[8];
+            let g = gap / r.prox.prox_distance;
+            let prox = (r.prox.prox_dark + r.prox.prox_gain * refl / (1.0 + g * g))
+                + r.prox.prox_noise * z[8];
             frames.cell_index.push(c as i64);
-            frames.cell_id.push(r.cell_ids[c]);
+            frames.cell_id.push(r.cells.cell_ids[c]);
             frames.t_sample_ns.push(chunk.t_ns[i]);
             frames.t_ns.push(arrival);
             frames.proximity.push(prox);
@@ -581,16 +614,20 @@ impl Physics {
             })
             .collect();
         let mut out = vec![[0.0; 3]; rows.len()];
-        if !speed.iter().any(|&s| s > 1e-6) || !(r.arm_vibration > 0.0) || r.arm_modes.is_empty() {
+        if !speed.iter().any(|&s| s > 1e-6)
+            || !(r.acc.arm_vibration > 0.0)
+            || r.acc.arm_modes.is_empty()
+        {
             return out;
         }
-        let scale = r.arm_vibration * r.gravity * (2.0 / r.arm_modes.len() as f64).sqrt();
+        let scale =
+            r.acc.arm_vibration * r.acc.gravity * (2.0 / r.acc.arm_modes.len() as f64).sqrt();
         let two_pi = 2.0 * std::f64::consts::PI;
         for (e, &i) in rows.iter().enumerate() {
             let amp = scale * (speed[e] / 0.05).min(2.0);
             let t = chunk.t_s[i];
             let mut sum = [0.0; 3];
-            for (q, mode) in r.arm_modes.iter().enumerate() {
+            for (q, mode) in r.acc.arm_modes.iter().enumerate() {
                 let wave = (two_pi * mode[0] * t + mode[1]).sin();
                 for j in 0..3 {
                     sum[j] = if q == 0 {

@@ -5,7 +5,8 @@
 
 use crate::philox::{box_muller, unit, CounterStream};
 
-/// Constants of the spring-block and of the ringing shear mode.
+/// Constants of the spring-block: static and kinetic friction, the tangential spring (N/m) and
+/// mass (kg), the relative spread of the static threshold, the sample rate (Hz).
 #[derive(Clone, Copy, Debug)]
 pub struct SlipParams {
     pub mu_s: f64,
@@ -13,8 +14,16 @@ pub struct SlipParams {
     pub tangential_stiffness: f64,
     pub tangential_mass: f64,
     pub threshold_sd: f64,
-    pub coupling: f64,
     pub rate_hz: f64,
+    pub ring: Ringing,
+}
+
+/// The cover's shear mode a slip rings: the share of the force drop that reaches the
+/// accelerometer, angular frequency (rad/s), decay rate (1/s), and the accelerometer's gain and
+/// phase lag at that frequency.
+#[derive(Clone, Copy, Debug)]
+pub struct Ringing {
+    pub coupling: f64,
     pub omega: f64,
     pub decay: f64,
     pub gain: f64,
@@ -134,7 +143,7 @@ pub fn run(
                 let drop = 2.0 * dmu * force[s];
                 cell.ring.push((
                     t0 + frac.clamp(0.0, 1.0) * (t[s] - t0),
-                    strength[s] * p.coupling * drop / p.tangential_mass,
+                    strength[s] * p.ring.coupling * drop / p.tangential_mass,
                 ));
                 for x in &mut load[hit..] {
                     *x -= drop;
@@ -153,14 +162,18 @@ pub fn run(
             for &(te, peak) in &cell.ring {
                 let tau = t[k] - te;
                 if tau >= 0.0 {
-                    sum += peak * p.gain * (-p.decay * tau).exp() * (p.omega * tau + p.lag).sin();
+                    sum += peak
+                        * p.ring.gain
+                        * (-p.ring.decay * tau).exp()
+                        * (p.ring.omega * tau + p.ring.lag).sin();
                 }
             }
             *o = sum;
         }
         // Forget slips that have rung out (< 0.1 % of their peak).
         let t_last = t[n - 1];
-        cell.ring.retain(|&(te, _)| (t_last - te) * p.decay <= 7.0);
+        cell.ring
+            .retain(|&(te, _)| (t_last - te) * p.ring.decay <= 7.0);
     }
     out
 }

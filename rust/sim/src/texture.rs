@@ -14,17 +14,32 @@ pub struct Texture {
     pub phase: Vec<f64>,
 }
 
-/// The skin constants the texture response uses.
+/// How a cell vibrates on its contact: the cover's smoothing over its contact length (m), the
+/// resonance (Hz) and damping ratio of the contact stiffness, the accelerometer's bandwidth (Hz).
 #[derive(Clone, Copy, Debug)]
-pub struct TextureResponse {
+pub struct ContactVibration {
     pub cover_contact_length: f64,
     pub contact_resonance: f64,
     pub contact_damping: f64,
     pub acc_bandwidth: f64,
+}
+
+/// How strongly the surface drives the cell: the cover's modulus (Pa) and half-coupling
+/// pressure (Pa), and the tangential and lateral shares of the normal excitation.
+#[derive(Clone, Copy, Debug)]
+pub struct TextureCoupling {
     pub coupling_modulus: f64,
     pub coupling_pressure: f64,
     pub tangential_coupling: f64,
     pub lateral_coupling: f64,
+}
+
+/// The skin's texture response on one object: the skin's constants and the object's top
+/// modulus (Pa) and kinetic friction.
+#[derive(Clone, Copy, Debug)]
+pub struct TextureResponse {
+    pub vibration: ContactVibration,
+    pub coupling: TextureCoupling,
     pub top_modulus: f64,
     pub mu_kinetic: f64,
 }
@@ -58,9 +73,9 @@ pub fn acceleration(
     let qnorm: Vec<f64> = tex.kvec.iter().map(|q| q[0].hypot(q[1])).collect();
     let smooth: Vec<f64> = qnorm
         .iter()
-        .map(|q| (-((PI * k.cover_contact_length * q).powi(2))).exp())
+        .map(|q| (-((PI * k.vibration.cover_contact_length * q).powi(2))).exp())
         .collect();
-    let stiff = (k.top_modulus / (k.top_modulus + k.coupling_modulus)).sqrt();
+    let stiff = (k.top_modulus / (k.top_modulus + k.coupling.coupling_modulus)).sqrt();
     // The response of each wave depends on the velocity only: kept while it does not change
     // (a cell sliding at constant speed), recomputed when it does.
     let mut resp = vec![(0.0, 0.0, 0.0, 0.0); m]; // (base/A-free gain, phase lag, tangential, 1)
@@ -76,10 +91,10 @@ pub fn acceleration(
             for j in 0..m {
                 let kv = tex.kvec[j];
                 let f = (w[i][0] * kv[0] + w[i][1] * kv[1]).abs();
-                let r = f / k.contact_resonance;
-                let two_zr = 2.0 * k.contact_damping * r;
+                let r = f / k.vibration.contact_resonance;
+                let two_zr = 2.0 * k.vibration.contact_damping * r;
                 let h_t = cdiv((1.0, two_zr), (1.0 - r * r, two_zr));
-                let h_l = cdiv((1.0, 0.0), (1.0, f / k.acc_bandwidth));
+                let h_l = cdiv((1.0, 0.0), (1.0, f / k.vibration.acc_bandwidth));
                 let h = cmul(h_t, h_l);
                 let base =
                     -(tex.amplitude[j] * smooth[j]) * (2.0 * PI * f).powi(2) * h.0.hypot(h.1);
@@ -87,12 +102,12 @@ pub fn acceleration(
                 resp[j] = (
                     base,
                     h.1.atan2(h.0),
-                    k.tangential_coupling * k.mu_kinetic / (1.0 + r * r),
-                    k.lateral_coupling * cross,
+                    k.coupling.tangential_coupling * k.mu_kinetic / (1.0 + r * r),
+                    k.coupling.lateral_coupling * cross,
                 );
             }
         }
-        let coupling = stiff * p / (p + k.coupling_pressure);
+        let coupling = stiff * p / (p + k.coupling.coupling_pressure);
         let (mut tang, mut lat, mut norm) = (0.0, 0.0, 0.0);
         for j in 0..m {
             let kv = tex.kvec[j];

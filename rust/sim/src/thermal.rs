@@ -16,20 +16,26 @@ pub struct System {
     pub t_ss: Vec<f64>,
 }
 
-/// Temperatures [node 0, node 1] of every sample of a cell-major chunk; each sample's
-/// configuration is `config[i]` (an index into `systems`). `state` (C×N) and `state_t` (C)
+/// The samples of a cell-major chunk to heat: each sample's cell, time (s) and configuration
+/// (an index into the systems).
+#[derive(Clone, Copy, Debug)]
+pub struct HeatSamples<'a> {
+    pub cells: &'a [i64],
+    pub t_s: &'a [f64],
+    pub config: &'a [usize],
+}
+
+/// Temperatures [node 0, node 1] of every sample of `samples`. `state` (C×N) and `state_t` (C)
 /// are each cell's network state and its time; both are advanced to the cell's last sample.
 /// Returns (m × 2) temperatures.
 pub fn heat(
     systems: &[System],
     sqrt_c: &[f64],
-    cells: &[i64],
-    t_s: &[f64],
-    config: &[usize],
+    samples: &HeatSamples<'_>,
     state: &mut [f64],
     state_t: &mut [f64],
 ) -> Result<Vec<[f64; 2]>, SimError> {
-    heat_at(systems, sqrt_c, cells, t_s, config, state, state_t, None)
+    heat_at(systems, sqrt_c, samples, state, state_t, None)
 }
 
 /// [`heat`] with the temperatures computed only at the samples where `wanted` is true (zero
@@ -37,13 +43,12 @@ pub fn heat(
 pub fn heat_at(
     systems: &[System],
     sqrt_c: &[f64],
-    cells: &[i64],
-    t_s: &[f64],
-    config: &[usize],
+    samples: &HeatSamples<'_>,
     state: &mut [f64],
     state_t: &mut [f64],
     wanted: Option<&[bool]>,
 ) -> Result<Vec<[f64; 2]>, SimError> {
+    let HeatSamples { cells, t_s, config } = *samples;
     let n = sqrt_c.len();
     let m = cells.len();
     if t_s.len() != m || config.len() != m || wanted.is_some_and(|w| w.len() != m) {

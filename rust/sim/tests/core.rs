@@ -2,13 +2,17 @@
 //! the mechanics, the relaxation's limits, the indentation law, the heat solution's steady
 //! state and the force loop's bookkeeping.
 
-use aptkt_sim::control::{numpy_sum, run_ticks, ForceControl, LeanQueue, Phase, Status};
-use aptkt_sim::mechanics::{Cells, Chunk, Law, MechState, Mechanics, Relaxation, Segment, Shape};
+use aptkt_sim::control::{numpy_sum, run_ticks, ForceControl, LeanQueue, Phase, Status, TickRun};
+use aptkt_sim::mechanics::{Chunk, Law, MechState, Mechanics, Relaxation, Segment, Shape};
 use aptkt_sim::philox::{block, CounterStream};
 use aptkt_sim::sensors::Sensors;
-use aptkt_sim::texture::{acceleration, Texture, TextureResponse};
-use aptkt_sim::thermal::{heat, System};
+use aptkt_sim::texture::{
+    acceleration, ContactVibration, Texture, TextureCoupling, TextureResponse,
+};
+use aptkt_sim::thermal::{heat, HeatSamples, System};
 use proptest::prelude::*;
+
+mod common;
 
 #[test]
 fn philox_matches_numpy() {
@@ -67,18 +71,7 @@ fn law(k_skin: f64, e: f64, h: f64, eps_d: f64) -> Law {
 }
 
 fn mechanics(weights: Vec<f64>, times: Vec<f64>) -> Mechanics {
-    let n = 3;
-    let cells = Cells {
-        clock_rate: vec![250.0, 250.3, 249.8],
-        clock_phase: vec![0.0011, 0.0023, 0.0007],
-        sensor_height: vec![[1e-6, -2e-6, 0.0]; n],
-        sensor_xy: (0..n)
-            .map(|c| {
-                let x = c as f64 * 0.01;
-                [[x, 0.002], [x - 0.002, -0.001], [x + 0.002, -0.001]]
-            })
-            .collect(),
-    };
+    let cells = common::cells([1e-6, -2e-6, 0.0]);
     let shape = Shape {
         centre: [0.55, 0.0],
         rotation: 0.3,
@@ -217,12 +210,12 @@ fn heat_reaches_the_steady_state_and_is_exact_in_time() {
     let cells = vec![0i64; t.len()];
     let mut state = vec![25.0, 10.0];
     let mut state_t = vec![0.0];
+    let config = vec![0; t.len()];
+    let samples = |cells, t_s, config| HeatSamples { cells, t_s, config };
     let out = heat(
         std::slice::from_ref(&sys),
         &sqrt_c,
-        &cells,
-        &t,
-        &vec![0; t.len()],
+        &samples(&cells, &t, &config),
         &mut state,
         &mut state_t,
     )
@@ -238,21 +231,18 @@ fn heat_reaches_the_steady_state_and_is_exact_in_time() {
         heat(
             std::slice::from_ref(&sys),
             &sqrt_c,
-            &cells[half.clone()],
-            &t[half.clone()],
-            &vec![0; 50],
+            &samples(&cells[half.clone()], &t[half.clone()], &config[..50]),
             &mut s2,
             &mut t2,
         )
         .unwrap();
     }
     assert!((s2[0] - state[0]).abs() < 1e-12 && (s2[1] - state[1]).abs() < 1e-12);
+    let missing = vec![1; t.len()];
     assert!(heat(
         &[sys],
         &sqrt_c,
-        &cells,
-        &t,
-        &vec![1; t.len()],
+        &samples(&cells, &t, &missing),
         &mut s2,
         &mut t2
     )
@@ -267,14 +257,18 @@ fn texture_is_silent_at_rest_and_scales_with_amplitude() {
         phase: vec![0.1, 0.2],
     };
     let k = TextureResponse {
-        cover_contact_length: 0.25e-3,
-        contact_resonance: 90.0,
-        contact_damping: 0.35,
-        acc_bandwidth: 125.0,
-        coupling_modulus: 1e5,
-        coupling_pressure: 150.0,
-        tangential_coupling: 1.2,
-        lateral_coupling: 0.35,
+        vibration: ContactVibration {
+            cover_contact_length: 0.25e-3,
+            contact_resonance: 90.0,
+            contact_damping: 0.35,
+            acc_bandwidth: 125.0,
+        },
+        coupling: TextureCoupling {
+            coupling_modulus: 1e5,
+            coupling_pressure: 150.0,
+            tangential_coupling: 1.2,
+            lateral_coupling: 0.35,
+        },
         top_modulus: 1e6,
         mu_kinetic: 0.5,
     };
@@ -293,33 +287,61 @@ fn texture_is_silent_at_rest_and_scales_with_amplitude() {
     }
 }
 
-#[test]
-fn force_loop_settles_on_the_target() {
-    let m = mechanics(vec![0.3], vec![0.2]);
-    let n = m.cells.len();
-    let sensors = Sensors::new(
-        [1, 2],
+/// The patch's force sensors (gain 0.5, offset 1, a little noise, 0.8 ms latency).
+fn patch_sensors(key: [u64; 2], n: usize) -> Sensors {
+    Sensors::new(
+        key,
         vec![[0.5; 3]; n],
         vec![[1.0; 3]; n],
         1e-3,
         800_000,
         6e-4,
     )
-    .unwrap();
+    .unwrap()
+}
+
+/// Ticks until the phase ends, past every flush (whose packets these tests do not make).
+fn ticks_to_the_end(
+    m: &Mechanics,
+    sensors: &Sensors,
+    ctl: &ForceControl,
+    st: &mut MechState,
+    q: &mut LeanQueue,
+    run: &mut TickRun,
+) -> Status {
+    loop {
+        run.samples = 0;
+        let (status, _) = run_ticks(m, sensors, ctl, st, q, run);
+        if status != Status::Flush {
+            return status;
+        }
+    }
+}
+
+/// A skin calibration of gain 0.5 and offset 1, every cell reading 0 N.
+fn lean_queue(n: usize) -> LeanQueue {
+    LeanQueue {
+        latest: vec![[0.0; 3]; n],
+        cal_gain: vec![[0.5; 3]; n],
+        cal_offset: vec![[1.0; 3]; n],
+        ..Default::default()
+    }
+}
+
+#[test]
+fn force_loop_settles_on_the_target() {
+    let m = mechanics(vec![0.3], vec![0.2]);
+    let n = m.cells.len();
+    let sensors = patch_sensors([1, 2], n);
     let mut st = rest_state(&m);
     // Start just touching the face.
-    let mut segs = vec![Segment {
+    let segs = vec![Segment {
         t0: 0,
         p0: [0.55, 0.0, 0.02],
         v0: [0.0; 3],
         a: [0.0; 3],
     }];
-    let mut q = LeanQueue {
-        latest: vec![[0.0; 3]; n],
-        cal_gain: vec![[0.5; 3]; n],
-        cal_offset: vec![[1.0; 3]; n],
-        ..Default::default()
-    };
+    let mut q = lean_queue(n);
     let ctl = ForceControl {
         target: 0.2,
         gain: 0.02,
@@ -329,26 +351,21 @@ fn force_loop_settles_on_the_target() {
         tick_ns: 8_000_000,
         wrench_limit: 5.0,
     };
-    let mut phase = Phase::Settle {
-        t_limit_ns: 3_000_000_000,
-        settled: 0,
+    let mut run = TickRun {
+        phase: Phase::Settle {
+            t_limit_ns: 3_000_000_000,
+            settled: 0,
+        },
+        segs,
+        chunk: Chunk::default(),
+        samples: 0,
     };
-    let mut chunk = Chunk::default();
     let mut status = Status::Flush;
     while status == Status::Flush {
-        let mut samples = 0;
-        (status, _) = run_ticks(
-            &m,
-            &sensors,
-            &ctl,
-            &mut phase,
-            &mut st,
-            &mut segs,
-            &mut q,
-            &mut chunk,
-            &mut samples,
-        );
+        run.samples = 0;
+        (status, _) = run_ticks(&m, &sensors, &ctl, &mut st, &mut q, &mut run);
     }
+    let chunk = run.chunk;
     assert_eq!(status, Status::Done);
     assert!((q.reading() - 0.2).abs() < 0.02, "{}", q.reading());
     // Every sample is in the chunk exactly once.
@@ -364,15 +381,7 @@ fn force_loop_settles_on_the_target() {
 fn guarded_move_stops_at_the_first_tick_over_the_threshold() {
     let m = mechanics(vec![0.3], vec![0.2]);
     let n = m.cells.len();
-    let sensors = Sensors::new(
-        [3, 4],
-        vec![[0.5; 3]; n],
-        vec![[1.0; 3]; n],
-        1e-3,
-        800_000,
-        6e-4,
-    )
-    .unwrap();
+    let sensors = patch_sensors([3, 4], n);
     let ctl = ForceControl {
         target: 0.0,
         gain: 0.0,
@@ -391,35 +400,19 @@ fn guarded_move_stops_at_the_first_tick_over_the_threshold() {
     }];
     let run = |threshold: f64, t_end_ns: i64| {
         let mut st = rest_state(&m);
-        let mut segs = plan.clone();
-        let mut q = LeanQueue {
-            latest: vec![[0.0; 3]; n],
-            cal_gain: vec![[0.5; 3]; n],
-            cal_offset: vec![[1.0; 3]; n],
-            ..Default::default()
+        let mut q = lean_queue(n);
+        let mut run = TickRun {
+            phase: Phase::Guard {
+                t_end_ns,
+                threshold,
+                window_ns: 250_000_000,
+                w_end_ns: i64::MIN,
+            },
+            segs: plan.clone(),
+            chunk: Chunk::default(),
+            samples: 0,
         };
-        let mut phase = Phase::Guard {
-            t_end_ns,
-            threshold,
-            window_ns: 250_000_000,
-            w_end_ns: i64::MIN,
-        };
-        let mut chunk = Chunk::default();
-        let mut status = Status::Flush;
-        while status == Status::Flush {
-            let mut samples = 0;
-            (status, _) = run_ticks(
-                &m,
-                &sensors,
-                &ctl,
-                &mut phase,
-                &mut st,
-                &mut segs,
-                &mut q,
-                &mut chunk,
-                &mut samples,
-            );
-        }
+        let status = ticks_to_the_end(&m, &sensors, &ctl, &mut st, &mut q, &mut run);
         (status, st.t_ns, q.reading())
     };
     let (status, t, reading) = run(0.05, 2_000_000_000);

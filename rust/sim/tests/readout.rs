@@ -2,13 +2,18 @@
 //! thermal systems asked for before anything changes, and steps that do not depend on how a
 //! motion is cut. The numpy formulation it replaced is compared in tests/sim.
 
-use aptkt_sim::mechanics::{Cells, Chunk, Law, MechState, Mechanics, Relaxation, Segment, Shape};
-use aptkt_sim::readout::{Frames, Physics, Readout, ThermalSystems, TrialState};
+use aptkt_sim::mechanics::{Chunk, Law, MechState, Mechanics, Relaxation, Segment, Shape};
+use aptkt_sim::readout::{
+    Accelerometers, CellFrames, ContactHeat, Frames, Physics, Proximity, Readout, ThermalSystems,
+    Thermometers, TrialState,
+};
 use aptkt_sim::sensors::Sensors;
-use aptkt_sim::slip::{SlipCell, SlipParams};
-use aptkt_sim::texture::{Texture, TextureResponse};
+use aptkt_sim::slip::{Ringing, SlipCell, SlipParams};
+use aptkt_sim::texture::{ContactVibration, Texture, TextureCoupling, TextureResponse};
 use aptkt_sim::thermal::System;
 use proptest::prelude::*;
+
+mod common;
 
 const N: usize = 3;
 const G: f64 = 9.80665;
@@ -21,17 +26,7 @@ fn physics(noise: f64, mu_s: f64) -> Physics {
         sigma.push(10f64.powf(-4.0 + 10.0 * i as f64 / 1999.0));
     }
     let delta = sigma.iter().map(|s| s / 2e7 + 0.01 * s / 5e4).collect();
-    let cells = Cells {
-        clock_rate: vec![250.0, 250.3, 249.8],
-        clock_phase: vec![0.0011, 0.0023, 0.0007],
-        sensor_height: vec![[0.0; 3]; N],
-        sensor_xy: (0..N)
-            .map(|c| {
-                let x = c as f64 * 0.01;
-                [[x, 0.002], [x - 0.002, -0.001], [x + 0.002, -0.001]]
-            })
-            .collect(),
-    };
+    let cells = common::cells([0.0; 3]);
     let shape = Shape {
         centre: [0.55, 0.0],
         rotation: 0.0,
@@ -67,14 +62,18 @@ fn physics(noise: f64, mu_s: f64) -> Physics {
         phase: vec![0.3, 1.1],
     };
     let response = TextureResponse {
-        cover_contact_length: 2.5e-4,
-        contact_resonance: 90.0,
-        contact_damping: 0.3,
-        acc_bandwidth: 125.0,
-        coupling_modulus: 1e6,
-        coupling_pressure: 500.0,
-        tangential_coupling: 0.5,
-        lateral_coupling: 0.3,
+        vibration: ContactVibration {
+            cover_contact_length: 2.5e-4,
+            contact_resonance: 90.0,
+            contact_damping: 0.3,
+            acc_bandwidth: 125.0,
+        },
+        coupling: TextureCoupling {
+            coupling_modulus: 1e6,
+            coupling_pressure: 500.0,
+            tangential_coupling: 0.5,
+            lateral_coupling: 0.3,
+        },
         top_modulus: 1e9,
         mu_kinetic: 0.8,
     };
@@ -84,35 +83,47 @@ fn physics(noise: f64, mu_s: f64) -> Physics {
         tangential_stiffness: 2000.0,
         tangential_mass: 0.002,
         threshold_sd: 0.1,
-        coupling: 0.5,
         rate_hz: 250.0,
-        omega: 2.0 * std::f64::consts::PI * 300.0,
-        decay: 0.1 * 2.0 * std::f64::consts::PI * 300.0,
-        gain: 0.4,
-        lag: -1.2,
+        ring: Ringing {
+            coupling: 0.5,
+            omega: 2.0 * std::f64::consts::PI * 300.0,
+            decay: 0.1 * 2.0 * std::f64::consts::PI * 300.0,
+            gain: 0.4,
+            lag: -1.2,
+        },
     };
     let readout = Readout {
-        centres: (0..N).map(|c| [c as f64 * 0.01, 0.0]).collect(),
-        axes: vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]; N],
-        acc_bias: vec![[0.0; 3]; N],
-        cell_ids: vec![1, 2, 3],
-        gravity: G,
-        acc_noise: noise * 0.004,
-        die_self_heating: 1.5,
-        die_temp_noise: noise * 0.05,
-        temp_noise: noise * 0.03,
-        prox_dark: 100.0,
-        prox_gain: 5000.0,
-        prox_distance: 0.01,
-        prox_noise: noise * 2.0,
-        reflectivity: 0.5,
-        table_reflectivity: 0.3,
-        contact_pressure_half: 120.0,
-        conductance_scale: 1.0,
-        contact_steps: 20.0,
-        speed_step: 0.002,
-        arm_vibration: noise * 0.0025,
-        arm_modes: vec![[40.0, 0.1, 1.0, 0.0, 0.0], [85.0, 0.7, 0.0, 0.6, 0.8]],
+        cells: CellFrames {
+            centres: (0..N).map(|c| [c as f64 * 0.01, 0.0]).collect(),
+            axes: vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]; N],
+            acc_bias: vec![[0.0; 3]; N],
+            cell_ids: vec![1, 2, 3],
+        },
+        acc: Accelerometers {
+            gravity: G,
+            acc_noise: noise * 0.004,
+            arm_vibration: noise * 0.0025,
+            arm_modes: vec![[40.0, 0.1, 1.0, 0.0, 0.0], [85.0, 0.7, 0.0, 0.6, 0.8]],
+        },
+        temp: Thermometers {
+            die_self_heating: 1.5,
+            die_temp_noise: noise * 0.05,
+            temp_noise: noise * 0.03,
+        },
+        prox: Proximity {
+            prox_dark: 100.0,
+            prox_gain: 5000.0,
+            prox_distance: 0.01,
+            prox_noise: noise * 2.0,
+            reflectivity: 0.5,
+            table_reflectivity: 0.3,
+        },
+        heat: ContactHeat {
+            contact_pressure_half: 120.0,
+            conductance_scale: 1.0,
+            contact_steps: 20.0,
+            speed_step: 0.002,
+        },
     };
     Physics::new(
         mech,
@@ -147,7 +158,13 @@ fn rest(p: &Physics, t_ns: i64, x: f64) -> TrialState {
         },
         thermal: vec![32.0; N * 2],
         thermal_t: vec![0.0; N],
-        last_xy: p.readout.centres.iter().map(|c| [x + c[0], c[1]]).collect(),
+        last_xy: p
+            .readout
+            .cells
+            .centres
+            .iter()
+            .map(|c| [x + c[0], c[1]])
+            .collect(),
         slip: vec![
             SlipCell {
                 load: 0.0,

@@ -3,7 +3,12 @@
 
 use crate::packet::PACKET_LEN;
 use crate::parser::PacketSink;
-use crate::sensor::{decode_sensor, scale, SensorRaw};
+use std::ops::RangeInclusive;
+
+use crate::sensor::{
+    decode_sensor, scale, SensorRaw, RANGE_ACC, RANGE_CELL_ID, RANGE_FORCE, RANGE_PROXIMITY,
+    RANGE_TEMP_ACC, RANGE_TEMP_LM71,
+};
 use crate::{EncodeError, PacketType};
 
 /// Sensor packets in physical units: `acc`, `temp`, `force` are row-major `(n, 3)`, `(n, 2)`,
@@ -227,18 +232,32 @@ impl<'a> RawColumnsRef<'a> {
     }
 }
 
+/// `v` as the field's integer type; an error naming the field's range if it does not fit
+/// (whether it lies in the range is checked when the packet is encoded).
 fn narrow<T: TryFrom<i64>>(
     field: &'static str,
     v: i64,
-    min: i64,
-    max: i64,
+    range: &RangeInclusive<i64>,
 ) -> Result<T, EncodeError> {
     T::try_from(v).map_err(|_| EncodeError {
         field,
         value: v,
-        min,
-        max,
+        min: *range.start(),
+        max: *range.end(),
     })
+}
+
+/// The three columns of a vector field (see [`narrow`]).
+fn narrow3<T: TryFrom<i64>>(
+    field: &'static str,
+    v: &[i64],
+    range: &RangeInclusive<i64>,
+) -> Result<[T; 3], EncodeError> {
+    Ok([
+        narrow(field, v[0], range)?,
+        narrow(field, v[1], range)?,
+        narrow(field, v[2], range)?,
+    ])
 }
 
 /// Encodes all rows into `20 * n` bytes of consecutive sensor packets.
@@ -252,22 +271,14 @@ pub fn encode_sensor_columns(cols: &RawColumnsRef<'_>) -> Result<Vec<u8>, Column
             let temp = &cols.temp[2 * row..2 * row + 2];
             let force = &cols.force[3 * row..3 * row + 3];
             Ok(SensorRaw {
-                cell_id: narrow("cell_id", cols.cell_id[row], 0, 0x3FFF)?,
-                proximity: narrow("proximity", cols.proximity[row], 0, 0xFFFF)?,
-                acc: [
-                    narrow("acc", acc[0], -512, 511)?,
-                    narrow("acc", acc[1], -512, 511)?,
-                    narrow("acc", acc[2], -512, 511)?,
-                ],
+                cell_id: narrow("cell_id", cols.cell_id[row], &RANGE_CELL_ID)?,
+                proximity: narrow("proximity", cols.proximity[row], &RANGE_PROXIMITY)?,
+                acc: narrow3("acc", acc, &RANGE_ACC)?,
                 temp: [
-                    narrow("temp", temp[0], -128, 127)?,
-                    narrow("temp", temp[1], -8192, 8191)?,
+                    narrow("temp", temp[0], &RANGE_TEMP_ACC)?,
+                    narrow("temp", temp[1], &RANGE_TEMP_LM71)?,
                 ],
-                force: [
-                    narrow("force", force[0], 0, 4095)?,
-                    narrow("force", force[1], 0, 4095)?,
-                    narrow("force", force[2], 0, 4095)?,
-                ],
+                force: narrow3("force", force, &RANGE_FORCE)?,
             })
         })()
         .map_err(value)?;

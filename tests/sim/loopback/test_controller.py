@@ -16,13 +16,14 @@ from hypothesis import strategies as st
 
 from aptkt.sim.loopback import ControllerConfig, SimulatedController, SpringSurface
 from aptkt.sim.loopback import contact as contact_models
-from aptkt.sim.loopback.controller import DONE_WITH_CMD, PAUSED, PLAYING, RDY_FOR_CMD, STOPPED
+from aptkt.sim.loopback.config import PAUSED, PLAYING, STOPPED
 from aptkt.sim.loopback.rotvec import (
     integrate_rotvec,
     interpolate_rotvec,
     matrix_to_rotvec,
     rotvec_to_matrix,
 )
+from aptkt.sim.loopback.script import DONE_WITH_CMD, RDY_FOR_CMD
 
 DOWN = (math.pi, 0.0, 0.0)
 # The lines of ur_rtde's uploaded script the loopback relies on (name, offsets injection).
@@ -207,7 +208,7 @@ def test_controller_force_limit_triggers_a_protective_stop():
     assert ctl.runtime_state == PAUSED and not np.any(ctl.velocity) and ctl.motion is None
     assert "above the controller's 150.0 N limit" in ctl.protective_stop_reason
     assert ctl.normal_force() == pytest.approx(150.0, abs=1e4 * 0.1 * ctl.dt)
-    assert ctl._output("safety_status_bits") == 4 and ctl._output("robot_status_bits") == 1
+    assert ctl.output_values(["safety_status_bits", "robot_status_bits"]) == [4, 1]
 
 
 def test_the_rtde_watchdog_stops_the_program():

@@ -16,12 +16,8 @@ from loopback_helpers import free_loopback_host
 from scipy.spatial.transform import Rotation
 
 from aptkt.sim.loopback import Loopback
-from aptkt.sim.loopback.controller import (
-    CB3_VERSION,
-    E_SERIES_VERSION,
-    ControllerConfig,
-    SimulatedController,
-)
+from aptkt.sim.loopback.config import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
+from aptkt.sim.loopback.controller import SimulatedController
 from aptkt.sim.loopback.object_surface import SimObjectSurface
 from aptkt.skin import SerialSkin, StreamParser
 

@@ -12,6 +12,7 @@ import numpy as np
 from aptkt.experiments.aggregate import Curves, Estimate, collect, difference, estimate
 from aptkt.experiments.figures.base import Plan
 from aptkt.experiments.plots import learning_curves
+from aptkt.experiments.priors import PriorTask
 from aptkt.experiments.report import markdown_table
 from aptkt.experiments.sampling import draw_groups
 
@@ -198,27 +199,34 @@ def prior_group_plan(
         for t in range(ctx.scale.trials):
             seed = ctx.seed_for("trial", n_priors, g, t)
             for panel, actions in panels.items():
-                for m in methods:
-                    tags = {
-                        "figure": figure,
-                        "panel": panel,
-                        "n_priors": n_priors,
-                        "group": g,
-                        "trial": t,
-                        "priors": ",".join(group),
-                    }
-                    plan.specs.append(
-                        ctx.spec(
-                            m,
-                            ctx.learner(m, seed=seed),
-                            actions,
-                            ctx.scale.new_objects,
-                            task,
-                            seed,
-                            tags,
-                        )
-                    )
+                tags = {
+                    "figure": figure,
+                    "panel": panel,
+                    "n_priors": n_priors,
+                    "group": g,
+                    "trial": t,
+                    "priors": ",".join(group),
+                }
+                add_runs(ctx, plan, methods, actions, task, seed, tags)
     return plan
+
+
+def add_runs(
+    ctx,
+    plan: Plan,
+    methods: Sequence[str],
+    actions: Sequence[str],
+    task: PriorTask,
+    seed: int,
+    tags: Mapping[str, Any],
+) -> None:
+    """One trial of ``methods`` learning the new objects with ``actions`` and ``task``'s prior
+    knowledge, all from the same ``seed`` (the same pool order and exploration draws)."""
+    for m in methods:
+        spec = ctx.spec(
+            m, ctx.learner(m, seed=seed), actions, ctx.scale.new_objects, task, seed, tags
+        )
+        plan.specs.append(spec)
 
 
 def accuracy_table(

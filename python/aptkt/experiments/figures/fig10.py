@@ -10,14 +10,14 @@ confusion matrices, rescaled.
 from __future__ import annotations
 
 import json
-import math
-from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from aptkt.experiments.figures.base import Context, Headline, Plan, Section
-from aptkt.experiments.plots import figure, save_figure
+from aptkt.experiments.figures.analysis import Analysis, hide_unused, panel_grid
+from aptkt.experiments.figures.base import Context, Headline, Plan
+from aptkt.experiments.plots import save_figure
 from aptkt.experiments.report import PAPER, markdown_table
 from aptkt.experiments.similarity import (
     dissimilar_priors,
@@ -87,78 +87,87 @@ def plan(ctx: Context) -> Plan:
     return Plan()  # no learning runs: the analysis reads the data set
 
 
-def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    out = ctx.figure_dir(NAME)
-    sim = similarity(ctx)
-    objects, matrices, chosen = sim["objects"], sim["matrices"], sim["dissimilar"]
-    numbers = [ctx.index[o] for o in objects]
-    keys = list(matrices)
-    ncols = min(4, len(keys))
-    nrows = math.ceil(len(keys) / ncols)
-    fig, axes = figure(
-        nrows, ncols, figsize=(4.6 * ncols + 2, 5.2 * nrows), squeeze=False, layout="constrained"
-    )
-    prior_set = set(ctx.scale.priors)
-    names = [ctx.label(o) for o in objects]
-    for panel, (ax, key) in enumerate(zip(axes.ravel(), keys)):
-        first = panel % ncols == 0  # panels of a row share their rows: one set of row labels
-        im = ax.imshow(matrices[key], vmin=0, vmax=1, cmap="viridis")
-        ax.set_xticks(range(len(objects)), names, fontsize=6, rotation=90)
-        ax.set_yticks(range(len(objects)), names if first else [], fontsize=6)
-        if first:
-            ax.set_ylabel("row: observations of this object", fontsize=8)
-        ax.set_xlabel("column: assigned to this object's mixture component", fontsize=8)
-        # The paper's colours: old objects' numbers blue, new objects' red.
-        for lab, obj in zip(ax.get_xticklabels() + ax.get_yticklabels(), objects + objects):
-            lab.set_color("tab:blue" if obj in prior_set else "tab:red")
-        ax.set_title(
-            f"{key}: dissimilar {ctx.numbers(chosen[key])}"
-            if key != ALL
-            else f"average: dissimilar {ctx.numbers(chosen[key])}",
-            fontsize=10,
-        )
-    for ax in axes.ravel()[len(keys) :]:
-        ax.set_visible(False)
-    fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.6, label="similarity (rescaled confusion)")
-    fig.suptitle(
-        "Fig. 10 — object confusion from Gaussian mixture models (blue: prior, red: new objects)"
-    )
-    files = [str(p.relative_to(ctx.output)) for p in save_figure(fig, out / NAME)]
-    write_csv(
-        out / "confusion.csv",
-        [
-            {
-                "panel": key,
-                "object": objects[i],
-                "object_number": numbers[i],
-                "component_object": objects[k],
-                "component_number": numbers[k],
-                "similarity": float(matrices[key][i, k]),
-            }
-            for key in keys
-            for i in range(len(objects))
-            for k in range(len(objects))
-        ],
-    )
-    (out / "dissimilar.json").write_text(
-        json.dumps(
-            {
-                "dissimilar": chosen,
-                "dissimilar_numbers": {k: [ctx.index[o] for o in v] for k, v in chosen.items()},
-                "scores": sim["scores"],
-                "em": sim["em"],
-            },
-            indent=2,
-        )
-    )
-    files += [f"{NAME}/confusion.csv", f"{NAME}/dissimilar.json"]
+class _Fig10(Analysis):
+    name, title = NAME, TITLE
 
-    paper_sets = PAPER["fig10_dissimilar"]
-    compared = [k for k in keys if k in paper_sets]
-    same = [k for k in compared if set(paper_sets[k]) == {ctx.index[o] for o in chosen[k]}]
-    overlap = [len(set(paper_sets[k]) & {ctx.index[o] for o in chosen[k]}) for k in compared]
-    headlines = (
-        [
+    def measure(self) -> None:
+        self.sim = similarity(self.ctx)
+        self.objects, self.matrices = self.sim["objects"], self.sim["matrices"]
+        self.chosen = self.sim["dissimilar"]
+        self.keys = list(self.matrices)
+
+    def draw(self) -> list[str]:
+        ctx, objects, out = self.ctx, self.objects, self.ctx.figure_dir(NAME)
+        fig, axes = panel_grid(len(self.keys), size=(4.6, 5.2), extra_width=2, layout="constrained")
+        ncols = min(4, len(self.keys))
+        prior_set = set(ctx.scale.priors)
+        names = [ctx.label(o) for o in objects]
+        for panel, (ax, key) in enumerate(zip(axes, self.keys)):
+            first = panel % ncols == 0  # panels of a row share their rows: one set of row labels
+            im = ax.imshow(self.matrices[key], vmin=0, vmax=1, cmap="viridis")
+            ax.set_xticks(range(len(objects)), names, fontsize=6, rotation=90)
+            ax.set_yticks(range(len(objects)), names if first else [], fontsize=6)
+            if first:
+                ax.set_ylabel("row: observations of this object", fontsize=8)
+            ax.set_xlabel("column: assigned to this object's mixture component", fontsize=8)
+            # The paper's colours: old objects' numbers blue, new objects' red.
+            for lab, obj in zip(ax.get_xticklabels() + ax.get_yticklabels(), objects + objects):
+                lab.set_color("tab:blue" if obj in prior_set else "tab:red")
+            ax.set_title(
+                f"{key}: dissimilar {ctx.numbers(self.chosen[key])}"
+                if key != ALL
+                else f"average: dissimilar {ctx.numbers(self.chosen[key])}",
+                fontsize=10,
+            )
+        hide_unused(axes, len(self.keys))
+        fig.colorbar(im, ax=axes, shrink=0.6, label="similarity (rescaled confusion)")
+        fig.suptitle(
+            "Fig. 10 — object confusion from Gaussian mixture models (blue: prior, red: new objects)"
+        )
+        files = [str(p.relative_to(ctx.output)) for p in save_figure(fig, out / NAME)]
+        self._write_tables(out)
+        return files + [f"{NAME}/confusion.csv", f"{NAME}/dissimilar.json"]
+
+    def _write_tables(self, out: Path) -> None:
+        objects, numbers = self.objects, [self.ctx.index[o] for o in self.objects]
+        write_csv(
+            out / "confusion.csv",
+            [
+                {
+                    "panel": key,
+                    "object": objects[i],
+                    "object_number": numbers[i],
+                    "component_object": objects[k],
+                    "component_number": numbers[k],
+                    "similarity": float(self.matrices[key][i, k]),
+                }
+                for key in self.keys
+                for i in range(len(objects))
+                for k in range(len(objects))
+            ],
+        )
+        chosen, index = self.chosen, self.ctx.index
+        (out / "dissimilar.json").write_text(
+            json.dumps(
+                {
+                    "dissimilar": chosen,
+                    "dissimilar_numbers": {k: [index[o] for o in v] for k, v in chosen.items()},
+                    "scores": self.sim["scores"],
+                    "em": self.sim["em"],
+                },
+                indent=2,
+            )
+        )
+
+    def headlines(self) -> list[Headline]:
+        ctx, chosen, paper_sets = self.ctx, self.chosen, PAPER["fig10_dissimilar"]
+        compared = [k for k in self.keys if k in paper_sets]
+        if not compared:
+            return []
+        ours = {k: {ctx.index[o] for o in chosen[k]} for k in compared}
+        same = [k for k in compared if set(paper_sets[k]) == ours[k]]
+        overlap = [len(set(paper_sets[k]) & ours[k]) for k in compared]
+        return [
             Headline(
                 NAME,
                 "the priors dissimilar to the new objects (per action and for all actions)",
@@ -171,37 +180,56 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                 "paper's measured ones — Fig. 11 uses the sets found here",
             )
         ]
-        if compared
-        else []
-    )
-    not_converged = [a for a, e in sim["em"].items() if not e["converged"]]
-    body = [
-        f"Mixture per action: one component per object, initialised at that object's pool observations, "
-        f"{COVARIANCE} covariance; EM ≤ 100 iterations, tol 1e-3. Iterations used: "
-        + ", ".join(f"{a} {e['n_iter']}" for a, e in sim["em"].items())
-        + (f" (not converged: {', '.join(not_converged)})" if not_converged else " (all converged)")
-        + ".",
-        "",
-        "A prior's score is log10 of its largest similarity (mean confusion of both directions, before "
-        "rescaling) with any new object; the lowest scores are the dissimilar priors.",
-        "",
-        markdown_table(
-            [
-                "panel",
-                "dissimilar priors",
-                "paper (numbers)",
-                "log10 similarity of each prior (number: score)",
-            ],
-            [
+
+    def body(self) -> list[str]:
+        ctx, sim, paper_sets = self.ctx, self.sim, PAPER["fig10_dissimilar"]
+        not_converged = [a for a, e in sim["em"].items() if not e["converged"]]
+        return [
+            f"Mixture per action: one component per object, initialised at that object's pool observations, "
+            f"{COVARIANCE} covariance; EM ≤ 100 iterations, tol 1e-3. Iterations used: "
+            + ", ".join(f"{a} {e['n_iter']}" for a, e in sim["em"].items())
+            + (
+                f" (not converged: {', '.join(not_converged)})"
+                if not_converged
+                else " (all converged)"
+            )
+            + ".",
+            "",
+            "A prior's score is log10 of its largest similarity (mean confusion of both directions, before "
+            "rescaling) with any new object; the lowest scores are the dissimilar priors.",
+            "",
+            markdown_table(
                 [
-                    k,
-                    ctx.names(chosen[k]),
-                    "{" + ", ".join(map(str, paper_sets.get(k, ()))) + "}",
-                    ", ".join(f"{ctx.index[o]}: {v:.1f}" for o, v in sim["scores"][k].items()),
-                ]
-                for k in keys
-            ],
-        ),
-    ]
-    nums = {"dissimilar": chosen, "scores": sim["scores"], "em": sim["em"], "same_as_paper": same}
-    return Section(NAME, TITLE, headlines, "\n".join(body), files, nums)
+                    "panel",
+                    "dissimilar priors",
+                    "paper (numbers)",
+                    "log10 similarity of each prior (number: score)",
+                ],
+                [
+                    [
+                        k,
+                        ctx.names(self.chosen[k]),
+                        "{" + ", ".join(map(str, paper_sets.get(k, ()))) + "}",
+                        ", ".join(f"{ctx.index[o]}: {v:.1f}" for o, v in sim["scores"][k].items()),
+                    ]
+                    for k in self.keys
+                ],
+            ),
+        ]
+
+    def numbers(self) -> dict[str, Any]:
+        paper_sets = PAPER["fig10_dissimilar"]
+        same = [
+            k
+            for k in self.keys
+            if k in paper_sets and set(paper_sets[k]) == {self.ctx.index[o] for o in self.chosen[k]}
+        ]
+        return {
+            "dissimilar": self.chosen,
+            "scores": self.sim["scores"],
+            "em": self.sim["em"],
+            "same_as_paper": same,
+        }
+
+
+analyse = _Fig10.analyse

@@ -16,22 +16,24 @@ cut-off prevents it.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from aptkt.experiments.figures import fig10
+from aptkt.experiments.figures.analysis import Analysis, hide_unused, panel_grid
 from aptkt.experiments.figures.base import (
     STRESS_CUTOFF,
     STRESS_NO_CUTOFF,
     Context,
     Headline,
     Plan,
-    Section,
 )
 from aptkt.experiments.figures.common import (
+    GainSummary,
     accuracy_table,
+    add_runs,
     gain_summary,
     key_steps,
     mean_lambda,
@@ -42,9 +44,7 @@ from aptkt.experiments.figures.common import (
     share_text,
     transfer_rate,
 )
-from aptkt.experiments.plots import figure
 from aptkt.experiments.report import ci, listed, markdown_table, no_harm_verdict, pp, span
-from aptkt.experiments.tables import curves_rows
 
 NAME = "fig11"
 TITLE = "negative-transfer test with dissimilar priors"
@@ -80,101 +80,121 @@ def plan(ctx: Context) -> Plan:
         key = fig10.ALL if panel == STRESS else panel
         for t in range(ctx.scale.fig11_trials):
             seed = ctx.seed_for("fig11", key, t)
-            for m in STRESS_METHODS if panel == STRESS else METHODS:
-                tags = {
-                    "figure": NAME,
-                    "panel": panel,
-                    "group": 0,
-                    "trial": t,
-                    "priors": ",".join(task.objects),
-                }
-                plan.specs.append(
-                    ctx.spec(
-                        m,
-                        ctx.learner(m, seed=seed),
-                        actions,
-                        ctx.scale.new_objects,
-                        task,
-                        seed,
-                        tags,
-                    )
-                )
+            methods = STRESS_METHODS if panel == STRESS else METHODS
+            tags = {
+                "figure": NAME,
+                "panel": panel,
+                "group": 0,
+                "trial": t,
+                "priors": ",".join(task.objects),
+            }
+            add_runs(ctx, plan, methods, actions, task, seed, tags)
     return plan
 
 
-def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    design = panels(ctx)
-    steps = key_steps(ctx.scale.budget)
-    keys = list(design)
-    stress = [r for r in rows if r.get("panel") == STRESS]
-    shown = keys + ([STRESS] if stress else [])
-    ncols = min(4, len(shown))
-    nrows = math.ceil(len(shown) / ncols)
-    fig, axes = figure(nrows, ncols, figsize=(4.2 * ncols, 3.8 * nrows), squeeze=False)
-    gains, rates, spaces, worst, curve_rows, tables = {}, {}, {}, {}, [], []
-    control, control_worst, over_control, lambdas = {}, {}, {}, {}
-    methods = present(rows, METHODS)  # the control runs in the settings only, never in stress
-    for i, (ax, key) in enumerate(zip(axes.ravel(), keys)):
-        curves = method_curves(rows, {"panel": key}, methods)
-        gains[key] = gain_summary(curves, "APTKT", steps=steps)
+class _Fig11(Analysis):
+    name, title = NAME, TITLE
+
+    def measure(self) -> None:
+        self.design = panels(self.ctx)
+        self.steps = key_steps(self.ctx.scale.budget)
+        self.keys = list(self.design)
+        self.curves: dict[str, Any] = {}
+        self.gains: dict[str, GainSummary] = {}
+        self.control: dict[str, GainSummary] = {}  # control − baseline
+        self.over_control: dict[str, GainSummary] = {}  # APTKT − control
+        self.rates: dict[str, float] = {}
+        self.spaces: dict[str, float] = {}
+        self.lambdas: dict[str, float] = {}
+        self.worst: dict[str, float] = {}  # the worst step's mean gain
+        self.control_worst: dict[str, float] = {}
+        self.tables: list[str] = []
+        methods = present(self.rows, METHODS)  # the control runs in the settings only
+        for key in self.keys:
+            self._setting(key, methods)
+        self.stress = [r for r in self.rows if r.get("panel") == STRESS]
+        self.stress_numbers: dict[str, Any] = {}
+        if self.stress:
+            self._stress()
+
+    def _setting(self, key: str, methods: tuple[str, ...]) -> None:
+        rows, steps, where = self.rows, self.steps, {"method": "APTKT", "panel": key}
+        curves = self.curves[key] = method_curves(rows, {"panel": key}, methods)
+        gain = self.gains[key] = gain_summary(curves, "APTKT", steps=steps)
         if "control" in curves:
-            control[key] = gain_summary(curves, "control", steps=steps)
-            control_worst[key] = float(np.nanmin(control[key].gain.mean()))
-            over_control[key] = gain_summary(curves, "APTKT", base="control", steps=steps)
-        rates[key] = transfer_rate(rows, {"method": "APTKT", "panel": key})
-        lambdas[key] = mean_lambda(rows, {"method": "APTKT", "panel": key})
-        spaces[key] = prior_space_rate(rows, {"method": "APTKT", "panel": key})
-        worst[key] = float(np.nanmin(gains[key].gain.mean()))
-        label = "all actions" if key == fig10.ALL else key
-        plot_panel(
-            ax,
-            curves,
-            f"{label}, priors:\n{ctx.names(design[key][1])}",
-            chance=ctx.chance,
-            legend=(i == 0),
-        )
-        curve_rows += [
-            r for m, c in curves.items() for r in curves_rows({"panel": key, "method": m}, c)
-        ]
+            self.control[key] = gain_summary(curves, "control", steps=steps)
+            self.control_worst[key] = float(np.nanmin(self.control[key].gain.mean()))
+            self.over_control[key] = gain_summary(curves, "APTKT", base="control", steps=steps)
+        self.rates[key] = transfer_rate(rows, where)
+        self.lambdas[key] = mean_lambda(rows, where)
+        self.spaces[key] = prior_space_rate(rows, where)
+        self.worst[key] = float(np.nanmin(gain.gain.mean()))
+        self.keep_curves({"panel": key}, curves)
         fused = (
             method_curves(rows, {"panel": key}, methods, value="fused_accuracy")
             if key == fig10.ALL
             else None  # one action: fused is the action's own accuracy
         )
-        tables.append(f"**{label}**\n\n" + accuracy_table(curves, steps, fused))
-    stress_numbers: dict[str, Any] = {}
-    if stress:
-        ax = axes.ravel()[len(keys)]
+        table = accuracy_table(curves, steps, fused)
+        self.tables.append(f"**{_label(key)}**\n\n" + table)
+
+    def _stress(self) -> None:
+        stress, steps = self.stress, self.steps
         methods = present(stress, STRESS_METHODS)
-        curves = method_curves(stress, {}, methods)
+        curves = self.curves[STRESS] = method_curves(stress, {}, methods)
         fused = method_curves(stress, {}, methods, value="fused_accuracy")
-        plot_panel(
-            ax,
-            curves,
-            f"stress: λ = 1 from the least related of\n{ctx.names(design[fig10.ALL][1])}",
-            chance=ctx.chance,
-        )
-        curve_rows += [
-            r for m, c in curves.items() for r in curves_rows({"panel": STRESS, "method": m}, c)
-        ]
-        tables.append("**stress (all actions)**\n\n" + accuracy_table(curves, steps, fused))
+        self.keep_curves({"panel": STRESS}, curves)
+        self.tables.append("**stress (all actions)**\n\n" + accuracy_table(curves, steps, fused))
         for m in methods[1:]:
             g = gain_summary(curves, m, steps=steps)
-            stress_numbers[m] = {
+            self.stress_numbers[m] = {
                 "gain": g.as_dict(),
                 "worst_step_gain": float(np.nanmin(g.gain.mean())),
                 "transfer_rate": transfer_rate(stress, {"method": m}),
             }
-    for ax in axes.ravel()[len(shown) :]:
-        ax.set_visible(False)
-    fig.suptitle("Fig. 11 — negative-transfer test: priors dissimilar to the new objects")
-    fig.tight_layout()
-    files = ctx.write_figure(NAME, fig, rows, curve_rows)
 
-    harmed = [k for k in keys if gains[k].overall.significant_negative]
-    harmed_early = [k for k in keys if 0 in gains[k].at and gains[k].at[0].significant_negative]
-    headlines = [
-        Headline(
+    def draw(self) -> list[str]:
+        ctx, design = self.ctx, self.design
+        shown = self.keys + ([STRESS] if self.stress else [])
+        fig, axes = panel_grid(len(shown))
+        for i, (ax, key) in enumerate(zip(axes, self.keys)):
+            title = f"{_label(key)}, priors:\n{ctx.names(design[key][1])}"
+            plot_panel(ax, self.curves[key], title, chance=ctx.chance, legend=(i == 0))
+        if self.stress:
+            title = f"stress: λ = 1 from the least related of\n{ctx.names(design[fig10.ALL][1])}"
+            plot_panel(axes[len(self.keys)], self.curves[STRESS], title, chance=ctx.chance)
+        hide_unused(axes, len(shown))
+        fig.suptitle("Fig. 11 — negative-transfer test: priors dissimilar to the new objects")
+        fig.tight_layout()
+        return self.write(fig)
+
+    def headlines(self) -> list[Headline]:
+        headlines = [self._no_harm(), self._stopped(), self._worst_step()]
+        raw = self.stress_numbers.get(STRESS_NO_CUTOFF)
+        cut = self.stress_numbers.get(STRESS_CUTOFF)
+        if raw is not None and cut is not None:
+            headlines.append(
+                Headline(
+                    NAME,
+                    "stress (beyond the paper): λ = 1 from the least related prior; the cut-off "
+                    "prevents the harm",
+                    "not in the paper",
+                    f"without the cut-off {pp(raw['gain']['overall']['mean'])} over the curve "
+                    f"(worst step {pp(raw['worst_step_gain'])}, transfer rate "
+                    f"{100 * raw['transfer_rate']:.0f} %); with it {pp(cut['gain']['overall']['mean'])} "
+                    f"(worst step {pp(cut['worst_step_gain'])}, transfer rate {100 * cut['transfer_rate']:.0f} %)",
+                    "agrees: the cut-off stops the harmful transfer"
+                    if cut["worst_step_gain"] >= -HARM
+                    else "differs: harm remains with the cut-off",
+                )
+            )
+        return headlines
+
+    def _no_harm(self) -> Headline:
+        keys, gains = self.keys, self.gains
+        harmed = [k for k in keys if gains[k].overall.significant_negative]
+        harmed_early = [k for k in keys if 0 in gains[k].at and gains[k].at[0].significant_negative]
+        return Headline(
             NAME,
             f"dissimilar priors: APTKT ≈ baseline (no negative transfer) in all {len(keys)} settings",
             "yes",
@@ -184,14 +204,15 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             if not harmed
             else "differs: negative transfer in " + ", ".join(harmed),
             evidence=[gains[k].overall for k in keys],
-            why=_space_text(harmed, gains, control, over_control),
+            why=_space_text(harmed, gains, self.control, self.over_control),
         )
-    ]
-    # The paper explains the absence of harm by the cut-off: "stopped transferring". We read
-    # "stopped" as at most 20 % of APTKT's transfer decisions choosing a prior.
-    stopped = [k for k in keys if rates[k] <= STOPPED]
-    headlines.append(
-        Headline(
+
+    def _stopped(self) -> Headline:
+        # The paper explains the absence of harm by the cut-off: "stopped transferring". We
+        # read "stopped" as at most 20 % of APTKT's transfer decisions choosing a prior.
+        keys, rates = self.keys, self.rates
+        stopped = [k for k in keys if rates[k] <= STOPPED]
+        return Headline(
             NAME,
             "with dissimilar priors APTKT stops transferring (λ under ε_neg)",
             "yes",
@@ -201,19 +222,22 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             if len(stopped) == len(keys)
             else f"differs: APTKT kept transferring in {len(keys) - len(stopped)} of {len(keys)} settings — the absence of "
             "harm is not the cut-off's doing",
-            why=_rate_text(ctx, [k for k in keys if k not in stopped], lambdas, over_control),
+            why=_rate_text(
+                self.ctx, [k for k in keys if k not in stopped], self.lambdas, self.over_control
+            ),
         )
-    )
-    below = [k for k in keys if worst[k] < -HARM]
-    headlines.append(
-        Headline(
+
+    def _worst_step(self) -> Headline:
+        keys, worst, control_worst = self.keys, self.worst, self.control_worst
+        below = [k for k in keys if worst[k] < -HARM]
+        return Headline(
             NAME,
             f"no step below the baseline by more than {100 * HARM:.0f} pp (mean over trials)",
             "yes (Fig. 11)",
             f"worst step {pp(min(worst.values()))}; more than {100 * HARM:.0f} pp below in "
             f"{len(below)} of {len(keys)} settings{listed(below)}",
             "agrees" if not below else "differs: " + ", ".join(below),
-            evidence=[gains[k].overall for k in keys],
+            evidence=[self.gains[k].overall for k in keys],
             why=(
                 "the control's (the prior's feature space, no transfer) worst step: "
                 + "; ".join(
@@ -225,72 +249,67 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
                 else ""
             ),
         )
-    )
-    if STRESS_NO_CUTOFF in stress_numbers and STRESS_CUTOFF in stress_numbers:
-        raw, cut = stress_numbers[STRESS_NO_CUTOFF], stress_numbers[STRESS_CUTOFF]
-        headlines.append(
-            Headline(
-                NAME,
-                "stress (beyond the paper): λ = 1 from the least related prior; the cut-off "
-                "prevents the harm",
-                "not in the paper",
-                f"without the cut-off {pp(raw['gain']['overall']['mean'])} over the curve "
-                f"(worst step {pp(raw['worst_step_gain'])}, transfer rate "
-                f"{100 * raw['transfer_rate']:.0f} %); with it {pp(cut['gain']['overall']['mean'])} "
-                f"(worst step {pp(cut['worst_step_gain'])}, transfer rate {100 * cut['transfer_rate']:.0f} %)",
-                "agrees: the cut-off stops the harmful transfer"
-                if cut["worst_step_gain"] >= -HARM
-                else "differs: harm remains with the cut-off",
-            )
-        )
-    body = [
-        f"{ctx.scale.fig11_trials} trials per setting; budget {ctx.scale.budget}. The control "
-        "learns the new objects in the prior's feature space without any transfer: "
-        "control − baseline is what the prior's transforms alone do to them.",
-        "",
-        markdown_table(
-            [
-                "setting",
-                "priors",
-                "gain over all steps",
-                "verdict",
-                "gain at step 0",
-                "worst step",
-                "transfer rate",
-                "models in the prior's space",
-                "control − baseline (curve / worst step)",
-            ],
-            [
+
+    def body(self) -> list[str]:
+        ctx, gains, control = self.ctx, self.gains, self.control
+        return [
+            f"{ctx.scale.fig11_trials} trials per setting; budget {ctx.scale.budget}. The control "
+            "learns the new objects in the prior's feature space without any transfer: "
+            "control − baseline is what the prior's transforms alone do to them.",
+            "",
+            markdown_table(
                 [
-                    k,
-                    ctx.names(design[k][1]),
-                    ci(gains[k].overall),
-                    no_harm_verdict(gains[k].overall),
-                    ci(gains[k].at[0]) if 0 in gains[k].at else "",
-                    pp(worst[k]),
-                    f"{100 * rates[k]:.0f} %",
-                    share_text(spaces[k]),
-                    f"{ci(control[k].overall)} / {pp(control_worst[k])}" if k in control else "",
-                ]
-                for k in keys
-            ],
-        ),
-        "",
-        "\n\n".join(tables),
-    ]
-    numbers = {
-        "gain": {k: g.as_dict() for k, g in gains.items()},
-        "transfer_rate": rates,
-        "prior_space_rate": spaces,
-        "worst_step_gain": worst,
-        "mean_lambda": lambdas,
-        "control_vs_baseline": {k: g.as_dict() for k, g in control.items()},
-        "control_worst_step_gain": control_worst,
-        "APTKT_vs_control": {k: g.as_dict() for k, g in over_control.items()},
-        "stress": stress_numbers,
-        "priors": {k: list(v[1]) for k, v in design.items()},
-    }
-    return Section(NAME, TITLE, headlines, "\n".join(body), files, numbers)
+                    "setting",
+                    "priors",
+                    "gain over all steps",
+                    "verdict",
+                    "gain at step 0",
+                    "worst step",
+                    "transfer rate",
+                    "models in the prior's space",
+                    "control − baseline (curve / worst step)",
+                ],
+                [
+                    [
+                        k,
+                        ctx.names(self.design[k][1]),
+                        ci(gains[k].overall),
+                        no_harm_verdict(gains[k].overall),
+                        ci(gains[k].at[0]) if 0 in gains[k].at else "",
+                        pp(self.worst[k]),
+                        f"{100 * self.rates[k]:.0f} %",
+                        share_text(self.spaces[k]),
+                        f"{ci(control[k].overall)} / {pp(self.control_worst[k])}"
+                        if k in control
+                        else "",
+                    ]
+                    for k in self.keys
+                ],
+            ),
+            "",
+            "\n\n".join(self.tables),
+        ]
+
+    def numbers(self) -> dict[str, Any]:
+        return {
+            "gain": {k: g.as_dict() for k, g in self.gains.items()},
+            "transfer_rate": self.rates,
+            "prior_space_rate": self.spaces,
+            "worst_step_gain": self.worst,
+            "mean_lambda": self.lambdas,
+            "control_vs_baseline": {k: g.as_dict() for k, g in self.control.items()},
+            "control_worst_step_gain": self.control_worst,
+            "APTKT_vs_control": {k: g.as_dict() for k, g in self.over_control.items()},
+            "stress": self.stress_numbers,
+            "priors": {k: list(v[1]) for k, v in self.design.items()},
+        }
+
+
+analyse = _Fig11.analyse
+
+
+def _label(key: str) -> str:
+    return "all actions" if key == fig10.ALL else key
 
 
 def _space_text(harmed, gains, control, over_control) -> str:

@@ -10,19 +10,18 @@ every model sees exactly the same observations and the comparison is of the mode
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from aptkt.actions import PAPER_ACTIONS
 from aptkt.experiments.aggregate import collect, difference, estimate, mean_over_panels
-from aptkt.experiments.figures.base import Context, Headline, Plan, Section
+from aptkt.experiments.figures.analysis import Analysis, hide_unused, panel_grid
+from aptkt.experiments.figures.base import Context, Headline, Plan
 from aptkt.experiments.figures.common import plot_panel
-from aptkt.experiments.plots import figure
 from aptkt.experiments.report import PAPER, ci, listed, markdown_table
 from aptkt.experiments.sampling import draw_groups
-from aptkt.experiments.tables import curves_rows
 
 NAME = "fig6"
 TITLE = "multi-modal kernel vs single modalities"
@@ -78,32 +77,34 @@ def _category(e) -> str:
     return "beats" if e.significant_positive else "worse" if e.significant_negative else "matches"
 
 
-def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    actions = list(ctx.scale.actions)
-    per_action: dict[str, dict[str, Any]] = {}
-    n = len(actions) + 1
-    ncols = min(4, n)
-    fig, axes = figure(
-        math.ceil(n / ncols),
-        ncols,
-        figsize=(4.2 * ncols, 3.8 * math.ceil(n / ncols)),
-        squeeze=False,
-    )
-    axes = axes.ravel()
-    curve_rows = []
-    chance = 1.0 / ctx.scale.fig6_group_size  # each run tells the objects of one group apart
-    for i, a in enumerate(actions):
-        curves = {k: collect(rows, {"panel": a, "method": k}, x="n_observations") for k in kinds(a)}
-        plot_panel(axes[i], curves, a, chance=chance, xlabel=XLABEL, legend=False)
-        curve_rows += [
-            r for k, c in curves.items() for r in curves_rows({"panel": a, "method": k}, c)
-        ]
+class _Fig6(Analysis):
+    name, title = NAME, TITLE
+
+    def measure(self) -> None:
+        self.actions = list(self.ctx.scale.actions)
+        self.per_action = {a: self._action(a) for a in self.actions}
+        for a in self.actions:
+            self.keep_curves({"panel": a}, self.per_action[a]["curves"])
+        # The averaged panel: per run (group, trial), each model's mean over the actions it
+        # applies to.
+        self.average = {}
+        for k in KINDS:
+            have = [d["curves"][k] for d in self.per_action.values() if k in d["curves"]]
+            if have:
+                self.average[k] = mean_over_panels(have)
+        self.keep_curves({"panel": "average"}, self.average)
+        self.cats = {a: _category(self.per_action[a]["vs_best"]) for a in self.actions}
+
+    def _action(self, a: str) -> dict[str, Any]:
+        curves = {
+            k: collect(self.rows, {"panel": a, "method": k}, x="n_observations") for k in kinds(a)
+        }
         singles = [k for k in curves if k != "Multi"]
         overall = {k: float(np.nanmean(c.run_means())) for k, c in curves.items()}
         best = max(singles, key=lambda k: overall[k])
         diff = difference(curves["Multi"], curves[best])
         units = diff.units(0)
-        per_action[a] = {
+        return {
             "curves": curves,
             "best_single": best,
             "overall": overall,
@@ -111,92 +112,104 @@ def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
             "vs_best_final": estimate(diff.values[:, -1], units),
             "final": {k: float(np.nanmean(c.values[:, -1])) for k, c in curves.items()},
         }
-    # The averaged panel: per run (group, trial), each model's mean over the actions it applies to.
-    avg = {}
-    for k in KINDS:
-        have = [per_action[a]["curves"][k] for a in actions if k in per_action[a]["curves"]]
-        if have:
-            avg[k] = mean_over_panels(have)
-    plot_panel(
-        axes[len(actions)], avg, "averaged over actions", chance=chance, xlabel=XLABEL
-    )  # every model: the legend
-    curve_rows += [
-        r for k, c in avg.items() for r in curves_rows({"panel": "average", "method": k}, c)
-    ]
-    for ax in axes[n:]:
-        ax.set_visible(False)
-    fig.suptitle("Fig. 6 — multi-modal combination (Multi) vs single modalities, no transfer")
-    fig.tight_layout()
-    files = ctx.write_figure(NAME, fig, rows, curve_rows)
 
-    cats = {a: _category(per_action[a]["vs_best"]) for a in actions}
-    worse = [a for a in actions if cats[a] == "worse"]
-    paper_cat = {
-        **{a: "beats" for a in PAPER["fig6_beats"]},
-        **{a: "matches" for a in PAPER["fig6_matches"]},
-    }
-    mismatched = [a for a in actions if a in paper_cat and cats[a] != paper_cat[a]]
-    headlines = [
-        Headline(
-            NAME,
-            "the multi-modal kernel matches or beats the best single modality, every action",
-            "yes, all 7",
-            f"beats for {sum(c == 'beats' for c in cats.values())}, matches for "
-            f"{sum(c == 'matches' for c in cats.values())}, worse for {len(worse)} of {len(actions)}"
-            f"{listed(worse)}",
-            "agrees"
-            if not worse
-            else "differs: worse than the best single modality for " + ", ".join(worse),
-            evidence=[per_action[a]["vs_best"] for a in actions],
-        ),
-        Headline(
-            NAME,
-            "which actions gain from combining (beats) and which only match",
-            f"beats: {', '.join(PAPER['fig6_beats'])}; matches: {', '.join(PAPER['fig6_matches'])}",
-            "; ".join(f"{a} {cats[a]}" for a in actions),
-            "agrees: the same per action"
-            if not mismatched
-            else f"differs for {len(mismatched)} of {len([a for a in actions if a in paper_cat])}: {', '.join(mismatched)}",
-            evidence=[per_action[a]["vs_best"] for a in actions],
-        ),
-    ]
-    body = [
-        f"{len(groups(ctx))} groups of {ctx.scale.fig6_group_size} objects × {ctx.scale.fig6_trials} trials per action "
-        f"and model; {ctx.scale.fig6_budget} observations after the initial round (one per object), in random order. "
-        '"Multi − best single": the accuracy difference to the single modality with the best mean curve, paired by '
-        "run, averaged over the curve (95 % CI over groups); beats / matches / worse: the interval above / around / below 0.",
-        "",
-        markdown_table(
-            [
-                "action",
-                "final accuracy per model",
-                "best single",
-                "Multi − best single (curve)",
-                "(last step)",
-                "verdict",
-            ],
-            [
-                [
-                    a,
-                    ", ".join(f"{k} {v:.3f}" for k, v in per_action[a]["final"].items()),
-                    per_action[a]["best_single"],
-                    ci(per_action[a]["vs_best"]),
-                    ci(per_action[a]["vs_best_final"]),
-                    cats[a],
-                ]
-                for a in actions
-            ],
-        ),
-    ]
-    numbers = {
-        a: {
-            "best_single": d["best_single"],
-            "mean_over_curve": d["overall"],
-            "final": d["final"],
-            "multi_vs_best": d["vs_best"].as_dict(),
-            "multi_vs_best_final": d["vs_best_final"].as_dict(),
-            "verdict": cats[a],
+    def draw(self) -> list[str]:
+        n = len(self.actions) + 1
+        fig, axes = panel_grid(n)
+        chance = 1.0 / self.ctx.scale.fig6_group_size  # each run tells one group's objects apart
+        for ax, a in zip(axes, self.actions):
+            curves = self.per_action[a]["curves"]
+            plot_panel(ax, curves, a, chance=chance, xlabel=XLABEL, legend=False)
+        # every model: the legend
+        plot_panel(
+            axes[len(self.actions)],
+            self.average,
+            "averaged over actions",
+            chance=chance,
+            xlabel=XLABEL,
+        )
+        hide_unused(axes, n)
+        fig.suptitle("Fig. 6 — multi-modal combination (Multi) vs single modalities, no transfer")
+        fig.tight_layout()
+        return self.write(fig)
+
+    def headlines(self) -> list[Headline]:
+        actions, cats, per_action = self.actions, self.cats, self.per_action
+        worse = [a for a in actions if cats[a] == "worse"]
+        paper_cat = {
+            **{a: "beats" for a in PAPER["fig6_beats"]},
+            **{a: "matches" for a in PAPER["fig6_matches"]},
         }
-        for a, d in per_action.items()
-    }
-    return Section(NAME, TITLE, headlines, "\n".join(body), files, numbers)
+        mismatched = [a for a in actions if a in paper_cat and cats[a] != paper_cat[a]]
+        evidence = [per_action[a]["vs_best"] for a in actions]
+        return [
+            Headline(
+                NAME,
+                "the multi-modal kernel matches or beats the best single modality, every action",
+                "yes, all 7",
+                f"beats for {sum(c == 'beats' for c in cats.values())}, matches for "
+                f"{sum(c == 'matches' for c in cats.values())}, worse for {len(worse)} of {len(actions)}"
+                f"{listed(worse)}",
+                "agrees"
+                if not worse
+                else "differs: worse than the best single modality for " + ", ".join(worse),
+                evidence=evidence,
+            ),
+            Headline(
+                NAME,
+                "which actions gain from combining (beats) and which only match",
+                f"beats: {', '.join(PAPER['fig6_beats'])}; matches: {', '.join(PAPER['fig6_matches'])}",
+                "; ".join(f"{a} {cats[a]}" for a in actions),
+                "agrees: the same per action"
+                if not mismatched
+                else f"differs for {len(mismatched)} of {len([a for a in actions if a in paper_cat])}: {', '.join(mismatched)}",
+                evidence=evidence,
+            ),
+        ]
+
+    def body(self) -> list[str]:
+        ctx, per_action = self.ctx, self.per_action
+        return [
+            f"{len(groups(ctx))} groups of {ctx.scale.fig6_group_size} objects × {ctx.scale.fig6_trials} trials per action "
+            f"and model; {ctx.scale.fig6_budget} observations after the initial round (one per object), in random order. "
+            '"Multi − best single": the accuracy difference to the single modality with the best mean curve, paired by '
+            "run, averaged over the curve (95 % CI over groups); beats / matches / worse: the interval above / around / below 0.",
+            "",
+            markdown_table(
+                [
+                    "action",
+                    "final accuracy per model",
+                    "best single",
+                    "Multi − best single (curve)",
+                    "(last step)",
+                    "verdict",
+                ],
+                [
+                    [
+                        a,
+                        ", ".join(f"{k} {v:.3f}" for k, v in per_action[a]["final"].items()),
+                        per_action[a]["best_single"],
+                        ci(per_action[a]["vs_best"]),
+                        ci(per_action[a]["vs_best_final"]),
+                        self.cats[a],
+                    ]
+                    for a in self.actions
+                ],
+            ),
+        ]
+
+    def numbers(self) -> dict[str, Any]:
+        return {
+            a: {
+                "best_single": d["best_single"],
+                "mean_over_curve": d["overall"],
+                "final": d["final"],
+                "multi_vs_best": d["vs_best"].as_dict(),
+                "multi_vs_best_final": d["vs_best_final"].as_dict(),
+                "verdict": self.cats[a],
+            }
+            for a, d in self.per_action.items()
+        }
+
+
+analyse = _Fig6.analyse

@@ -9,10 +9,10 @@ mean curves; large panel: every run.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
 from typing import Any
 
-from aptkt.experiments.figures.base import Context, Headline, Plan, Section
+from aptkt.experiments.figures.analysis import Analysis
+from aptkt.experiments.figures.base import Context, Headline, Plan
 from aptkt.experiments.figures.common import (
     GainSummary,
     accuracy_table,
@@ -29,7 +29,6 @@ from aptkt.experiments.figures.common import (
 )
 from aptkt.experiments.plots import canvas
 from aptkt.experiments.report import PAPER, ci, gain_verdict, markdown_table, pp
-from aptkt.experiments.tables import curves_rows
 
 NAME = "fig7"
 TITLE = "transfer from 3 prior objects, all actions"
@@ -40,133 +39,151 @@ def plan(ctx: Context) -> Plan:
     return prior_group_plan(ctx, NAME, ctx.scale.n_priors, METHODS, {"all": ctx.scale.actions})
 
 
-def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    budget = ctx.scale.budget
-    where = {"panel": "all"}
-    methods = present(rows, METHODS)
-    curves = method_curves(rows, where, methods)
-    fused = method_curves(rows, where, methods, value="fused_accuracy")
-    steps = key_steps(budget)
-    gain = gain_summary(curves, "APTKT", steps=steps)
-    fused_gain = gain_summary(fused, "APTKT", steps=steps)
-    rate = transfer_rate(rows, {"method": "APTKT"})
-    space_rate = prior_space_rate(rows, {"method": "APTKT"})
-    groups = prior_groups(ctx, ctx.scale.n_priors)
+class _Fig7(Analysis):
+    name, title = NAME, TITLE
 
-    # Paper layout: one small panel per group (mean of its trials), a large panel of all runs.
-    ncols = math.ceil(len(groups) / 2)
-    fig = canvas(figsize=(4.0 * ncols + 7, 6.4), layout="constrained")
-    grid = fig.add_gridspec(2, ncols + 2)
-    per_group = []
-    for g, group in enumerate(groups):
-        ax = fig.add_subplot(grid[g // ncols, g % ncols])
-        gc = method_curves(rows, {**where, "group": g}, methods)
-        per_group.append((g, group, gain_summary(gc, "APTKT")))
-        # Small panels keep short axis labels; the title names the group's priors.
-        plot_panel(
-            ax,
-            gc,
-            f"group {g}:\n" + ctx.names(group, sep=",\n"),
-            chance=ctx.chance,
-            xlabel="observations",
-            ylabel="accuracy",
-            legend=False,
+    def measure(self) -> None:
+        rows, where = self.rows, {"panel": "all"}
+        self.methods = present(rows, METHODS)
+        self.curves = method_curves(rows, where, self.methods)
+        self.fused = method_curves(rows, where, self.methods, value="fused_accuracy")
+        self.steps = steps = key_steps(self.ctx.scale.budget)
+        self.gain = gain_summary(self.curves, "APTKT", steps=steps)
+        self.fused_gain = gain_summary(self.fused, "APTKT", steps=steps)
+        self.rate = transfer_rate(rows, {"method": "APTKT"})
+        self.space_rate = prior_space_rate(rows, {"method": "APTKT"})
+        self.groups = prior_groups(self.ctx, self.ctx.scale.n_priors)
+        self.per_group = []
+        self.group_curves = []
+        for g, group in enumerate(self.groups):
+            gc = method_curves(rows, {**where, "group": g}, self.methods)
+            self.group_curves.append(gc)
+            self.per_group.append((g, group, gain_summary(gc, "APTKT")))
+        # The control beside APTKT: the prior's feature space alone, and the transfer on top.
+        self.split = (
+            (
+                gain_summary(self.curves, "control", steps=steps),
+                gain_summary(self.curves, "APTKT", base="control", steps=steps),
+            )
+            if "control" in self.curves
+            else None
         )
-        ax.title.set_fontsize(8)
-    big = fig.add_subplot(grid[:, ncols:])
-    plot_panel(big, curves, f"average of {curves['APTKT'].n_runs} runs", chance=ctx.chance)
-    fig.suptitle(
-        f"Fig. 7 — transfer from {ctx.scale.n_priors} prior objects, {len(ctx.scale.actions)} actions"
-    )
-    curve_rows = [
-        r for m, c in curves.items() for r in curves_rows({"panel": "all", "method": m}, c)
-    ] + [r for m, c in fused.items() for r in curves_rows({"panel": "all (fused)", "method": m}, c)]
-    files = ctx.write_figure(NAME, fig, rows, curve_rows)
+        self.keep_curves({"panel": "all"}, self.curves)
+        self.keep_curves({"panel": "all (fused)"}, self.fused)
 
-    mean_gain = gain.gain.mean()
-    # The control beside APTKT: the prior's feature space alone, and the transfer on top of it.
-    split = (
-        (
-            gain_summary(curves, "control", steps=steps),
-            gain_summary(curves, "APTKT", base="control", steps=steps),
+    def draw(self) -> list[str]:
+        ctx, groups = self.ctx, self.groups
+        # Paper layout: one small panel per group (mean of its trials), a large one of all runs.
+        ncols = math.ceil(len(groups) / 2)
+        fig = canvas(figsize=(4.0 * ncols + 7, 6.4), layout="constrained")
+        grid = fig.add_gridspec(2, ncols + 2)
+        for g, group in enumerate(groups):
+            ax = fig.add_subplot(grid[g // ncols, g % ncols])
+            # Small panels keep short axis labels; the title names the group's priors.
+            plot_panel(
+                ax,
+                self.group_curves[g],
+                f"group {g}:\n" + ctx.names(group, sep=",\n"),
+                chance=ctx.chance,
+                xlabel="observations",
+                ylabel="accuracy",
+                legend=False,
+            )
+            ax.title.set_fontsize(8)
+        big = fig.add_subplot(grid[:, ncols:])
+        runs = self.curves["APTKT"].n_runs
+        plot_panel(big, self.curves, f"average of {runs} runs", chance=ctx.chance)
+        fig.suptitle(
+            f"Fig. 7 — transfer from {ctx.scale.n_priors} prior objects, {len(ctx.scale.actions)} actions"
         )
-        if "control" in curves
-        else None
-    )
-    headlines = [
-        Headline(
-            NAME,
-            f"transfer from {ctx.scale.n_priors} priors: gain over the baseline throughout learning",
-            pp(PAPER["fig7_gain"]),
-            ci(gain.overall) + " (mean over steps)",
-            gain_verdict(gain.overall, PAPER["fig7_gain"]),
-            why=_decomposition_text(split),
-        ),
-        Headline(
-            NAME,
-            "APTKT above the baseline at every step",
-            "yes (Fig. 7)",
-            f"mean gain > 0 at {round(gain.positive_steps * len(mean_gain))} of {len(mean_gain)} steps "
-            f"(smallest {pp(float(mean_gain.min()))}, largest {pp(float(mean_gain.max()))})",
-            "agrees"
-            if gain.positive_steps == 1.0
-            else "differs: the mean gain is not positive at every step",
-            evidence=[gain.overall],
-        ),
-    ]
-    body = [
-        f"{len(groups)} groups of {ctx.scale.n_priors} priors × {ctx.scale.trials} trials; budget {budget} "
-        f"observations after the initial round of {len(ctx.scale.actions) * len(ctx.scale.new_objects)} "
-        "(every action once on every new object). Accuracy: each action's model on its test observations, "
-        "averaged over actions.",
-        "",
-        accuracy_table(curves, steps, fused),
-        "",
-        "Gain (APTKT − baseline), paired by run:",
-        "",
-        markdown_table(
-            ["step", "gain", "fused over actions"],
-            [[s, ci(gain.at[s]), ci(fused_gain.at[s])] for s in steps if s in gain.at]
-            + [
-                ["mean over all steps", ci(gain.overall), ci(fused_gain.overall)],
-                [f"peak (step {gain.peak_step})", ci(gain.peak), ""],
-            ],
-        ),
-        "",
-        f"APTKT transferred a prior object in {100 * rate:.1f} % of its transfer decisions (ε_neg = {ctx.scale.eps_neg}); "
-        f"share of its models fitted in the prior's feature space: {share_text(space_rate, 1)}.",
-        "",
-        *_control_lines(curves, fused, steps),
-        "",
-        "Per group (gain = mean over steps of APTKT − baseline):",
-        "",
-        markdown_table(
-            ["group", "priors", "gain"],
-            [[g, ctx.names(group), ci(s.overall)] for g, group, s in per_group],
-        ),
-    ]
-    control: dict[str, Any] = (
-        {"control_vs_baseline": split[0].as_dict(), "APTKT_vs_control": split[1].as_dict()}
-        if split
-        else {}
-    )
-    if "APTKT-multi" in curves:
-        control["multi_vs_APTKT"] = gain_summary(
-            curves, "APTKT-multi", base="APTKT", steps=steps
-        ).as_dict()
-        control["multi_vs_APTKT_fused"] = gain_summary(
-            fused, "APTKT-multi", base="APTKT", steps=steps
-        ).as_dict()
-        control["multi_transfer_rate"] = transfer_rate(rows, {"method": "APTKT-multi"})
-    numbers = {
-        **control,
-        "gain": gain.as_dict(),
-        "fused_gain": fused_gain.as_dict(),
-        "transfer_rate": rate,
-        "prior_space_rate": space_rate,
-        "per_group": {g: s.overall.as_dict() for g, _, s in per_group},
-    }
-    return Section(NAME, TITLE, headlines, "\n".join(body), files, numbers)
+        return self.write(fig)
+
+    def headlines(self) -> list[Headline]:
+        gain, n_priors = self.gain, self.ctx.scale.n_priors
+        mean_gain = gain.gain.mean()
+        return [
+            Headline(
+                NAME,
+                f"transfer from {n_priors} priors: gain over the baseline throughout learning",
+                pp(PAPER["fig7_gain"]),
+                ci(gain.overall) + " (mean over steps)",
+                gain_verdict(gain.overall, PAPER["fig7_gain"]),
+                why=_decomposition_text(self.split),
+            ),
+            Headline(
+                NAME,
+                "APTKT above the baseline at every step",
+                "yes (Fig. 7)",
+                f"mean gain > 0 at {round(gain.positive_steps * len(mean_gain))} of {len(mean_gain)} steps "
+                f"(smallest {pp(float(mean_gain.min()))}, largest {pp(float(mean_gain.max()))})",
+                "agrees"
+                if gain.positive_steps == 1.0
+                else "differs: the mean gain is not positive at every step",
+                evidence=[gain.overall],
+            ),
+        ]
+
+    def body(self) -> list[str]:
+        ctx, gain, fused_gain, steps = self.ctx, self.gain, self.fused_gain, self.steps
+        s = ctx.scale
+        return [
+            f"{len(self.groups)} groups of {s.n_priors} priors × {s.trials} trials; budget {s.budget} "
+            f"observations after the initial round of {len(s.actions) * len(s.new_objects)} "
+            "(every action once on every new object). Accuracy: each action's model on its test observations, "
+            "averaged over actions.",
+            "",
+            accuracy_table(self.curves, steps, self.fused),
+            "",
+            "Gain (APTKT − baseline), paired by run:",
+            "",
+            markdown_table(
+                ["step", "gain", "fused over actions"],
+                [[st, ci(gain.at[st]), ci(fused_gain.at[st])] for st in steps if st in gain.at]
+                + [
+                    ["mean over all steps", ci(gain.overall), ci(fused_gain.overall)],
+                    [f"peak (step {gain.peak_step})", ci(gain.peak), ""],
+                ],
+            ),
+            "",
+            f"APTKT transferred a prior object in {100 * self.rate:.1f} % of its transfer decisions (ε_neg = {s.eps_neg}); "
+            f"share of its models fitted in the prior's feature space: {share_text(self.space_rate, 1)}.",
+            "",
+            *_control_lines(self.curves, self.fused, steps),
+            "",
+            "Per group (gain = mean over steps of APTKT − baseline):",
+            "",
+            markdown_table(
+                ["group", "priors", "gain"],
+                [[g, ctx.names(group), ci(sm.overall)] for g, group, sm in self.per_group],
+            ),
+        ]
+
+    def numbers(self) -> dict[str, Any]:
+        curves, fused, steps, split = self.curves, self.fused, self.steps, self.split
+        control: dict[str, Any] = (
+            {"control_vs_baseline": split[0].as_dict(), "APTKT_vs_control": split[1].as_dict()}
+            if split
+            else {}
+        )
+        if "APTKT-multi" in curves:
+            control["multi_vs_APTKT"] = gain_summary(
+                curves, "APTKT-multi", base="APTKT", steps=steps
+            ).as_dict()
+            control["multi_vs_APTKT_fused"] = gain_summary(
+                fused, "APTKT-multi", base="APTKT", steps=steps
+            ).as_dict()
+            control["multi_transfer_rate"] = transfer_rate(self.rows, {"method": "APTKT-multi"})
+        return {
+            **control,
+            "gain": self.gain.as_dict(),
+            "fused_gain": self.fused_gain.as_dict(),
+            "transfer_rate": self.rate,
+            "prior_space_rate": self.space_rate,
+            "per_group": {g: sm.overall.as_dict() for g, _, sm in self.per_group},
+        }
+
+
+analyse = _Fig7.analyse
 
 
 def _control_lines(curves, fused, steps) -> list[str]:

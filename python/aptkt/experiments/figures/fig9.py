@@ -9,10 +9,11 @@ exactly Fig. 7's (same groups, same seeds), plus APTKT+aux.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
-from aptkt.experiments.figures.base import Context, Headline, Plan, Section
+from aptkt.experiments.figures.analysis import Analysis, panel_grid
+from aptkt.experiments.figures.base import Context, Headline, Plan
 from aptkt.experiments.figures.common import (
     accuracy_table,
     error_removed,
@@ -26,9 +27,7 @@ from aptkt.experiments.figures.common import (
     prior_groups,
     transfer_rate,
 )
-from aptkt.experiments.plots import figure
 from aptkt.experiments.report import PAPER, ci, gain_verdict, markdown_table, pp
-from aptkt.experiments.tables import curves_rows
 
 NAME = "fig9"
 TITLE = "increasing the number of prior objects; auxiliary features"
@@ -44,191 +43,207 @@ def plan(ctx: Context) -> Plan:
     return plan
 
 
-def analyse(ctx: Context, rows: Sequence[Mapping[str, Any]]) -> Section:
-    counts = list(ctx.scale.prior_counts)
-    steps = key_steps(ctx.scale.budget)
-    fig, axes = figure(1, len(counts), figsize=(4.6 * len(counts), 4.2), squeeze=False)
-    plain, aux, aux_vs_plain, rates, curve_rows, tables = {}, {}, {}, {}, [], []
-    lambdas, aux_room = {}, {}
-    multi: dict[int, Any] = {}
-    methods = present(rows, METHODS)
-    for i, n in enumerate(counts):
-        curves = method_curves(rows, {"n_priors": n}, methods)
-        if "APTKT-multi" in curves:
-            multi[n] = (
-                gain_summary(curves, "APTKT-multi", base="APTKT", steps=steps),
-                transfer_rate(rows, {"method": "APTKT-multi", "n_priors": n}),
-            )
-        plain[n] = gain_summary(curves, "APTKT", steps=steps)
-        aux[n] = gain_summary(curves, "APTKT+aux", steps=steps)
-        aux_vs_plain[n] = gain_summary(curves, "APTKT+aux", base="APTKT", steps=steps)
-        rates[n] = transfer_rate(rows, {"method": "APTKT", "n_priors": n})
-        lambdas[n] = mean_lambda(rows, {"method": "APTKT", "n_priors": n})
-        aux_room[n] = error_removed(
-            curves["baseline"], aux[n].gain, step=1 if 1 in aux[n].at else 0
-        )
-        groups = len(prior_groups(ctx, n))
-        plot_panel(
-            axes[0, i],
-            curves,
-            f"({'abcdefgh'[i % 8]}) {n} prior objects, {groups} group(s)",
-            chance=ctx.chance,
-            legend=(i == 0),
-        )
-        curve_rows += [
-            r for m, c in curves.items() for r in curves_rows({"n_priors": n, "method": m}, c)
-        ]
-        fused = method_curves(rows, {"n_priors": n}, METHODS, value="fused_accuracy")
-        tables.append(f"**{n} priors**\n\n" + accuracy_table(curves, steps, fused))
-    fig.suptitle(
-        "Fig. 9 — more prior objects: baseline (red), APTKT (blue), APTKT with auxiliary features (green)"
-    )
-    fig.tight_layout()
-    files = ctx.write_figure(NAME, fig, rows, curve_rows)
+class _Fig9(Analysis):
+    name, title = NAME, TITLE
 
-    most, fewest = max(counts), min(counts)
-    one = 1 if 1 in aux[most].at else 0
-    headlines = [
-        Headline(
-            NAME,
-            f"auxiliary features with {most} priors: gain over the baseline after one new observation",
-            pp(PAPER["fig9_aux_gain_10_priors"]) + " (10 priors)",
-            ci(aux[most].at[one])
-            + f" (step {one}; the baseline is at {aux_room[most][0]:.3f} there, and APTKT+aux "
-            f"removes {100 * aux_room[most][1]:.0f} % of its error)",
-            gain_verdict(aux[most].at[one], PAPER["fig9_aux_gain_10_priors"]),
+    def measure(self) -> None:
+        ctx, rows = self.ctx, self.rows
+        self.counts = list(ctx.scale.prior_counts)
+        self.steps = steps = key_steps(ctx.scale.budget)
+        self.curves: dict[int, Any] = {}
+        self.plain, self.aux, self.aux_vs_plain, self.rates, self.tables = {}, {}, {}, {}, []
+        self.lambdas, self.aux_room = {}, {}
+        self.multi: dict[int, Any] = {}
+        methods = present(rows, METHODS)
+        for n in self.counts:
+            curves = self.curves[n] = method_curves(rows, {"n_priors": n}, methods)
+            if "APTKT-multi" in curves:
+                self.multi[n] = (
+                    gain_summary(curves, "APTKT-multi", base="APTKT", steps=steps),
+                    transfer_rate(rows, {"method": "APTKT-multi", "n_priors": n}),
+                )
+            self.plain[n] = gain_summary(curves, "APTKT", steps=steps)
+            aux = self.aux[n] = gain_summary(curves, "APTKT+aux", steps=steps)
+            self.aux_vs_plain[n] = gain_summary(curves, "APTKT+aux", base="APTKT", steps=steps)
+            self.rates[n] = transfer_rate(rows, {"method": "APTKT", "n_priors": n})
+            self.lambdas[n] = mean_lambda(rows, {"method": "APTKT", "n_priors": n})
+            self.aux_room[n] = error_removed(
+                curves["baseline"], aux.gain, step=1 if 1 in aux.at else 0
+            )
+            self.keep_curves({"n_priors": n}, curves)
+            fused = method_curves(rows, {"n_priors": n}, METHODS, value="fused_accuracy")
+            self.tables.append(f"**{n} priors**\n\n" + accuracy_table(curves, steps, fused))
+        self.most, self.fewest = max(self.counts), min(self.counts)
+        self.one = 1 if 1 in self.aux[self.most].at else 0
+
+    def draw(self) -> list[str]:
+        counts = self.counts
+        fig, axes = panel_grid(len(counts), per_row=len(counts), size=(4.6, 4.2))
+        for i, n in enumerate(counts):
+            groups = len(prior_groups(self.ctx, n))
+            plot_panel(
+                axes[i],
+                self.curves[n],
+                f"({'abcdefgh'[i % 8]}) {n} prior objects, {groups} group(s)",
+                chance=self.ctx.chance,
+                legend=(i == 0),
+            )
+        fig.suptitle(
+            "Fig. 9 — more prior objects: baseline (red), APTKT (blue), APTKT with auxiliary features (green)"
         )
-    ]
-    if len(counts) > 1:
+        fig.tight_layout()
+        return self.write(fig)
+
+    def headlines(self) -> list[Headline]:
+        most, one, aux_room = self.most, self.one, self.aux_room
+        headlines = [
+            Headline(
+                NAME,
+                f"auxiliary features with {most} priors: gain over the baseline after one new observation",
+                pp(PAPER["fig9_aux_gain_10_priors"]) + " (10 priors)",
+                ci(self.aux[most].at[one])
+                + f" (step {one}; the baseline is at {aux_room[most][0]:.3f} there, and APTKT+aux "
+                f"removes {100 * aux_room[most][1]:.0f} % of its error)",
+                gain_verdict(self.aux[most].at[one], PAPER["fig9_aux_gain_10_priors"]),
+            )
+        ]
+        if len(self.counts) > 1:
+            headlines += [self._fades(), self._aux_beats_plain()]
+        if self.multi:
+            headlines.append(self._multi())
+        return headlines
+
+    def _fades(self) -> Headline:
+        plain, rates, most, fewest = self.plain, self.rates, self.most, self.fewest
         fades = plain[most].overall.mean < plain[fewest].overall.mean
         fewer = rates[most] < rates[fewest]
-        headlines.append(
-            Headline(
-                NAME,
-                "plain transfer fades as priors are added (λ falls under ε_neg)",
-                "yes",
-                f"gain {pp(plain[fewest].overall.mean)} with {fewest} → {pp(plain[most].overall.mean)} with {most} priors; "
-                f"transfer rate {100 * rates[fewest]:.0f} % → {100 * rates[most]:.0f} %",
-                "agrees"
-                if fades and fewer
-                else "differs: "
-                + ("the gain does not shrink" if not fades else "the transfer rate does not fall"),
-                evidence=[plain[fewest].overall, plain[most].overall],
-                why=_fade_text(ctx, fewest, most, lambdas, rates),
-            )
+        return Headline(
+            NAME,
+            "plain transfer fades as priors are added (λ falls under ε_neg)",
+            "yes",
+            f"gain {pp(plain[fewest].overall.mean)} with {fewest} → {pp(plain[most].overall.mean)} with {most} priors; "
+            f"transfer rate {100 * rates[fewest]:.0f} % → {100 * rates[most]:.0f} %",
+            "agrees"
+            if fades and fewer
+            else "differs: "
+            + ("the gain does not shrink" if not fades else "the transfer rate does not fall"),
+            evidence=[plain[fewest].overall, plain[most].overall],
+            why=_fade_text(self.ctx, fewest, most, self.lambdas, rates),
         )
-        more = [n for n in counts if n > fewest]
+
+    def _aux_beats_plain(self) -> Headline:
+        counts, plain, aux_vs_plain = self.counts, self.plain, self.aux_vs_plain
+        more = [n for n in counts if n > self.fewest]
         restored = [n for n in more if aux_vs_plain[n].overall.significant_positive]
-        headlines.append(
-            Headline(
-                NAME,
-                f"auxiliary features beat plain APTKT with {', '.join(map(str, more))} priors",
-                "yes",
-                "; ".join(f"{n}: {ci(aux_vs_plain[n].overall)}" for n in more),
-                "agrees"
-                if len(restored) == len(more)
-                else f"differs: significantly better for {len(restored)} of {len(more)} prior counts",
-                evidence=[aux_vs_plain[n].overall for n in more],
-                why=(
-                    "the auxiliary features were to restore a transfer that fades with more "
-                    "priors; plain APTKT's gain over the baseline at step 0 is "
-                    + ", ".join(
-                        f"{pp(plain[n].at[0].mean)} with {n}" for n in counts if 0 in plain[n].at
-                    )
-                    + " priors"
-                ),
-            )
+        return Headline(
+            NAME,
+            f"auxiliary features beat plain APTKT with {', '.join(map(str, more))} priors",
+            "yes",
+            "; ".join(f"{n}: {ci(aux_vs_plain[n].overall)}" for n in more),
+            "agrees"
+            if len(restored) == len(more)
+            else f"differs: significantly better for {len(restored)} of {len(more)} prior counts",
+            evidence=[aux_vs_plain[n].overall for n in more],
+            why=(
+                "the auxiliary features were to restore a transfer that fades with more "
+                "priors; plain APTKT's gain over the baseline at step 0 is "
+                + ", ".join(
+                    f"{pp(plain[n].at[0].mean)} with {n}" for n in counts if 0 in plain[n].at
+                )
+                + " priors"
+            ),
         )
-    if multi:
+
+    def _multi(self) -> Headline:
+        multi = self.multi
         better = [n for n, (g, _) in multi.items() if g.overall.significant_positive]
         worse = [n for n, (g, _) in multi.items() if g.overall.significant_negative]
-        headlines.append(
-            Headline(
-                NAME,
-                "beyond the paper: transfer from every prior above ε_neg at once "
-                '(transfer="multi") is at least as good as the paper\'s single most related prior',
-                "not in the paper",
-                "; ".join(f"{n}: {ci(g.overall)}" for n, (g, _) in multi.items())
-                + " (APTKT-multi − APTKT over the curve, by number of priors)",
-                (
-                    "agrees: never significantly worse; "
-                    + (
-                        f"significantly better with {', '.join(map(str, better))} priors"
-                        if better
-                        else "no significant difference with any number of priors"
-                    )
+        return Headline(
+            NAME,
+            "beyond the paper: transfer from every prior above ε_neg at once "
+            '(transfer="multi") is at least as good as the paper\'s single most related prior',
+            "not in the paper",
+            "; ".join(f"{n}: {ci(g.overall)}" for n, (g, _) in multi.items())
+            + " (APTKT-multi − APTKT over the curve, by number of priors)",
+            (
+                "agrees: never significantly worse; "
+                + (
+                    f"significantly better with {', '.join(map(str, better))} priors"
+                    if better
+                    else "no significant difference with any number of priors"
                 )
-                if not worse
-                else "differs: significantly worse with "
-                + ", ".join(map(str, worse))
-                + " prior(s)",
-                evidence=[g.overall for g, _ in multi.values()],
             )
+            if not worse
+            else "differs: significantly worse with " + ", ".join(map(str, worse)) + " prior(s)",
+            evidence=[g.overall for g, _ in multi.values()],
         )
-    body = [
-        f"Groups per count: {', '.join(f'{n}: {len(prior_groups(ctx, n))}' for n in counts)}; "
-        f"{ctx.scale.trials} trials each; budget {ctx.scale.budget}.",
-        "",
-        markdown_table(
-            [
-                "priors",
-                "APTKT − baseline (all steps)",
-                "APTKT+aux − baseline (all steps)",
-                "APTKT+aux − baseline (step 1)",
-                "APTKT+aux − APTKT (all steps)",
-                "APTKT transfer rate",
-            ],
-            [
+
+    def body(self) -> list[str]:
+        ctx, counts = self.ctx, self.counts
+        return [
+            f"Groups per count: {', '.join(f'{n}: {len(prior_groups(ctx, n))}' for n in counts)}; "
+            f"{ctx.scale.trials} trials each; budget {ctx.scale.budget}.",
+            "",
+            markdown_table(
                 [
-                    n,
-                    ci(plain[n].overall),
-                    ci(aux[n].overall),
-                    ci(aux[n].at[one]),
-                    ci(aux_vs_plain[n].overall),
-                    f"{100 * rates[n]:.0f} %",
-                ]
-                for n in counts
-            ],
-        ),
-        "",
-        *(
-            [
-                "Beyond the paper: transfer from every prior above ε_neg at once (APTKT-multi, "
-                "one multi-source kernel) against the paper's single most related prior, paired "
-                "by run:",
-                "",
-                markdown_table(
-                    ["priors", "APTKT-multi − APTKT (all steps)", "step 0", "multi transfer rate"],
+                    "priors",
+                    "APTKT − baseline (all steps)",
+                    "APTKT+aux − baseline (all steps)",
+                    "APTKT+aux − baseline (step 1)",
+                    "APTKT+aux − APTKT (all steps)",
+                    "APTKT transfer rate",
+                ],
+                [
                     [
-                        [
-                            n,
-                            ci(g.overall),
-                            ci(g.at[0]) if 0 in g.at else "",
-                            f"{100 * r:.0f} %",
-                        ]
-                        for n, (g, r) in multi.items()
-                    ],
-                ),
-                "",
-            ]
-            if multi
-            else []
-        ),
-        "\n\n".join(tables),
-    ]
-    numbers = {
-        "multi_vs_APTKT": {n: g.as_dict() for n, (g, _) in multi.items()},
-        "multi_transfer_rate": {n: r for n, (_, r) in multi.items()},
-        "APTKT": {n: g.as_dict() for n, g in plain.items()},
-        "APTKT+aux": {n: g.as_dict() for n, g in aux.items()},
-        "aux_vs_APTKT": {n: g.as_dict() for n, g in aux_vs_plain.items()},
-        "transfer_rate": rates,
-        "mean_lambda": lambdas,
-        "aux_baseline_error_removed": {
-            n: {"baseline": b, "share": r} for n, (b, r) in aux_room.items()
-        },
-    }
-    return Section(NAME, TITLE, headlines, "\n".join(body), files, numbers)
+                        n,
+                        ci(self.plain[n].overall),
+                        ci(self.aux[n].overall),
+                        ci(self.aux[n].at[self.one]),
+                        ci(self.aux_vs_plain[n].overall),
+                        f"{100 * self.rates[n]:.0f} %",
+                    ]
+                    for n in counts
+                ],
+            ),
+            "",
+            *self._multi_lines(),
+            "\n\n".join(self.tables),
+        ]
+
+    def _multi_lines(self) -> list[str]:
+        if not self.multi:
+            return []
+        return [
+            "Beyond the paper: transfer from every prior above ε_neg at once (APTKT-multi, "
+            "one multi-source kernel) against the paper's single most related prior, paired "
+            "by run:",
+            "",
+            markdown_table(
+                ["priors", "APTKT-multi − APTKT (all steps)", "step 0", "multi transfer rate"],
+                [
+                    [n, ci(g.overall), ci(g.at[0]) if 0 in g.at else "", f"{100 * r:.0f} %"]
+                    for n, (g, r) in self.multi.items()
+                ],
+            ),
+            "",
+        ]
+
+    def numbers(self) -> dict[str, Any]:
+        return {
+            "multi_vs_APTKT": {n: g.as_dict() for n, (g, _) in self.multi.items()},
+            "multi_transfer_rate": {n: r for n, (_, r) in self.multi.items()},
+            "APTKT": {n: g.as_dict() for n, g in self.plain.items()},
+            "APTKT+aux": {n: g.as_dict() for n, g in self.aux.items()},
+            "aux_vs_APTKT": {n: g.as_dict() for n, g in self.aux_vs_plain.items()},
+            "transfer_rate": self.rates,
+            "mean_lambda": self.lambdas,
+            "aux_baseline_error_removed": {
+                n: {"baseline": b, "share": r} for n, (b, r) in self.aux_room.items()
+            },
+        }
+
+
+analyse = _Fig9.analyse
 
 
 def _fade_text(

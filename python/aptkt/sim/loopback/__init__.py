@@ -12,15 +12,11 @@ Run one in a terminal with ``python -m aptkt.sim.loopback``; in code use :class:
 client's interpreter).
 """
 
+from aptkt.sim.loopback.config import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
 from aptkt.sim.loopback.contact import ContactModel, NoContact, Scene, SpringSurface
-from aptkt.sim.loopback.controller import (
-    CB3_VERSION,
-    E_SERIES_VERSION,
-    SUPPORTED_COMMANDS,
-    ControllerConfig,
-    SimulatedController,
-)
+from aptkt.sim.loopback.controller import SimulatedController
 from aptkt.sim.loopback.process import Loopback, LoopbackError
+from aptkt.sim.loopback.script import SUPPORTED_COMMANDS
 from aptkt.sim.loopback.servers import LoopbackServer
 
 __all__ = [

@@ -16,13 +16,9 @@ import time
 from typing import Any
 
 from aptkt.errors import ConfigError
+from aptkt.sim.loopback.config import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
 from aptkt.sim.loopback.contact import scene_from_workspace
-from aptkt.sim.loopback.controller import (
-    CB3_VERSION,
-    E_SERIES_VERSION,
-    ControllerConfig,
-    SimulatedController,
-)
+from aptkt.sim.loopback.controller import SimulatedController
 from aptkt.sim.loopback.process import serve_stdio
 from aptkt.sim.loopback.servers import LoopbackServer
 from aptkt.sim.loopback.tcp_skin import SkinConfig

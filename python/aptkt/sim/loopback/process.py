@@ -20,12 +20,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from typing import Any
 
-from aptkt.sim.loopback.controller import (
-    CB3_VERSION,
-    E_SERIES_VERSION,
-    ControllerConfig,
-    SimulatedController,
-)
+from aptkt.sim.loopback.config import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
+from aptkt.sim.loopback.controller import SimulatedController
 from aptkt.sim.loopback.servers import LoopbackServer
 from aptkt.sim.loopback.tcp_skin import SkinConfig
 

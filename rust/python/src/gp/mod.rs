@@ -4,8 +4,7 @@
 
 use aptkt_gp::kernel::{KernelEval, PairDistances};
 use aptkt_gp::{
-    Data, Free, GpError, HyperPrior, KernelTask, LatentMean, Layout, Modalities, ModelSpec,
-    OneVsAll, Predictive, Source,
+    BinaryFit, Data, GpError, GpResult, KernelTask, Layout, Modalities, OneVsAll, Source,
 };
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
@@ -17,6 +16,10 @@ use std::sync::{Arc, Condvar, Mutex};
 use std::time::Duration;
 
 use crate::errors::gp_error;
+
+mod settings;
+
+use settings::FitSettings;
 
 fn data_from(x: &PyReadonlyArray2<'_, f64>) -> Result<Data, GpError> {
     let view = x.as_array();
@@ -160,214 +163,6 @@ pub struct GpcModel {
     n_threads: usize,
 }
 
-/// Everything that defines a fit except the data: the hyper-parameters' starting values, which
-/// of them are free, their bounds, and the optimiser's and Newton iteration's limits. Built
-/// with keywords only (`FitSettings(modalities=[[0, 1]], n_restarts=2, ...)`); every field is
-/// a readable and writable attribute.
-#[pyclass(module = "aptkt._core", get_all, set_all)]
-#[derive(Clone)]
-pub struct FitSettings {
-    /// Feature columns of each modality.
-    modalities: Vec<Vec<usize>>,
-    /// Initial signal variance σ².
-    signal_variance: f64,
-    /// Initial length-scale per modality; NaN: scaled to the data (median pairwise distance).
-    length_scales: Vec<f64>,
-    /// Initial modality weights γ (normalised).
-    weights: Vec<f64>,
-    free_signal_variance: bool,
-    free_length_scales: bool,
-    free_weights: bool,
-    free_lambda: bool,
-    signal_variance_bounds: (f64, f64),
-    length_scale_bounds: (f64, f64),
-    optimize: bool,
-    n_restarts: usize,
-    seed: u64,
-    max_iter: usize,
-    /// The hyper-parameter search stops when the objective's relative decrease falls below it.
-    optimizer_tol: f64,
-    newton_max_iter: usize,
-    newton_tol: f64,
-    max_jitter: f64,
-    /// Predictive integral: "erf" or "quadrature".
-    approximation: String,
-    /// Threads for the per-class fits; 0: rayon's default (all cores).
-    n_threads: usize,
-    /// MAP-II hyper-prior on σ²: (centre, sd of ln σ²); None: flat.
-    prior_signal_variance: Option<(f64, f64)>,
-    /// MAP-II hyper-prior on each ℓ_m: (centre relative to the modality's data scale, sd of
-    /// ln ℓ_m); None: flat.
-    prior_length_scale: Option<(f64, f64)>,
-    /// MAP-II hyper-prior on each modality-weight logit: sd of a normal centred on 0 (equal
-    /// weights); None: flat.
-    prior_weight_logit: Option<f64>,
-    /// The latent function's constant prior mean: "zero" or "base-rate" (the log-odds of each
-    /// classifier's Jeffreys-smoothed share of positive labels).
-    latent_mean: String,
-    /// One length-scale for every modality (the shared kernel only).
-    tie_length_scales: bool,
-}
-
-#[pymethods]
-impl FitSettings {
-    #[new]
-    // No defaults here but those that switch an extension off (the hyper-priors, the latent
-    // mean): aptkt.gp.DEFAULTS is the one source of the settings' defaults, and LaplaceGPC
-    // passes every one of them.
-    #[pyo3(signature = (
-        *, modalities, signal_variance, length_scales, weights, free_signal_variance,
-        free_length_scales, free_weights, free_lambda, signal_variance_bounds,
-        length_scale_bounds, optimize, n_restarts, seed, max_iter, optimizer_tol, newton_max_iter,
-        newton_tol, max_jitter, approximation, n_threads, prior_signal_variance = None,
-        prior_length_scale = None, prior_weight_logit = None, latent_mean = "zero".to_string(),
-        tie_length_scales = false
-    ))]
-    #[allow(clippy::too_many_arguments)]
-    fn new(
-        modalities: Vec<Vec<usize>>,
-        signal_variance: f64,
-        length_scales: Vec<f64>,
-        weights: Vec<f64>,
-        free_signal_variance: bool,
-        free_length_scales: bool,
-        free_weights: bool,
-        free_lambda: bool,
-        signal_variance_bounds: (f64, f64),
-        length_scale_bounds: (f64, f64),
-        optimize: bool,
-        n_restarts: usize,
-        seed: u64,
-        max_iter: usize,
-        optimizer_tol: f64,
-        newton_max_iter: usize,
-        newton_tol: f64,
-        max_jitter: f64,
-        approximation: String,
-        n_threads: usize,
-        prior_signal_variance: Option<(f64, f64)>,
-        prior_length_scale: Option<(f64, f64)>,
-        prior_weight_logit: Option<f64>,
-        latent_mean: String,
-        tie_length_scales: bool,
-    ) -> Self {
-        FitSettings {
-            modalities,
-            signal_variance,
-            length_scales,
-            weights,
-            free_signal_variance,
-            free_length_scales,
-            free_weights,
-            free_lambda,
-            signal_variance_bounds,
-            length_scale_bounds,
-            optimize,
-            n_restarts,
-            seed,
-            max_iter,
-            optimizer_tol,
-            newton_max_iter,
-            newton_tol,
-            max_jitter,
-            approximation,
-            n_threads,
-            prior_signal_variance,
-            prior_length_scale,
-            prior_weight_logit,
-            latent_mean,
-            tie_length_scales,
-        }
-    }
-
-    fn __repr__(&self) -> String {
-        let b = |v: bool| if v { "True" } else { "False" };
-        format!(
-            "FitSettings(modalities={:?}, signal_variance={:?}, length_scales={:?}, \
-             weights={:?}, free_signal_variance={}, free_length_scales={}, free_weights={}, \
-             free_lambda={}, signal_variance_bounds={:?}, length_scale_bounds={:?}, \
-             optimize={}, n_restarts={}, seed={}, max_iter={}, optimizer_tol={:?}, \
-             newton_max_iter={}, newton_tol={:?}, max_jitter={:?}, approximation={:?}, n_threads={}, \
-             prior_signal_variance={}, prior_length_scale={}, prior_weight_logit={}, \
-             latent_mean={:?}, tie_length_scales={})",
-            self.modalities,
-            self.signal_variance,
-            self.length_scales,
-            self.weights,
-            b(self.free_signal_variance),
-            b(self.free_length_scales),
-            b(self.free_weights),
-            b(self.free_lambda),
-            self.signal_variance_bounds,
-            self.length_scale_bounds,
-            b(self.optimize),
-            self.n_restarts,
-            self.seed,
-            self.max_iter,
-            self.optimizer_tol,
-            self.newton_max_iter,
-            self.newton_tol,
-            self.max_jitter,
-            self.approximation,
-            self.n_threads,
-            py_pair(self.prior_signal_variance),
-            py_pair(self.prior_length_scale),
-            self.prior_weight_logit
-                .map_or_else(|| "None".to_string(), |sd| format!("{sd:?}")),
-            self.latent_mean,
-            b(self.tie_length_scales)
-        )
-    }
-}
-
-fn py_pair(p: Option<(f64, f64)>) -> String {
-    match p {
-        Some((a, b)) => format!("({a:?}, {b:?})"),
-        None => "None".to_string(),
-    }
-}
-
-impl FitSettings {
-    /// The core's model specification for data with `d` columns.
-    fn spec(&self, d: usize) -> PyResult<ModelSpec> {
-        let mut spec =
-            ModelSpec::new(Modalities::new(self.modalities.clone(), d).map_err(gp_error)?);
-        spec.signal_variance = self.signal_variance;
-        spec.length_scales = self.length_scales.clone();
-        spec.weights = self.weights.clone();
-        spec.free = Free {
-            signal_variance: self.free_signal_variance,
-            length_scales: self.free_length_scales,
-            weights: self.free_weights,
-            lambda: self.free_lambda,
-        };
-        spec.signal_variance_bounds = self.signal_variance_bounds;
-        spec.length_scale_bounds = self.length_scale_bounds;
-        spec.optimize = self.optimize;
-        spec.n_restarts = self.n_restarts;
-        spec.seed = self.seed;
-        spec.lbfgs.max_iter = self.max_iter;
-        spec.lbfgs.ftol = self.optimizer_tol;
-        spec.newton.max_iter = self.newton_max_iter;
-        spec.newton.tol = self.newton_tol;
-        spec.max_jitter = self.max_jitter;
-        spec.predictive = parse_predictive(&self.approximation)?;
-        spec.latent_mean = parse_latent_mean(&self.latent_mean)?;
-        spec.tie_length_scales = self.tie_length_scales;
-        if self.prior_signal_variance.is_some()
-            || self.prior_length_scale.is_some()
-            || self.prior_weight_logit.is_some()
-        {
-            spec.hyper_prior = Some(HyperPrior {
-                signal_variance: self.prior_signal_variance,
-                length_scale: self.prior_length_scale,
-                weight_logit: self.prior_weight_logit,
-            });
-        }
-        Ok(spec)
-    }
-}
-
 /// One class's source tasks as (X, labels ±1, λ).
 type PySources<'py> = Vec<(PyReadonlyArray2<'py, f64>, PyReadonlyArray1<'py, f64>, f64)>;
 
@@ -377,9 +172,7 @@ type PySources<'py> = Vec<(PyReadonlyArray2<'py, f64>, PyReadonlyArray1<'py, f64
 /// without optimising; `starts` gives per-classifier starting rows (None: the settings').
 #[pyfunction]
 #[pyo3(signature = (x, labels, n_classes, sources, settings, thetas = None, starts = None))]
-#[allow(clippy::too_many_arguments)]
 fn fit_gpc(
-    py: Python<'_>,
     x: PyReadonlyArray2<'_, f64>,
     labels: PyReadonlyArray1<'_, i64>,
     n_classes: usize,
@@ -388,6 +181,7 @@ fn fit_gpc(
     thetas: Option<PyReadonlyArray2<'_, f64>>,
     starts: Option<Vec<Option<Vec<f64>>>>,
 ) -> PyResult<GpcModel> {
+    let py = x.py();
     let thetas: Option<Vec<Vec<f64>>> =
         thetas.map(|t| t.as_array().outer_iter().map(|r| r.to_vec()).collect());
     let data = data_from(&x).map_err(gp_error)?;
@@ -481,23 +275,25 @@ fn fit_gpc_shared(
     Ok(GpcModel { model, n_threads })
 }
 
-fn parse_predictive(name: &str) -> PyResult<Predictive> {
-    match name {
-        "erf" => Ok(Predictive::ErfMixture),
-        "quadrature" => Ok(Predictive::Quadrature),
-        other => Err(PyValueError::new_err(format!(
-            "approximation must be 'erf' or 'quadrature', got {other:?}"
-        ))),
+impl GpcModel {
+    /// `predict(model, x)` (n × n_classes, row-major) on this model's pool, the GIL released.
+    fn per_class<'py>(
+        &self,
+        py: Python<'py>,
+        x: &PyReadonlyArray2<'py, f64>,
+        predict: fn(&OneVsAll, &Data) -> GpResult<Vec<f64>>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let data = data_from(x).map_err(gp_error)?;
+        let probs = py
+            .detach(|| run_in_pool(self.n_threads, || predict(&self.model, &data)))
+            .and_then(|r| r)
+            .map_err(gp_error)?;
+        matrix(py, probs, data.n, self.model.n_classes)
     }
-}
 
-fn parse_latent_mean(name: &str) -> PyResult<LatentMean> {
-    match name {
-        "zero" => Ok(LatentMean::Zero),
-        "base-rate" => Ok(LatentMean::BaseRate),
-        other => Err(PyValueError::new_err(format!(
-            "latent_mean must be 'zero' or 'base-rate', got {other:?}"
-        ))),
+    /// One value per classifier.
+    fn each<T>(&self, value: impl Fn(&BinaryFit) -> T) -> Vec<T> {
+        self.model.classifiers.iter().map(value).collect()
     }
 }
 
@@ -509,12 +305,7 @@ impl GpcModel {
         py: Python<'py>,
         x: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let data = data_from(&x).map_err(gp_error)?;
-        let probs = py
-            .detach(|| run_in_pool(self.n_threads, || self.model.predict_proba(&data)))
-            .and_then(|r| r)
-            .map_err(gp_error)?;
-        matrix(py, probs, data.n, self.model.n_classes)
+        self.per_class(py, &x, OneVsAll::predict_proba)
     }
 
     /// Each one-vs-all classifier's own p(y = +1 | x), shape (n, n_classes), not normalised.
@@ -523,12 +314,7 @@ impl GpcModel {
         py: Python<'py>,
         x: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let data = data_from(&x).map_err(gp_error)?;
-        let probs = py
-            .detach(|| run_in_pool(self.n_threads, || self.model.predict_binary(&data)))
-            .and_then(|r| r)
-            .map_err(gp_error)?;
-        matrix(py, probs, data.n, self.model.n_classes)
+        self.per_class(py, &x, OneVsAll::predict_binary)
     }
 
     /// Latent predictive means and variances, each (n, n_classifiers).
@@ -596,74 +382,45 @@ impl GpcModel {
 
     #[getter]
     fn log_marginal_likelihood_value<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_vec(py, self.model.classifiers.iter().map(|c| c.lml).collect())
+        PyArray1::from_vec(py, self.each(|c| c.lml))
     }
 
     /// Each classifier's latent prior mean m (0 for the zero-mean GP).
     #[getter]
     fn latent_offset<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_vec(
-            py,
-            self.model
-                .classifiers
-                .iter()
-                .map(|c| c.latent_offset)
-                .collect(),
-        )
+        PyArray1::from_vec(py, self.each(|c| c.latent_offset))
     }
 
     /// Log hyper-prior density at the fitted theta per classifier (0 for ML-II).
     #[getter]
     fn log_hyper_prior<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_vec(
-            py,
-            self.model.classifiers.iter().map(|c| c.log_prior).collect(),
-        )
+        PyArray1::from_vec(py, self.each(|c| c.log_prior))
     }
 
     #[getter]
     fn jitter<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_vec(
-            py,
-            self.model.classifiers.iter().map(|c| c.jitter).collect(),
-        )
+        PyArray1::from_vec(py, self.each(|c| c.jitter))
     }
 
     #[getter]
     fn optimizer_converged(&self) -> Vec<bool> {
-        self.model
-            .classifiers
-            .iter()
-            .map(|c| c.optimizer_converged)
-            .collect()
+        self.each(|c| c.optimizer_converged)
     }
 
     #[getter]
     fn newton_converged(&self) -> Vec<bool> {
-        self.model
-            .classifiers
-            .iter()
-            .map(|c| c.newton_converged)
-            .collect()
+        self.each(|c| c.newton_converged)
     }
 
     #[getter]
     fn evaluations(&self) -> Vec<usize> {
-        self.model
-            .classifiers
-            .iter()
-            .map(|c| c.evaluations)
-            .collect()
+        self.each(|c| c.evaluations)
     }
 
     /// Quasi-Newton iterations of the start that gave each classifier's theta.
     #[getter]
     fn iterations(&self) -> Vec<usize> {
-        self.model
-            .classifiers
-            .iter()
-            .map(|c| c.iterations)
-            .collect()
+        self.each(|c| c.iterations)
     }
 
     #[getter]
@@ -735,7 +492,7 @@ fn kernel_matrix<'py>(
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<FitSettings>()?;
+    settings::register(m)?;
     m.add_class::<GpcModel>()?;
     m.add_function(wrap_pyfunction!(fit_gpc, m)?)?;
     m.add_function(wrap_pyfunction!(fit_gpc_shared, m)?)?;

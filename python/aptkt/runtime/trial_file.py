@@ -1,0 +1,93 @@
+"""The data set a plan of trials fills, shared by the simulated generator and the collection
+on a robot: a fresh file, or an existing one resumed — repaired first if its writer died, the
+trials it holds skipped — and the progress bar over the whole plan."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from aptkt.actions import ExploratoryAction
+from aptkt.data.store import DatasetReader, DatasetWriter, repair
+from aptkt.errors import DatasetError
+from aptkt.runtime.grid import TrialGrid
+
+__all__ = ["TrialFile"]
+
+
+class TrialFile:
+    """The writer of ``path`` for ``plan`` and the trials still to do (:attr:`todo`, in plan
+    order). With ``resume`` an existing file is completed: ``check`` first sees its description
+    (and raises if the file belongs to another plan), a file whose writer died is repaired
+    (:attr:`repaired`: the recordings it kept). Without it an existing file is an error unless
+    ``overwrite``. ``bar``: tqdm options for a progress bar over the plan (None: no bar)."""
+
+    def __init__(
+        self,
+        path: str | Path,
+        plan: TrialGrid,
+        *,
+        description: Mapping[str, Any],
+        resume: bool,
+        overwrite: bool,
+        check: Callable[[dict[str, Any]], None] | None = None,
+        bar: Mapping[str, Any] | None = None,
+    ):
+        self.path = Path(path)
+        self.plan = plan
+        #: Recordings kept by repairing a file whose writer died (None: no repair).
+        self.repaired: int | None = None
+        if resume and self.path.exists():
+            if check is not None:
+                with DatasetReader(self.path) as rd:
+                    check(rd.description)
+            try:
+                self.writer = DatasetWriter(self.path, "a")
+            except DatasetError:
+                self.repaired = repair(self.path)  # its writer died: keep every complete recording
+                self.writer = DatasetWriter(self.path, "a")
+        else:
+            if self.path.exists() and not overwrite:
+                raise DatasetError(
+                    f"{self.path} exists: use --resume to complete it or --overwrite to replace it"
+                )
+            self.writer = DatasetWriter(
+                self.path, "w", description=description, overwrite=overwrite
+            )
+        done = self.writer.keys()
+        self.todo: list[tuple[str, ExploratoryAction, int]] = [
+            (o, a, t) for o, a, t in plan.trials() if (o, a.name, t) not in done
+        ]
+        self.bar = (
+            None
+            if bar is None
+            else tqdm(
+                total=len(plan),
+                initial=len(plan) - len(self.todo),
+                unit="trial",
+                desc=self.path.name,
+                **bar,
+            )
+        )
+
+    def __enter__(self) -> TrialFile:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+        self.writer.close()
+
+    def summary(self, **extra: Any) -> dict[str, Any]:
+        """The file's :meth:`~aptkt.data.DatasetReader.info`, whether it was repaired, and
+        ``extra``; read after :meth:`close`."""
+        with DatasetReader(self.path) as rd:
+            info = rd.info()
+        info.update(repaired=self.repaired, **extra)
+        return info

@@ -1,0 +1,50 @@
+"""HDF5 below h5py (aptkt.data.hdf5): the superblock checksum and the writer mark."""
+
+from __future__ import annotations
+
+import h5py
+import pytest
+
+from aptkt.data.hdf5 import copy_without_writer_mark, cut_short, lookup3, writer_mark
+
+
+@pytest.mark.parametrize(
+    ("data", "expected"),
+    [
+        # The test vectors of Bob Jenkins' lookup3.c (hashlittle, seed 0).
+        (b"", 0xDEADBEEF),
+        (b"Four score and seven years ago", 0x17770551),
+    ],
+)
+def test_lookup3_gives_the_reference_hashes(data, expected):
+    assert lookup3(data) == expected
+
+
+def _superblock(path):
+    raw = path.read_bytes()
+    size = 12 + 4 * raw[9] + 4  # version 2/3: fixed part, four addresses, checksum
+    return raw[:size]
+
+
+def test_lookup3_is_the_checksum_hdf5_writes(tmp_path):
+    path = tmp_path / "f.h5"
+    with h5py.File(path, "w", libver="latest") as f:
+        f["x"] = [1, 2, 3]
+    sb = _superblock(path)
+    assert sb[8] in (2, 3)
+    assert lookup3(sb[:-4]) == int.from_bytes(sb[-4:], "little")
+
+
+def test_a_copy_without_the_writer_mark_opens(tmp_path):
+    path, copy = tmp_path / "f.h5", tmp_path / "copy.h5"
+    f = h5py.File(path, "w", libver="latest")
+    f["x"] = [1, 2, 3]
+    f.flush()
+    assert writer_mark(path) != 0  # open for writing: other opens are refused
+    copy_without_writer_mark(path, copy)
+    assert writer_mark(copy) == 0 and not cut_short(copy)
+    sb = _superblock(copy)
+    assert lookup3(sb[:-4]) == int.from_bytes(sb[-4:], "little")
+    with h5py.File(copy, "r") as g:
+        assert list(g["x"][...]) == [1, 2, 3]
+    f.close()
