@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.errors import FeatureTableError
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
 from aptkt.learning.observations import Observations, ObservationTable
@@ -93,7 +94,7 @@ def split_trials(table: FeatureTable, actions: Sequence[str]) -> tuple[np.ndarra
         for obj in table.object_names:
             rows = table.rows_of(obj, action)
             if rows.size < 2:
-                raise ValueError(
+                raise FeatureTableError(
                     f"{table.path}: object {obj} has {rows.size} row(s) of action {action}; "
                     "the benchmark needs at least 2 (one to learn from, one held out)"
                 )
@@ -141,7 +142,7 @@ def draw_groups(
     objects: Sequence[str], distances: tuple[list[str], np.ndarray], s: BenchmarkSettings
 ) -> list[Group]:
     if len(objects) < s.new_objects + s.prior_objects:
-        raise ValueError(
+        raise FeatureTableError(
             f"{s.new_objects} new and {s.prior_objects} prior objects need at least "
             f"{s.new_objects + s.prior_objects} objects; the table has {len(objects)}"
         )

@@ -112,7 +112,7 @@ def read_trial(path: str | Path) -> np.ndarray:
         lines = path.read_text(encoding="utf-8").splitlines()
     except (OSError, UnicodeDecodeError) as exc:
         raise RawDataError(f"{path}: cannot read the file: {exc}") from None
-    if not lines:
+    if not any(line.strip() for line in lines):
         raise RawDataError(f"{path}: the file is empty")
     header = _cells(lines[0])
     if tuple(h.strip() for h in header) != COLUMNS:
