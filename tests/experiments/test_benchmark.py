@@ -113,6 +113,7 @@ def test_the_reported_gains_are_the_paired_means_of_the_results(run):
     report = (run / "report.md").read_text()
     assert "## Checks" in report and "1-NN" in report
     assert (run / "benchmark.png").stat().st_size > 0 and (run / "benchmark.svg").exists()
+    assert "## How the data's noise looks" in report and len(summary["noise_profile"]) == 2
     assert summary["learner"]["gp"]["kernel"] == "shared"
 
 

@@ -285,6 +285,7 @@ def run_benchmark(
     from aptkt import __version__
     from aptkt.experiments import benchmark_report as br
     from aptkt.experiments.executors import LocalExecutor
+    from aptkt.experiments.noise_profile import noise_profile
     from aptkt.experiments.plots import save_figure
     from aptkt.experiments.tables import write_csv
 
@@ -338,8 +339,10 @@ def run_benchmark(
         "results": br.summary(c),
         "checks": [{"claim": k.claim, "measured": k.measured, "holds": k.holds} for k in found],
     }
+    profiles = noise_profile(table.observations(actions))
+    summary["noise_profile"] = [p.as_dict() for p in profiles]
     (output / "summary.json").write_text(json.dumps(summary, indent=1))
-    (output / "report.md").write_text(br.report_markdown(c, head, found))
+    (output / "report.md").write_text(br.report_markdown(c, head, found, profiles))
     for k in found:
         say(f"  {'holds' if k.holds else 'FAILS'}: {k.claim} — {k.measured}")
     say(

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.experiments.aggregate import Estimate, estimate, mean_band
+from aptkt.experiments.noise_profile import NoiseProfile
 from aptkt.experiments.plots import METHOD_COLOURS, figure
 from aptkt.experiments.report import ci, markdown_table, pp
 
@@ -186,7 +187,7 @@ def plot(c: Mapping[str, Mapping[str, np.ndarray]], chance: float) -> Any:
     """Top: each method's mean accuracy per prior choice with its 95 % band (clipped to
     [0, 1]) and the 1-NN reference at step 0; bottom: each method's paired gain over the
     baseline with its band."""
-    choices = list(c)
+    choices = sorted(c, key=lambda k: list(_TITLES).index(k) if k in _TITLES else 99)
     fig, axes = figure(2, len(choices), figsize=(5.0 * len(choices), 7.6), squeeze=False)
     for j, choice in enumerate(choices):
         methods = c[choice]
@@ -264,8 +265,10 @@ def report_markdown(
     c: Mapping[str, Mapping[str, np.ndarray]],
     head: Mapping[str, Any],
     found: Sequence[Check],
+    profiles: Sequence[NoiseProfile] = (),
 ) -> str:
-    """report.md: the set-up, each check with its verdict, the curves and the gains."""
+    """report.md: the set-up, each check with its verdict, the curves and the gains, and how
+    the data's noise looks."""
     lines = [
         f"# Real-data benchmark: {head['table']}",
         "",
@@ -290,7 +293,8 @@ def report_markdown(
         ),
         "",
     ]
-    for choice, methods in c.items():
+    for choice in sorted(c, key=lambda k: list(_TITLES).index(k) if k in _TITLES else 99):
+        methods = c[choice]
         n_steps = methods["baseline"].shape[1]
         steps = [s for s in TABLE_STEPS if s < n_steps]
         lines += [f"## {_TITLES.get(choice, choice).capitalize()}", ""]
@@ -314,6 +318,32 @@ def report_markdown(
                 + [ci(_paired(methods["APTKT+aux"][:, s], methods["APTKT"][:, s])) for s in steps]
             )
         lines += [markdown_table(["paired gain", *(f"step {s}" for s in steps)], rows), ""]
+    if profiles:
+        lines += [
+            "## How the data's noise looks",
+            "",
+            "Per action and modality (`aptkt.experiments.noise_profile`): separation — the "
+            "spread of the object means in units of the within-object noise; drift — how far "
+            "each object's observations move from the first half of its trials to the second, "
+            "against stationary noise (1: none); heterogeneity — how much the noise differs "
+            "between objects, against equal noise (1: the same for every object).",
+            "",
+            markdown_table(
+                ["action", "modality", "columns", "separation", "drift", "heterogeneity"],
+                [
+                    [
+                        p.action,
+                        p.modality,
+                        p.columns,
+                        f"{p.separation:.2f}",
+                        f"{p.drift:.2f}",
+                        f"{p.heterogeneity:.2f}",
+                    ]
+                    for p in profiles
+                ],
+            ),
+            "",
+        ]
     lines += [
         "Plots: `benchmark.png` / `.svg` (top: mean accuracy with 95 % bands, the 1-NN "
         "reference at step 0; bottom: gains over the baseline). Every group's curves: "
