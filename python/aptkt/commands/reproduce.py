@@ -60,6 +60,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=0,
         help="root seed of the data, the groups and the trials (default %(default)s)",
     )
+    p.add_argument(
+        "--real-data",
+        type=Path,
+        metavar="DIR",
+        help="an aptkt benchmark output directory: the report sets its real-data gains beside "
+        "this run's",
+    )
     add_method_arguments(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
@@ -83,6 +90,10 @@ def run(args: argparse.Namespace) -> int:
                 "--scheduler needs dask[distributed]: pip install 'aptkt[dask]'"
             ) from None
     figures = FIGURE_NAMES if args.name == "all" else (args.name,)
+    if args.real_data is not None:
+        from aptkt.experiments.beside_real import load_benchmark
+
+        load_benchmark(args.real_data)  # checked before any work
     try:
         base = learner_config(args)
     except ValueError as exc:
@@ -97,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         progress=not args.no_progress and sys.stderr.isatty(),
         base=base,
+        real_data=args.real_data,
         command=_command(args),
     )
     try:
@@ -121,6 +133,8 @@ def _command(args: argparse.Namespace) -> str:
     if args.scheduler:
         parts.append(f"--scheduler {args.scheduler}")
     parts.append(f"--seed {args.seed}")
+    if args.real_data is not None:
+        parts.append(f"--real-data {args.real_data}")
     if args.reading != "aptkt":
         parts.append(f"--reading {args.reading}")
     for option in ("cutoff", "evidence_margin", "kernel"):

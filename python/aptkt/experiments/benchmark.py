@@ -48,10 +48,10 @@ __all__ = [
 PRIOR_CHOICES = ("random", "nearest", "farthest")
 #: The learners compared, by the name the results use.
 METHODS: dict[str, dict[str, Any]] = {
-    "baseline": {"transfer": "none"},
-    "APTKT": {},
-    "APTKT+aux": {"auxiliary": True},
-    "control": {"transfer": "control"},
+    "baseline": {"transfer": "none", "auxiliary": False},
+    "APTKT": {"transfer": "paper", "auxiliary": False},
+    "APTKT+aux": {"transfer": "paper", "auxiliary": True},
+    "control": {"transfer": "control", "auxiliary": False},
 }
 #: The reference rule's name in the results.
 NEAREST_NEIGHBOUR = "1-NN"

@@ -30,6 +30,7 @@ from aptkt.actions import PAPER_ACTIONS
 from aptkt.data import DatasetReader
 from aptkt.errors import ConfigError
 from aptkt.experiments.batch import StoredSteps, build_priors, run_batch
+from aptkt.experiments.beside_real import beside_real, load_benchmark
 from aptkt.experiments.executors import Executor, make_executor
 from aptkt.experiments.figures import FIGURES
 from aptkt.experiments.figures.base import METHODS, Context, Section
@@ -60,10 +61,12 @@ class ReproduceSettings:
     seed: int = 0
     progress: bool = True
     scale: Scale | None = None  # overrides the full / quick size (tests, custom studies)
-    #: How every model is fitted (the prior's, the baseline's, APTKT's).
     #: The learner every method starts from (``--reading`` and the method options).
     base: LearnerConfig = field(default_factory=LearnerConfig)
     command: str = ""
+    #: An ``aptkt benchmark`` output directory whose real-data gains the report sets beside
+    #: this run's.
+    real_data: Path | None = None
 
     def resolved_scale(self) -> Scale:
         if self.scale is not None:
@@ -282,7 +285,10 @@ def _write(
         "scale": scale.name,
         "settings": _flat_settings(scale, s, done.timings, batch),
     }
-    (out / "report.md").write_text(render_report(sections, run_info))
+    numbers = {sec.figure: sec.numbers for sec in sections}
+    real = load_benchmark(s.real_data) if s.real_data is not None else None
+    beside = "\n".join(beside_real(numbers, real))
+    (out / "report.md").write_text(render_report(sections, run_info) + "\n" + beside)
     for section in sections:
         (ctx.figure_dir(section.figure) / "report.md").write_text(
             render_report([section], run_info)

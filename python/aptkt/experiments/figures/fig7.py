@@ -159,20 +159,12 @@ class _Fig7(Analysis):
         ]
 
     def numbers(self) -> dict[str, Any]:
-        curves, fused, steps, split = self.curves, self.fused, self.steps, self.split
+        split = self.split
         control: dict[str, Any] = (
             {"control_vs_baseline": split[0].as_dict(), "APTKT_vs_control": split[1].as_dict()}
             if split
             else {}
         )
-        if "APTKT-multi" in curves:
-            control["multi_vs_APTKT"] = gain_summary(
-                curves, "APTKT-multi", base="APTKT", steps=steps
-            ).as_dict()
-            control["multi_vs_APTKT_fused"] = gain_summary(
-                fused, "APTKT-multi", base="APTKT", steps=steps
-            ).as_dict()
-            control["multi_transfer_rate"] = transfer_rate(self.rows, {"method": "APTKT-multi"})
         return {
             **control,
             "gain": self.gain.as_dict(),
@@ -194,7 +186,6 @@ def _control_lines(curves, fused, steps) -> list[str]:
         for name, method, base in (
             ("control − baseline (the prior's feature space alone)", "control", "baseline"),
             ("APTKT − control (the transfer alone)", "APTKT", "control"),
-            ("APTKT-multi − APTKT (several sources vs the paper's one)", "APTKT-multi", "APTKT"),
         )
         if method in curves and base in curves
     ]
@@ -206,8 +197,8 @@ def _control_lines(curves, fused, steps) -> list[str]:
         f = gain_summary(fused, method, base=base, steps=steps)
         rows.append([name, ci(g.at[0]) if 0 in g.at else "", ci(g.overall), ci(f.overall)])
     return [
-        "Beyond the paper, paired by run: the control (the prior's feature space, no transfer) "
-        "and transfer from every prior above ε_neg at once (APTKT-multi):",
+        "Beyond the paper, paired by run: the control (the prior's feature space and kernel, no "
+        "transfer):",
         "",
         markdown_table(["comparison", "step 0", "mean over all steps", "fused, all steps"], rows),
     ]

@@ -53,15 +53,9 @@ class _Fig9(Analysis):
         self.curves: dict[int, Any] = {}
         self.plain, self.aux, self.aux_vs_plain, self.rates, self.tables = {}, {}, {}, {}, []
         self.lambdas, self.aux_room = {}, {}
-        self.multi: dict[int, Any] = {}
         methods = present(rows, METHODS)
         for n in self.counts:
             curves = self.curves[n] = method_curves(rows, {"n_priors": n}, methods)
-            if "APTKT-multi" in curves:
-                self.multi[n] = (
-                    gain_summary(curves, "APTKT-multi", base="APTKT", steps=steps),
-                    transfer_rate(rows, {"method": "APTKT-multi", "n_priors": n}),
-                )
             self.plain[n] = gain_summary(curves, "APTKT", steps=steps)
             aux = self.aux[n] = gain_summary(curves, "APTKT+aux", steps=steps)
             self.aux_vs_plain[n] = gain_summary(curves, "APTKT+aux", base="APTKT", steps=steps)
@@ -109,8 +103,6 @@ class _Fig9(Analysis):
         ]
         if len(self.counts) > 1:
             headlines += [self._fades(), self._aux_beats_plain()]
-        if self.multi:
-            headlines.append(self._multi())
         return headlines
 
     def _fades(self) -> Headline:
@@ -154,30 +146,6 @@ class _Fig9(Analysis):
             ),
         )
 
-    def _multi(self) -> Headline:
-        multi = self.multi
-        better = [n for n, (g, _) in multi.items() if g.overall.significant_positive]
-        worse = [n for n, (g, _) in multi.items() if g.overall.significant_negative]
-        return Headline(
-            NAME,
-            "beyond the paper: transfer from every prior above ε_neg at once "
-            '(transfer="multi") is at least as good as the paper\'s single most related prior',
-            "not in the paper",
-            "; ".join(f"{n}: {ci(g.overall)}" for n, (g, _) in multi.items())
-            + " (APTKT-multi − APTKT over the curve, by number of priors)",
-            (
-                "agrees: never significantly worse; "
-                + (
-                    f"significantly better with {', '.join(map(str, better))} priors"
-                    if better
-                    else "no significant difference with any number of priors"
-                )
-            )
-            if not worse
-            else "differs: significantly worse with " + ", ".join(map(str, worse)) + " prior(s)",
-            evidence=[g.overall for g, _ in multi.values()],
-        )
-
     def body(self) -> list[str]:
         ctx, counts = self.ctx, self.counts
         return [
@@ -206,32 +174,11 @@ class _Fig9(Analysis):
                 ],
             ),
             "",
-            *self._multi_lines(),
             "\n\n".join(self.tables),
-        ]
-
-    def _multi_lines(self) -> list[str]:
-        if not self.multi:
-            return []
-        return [
-            "Beyond the paper: transfer from every prior above ε_neg at once (APTKT-multi, "
-            "one multi-source kernel) against the paper's single most related prior, paired "
-            "by run:",
-            "",
-            markdown_table(
-                ["priors", "APTKT-multi − APTKT (all steps)", "step 0", "multi transfer rate"],
-                [
-                    [n, ci(g.overall), ci(g.at[0]) if 0 in g.at else "", f"{100 * r:.0f} %"]
-                    for n, (g, r) in self.multi.items()
-                ],
-            ),
-            "",
         ]
 
     def numbers(self) -> dict[str, Any]:
         return {
-            "multi_vs_APTKT": {n: g.as_dict() for n, (g, _) in self.multi.items()},
-            "multi_transfer_rate": {n: r for n, (_, r) in self.multi.items()},
             "APTKT": {n: g.as_dict() for n, g in self.plain.items()},
             "APTKT+aux": {n: g.as_dict() for n, g in self.aux.items()},
             "aux_vs_APTKT": {n: g.as_dict() for n, g in self.aux_vs_plain.items()},
