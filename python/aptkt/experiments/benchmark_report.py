@@ -174,12 +174,13 @@ _TITLES = {
     "nearest": "the most similar priors",
     "farthest": "the least similar priors",
 }
-#: Line styles that keep equal curves apart (drawn in this order, each visible over the last).
+#: Line style, marker and width per method, drawn in this order: each later line is thinner
+#: and broken, so that a curve equal to an earlier one leaves that one visible around it.
 _STYLES = {
-    "baseline": ("-", "o"),
-    "control": (":", "s"),
-    "APTKT": ("-", "^"),
-    "APTKT+aux": ("--", "v"),
+    "baseline": ("-", "o", 3.2),
+    "control": ("-", "s", 3.2),
+    "APTKT": ("--", "^", 2.0),
+    "APTKT+aux": (":", "v", 1.4),
 }
 
 
@@ -187,6 +188,8 @@ def plot(c: Mapping[str, Mapping[str, np.ndarray]], chance: float) -> Any:
     """Top: each method's mean accuracy per prior choice with its 95 % band (clipped to
     [0, 1]) and the 1-NN reference at step 0; bottom: each method's paired gain over the
     baseline with its band."""
+    from matplotlib.ticker import MaxNLocator  # matplotlib is imported when a plot is made
+
     choices = sorted(c, key=lambda k: list(_TITLES).index(k) if k in _TITLES else 99)
     fig, axes = figure(2, len(choices), figsize=(5.0 * len(choices), 7.6), squeeze=False)
     for j, choice in enumerate(choices):
@@ -197,36 +200,18 @@ def plot(c: Mapping[str, Mapping[str, np.ndarray]], chance: float) -> Any:
         for method in METHOD_ORDER:
             if method not in methods:
                 continue
-            ls, marker = _STYLES[method]
+            ls, marker, lw = _STYLES[method]
             colour = METHOD_COLOURS.get(method)
+            look = {"ls": ls, "marker": marker, "markevery": marks, "color": colour, "lw": lw}
+            look.update(ms=2 + 1.5 * lw, mfc="none" if lw < 3 else colour)
             mean, low, high = mean_band(methods[method])
-            top.plot(
-                steps,
-                mean,
-                ls=ls,
-                marker=marker,
-                markevery=marks,
-                color=colour,
-                lw=1.8,
-                ms=5,
-                label=method,
-            )
+            top.plot(steps, mean, label=method, **look)
             top.fill_between(
                 steps, np.clip(low, 0, 1), np.clip(high, 0, 1), color=colour, alpha=0.15, lw=0
             )
             if method != "baseline":
                 d_mean, d_low, d_high = mean_band(methods[method] - methods["baseline"])
-                bottom.plot(
-                    steps,
-                    100 * d_mean,
-                    ls=ls,
-                    marker=marker,
-                    markevery=marks,
-                    color=colour,
-                    lw=1.8,
-                    ms=5,
-                    label=f"{method} − baseline",
-                )
+                bottom.plot(steps, 100 * d_mean, label=f"{method} − baseline", **look)
                 bottom.fill_between(
                     steps, 100 * d_low, 100 * d_high, color=colour, alpha=0.15, lw=0
                 )
@@ -251,6 +236,8 @@ def plot(c: Mapping[str, Mapping[str, np.ndarray]], chance: float) -> Any:
         top.set_ylabel("accuracy on held-out trials")
         top.grid(alpha=0.3)
         bottom.axhline(0, color="0.3", lw=1)
+        for ax in (top, bottom):
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         bottom.set_xlabel("observations chosen after one of each new object")
         bottom.set_ylabel("gain over the baseline (pp)")
         bottom.grid(alpha=0.3)
