@@ -512,3 +512,47 @@ def test_leave_one_out_posteriors_match_refitting_without_each_observation():
     loo2 = leave_one_out_posteriors(two, X[:16])
     assert loo2.shape == (16, 2)
     np.testing.assert_allclose(loo2.sum(axis=1), 1.0)
+
+
+def test_one_more_observation_lowers_accuracy_only_below_the_recognisable_amplitude():
+    """The mechanism of unlearning, with fixed kernels (nothing fitted): five objects, one
+    observation each, then a second observation of one of them. At σ² = 1 a classifier cannot
+    recognise a lone observation, its latent function stays a kernel-weighted sum over its
+    observations, and the object observed twice claims the others' test observations: accuracy
+    falls. At the recognisable σ² (one lone observation recognised at 0.95) it does not."""
+    rng = np.random.default_rng(0)
+    change = {1.0: [], recognisable_signal_variance(): []}
+    for _ in range(200):
+        means = rng.normal(0.0, 3.0, size=(5, 2))
+        X1, y1 = means + rng.normal(size=(5, 2)), np.arange(5)
+        X2, y2 = np.vstack([X1, means[0] + rng.normal(size=2)]), np.r_[y1, 0]
+        T, truth = np.repeat(means, 40, axis=0) + rng.normal(size=(200, 2)), np.repeat(y1, 40)
+        for sv, out in change.items():
+            before = LaplaceGPC(3.0, sv, optimize=False).fit(X1, y1).predict(T)
+            after = LaplaceGPC(3.0, sv, optimize=False).fit(X2, y2).predict(T)
+            out.append(np.mean(after == truth) - np.mean(before == truth))
+    small, recognising = (np.array(v) for v in change.values())
+    assert small.mean() < -0.03  # unlearns by 5 pp
+    assert (
+        recognising.mean() > -0.01
+        and abs(recognising.mean()) < 3 * recognising.std() / np.sqrt(200) + 0.01
+    )
+
+
+def test_neither_the_baseline_nor_aptkt_unlearns_on_a_synthetic_world():
+    """The mean learning curve over 24 runs of a synthetic world (3 priors, 5 new objects, two
+    actions) never falls by more than 1 pp from one observation to the next."""
+    curves = {"none": [], "paper": []}
+    for seed in range(24):
+        priors, news, means = make_world(n_prior=3, n_new=5, separation=0.5, seed=seed)
+        prior = PriorKnowledge.build(draw(means, priors, 12, seed=seed), seed=seed)
+        pool = draw(means, news, 8, seed=seed + 100)
+        test = draw(means, news, 10, seed=seed + 200)
+        for transfer, out in curves.items():
+            run = APTKT(LearnerConfig(transfer=transfer, budget=6, seed=seed), prior).run(
+                PoolEnvironment(pool, seed=seed), list(ACTIONS), news, test
+            )
+            out.append(run.curve()["mean_accuracy"])
+    for transfer, runs in curves.items():
+        mean = np.mean(runs, axis=0)
+        assert np.max(-np.diff(mean)) <= 0.01, (transfer, np.round(mean, 3))
