@@ -211,27 +211,25 @@ def test_control_learns_one_kernel_from_the_old_and_new_observations(world):
         assert np.allclose(lrn.model.modality_weights_[0], 1 / len(lengths))
         X, groups = prior.pipeline.transform(lrn.observations)
         X_old = prior.pipeline.transform(prior.observations)[0]
-        again = LaplaceGPC(
-            modalities=groups,
-            n_restarts=0,
-            optimizer_tol=1e-6,
-            hyper_prior=GPSettings().hyper_prior_for_fit(shared=True),
-            fixed=("transfer_lambda", "modality_weights"),
-            kernel="shared",
-            tie_length_scales=True,
-            random_state=lrn.model.random_state,
-        ).fit(X, lrn.observations.objects, kernel_tasks=[(X_old, prior.observations.objects)])
+
+        def shared_kernel():
+            return LaplaceGPC(
+                modalities=groups,
+                n_restarts=0,
+                optimizer_tol=1e-6,
+                hyper_prior=GPSettings().hyper_prior_for_fit(shared=True),
+                fixed=("transfer_lambda", "modality_weights"),
+                kernel="shared",
+                tie_length_scales=True,
+                random_state=lrn.model.random_state,
+            )
+
+        again = shared_kernel().fit(
+            X, lrn.observations.objects, kernel_tasks=[(X_old, prior.observations.objects)]
+        )
         np.testing.assert_allclose(thetas, again.theta_, rtol=1e-9, atol=1e-12)
         # The old task pulls the kernel: alone, the new observations choose another one.
-        alone = LaplaceGPC(
-            modalities=groups,
-            n_restarts=0,
-            optimizer_tol=1e-6,
-            hyper_prior=GPSettings().hyper_prior_for_fit(shared=True),
-            fixed=("transfer_lambda", "modality_weights"),
-            kernel="shared",
-            tie_length_scales=True,
-        ).fit(X, lrn.observations.objects)
+        alone = shared_kernel().fit(X, lrn.observations.objects)
         assert not np.allclose(alone.theta_[0], thetas[0], atol=1e-3)
     assert all(not s.transfer or not any(s.transfer.values()) for s in run.steps)
 

@@ -34,30 +34,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=Path("aptkt-benchmark"),
         help="output directory (default %(default)s)",
     )
-    p.add_argument(
-        "--groups",
-        type=int,
-        default=DEFAULTS["groups"],
-        help="groups of new objects (default %(default)s)",
-    )
-    p.add_argument(
-        "--new",
-        type=int,
-        default=DEFAULTS["new"],
-        help="new objects per group (default %(default)s)",
-    )
-    p.add_argument(
-        "--priors",
-        type=int,
-        default=DEFAULTS["priors"],
-        help="prior objects per group (default %(default)s)",
-    )
-    p.add_argument(
-        "--budget",
-        type=int,
-        default=DEFAULTS["budget"],
-        help="actively chosen observations after the first round (default %(default)s)",
-    )
+    for option, what in (
+        ("groups", "groups of new objects"),
+        ("new", "new objects per group"),
+        ("priors", "prior objects per group"),
+        ("budget", "actively chosen observations after the first round"),
+    ):
+        p.add_argument(
+            f"--{option}", type=int, default=DEFAULTS[option], help=f"{what} (default %(default)s)"
+        )
     p.add_argument(
         "--choices",
         metavar="random,nearest,farthest",
