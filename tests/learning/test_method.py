@@ -212,7 +212,7 @@ def test_control_learns_one_kernel_from_the_old_and_new_observations(world):
         X, groups = prior.pipeline.transform(lrn.observations)
         X_old = prior.pipeline.transform(prior.observations)[0]
 
-        def shared_kernel():
+        def shared_kernel(groups=groups, seed=lrn.model.random_state):
             return LaplaceGPC(
                 modalities=groups,
                 n_restarts=0,
@@ -221,7 +221,7 @@ def test_control_learns_one_kernel_from_the_old_and_new_observations(world):
                 fixed=("transfer_lambda", "modality_weights"),
                 kernel="shared",
                 tie_length_scales=True,
-                random_state=lrn.model.random_state,
+                random_state=seed,
             )
 
         again = shared_kernel().fit(
