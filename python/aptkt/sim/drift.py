@@ -105,7 +105,9 @@ class RecordingDrift:
 
     def __post_init__(self) -> None:
         if not math.isfinite(self.storage) or self.storage < 0:
-            raise ValueError(f"RecordingDrift.storage must be finite and >= 0, got {self.storage!r}")
+            raise ValueError(
+                f"RecordingDrift.storage must be finite and >= 0, got {self.storage!r}"
+            )
         for name in ("trial_period", "object_heat_loss"):
             value = getattr(self, name)
             if not math.isfinite(value) or value <= 0:
@@ -167,9 +169,7 @@ class RecordingDrift:
             room=room_offset + float(room_path[trial]),
             object_lag=_lag(room_path, keep)
             + self.storage * float(stored["t"].standard_normal()) * keep ** (trial + 1),
-            force_offset=tuple(
-                tuple(float(x) for x in row) for row in offsets.reshape(n_cells, 3)
-            ),
+            force_offset=tuple(tuple(float(x) for x in row) for row in offsets.reshape(n_cells, 3)),
             force_gain=float(np.exp(level("force_gain")[0])),
             cover_stiffness=float(np.exp(level("cover_stiffness")[0])),
             coupling=float(np.exp(level("coupling")[0])),

@@ -412,9 +412,7 @@ def _parse_object(table: Mapping[str, Any], source: str, auto_index: int) -> Obj
     size = r.numbers("size", [0.15, 0.15], length=2, lo=0.0, lo_open=True)
     session = r.string("session", role)
     if not _NAME.match(session):
-        raise r.fail(
-            "session", "must be lower case letters, digits and '_' starting with a letter"
-        )
+        raise r.fail("session", "must be lower case letters, digits and '_' starting with a letter")
     spec = ObjectSpec(
         name=name,
         index=index,
