@@ -6,6 +6,11 @@ few times with the real simulator and feature extraction; the feature pipeline i
 prior objects' observations (the prior knowledge's feature space) and the new object's mean
 observation must lie nearest to its designed relative's. The presses' force must also grow with
 depth differently for different objects (soft layers on hard ones lock up).
+
+The relations are properties of the objects, so they are measured without the recording's
+sessions and drift (``RecordingDrift.off()``): in the default world the new objects are recorded
+in another session than the priors, whose room and skin calibration move every new object's
+observations away from the priors' (docs/simulation.md, "Sessions and drift").
 """
 
 from __future__ import annotations
@@ -16,13 +21,13 @@ import pytest
 from aptkt.actions import PAPER_ACTIONS
 from aptkt.learning.extract import observations_from_recordings
 from aptkt.learning.pipeline import FeaturePipeline
-from aptkt.sim import SimWorld
+from aptkt.sim import RecordingDrift, SimWorld
 from aptkt.sim.objects import default_library
 
 pytestmark = pytest.mark.slow
 
 #: Trials per object and action: enough for a stable mean, few enough to stay cheap.
-TRIALS = 2
+TRIALS = 3  # trials 0-2, as the tables of docs/simulation.md
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +35,7 @@ def world_features():
     lib = default_library()
     priors, new = lib.with_role("prior"), lib.with_role("new")
     actions = {"P1", "P2"} | {a for o in new for r in lib[o].relations for a in r.actions}
-    world = SimWorld(lib, seed=0)
+    world = SimWorld(lib, seed=0, drift=RecordingDrift.off())
     out = {}
     for a in sorted(actions):
         objects = priors + [o for o in new if a in {"P1", "P2"} or _uses(lib[o], a)]

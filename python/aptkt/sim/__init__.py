@@ -7,6 +7,7 @@ UR controller with its simulated skin, for the real UR10 backend without an arm
 >>> rec = SimWorld(seed=0).explore("rough_sponge", "P2", trial=0)
 """
 
+from aptkt.sim.drift import RecordingDrift, Wander
 from aptkt.sim.objects import ObjectLibrary, ObjectSpec, default_library, load_library
 from aptkt.sim.robot import SimRobot
 from aptkt.sim.skin_stream import PtySkinLink, SimSkin
@@ -25,4 +26,6 @@ __all__ = [
     "load_library",
     "TrialConditions",
     "TrialVariation",
+    "RecordingDrift",
+    "Wander",
 ]

@@ -135,6 +135,9 @@ class ObjectSpec:
     reflectivity: float = 0.5  # IR reflectivity seen by the proximity sensor, 0..1
     temperature_offset: float = 0.0  # K relative to the room
     variability: float = 0.05  # relative sd of material properties from trial to trial
+    #: The recording session the object's trials belong to (docs/simulation.md, "Sessions and
+    #: drift"): objects of one session share the skin's mounting and the room of that day.
+    session: str = "custom"
     source: str = field(default="", compare=False)
 
     @property
@@ -407,6 +410,9 @@ def _parse_object(table: Mapping[str, Any], source: str, auto_index: int) -> Obj
         rl.finish()
     related += [rel.prior for rel in relations if rel.prior not in related]
     size = r.numbers("size", [0.15, 0.15], length=2, lo=0.0, lo_open=True)
+    session = r.string("session", role)
+    if not _NAME.match(session):
+        raise r.fail("session", "must be lower case letters, digits and '_' starting with a letter")
     spec = ObjectSpec(
         name=name,
         index=index,
@@ -424,6 +430,7 @@ def _parse_object(table: Mapping[str, Any], source: str, auto_index: int) -> Obj
         reflectivity=r.number("reflectivity", 0.5, lo=0.0, hi=1.0),
         temperature_offset=r.number("temperature_offset", 0.0, lo=-30.0, hi=30.0),
         variability=r.number("variability", 0.05, lo=0.0, hi=0.5),
+        session=session,
         source=source,
     )
     r.finish()

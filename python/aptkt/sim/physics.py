@@ -12,6 +12,7 @@ Units: SI inside; frames carry the protocol's physical units (g, °C, normalised
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass
@@ -27,7 +28,13 @@ from aptkt.sim.objects import ObjectSpec, Relaxation
 from aptkt.sim.patch import PatchGeometry, PatchImperfections
 from aptkt.sim.seeding import CounterStream
 from aptkt.sim.texture import StickSlip, texture_field, waviness_waves
-from aptkt.sim.thermal import CONTACT_STEPS, SPEED_STEP, CellThermal, ThermalNetwork
+from aptkt.sim.thermal import (
+    CONTACT_STEPS,
+    SPEED_STEP,
+    CellThermal,
+    ThermalNetwork,
+    interface_level,
+)
 from aptkt.sim.trial import TrialConditions
 
 __all__ = [
@@ -173,19 +180,26 @@ class ContactPhysics:
             waves=waviness_waves(obj),
             size=obj.size,
         )
-        self.texture = texture_field(obj).scaled(conditions.roughness_scale)
+        # The cover's coupling scales everything that reaches the accelerometers through it:
+        # the texture's accelerations (linear in the surface's amplitudes) and the slips' ringing.
+        self.texture = texture_field(obj).scaled(
+            conditions.roughness_scale * conditions.texture_coupling
+        )
         self.mu_k = obj.surface.friction_kinetic * conditions.friction_scale
         self.top_modulus = obj.top.modulus * conditions.modulus_scale
         self.thermal = CellThermal(
             k,
             obj.layers,
-            obj.surface.contact_conductance,
+            obj.surface.contact_conductance * interface_level(conditions.interface_scale),
             conditions.ambient,
             conditions.object_temperature,
             conditions.conductance_scale,
         )
         mu_s = obj.surface.friction_static * conditions.friction_scale
-        self.slip = StickSlip(k, mu_s, self.mu_k, _child(noise_seq, 1), n)
+        slip_constants = dataclasses.replace(
+            k, slip_coupling=k.slip_coupling * conditions.texture_coupling
+        )
+        self.slip = StickSlip(slip_constants, mu_s, self.mu_k, _child(noise_seq, 1), n)
         self._noise = CounterStream(_child(noise_seq, 2), _NOISE_SLOTS)
         self._sensor_xy = geometry.sensor_positions  # (C, 3, 2)
         self._centres = geometry.cell_centres  # (C, 2)
@@ -204,6 +218,11 @@ class ContactPhysics:
             raise ValueError(
                 f"trial conditions are for {self._gain_drift.size} cells, the patch has {n}"
             )
+        #: The sensors' zero-load readings in this trial: the patch's own, moved by the zero's
+        #: drift (a force error in N, read through each sensor's true gain).
+        self._offset = np.asarray(imperfections.force_offset, dtype=np.float64)[:n] + np.asarray(
+            conditions.force_offset, dtype=np.float64
+        ).reshape(n, 3) / (np.asarray(imperfections.force_gain)[:n] / self._gain_drift[:, None])
         #: How the skin's accelerometers respond to this object's texture (the compiled core's
         #: settings; also what ``aptkt._core.sim_texture`` takes).
         self.texture_response = _core.TextureResponse(
@@ -247,7 +266,7 @@ class ContactPhysics:
             _core.ForceSensors(
                 (int(self._noise.key[0]), int(self._noise.key[1])),
                 (imp.force_gain / self._gain_drift[:, None]).tolist(),
-                np.asarray(imp.force_offset, dtype=np.float64).tolist(),
+                self._offset.tolist(),
                 float(k.force_noise),
                 self._latency_ns,
                 float(k.link_jitter),
@@ -372,7 +391,7 @@ class ContactPhysics:
         """Normalised force readings (offset + (F + noise) / gain) of the sensors of ``cells``."""
         imp = self.imp
         gain = imp.force_gain[cells] / self._gain_drift[cells][:, None]
-        return imp.force_offset[cells] + (f_true + self.k.force_noise * noise[:, 0:3]) / gain
+        return self._offset[cells] + (f_true + self.k.force_noise * noise[:, 0:3]) / gain
 
     def force_readings(self, chunk: MechChunk) -> tuple[np.ndarray, np.ndarray]:
         """Arrival times and normalised force readings (n, 3) of every sample of ``chunk``: the

@@ -36,6 +36,8 @@ __all__ = [
     "CellThermal",
     "contact_bins",
     "speed_bins",
+    "interface_level",
+    "INTERFACE_LEVELS_PER_OCTAVE",
     "thermal_network",
 ]
 
@@ -46,6 +48,10 @@ TABLE_LAYER = Layer("table top (wood)", 0.03, 1e9, 1.0, 0.15, 1.0e6)
 CONTACT_STEPS = 20
 #: Sliding speeds are quantised to this step (m/s) for the same reason.
 SPEED_STEP = 0.002
+
+#: A trial's interface conductance is quantised to this many levels per factor of two, so that
+#: an object's trials share a few networks (each decomposed once per configuration it meets).
+INTERFACE_LEVELS_PER_OCTAVE = 8
 
 _SKIN_NODES = 4  # LM71, PCB, inner cover, outer cover
 _FIRST_NODE = 40e-6  # m, thickness of the first object node of every layer
@@ -193,12 +199,21 @@ class ThermalNetwork:
         return sys_
 
 
-@functools.lru_cache(maxsize=64)
+# An object meets a dozen interface levels (interface_level), each its own network.
+@functools.lru_cache(maxsize=512)
 def thermal_network(
     constants: SkinConstants, layers: tuple[Layer, ...], contact_conductance: float
 ) -> ThermalNetwork:
     """The (cached) network of an object: built once per process, shared by all its trials."""
     return ThermalNetwork(constants, layers, contact_conductance)
+
+
+def interface_level(scale: float) -> float:
+    """``scale`` rounded to the nearest of the levels 2^(i / INTERFACE_LEVELS_PER_OCTAVE)."""
+    if not scale > 0 or not math.isfinite(scale):
+        raise ValueError(f"an interface scale must be finite and > 0, got {scale!r}")
+    steps = round(math.log2(scale) * INTERFACE_LEVELS_PER_OCTAVE)
+    return float(2.0 ** (steps / INTERFACE_LEVELS_PER_OCTAVE))
 
 
 def speed_bins(speed: np.ndarray) -> np.ndarray:

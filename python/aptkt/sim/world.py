@@ -22,6 +22,7 @@ import numpy as np
 
 from aptkt.actions import PAPER_ACTIONS, ExplorationSettings, ExploratoryAction, Movement, explore
 from aptkt.robot.base import Placement, SafetyLimits
+from aptkt.sim.drift import RecordingDrift
 from aptkt.sim.engine import FastDriver, RealTimeDriver, SimEngine
 from aptkt.sim.objects import ObjectLibrary, ObjectSpec, default_library
 from aptkt.sim.patch import DEFAULT_CELL_IDS, PatchGeometry, PatchImperfections, SkinConstants
@@ -58,7 +59,10 @@ class SimWorld:
 
     ``seed`` keys every trial; ``patch_seed`` fixes the patch's own imperfections (its
     calibration errors, crooked cells, clocks), so two worlds with different seeds share the
-    same skin, as two data sets recorded with one robot do. ``layout`` takes the cell ids and
+    same skin, as two data sets recorded with one robot do. ``drift`` describes how the skin
+    and the room change while a data set is recorded: between sessions (each object's
+    ``session``) and over a run of trials (trial ``t`` of an object and action is the run's
+    ``t``-th); :meth:`RecordingDrift.off` gives independent trials around a fixed skin. ``layout`` takes the cell ids and
     positions from a skin patch file; the force calibration is always the simulated patch's
     own (:attr:`patch`, the one to give a skin source reading this world).
     """
@@ -75,12 +79,14 @@ class SimWorld:
         cell_ids: tuple[int, ...] = DEFAULT_CELL_IDS,
         layout: PatchConfig | None = None,
         settings: ExplorationSettings | None = None,
+        drift: RecordingDrift | None = None,
     ):
         if not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
         self.objects = objects if objects is not None else default_library()
         self.seed = int(seed)
         self.variation = variation or TrialVariation()
+        self.drift = drift if drift is not None else RecordingDrift()
         self.limits = limits or SafetyLimits()
         if layout is not None:  # cell ids and positions from a skin patch file
             self.geometry = PatchGeometry.from_patch(
@@ -145,6 +151,7 @@ class SimWorld:
             self.variation,
             trial_seed_sequence(self.seed, obj.name, action_name, trial),
             self.geometry.n_cells,
+            self.drift.at(self.seed, obj, action_name, trial, self.geometry.n_cells),
         )
 
     def _action(self, action: ExploratoryAction | str) -> ExploratoryAction:
@@ -175,7 +182,7 @@ class SimWorld:
         """
         obj = self.objects[object_name]
         seq = trial_seed_sequence(self.seed, obj.name, action_name, trial)
-        cond = TrialConditions.draw(obj, self.variation, seq, self.geometry.n_cells)
+        cond = self.conditions(obj.name, action_name, trial)
         noise = np.random.SeedSequence(
             seq.entropy, spawn_key=(*seq.spawn_key, *stable_words("noise"))
         )
@@ -240,6 +247,7 @@ class SimWorld:
             "seed": self.seed,
             "object_index": obj.index,
             "object_role": obj.role,
+            "session": obj.session,
             "conditions": cond.to_dict(),
         }
 
