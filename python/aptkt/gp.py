@@ -45,6 +45,8 @@ __all__ = [
     "KernelNotPositiveDefiniteError",
     "LATENT_MEANS",
     "LaplaceGPC",
+    "MAX_ITERATIONS",
+    "MAX_RESTARTS",
     "TransferSource",
     "check_optimizer_tol",
     "kernel_matrix",
@@ -71,6 +73,12 @@ class FitDefaults:
 
 DEFAULTS = FitDefaults()
 CLASS_PRIORS = ("training", "uniform")
+#: Optimiser starts a fit may add to the first (``n_restarts``): each is a whole optimisation
+#: (the defaults make one more), and the starts are held in memory together.
+MAX_RESTARTS = 1000
+#: Iterations of the optimiser (``max_iter``) and of the search for the mode
+#: (``newton_max_iter``).
+MAX_ITERATIONS = 1_000_000
 LATENT_MEANS = ("zero", "base-rate")
 
 #: Parameters a saved model leaves out at their default (added after the format was fixed).
@@ -419,24 +427,44 @@ def _validate(estimator: BaseEstimator, X: Any, y: Any = _NO_TARGET, *, reset: b
 
 def _threads(n_jobs: Any) -> int:
     """Threads for ``n_jobs`` by joblib's convention: None -> 1, -1 -> every core, -2 -> all
-    but one, and so on."""
+    but one, and so on; never more than the machine's cores (more threads only share them, and
+    each one costs memory: a huge ``n_jobs`` once started threads without end)."""
     if n_jobs is None:
         return 1
     if isinstance(n_jobs, bool) or not isinstance(n_jobs, (int, np.integer)) or n_jobs == 0:
         raise ValueError(f"n_jobs must be None or a non-zero integer, got {n_jobs!r}")
+    cores = os.cpu_count() or 1
     if n_jobs > 0:
-        return int(n_jobs)
-    return max(1, (os.cpu_count() or 1) + 1 + int(n_jobs))
+        return min(int(n_jobs), cores)
+    return max(1, cores + 1 + int(n_jobs))
+
+
+def _real(value: Any, name: str, *, positive: bool = False) -> float:
+    """A setting that must be a finite real number (not a bool), > 0 or >= 0."""
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float, np.integer, np.floating))
+        or not np.isfinite(value)
+        or not (value > 0 if positive else value >= 0)
+    ):
+        raise ValueError(
+            f"{name} must be a finite number {'>' if positive else '>='} 0, got {value!r}"
+        )
+    return float(value)
+
+
+def _count(value: Any, name: str, maximum: int) -> int:
+    """A setting that must be an integer (not a bool) in ``0..maximum``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+        raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
+    if value > maximum:
+        raise ValueError(f"{name} must be at most {maximum}, got {value}")
+    return int(value)
 
 
 def check_optimizer_tol(value: Any) -> None:
     """The optimiser's relative tolerance must be a finite real number >= 0 (not a bool)."""
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, (int, float, np.number))
-        or not (np.isfinite(value) and value >= 0)
-    ):
-        raise ValueError(f"optimizer_tol must be a finite number >= 0, got {value!r}")
+    _real(value, "optimizer_tol")
 
 
 def _seed(random_state: Any) -> int:
@@ -477,7 +505,8 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
     n_restarts : int
         Starts besides the initial hyper-parameters (default 1): the first is scaled to the
         data (median pairwise distance per modality; random around it when the initial
-        length-scale is already "auto"), the others are random around that scale.
+        length-scale is already "auto"), the others are random around that scale. At most
+        :data:`MAX_RESTARTS`.
     fixed : iterable of str
         Hyper-parameters held at their initial values, among ``"signal_variance"``,
         ``"length_scale"``, ``"modality_weights"``, ``"transfer_lambda"``. By default λ is fixed
@@ -485,7 +514,8 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
     random_state : None, int or numpy Generator
         Seeds the random starts; the fit is deterministic for a given value.
     max_iter : int
-        Iterations of the quasi-Newton optimiser per start (default 100).
+        Iterations of the quasi-Newton optimiser per start (default 100; at most
+        :data:`MAX_ITERATIONS`).
     optimizer_tol : float
         The optimiser stops when an iteration lowers the negative log marginal likelihood (or
         posterior) by less than this fraction of its value; default 1e7·eps ≈ 2.2e-9, the
@@ -494,7 +524,9 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
     length_scale_bounds, signal_variance_bounds : (float, float)
         Box constraints of the optimiser.
     newton_max_iter, newton_tol : int, float
-        Newton mode-finding limits (Algorithm 3.1).
+        Newton mode-finding limits (Algorithm 3.1): at most :data:`MAX_ITERATIONS`, and a
+        finite tolerance >= 0. Every numeric setting is checked when ``fit`` starts: NaN,
+        infinity, a bool or a value out of range is a :class:`ValueError` naming it.
     max_jitter : float
         If a kernel cannot be factorised, jitter of 1e-10, 1e-8, ... times the signal variance
         is added to its diagonal up to this bound, then
@@ -504,7 +536,11 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         ~1e-5) or Gauss-Legendre quadrature of the exact integrand (error < 1e-9).
     n_jobs : int, optional
         Threads for the per-class fits, by joblib's convention: None (default) one, -1 every
-        core, -2 all but one, ...
+        core, -2 all but one, ...; never more than the machine's cores.
+
+    A fit whose n x n matrices would not fit in the memory available raises
+    :class:`~aptkt.errors.ProblemTooLargeError` naming the rows and the bytes needed, before
+    allocating them.
     hyper_prior : None, "weak" or HyperPrior
         None: plain ML-II (maximise the log marginal likelihood). Otherwise MAP-II with the
         given weak log-normal hyper-priors (see :class:`HyperPrior`).
@@ -655,9 +691,11 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         if self.modality_weights is None:
             weights = [1.0 / m] * m
         else:
-            weights = [float(w) for w in self.modality_weights]
+            weights = [_real(w, "modality_weights") for w in self.modality_weights]
             if len(weights) != m:
                 raise ValueError(f"modality_weights has {len(weights)} values for {m} modalities")
+            if sum(weights) <= 0:
+                raise ValueError(f"modality_weights must have a positive sum, got {weights}")
         fixed = set(self.fixed)
         unknown = fixed - set(_FIXABLE)
         if unknown:
@@ -671,21 +709,33 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             raise ValueError(
                 f"approximation must be one of {_APPROXIMATIONS}, got {self.approximation!r}"
             )
+        # Every number is checked here, before the core sees it: NaN, infinity or a bool
+        # would otherwise pass as a tolerance or a count and surface as a fit that never ends.
         check_optimizer_tol(self.optimizer_tol)
-        for name in ("n_restarts", "max_iter", "newton_max_iter"):
-            value = getattr(self, name)
-            if not isinstance(value, (int, np.integer)) or value < 0:
-                raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
+        _real(self.newton_tol, "newton_tol")
+        _real(self.max_jitter, "max_jitter")
+        _count(self.n_restarts, "n_restarts", MAX_RESTARTS)
+        _count(self.max_iter, "max_iter", MAX_ITERATIONS)
+        _count(self.newton_max_iter, "newton_max_iter", MAX_ITERATIONS)
         _threads(self.n_jobs)  # checks the value
+        bounds = {}
+        for name in ("signal_variance_bounds", "length_scale_bounds"):
+            value = getattr(self, name)
+            if isinstance(value, (str, bytes)) or np.ndim(value) != 1 or len(value) != 2:
+                raise ValueError(f"{name} must be a pair (low, high), got {value!r}")
+            lo, hi = (_real(v, name, positive=True) for v in value)
+            if not lo < hi:
+                raise ValueError(f"{name} must satisfy low < high, got {value!r}")
+            bounds[name] = (lo, hi)
         return {
             "modality_names": names,
             "modalities": groups,
-            "signal_variance": float(self.signal_variance),
+            "signal_variance": _real(self.signal_variance, "signal_variance", positive=True),
             "length_scales": length_scales,
             "weights": weights,
             "free": {k: k not in fixed for k in _FIXABLE},
-            "signal_variance_bounds": tuple(float(v) for v in self.signal_variance_bounds),
-            "length_scale_bounds": tuple(float(v) for v in self.length_scale_bounds),
+            "signal_variance_bounds": bounds["signal_variance_bounds"],
+            "length_scale_bounds": bounds["length_scale_bounds"],
             "hyper_prior": HyperPrior.resolve(self.hyper_prior),
         }
 
