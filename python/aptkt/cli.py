@@ -62,7 +62,9 @@ def _missing_dirs(args: argparse.Namespace) -> list[Path]:
             continue
         path = Path(value).absolute()
         for p in (path, *path.parents):
-            if p.exists() or os.path.lexists(p):
+            # (os.path: a name the system refuses, too long say, is an error for the command's
+            # own checks to report, not a traceback here.)
+            if os.path.lexists(p):
                 break
             missing.append(p)
     return sorted(set(missing), key=lambda p: len(p.parts), reverse=True)

@@ -192,6 +192,123 @@ MISTAKES = [
         "--resume and --overwrite",
     ),
     (["skin", "monitor"], "PORT"),
+    # names the file system refuses, values without bound: before any file is created
+    (["dataset", "generate", "-o", "{d}/" + "a" * 300 + ".h5", *DATA_GEN], "is too long"),
+    (["collect", *SIM, "--objects", "towel", "-n", "1", "-o", "{d}/" + "c" * 250], "too long"),
+    (["reproduce", "fig7", "--quick", "-o", "{d}/new/" + "r" * 300], "is too long"),
+    (["dataset", "info", "{d}/" + "i" * 300 + ".h5"], "is too long"),
+    (
+        ["reproduce", "fig7", "--quick", "--scheduler", "notaurl", "-o", "{d}/new/r"],
+        "not a scheduler address",
+    ),
+    (
+        [
+            "collect",
+            *SIM,
+            "--objects",
+            "towel",
+            "-n",
+            "1",
+            "-o",
+            "{d}/new/c.h5",
+            "--thermal-wait",
+            "inf",
+        ],
+        "--thermal-wait must be at most 3600",
+    ),
+    (
+        [
+            "collect",
+            *SIM,
+            "--objects",
+            "towel",
+            "-n",
+            "1",
+            "-o",
+            "{d}/new/c.h5",
+            "--thermal-wait",
+            "nan",
+        ],
+        "--thermal-wait",
+    ),
+    (
+        [
+            "collect",
+            "--robot",
+            "ur10",
+            "--workspace",
+            "{d}/p.npz",
+            "--skin",
+            "/dev/null",
+            "--objects",
+            "towel",
+            "-n",
+            "1",
+            "-o",
+            "{d}/new/c.h5",
+        ],
+        "not a workspace file",
+    ),  # fmt: skip
+    (
+        [
+            "collect",
+            *SIM,
+            "--objects",
+            "towel",
+            "-n",
+            "1",
+            "--actions-file",
+            "{d}/p.npz",
+            "-o",
+            "{d}/new/c.h5",
+        ],
+        "not an actions file",
+    ),
+    (
+        ["dataset", "generate", "-o", "{d}/new/s.h5", "--objects-file", "{d}/p.npz", *DATA_GEN],
+        "not an object library",
+    ),
+    (
+        ["dataset", "generate", "-o", "{d}/new/s.h5", "-n", "100000000", "--no-progress"],
+        "= 10500000000 trials, more than the 100000",
+    ),
+    (
+        ["collect", *SIM, "--objects", "towel", "-n", "200000", "-o", "{d}/new/c.h5"],
+        "more than the 100000",
+    ),
+    (
+        ["dataset", "generate", "-o", "{d}/new/s.h5", "--first-trial", "3000000000", *DATA_GEN],
+        "32-bit",
+    ),
+    (
+        ["dataset", "generate", "-o", "{d}/new/s.h5", "-j", "100000", *DATA_GEN],
+        "--jobs must be at most",
+    ),
+    (["dataset", "features", "{d}/d.h5", "-j", "100000"], "--jobs must be at most"),
+    (["reproduce", "fig6", "--quick", "-j", "100000", "-o", "{d}/new/r"], "--jobs must be at most"),
+    (
+        ["demo", "--quick", "--trials", "1000000000", "-o", "{d}/new/demo"],
+        "--trials must be at most",
+    ),
+    (
+        ["prior", "build", "{d}/d.h5", "-o", "{d}/new/r.npz", "--restarts", "1000000000"],
+        "--restarts must be at most 1000",
+    ),
+    (
+        [
+            "learn",
+            *SIM,
+            "--prior",
+            "{d}/p.npz",
+            "--objects",
+            "towel,cork_board",
+            "--budget",
+            "1000000000",
+            "-o",
+            "{d}/new/l",
+        ],
+        "--budget must be at most",
+    ),  # fmt: skip
     # the method's alternatives: an unreadable margin, a combination the learner refuses
     (
         [

@@ -9,9 +9,11 @@ import sys
 from aptkt.commands._checks import (
     at_least,
     input_file,
+    jobs,
     output_file,
     resume_or_overwrite,
     rewritable_file,
+    trial_plan,
 )
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
@@ -134,6 +136,8 @@ def build_plan(args: argparse.Namespace):  # -> GenerationPlan
 
     at_least(args.seed, 0, "--seed")
     at_least(args.first_trial, 0, "--first-trial")
+    at_least(args.repetitions, 1, "--repetitions")
+    jobs(args.jobs)
     resume_or_overwrite(args.resume, args.overwrite)
     output_file(args.output)
     library = load_library(*args.objects_file)
@@ -156,10 +160,7 @@ def build_plan(args: argparse.Namespace):  # -> GenerationPlan
         raise ConfigError(
             f"--actions: unknown action(s) {', '.join(unknown)}; known: {', '.join(available)}"
         )
-    if args.repetitions < 1:
-        raise ConfigError("--repetitions must be >= 1")
-    if args.jobs < 1:
-        raise ConfigError("--jobs must be >= 1")
+    trial_plan(len(objects), len(names), args.repetitions, args.first_trial)
     return GenerationPlan(
         tuple(objects),
         tuple(available[a] for a in names),
@@ -241,8 +242,7 @@ def run_features(args: argparse.Namespace) -> int:
     from aptkt.learning.dataset import extract_features
 
     rewritable_file(args.file)
-    if args.jobs < 1:
-        raise ConfigError("--jobs must be >= 1")
+    jobs(args.jobs)
     executor = LocalExecutor(args.jobs)
     try:
         counts = extract_features(

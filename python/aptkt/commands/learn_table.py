@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from aptkt.commands._checks import MAX_BUDGET, MAX_RUNS, at_most
 from aptkt.commands._method import gp_options, method_options
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
@@ -90,6 +91,9 @@ def run(args: argparse.Namespace) -> int:
     runs = DEFAULT_RUNS if args.runs is None else args.runs
     if runs < 1:
         raise ConfigError("--runs must be >= 1")
+    at_most(runs, MAX_RUNS, "--runs")
+    at_most(args.budget, MAX_BUDGET, "--budget")
+    at_most(args.patience, MAX_BUDGET, "--patience")
     eps_neg = LearnerConfig.eps_neg if args.eps_neg is None else args.eps_neg
     method = method_options(args)
     gp = gp_options(args)
