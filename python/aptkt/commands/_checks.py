@@ -177,6 +177,22 @@ def input_file(path: str | Path, option: str) -> Path:
     return path
 
 
+def intact_data_set(path: str | Path, option: str) -> None:
+    """A data set file that is not cut short, or whose shortened end damaged nothing: bytes
+    past the end of a file read as zeros, and a command must not learn from those. (Damage in
+    the middle of a file is found when the damaged recording or feature is read.)"""
+    from aptkt.data.store import DatasetReader
+
+    with DatasetReader(path) as rd:
+        problem = rd.damage() if rd.cut_short else None
+    if problem:
+        where = f"{option} {path}" if option.startswith("-") else str(path)
+        raise ConfigError(
+            f"{where}: damaged (the file is cut short): {problem}; 'aptkt dataset repair "
+            f"{path}' keeps every readable recording"
+        )
+
+
 def resume_or_overwrite(resume: bool, overwrite: bool) -> None:
     if resume and overwrite:
         raise ConfigError(

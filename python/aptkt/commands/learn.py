@@ -12,6 +12,7 @@ from aptkt.commands._checks import (
     at_least,
     at_most,
     input_file,
+    intact_data_set,
     output_dir,
     output_file,
 )
@@ -185,6 +186,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(str(exc)) from None
     test = None
     if args.test:
+        input_file(args.test, "--test")
+        intact_data_set(args.test, "--test")
         test = _load_test(args.test, names, objects)
     session = make_session(args, seed=args.seed)
     session.check_objects(objects)

@@ -8,7 +8,7 @@ import os
 import sys
 from pathlib import Path
 
-from aptkt.commands._checks import at_least, at_most, input_file, output_file
+from aptkt.commands._checks import at_least, at_most, input_file, intact_data_set, output_file
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
 from aptkt.gp import MAX_RESTARTS
@@ -86,6 +86,7 @@ def run_build(args: argparse.Namespace) -> int:
     if not os.path.exists(args.data):  # (os.path: a name too long to exist is an answer too)
         raise ConfigError(f"{args.data}: no such data set")
     input_file(args.data, "DATA")
+    intact_data_set(args.data, "DATA")
     at_least(args.seed, 0, "--seed")
     at_least(args.restarts, 0, "--restarts")
     at_most(args.restarts, MAX_RESTARTS, "--restarts", "restarts bound every model's fit")

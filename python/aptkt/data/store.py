@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import ctypes
 import functools
+import io
 import json
 import os
 import shutil
@@ -38,6 +39,8 @@ import h5py
 import numpy as np
 
 from aptkt import __version__
+from aptkt.data import atomic
+from aptkt.data.integrity import first_row_beyond
 from aptkt.data.schema import (
     INDEX_DTYPE,
     READABLE_VERSIONS,
@@ -442,6 +445,9 @@ class DatasetWriter:
         self.path = Path(path)
         if mode not in ("w", "a"):
             raise ValueError("mode must be 'w' or 'a'")
+        if mode == "a" and atomic.holds_nothing(self.path):
+            # Left by a writer killed as it created the file: nothing to append to.
+            mode, overwrite = "w", True
         if mode == "a" and self.path.exists():
             try:
                 self._f = _while_locked(lambda: h5py.File(self.path, "a", libver="latest"))
@@ -459,46 +465,14 @@ class DatasetWriter:
                     f"{self.path} exists (use overwrite=True / --overwrite, or append)"
                 )
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._f = _while_locked(
-                lambda: h5py.File(self.path, "w", libver="latest", track_order=False)
-            )
-            f = self._f
-            f.attrs["schema"] = SCHEMA
-            f.attrs["schema_version"] = SCHEMA_VERSION
-            f.attrs["software_version"] = __version__
-            f.attrs["description"] = json.dumps(
-                dict(description or {}), sort_keys=True, default=_json_default
-            )
-            g = f.create_group("recordings")
-            g.create_dataset(
-                "index",
-                shape=(0,),
-                maxshape=(None,),
-                dtype=INDEX_DTYPE,
-                chunks=(256,),
-                track_times=False,
-            )
-            g.create_dataset(
-                "metadata",
-                shape=(0,),
-                maxshape=(None,),
-                dtype=np.uint8,
-                chunks=(_META_CHUNK_BYTES,),
-                track_times=False,
-                **_COMPRESSION,
-            )
-            s = g.create_group("samples")
-            for name, (tail, dtype) in SAMPLE_FIELDS.items():
-                s.create_dataset(
-                    name,
-                    shape=(0, *tail),
-                    maxshape=(None, *tail),
-                    dtype=dtype,
-                    chunks=(_CHUNK_ROWS, *tail),
-                    track_times=False,
-                    **_COMPRESSION,
-                )
-            f.flush()
+
+            def build(tmp: Path) -> None:
+                with h5py.File(tmp, "w", libver="latest", track_order=False) as f:
+                    _create_structure(f, description)
+
+            # Whole or not at all: a kill while HDF5 creates a file left 48 bytes nothing reads.
+            atomic.create(self.path, build)
+            self._f = _while_locked(lambda: h5py.File(self.path, "a", libver="latest"))
         try:
             _while_locked(self._start_swmr)
         except RuntimeError as exc:
@@ -599,6 +573,46 @@ class DatasetWriter:
             self._f.close()
 
 
+def _create_structure(f: h5py.File, description: Mapping[str, Any] | None) -> None:
+    """An empty data set in ``f``: its attributes and every dataset, created before the first
+    recording (SWMR mode creates no datasets)."""
+    f.attrs["schema"] = SCHEMA
+    f.attrs["schema_version"] = SCHEMA_VERSION
+    f.attrs["software_version"] = __version__
+    f.attrs["description"] = json.dumps(
+        dict(description or {}), sort_keys=True, default=_json_default
+    )
+    g = f.create_group("recordings")
+    g.create_dataset(
+        "index",
+        shape=(0,),
+        maxshape=(None,),
+        dtype=INDEX_DTYPE,
+        chunks=(256,),
+        track_times=False,
+    )
+    g.create_dataset(
+        "metadata",
+        shape=(0,),
+        maxshape=(None,),
+        dtype=np.uint8,
+        chunks=(_META_CHUNK_BYTES,),
+        track_times=False,
+        **_COMPRESSION,
+    )
+    s = g.create_group("samples")
+    for name, (tail, dtype) in SAMPLE_FIELDS.items():
+        s.create_dataset(
+            name,
+            shape=(0, *tail),
+            maxshape=(None, *tail),
+            dtype=dtype,
+            chunks=(_CHUNK_ROWS, *tail),
+            track_times=False,
+            **_COMPRESSION,
+        )
+
+
 def _next_chunk_start(length: int, chunk: int) -> int:
     return -(-int(length) // chunk) * chunk
 
@@ -633,26 +647,43 @@ class DatasetReader:
             raise DatasetError(f"{self.path}: no such file")
         #: The file's writer died outside SWMR mode: it is read through a private copy.
         self.writer_died = False
+        #: The file holds nothing: its writer was killed as it created it (an aptkt that
+        #: created files in place). Read as an empty data set; a writer starts it afresh.
+        self.holds_nothing = atomic.holds_nothing(self.path)
         self._copy: Path | None = None
         self._damaged: list[int] | None = None
-        try:
-            self._f = _while_locked(lambda: _open_swmr_read(self.path))
-        except OSError as exc:
-            if not _refused_for_writer_mark(exc):
-                raise DatasetError(f"{self.path}: not a readable HDF5 data set: {exc}") from exc
-            self._f = self._open_private_copy()
+        if self.holds_nothing:
+            self._f = h5py.File(io.BytesIO(), "w", libver="latest")
+            _create_structure(self._f, None)
+        else:
+            try:
+                self._f = _while_locked(lambda: _open_swmr_read(self.path))
+            except OSError as exc:
+                if not _refused_for_writer_mark(exc):
+                    raise DatasetError(f"{self.path}: not a readable HDF5 data set: {exc}") from exc
+                self._f = self._open_private_copy()
+        #: The file is shorter than the end HDF5 recorded in it: bytes past its end read as
+        #: zeros, so what lies there is checked before it is used.
+        self.cut_short = _cut_short(self.path)
         try:
             self.version = _check_schema(self._f, self.path)
             self._meta = self._f["recordings/metadata"]
             self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
             # A snapshot: recordings appended after opening are not seen (reopen to see them).
             index = _readable_prefix(self._f["recordings/index"])
+            beyond = self._beyond(self._f["recordings/index"])
         except (OSError, KeyError) as exc:
             self.close()
             raise DatasetError(
                 f"{self.path}: damaged: the file's structure cannot be read ({exc}); "
                 "no recording can be recovered from it"
             ) from exc
+        #: Index rows past the end of a file cut short (they read as zeros): recordings whose
+        #: very names are lost, left out.
+        self.lost = 0
+        if beyond is not None and beyond < len(index):
+            self.lost = len(index) - beyond
+            index = index[:beyond]
         self.index = index[: self._complete(index)]
         #: Index rows of an append that was cut short (a writer killed mid-append, or one
         #: still running), left out: 0 or 1.
@@ -660,8 +691,15 @@ class DatasetReader:
         # counted: it can only hold that same in-flight row.)
         self.incomplete = len(index) - len(self.index)
 
+    def _beyond(self, ds: h5py.Dataset) -> int | None:
+        """The first row of ``ds`` past the end of this file, if it is cut short."""
+        if not self.cut_short or self.holds_nothing:
+            return None
+        return first_row_beyond(ds, self.path.stat().st_size)
+
     def _open_private_copy(self) -> h5py.File:
-        fd, name = tempfile.mkstemp(prefix=f"{self.path.name}.", suffix=".reading")
+        # (The name cut: a name near the file system's limit would not take the suffixes.)
+        fd, name = tempfile.mkstemp(prefix=f"{self.path.name[:100]}.", suffix=".reading")
         os.close(fd)
         self._copy = Path(name)
         try:
@@ -694,7 +732,7 @@ class DatasetReader:
             self._read_metadata(last, n - 1)
             for ds in self._samples.values():
                 ds[int(last["row_start"]) : int(last["row_stop"])]
-        except (OSError, ValueError):  # data past the end of the file, or torn metadata
+        except (OSError, ValueError, DatasetError):  # past the end of the file, or torn
             return n - 1
         return n
 
@@ -703,7 +741,27 @@ class DatasetReader:
             raw = self._meta[int(row["meta_start"]) : int(row["meta_stop"])].tobytes()
         else:
             raw = self._meta[i]
-        return json.loads(raw.decode("utf-8") if isinstance(raw, bytes) else raw)
+        try:
+            meta = json.loads(raw.decode("utf-8") if isinstance(raw, bytes) else raw)
+        except ValueError as exc:  # not UTF-8, or not JSON: bytes changed on disk
+            raise DatasetError(
+                f"{self.path}: recording {i} ({self._name(row)}) is damaged: its metadata is "
+                f"not valid JSON ({exc}); 'aptkt dataset repair {self.path}' keeps the "
+                "readable recordings"
+            ) from None
+        if not isinstance(meta, dict):
+            raise DatasetError(
+                f"{self.path}: recording {i} ({self._name(row)}) is damaged: its metadata is "
+                f"not a JSON object; 'aptkt dataset repair {self.path}' keeps the readable ones"
+            )
+        return meta
+
+    @staticmethod
+    def _name(row: np.void) -> str:
+        def text(b: bytes) -> str:
+            return b.decode("utf-8", errors="replace")
+
+        return f"{text(row['object'])}/{text(row['action'])}/trial {int(row['trial'])}"
 
     def __enter__(self) -> DatasetReader:
         return self
@@ -731,7 +789,12 @@ class DatasetReader:
 
     def key(self, i: int) -> tuple[str, str, int]:
         r = self.index[i]
-        return r["object"].decode(), r["action"].decode(), int(r["trial"])
+        # (errors="replace": a damaged row must still be nameable in the error that names it.)
+        return (
+            r["object"].decode("utf-8", errors="replace"),
+            r["action"].decode("utf-8", errors="replace"),
+            int(r["trial"]),
+        )
 
     def keys(self) -> list[tuple[str, str, int]]:
         return [self.key(i) for i in range(len(self))]
@@ -775,11 +838,70 @@ class DatasetReader:
             yield self.recording(i)
 
     def features(self, action: str, modality: str) -> tuple[np.ndarray, np.ndarray]:
-        """``(recording numbers, values)`` of stored features; KeyError if there are none."""
-        g = self._f.get(f"features/{action}")
-        if g is None or modality not in g:
+        """``(recording numbers, values)`` of stored features; KeyError if there are none,
+        :class:`DatasetError` naming the recording if they are damaged (past the end of a file
+        cut short, or failing their checksum)."""
+        try:
+            g = self._f.get(f"features/{action}")
+            stored = g is not None and modality in g
+        except (KeyError, OSError) as exc:  # a group header past the end of the file
+            raise DatasetError(
+                f"{self.path}: the stored features of {action} are damaged (their structure "
+                f"cannot be read: {exc}); run 'aptkt dataset repair {self.path}', then "
+                "extract the features again"
+            ) from None
+        if not stored:
             raise KeyError(f"no stored {modality!r} features for action {action!r}")
+        problem = self._feature_damage(action, modality, read=True)
+        if problem is not None:
+            raise DatasetError(
+                f"{self.path}: the stored {modality} features of {action} are damaged "
+                f"({problem}); run 'aptkt dataset repair {self.path}' (it keeps the readable "
+                "recordings, not the features), then extract the features again"
+            )
         return g["recording"][...], g[modality][...]
+
+    def _feature_damage(self, action: str, modality: str, *, read: bool) -> str | None:
+        """What is wrong with the stored features of ``action`` / ``modality`` (None: nothing
+        found). Their position against the end of the file is always checked; with ``read``
+        they are read too (checksums, when they were stored with them)."""
+        every = f"those of every {action} recording"
+        try:
+            g = self._f[f"features/{action}"]
+            recs, values = g["recording"], g[modality]
+        except (KeyError, OSError) as exc:  # a header past the end of the file, or changed
+            return f"their structure cannot be read ({exc}): {every}"
+        try:
+            for ds in (recs, values):
+                row = self._beyond(ds)
+                if row is not None:
+                    where = f"from row {row} on"
+                    if ds is values and self._beyond(recs) is None:
+                        i = int(recs[row])
+                        if 0 <= i < len(self):
+                            where = f"from recording {i} ({self._name(self.index[i])}) on"
+                    elif ds is recs:
+                        where = every
+                    return f"the file ends before them: {where}"
+            if read:
+                recs[...]
+                values[...]
+        except (OSError, ValueError, IndexError) as exc:  # a checksum, or an unreadable chunk
+            return f"they cannot be read ({exc}): {every}"
+        return None
+
+    def damaged_features(self, *, full: bool = False) -> list[str]:
+        """``action/modality: problem`` of every damaged stored feature matrix: those past the
+        end of a file cut short; with ``full`` also those failing their checksum."""
+        out = []
+        for action, modalities in self._feature_groups().items():
+            if modalities is None:
+                out.append(f"{action}: their structure cannot be read: every {action} recording's")
+            for m in modalities or ():
+                problem = self._feature_damage(action, m, read=full)
+                if problem is not None:
+                    out.append(f"{action}/{m}: {problem}")
+        return out
 
     def feature_settings(self, action: str) -> dict[str, Any] | None:
         """The extraction settings the stored features of ``action`` were computed with (None
@@ -791,33 +913,88 @@ class DatasetReader:
         return settings
 
     def feature_names(self) -> dict[str, list[str]]:
-        g = self._f.get("features")
-        if g is None:
-            return {}
-        return {a: sorted(k for k in g[a] if k != "recording") for a in g}
+        """Stored modalities by action (none for an action whose group cannot be read: see
+        :meth:`damaged_features`)."""
+        return {a: m or [] for a, m in self._feature_groups().items()}
+
+    def _feature_groups(self) -> dict[str, list[str] | None]:
+        """Stored modalities by action; None for an action whose group cannot be read (its
+        header past the end of a file cut short)."""
+        try:
+            g = self._f.get("features")
+            actions = [] if g is None else list(g)
+        except (KeyError, OSError):
+            return {"(every action)": None}
+        out: dict[str, list[str] | None] = {}
+        for a in actions:
+            try:
+                out[a] = sorted(k for k in g[a] if k != "recording")
+            except (KeyError, OSError):
+                out[a] = None
+        return out
 
     def damaged(self, *, full: bool = False) -> list[int]:
-        """Numbers of the indexed recordings whose samples or metadata cannot be read. Every
-        recording is read once to find out — only when the file is shorter than HDF5 recorded
-        (cut short) or its writer died, unless ``full`` (a file damaged in its middle on disk
-        is then found too; it costs about 8 ms per recording)."""
-        if not (full or self.writer_died or _cut_short(self.path)):
-            return []
+        """Numbers of the indexed recordings whose samples or metadata cannot be read (their
+        compression's checksum fails, their metadata is not JSON) or whose index row is
+        impossible. Every recording is read once to find out — only when the file is shorter
+        than HDF5 recorded (cut short) or its writer died, unless ``full`` (a file damaged in
+        its middle on disk is then found too; it costs about 8 ms per recording)."""
+        implausible = self._implausible()
+        if not (full or self.writer_died or self.cut_short):
+            return implausible
         if self._damaged is None:
-            bad = []
+            bad = set(implausible)
             for i in range(len(self)):
+                if i in bad:
+                    continue
                 try:
                     self.metadata(i)
                     self.raw(i)
-                except (OSError, ValueError):
-                    bad.append(i)
-            self._damaged = bad
+                except (OSError, ValueError, DatasetError):
+                    bad.add(i)
+            self._damaged = sorted(bad)
         return list(self._damaged)
 
-    def info(self) -> dict[str, Any]:
+    def _implausible(self) -> list[int]:
+        """Index rows no writer writes: an empty name, or sample or metadata ranges outside
+        their datasets (zeros or changed bytes; the index has no checksum of its own). A
+        vectorised look at the index: always done."""
+        ix = self.index
+        if len(ix) == 0:
+            return []
+        samples_end = min(ds.shape[0] for ds in self._samples.values())
+        bad = (ix["object"] == b"") | (ix["action"] == b"")
+        bad |= (ix["row_start"] < 0) | (ix["row_start"] > ix["row_stop"])
+        bad |= ix["row_stop"] > samples_end
+        if self.version >= 2:
+            bad |= (ix["meta_start"] < 0) | (ix["meta_start"] >= ix["meta_stop"])
+            bad |= ix["meta_stop"] > self._meta.shape[0]
+        return [int(i) for i in np.flatnonzero(bad)]
+
+    def damage(self, *, full: bool = False) -> str | None:
+        """The damage found (see :meth:`damaged`, :meth:`damaged_features`), in one phrase
+        naming the first damaged recording; None if none is found."""
+        problems = []
+        if self.lost:
+            problems.append(
+                f"{self.lost} recording(s) indexed past the end of the file (their names lost)"
+            )
+        bad = self.damaged(full=full)
+        if bad:
+            more = f" and {len(bad) - 1} more" if len(bad) > 1 else ""
+            problems.append(
+                f"recording {bad[0]} ({self._name(self.index[bad[0]])}){more} cannot be read"
+            )
+        problems += [f"stored features {p}" for p in self.damaged_features(full=full)]
+        return "; ".join(problems) if problems else None
+
+    def info(self, *, full: bool = False) -> dict[str, Any]:
         """A summary of the readable recordings: counts per object and action, samples, size on
-        disk, schema; ``damaged`` lists ``object/action/trial`` of those that are not."""
-        damaged = self.damaged()
+        disk, schema; ``damaged`` lists ``object/action/trial`` of those that are not,
+        ``damaged_features`` the stored features that are not, ``lost`` counts index rows past
+        the end of a file cut short. ``full``: read everything to find damage (see
+        :meth:`damaged`)."""
+        damaged = self.damaged(full=full)
         index = np.delete(self.index, damaged)
         objects = Counter(index["object"].astype(str).tolist())
         actions = Counter(index["action"].astype(str).tolist())
@@ -829,6 +1006,9 @@ class DatasetReader:
             "software_version": self.attrs.get("software_version"),
             "recordings": len(index),
             "damaged": ["{}/{}/trial {}".format(*self.key(i)) for i in damaged],
+            "damaged_features": self.damaged_features(full=full),
+            "lost": self.lost,
+            "holds_nothing": self.holds_nothing,
             "writer_died": self.writer_died,
             "incomplete": self.incomplete,
             "objects": dict(objects),
@@ -885,6 +1065,12 @@ def store_features(
             f"{path}: a writer has the file open, or died without closing it; wait for it to "
             f"finish, or run 'aptkt dataset repair {path}' first"
         )
+    if _cut_short(path):
+        raise DatasetError(
+            f"{path}: the file is cut short (it ends before the end HDF5 recorded in it): "
+            f"features cannot be stored in it; run 'aptkt dataset repair {path}' first (it "
+            "keeps every readable recording)"
+        )
     tmp = path.with_name(path.name + ".features-tmp")
     try:
         shutil.copyfile(path, tmp)
@@ -904,12 +1090,13 @@ def store_features(
                     del g["recording"]
                     for m in [k for k in g if k != "recording"]:
                         del g[m]
+                # Fletcher-32: a changed byte is an error when read, not another number.
                 if "recording" not in g:
-                    g.create_dataset("recording", data=recs, track_times=False)
+                    g.create_dataset("recording", data=recs, track_times=False, fletcher32=True)
                 for modality, values in vals.items():
                     if modality in g:
                         del g[modality]
-                    g.create_dataset(modality, data=values, track_times=False)
+                    g.create_dataset(modality, data=values, track_times=False, fletcher32=True)
                 if settings is None:
                     g.attrs.pop("extraction", None)
                 else:
@@ -942,13 +1129,16 @@ def repair(path: str | Path, *, backup: bool = True) -> int:
     try:
         with DatasetReader(path) as src:
             desc = src.description
+            skip = set(src._implausible())
             with DatasetWriter(tmp, "w", description=desc, overwrite=True) as dst:
                 n = 0
                 for i in range(len(src)):
+                    if i in skip:
+                        continue
                     try:
                         meta = src.metadata(i)
                         raw = src.raw(i)
-                    except (OSError, ValueError):  # damaged (e.g. lies past a truncation)
+                    except (OSError, ValueError, DatasetError):  # damaged (past a truncation)
                         continue
                     r = src.index[i]
                     meta_json = json.dumps(meta, sort_keys=True, default=_json_default)

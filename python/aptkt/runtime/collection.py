@@ -135,7 +135,8 @@ def collect(
     if resume and path.exists():
         _check_resumable(path, plan, session_desc)
         try:
-            writer = DatasetWriter(path, "a")
+            # (The description serves a file that holds nothing yet, started afresh.)
+            writer = DatasetWriter(path, "a", description=description)
         except DatasetError:
             repaired = repair(path)  # its writer died: keep every complete recording
             writer = DatasetWriter(path, "a")

@@ -122,7 +122,8 @@ def generate(
     repaired = None
     if resume and path.exists():
         try:
-            writer = DatasetWriter(path, "a")
+            # (The description serves a file that holds nothing yet, started afresh.)
+            writer = DatasetWriter(path, "a", description=plan.describe())
         except DatasetError:
             repaired = repair(path)
             writer = DatasetWriter(path, "a")
