@@ -21,7 +21,7 @@ from aptkt.data import DatasetReader, DatasetWriter, repair
 from aptkt.learning.dataset import extract_features
 from aptkt.runtime.generation import GenerationPlan, generate
 
-OBJECTS = ("towel", "cork_board", "rough_sponge")
+OBJECTS = ("towel", "cork_board", "rough_sponge", "metal_toolbox")
 
 
 @pytest.fixture(scope="module")
@@ -85,7 +85,7 @@ def test_a_truncated_data_set_is_refused_or_read_exactly(data, tmp_path, capsys,
     else:
         line = _one_line(capsys, "aptkt dataset export-features")
         assert str(t) in line and "damaged" in line
-        named = r"(towel|cork_board|rough_sponge)/(P1|S1)/trial \d|every (P1|S1) rec"
+        named = r"(towel|cork_board|rough_sponge|metal_toolbox)/(P1|S1)/trial \d|every (P1|S1) rec"
         assert re.search(named + "|no recording can be recovered", line), line
         assert "DAMAGED" in report  # and `dataset info` says so
         assert not (tmp_path / "t.csv").exists()
@@ -98,6 +98,35 @@ def test_a_truncated_data_set_is_refused_or_read_exactly(data, tmp_path, capsys,
         assert not (tmp_path / "p.npz").exists()
     if cut == 1000:  # the bug report's case: the end of the stored features is gone
         assert code == 1 and "DAMAGED: stored features" in report
+
+
+def test_every_reader_refuses_a_truncated_data_set(data, tmp_path, capsys):
+    """`learn --test` and `reproduce --data` too: before the robot connects or anything is
+    simulated."""
+    from aptkt.learning import PriorKnowledge
+    from aptkt.learning.dataset import load_observations
+
+    t = tmp_path / "t.h5"
+    t.write_bytes((data / "d.h5").read_bytes()[:-1000])
+    prior = tmp_path / "p.npz"
+    table = load_observations(data / "d.h5", actions=["P1"], objects=["towel", "cork_board"])
+    PriorKnowledge.build(table).save(prior)
+    learn = ["learn", "--robot", "sim", "--prior", str(prior), "--actions", "P1"]
+    learn += [
+        "--objects",
+        "rough_sponge,metal_toolbox",
+        "--test",
+        str(t),
+        "-o",
+        str(tmp_path / "l"),
+    ]
+    reproduce = ["reproduce", "fig7", "--quick", "--data", str(t), "-o", str(tmp_path / "r")]
+    for argv, label in ((learn, "aptkt learn"), (reproduce, "aptkt reproduce")):
+        assert main(argv) == 1
+        line = _one_line(capsys, label)
+        assert str(t) in line and "damaged (the file is cut short)" in line
+        assert re.search(r"/S1/trial \d", line), line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.npz", "t.h5"]
 
 
 def test_repair_then_features_recovers_a_truncated_file(data, tmp_path, capsys):
@@ -160,7 +189,7 @@ def test_corrupted_metadata_json_is_one_error_line(data, tmp_path, capsys):
     assert main(["dataset", "info", str(path), "--check"]) == 0
     out = capsys.readouterr().out
     assert "DAMAGED: 1 recording(s)" in out and name in out
-    assert repair(path) == 17  # the others are kept
+    assert repair(path) == 2 * 3 * len(OBJECTS) - 1  # the others are kept
 
 
 def test_changed_feature_bytes_fail_their_checksum(data, tmp_path, capsys):

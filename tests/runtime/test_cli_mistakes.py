@@ -430,3 +430,46 @@ def test_read_only_places_are_one_error_line(read_only, argv, fragment):
     assert len(lines) == 1 and lines[0].startswith(f"{_label(argv)}: error: "), r.stderr
     assert fragment in lines[0]
     assert sorted(p.name for p in (read_only / "ro").iterdir()) == before
+
+
+# What argparse itself finds (an unknown option, a missing required argument, a value that is
+# not a number, a name that is not a choice): its convention, which docs/reliability.md states —
+# the command's usage, then one `aptkt <command>: error: ...` line, exit code 2.
+USAGE_MISTAKES = [
+    ["dataset", "generate", "-o", "x.h5", "-n", "many"],
+    ["dataset", "info"],
+    ["dataset"],
+    ["collect", "--robot", "sim", "-o", "x.h5"],
+    [
+        "collect",
+        "--robot",
+        "sim",
+        "--objects",
+        "towel",
+        "-n",
+        "1",
+        "-o",
+        "x.h5",
+        "--thermal-wait",
+        "long",
+    ],
+    ["learn", "--robot", "mars", "--objects", "a,b"],
+    ["prior", "build", "--frob"],
+    ["reproduce", "fig99"],
+    ["demo", "--budget", "1.5"],
+    ["skin", "monitor", "--no-such-option"],
+]
+
+
+@pytest.mark.parametrize("argv", USAGE_MISTAKES, ids=lambda v: " ".join(v)[:50])
+def test_usage_errors_exit_2_with_the_usage(capsys, argv):
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    lines = [line for line in err.splitlines() if line.strip()]
+    label = _label(argv) if len(argv) > 1 and not argv[1].startswith("-") else f"aptkt {argv[0]}"
+    assert lines[0].startswith(f"usage: {label}"), err
+    assert re.match(rf"^{re.escape(label)}: error: ", lines[-1]), lines[-1]
+    assert sum(": error: " in line for line in lines) == 1
