@@ -75,7 +75,7 @@ CHILD = textwrap.dedent(
     rng = np.random.default_rng(0)
     X = rng.normal(size=(1500, 6))
     y = (X[:, 0] + 0.5 * rng.normal(size=1500) > 0).astype(int) + (X[:, 1] > 0.7)
-    model = LaplaceGPC(n_restarts=6, max_iter=300, n_jobs=1, random_state=0)
+    model = LaplaceGPC(n_restarts=int(sys.argv[1]), max_iter=300, n_jobs=1, random_state=0)
     print("fitting", flush=True)
     try:
         model.fit(X, y)
@@ -91,10 +91,14 @@ CHILD = textwrap.dedent(
 
 
 @pytest.mark.skipif(os.name != "posix", reason="SIGINT delivery to a child process")
-def test_ctrl_c_interrupts_a_long_fit_promptly():
+@pytest.mark.parametrize("restarts", [6, 1000], ids=["6 restarts", "MAX_RESTARTS"])
+def test_ctrl_c_interrupts_a_long_fit_promptly(restarts):
+    from aptkt.gp import MAX_RESTARTS
+
+    assert restarts <= MAX_RESTARTS
     env = {**os.environ, "PYTHONPATH": str(PYTHON_DIR)}
     child = subprocess.Popen(
-        [sys.executable, "-c", CHILD], stdout=subprocess.PIPE, text=True, env=env
+        [sys.executable, "-c", CHILD, str(restarts)], stdout=subprocess.PIPE, text=True, env=env
     )
     try:
         assert child.stdout.readline().strip() == "fitting"
