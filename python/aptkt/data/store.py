@@ -15,7 +15,14 @@ metadata; the reader checks the last row against the other datasets and drops it
 incomplete (at most one append is ever in flight). :class:`DatasetReader` opens files in
 SWMR-read mode, which also works while a writer is running or after it died. To *append* to a
 file whose writer died, :func:`repair` first copies its complete recordings into a fresh file
-(the HDF5 library refuses to reopen a crashed SWMR file for writing until that is done).
+(the HDF5 library refuses to reopen a crashed SWMR file for writing until that is done). A new
+file is created whole, its structure built under another name first (:mod:`aptkt.data.atomic`).
+
+Damage: HDF5 reads the bytes past the end of a file cut short as zeros, without an error, so the
+reader checks the position of what it reads in such a file (:mod:`aptkt.data.integrity`);
+compressed data (samples, metadata) carry zlib's checksum and stored features Fletcher-32, so
+bytes changed on disk are an error when read. Every such error names the file and the
+recording.
 """
 
 from __future__ import annotations
