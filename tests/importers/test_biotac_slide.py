@@ -13,7 +13,6 @@ from aptkt.importers.biotac_slide import (
     MODALITIES,
     find_trials,
     import_biotac_slide,
-    read_trial,
     trial_features,
 )
 from aptkt.learning.feature_table import read_feature_table
