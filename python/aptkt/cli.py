@@ -37,7 +37,19 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
+    _mark_parsers(parser)
     return parser
+
+
+def _mark_parsers(parser: argparse.ArgumentParser) -> None:
+    """Each (sub-)command's parser records itself in the arguments it parses, so that an
+    unknown option is reported by the command it was given to (argparse leaves that to the
+    top-level parser: `aptkt: error: unrecognized arguments`)."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in action.choices.values():
+                child.set_defaults(_usage_parser=child)
+                _mark_parsers(child)
 
 
 def _version() -> str:
@@ -63,7 +75,9 @@ def _missing_dirs(args: argparse.Namespace) -> list[Path]:
             continue
         path = Path(value).absolute()
         for p in (path, *path.parents):
-            if p.exists() or os.path.lexists(p):
+            # (os.path: a name the system refuses, too long say, is an error for the command's
+            # own checks to report, not a traceback here.)
+            if os.path.lexists(p):
                 break
             missing.append(p)
     return sorted(set(missing), key=lambda p: len(p.parts), reverse=True)
@@ -83,7 +97,10 @@ def _terminate(signum: int, frame: object) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)
+    command_parser = vars(args).pop("_usage_parser", parser)
+    if unknown:  # usage and one `aptkt <command>: error:` line, exit code 2 (argparse's rule)
+        command_parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     label = _label(args)
     created = _missing_dirs(args)
     code = 1

@@ -4,7 +4,12 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from aptkt._core import AptktError, KernelNotPositiveDefiniteError
+from aptkt._core import (
+    AptktError,
+    KernelNotPositiveDefiniteError,
+    NonFiniteResultError,
+    ProblemTooLargeError,
+)
 
 if TYPE_CHECKING:  # for annotations only: errors are the bottom layer and import nothing above
     from aptkt.skin.samples import Recording
@@ -30,6 +35,8 @@ __all__ = [
     "WorkerDiedError",
     "NotFittedError",
     "KernelNotPositiveDefiniteError",
+    "ProblemTooLargeError",
+    "NonFiniteResultError",
 ]
 
 

@@ -2,7 +2,10 @@
 
 Every function accepts float64, float32 and int16 arrays (raw sensor samples), contiguous or
 strided, without copying them; other numeric dtypes are converted to float64 first. NaN or
-infinity anywhere in the input raises :class:`ValueError` naming the input and the index.
+infinity anywhere in the input raises :class:`ValueError` naming the input and the index; finite
+input whose result overflows float64 (values near 1e308, whose squares or differences are
+infinite) raises :class:`~aptkt.errors.NonFiniteResultError` instead of returning infinity or
+NaN.
 
 =========================  ==================================================================
 stiffness                  :func:`mean_force` — mean over force sensors, cells and time steps
@@ -73,7 +76,8 @@ def hjorth(x: Any, axis: int = -1) -> tuple[Any, Any, Any]:
     activity = var(x), mobility = sqrt(var(dx) / var(x)),
     complexity = sqrt(var(ddx) / var(dx)) / mobility — the definitions of antropy's
     ``hjorth_params`` (which returns mobility and complexity only). A constant lane gives NaN
-    mobility and complexity. Needs at least 3 samples along ``axis``.
+    mobility and complexity (undefined); a variance that overflows raises
+    :class:`~aptkt.errors.NonFiniteResultError`. Needs at least 3 samples along ``axis``.
 
     Returns floats for 1-D input, otherwise three arrays shaped like ``x`` without ``axis``.
     """

@@ -190,6 +190,10 @@ def test_the_command_refuses_to_overwrite_and_reports_mistakes_in_one_line(run, 
         (["--new", "1"], "--new must be >= 2"),
         (["--choices", "closest"], "--choices: closest"),
         (["--groups", "0"], "--groups must be >= 1"),
+        # bounded as the other commands' counts (docs/reliability.md)
+        (["--groups", "1000000"], "--groups must be at most 1000"),
+        (["--budget", "1000000000"], "--budget must be at most 10000"),
+        (["-j", "100000"], "--jobs must be at most"),
     ):
         assert main(["benchmark", str(table), "-o", str(tmp_path / "x"), *extra]) == 1
         err = capsys.readouterr().err.strip()

@@ -151,3 +151,20 @@ def test_scaling_scales_activity_only(x, scale):
     assert a1 == pytest.approx(a0 * scale**2, rel=1e-9)
     assert m1 == pytest.approx(m0, rel=1e-9)
     assert c1 == pytest.approx(c0, rel=1e-9)
+
+
+def test_an_overflowing_hjorth_is_a_typed_error_not_nan():
+    """Finite values whose squares or differences exceed float64: (nan, nan, nan) before."""
+    from aptkt.errors import NonFiniteResultError
+
+    with pytest.raises(NonFiniteResultError, match="x: the Hjorth"):
+        features.hjorth([1e308, -1e308] * 10)
+    with pytest.raises(NonFiniteResultError):
+        features.hjorth(np.array([1e154, -1e154] * 10))  # the squares fit, the differences not
+    with pytest.raises(NonFiniteResultError, match="acc"):
+        features.texture_descriptor(np.tile([1e308, -1e308], (2, 3, 5)))
+    with pytest.raises(NonFiniteResultError, match="force: the mean"):
+        features.mean_force(np.array([1.7e308, 1.7e308]))
+    # Undefined is not overflow: a constant signal still has NaN mobility and complexity.
+    activity, mobility, complexity = features.hjorth([2.0] * 10)
+    assert activity == 0.0 and np.isnan(mobility) and np.isnan(complexity)

@@ -75,7 +75,7 @@ CHILD = textwrap.dedent(
     rng = np.random.default_rng(0)
     X = rng.normal(size=(1500, 6))
     y = (X[:, 0] + 0.5 * rng.normal(size=1500) > 0).astype(int) + (X[:, 1] > 0.7)
-    model = LaplaceGPC(n_restarts=6, max_iter=300, n_jobs=1, random_state=0)
+    model = LaplaceGPC(n_restarts=int(sys.argv[1]), max_iter=300, n_jobs=1, random_state=0)
     print("fitting", flush=True)
     try:
         model.fit(X, y)
@@ -91,10 +91,14 @@ CHILD = textwrap.dedent(
 
 
 @pytest.mark.skipif(os.name != "posix", reason="SIGINT delivery to a child process")
-def test_ctrl_c_interrupts_a_long_fit_promptly():
+@pytest.mark.parametrize("restarts", [6, 1000], ids=["6 restarts", "MAX_RESTARTS"])
+def test_ctrl_c_interrupts_a_long_fit_promptly(restarts):
+    from aptkt.gp import MAX_RESTARTS
+
+    assert restarts <= MAX_RESTARTS
     env = {**os.environ, "PYTHONPATH": str(PYTHON_DIR)}
     child = subprocess.Popen(
-        [sys.executable, "-c", CHILD], stdout=subprocess.PIPE, text=True, env=env
+        [sys.executable, "-c", CHILD, str(restarts)], stdout=subprocess.PIPE, text=True, env=env
     )
     try:
         assert child.stdout.readline().strip() == "fitting"
@@ -177,3 +181,114 @@ def test_fits_from_several_threads_at_once_equal_fits_one_after_the_other():
     assert not any(t.is_alive() for t in threads), "a concurrent fit did not end"
     for a, b in zip(alone, together):
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("value", [np.nan, -1.0, np.inf, True])
+def test_newton_tol_is_checked_like_optimizer_tol(value):
+    # A NaN tolerance is never met: every Newton search ran to its iteration limit.
+    X, y = make_blobs(4, 2, 2, seed=2)
+    with pytest.raises(ValueError, match="newton_tol must be a finite number >= 0"):
+        LaplaceGPC(newton_tol=value).fit(X, y)
+
+
+@pytest.mark.parametrize(
+    ("params", "match"),
+    [
+        ({"max_jitter": np.nan}, "max_jitter must be a finite number >= 0"),
+        ({"signal_variance": np.inf}, "signal_variance must be a finite number > 0"),
+        ({"signal_variance": True}, "signal_variance must be a finite number > 0"),
+        ({"length_scale_bounds": (1e-5, np.inf)}, "length_scale_bounds must be a finite"),
+        ({"signal_variance_bounds": (2.0, 1.0)}, "signal_variance_bounds must satisfy low < high"),
+        ({"modality_weights": [np.nan, 1.0]}, "modality_weights must be a finite number >= 0"),
+        ({"max_iter": True}, "max_iter must be a non-negative integer"),
+        ({"max_iter": 10**9}, "max_iter must be at most 1000000"),
+        ({"newton_max_iter": 2.5}, "newton_max_iter must be a non-negative integer"),
+    ],
+)
+def test_every_numeric_setting_is_checked(params, match):
+    X, y = make_blobs(4, 2, 2, seed=2)
+    mods = [[0], [1]] if "modality_weights" in params else None
+    with pytest.raises(ValueError, match=match):
+        LaplaceGPC(modalities=mods, **params).fit(X, y)
+
+
+def test_n_restarts_is_bounded():
+    """10**9 restarts took 12 GB for their starting points before the first start ran (and
+    ignored Ctrl-C meanwhile); the count is refused before anything is allocated."""
+    from aptkt.gp import MAX_RESTARTS
+
+    X, y = make_blobs(4, 2, 2, seed=2)
+    with pytest.raises(ValueError, match=f"n_restarts must be at most {MAX_RESTARTS}"):
+        LaplaceGPC(n_restarts=10**9).fit(X, y)
+    LaplaceGPC(n_restarts=MAX_RESTARTS, max_iter=1, random_state=0).fit(X[:20], y[:20])
+
+
+THREADS_CHILD = textwrap.dedent(
+    """
+    import os
+    import numpy as np
+    from aptkt.gp import LaplaceGPC
+
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(40, 2))
+    y = (X[:, 0] > 0).astype(int) + (X[:, 1] > 0)
+    LaplaceGPC(n_jobs=10**6, random_state=0).fit(X, y).predict_proba(X)
+    print(len(os.listdir("/proc/self/task")), flush=True)
+    """
+)
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="counts threads in /proc")
+def test_n_jobs_is_capped_at_the_cores():
+    # Before the cap, n_jobs=10**6 kept starting threads (30,739 after 10 minutes).
+    from aptkt.gp.inputs import threads
+
+    cores = os.cpu_count() or 1
+    assert threads(10**6) == cores and threads(-1) == cores
+    env = {**os.environ, "PYTHONPATH": str(PYTHON_DIR)}
+    r = subprocess.run(
+        [sys.executable, "-c", THREADS_CHILD],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+        check=False,
+    )
+    assert r.returncode == 0, r.stderr
+    # The interpreter's own threads (BLAS pools, ...) plus one pool of at most `cores`.
+    baseline = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import os, numpy, aptkt.gp; print(len(os.listdir('/proc/self/task')))",
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=True,
+    )
+    assert int(r.stdout) <= int(baseline.stdout) + cores + 1, (r.stdout, baseline.stdout)
+
+
+def test_a_fit_too_large_for_memory_says_so_before_allocating():
+    """200,000 rows: a Rust allocation failure and "the fit's thread panicked" before; now a
+    typed error naming the rows and the bytes, raised before any n x n matrix exists."""
+    from aptkt.errors import AptktError, ProblemTooLargeError
+
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(200_000, 2))
+    y = (X[:, 0] > 0).astype(int)
+    with pytest.raises(ProblemTooLargeError, match="a fit on 200000 rows") as info:
+        LaplaceGPC().fit(X, y)
+    assert isinstance(info.value, AptktError)
+    assert "TB of memory" in str(info.value) and "available" in str(info.value)
+    # The shared kernel holds every classifier of every task at once: its estimate counts them
+    # all, the further labelled data sets (kernel_tasks) included.
+    with pytest.raises(ProblemTooLargeError, match="a shared-kernel fit on 200000 rows"):
+        LaplaceGPC(kernel="shared").fit(X, y)
+    with pytest.raises(ProblemTooLargeError, match="a shared-kernel fit on 200020 rows"):
+        LaplaceGPC().fit(X[:20], y[:20], kernel_tasks=[(X, y)])
+    from aptkt.gp import kernel_matrix
+
+    with pytest.raises(ProblemTooLargeError, match="kernel matrix of 200000 rows"):
+        kernel_matrix(X, [0.0, 0.0])

@@ -75,3 +75,66 @@ def test_inspect_flags_an_effectively_constant_kernel(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "texture: UNINFORMATIVE for b" in text and "2.9e+04" in text
     assert "force: UNINFORMATIVE" not in text
+
+
+def test_learn_refuses_an_action_redefined_since_the_prior_was_built(tmp_path, capsys):
+    """The prior records what each action was; an actions file that gives one of its names to
+    another movement is refused instead of pairing the prior's models with other presses."""
+    (tmp_path / "q.toml").write_text(
+        '[[action]]\nname = "Q1"\nmovement = "press"\ndepth = 0.001\nhold_time = 0.5\n'
+    )
+    data, prior = tmp_path / "q.h5", tmp_path / "q.npz"
+    gen = ["dataset", "generate", "-o", str(data), "--actions-file", str(tmp_path / "q.toml")]
+    gen += ["--objects", "rough_sponge,metal_toolbox", "-n", "3", "--no-progress"]
+    assert main(gen) == 0
+    assert main(["prior", "build", str(data), "-o", str(prior)]) == 0
+    recorded = PriorKnowledge.load(prior).metadata["action_definitions"]
+    assert recorded["Q1"]["depth"] == 0.001
+    (tmp_path / "q4.toml").write_text(
+        '[[action]]\nname = "Q1"\nmovement = "press"\ndepth = 0.004\nhold_time = 0.5\n'
+    )
+    capsys.readouterr()
+    learn = ["learn", "--robot", "sim", "--prior", str(prior), "--objects", "towel,cork_board"]
+    learn += [
+        "--actions-file",
+        str(tmp_path / "q4.toml"),
+        "--budget",
+        "1",
+        "-o",
+        str(tmp_path / "l"),
+    ]
+    assert main(learn) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("aptkt learn: error: --actions-file: action 'Q1' redefines")
+    assert "depth 0.001 -> 0.004" in err and "another name" in err
+    assert not (tmp_path / "l").exists()
+
+
+def test_a_paper_action_cannot_be_redefined(tmp_path, capsys):
+    from aptkt.actions import actions_from_toml
+
+    path = tmp_path / "p1.toml"
+    path.write_text('[[action]]\nname = "P1"\nmovement = "press"\ndepth = 0.004\nhold_time = 3.0\n')
+    with pytest.raises(ValueError, match=r"redefines the paper's P1 \(depth 0.001 -> 0.004\)"):
+        actions_from_toml(path)
+    argv = ["collect", "--robot", "sim", "--objects", "towel", "--actions", "P1", "-n", "1"]
+    argv += ["--actions-file", str(path), "-o", str(tmp_path / "c.h5")]
+    assert main(argv) == 1
+    assert "redefines the paper's P1" in capsys.readouterr().err
+    assert not (tmp_path / "c.h5").exists()
+    # The same definition under the same name is no redefinition.
+    path.write_text('[[action]]\nname = "P1"\nmovement = "press"\ndepth = 0.001\nhold_time = 3.0\n')
+    assert actions_from_toml(path)["P1"] == PAPER_ACTIONS["P1"]
+
+
+def test_a_bool_is_not_a_number_of_seconds(tmp_path):
+    from aptkt.actions import ExploratoryAction, Movement, actions_from_toml
+
+    path = tmp_path / "a.toml"
+    path.write_text(
+        '[[action]]\nname = "P9"\nmovement = "press"\ndepth = 0.001\nhold_time = true\n'
+    )
+    with pytest.raises(ValueError, match="hold_time must be a finite number >= 0, got True"):
+        actions_from_toml(path)
+    with pytest.raises(ValueError, match="depth must be a finite number"):
+        ExploratoryAction("P9", Movement.PRESS, depth=True, hold_time=1.0)

@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a missing one must fail, not skip
-from loopback_helpers import PLACEMENT, at_rest, fire_after, in_contact  # noqa: E402
+from loopback_helpers import PLACEMENT, SURFACE_Z, at_rest, fire_after, in_contact  # noqa: E402
 
 from aptkt.errors import (  # noqa: E402
     ProgramStoppedError,
@@ -209,6 +209,34 @@ def test_dropped_connection_mid_slide(make_robot, loopback, skin):
     with pytest.raises(RobotConnectionError, match="call recover"):
         robot.lift(0.01)
     assert time.monotonic() - t0 < 0.1
+
+
+def test_a_drop_during_the_approach_ends_at_the_controllers_watchdog(make_robot, loopback, skin):
+    """What docs/reliability.md states: with the link gone nothing can stop the guarded
+    approach but the controller's RTDE watchdog, so the arm goes on down at approach_speed for
+    up to watchdog_timeout (into the object if it gets there), then stops; nothing retracts it."""
+    speed, timeout, accel = 0.005, 0.5, 0.5  # the default limits
+    robot = make_robot(approach_speed=speed, max_approach_travel=0.05)
+    robot.move_above(PLACEMENT, 0.004)
+    at_drop: dict = {}
+
+    def drop() -> None:
+        at_drop.update(loopback.state())
+        loopback.drop_connections(refuse_for=None)
+
+    fire_after(0.5, drop)  # 2.5 mm down: 1.5 mm above the surface
+    with pytest.raises(RobotConnectionError):
+        robot.approach_contact(skin, 0.05)
+    time.sleep(timeout + 0.5)
+    state = at_rest(loopback, 0.1)
+    assert not state["program_running"] and "RTDE input watchdog" in state["stop_reason"]
+    travel = at_drop["pose"][2] - state["pose"][2]
+    # At most approach_speed x watchdog_timeout (+ the stop's v^2 / 2a, and one control cycle
+    # of slack per end) further: 2.5 mm here, ending 1 mm into the object.
+    assert travel <= speed * timeout + speed**2 / (2 * accel) + 0.0004, travel
+    assert travel > 0.5 * speed * timeout, travel  # it did go on: nothing else stopped it
+    assert state["pose"][2] < SURFACE_Z and state["normal_force"] > 0.0  # still pressing
+    loopback.restore()
 
 
 def test_frozen_network_mid_press(make_robot, loopback, skin):

@@ -192,6 +192,123 @@ MISTAKES = [
         "--resume and --overwrite",
     ),
     (["skin", "monitor"], "PORT"),
+    # names the file system refuses, values without bound: before any file is created
+    (["dataset", "generate", "-o", "{d}/" + "a" * 300 + ".h5", *DATA_GEN], "is too long"),
+    (["collect", *SIM, "--objects", "towel", "-n", "1", "-o", "{d}/" + "c" * 250], "too long"),
+    (["reproduce", "fig7", "--quick", "-o", "{d}/new/" + "r" * 300], "is too long"),
+    (["dataset", "info", "{d}/" + "i" * 300 + ".h5"], "is too long"),
+    (
+        ["reproduce", "fig7", "--quick", "--scheduler", "notaurl", "-o", "{d}/new/r"],
+        "not a scheduler address",
+    ),
+    (
+        [
+            "collect",
+            *SIM,
+            "--objects",
+            "towel",
+            "-n",
+            "1",
+            "-o",
+            "{d}/new/c.h5",
+            "--thermal-wait",
+            "inf",
+        ],
+        "--thermal-wait must be at most 3600",
+    ),
+    (
+        [
+            "collect",
+            *SIM,
+            "--objects",
+            "towel",
+            "-n",
+            "1",
+            "-o",
+            "{d}/new/c.h5",
+            "--thermal-wait",
+            "nan",
+        ],
+        "--thermal-wait",
+    ),
+    (
+        [
+            "collect",
+            "--robot",
+            "ur10",
+            "--workspace",
+            "{d}/p.npz",
+            "--skin",
+            "/dev/null",
+            "--objects",
+            "towel",
+            "-n",
+            "1",
+            "-o",
+            "{d}/new/c.h5",
+        ],
+        "not a workspace file",
+    ),  # fmt: skip
+    (
+        [
+            "collect",
+            *SIM,
+            "--objects",
+            "towel",
+            "-n",
+            "1",
+            "--actions-file",
+            "{d}/p.npz",
+            "-o",
+            "{d}/new/c.h5",
+        ],
+        "not an actions file",
+    ),
+    (
+        ["dataset", "generate", "-o", "{d}/new/s.h5", "--objects-file", "{d}/p.npz", *DATA_GEN],
+        "not an object library",
+    ),
+    (
+        ["dataset", "generate", "-o", "{d}/new/s.h5", "-n", "100000000", "--no-progress"],
+        "= 10500000000 trials, more than the 100000",
+    ),
+    (
+        ["collect", *SIM, "--objects", "towel", "-n", "200000", "-o", "{d}/new/c.h5"],
+        "more than the 100000",
+    ),
+    (
+        ["dataset", "generate", "-o", "{d}/new/s.h5", "--first-trial", "3000000000", *DATA_GEN],
+        "32-bit",
+    ),
+    (
+        ["dataset", "generate", "-o", "{d}/new/s.h5", "-j", "100000", *DATA_GEN],
+        "--jobs must be at most",
+    ),
+    (["dataset", "features", "{d}/d.h5", "-j", "100000"], "--jobs must be at most"),
+    (["reproduce", "fig6", "--quick", "-j", "100000", "-o", "{d}/new/r"], "--jobs must be at most"),
+    (
+        ["demo", "--quick", "--trials", "1000000000", "-o", "{d}/new/demo"],
+        "--trials must be at most",
+    ),
+    (
+        ["prior", "build", "{d}/d.h5", "-o", "{d}/new/r.npz", "--restarts", "1000000000"],
+        "--restarts must be at most 1000",
+    ),
+    (
+        [
+            "learn",
+            *SIM,
+            "--prior",
+            "{d}/p.npz",
+            "--objects",
+            "towel,cork_board",
+            "--budget",
+            "1000000000",
+            "-o",
+            "{d}/new/l",
+        ],
+        "--budget must be at most",
+    ),  # fmt: skip
     # the method's alternatives: a value the learner refuses
     (
         [
@@ -296,3 +413,46 @@ def test_read_only_places_are_one_error_line(read_only, argv, fragment):
     assert len(lines) == 1 and lines[0].startswith(f"{_label(argv)}: error: "), r.stderr
     assert fragment in lines[0]
     assert sorted(p.name for p in (read_only / "ro").iterdir()) == before
+
+
+# What argparse itself finds (an unknown option, a missing required argument, a value that is
+# not a number, a name that is not a choice): its convention, which docs/reliability.md states —
+# the command's usage, then one `aptkt <command>: error: ...` line, exit code 2.
+USAGE_MISTAKES = [
+    ["dataset", "generate", "-o", "x.h5", "-n", "many"],
+    ["dataset", "info"],
+    ["dataset"],
+    ["collect", "--robot", "sim", "-o", "x.h5"],
+    [
+        "collect",
+        "--robot",
+        "sim",
+        "--objects",
+        "towel",
+        "-n",
+        "1",
+        "-o",
+        "x.h5",
+        "--thermal-wait",
+        "long",
+    ],
+    ["learn", "--robot", "mars", "--objects", "a,b"],
+    ["prior", "build", "--frob"],
+    ["reproduce", "fig99"],
+    ["demo", "--budget", "1.5"],
+    ["skin", "monitor", "--no-such-option"],
+]
+
+
+@pytest.mark.parametrize("argv", USAGE_MISTAKES, ids=lambda v: " ".join(v)[:50])
+def test_usage_errors_exit_2_with_the_usage(capsys, argv):
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    lines = [line for line in err.splitlines() if line.strip()]
+    label = _label(argv) if len(argv) > 1 and not argv[1].startswith("-") else f"aptkt {argv[0]}"
+    assert lines[0].startswith(f"usage: {label}"), err
+    assert re.match(rf"^{re.escape(label)}: error: ", lines[-1]), lines[-1]
+    assert sum(": error: " in line for line in lines) == 1

@@ -144,3 +144,53 @@ def test_learn_checks_the_limits_before_connecting(
     assert not (tmp_path / "out").exists()
     after = loopback.state()  # never connected, never moved
     assert not after["connections"] and after["pose"] == before["pose"], after
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "fragment"),
+    [
+        ("--thermal-wait", "inf", "--thermal-wait must be at most 3600"),
+        ("--workspace", "binary", "not a workspace file"),
+        ("--repetitions", "100000000", "more than the 100000"),
+    ],
+)
+def test_collect_refuses_before_the_arm_moves(tmp_path, capsys, loopback, option, value, fragment):
+    """An infinite --thermal-wait used to fail only after the first press (the arm moved, and
+    the trial's recording was lost); a binary workspace file was a UnicodeDecodeError."""
+    cell = tmp_path / "cell.toml"
+    cell.write_text(CELL.replace('"127.0.0.1"', f'"{loopback.host}"'))
+    args = {"--workspace": str(cell), "--thermal-wait": "0", "--repetitions": "1"}
+    if value == "binary":
+        value = str(tmp_path / "prior.npz")
+        (tmp_path / "prior.npz").write_bytes(bytes(range(256)) * 4)
+    args[option] = value
+    before = loopback.state()
+    argv = [
+        "collect", "--robot", "ur10", "--skin", loopback.skin_port, "--objects", "block",
+        "--actions", "P1", "-o", str(tmp_path / "d.h5"),
+        *(x for item in args.items() for x in item),
+    ]  # fmt: skip
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("aptkt collect: error: "), err
+    assert fragment in lines[0]
+    assert not (tmp_path / "d.h5").exists()
+    after = loopback.state()  # never connected, never moved
+    assert not after["connections"] and after["pose"] == before["pose"], after
+
+
+def test_exploration_settings_refuse_an_endless_wait():
+    from aptkt.actions import ExplorationSettings
+
+    for value in (float("inf"), float("nan"), -1.0):
+        with pytest.raises(ValueError, match="thermal_wait must be a finite number >= 0"):
+            ExplorationSettings(thermal_wait=value)
+
+
+def test_a_bool_in_the_limits_is_not_a_number():
+    from aptkt.errors import ConfigError
+    from aptkt.robot.workspace import parse_workspace
+
+    with pytest.raises(ConfigError, match="robot.limits.max_hold_time must be a finite number"):
+        parse_workspace({"robot": {"limits": {"max_hold_time": True}}}, source="cell.toml")

@@ -25,6 +25,7 @@ __all__ = [
     "PAPER_ACTIONS",
     "MODALITIES_BY_MOVEMENT",
     "actions_from_toml",
+    "redefinition",
 ]
 
 
@@ -74,7 +75,13 @@ class ExploratoryAction:
             raise ValueError("an exploratory action needs a non-empty name")
         for key in ("depth", "hold_time", "normal_force", "speed", "slide_time"):
             value = getattr(self, key)
-            if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+            # A bool is an int to Python: `hold_time = true` would hold for 1 s.
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not math.isfinite(value)
+                or value < 0
+            ):
                 raise ValueError(
                     f"action {self.name!r}: {key} must be a finite number >= 0, got {value!r}"
                 )
@@ -172,11 +179,43 @@ PAPER_ACTIONS: Mapping[str, ExploratoryAction] = {
 }
 
 
+def redefinition(
+    action: ExploratoryAction, known: Mapping[str, ExploratoryAction], whose: str
+) -> str | None:
+    """Why ``action`` may not carry its name: ``known`` (``whose`` actions) has an action of
+    that name with other parameters. Data, features and prior knowledge are filed under action
+    names; a second meaning of a name would pair models of one movement with observations of
+    another. None if the name is free or the definition the same."""
+    old = known.get(action.name)
+    if old is None or old == action:
+        return None
+    changed = ", ".join(
+        f"{k} {getattr(old, k):g} -> {getattr(action, k):g}"
+        for k in ("depth", "hold_time", "normal_force", "speed", "slide_time")
+        if getattr(old, k) != getattr(action, k)
+    )
+    if old.movement != action.movement:
+        changed = f"movement {old.movement.value} -> {action.movement.value}" + (
+            f", {changed}" if changed else ""
+        )
+    return (
+        f"action {action.name!r} redefines {whose} {action.name} ({changed}); "
+        "give your action another name"
+    )
+
+
 def actions_from_toml(path: str | Path) -> dict[str, ExploratoryAction]:
-    """Load actions from a TOML file with one ``[[action]]`` table per action."""
+    """Load actions from a TOML file with one ``[[action]]`` table per action. An action named
+    like one of the paper's (:data:`PAPER_ACTIONS`) must be that action: a file that redefines
+    one is refused."""
     path = Path(path)
     with path.open("rb") as fh:
-        doc = tomllib.load(fh)
+        try:
+            doc = tomllib.load(fh)
+        except UnicodeDecodeError:
+            raise ValueError(
+                f"{path}: not an actions file (TOML text), not even UTF-8 text"
+            ) from None
     tables = doc.get("action")
     if not isinstance(tables, list) or not tables:
         raise ValueError(f"{path}: expected one or more [[action]] tables")
@@ -188,5 +227,8 @@ def actions_from_toml(path: str | Path) -> dict[str, ExploratoryAction]:
             raise ValueError(f"{path}: action #{i + 1}: {exc}") from None
         if action.name in actions:
             raise ValueError(f"{path}: action {action.name!r} is defined twice")
+        why = redefinition(action, PAPER_ACTIONS, "the paper's")
+        if why:
+            raise ValueError(f"{path}: {why}")
         actions[action.name] = action
     return actions

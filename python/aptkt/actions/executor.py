@@ -19,6 +19,7 @@ the approach) is raised as it is: there is nothing to keep.
 from __future__ import annotations
 
 import datetime as _dt
+import math
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
@@ -44,11 +45,13 @@ class ExplorationSettings:
     stamp_wall_clock: bool = True  # add the UTC time to the metadata (off for reproducible data)
 
     def __post_init__(self) -> None:
+        # Finite too: an infinite wait would fail only after the first action, with the arm
+        # having pressed the object and the trial's recording lost.
         for name in ("clearance", "contact_threshold", "lift_height"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"ExplorationSettings.{name} must be > 0")
-        if not self.thermal_wait >= 0:
-            raise ValueError("ExplorationSettings.thermal_wait must be >= 0")
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
+                raise ValueError(f"ExplorationSettings.{name} must be a finite number > 0")
+        if not (math.isfinite(self.thermal_wait) and self.thermal_wait >= 0):
+            raise ValueError("ExplorationSettings.thermal_wait must be a finite number >= 0")
 
 
 def crop_recording(rec: Recording, start_ns: int, stop_ns: int) -> Recording:

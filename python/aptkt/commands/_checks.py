@@ -5,6 +5,7 @@ operating system deep inside a library reads as a traceback. Every failure is a
 
 from __future__ import annotations
 
+import math
 import os
 from collections import Counter
 from collections.abc import Iterable
@@ -12,11 +13,66 @@ from pathlib import Path
 
 from aptkt.errors import ConfigError
 
+#: Trials one command may plan (objects x actions x repetitions): 50 times the paper's test set
+#: (2,100 trials). The plan is held in memory before the first trial runs, and a larger one
+#: would run for days; split bigger collections with --first-trial.
+MAX_TRIALS = 100_000
+#: Trial numbers are stored as 32-bit integers in a data set's index.
+MAX_TRIAL_NUMBER = 2**31 - 1
+#: Observations a learning run may choose (--budget, --patience): every one is a trial on the
+#: robot, and the models are refitted on all of them after each.
+MAX_BUDGET = 10_000
+#: Learning runs per method (demo --trials, learn --runs).
+MAX_RUNS = 1_000
+#: Seconds aptkt waits for the temperature sensors after an action (--thermal-wait): an hour.
+MAX_THERMAL_WAIT = 3600.0
+#: aptkt writes side files next to a data set, named after it (``.features-tmp``,
+#: ``.repairing``, ``.crashed``, ``.creating``, ``.aborted-<k>.h5``): a name must leave this
+#: many bytes of the file system's limit for them.
+SIDE_FILE_ROOM = 16
+
 
 def at_least(value: float | None, minimum: float, option: str) -> None:
     """``value >= minimum`` (``None``: the option was not given)."""
     if value is not None and not value >= minimum:
         raise ConfigError(f"{option} must be >= {minimum}, got {value}")
+
+
+def at_most(value: float | None, maximum: float, option: str, why: str = "") -> None:
+    """``value <= maximum`` and finite (``None``: the option was not given); ``why`` says
+    where the bound comes from."""
+    if value is not None and not (math.isfinite(value) and value <= maximum):
+        raise ConfigError(
+            f"{option} must be at most {maximum:g}, got {value}" + (f" ({why})" if why else "")
+        )
+
+
+def max_jobs() -> int:
+    """Processes a command may start (--jobs): four per core. More only share the same cores
+    (the work is CPU-bound) while each holds its own copy of the simulated world."""
+    return 4 * (os.cpu_count() or 1)
+
+
+def jobs(value: int, option: str = "--jobs") -> None:
+    at_least(value, 1, option)
+    at_most(value, max_jobs(), option, f"4 per core of this machine's {os.cpu_count() or 1}")
+
+
+def trial_plan(objects: int, actions: int, repetitions: int, first_trial: int) -> None:
+    """A plan of ``repetitions`` trials of every action on every object, numbered from
+    ``first_trial``, within :data:`MAX_TRIALS` and :data:`MAX_TRIAL_NUMBER`."""
+    total = objects * actions * repetitions
+    if total > MAX_TRIALS:
+        raise ConfigError(
+            f"--repetitions {repetitions}: {objects} object(s) x {actions} action(s) x "
+            f"{repetitions} = {total} trials, more than the {MAX_TRIALS} one command may plan "
+            "(split the work into several files with --first-trial)"
+        )
+    if first_trial + repetitions - 1 > MAX_TRIAL_NUMBER:
+        raise ConfigError(
+            f"--first-trial {first_trial} with --repetitions {repetitions}: trial numbers "
+            f"must stay below {MAX_TRIAL_NUMBER + 1} (a data set stores them as 32-bit integers)"
+        )
 
 
 def no_duplicates(names: Iterable[str], option: str) -> None:
@@ -40,9 +96,56 @@ def _writable(directory: Path, path: Path, option: str) -> None:
         raise ConfigError(f"{option} {path}: cannot write in {directory} (permission denied)")
 
 
+def _limit(directory: Path, name: str, default: int) -> int:
+    try:
+        return int(os.pathconf(directory, name))
+    except (OSError, ValueError):
+        return default
+
+
+def _short(path: Path) -> str:
+    text = str(path)
+    return text if len(text) <= 60 else f"{text[:30]}...{text[-20:]}"
+
+
+def name_fits(path: str | Path, option: str, *, room: int = 0, path_room: int = 0) -> None:
+    """Every component of ``path`` within the file system's limit (``room`` bytes fewer for the
+    last, which names the side files too), and the whole path, plus ``path_room`` bytes for
+    what the command puts under it, within the system's: the operating system would refuse the
+    name only once the command opens the file, after its work."""
+    path = Path(path)
+    where = Path("/")
+    for parent in path.absolute().parents:
+        if os.path.isdir(parent):
+            where = parent
+            break
+    name_max = _limit(where, "PC_NAME_MAX", 255)
+    path_max = _limit(where, "PC_PATH_MAX", 4096)
+    parts = path.parts
+    for i, part in enumerate(parts):
+        size = len(os.fsencode(part))
+        last = i == len(parts) - 1
+        if size > name_max - (room if last else 0):
+            extra = (
+                f", less {room} for the side files aptkt names after it" if last and room else ""
+            )
+            raise ConfigError(
+                f"{option} {_short(path)}: a name of {size} bytes is too long (the file system "
+                f"allows {name_max} bytes per name{extra})"
+            )
+    size = len(os.fsencode(str(path.absolute())))
+    if size + max(room, path_room) >= path_max:
+        raise ConfigError(
+            f"{option} {_short(path)}: a path of {size} bytes is too long (the system allows "
+            f"{path_max - 1} bytes, less {max(room, path_room)} for the files aptkt adds)"
+        )
+
+
 def output_file(path: str | Path, option: str = "--output") -> Path:
-    """A file the command will create or replace: not a directory, not under a file, and in a
-    directory this user may write in (the file is replaced by renaming a new one onto it)."""
+    """A file the command will create or replace: a name the file system takes, not a
+    directory, not under a file, and in a directory this user may write in (the file is
+    replaced by renaming a new one onto it)."""
+    name_fits(path, option, room=SIDE_FILE_ROOM)
     path = Path(path)
     if path.is_dir():
         raise ConfigError(f"{option} {path}: is a directory (give a file name)")
@@ -52,6 +155,8 @@ def output_file(path: str | Path, option: str = "--output") -> Path:
 
 def output_dir(path: str | Path, option: str = "--output") -> Path:
     """A directory the command will create (or add to)."""
+    # The files inside have names of aptkt's choosing; 64 bytes covers the longest of them.
+    name_fits(path, option, path_room=64)
     path = Path(path)
     if path.exists():
         if not path.is_dir():
@@ -63,12 +168,29 @@ def output_dir(path: str | Path, option: str = "--output") -> Path:
 
 
 def input_file(path: str | Path, option: str) -> Path:
+    name_fits(path, option)
     path = Path(path)
     if not path.exists():
         raise ConfigError(f"{option} {path}: no such file")
     if path.is_dir():
         raise ConfigError(f"{option} {path}: is a directory, not a file")
     return path
+
+
+def intact_data_set(path: str | Path, option: str) -> None:
+    """A data set file that is not cut short, or whose shortened end damaged nothing: bytes
+    past the end of a file read as zeros, and a command must not learn from those. (Damage in
+    the middle of a file is found when the damaged recording or feature is read.)"""
+    from aptkt.data.store import DatasetReader
+
+    with DatasetReader(path) as rd:
+        problem = rd.damage() if rd.cut_short else None
+    if problem:
+        where = f"{option} {path}" if option.startswith("-") else str(path)
+        raise ConfigError(
+            f"{where}: damaged (the file is cut short): {problem}; 'aptkt dataset repair "
+            f"{path}' keeps every readable recording"
+        )
 
 
 def resume_or_overwrite(resume: bool, overwrite: bool) -> None:

@@ -7,7 +7,7 @@ import argparse
 from typing import Any
 
 from aptkt.actions.executor import ExplorationSettings
-from aptkt.commands._checks import at_least, input_file
+from aptkt.commands._checks import MAX_THERMAL_WAIT, at_least, at_most, input_file
 from aptkt.errors import ConfigError
 
 #: Exit code of `aptkt collect` and `aptkt learn` when a robot or skin fault stopped the
@@ -128,6 +128,7 @@ def _host_port(text: str, option: str) -> tuple[str, int]:
 def make_session(args: argparse.Namespace, *, seed: int = 0) -> Any:
     """The (not yet entered) live session the options describe."""
     at_least(args.thermal_wait, 0, "--thermal-wait")
+    at_most(args.thermal_wait, MAX_THERMAL_WAIT, "--thermal-wait", "an hour")
     settings = ExplorationSettings(thermal_wait=args.thermal_wait)
     if args.robot == "sim":
         from aptkt.runtime.sessions import SimSession

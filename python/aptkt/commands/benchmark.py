@@ -60,19 +60,29 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from aptkt.commands._checks import at_least, input_file, output_dir
+    from aptkt.commands._checks import (
+        MAX_BUDGET,
+        MAX_RUNS,
+        at_least,
+        at_most,
+        input_file,
+        jobs,
+        output_dir,
+    )
     from aptkt.commands._method import learner_config
     from aptkt.commands._session import split_names
     from aptkt.errors import ConfigError
     from aptkt.experiments.benchmark import PRIOR_CHOICES, BenchmarkSettings, run_benchmark
     from aptkt.learning.feature_table import read_feature_table
 
-    at_least(args.jobs, 1, "--jobs")
+    jobs(args.jobs)
     at_least(args.seed, 0, "--seed")
     at_least(args.groups, 1, "--groups")
+    at_most(args.groups, MAX_RUNS, "--groups")
     at_least(args.new, 2, "--new")
     at_least(args.priors, 2, "--priors")
     at_least(args.budget, 0, "--budget")
+    at_most(args.budget, MAX_BUDGET, "--budget")
     input_file(args.table, "TABLE")
     output_dir(args.output)
     if (args.output / "report.md").exists() and not args.force:

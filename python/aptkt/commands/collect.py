@@ -7,7 +7,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from aptkt.commands._checks import at_least, output_file, resume_or_overwrite
+from aptkt.commands._checks import at_least, output_file, resume_or_overwrite, trial_plan
 from aptkt.commands._session import (
     EXIT_FAULT,
     add_action_arguments,
@@ -92,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
     objects = split_names(args.objects, "--objects") or []  # a required option
     available = available_actions(args)
     names = split_names(args.actions, "--actions") or list(available)
+    trial_plan(len(objects), len(names), args.repetitions, args.first_trial)
     plan = CollectionPlan(
         tuple(objects), tuple(pick_actions(names, available)), args.repetitions, args.first_trial
     )

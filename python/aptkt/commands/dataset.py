@@ -9,9 +9,12 @@ import sys
 from aptkt.commands._checks import (
     at_least,
     input_file,
+    intact_data_set,
+    jobs,
     output_file,
     resume_or_overwrite,
     rewritable_file,
+    trial_plan,
 )
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
@@ -76,9 +79,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--json", action="store_true", help="print the summary as JSON")
     g.set_defaults(func=run_generate)
 
-    i = ds.add_parser("info", help="summarise a data set file")
+    i = ds.add_parser(
+        "info",
+        help="summarise a data set file",
+        description="Counts the recordings, and reports damage: a file cut short is checked "
+        "recording by recording; --check reads every recording and stored feature (about 8 ms "
+        "per recording) to find damage anywhere.",
+    )
     i.add_argument("file", metavar="FILE")
     i.add_argument("--json", action="store_true", help="print JSON")
+    i.add_argument(
+        "--check",
+        action="store_true",
+        help="read everything: find a recording or feature damaged in the middle of the file",
+    )
     i.set_defaults(func=run_info)
 
     f = ds.add_parser(
@@ -160,6 +174,8 @@ def build_plan(args: argparse.Namespace):  # -> GenerationPlan
 
     at_least(args.seed, 0, "--seed")
     at_least(args.first_trial, 0, "--first-trial")
+    at_least(args.repetitions, 1, "--repetitions")
+    jobs(args.jobs)
     resume_or_overwrite(args.resume, args.overwrite)
     output_file(args.output)
     library = load_library(*args.objects_file)
@@ -182,10 +198,7 @@ def build_plan(args: argparse.Namespace):  # -> GenerationPlan
         raise ConfigError(
             f"--actions: unknown action(s) {', '.join(unknown)}; known: {', '.join(available)}"
         )
-    if args.repetitions < 1:
-        raise ConfigError("--repetitions must be >= 1")
-    if args.jobs < 1:
-        raise ConfigError("--jobs must be >= 1")
+    trial_plan(len(objects), len(names), args.repetitions, args.first_trial)
     return GenerationPlan(
         tuple(objects),
         tuple(available[a] for a in names),
@@ -217,9 +230,16 @@ def run_info(args: argparse.Namespace) -> int:
 
     input_file(args.file, "FILE")
     with DatasetReader(args.file) as rd:
-        info = rd.info()
+        info = rd.info(full=args.check)
     if args.json:
         print(json.dumps(info, indent=2, sort_keys=True, default=str))
+        return 0
+    if info["holds_nothing"]:
+        print(
+            f"{info['path']}: holds nothing ({info['file_bytes']} bytes): its writer was killed "
+            "as it created it, before any recording; --resume (or 'aptkt dataset repair "
+            f"{args.file}') starts it afresh"
+        )
         return 0
     print(f"{info['path']}: {info['schema']} (written by aptkt {info['software_version']})")
     print(
@@ -230,6 +250,16 @@ def run_info(args: argparse.Namespace) -> int:
         print(
             f"  DAMAGED: {len(info['damaged'])} recording(s) cannot be read ({shown}); "
             f"'aptkt dataset repair {args.file}' keeps the {info['recordings']} readable ones"
+        )
+    if info["lost"]:
+        print(
+            f"  DAMAGED: {info['lost']} more recording(s) were indexed past the end of the file "
+            "(cut short): even their names are lost"
+        )
+    for problem in info["damaged_features"]:
+        print(
+            f"  DAMAGED: stored features {problem}; they are refused when read "
+            f"('aptkt dataset repair {args.file}', then extract them again)"
         )
     if info["incomplete"]:
         print(
@@ -267,8 +297,8 @@ def run_features(args: argparse.Namespace) -> int:
     from aptkt.learning.dataset import extract_features
 
     rewritable_file(args.file)
-    if args.jobs < 1:
-        raise ConfigError("--jobs must be >= 1")
+    jobs(args.jobs)
+    intact_data_set(args.file, "FILE")
     executor = LocalExecutor(args.jobs)
     try:
         counts = extract_features(
@@ -290,6 +320,8 @@ def run_export_features(args: argparse.Namespace) -> int:
     from aptkt.learning.dataset import load_observations
     from aptkt.learning.feature_table import write_feature_table
 
+    input_file(args.file, "FILE")
+    intact_data_set(args.file, "FILE")
     try:
         table = load_observations(
             args.file,

@@ -46,12 +46,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from aptkt.commands._checks import at_least, output_dir
+    from aptkt.commands._checks import MAX_BUDGET, MAX_RUNS, at_least, at_most, jobs, output_dir
     from aptkt.experiments.demo import DemoSettings, run_demo
 
-    at_least(args.jobs, 1, "--jobs")
+    jobs(args.jobs)
     at_least(args.trials, 1, "--trials")
+    at_most(args.trials, MAX_RUNS, "--trials")
     at_least(args.budget, 0, "--budget")
+    at_most(args.budget, MAX_BUDGET, "--budget")
     at_least(args.seed, 0, "--seed")
     output_dir(args.output)
     common = dict(output=args.output, seed=args.seed, jobs=args.jobs)

@@ -7,7 +7,15 @@ import sys
 from pathlib import Path
 
 from aptkt.commands import learn_table
-from aptkt.commands._checks import at_least, input_file, output_dir, output_file
+from aptkt.commands._checks import (
+    MAX_BUDGET,
+    at_least,
+    at_most,
+    input_file,
+    intact_data_set,
+    output_dir,
+    output_file,
+)
 from aptkt.commands._method import add_method_arguments, learner_config
 from aptkt.commands._session import (
     EXIT_FAULT,
@@ -133,7 +141,9 @@ def run(args: argparse.Namespace) -> int:
     input_file(args.prior, "--prior")
     at_least(args.seed, 0, "--seed")
     at_least(args.budget, 0, "--budget")
+    at_most(args.budget, MAX_BUDGET, "--budget")
     at_least(args.patience, 1, "--patience")
+    at_most(args.patience, MAX_BUDGET, "--patience")
     output_dir(args.output)
     if args.record:
         output_file(args.record, "--record")
@@ -157,6 +167,7 @@ def run(args: argparse.Namespace) -> int:
             f"it has {', '.join(prior.actions)}"
         )
     actions = {a.name: a for a in pick_actions(names, available_actions(args))}
+    _same_as_the_prior(actions, prior.metadata.get("action_definitions"), args.prior)
     try:
         config = learner_config(
             args,
@@ -172,6 +183,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(str(exc)) from None
     test = None
     if args.test:
+        input_file(args.test, "--test")
+        intact_data_set(args.test, "--test")
         test = _load_test(args.test, names, objects)
     session = make_session(args, seed=args.seed)
     session.check_objects(objects)
@@ -208,6 +221,25 @@ def run(args: argparse.Namespace) -> int:
         print(f"aptkt learn: fault: {exc}", file=sys.stderr)
         return EXIT_FAULT
     return 0
+
+
+def _same_as_the_prior(actions: dict, recorded: object, path: str) -> None:
+    """Refuses an action whose definition differs from the one of the same name the prior
+    knowledge was built with (recorded by ``aptkt prior build``): its models would be paired
+    with observations of another movement."""
+    from aptkt.actions import ExploratoryAction
+    from aptkt.actions.definition import redefinition
+
+    if not isinstance(recorded, dict):
+        return  # a prior built otherwise: only the paper's names are known (actions_from_toml)
+    try:
+        known = {name: ExploratoryAction.from_dict(d) for name, d in recorded.items()}
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"--prior {path}: its recorded action definitions: {exc}") from None
+    for action in actions.values():
+        why = redefinition(action, known, "the action the prior knowledge was built with,")
+        if why:
+            raise ConfigError(f"--actions-file: {why} (prior {path})")
 
 
 def _load_test(path: str, actions: list[str], objects: list[str]):  # -> ObservationTable

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from aptkt.commands._checks import MAX_BUDGET, MAX_RUNS, at_most
 from aptkt.commands._method import learner_config
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
@@ -89,6 +90,9 @@ def run(args: argparse.Namespace) -> int:
     runs = DEFAULT_RUNS if args.runs is None else args.runs
     if runs < 1:
         raise ConfigError("--runs must be >= 1")
+    at_most(runs, MAX_RUNS, "--runs")
+    at_most(args.budget, MAX_BUDGET, "--budget")
+    at_most(args.patience, MAX_BUDGET, "--patience")
     try:  # the learner's own checks of the options, as a one-line error
         config = learner_config(
             args,

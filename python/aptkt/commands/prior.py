@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
-from aptkt.commands._checks import at_least, input_file, output_file
+from aptkt.commands._checks import at_least, at_most, input_file, intact_data_set, output_file
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
+from aptkt.gp import MAX_RESTARTS
 from aptkt.learning.config import GPSettings
 from aptkt.learning.pipeline import FEATURE_SCALES
 
@@ -80,13 +82,15 @@ def run_build(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from aptkt.learning import GPSettings, PriorKnowledge
-    from aptkt.learning.dataset import load_observations
+    from aptkt.learning.dataset import load_observations, stored_actions
 
-    if not args.data.exists():
+    if not os.path.exists(args.data):  # (os.path: a name too long to exist is an answer too)
         raise ConfigError(f"{args.data}: no such data set")
     input_file(args.data, "DATA")
+    intact_data_set(args.data, "DATA")
     at_least(args.seed, 0, "--seed")
     at_least(args.restarts, 0, "--restarts")
+    at_most(args.restarts, MAX_RESTARTS, "--restarts", "restarts bound every model's fit")
     # Before the features are extracted and the models fitted: not after.
     output_file(args.output)
     objects = split_names(args.objects, "--objects")
@@ -112,7 +116,14 @@ def run_build(args: argparse.Namespace) -> int:
             seed=args.seed,
             progress=bar,
         )
-    prior.metadata.update(data=str(args.data), trials=args.trials)
+    # What each action was, so that `learn` refuses an actions file that gives one of these
+    # names to another movement.
+    recorded = stored_actions(args.data)
+    prior.metadata.update(
+        data=str(args.data),
+        trials=args.trials,
+        action_definitions={a: recorded[a].to_dict() for a in prior.actions if a in recorded},
+    )
     prior.save(args.output)
     print(
         f"{args.output}: prior knowledge of {len(prior.objects)} objects ({', '.join(prior.objects)}) "

@@ -73,15 +73,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from aptkt.commands._checks import at_least, input_file, output_dir
+    from aptkt.commands._checks import at_least, input_file, intact_data_set, jobs, output_dir
     from aptkt.errors import ConfigError
     from aptkt.experiments.reproduce import FIGURE_NAMES, ReproduceSettings, reproduce
 
-    at_least(args.jobs, 1, "--jobs")
+    jobs(args.jobs)
     at_least(args.seed, 0, "--seed")
     output_dir(args.output)
     if args.data is not None:
         input_file(args.data, "--data")
+        intact_data_set(args.data, "--data")
     if args.scheduler:
         try:
             import dask.distributed  # noqa: F401

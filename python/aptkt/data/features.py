@@ -14,7 +14,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from aptkt.data.hdf5 import writer_mark
+from aptkt.data.hdf5 import cut_short, writer_mark
 from aptkt.data.store import check_schema
 from aptkt.errors import DatasetError
 
@@ -64,6 +64,12 @@ def store_features(
             f"{path}: a writer has the file open, or died without closing it; wait for it to "
             f"finish, or run 'aptkt dataset repair {path}' first"
         )
+    if cut_short(path):
+        raise DatasetError(
+            f"{path}: the file is cut short (it ends before the end HDF5 recorded in it): "
+            f"features cannot be stored in it; run 'aptkt dataset repair {path}' first (it "
+            "keeps every readable recording)"
+        )
     tmp = path.with_name(path.name + ".features-tmp")
     try:
         shutil.copyfile(path, tmp)
@@ -83,12 +89,13 @@ def store_features(
                     del g["recording"]
                     for m in [k for k in g if k != "recording"]:
                         del g[m]
+                # Fletcher-32: a changed byte is an error when read, not another number.
                 if "recording" not in g:
-                    g.create_dataset("recording", data=recs, track_times=False)
+                    g.create_dataset("recording", data=recs, track_times=False, fletcher32=True)
                 for modality, values in vals.items():
                     if modality in g:
                         del g[modality]
-                    g.create_dataset(modality, data=values, track_times=False)
+                    g.create_dataset(modality, data=values, track_times=False, fletcher32=True)
                 if settings is None:
                     g.attrs.pop("extraction", None)
                 else:

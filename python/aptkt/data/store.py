@@ -15,7 +15,14 @@ metadata; the reader checks the last row against the other datasets and drops it
 incomplete (at most one append is ever in flight). :class:`DatasetReader` opens files in
 SWMR-read mode, which also works while a writer is running or after it died. To *append* to a
 file whose writer died, :func:`repair` first copies its complete recordings into a fresh file
-(the HDF5 library refuses to reopen a crashed SWMR file for writing until that is done).
+(the HDF5 library refuses to reopen a crashed SWMR file for writing until that is done). A new
+file is created whole, its structure built under another name first (:mod:`aptkt.data.atomic`).
+
+Damage: HDF5 reads the bytes past the end of a file cut short as zeros, without an error, so the
+reader checks the position of what it reads in such a file (:mod:`aptkt.data.integrity`);
+compressed data (samples, metadata) carry zlib's checksum and stored features Fletcher-32, so
+bytes changed on disk are an error when read. Every such error names the file and the
+recording.
 """
 
 from __future__ import annotations
@@ -31,10 +38,9 @@ from typing import Any
 import h5py
 import numpy as np
 
-from aptkt import __version__
+from aptkt.data import atomic, integrity
 from aptkt.data.codec import (
     CHUNK_ROWS,
-    COMPRESSION,
     META_CHUNK_BYTES,
     PackedRecording,
     json_default,
@@ -90,6 +96,9 @@ class DatasetWriter:
         self.path = Path(path)
         if mode not in ("w", "a"):
             raise ValueError("mode must be 'w' or 'a'")
+        if mode == "a" and atomic.holds_nothing(self.path):
+            # Left by a writer killed as it created the file: nothing to append to.
+            mode, overwrite = "w", True
         if mode == "a" and self.path.exists():
             self._f = self._open_for_appending()
         else:
@@ -128,47 +137,11 @@ class DatasetWriter:
         return f
 
     def _create(self, description: Mapping[str, Any] | None) -> h5py.File:
-        """A new file with every dataset of the layout, empty (created before the first
-        recording: SWMR mode cannot create datasets)."""
+        """A new file with every dataset of the layout, empty; whole or not at all (a kill while
+        HDF5 creates a file in place left 48 bytes nothing reads)."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        f = while_locked(lambda: h5py.File(self.path, "w", libver="latest", track_order=False))
-        f.attrs["schema"] = SCHEMA
-        f.attrs["schema_version"] = SCHEMA_VERSION
-        f.attrs["software_version"] = __version__
-        f.attrs["description"] = json.dumps(
-            dict(description or {}), sort_keys=True, default=json_default
-        )
-        g = f.create_group("recordings")
-        g.create_dataset(
-            "index",
-            shape=(0,),
-            maxshape=(None,),
-            dtype=INDEX_DTYPE,
-            chunks=(256,),
-            track_times=False,
-        )
-        g.create_dataset(
-            "metadata",
-            shape=(0,),
-            maxshape=(None,),
-            dtype=np.uint8,
-            chunks=(META_CHUNK_BYTES,),
-            track_times=False,
-            **COMPRESSION,
-        )
-        s = g.create_group("samples")
-        for name, (tail, dtype) in SAMPLE_FIELDS.items():
-            s.create_dataset(
-                name,
-                shape=(0, *tail),
-                maxshape=(None, *tail),
-                dtype=dtype,
-                chunks=(CHUNK_ROWS, *tail),
-                track_times=False,
-                **COMPRESSION,
-            )
-        f.flush()
-        return f
+        atomic.create_data_set(self.path, description)
+        return while_locked(lambda: h5py.File(self.path, "a", libver="latest"))
 
     def _start_swmr(self) -> None:
         self._f.swmr_mode = True
@@ -284,26 +257,42 @@ class DatasetReader:
             raise DatasetError(f"{self.path}: no such file")
         #: The file's writer died outside SWMR mode: it is read through a private copy.
         self.writer_died = False
+        #: The file holds nothing: its writer was killed as it created it (an aptkt that
+        #: created files in place). Read as an empty data set; a writer starts it afresh.
+        self.holds_nothing = atomic.holds_nothing(self.path)
         self._copy: Path | None = None
         self._damaged: list[int] | None = None
-        try:
-            self._f = while_locked(lambda: open_swmr_read(self.path))
-        except OSError as exc:
-            if not refused_for_writer_mark(exc):
-                raise DatasetError(f"{self.path}: not a readable HDF5 data set: {exc}") from exc
-            self._f = self._open_private_copy()
+        if self.holds_nothing:
+            self._f = atomic.empty_data_set()
+        else:
+            try:
+                self._f = while_locked(lambda: open_swmr_read(self.path))
+            except OSError as exc:
+                if not refused_for_writer_mark(exc):
+                    raise DatasetError(f"{self.path}: not a readable HDF5 data set: {exc}") from exc
+                self._f = self._open_private_copy()
+        #: The file is shorter than the end HDF5 recorded in it: bytes past its end read as
+        #: zeros, so what lies there is checked before it is used.
+        self.cut_short = cut_short(self.path)
         try:
             self.version = check_schema(self._f, self.path)
             self._meta = self._f["recordings/metadata"]
             self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
             # A snapshot: recordings appended after opening are not seen (reopen to see them).
             index = readable_prefix(self._f["recordings/index"])
+            beyond = self._beyond(self._f["recordings/index"])
         except (OSError, KeyError) as exc:
             self.close()
             raise DatasetError(
                 f"{self.path}: damaged: the file's structure cannot be read ({exc}); "
                 "no recording can be recovered from it"
             ) from exc
+        #: Index rows past the end of a file cut short (they read as zeros): recordings whose
+        #: very names are lost, left out.
+        self.lost = 0
+        if beyond is not None and beyond < len(index):
+            self.lost = len(index) - beyond
+            index = index[:beyond]
         self.index = index[: self._complete(index)]
         #: Index rows of an append that was cut short (a writer killed mid-append, or one
         #: still running), left out: 0 or 1.
@@ -311,8 +300,15 @@ class DatasetReader:
         # counted: it can only hold that same in-flight row.)
         self.incomplete = len(index) - len(self.index)
 
+    def _beyond(self, ds: h5py.Dataset) -> int | None:
+        """The first row of ``ds`` past the end of this file, if it is cut short."""
+        if not self.cut_short or self.holds_nothing:
+            return None
+        return integrity.first_row_beyond(ds, self.path.stat().st_size)
+
     def _open_private_copy(self) -> h5py.File:
-        fd, name = tempfile.mkstemp(prefix=f"{self.path.name}.", suffix=".reading")
+        # (The name cut: a name near the file system's limit would not take the suffixes.)
+        fd, name = tempfile.mkstemp(prefix=f"{self.path.name[:100]}.", suffix=".reading")
         os.close(fd)
         self._copy = Path(name)
         try:
@@ -345,7 +341,7 @@ class DatasetReader:
             self._read_metadata(last, n - 1)
             for ds in self._samples.values():
                 ds[int(last["row_start"]) : int(last["row_stop"])]
-        except (OSError, ValueError):  # data past the end of the file, or torn metadata
+        except (OSError, ValueError, DatasetError):  # past the end of the file, or torn
             return n - 1
         return n
 
@@ -354,7 +350,7 @@ class DatasetReader:
             raw = self._meta[int(row["meta_start"]) : int(row["meta_stop"])].tobytes()
         else:
             raw = self._meta[i]
-        return json.loads(raw.decode("utf-8") if isinstance(raw, bytes) else raw)
+        return integrity.parse_metadata(raw, self.path, i, row)
 
     def __enter__(self) -> DatasetReader:
         return self
@@ -382,7 +378,12 @@ class DatasetReader:
 
     def key(self, i: int) -> tuple[str, str, int]:
         r = self.index[i]
-        return r["object"].decode(), r["action"].decode(), int(r["trial"])
+        # (errors="replace": a damaged row must still be nameable in the error that names it.)
+        return (
+            r["object"].decode("utf-8", errors="replace"),
+            r["action"].decode("utf-8", errors="replace"),
+            int(r["trial"]),
+        )
 
     def keys(self) -> list[tuple[str, str, int]]:
         return [self.key(i) for i in range(len(self))]
@@ -426,11 +427,49 @@ class DatasetReader:
             yield self.recording(i)
 
     def features(self, action: str, modality: str) -> tuple[np.ndarray, np.ndarray]:
-        """``(recording numbers, values)`` of stored features; KeyError if there are none."""
-        g = self._f.get(f"features/{action}")
-        if g is None or modality not in g:
+        """``(recording numbers, values)`` of stored features; KeyError if there are none,
+        :class:`DatasetError` naming the recording if they are damaged (past the end of a file
+        cut short, or failing their checksum)."""
+        try:
+            g = self._f.get(f"features/{action}")
+            stored = g is not None and modality in g
+        except (KeyError, OSError) as exc:  # a group header past the end of the file
+            raise DatasetError(
+                f"{self.path}: the stored features of {action} are damaged (their structure "
+                f"cannot be read: {exc}); run 'aptkt dataset repair {self.path}', then "
+                "extract the features again"
+            ) from None
+        if not stored:
             raise KeyError(f"no stored {modality!r} features for action {action!r}")
+        problem = self._feature_damage(action, modality, read=True)
+        if problem is not None:
+            raise DatasetError(
+                f"{self.path}: the stored {modality} features of {action} are damaged "
+                f"({problem}); run 'aptkt dataset repair {self.path}' (it keeps the readable "
+                "recordings, not the features), then extract the features again"
+            )
         return g["recording"][...], g[modality][...]
+
+    def _feature_damage(self, action: str, modality: str, *, read: bool) -> str | None:
+        def name(i: int) -> str | None:
+            return f"{i} ({integrity.row_name(self.index[i])})" if 0 <= i < len(self) else None
+
+        return integrity.feature_damage(
+            self._f, action, modality, beyond=self._beyond, recording_name=name, read=read
+        )
+
+    def damaged_features(self, *, full: bool = False) -> list[str]:
+        """``action/modality: problem`` of every damaged stored feature matrix: those past the
+        end of a file cut short; with ``full`` also those failing their checksum."""
+        out = []
+        for action, modalities in integrity.feature_groups(self._f).items():
+            if modalities is None:
+                out.append(f"{action}: their structure cannot be read: every {action} recording's")
+            for m in modalities or ():
+                problem = self._feature_damage(action, m, read=full)
+                if problem is not None:
+                    out.append(f"{action}/{m}: {problem}")
+        return out
 
     def feature_settings(self, action: str) -> dict[str, Any] | None:
         """The extraction settings the stored features of ``action`` were computed with (None
@@ -442,33 +481,49 @@ class DatasetReader:
         return settings
 
     def feature_names(self) -> dict[str, list[str]]:
-        g = self._f.get("features")
-        if g is None:
-            return {}
-        return {a: sorted(k for k in g[a] if k != "recording") for a in g}
+        """Stored modalities by action (none for an action whose group cannot be read: see
+        :meth:`damaged_features`)."""
+        return {a: m or [] for a, m in integrity.feature_groups(self._f).items()}
 
     def damaged(self, *, full: bool = False) -> list[int]:
-        """Numbers of the indexed recordings whose samples or metadata cannot be read. Every
-        recording is read once to find out — only when the file is shorter than HDF5 recorded
-        (cut short) or its writer died, unless ``full`` (a file damaged in its middle on disk
-        is then found too; it costs about 8 ms per recording)."""
-        if not (full or self.writer_died or cut_short(self.path)):
-            return []
+        """Numbers of the indexed recordings whose samples or metadata cannot be read (their
+        compression's checksum fails, their metadata is not JSON) or whose index row is
+        impossible. Every recording is read once to find out — only when the file is shorter
+        than HDF5 recorded (cut short) or its writer died, unless ``full`` (a file damaged in
+        its middle on disk is then found too; it costs about 8 ms per recording)."""
+        implausible = self._implausible()
+        if not (full or self.writer_died or self.cut_short):
+            return implausible
         if self._damaged is None:
-            bad = []
+            bad = set(implausible)
             for i in range(len(self)):
+                if i in bad:
+                    continue
                 try:
                     self.metadata(i)
                     self.raw(i)
-                except (OSError, ValueError):
-                    bad.append(i)
-            self._damaged = bad
+                except (OSError, ValueError, DatasetError):
+                    bad.add(i)
+            self._damaged = sorted(bad)
         return list(self._damaged)
 
-    def info(self) -> dict[str, Any]:
+    def _implausible(self) -> list[int]:
+        return integrity.implausible_rows(self.index, self._samples, self._meta, self.version)
+
+    def damage(self, *, full: bool = False) -> str | None:
+        """The damage found (see :meth:`damaged`, :meth:`damaged_features`), in one phrase
+        naming the first damaged recording; None if none is found."""
+        bad = self.damaged(full=full)
+        first = integrity.row_name(self.index[bad[0]]) if bad else None
+        return integrity.damage_phrase(self.lost, bad, first, self.damaged_features(full=full))
+
+    def info(self, *, full: bool = False) -> dict[str, Any]:
         """A summary of the readable recordings: counts per object and action, samples, size on
-        disk, schema; ``damaged`` lists ``object/action/trial`` of those that are not."""
-        damaged = self.damaged()
+        disk, schema; ``damaged`` lists ``object/action/trial`` of those that are not,
+        ``damaged_features`` the stored features that are not, ``lost`` counts index rows past
+        the end of a file cut short. ``full``: read everything to find damage (see
+        :meth:`damaged`)."""
+        damaged = self.damaged(full=full)
         index = np.delete(self.index, damaged)
         objects = Counter(index["object"].astype(str).tolist())
         actions = Counter(index["action"].astype(str).tolist())
@@ -480,6 +535,9 @@ class DatasetReader:
             "software_version": self.attrs.get("software_version"),
             "recordings": len(index),
             "damaged": ["{}/{}/trial {}".format(*self.key(i)) for i in damaged],
+            "damaged_features": self.damaged_features(full=full),
+            "lost": self.lost,
+            "holds_nothing": self.holds_nothing,
             "writer_died": self.writer_died,
             "incomplete": self.incomplete,
             "objects": dict(objects),
@@ -504,13 +562,16 @@ def repair(path: str | Path, *, backup: bool = True) -> int:
     try:
         with DatasetReader(path) as src:
             desc = src.description
+            skip = set(src._implausible())
             with DatasetWriter(tmp, "w", description=desc, overwrite=True) as dst:
                 n = 0
                 for i in range(len(src)):
+                    if i in skip:
+                        continue
                     try:
                         meta = src.metadata(i)
                         raw = src.raw(i)
-                    except (OSError, ValueError):  # damaged (e.g. lies past a truncation)
+                    except (OSError, ValueError, DatasetError):  # damaged (past a truncation)
                         continue
                     r = src.index[i]
                     meta_json = json.dumps(meta, sort_keys=True, default=json_default)

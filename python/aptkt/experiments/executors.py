@@ -119,6 +119,11 @@ class DaskExecutor:
         else:
             try:
                 self.client, self._own = Client(address, timeout="20s"), True
+            except ValueError as exc:  # dask's parse of the address
+                raise ConfigError(
+                    f"--scheduler {address!r} is not a scheduler address (e.g. "
+                    f"tcp://host:8786): {exc}"
+                ) from None
             except (OSError, TimeoutError) as exc:
                 raise ConfigError(f"cannot reach the Dask scheduler at {address!r}: {exc}") from exc
         workers = len(self.client.scheduler_info().get("workers", {}))

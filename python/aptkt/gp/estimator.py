@@ -45,7 +45,8 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
     n_restarts : int
         Starts besides the initial hyper-parameters (default 1): the first is scaled to the
         data (median pairwise distance per modality; random around it when the initial
-        length-scale is already "auto"), the others are random around that scale.
+        length-scale is already "auto"), the others are random around that scale. At most
+        :data:`~aptkt.gp.MAX_RESTARTS`.
     fixed : iterable of str
         Hyper-parameters held at their initial values, among ``"signal_variance"``,
         ``"length_scale"``, ``"modality_weights"``, ``"transfer_lambda"``. By default λ is fixed
@@ -53,7 +54,8 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
     random_state : None, int or numpy Generator
         Seeds the random starts; the fit is deterministic for a given value.
     max_iter : int
-        Iterations of the quasi-Newton optimiser per start (default 100).
+        Iterations of the quasi-Newton optimiser per start (default 100; at most
+        :data:`~aptkt.gp.MAX_ITERATIONS`).
     optimizer_tol : float
         The optimiser stops when an iteration lowers the negative log marginal likelihood (or
         posterior) by less than this fraction of its value; default 1e7·eps ≈ 2.2e-9, the
@@ -62,7 +64,9 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
     length_scale_bounds, signal_variance_bounds : (float, float)
         Box constraints of the optimiser.
     newton_max_iter, newton_tol : int, float
-        Newton mode-finding limits (Algorithm 3.1).
+        Newton mode-finding limits (Algorithm 3.1): at most :data:`~aptkt.gp.MAX_ITERATIONS`,
+        and a finite tolerance >= 0. Every numeric setting is checked when ``fit`` starts: NaN,
+        infinity, a bool or a value out of range is a :class:`ValueError` naming it.
     max_jitter : float
         If a kernel cannot be factorised, jitter of 1e-10, 1e-8, ... times the signal variance
         is added to its diagonal up to this bound, then
@@ -72,7 +76,12 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         ~1e-5) or Gauss-Legendre quadrature of the exact integrand (error < 1e-9).
     n_jobs : int, optional
         Threads for the per-class fits, by joblib's convention: None (default) one, -1 every
-        core, -2 all but one, ...
+        core, -2 all but one, ...; never more than the machine's cores.
+
+    A fit whose n x n matrices would not fit in the memory available (with
+    ``kernel="shared"``: every task's, held at once) raises
+    :class:`~aptkt.errors.ProblemTooLargeError` naming the rows and the bytes needed, before
+    allocating them.
     hyper_prior : None, "weak" or HyperPrior
         None: plain ML-II (maximise the log marginal likelihood). Otherwise MAP-II with the
         given weak log-normal hyper-priors (see :class:`HyperPrior`).

@@ -20,7 +20,9 @@ __all__ = [
     "NotFitted",
     "as_matrix",
     "check_classification_targets",
+    "count",
     "normalise_modalities",
+    "real",
     "seed_of",
     "threads",
     "validate",
@@ -125,14 +127,39 @@ def validate(estimator: BaseEstimator, X: Any, y: Any = _NO_TARGET, *, reset: bo
 
 def threads(n_jobs: Any) -> int:
     """Threads for ``n_jobs`` by joblib's convention: None -> 1, -1 -> every core, -2 -> all
-    but one, and so on."""
+    but one, and so on; never more than the machine's cores (more threads only share them, and
+    each one costs memory: a huge ``n_jobs`` once started threads without end)."""
     if n_jobs is None:
         return 1
     if isinstance(n_jobs, bool) or not isinstance(n_jobs, (int, np.integer)) or n_jobs == 0:
         raise ValueError(f"n_jobs must be None or a non-zero integer, got {n_jobs!r}")
+    cores = os.cpu_count() or 1
     if n_jobs > 0:
-        return int(n_jobs)
-    return max(1, (os.cpu_count() or 1) + 1 + int(n_jobs))
+        return min(int(n_jobs), cores)
+    return max(1, cores + 1 + int(n_jobs))
+
+
+def real(value: Any, name: str, *, positive: bool = False) -> float:
+    """A setting that must be a finite real number (not a bool), > 0 or >= 0."""
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float, np.integer, np.floating))
+        or not np.isfinite(value)
+        or not (value > 0 if positive else value >= 0)
+    ):
+        raise ValueError(
+            f"{name} must be a finite number {'>' if positive else '>='} 0, got {value!r}"
+        )
+    return float(value)
+
+
+def count(value: Any, name: str, maximum: int) -> int:
+    """A setting that must be an integer (not a bool) in ``0..maximum``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+        raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
+    if value > maximum:
+        raise ValueError(f"{name} must be at most {maximum}, got {value}")
+    return int(value)
 
 
 def seed_of(random_state: Any) -> int:

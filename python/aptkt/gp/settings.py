@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from aptkt import _core
-from aptkt.gp.inputs import normalise_modalities, seed_of, threads
+from aptkt.gp.inputs import count, normalise_modalities, real, seed_of, threads
 
 __all__ = [
     "CLASS_PRIORS",
@@ -20,6 +20,8 @@ __all__ = [
     "FitDefaults",
     "HyperPrior",
     "LATENT_MEANS",
+    "MAX_ITERATIONS",
+    "MAX_RESTARTS",
     "check_class_prior",
     "check_optimizer_tol",
     "core_settings",
@@ -53,6 +55,12 @@ CLASS_PRIORS = ("training", "uniform")
 #: scikit-learn's one-vs-rest GPC); "shared": one kernel for every classifier of the model.
 KERNELS = ("per-classifier", "shared")
 LATENT_MEANS = ("zero", "base-rate")
+#: Optimiser starts a fit may add to the first (``n_restarts``): each is a whole optimisation
+#: (the defaults make one more), and the starts are held in memory together.
+MAX_RESTARTS = 1000
+#: Iterations of the optimiser (``max_iter``) and of the search for the mode
+#: (``newton_max_iter``).
+MAX_ITERATIONS = 1_000_000
 
 _FIXABLE = ("signal_variance", "length_scale", "modality_weights", "transfer_lambda")
 _APPROXIMATIONS = ("erf", "quadrature")
@@ -138,12 +146,7 @@ class HyperPrior:
 
 def check_optimizer_tol(value: Any) -> None:
     """The optimiser's relative tolerance must be a finite real number >= 0 (not a bool)."""
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, (int, float, np.number))
-        or not (np.isfinite(value) and value >= 0)
-    ):
-        raise ValueError(f"optimizer_tol must be a finite number >= 0, got {value!r}")
+    real(value, "optimizer_tol")
 
 
 def check_class_prior(*values: str | None) -> None:
@@ -177,9 +180,11 @@ def fit_spec(est: Any, n_features: int) -> dict[str, Any]:
     if est.modality_weights is None:
         weights = [1.0 / m] * m
     else:
-        weights = [float(w) for w in est.modality_weights]
+        weights = [real(w, "modality_weights") for w in est.modality_weights]
         if len(weights) != m:
             raise ValueError(f"modality_weights has {len(weights)} values for {m} modalities")
+        if sum(weights) <= 0:
+            raise ValueError(f"modality_weights must have a positive sum, got {weights}")
     fixed = set(est.fixed)
     unknown = fixed - set(_FIXABLE)
     if unknown:
@@ -195,21 +200,33 @@ def fit_spec(est: Any, n_features: int) -> dict[str, Any]:
         raise ValueError(
             f"approximation must be one of {_APPROXIMATIONS}, got {est.approximation!r}"
         )
+    # Every number is checked here, before the core sees it: NaN, infinity or a bool would
+    # otherwise pass as a tolerance or a count and surface as a fit that never ends.
     check_optimizer_tol(est.optimizer_tol)
-    for name in ("n_restarts", "max_iter", "newton_max_iter"):
-        value = getattr(est, name)
-        if not isinstance(value, (int, np.integer)) or value < 0:
-            raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
+    real(est.newton_tol, "newton_tol")
+    real(est.max_jitter, "max_jitter")
+    count(est.n_restarts, "n_restarts", MAX_RESTARTS)
+    count(est.max_iter, "max_iter", MAX_ITERATIONS)
+    count(est.newton_max_iter, "newton_max_iter", MAX_ITERATIONS)
     threads(est.n_jobs)  # checks the value
+    bounds = {}
+    for name in ("signal_variance_bounds", "length_scale_bounds"):
+        value = getattr(est, name)
+        if isinstance(value, (str, bytes)) or np.ndim(value) != 1 or len(value) != 2:
+            raise ValueError(f"{name} must be a pair (low, high), got {value!r}")
+        lo, hi = (real(v, name, positive=True) for v in value)
+        if not lo < hi:
+            raise ValueError(f"{name} must satisfy low < high, got {value!r}")
+        bounds[name] = (lo, hi)
     return {
         "modality_names": names,
         "modalities": groups,
-        "signal_variance": float(est.signal_variance),
+        "signal_variance": real(est.signal_variance, "signal_variance", positive=True),
         "length_scales": length_scales,
         "weights": weights,
         "free": {k: k not in fixed for k in _FIXABLE},
-        "signal_variance_bounds": tuple(float(v) for v in est.signal_variance_bounds),
-        "length_scale_bounds": tuple(float(v) for v in est.length_scale_bounds),
+        "signal_variance_bounds": bounds["signal_variance_bounds"],
+        "length_scale_bounds": bounds["length_scale_bounds"],
         "hyper_prior": HyperPrior.resolve(est.hyper_prior),
     }
 

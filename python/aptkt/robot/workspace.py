@@ -78,6 +78,10 @@ def load_workspace(path: str | Path) -> WorkspaceConfig:
         raise ConfigError(f"{path}: workspace file not found") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError:  # a binary file given by mistake (a prior's .npz, say)
+        raise ConfigError(
+            f"{path}: not a workspace file (TOML text), not even UTF-8 text"
+        ) from None
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read: {exc}") from None
     return parse_workspace(doc, source=str(path))

@@ -45,7 +45,8 @@ class TrialFile:
                 with DatasetReader(self.path) as rd:
                     check(rd.description)
             try:
-                self.writer = DatasetWriter(self.path, "a")
+                # (The description serves a file that holds nothing yet, started afresh.)
+                self.writer = DatasetWriter(self.path, "a", description=description)
             except DatasetError:
                 self.repaired = repair(self.path)  # its writer died: keep every complete recording
                 self.writer = DatasetWriter(self.path, "a")

@@ -473,6 +473,12 @@ def _read_toml(path: Path) -> Mapping[str, Any]:
         raise ConfigError(f"{path}: object library not found") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(
+            f"{path}: not an object library (TOML text), not even UTF-8 text"
+        ) from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a directory, not an object library") from None
 
 
 def default_library() -> ObjectLibrary:

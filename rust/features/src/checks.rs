@@ -13,6 +13,14 @@ pub enum FeatureError {
     },
     #[error("{name}: {message}")]
     Shape { name: String, message: String },
+    /// Finite input whose result overflowed: values too large for float64 arithmetic (their
+    /// squares or differences exceed 1.8e308).
+    #[error("{name}: the {what} overflows to {value} (the values are too large: their squares or differences exceed float64's range); rescale the input")]
+    NonFiniteResult {
+        name: String,
+        what: String,
+        value: f64,
+    },
 }
 
 impl FeatureError {
@@ -21,6 +29,27 @@ impl FeatureError {
             name: name.to_string(),
             message: message.into(),
         }
+    }
+
+    pub(crate) fn overflow(name: &str, what: &str, value: f64) -> Self {
+        FeatureError::NonFiniteResult {
+            name: name.to_string(),
+            what: what.to_string(),
+            value,
+        }
+    }
+}
+
+/// `values` of a computation on input already known to be finite: any NaN or infinity in them
+/// is an overflow, reported as [`FeatureError::NonFiniteResult`].
+pub(crate) fn finite_result<'a>(
+    name: &str,
+    what: &str,
+    values: impl IntoIterator<Item = &'a f64>,
+) -> Result<(), FeatureError> {
+    match values.into_iter().find(|v| !v.is_finite()) {
+        Some(&v) => Err(FeatureError::overflow(name, what, v)),
+        None => Ok(()),
     }
 }
 

@@ -22,6 +22,12 @@ pub struct Hjorth {
 /// and a second accumulates all three centred sums of squares. Centring first keeps full
 /// precision for signals with a large offset (gravity on an accelerometer axis).
 pub fn hjorth<T: Sample>(x: ArrayView1<'_, T>) -> Hjorth {
+    hjorth_with_variances(x).0
+}
+
+/// [`hjorth`], with the three variances it is built from (var(x), var(x'), var(x'')): a
+/// non-finite one means the signal's values overflowed float64 (see [`hjorth_checked`]).
+fn hjorth_with_variances<T: Sample>(x: ArrayView1<'_, T>) -> (Hjorth, [f64; 3]) {
     match x.as_slice() {
         Some(s) => hjorth_slice(s),
         None => {
@@ -29,6 +35,30 @@ pub fn hjorth<T: Sample>(x: ArrayView1<'_, T>) -> Hjorth {
             hjorth_slice(&lane)
         }
     }
+}
+
+/// [`hjorth`] of a lane of `name`, or an error if its variances are not finite: the input
+/// holds a NaN or an infinity (reported with its index in `whole`, the array the lane belongs
+/// to), or its values are so large that their squares or differences overflow. The NaN of a
+/// constant lane's ratios is an answer (undefined), not an error; an overflow's is not.
+pub(crate) fn hjorth_checked<T: Sample>(
+    name: &str,
+    lane: ArrayView1<'_, T>,
+    whole: &ArrayViewD<'_, T>,
+) -> Result<Hjorth, FeatureError> {
+    let (h, variances) = hjorth_with_variances(lane);
+    if lane.len() >= 3 {
+        if let Some(&v) = variances.iter().find(|v| !v.is_finite()) {
+            check_finite(name, whole)?;
+            let what = [
+                "activity (variance)",
+                "variance of the first difference",
+                "variance of the second difference",
+            ][variances.iter().position(|x| !x.is_finite()).unwrap_or(0)];
+            return Err(FeatureError::overflow(name, &format!("Hjorth {what}"), v));
+        }
+    }
+    Ok(h)
 }
 
 const NAN3: Hjorth = Hjorth {
@@ -39,10 +69,10 @@ const NAN3: Hjorth = Hjorth {
 
 /// Lanes of 4 independent accumulators let the CPU overlap the additions (a single running
 /// sum is bound by the floating-point add latency).
-fn hjorth_slice<T: Sample>(s: &[T]) -> Hjorth {
+fn hjorth_slice<T: Sample>(s: &[T]) -> (Hjorth, [f64; 3]) {
     let n = s.len();
     if n < 3 {
-        return NAN3;
+        return (NAN3, [f64::NAN; 3]);
     }
     let mut sums = [0.0f64; 4];
     let mut chunks = s.chunks_exact(4);
@@ -96,11 +126,14 @@ fn hjorth_slice<T: Sample>(s: &[T]) -> Hjorth {
     let var2 = (ss2.iter().sum::<f64>() + r2) / (nf - 2.0);
     let mobility = (var1 / var0).sqrt();
     let complexity = (var2 / var1).sqrt() / mobility;
-    Hjorth {
-        activity: var0,
-        mobility,
-        complexity,
-    }
+    (
+        Hjorth {
+            activity: var0,
+            mobility,
+            complexity,
+        },
+        [var0, var1, var2],
+    )
 }
 
 /// Hjorth parameters of every lane of `x` along `axis`; output arrays have `x`'s shape without
@@ -131,12 +164,9 @@ pub fn hjorth_along<T: Sample>(
     let mut mobility = Vec::with_capacity(n_out);
     let mut complexity = Vec::with_capacity(n_out);
     for lane in x.lanes(Axis(axis)) {
-        let h = hjorth(lane);
         // A NaN or infinity anywhere in a lane makes its variance non-finite; only then is the
         // whole input scanned to report where (finite data are read once less).
-        if !h.activity.is_finite() {
-            check_finite(name, &x)?;
-        }
+        let h = hjorth_checked(name, lane, &x)?;
         activity.push(h.activity);
         mobility.push(h.mobility);
         complexity.push(h.complexity);
@@ -223,6 +253,26 @@ mod tests {
             }
             other => panic!("expected a NonFinite error, got {:?}", other.err()),
         }
+    }
+
+    #[test]
+    fn overflow_is_an_error_and_a_constant_lane_is_not() {
+        let big: Vec<f64> = [1e308, -1e308].repeat(10);
+        let a = Array1::from(big);
+        match hjorth_along("x", a.view().into_dyn(), 0) {
+            Err(FeatureError::NonFiniteResult { name, .. }) => assert_eq!(name, "x"),
+            other => panic!("expected a NonFiniteResult error, got {:?}", other.err()),
+        }
+        // Squares fine, differences overflow: var(x) is finite, var(x') is not.
+        let a = Array1::from([1e154, -1e154].repeat(10));
+        assert!(matches!(
+            hjorth_along("x", a.view().into_dyn(), 0),
+            Err(FeatureError::NonFiniteResult { .. })
+        ));
+        let flat = Array1::from(vec![2.0; 10]);
+        let h = hjorth_along("x", flat.view().into_dyn(), 0).unwrap();
+        assert_eq!(h.activity[[]], 0.0);
+        assert!(h.mobility[[]].is_nan());
     }
 
     #[test]

@@ -1,6 +1,6 @@
 use ndarray::{Array1, ArrayD, ArrayView1, ArrayViewD, Axis};
 
-use crate::checks::{check_finite, resolve_axis, FeatureError};
+use crate::checks::{check_finite, finite_result, resolve_axis, FeatureError};
 use crate::Sample;
 
 /// Mean over every element: the stiffness feature F̄ is the mean normal force over all force
@@ -24,7 +24,9 @@ pub fn mean_all<T: Sample>(name: &str, x: ArrayViewD<'_, T>) -> Result<f64, Feat
         }
         sum = t;
     }
-    Ok((sum + comp) / x.len() as f64)
+    let mean = (sum + comp) / x.len() as f64;
+    finite_result(name, "mean", [mean].iter())?;
+    Ok(mean)
 }
 
 /// Gradient with unit spacing, as `numpy.gradient(x)` with `edge_order=1`: central differences
@@ -66,6 +68,7 @@ pub fn gradient_along<T: Sample>(
     {
         dst.assign(&gradient(src));
     }
+    finite_result(name, "gradient", out.iter())?;
     Ok(out)
 }
 
@@ -98,6 +101,7 @@ pub fn thermal_curve<T: Sample>(
     let mut out = Array1::<f64>::zeros(2 * steps);
     out.slice_mut(ndarray::s![..steps]).assign(&mean);
     out.slice_mut(ndarray::s![steps..]).assign(&grad);
+    finite_result(name, "temperature curve", out.iter())?;
     Ok(out)
 }
 
@@ -133,6 +137,28 @@ mod tests {
             assert!((curve[t] - (30.5 - 0.5 * t as f64)).abs() < 1e-12);
             assert!((curve[6 + t] + 0.5).abs() < 1e-12);
         }
+    }
+
+    #[test]
+    fn overflowing_results_are_errors_not_infinities() {
+        let big = ArrayD::from_shape_vec(ndarray::IxDyn(&[4]), vec![1e308, -1e308, 1e308, -1e308])
+            .unwrap();
+        assert_eq!(mean_all("f", big.view()).unwrap(), 0.0);
+        let huge = ArrayD::from_shape_vec(ndarray::IxDyn(&[2]), vec![1.7e308, 1.7e308]).unwrap();
+        assert!(matches!(
+            mean_all("f", huge.view()),
+            Err(FeatureError::NonFiniteResult { .. })
+        ));
+        assert!(matches!(
+            gradient_along("t", big.view(), 0),
+            Err(FeatureError::NonFiniteResult { .. })
+        ));
+        let temp =
+            ArrayD::from_shape_vec(ndarray::IxDyn(&[1, 2]), vec![1.7e308, -1.7e308]).unwrap();
+        assert!(matches!(
+            thermal_curve("t", temp.view(), -1),
+            Err(FeatureError::NonFiniteResult { .. })
+        ));
     }
 
     #[test]

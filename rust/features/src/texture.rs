@@ -1,7 +1,7 @@
 use ndarray::{Array1, ArrayD, ArrayView1, ArrayView2, ArrayViewD, Axis, Dimension, Ix2, IxDyn};
 
-use crate::checks::{check_finite, resolve_axis, FeatureError};
-use crate::hjorth::hjorth;
+use crate::checks::{check_finite, finite_result, resolve_axis, FeatureError};
+use crate::hjorth::hjorth_checked;
 use crate::Sample;
 
 /// Length of the texture descriptor: A, M, C per axis (3 × 3) and the 3 axis-pair correlations.
@@ -118,7 +118,7 @@ pub fn texture_descriptor<T: Sample>(
     let mut td = Array1::<f64>::zeros(TEXTURE_DIM);
     for cell in acc.outer_iter() {
         for (axis, lane) in cell.lanes(Axis(1)).into_iter().enumerate() {
-            let h = hjorth(lane);
+            let h = hjorth_checked(name, lane, &acc)?;
             td[axis] += h.activity;
             td[3 + axis] += h.mobility;
             td[6 + axis] += h.complexity;
@@ -137,6 +137,8 @@ pub fn texture_descriptor<T: Sample>(
     if td.iter().take(3).any(|v| !v.is_finite()) {
         check_finite(name, &acc)?;
     }
+    // Each activity is finite; their sum over the cells may still overflow.
+    finite_result(name, "mean activity", td.iter().take(3))?;
     Ok(td)
 }
 

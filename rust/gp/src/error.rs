@@ -17,6 +17,13 @@ pub enum GpError {
     /// The fit was cancelled through its cancel flag.
     #[error("the fit was cancelled")]
     Cancelled,
+    /// The work needs more memory than the machine has: found before allocating it.
+    #[error("{message}")]
+    TooLarge {
+        rows: usize,
+        bytes: u128,
+        message: String,
+    },
 }
 
 pub type GpResult<T> = Result<T, GpError>;

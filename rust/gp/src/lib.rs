@@ -10,6 +10,7 @@ pub mod kernel;
 pub mod laplace;
 pub mod likelihood;
 pub mod linalg;
+pub mod memory;
 pub mod model;
 pub mod optimize;
 pub mod rng;
@@ -21,6 +22,6 @@ pub use kernel::{Data, Hyper, Layout, Modalities};
 pub use likelihood::Predictive;
 pub use model::{
     fit, fit_at, fit_from, layout_for, BinaryFit, Free, HyperPrior, LatentMean, ModelSpec,
-    OneVsAll, PriorTerm, Source,
+    OneVsAll, PriorTerm, Source, MAX_RESTARTS,
 };
 pub use shared::{fit_shared, KernelTask};

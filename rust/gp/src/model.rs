@@ -15,6 +15,7 @@ use crate::laplace::{find_mode_with_jitter, lml_gradient_in, Jitter, Mode, Newto
 use crate::likelihood::{predictive_probability, Predictive};
 use crate::linalg;
 use crate::linalg::InverseScratch;
+use crate::memory;
 use crate::optimize::{minimize, LbfgsConfig, OptResult};
 use crate::rng::SplitMix64;
 
@@ -102,6 +103,10 @@ pub fn log_prior(terms: &[PriorTerm], theta: &[f64]) -> (f64, Vec<f64>) {
     (value, grad)
 }
 
+/// The most optimiser starts a fit may add to the first ([`ModelSpec::n_restarts`]): each is a
+/// whole optimisation, and the starting points are held in memory together.
+pub const MAX_RESTARTS: usize = 1000;
+
 /// Everything that defines a model except the data.
 #[derive(Debug, Clone)]
 pub struct ModelSpec {
@@ -188,6 +193,20 @@ impl ModelSpec {
             return Err(GpError::InvalidInput(format!(
                 "modality weights must be >= 0 with a positive sum, got {:?}",
                 self.weights
+            )));
+        }
+        if self.n_restarts > MAX_RESTARTS {
+            return Err(GpError::InvalidInput(format!(
+                "n_restarts must be at most {MAX_RESTARTS}, got {}",
+                self.n_restarts
+            )));
+        }
+        // NaN or a negative tolerance would never be met, and infinity always: a search
+        // without end, or none.
+        if !(self.newton.tol.is_finite() && self.newton.tol >= 0.0) {
+            return Err(GpError::InvalidInput(format!(
+                "newton_tol must be a finite number >= 0, got {}",
+                self.newton.tol
             )));
         }
         if !(self.lbfgs.ftol.is_finite() && self.lbfgs.ftol >= 0.0) {
@@ -937,6 +956,58 @@ fn check_sources(x: &Data, sources: &[Vec<Source>], n_classes: usize) -> GpResul
     Ok(())
 }
 
+/// Refuses a fit whose n × n matrices cannot fit in the memory this process has, before any of
+/// them is allocated (see [`crate::memory`]).
+fn check_memory(
+    x: &Data,
+    sources: &[Vec<Source>],
+    spec: &ModelSpec,
+    positives: &[usize],
+    optimise: bool,
+) -> GpResult<()> {
+    let rows: Vec<usize> = positives
+        .iter()
+        .map(|&c| x.n + sources[c].iter().map(|s| s.x.n).sum::<usize>())
+        .collect();
+    let with_sources: Vec<usize> = positives
+        .iter()
+        .zip(&rows)
+        .filter(|(&c, _)| !sources[c].is_empty())
+        .map(|(_, &n)| n)
+        .collect();
+    let starts = if optimise && spec.optimize {
+        1 + spec.n_restarts
+    } else {
+        1
+    };
+    // The fit runs on the calling pool: that many starts at most run at once.
+    let concurrent = rayon::current_num_threads().min(positives.len() * starts);
+    let m = spec.modalities.len();
+    let needed = memory::fit_bytes(x.n, &rows, &with_sources, m, concurrent);
+    let available = memory::available_bytes();
+    let alone = memory::fit_bytes(x.n, &rows, &with_sources, m, 1);
+    let hint = if concurrent > 1 && available.is_some_and(|a| alone <= a as u128) {
+        format!(
+            "; one thread at a time (n_jobs=1) would need {}",
+            memory::human(alone)
+        )
+    } else {
+        "; fit on fewer rows (a subsample)".to_string()
+    };
+    let largest = rows.iter().copied().max().unwrap_or(x.n);
+    memory::check(
+        &format!(
+            "a fit on {largest} rows ({} classifier(s), {m} modalit{}, {concurrent} at a time)",
+            positives.len(),
+            if m == 1 { "y" } else { "ies" }
+        ),
+        largest,
+        needed,
+        available,
+        &hint,
+    )
+}
+
 /// Checks one labelled data set and its sources: labels per row and in range, at least two
 /// classes, finite data, well-formed sources.
 pub(crate) fn check_task(
@@ -993,8 +1064,15 @@ fn fit_impl(
         ));
     }
     let layout = layout_for(spec, sources);
-    let center = column_means(x);
     let positives = classifier_classes(n_classes, &layout);
+    check_memory(
+        x,
+        sources,
+        spec,
+        &positives,
+        matches!(hypers, Hypers::Optimise(_)),
+    )?;
+    let center = column_means(x);
     let rows = match &hypers {
         Hypers::At(t) => Some(t.len()),
         Hypers::Optimise(Some(s)) => Some(s.len()),
@@ -1342,6 +1420,38 @@ mod tests {
             fit(&x, &y, 2, &[vec![src], vec![]], &spec),
             Err(GpError::InvalidInput(_))
         ));
+        // A tolerance never met (NaN, negative) or always met (infinity), and restarts without
+        // bound, are settings errors, not fits that never end.
+        for tol in [f64::NAN, -1.0, f64::INFINITY] {
+            let mut bad = spec.clone();
+            bad.newton.tol = tol;
+            assert!(matches!(
+                fit(&x, &y, 2, &[vec![], vec![]], &bad),
+                Err(GpError::InvalidInput(m)) if m.contains("newton_tol")
+            ));
+        }
+        let mut bad = spec.clone();
+        bad.n_restarts = MAX_RESTARTS + 1;
+        assert!(matches!(
+            fit(&x, &y, 2, &[vec![], vec![]], &bad),
+            Err(GpError::InvalidInput(m)) if m.contains("n_restarts")
+        ));
+    }
+
+    #[test]
+    fn a_fit_beyond_the_memory_is_refused_before_allocating() {
+        // 3 million rows (24 MB of data): each n x n matrix would take 72 TB.
+        let n = 3_000_000;
+        let x = Data::new(vec![0.5; n], n, 1).unwrap();
+        let y: Vec<usize> = (0..n).map(|i| i % 2).collect();
+        let spec = ModelSpec::new(Modalities::all_columns(1));
+        match fit(&x, &y, 2, &[vec![], vec![]], &spec) {
+            Err(GpError::TooLarge { rows, bytes, .. }) => {
+                assert_eq!(rows, n);
+                assert!(bytes > 72_000_000_000_000);
+            }
+            other => panic!("expected TooLarge, got {:?}", other.err()),
+        }
     }
 
     #[test]

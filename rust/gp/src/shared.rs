@@ -15,6 +15,7 @@ use rayon::prelude::*;
 
 use crate::error::{GpError, GpResult};
 use crate::kernel::{column_means, Data, Hyper, Layout};
+use crate::memory;
 use crate::model::{
     check_task, classifier_classes, fit_at, layout_for, log_prior, theta_box, BinaryProblem,
     ModelSpec, OneVsAll, PriorTerm, Source, Workspace,
@@ -71,6 +72,7 @@ pub fn fit_shared(tasks: &[KernelTask<'_>], target: usize, spec: &ModelSpec) -> 
         }
         check_task(t.x, t.labels, t.n_classes, t.sources)?;
     }
+    check_memory(tasks, spec)?;
     let m = spec.modalities.len();
     // The target's classifiers first, so that its first classifier sets the data scale.
     let mut order: Vec<usize> = vec![target];
@@ -151,6 +153,46 @@ pub fn fit_shared(tasks: &[KernelTask<'_>], target: usize, spec: &ModelSpec) -> 
         goal.sources,
         spec,
         &rows,
+    )
+}
+
+/// Refuses a shared fit whose n × n matrices cannot all be held at once, before any of them is
+/// allocated (see [`crate::memory`]). Unlike a per-classifier fit, whose starts run a few at a
+/// time, every classifier of every task keeps its distances and its working matrices (kernel,
+/// per-modality parts, factor, inverse and scratch) through each start, whatever the threads;
+/// the target's model is then built at the shared values beside them.
+fn check_memory(tasks: &[KernelTask<'_>], spec: &ModelSpec) -> GpResult<()> {
+    let m = spec.modalities.len();
+    let (mut needed, mut total_rows, mut largest, mut n_classifiers) = (0u128, 0usize, 0, 0);
+    for t in tasks {
+        let layout = layout_for(spec, t.sources);
+        let classes = classifier_classes(t.n_classes, &layout);
+        let rows: Vec<usize> = classes
+            .iter()
+            .map(|&c| t.x.n + t.sources[c].iter().map(|s| s.x.n).sum::<usize>())
+            .collect();
+        let with_sources: Vec<usize> = classes
+            .iter()
+            .zip(&rows)
+            .filter(|(&c, _)| !t.sources[c].is_empty())
+            .map(|(_, &n)| n)
+            .collect();
+        needed += memory::fit_bytes(t.x.n, &rows, &with_sources, m, rows.len());
+        total_rows += t.x.n;
+        largest = rows.iter().copied().fold(largest, usize::max);
+        n_classifiers += rows.len();
+    }
+    memory::check(
+        &format!(
+            "a shared-kernel fit on {total_rows} rows ({} task(s), {n_classifiers} \
+             classifier(s) held at once, the largest on {largest} rows, {m} modalit{})",
+            tasks.len(),
+            if m == 1 { "y" } else { "ies" }
+        ),
+        largest,
+        needed,
+        memory::available_bytes(),
+        "; share the kernel with fewer tasks, or fit on fewer rows (a subsample)",
     )
 }
 
@@ -547,5 +589,45 @@ mod tests {
         let mut free_lambda = spec.clone();
         free_lambda.free.lambda = true;
         assert!(fit_shared(&[good], 0, &free_lambda).is_err());
+    }
+
+    #[test]
+    fn every_tasks_matrices_count_against_the_memory() {
+        // A small target beside a kernel task of 3 million rows (48 MB of data): that task's
+        // n x n matrices (72 TB each) are refused before any is allocated.
+        let (x, y) = blobs(6, &[[0.0, 0.0], [2.0, 1.0]], 0.7, 2);
+        let n = 3_000_000;
+        let big = Data::new(vec![0.5; 2 * n], n, 2).unwrap();
+        let big_y: Vec<usize> = (0..n).map(|i| i % 2).collect();
+        let spec = spec(Modalities::new(vec![vec![0, 1]], 2).unwrap());
+        let sources = no_sources(2);
+        let small = KernelTask {
+            x: &x,
+            labels: &y,
+            n_classes: 2,
+            sources: &sources,
+        };
+        let large = KernelTask {
+            x: &big,
+            labels: &big_y,
+            n_classes: 2,
+            sources: &sources,
+        };
+        assert!(fit_shared(&[small], 0, &spec).is_ok());
+        match fit_shared(&[small, large], 0, &spec) {
+            Err(GpError::TooLarge {
+                rows,
+                bytes,
+                message,
+            }) => {
+                assert_eq!(rows, n);
+                assert!(bytes > 72_000_000_000_000);
+                assert!(
+                    message.contains(&format!("shared-kernel fit on {} rows", n + 12)),
+                    "{message}"
+                );
+            }
+            other => panic!("expected TooLarge, got {:?}", other.err()),
+        }
     }
 }

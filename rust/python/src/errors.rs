@@ -14,6 +14,20 @@ create_exception!(
     AptktError,
     "A kernel matrix stayed non-positive-definite even after the largest permitted jitter."
 );
+create_exception!(
+    aptkt._core,
+    ProblemTooLargeError,
+    AptktError,
+    "The work needs more memory than this machine has; found before allocating it. The \
+     message names the rows and the bytes needed."
+);
+create_exception!(
+    aptkt._core,
+    NonFiniteResultError,
+    AptktError,
+    "A computation on finite input overflowed to infinity or NaN (the input's values are too \
+     large for float64 arithmetic); the message names the input."
+);
 
 /// Maps the Gaussian-process core's errors: bad input is a `ValueError`, a numerically
 /// hopeless kernel has its own type.
@@ -26,6 +40,7 @@ pub fn gp_error(e: aptkt_gp::GpError) -> PyErr {
             KernelNotPositiveDefiniteError::new_err(e.to_string())
         }
         aptkt_gp::GpError::Cancelled => AptktError::new_err(e.to_string()),
+        aptkt_gp::GpError::TooLarge { .. } => ProblemTooLargeError::new_err(e.to_string()),
     }
 }
 
@@ -35,6 +50,14 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add(
         "KernelNotPositiveDefiniteError",
         py.get_type::<KernelNotPositiveDefiniteError>(),
+    )?;
+    m.add(
+        "ProblemTooLargeError",
+        py.get_type::<ProblemTooLargeError>(),
+    )?;
+    m.add(
+        "NonFiniteResultError",
+        py.get_type::<NonFiniteResultError>(),
     )?;
     Ok(())
 }

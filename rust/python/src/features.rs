@@ -6,6 +6,8 @@ use numpy::{IntoPyArray, PyArray1, PyArrayDyn, PyReadonlyArrayDyn};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 
+use crate::errors::NonFiniteResultError;
+
 /// A numpy array of one of the sample types the kernels accept.
 pub enum SampleArray<'py> {
     F64(PyReadonlyArrayDyn<'py, f64>),
@@ -52,7 +54,10 @@ macro_rules! with_view {
 }
 
 fn to_py_err(e: core::FeatureError) -> PyErr {
-    PyValueError::new_err(e.to_string())
+    match e {
+        core::FeatureError::NonFiniteResult { .. } => NonFiniteResultError::new_err(e.to_string()),
+        _ => PyValueError::new_err(e.to_string()),
+    }
 }
 
 type ArrayTriple<'py> = (

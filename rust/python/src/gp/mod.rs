@@ -64,8 +64,18 @@ fn run_interruptible<T: Send>(
     let out = done.0.lock().unwrap_or_else(|e| e.into_inner()).take();
     match out {
         Some(Ok(value)) => Ok(value),
-        _ => Err(PyValueError::new_err(
-            "internal error: the fit's thread panicked",
+        Some(Err(payload)) => {
+            let why = payload
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| payload.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "no message".to_string());
+            Err(PyValueError::new_err(format!(
+                "internal error: the fit's thread panicked: {why}"
+            )))
+        }
+        None => Err(PyValueError::new_err(
+            "internal error: the fit's thread ended without a result",
         )),
     }
 }
@@ -128,6 +138,10 @@ thread_local! {
 /// child has the map but not the pools' threads: it starts afresh (the old pools are leaked,
 /// not dropped, since dropping would signal threads that do not exist there).
 fn pool(n_threads: usize) -> Result<Arc<rayon::ThreadPool>, GpError> {
+    // More threads than cores only share them, and each costs a stack: a huge count once
+    // started threads without end.
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let n_threads = n_threads.min(cores);
     POOLS.with(|cell| {
         let mut pools = cell.borrow_mut();
         let pid = std::process::id();
@@ -466,6 +480,16 @@ fn kernel_matrix<'py>(
         ));
     }
     let mods = Modalities::new(modalities, data.d).map_err(gp_error)?;
+    // The distances per modality, the kernel, and its copy handed to numpy.
+    let n_big = data.n as u128;
+    aptkt_gp::memory::check(
+        &format!("a kernel matrix of {} rows", data.n),
+        data.n,
+        n_big * n_big * 8 * (mods.len() as u128 + 2),
+        aptkt_gp::memory::available_bytes(),
+        "; compute it on fewer rows",
+    )
+    .map_err(gp_error)?;
     let layout = Layout {
         n_modalities: mods.len(),
         n_lambdas: source_sizes.len(),
