@@ -11,7 +11,7 @@ import numpy as np
 
 from aptkt.experiments.aggregate import Estimate, estimate, mean_band
 from aptkt.experiments.noise_profile import NoiseProfile
-from aptkt.experiments.plots import METHOD_COLOURS, figure
+from aptkt.experiments.plots import curve_styles, figure
 from aptkt.experiments.report import ci, markdown_table, pp
 
 __all__ = ["Check", "curves", "checks", "summary", "plot", "report_markdown"]
@@ -174,14 +174,6 @@ _TITLES = {
     "nearest": "the most similar priors",
     "farthest": "the least similar priors",
 }
-#: Line style, marker and width per method, drawn in this order: each later line is thinner
-#: and broken, so that a curve equal to an earlier one leaves that one visible around it.
-_STYLES = {
-    "baseline": ("-", "o", 3.2),
-    "control": ("-", "s", 3.2),
-    "APTKT": ("--", "^", 2.0),
-    "APTKT+aux": (":", "v", 1.4),
-}
 
 
 def plot(c: Mapping[str, Mapping[str, np.ndarray]], chance: float) -> Any:
@@ -196,14 +188,9 @@ def plot(c: Mapping[str, Mapping[str, np.ndarray]], chance: float) -> Any:
         methods = c[choice]
         top, bottom = axes[0, j], axes[1, j]
         steps = np.arange(methods["baseline"].shape[1])
-        marks = max(1, len(steps) // 8)
-        for method in METHOD_ORDER:
-            if method not in methods:
-                continue
-            ls, marker, lw = _STYLES[method]
-            colour = METHOD_COLOURS.get(method)
-            look = {"ls": ls, "marker": marker, "markevery": marks, "color": colour, "lw": lw}
-            look.update(ms=2 + 1.5 * lw, mfc="none" if lw < 3 else colour)
+        styles = curve_styles((m for m in METHOD_ORDER if m in methods), len(steps))
+        for method, look in styles.items():
+            colour = look["color"]
             mean, low, high = mean_band(methods[method])
             top.plot(steps, mean, label=method, **look)
             top.fill_between(

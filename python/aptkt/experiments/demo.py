@@ -34,10 +34,12 @@ from aptkt.errors import ConfigError
 from aptkt.experiments.aggregate import mean_band
 from aptkt.experiments.executors import LocalExecutor
 from aptkt.experiments.plots import figure, learning_curves, save_figure
+from aptkt.experiments.relatedness_plot import plot_relatedness, relatedness
 from aptkt.experiments.runs import RunSpec, flatten, run_many
 from aptkt.experiments.tables import write_csv
 from aptkt.learning import GPSettings, LearnerConfig, PriorKnowledge
 from aptkt.learning.dataset import extract_features, load_observations, stale_features
+from aptkt.learning.transfer_summary import summary_lines
 from aptkt.runtime.generation import GenerationPlan, generate
 
 __all__ = ["DemoSettings", "report_results", "run_demo", "DEMO_PRIORS", "DEMO_NEW"]
@@ -241,21 +243,26 @@ def report_results(
     table = _table(curves, fused, x, chance)
     for line in table:
         say("      " + line)
-    fig, axes = figure(1, 2, figsize=(11, 4.2))
-    learning_curves(
-        axes[0],
-        curves,
-        x[: curves["APTKT"].shape[1]],
-        chance=chance,
-        title="mean accuracy of the actions' models",
-    )
-    learning_curves(
-        axes[1], fused, x[: fused["APTKT"].shape[1]], chance=chance, title="all actions fused"
-    )
-    fig.suptitle(title)
-    plots = save_figure(fig, out / "learning_curves")
+    transfer = _transfer(rows, methods)
+    for i, (name, lines) in enumerate(transfer.items()):
+        if i == 0:  # the others in report.md
+            say(
+                f"      transfer at the end of the runs ({name}; per action: new object <- "
+                "prior object, or why not):"
+            )
+            for line in lines:
+                say("        " + line)
+    plots = _plot_curves(rows, curves, fused, x, chance, title, out / "learning_curves")
     confusion = _confusion(rows, ("baseline", "APTKT"), new_objects)
     plots += _plot_confusion(confusion, new_objects, out / "confusion")
+    heat_maps = {}
+    for name in transfer:
+        stem = out / f"transfer_{name.replace('+', '_')}"
+        finals = _final_transfer(rows, name)
+        heat_maps[name] = plot_relatedness(
+            relatedness(finals, methods[name]), stem, method=name, config=methods[name]
+        )
+        plots += heat_maps[name]
     write_csv(
         out / "confusion.csv",
         [
@@ -268,7 +275,8 @@ def report_results(
             for i, o in enumerate(new_objects)
         ],
     )
-    write_csv(out / "results.csv", [{k: v for k, v in r.items() if k != "confusion"} for r in rows])
+    nested = ("confusion", "final_transfer")  # in summary.json and report.md instead
+    write_csv(out / "results.csv", [{k: v for k, v in r.items() if k not in nested} for r in rows])
     summary = {
         **head,
         "table": table,
@@ -279,6 +287,7 @@ def report_results(
         "final_fused_accuracy": {m: float(np.nanmean(c[:, -1])) for m, c in fused.items()},
         "initial_fused_accuracy": {m: float(np.nanmean(c[:, 0])) for m, c in fused.items()},
         "final_confusion": {m: c.astype(int).tolist() for m, c in confusion.items()},
+        "transfer": transfer,
         "seconds": time.perf_counter() - t_start,
         "files": {
             **files,
@@ -288,11 +297,109 @@ def report_results(
         },
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    say(f"      plots: {', '.join(str(p) for p in plots)}")
+    (out / "report.md").write_text(_report_markdown(title, table, transfer, out, plots, heat_maps))
+    say(f"      report: {out / 'report.md'}; plots: {', '.join(str(p) for p in plots)}")
     say(
         f"      every step of every run: {out / 'results.csv'}; settings and table: {out / 'summary.json'}"
     )
     return summary
+
+
+def _actions(rows: list[dict[str, Any]]) -> list[str]:
+    """The actions learned, from the rows' ``accuracy[<action>]`` columns."""
+    found = (k[len("accuracy[") : -1] for r in rows for k in r if k.startswith("accuracy["))
+    return list(dict.fromkeys(found))
+
+
+def _plot_curves(
+    rows: list[dict[str, Any]],
+    curves: dict[str, np.ndarray],
+    fused: dict[str, np.ndarray],
+    x: np.ndarray,
+    chance: float,
+    title: str,
+    stem: Path,
+) -> list[Path]:
+    """The learning curves: each action's model averaged over actions and, with more than one
+    action, all actions fused beside it (with one, the two are the same curve)."""
+    panels = {"mean accuracy of the actions' models": curves}
+    actions = _actions(rows)
+    if len(actions) > 1:
+        panels["all actions fused"] = fused
+    else:
+        panels = {f"accuracy of the {actions[0]} model" if actions else "accuracy": curves}
+    fig, axes = figure(
+        1, len(panels), figsize=(5.5 * len(panels) + 0.5, 4.4), squeeze=False, layout="constrained"
+    )
+    for ax, (name, values) in zip(axes[0], panels.items()):
+        n = next(iter(values.values())).shape[1]
+        learning_curves(ax, values, x[:n], chance=chance, title=name)
+    fig.suptitle(title)
+    return save_figure(fig, stem)
+
+
+def _final_transfer(rows: list[dict[str, Any]], method: str) -> list[dict[str, Any]]:
+    """The transfer decisions in force at the end of each of the method's runs."""
+    return [r["final_transfer"] for r in rows if r["method"] == method and "final_transfer" in r]
+
+
+def _transfer(
+    rows: list[dict[str, Any]], methods: dict[str, LearnerConfig]
+) -> dict[str, list[str]]:
+    """Per method that transfers, what its runs transferred in the end, or why not."""
+    out = {}
+    for name, cfg in methods.items():
+        finals = _final_transfer(rows, name)
+        if cfg.transfers and finals:
+            out[name] = summary_lines(finals, cfg)
+    return out
+
+
+def _report_markdown(
+    title: str,
+    table: list[str],
+    transfer: dict[str, list[str]],
+    out: Path,
+    plots: list[Path],
+    heat_maps: dict[str, list[Path]],
+) -> str:
+    """report.md: the accuracy table, the learning curves, and per method what each new
+    object learned from."""
+    png = {p.stem: p.name for p in plots if p.suffix == ".png"}
+    lines = [f"# {title}", "", "## Accuracy", "", "```text", *table, "```", ""]
+    lines += (
+        [f"![learning curves]({png['learning_curves']})", ""] if "learning_curves" in png else []
+    )
+    lines += (
+        [f"![confusion between the new objects]({png['confusion']})", ""]
+        if "confusion" in png
+        else []
+    )
+    lines += [
+        "## Transfer",
+        "",
+        "Per action and new object: the prior object it learned from with λ (Eq. 2–3) and the "
+        "log Bayes factor that let it through, or why nothing was transferred — Eq. 3's "
+        "eps_neg, or the evidence cut-off (the new objects' labels must favour the transfer by "
+        "a log Bayes factor above the margin). The decisions are those in force at the end of "
+        "each run; outcomes are counted over runs, with their mean p̄, λ and log Bayes factor.",
+        "",
+    ]
+    if not transfer:
+        lines += ["No method of this run transfers.", ""]
+    for name, text in transfer.items():
+        lines += [f"### {name}", "", "```text", *text, "```", ""]
+        for p in heat_maps.get(name, []):
+            if p.suffix == ".png":
+                lines += [
+                    f"![{name}: relatedness of new and prior objects]({p.name})",
+                    "",
+                    "Cells: p̄, how much the new object (row) is like the prior object (column), "
+                    "mean over runs; solid red outline: learned from it (λ, in how many runs); "
+                    "dashed grey: the evidence cut-off stopped it (log Bayes factor).",
+                    "",
+                ]
+    return "\n".join(lines)
 
 
 def _curves(

@@ -2,14 +2,25 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from aptkt.experiments.aggregate import mean_band
 
-__all__ = ["BAND_LABEL", "learning_curves", "save_figure", "figure", "canvas", "METHOD_COLOURS"]
+__all__ = [
+    "BAND_LABEL",
+    "DRAW_ORDER",
+    "METHOD_COLOURS",
+    "METHOD_MARKERS",
+    "canvas",
+    "curve_styles",
+    "figure",
+    "learning_curves",
+    "save_figure",
+]
 
 #: The paper's colours (Fig. 9): baseline red, APTKT blue, APTKT with auxiliary features green.
 METHOD_COLOURS = {
@@ -38,6 +49,57 @@ def _pyplot():
 
 _SPARE_COLOURS = ("tab:pink", "tab:cyan", "black", "tab:olive", "tab:brown")
 
+#: The order curves are drawn in (methods not named here follow, in the order given).
+DRAW_ORDER = ("baseline", "control", "APTKT", "APTKT+aux", "Multi", "STIF", "Texture", "Thermal-C")
+#: A method keeps its marker in every plot.
+METHOD_MARKERS = {
+    "baseline": "o",
+    "control": "s",
+    "APTKT": "^",
+    "APTKT+aux": "v",
+    "Multi": "D",
+    "STIF": "P",
+    "Texture": "X",
+    "Thermal-C": "*",
+}
+_SPARE_MARKERS = ("<", ">", "h", "p", "d", "8")
+_LINE_STYLES = ("-", "--", ":", "-.", (0, (5, 1, 1, 1, 1, 1)), (0, (8, 2)))
+#: Line widths of the first and of the last curve drawn.
+_WIDEST, _THINNEST = 3.2, 1.2
+
+
+def curve_styles(methods: Iterable[str], n_points: int) -> dict[str, dict[str, Any]]:
+    """matplotlib keywords of each method's curve, in the order to draw them.
+
+    Each curve drawn later is thinner and more broken than the ones before, with hollow
+    markers: where two methods' curves coincide (APTKT and APTKT with auxiliary features often
+    do), the later one runs inside the earlier and both stay visible. Every method has its own
+    line style (by drawing position), marker and colour; markers sit on about 8 points.
+    """
+    names = list(dict.fromkeys(methods))
+    rank = {m: i for i, m in enumerate(DRAW_ORDER)}
+    ordered = sorted(names, key=lambda m: rank.get(m, len(rank)))
+    taken_colours = {METHOD_COLOURS.get(m) for m in ordered}
+    spare_colours = iter(c for c in _SPARE_COLOURS if c not in taken_colours)
+    taken_markers = {METHOD_MARKERS.get(m) for m in ordered}
+    spare_markers = iter(m for m in _SPARE_MARKERS if m not in taken_markers)
+    widths = np.linspace(_WIDEST, _THINNEST, len(ordered)) if len(ordered) > 1 else [2.0]
+    every = max(1, n_points // 8)
+    styles = {}
+    for i, (method, lw) in enumerate(zip(ordered, widths)):
+        colour = METHOD_COLOURS.get(method) or next(spare_colours, "0.2")
+        styles[method] = {
+            "color": colour,
+            "ls": _LINE_STYLES[i % len(_LINE_STYLES)],
+            "lw": float(lw),
+            "marker": METHOD_MARKERS.get(method) or next(spare_markers, "."),
+            "markevery": every,
+            "ms": 2 + 1.5 * float(lw),
+            "mfc": colour if i == 0 else "none",
+        }
+    return styles
+
+
 #: What the bands of every learning-curve plot are (shown in the legend).
 BAND_LABEL = "bands: 95 % interval of the mean over runs"
 
@@ -55,17 +117,16 @@ def learning_curves(
     """Mean curve with its 95 % interval over runs as a band, per method, and chance level.
 
     ``curves[method]`` has shape (runs, len(x)); ``chance`` is the accuracy of guessing
-    (1 / number of classes), drawn as a dashed line. The legend says what the bands are.
+    (1 / number of classes), drawn as a dashed line. Accuracies lie in [0, 1] and so do the
+    bands (a t interval over few runs reaches beyond). The legend says what the bands are.
     """
-
-    # Methods without a colour of their own take one that no method of this plot uses.
-    spare = iter(c for c in _SPARE_COLOURS if c not in {METHOD_COLOURS.get(m) for m in curves})
-    for method, values in curves.items():
-        values = np.asarray(values, dtype=float)
+    for method, look in curve_styles(curves, len(x)).items():
+        values = np.asarray(curves[method], dtype=float)
         mean, low, high = mean_band(values)
-        colour = METHOD_COLOURS.get(method) or next(spare, None)
-        ax.plot(x, mean, label=f"{method} (n={values.shape[0]})", color=colour, lw=2)
-        ax.fill_between(x, low, high, color=colour, alpha=0.18, lw=0)
+        ax.plot(x, mean, label=f"{method} (n={values.shape[0]})", **look)
+        ax.fill_between(
+            x, np.clip(low, 0, 1), np.clip(high, 0, 1), color=look["color"], alpha=0.15, lw=0
+        )
     ax.axhline(chance, color="0.4", ls="--", lw=1, label=f"chance ({chance:.2f})")
     ax.plot([], [], " ", label=BAND_LABEL)  # a legend line that only explains the bands
     ax.set_ylim(0, 1.02)

@@ -12,6 +12,7 @@ from typing import Any
 from aptkt.experiments.executors import Executor, LocalExecutor
 from aptkt.learning import APTKT, LearnerConfig, LearningRun, PoolEnvironment, PriorKnowledge
 from aptkt.learning.dataset import load_observations
+from aptkt.learning.transfer_summary import final_decisions
 
 __all__ = ["RunSpec", "execute", "flatten", "label", "run_many", "run_steps", "step_rows"]
 
@@ -88,7 +89,8 @@ def step_rows(
 ) -> list[dict[str, Any]]:
     """One row per step of a finished run, with the transfer counts of :func:`run_steps`; with
     the ``learner`` that made it, the last row has the final models' confusion over
-    ``objects``."""
+    ``objects`` and the transfer decisions in force at the end (``final_transfer``: action ->
+    new object -> decision)."""
     rows = []
     for step in run.steps:
         row = step.as_row()
@@ -103,6 +105,7 @@ def step_rows(
         rows.append(row)
     if rows and learner is not None:
         rows[-1]["confusion"] = final_confusion(learner, objects)
+        rows[-1]["final_transfer"] = final_decisions(run.steps)
     return rows
 
 

@@ -37,6 +37,7 @@ from aptkt.learning.environment import RecordingEnvironment
 from aptkt.learning.learner import APTKT, StepRecord
 from aptkt.learning.observations import ObservationTable
 from aptkt.learning.prior import PriorKnowledge
+from aptkt.learning.transfer_summary import describe, final_decisions, summary_lines
 from aptkt.runtime.salvage import note_interruption, salvage
 
 __all__ = ["LiveLearningAborted", "learn_live", "describe_step", "NO_TEST_NOTE"]
@@ -54,15 +55,6 @@ class LiveLearningAborted(AptktError):
     def __init__(self, message: str, *, cause: BaseException, saved: Path | None, output: Path):
         super().__init__(message)
         self.cause, self.saved, self.output = cause, saved, output
-
-
-def _fmt_decision(d: Mapping[str, Any], eps_neg: float) -> str:
-    if d.get("source"):
-        sources = d.get("sources") or {d["source"]: d["lambda"]}
-        got = ", ".join(f"{s} (lambda {lam:.2f})" for s, lam in sources.items())
-        return f"{d['new_object']} <- {got}"
-    best = max(d.get("mean_posterior", {}).values(), default=float("nan"))
-    return f"{d['new_object']}: none (max p {best:.2f} < eps_neg {eps_neg:g})"
 
 
 def describe_step(rec: StepRecord, config: LearnerConfig, n_pairs: int) -> str:
@@ -83,7 +75,7 @@ def describe_step(rec: StepRecord, config: LearnerConfig, n_pairs: int) -> str:
     for action, decisions in rec.transfer.items():
         if not config.transfers:
             continue
-        text = "; ".join(_fmt_decision(d, config.eps_neg) for d in decisions.values())
+        text = "; ".join(describe(d, config) for d in decisions.values())
         parts.append(f"    transfer {action}: {text}")
     if not math.isnan(rec.mean_accuracy):
         parts.append(f"    test accuracy {rec.mean_accuracy:.3f} (fused {rec.fused_accuracy:.3f})")
@@ -256,6 +248,10 @@ def _finish(
     (output / "run.json").write_text(json.dumps(_finite(summary), indent=2, default=_json))
     _write_steps(output / "steps.csv", steps)
     _write_transfer(output / "transfer.csv", steps)
+    if config.transfers and steps:
+        report("transfer at the end (per action: new object <- prior object, or why not):")
+        for line in summary_lines([final_decisions(steps)], config):
+            report("  " + line)
     report(
         f"{status}: {len(steps)} steps in {summary['seconds']:.1f} s; run written to {output / 'run.json'}, "
         f"{output / 'steps.csv'}, {output / 'transfer.csv'}"

@@ -79,7 +79,11 @@ class Context:
         (``curves.csv``) in its directory; returns the files, relative to the output."""
         out = self.figure_dir(name)
         files = [str(p.relative_to(self.output)) for p in save_figure(fig, out / name)]
-        write_csv(out / "results.csv", rows)
+        # The transfer decisions (nested, per action and object) stay in the run store's JSON.
+        write_csv(
+            out / "results.csv",
+            ({k: v for k, v in r.items() if k != "final_transfer"} for r in rows),
+        )
         write_csv(out / "curves.csv", curve_rows)
         return files + [f"{name}/results.csv", f"{name}/curves.csv"]
 
