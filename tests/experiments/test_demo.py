@@ -53,6 +53,21 @@ def test_quick_demo_writes_every_output(tmp_path, capsys):
     csv_rows = list(csv.DictReader((out / "confusion.csv").open()))
     assert {r["method"] for r in csv_rows} == {"baseline", "APTKT"}
     assert "true object" in (out / "confusion.svg").read_text()
+    # Per action and new object, what APTKT learned from (or why not), printed and in report.md,
+    # with the relatedness heat-map of each method that transfers.
+    assert "transfer at the end of the runs (APTKT;" in printed
+    lines = summary["transfer"]["APTKT"]
+    new_objects = ("smooth_sponge", "hard_box", "biscuit_box")
+    actions = summary["settings"]["actions"]
+    assert len(lines) == len(actions) * len(new_objects)
+    for k, line in enumerate(lines):
+        assert "        " + line in printed.splitlines()
+        assert line.split()[0 if k % 3 else 1].rstrip(":") == new_objects[k % 3]
+        assert " <- " in line or "no transfer" in line
+    report = (out / "report.md").read_text()
+    assert all(line in report for line in summary["transfer"]["APTKT+aux"])
+    for name in ("transfer_APTKT.png", "transfer_APTKT_aux.png", "learning_curves.png"):
+        assert f"({name})" in report and (out / name).stat().st_size > 0
     # A second run reuses the simulated data.
     assert main(["demo", "--quick", "-o", str(out), "--no-progress", "-j", "2"]) == 0
     assert "(0 simulated now" in capsys.readouterr().out

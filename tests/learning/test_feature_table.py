@@ -238,3 +238,45 @@ def test_learn_from_a_table_writes_the_demo_outputs(tmp_path, capsys):
             assert 0.5 < acc <= 1.0  # 3 well separated new objects: far above chance (1/3)
         assert summary["settings"]["prior_objects"] == PRIORS
     assert results[".csv"] == results[".h5"]
+
+
+def test_learning_from_a_table_says_what_each_new_object_learned_from(tmp_path, capsys):
+    """The printed summary, report.md and summary.json name, per action and new object, the
+    prior object each run's final model learned from — the one whose λ the model carries."""
+    path = write_feature_table(tmp_path / "t.csv", _world_table(n_per=4))
+    out = tmp_path / "out"
+    args = ["learn", "--table", str(path), "--prior-objects", ",".join(PRIORS), "--objects"]
+    args += [",".join(NEW), "--budget", "1", "--runs", "2", "--cutoff", "paper", "-o", str(out)]
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    lines = summary["transfer"]["APTKT"]
+    assert len(lines) == 2 * len(NEW)  # two actions
+    for line in lines:
+        assert "        " + line in printed.splitlines()
+    assert set(summary["transfer"]) == {"APTKT", "APTKT+aux"}
+    report = (out / "report.md").read_text()
+    assert all(line in report for line in lines) and "transfer_APTKT.png" in report
+    assert (out / "transfer_APTKT.png").stat().st_size > 0
+    # What each run's final APTKT model carries: a λ column of exactly one prior object.
+    with (out / "results.csv").open() as fh:
+        rows = [r for r in csv.DictReader(fh) if r["method"] == "APTKT"]
+    last = [max((r for r in rows if r["trial"] == t), key=lambda r: int(r["step"])) for t in "01"]
+    told, action = {}, ""
+    for line in lines:
+        if not line.startswith(" "):
+            action, line = line.split(maxsplit=1)
+        told[action, line.split()[0].rstrip(":")] = line.strip()
+    assert any(" <- " in text for text in told.values())  # related priors: Eq. 3 transfers
+    for (action, obj), text in told.items():
+        carried = {
+            k.split(".lambda[")[1][:-1]
+            for r in last
+            for k, v in r.items()
+            if k.startswith(f"hp[{action}][{obj}].lambda[") and v not in ("", None)
+        }
+        if carried:
+            (source,) = carried
+            assert text.startswith(f"{obj} <- {source} (lambda ") and text.endswith("2/2 runs")
+        else:
+            assert text.startswith(f"{obj}: no transfer")

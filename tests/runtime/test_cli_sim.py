@@ -489,3 +489,49 @@ def test_learn_takes_every_transfer_mode(workdir: Path, prior: Path, transfer: s
             }
     else:
         assert not decided  # the baseline and the control make no transfer decisions
+
+
+def test_learn_says_what_each_new_object_learned_from_or_why_not(
+    workdir: Path, prior: Path, capsys
+):
+    """Each step's decisions, and at the end the ones in force, name the prior object learned
+    from with λ or the rule that stopped the transfer: eps_neg, or the evidence cut-off."""
+    out = workdir / "run-words"
+    assert learn(workdir, prior, out, "--objects", NEW, "--budget", "2", "--seed", "3") == 0
+    text = capsys.readouterr().out
+    run = json.loads((out / "run.json").read_text())
+    margin, eps_neg = run["config"]["evidence_margin"], run["config"]["eps_neg"]
+    step_lines = [ln for ln in text.splitlines() if ln.startswith("    transfer ")]
+    decided = [d for s in run["steps"] for ds in s["transfer"].values() for d in ds.values()]
+    assert len(step_lines) == sum(len(s["transfer"]) for s in run["steps"])
+    words = "\n".join(step_lines)
+    sources = [d for d in decided if d["source"]]
+    stopped = [d for d in decided if not d["source"] and d["log_bayes_factor"]]
+    below = [d for d in decided if not d["source"] and not d["log_bayes_factor"]]
+    assert words.count(" <- ") == len(sources)
+    assert words.count(f"<= {margin:g} (evidence cut-off)") == len(stopped)
+    assert words.count(f"< eps_neg {eps_neg:g})") == len(below)
+    for d in stopped:  # the look-alike and its log Bayes factor, as the learner judged it
+        ((old, log_bf),) = d["log_bayes_factor"].items()
+        assert f"{d['new_object']}: no transfer, most like {old}" in words
+        assert f"log BF {log_bf:.1f} <= {margin:g}" in words
+    # The decisions in force at the end: the last one of each action and new object.
+    final: dict[tuple[str, str], dict] = {}
+    for step in run["steps"]:
+        for action, ds in step["transfer"].items():
+            final.update({(action, obj): d for obj, d in ds.items()})
+    tail = text[text.index("transfer at the end") :].splitlines()[1 : 1 + len(final)]
+    assert len(tail) == len(final) == 2 * len(NEW.split(","))
+    told: dict[tuple[str, str], str] = {}
+    action = ""
+    for line in tail:
+        body = line[2:]
+        if not body.startswith(" "):  # the action is named on its first line
+            action, body = body.split(maxsplit=1)
+        told[(action, body.split()[0].rstrip(":"))] = body.strip()
+    assert set(told) == set(final)
+    for (action, obj), d in final.items():
+        if d["source"]:
+            assert told[action, obj].startswith(f"{obj} <- {d['source']} (lambda {d['lambda']:.2f}")
+        else:
+            assert told[action, obj].startswith(f"{obj}: no transfer, most like ")

@@ -147,27 +147,26 @@ def plot_relatedness(
             shrink=0.8,
             label="p̄: how much the new object is like the old (Eq. 3)",
         )
-    fig.legend(
-        handles=[
-            Patch(
-                fill=False,
-                label="learned from (λ)",
-                ec=SOURCE_EDGE[0],
-                ls=SOURCE_EDGE[1],
-                lw=SOURCE_EDGE[2],
-            ),
+    handles = [
+        Patch(
+            fill=False,
+            label="learned from (λ)",
+            ec=SOURCE_EDGE[0],
+            ls=SOURCE_EDGE[1],
+            lw=SOURCE_EDGE[2],
+        )
+    ]
+    if config.cutoff == "evidence":
+        handles.append(
             Patch(
                 fill=False,
                 label=f"stopped by the evidence cut-off (log BF <= {config.evidence_margin:g})",
                 ec=STOPPED_EDGE[0],
                 ls=STOPPED_EDGE[1],
                 lw=STOPPED_EDGE[2],
-            ),
-        ],
-        loc="outside lower center",
-        ncols=2,
-        fontsize="small",
-    )
+            )
+        )
+    fig.legend(handles=handles, loc="outside lower center", ncols=2, fontsize="small")
     runs = f"mean of {first.runs} runs" if first.runs > 1 else "one run"
     fig.suptitle(f"{method}: new objects (rows) × prior objects, at the end of the run ({runs})")
     return save_figure(fig, stem)
