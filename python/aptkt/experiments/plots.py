@@ -74,7 +74,8 @@ def curve_styles(methods: Iterable[str], n_points: int) -> dict[str, dict[str, A
     Each curve drawn later is thinner and more broken than the ones before, with hollow
     markers: where two methods' curves coincide (APTKT and APTKT with auxiliary features often
     do), the later one runs inside the earlier and both stay visible. Every method has its own
-    line style (by drawing position), marker and colour; markers sit on about 8 points.
+    line style (by drawing position), marker and colour; markers sit on about 8 points, each
+    method's shifted by a point where there is room.
     """
     names = list(dict.fromkeys(methods))
     rank = {m: i for i, m in enumerate(DRAW_ORDER)}
@@ -93,7 +94,7 @@ def curve_styles(methods: Iterable[str], n_points: int) -> dict[str, dict[str, A
             "ls": _LINE_STYLES[i % len(_LINE_STYLES)],
             "lw": float(lw),
             "marker": METHOD_MARKERS.get(method) or next(spare_markers, "."),
-            "markevery": every,
+            "markevery": (i % every, every),  # coinciding curves' markers side by side
             "ms": 2 + 1.5 * float(lw),
             "mfc": colour if i == 0 else "none",
         }
@@ -129,7 +130,7 @@ def learning_curves(
         )
     ax.axhline(chance, color="0.4", ls="--", lw=1, label=f"chance ({chance:.2f})")
     ax.plot([], [], " ", label=BAND_LABEL)  # a legend line that only explains the bands
-    ax.set_ylim(0, 1.02)
+    ax.set_ylim(0, 1.03)
     from matplotlib.ticker import MaxNLocator  # see _pyplot
 
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))

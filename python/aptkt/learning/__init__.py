@@ -5,6 +5,7 @@ observations           feature observations as plain arrays (any sensor)
 pipeline               per-modality transforms (scaling, log, thermal PCA) fitted on training
 prior                  prior knowledge: old objects' observations, pipelines, models; save/load
 transfer               from where and how much to transfer (Eq. 3)
+transfer_summary       transfer decisions in words: the old object learned from, or why not
 evidence               Laplace evidence of a fitted classifier's labels, given its source task
 active                 uncertainty and next (action, object) selection (Eq. 4)
 learner                the APTKT process and the baseline
