@@ -7,8 +7,10 @@
 4. learn the new objects with APTKT, APTKT with auxiliary features and the baseline,
    ``trials`` runs each, drawing
    observations from the first ``train_reps`` trials and testing on the rest;
-5. print a table, plot the learning curves (with chance level and 95 % bands) and the final
-   models' confusion between the new objects, write every number to the output directory.
+5. print a table and, per action and new object, the prior object APTKT learned from with λ
+   or why not; plot the learning curves (with chance level and 95 % bands), the final models'
+   confusion between the new objects and the relatedness of new and prior objects; write
+   every number and ``report.md`` to the output directory.
 
 Accuracy is reported two ways everywhere: the mean over actions of each action's model on its
 own test observations (the paper's measure), and all actions' posteriors fused.
@@ -232,9 +234,10 @@ def report_results(
     t_start: float,
     say: Any = _say,
 ) -> dict[str, Any]:
-    """The demo's results from its runs' step rows — printed table, learning curves, confusion
-    matrices, ``results.csv``, ``confusion.csv`` and ``summary.json`` — shared with learning from
-    a feature table (:mod:`aptkt.experiments.table_learning`)."""
+    """The demo's results from its runs' step rows — printed table and transfer lines,
+    learning curves, confusion matrices, relatedness heat-maps, ``results.csv``,
+    ``confusion.csv``, ``summary.json`` and ``report.md`` — shared with learning from a feature
+    table (:mod:`aptkt.experiments.table_learning`)."""
     new_objects = tuple(new_objects)
     curves = _curves(rows, methods)
     fused = _curves(rows, methods, key="fused_accuracy")

@@ -6,7 +6,9 @@ to learn from and a held-out test set (by trial number); APTKT, APTKT with auxil
 the baseline then learn the new objects ``runs`` times each, as in the demo, and the same files
 are written (:func:`aptkt.experiments.demo.report_results`): ``results.csv`` (every step of
 every run), ``learning_curves.png``/``.svg``, ``confusion.png``/``.svg``/``.csv`` (the final
-models, baseline and APTKT), ``summary.json`` (settings, table, accuracies) and ``prior.npz``.
+models, baseline and APTKT), ``transfer_APTKT.png``/``transfer_APTKT_aux.png`` (and ``.svg``:
+the relatedness heat-maps), ``report.md``, ``summary.json`` (settings, table, accuracies,
+transfer lines) and ``prior.npz``.
 """
 
 from __future__ import annotations
