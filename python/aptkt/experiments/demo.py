@@ -399,7 +399,7 @@ def _report_markdown(
                     "",
                     "Cells: p̄, how much the new object (row) is like the prior object (column), "
                     "mean over runs; solid red outline: learned from it (λ, in how many runs); "
-                    "dashed grey: the evidence cut-off stopped it (log Bayes factor).",
+                    "dashed grey: the evidence cut-off stopped it (its log Bayes factor, in how many runs).",
                     "",
                 ]
     return "\n".join(lines)

@@ -80,7 +80,7 @@ def _cell_text(m: Relatedness, i: int, k: int) -> str:
     if m.transferred[i, k]:
         text += f"\nλ {m.lam[i, k]:.2f}{_share(m, m.transferred[i, k])}"
     elif m.stopped[i, k]:
-        text += f"\nBF {m.log_bf[i, k]:.1f}{_share(m, m.stopped[i, k])}"
+        text += f"\nlog BF {m.log_bf[i, k]:.1f}{_share(m, m.stopped[i, k])}"
     return text
 
 
@@ -100,11 +100,11 @@ def plot_relatedness(
     cols = min(n, 4)
     rows = math.ceil(n / cols)
     first = next(iter(matrices.values()))
-    cell_w = 0.9 * max(len(first.old), 2)
+    cell_w = 1.1 * max(len(first.old), 2)
     fig, axes = figure(
         rows,
         cols,
-        figsize=(cols * cell_w + 2.5, rows * (0.55 * max(len(first.new), 2) + 1.6) + 0.8),
+        figsize=(cols * cell_w + 2.5, rows * (0.7 * max(len(first.new), 2) + 2.0) + 0.8),
         squeeze=False,
         layout="constrained",
     )
@@ -145,7 +145,7 @@ def plot_relatedness(
             image,
             ax=axes.ravel().tolist(),
             shrink=0.8,
-            label="p̄: how much the new object is like the old (Eq. 3)",
+            label="p̄ (Eq. 3): new like old",
         )
     handles = [
         Patch(
