@@ -2,6 +2,7 @@
 #   make demo   -> virtual environment, Rust build, end-to-end demo on the simulated world
 #   make test   -> virtual environment, Rust build, cargo tests of the core crates, pytest
 #   make lint   -> ruff (lint, format), mypy on the package, clippy and rustfmt
+#   make docs   -> the documentation site (mkdocs.yml) into site/, warnings as errors
 #
 # Every build shares target/ and compiles each shared crate with the same profile (release) and
 # the same features (cargo resolves the whole workspace for the tests, the extension's crate
@@ -15,7 +16,7 @@ SHELL := /bin/bash
 # pip -v shows the build backend's output; keep cargo's progress lines and errors.
 SHOW_BUILD := grep -E --line-buffered "^ *(Compiling|Finished|Built wheel|Successfully installed)|[Ee]rror" | sed -u -e 's/^ */    /'
 
-.PHONY: venv install install-test install-lint demo wheel lint test test-rust test-python clean
+.PHONY: venv install install-test install-lint demo wheel lint docs test test-rust test-python clean
 
 venv:
 	@test -x $(PY) || { echo "==> creating the virtual environment $(VENV)"; python3 -m venv $(VENV); }
@@ -67,5 +68,13 @@ test-python: install-test wheel
 
 test: test-rust test-python
 
+# The site's tools alone: mkdocstrings reads the docstrings from python/ without importing aptkt,
+# so the docs need no Rust build. pip reads the pinned [docs] list from pyproject.toml's
+# dependency group without installing the package itself.
+docs: venv
+	@echo "==> building the documentation site into site/ (mkdocs --strict)"
+	@$(PY) -m pip install --quiet --group docs
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --quiet
+
 clean:
-	rm -rf target dist $(VENV) python/aptkt/_core*.so
+	rm -rf target dist site $(VENV) python/aptkt/_core*.so

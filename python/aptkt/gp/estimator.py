@@ -77,11 +77,6 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
     n_jobs : int, optional
         Threads for the per-class fits, by joblib's convention: None (default) one, -1 every
         core, -2 all but one, ...; never more than the machine's cores.
-
-    A fit whose n x n matrices would not fit in the memory available (with
-    ``kernel="shared"``: every task's, held at once) raises
-    :class:`~aptkt.errors.ProblemTooLargeError` naming the rows and the bytes needed, before
-    allocating them.
     hyper_prior : None, "weak" or HyperPrior
         None: plain ML-II (maximise the log marginal likelihood). Otherwise MAP-II with the
         given weak log-normal hyper-priors (see :class:`HyperPrior`).
@@ -152,6 +147,13 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         Quasi-Newton iterations of the start that gave each classifier's hyper-parameters.
     log_hyper_prior_ : ndarray of shape (n_classifiers,)
         Log hyper-prior density at ``theta_`` (0 for ML-II).
+
+    Notes
+    -----
+    A fit whose n x n matrices would not fit in the memory available (with
+    ``kernel="shared"``: every task's, held at once) raises
+    :class:`~aptkt.errors.ProblemTooLargeError` naming the rows and the bytes needed, before
+    allocating them.
     """
 
     def __init__(
