@@ -16,7 +16,7 @@ else:  # pragma: no cover - the package depends on tomli there
     import tomli as tomllib
 
 ROOT = Path(__file__).resolve().parents[2]
-DOCS = sorted([ROOT / "README.md", *(ROOT / "docs").glob("*.md")])
+DOCS = sorted([ROOT / "README.md", *(ROOT / "docs").rglob("*.md")])
 TOP = {p.name for p in ROOT.iterdir() if not p.name.startswith(".git")}
 
 #: Pointers to things that exist only on the machine the project was written on.
@@ -123,7 +123,56 @@ def test_ci_needs_nothing_outside_the_repository():
     assert ".." not in script.replace('"$(dirname "$0")/.."', "")
 
 
+def test_every_docs_page_named_in_code_or_docs_exists():
+    """`docs/reproduce.md` in a help text, a docstring, a bench or a page names a page that
+    exists (pages move: the code must follow)."""
+    files = [ROOT / "README.md", *(ROOT / "docs").rglob("*.md"), *(ROOT / "benches").glob("*.md")]
+    for folder in ("python", "benches", "tests"):
+        files += (ROOT / folder).rglob("*.py")
+    for path in files:
+        for page in re.findall(r"\bdocs/[\w/.-]+?\.md\b", path.read_text(encoding="utf-8")):
+            assert (ROOT / page).is_file(), (
+                f"{path.relative_to(ROOT)} names {page}, which does not exist"
+            )
+
+
+#: "issue 11", "Issues 11 and 15", "session 9's", "sessions 8-9": the project's internal
+#: bookkeeping, which means nothing to a reader of the documentation or the code.
+BOOKKEEPING = re.compile(r"\b(?:issues?|sessions?)\s+#?\d", re.IGNORECASE)
+
+
+def _bookkeeping(text: str) -> list[str]:
+    return [line for line in text.splitlines() if BOOKKEEPING.search(line)]
+
+
+def test_no_issue_or_session_numbers_in_docs_or_code():
+    files = [ROOT / "README.md", *(ROOT / "docs").rglob("*.md"), *(ROOT / "benches").rglob("*")]
+    files += (ROOT / "python").rglob("*.py")
+    found = []
+    for path in files:
+        if path.is_file() and path.suffix in (".md", ".py", ".toml", ".txt"):
+            text = path.read_text(encoding="utf-8")
+            found += [f"{path.relative_to(ROOT)}: {line}" for line in _bookkeeping(text)]
+    assert not found, "\n".join(found)
+
+
+@pytest.mark.parametrize(
+    "line,found",
+    [
+        ("the 30 s issue 15 asks for", True),
+        ("(Issues 11 and 15, 2026-11-25)", True),
+        ("### Session 9: the binding's thread pool", True),
+        ("issue #12", True),
+        ("sessions 8", True),
+        ("a recording session (`aptkt.sim.drift`) and the issue it raises", False),
+        ("session_id 3", False),
+    ],
+)
+def test_the_bookkeeping_pattern(line, found):
+    assert bool(_bookkeeping(line)) is found
+
+
 def test_the_paper_is_cited():
-    for name in ("README.md", "docs/design.md", "docs/experiments.md", "docs/method.md"):
+    for name in ("README.md", "docs/design.md", "docs/method.md"):
         text = (ROOT / name).read_text(encoding="utf-8")
         assert "10.3390/s18020634" in text and "Kaboli" in text, name

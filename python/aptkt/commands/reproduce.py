@@ -20,7 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "SVG), every step of every run (CSV), report.md (our numbers beside the paper's) and config.json "
         "(everything needed to repeat the run). Without --data it simulates the data set it needs and keeps "
         "it in the output directory. Finished runs are stored as they complete: rerun the same command "
-        "after an interruption and it resumes. See docs/experiments.md.",
+        "after an interruption and it resumes. See docs/reproduce.md.",
     )
     p.add_argument("name", choices=NAMES, help="the figure to reproduce, or all of them")
     p.add_argument(

@@ -1,6 +1,6 @@
 """How large the reproduced experiments are: the paper's sizes, or a quick reduced version.
 
-The paper's designs (§5.3–5.6), with our reading of what it leaves open (docs/experiments.md):
+The paper's designs (§5.3–5.6), with our reading of what it leaves open (docs/reproduce.md):
 
 * fig6: ``groups`` groups of ``fig6_group_size`` objects drawn from all objects, each learned
   ``fig6_trials`` times per action and model (multi-modal, each single modality), no transfer;
