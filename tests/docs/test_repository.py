@@ -172,6 +172,25 @@ def test_the_bookkeeping_pattern(line, found):
     assert bool(_bookkeeping(line)) is found
 
 
+def test_ci_builds_the_site_with_pinned_tools():
+    """CI runs `make docs` between the static gates and the tests, and the site's tools are
+    pinned exactly: a strict build must mean the same on every machine."""
+    steps = [
+        line for line in (ROOT / ".ci" / "run").read_text().splitlines() if line.startswith("make")
+    ]
+    assert steps == ["make lint", "make docs", "make test"]
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    tools = pyproject["dependency-groups"]["docs"]
+    assert {re.split(r"[=<>!~\[]", t)[0] for t in tools} >= {
+        "mkdocs",
+        "mkdocs-material",
+        "mkdocstrings-python",
+    }
+    assert all(re.fullmatch(r"[\w.\-\[\]]+==[\w.]+", t) for t in tools), tools
+    makefile = (ROOT / "Makefile").read_text()
+    assert "mkdocs build --strict" in makefile and "--group docs" in makefile
+
+
 def test_the_paper_is_cited():
     for name in ("README.md", "docs/design.md", "docs/method.md"):
         text = (ROOT / name).read_text(encoding="utf-8")
