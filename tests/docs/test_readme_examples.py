@@ -1,4 +1,5 @@
-"""Every Python block of the README runs and prints what the README says it prints.
+"""Every Python block of the README (and of docs/feature-tables.md) runs and prints what the
+page says it prints.
 
 A ```python block is followed by a ```text block with its expected output. Text must match
 exactly; numbers may differ by 0.02 (the last printed digit, which BLAS or platform rounding can
@@ -14,25 +15,28 @@ from pathlib import Path
 
 import pytest
 
-README = Path(__file__).resolve().parents[2] / "README.md"
+ROOT = Path(__file__).resolve().parents[2]
+README = ROOT / "README.md"
+PAGES = (README, ROOT / "docs" / "feature-tables.md")
 FENCE = re.compile(r"^```(\w*)\n(.*?)^```", re.MULTILINE | re.DOTALL)
 NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
 TOLERANCE = 0.02
 
 
-def _examples() -> list[tuple[str, str]]:
-    blocks = FENCE.findall(README.read_text(encoding="utf-8"))
+def _examples(page: Path = README) -> list[tuple[str, str]]:
+    blocks = FENCE.findall(page.read_text(encoding="utf-8"))
     pairs = []
     for k, (lang, body) in enumerate(blocks):
         if lang != "python":
             continue
         follows = blocks[k + 1] if k + 1 < len(blocks) else ("", "")
-        assert follows[0] == "text", "every python block in README.md needs its output after it"
+        assert follows[0] == "text", f"every python block in {page.name} needs its output after it"
         pairs.append((body, follows[1]))
     return pairs
 
 
 EXAMPLES = _examples()
+PAGE_EXAMPLES = [(page, *pair) for page in PAGES for pair in _examples(page)]
 
 
 def test_the_readme_has_examples():
@@ -46,15 +50,19 @@ def _same(printed: str, expected: str) -> bool:
     return all(abs(float(a) - float(b)) <= TOLERANCE for a, b in zip(got, want))
 
 
-@pytest.mark.parametrize("code,expected", EXAMPLES, ids=[f"block{k}" for k in range(len(EXAMPLES))])
-def test_readme_block_prints_what_the_readme_says(code, expected):
+@pytest.mark.parametrize(
+    "page,code,expected",
+    PAGE_EXAMPLES,
+    ids=[f"{p.name}-block{k}" for k, (p, _, _) in enumerate(PAGE_EXAMPLES)],
+)
+def test_readme_block_prints_what_the_readme_says(page, code, expected):
     # A fresh interpreter per block, as a reader pasting it would run it.
     run = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=False
     )
     assert run.returncode == 0, run.stderr
     assert _same(run.stdout, expected), (
-        f"README.md says:\n{expected}\nbut the block printed:\n{run.stdout}"
+        f"{page.name} says:\n{expected}\nbut the block printed:\n{run.stdout}"
     )
 
 

@@ -161,7 +161,9 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         length_scale: float | str | Sequence[float] = DEFAULTS.length_scale,
         signal_variance: float = DEFAULTS.signal_variance,
         *,
-        modalities: Mapping[str, Sequence[int] | Sequence[str]] | Sequence[Sequence[int]] | None = None,
+        modalities: Mapping[str, Sequence[int] | Sequence[str]]
+        | Sequence[Sequence[int]]
+        | None = None,
         modality_weights: Sequence[float] | None = None,
         optimize: bool = True,
         n_restarts: int = DEFAULTS.n_restarts,

@@ -92,8 +92,7 @@ def _by_name(modality: str, columns: list[str], feature_names: Any) -> list[int]
     unknown = [c for c in columns if c not in position]
     if unknown:
         raise ValueError(
-            f"modality {modality!r}: X has no column(s) {unknown}; its columns are "
-            f"{list(position)}"
+            f"modality {modality!r}: X has no column(s) {unknown}; its columns are {list(position)}"
         )
     return [position[c] for c in columns]
 
