@@ -156,7 +156,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         previous = signal.signal(signal.SIGTERM, _terminate)
     stdout = sys.stdout
     guard = _ClosedPipeGuard(stdout)
-    sys.stdout = guard  # type: ignore[assignment]
+    sys.stdout = guard
     try:
         code = int(args.func(args) or 0)
         if guard.closed and code == 0:
