@@ -220,3 +220,30 @@ def test_prior_build_and_export_do_not_replace_a_file_without_force(tmp_path, ca
         assert out.read_text() == "mine"
         assert main([*command, "--force"]) == 0
         assert out.read_bytes() != b"mine"
+
+
+def test_method_choices_state_the_defaults_each_reading_uses() -> None:
+    """--cutoff, --kernel, --prior-feature-scale: left out, the reading sets them, and their
+    help says to what."""
+    from aptkt.commands._method import learner_config
+
+    parser = build_parser()
+    helps = {
+        "/".join(a.option_strings): " ".join(a.help.split())
+        for c, a in ACTIONS
+        if c == "aptkt learn" and a.help
+    }
+    for reading in ("aptkt", "paper"):
+        args = parser.parse_args(["learn", "--objects", "a,b", "--reading", reading])
+        config = learner_config(args)
+        for option, used in (
+            ("--cutoff", config.cutoff),
+            ("--kernel", config.gp.kernel),
+            ("--prior-feature-scale", config.gp.prior_feature_scale),
+        ):
+            said = re.search(
+                r"default: ([\w-]+)(?: \(with --reading paper: ([\w-]+)\))?", helps[option]
+            )
+            assert said, f"{option}: its help states no default: {helps[option]}"
+            stated = said[2] if reading == "paper" and said[2] else said[1]
+            assert stated == used, f"--reading {reading}: {option} says {stated}, uses {used}"

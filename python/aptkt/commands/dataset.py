@@ -92,7 +92,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "per recording) to find damage anywhere.",
     )
     i.add_argument("file", metavar="DATASET", help="data set (HDF5)")
-    i.add_argument("--json", action="store_true", help="print JSON")
+    i.add_argument("--json", action="store_true", help="print the summary as JSON")
     i.add_argument(
         "--check",
         action="store_true",

@@ -241,7 +241,7 @@ def _refuse_earlier_run(out: Path, force: bool) -> None:
     if found and not force:
         raise ConfigError(
             f"--output {out}: holds an earlier result ({', '.join(found)}); give --force to "
-            "replace it, or choose another --output"
+            "replace it, or choose another output directory"
         )
 
 

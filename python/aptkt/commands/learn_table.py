@@ -105,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     output_dir(args.output)
-    refuse_overwrite(args.output, args.force, how="--force")
+    refuse_overwrite(args.output, args.force, how="--force", where=f"--output {args.output}:")
     settings = TableSettings(
         table=Path(args.table),
         prior_objects=tuple(priors),

@@ -77,13 +77,16 @@ def _check_objects(table, s: TableSettings, actions: list[str]) -> None:
 RESULT_FILES = ("summary.json", "results.csv", "prior.npz")
 
 
-def refuse_overwrite(out: Path, force: bool, how: str = "force=True") -> Path:
-    """``out``, unless it holds a result already and ``force`` is not given."""
+def refuse_overwrite(
+    out: Path, force: bool, how: str = "force=True", where: str | None = None
+) -> Path:
+    """``out``, unless it holds a result already and ``force`` is not given. ``how``: the
+    caller's way to give ``force``; ``where``: how messages name ``out``."""
     found = [name for name in RESULT_FILES if (out / name).exists()]
     if found and not force:
         raise ConfigError(
-            f"{out} holds an earlier result ({', '.join(found)}); give {how} to replace it, "
-            "or choose another output directory"
+            f"{where or out} holds an earlier result ({', '.join(found)}); give {how} to "
+            "replace it, or choose another output directory"
         )
     return out
 
