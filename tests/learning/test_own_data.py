@@ -137,3 +137,24 @@ def test_without_action_and_trial_columns_rows_are_numbered() -> None:
     assert table.action_names == ["observe"]
     assert table.trials.tolist() == [0, 0, 1, 1]
     assert table.columns == ["force.0"]
+
+
+def test_no_module_imports_pandas() -> None:
+    """pandas stays optional: aptkt reads a frame column by column and never imports it
+    (scikit-learn may, when it is installed)."""
+    import ast
+    from pathlib import Path
+
+    import aptkt
+
+    found = []
+    for path in Path(aptkt.__file__).parent.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module]
+            if any(n == "pandas" or n.startswith("pandas.") for n in names):
+                found.append(f"{path.name}:{node.lineno}")
+    assert not found, found
