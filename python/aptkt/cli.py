@@ -10,6 +10,7 @@ import sys
 import threading
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from aptkt import __version__
 from aptkt.errors import AptktError, Terminated
@@ -91,6 +92,50 @@ def _remove_empty(dirs: list[Path]) -> None:
             pass
 
 
+#: A reader that left (``aptkt learn ... | head -1``): the exit code of a program stopped by
+#: SIGPIPE, 128 + 13, as a shell reports it.
+EXIT_CLOSED_PIPE = 141
+
+
+class _ClosedPipeGuard:
+    """Standard output that, once its reader has gone, drops what is written instead of
+    raising: the command finishes its work and keeps its results on disk, rather than dying at
+    its next progress line."""
+
+    def __init__(self, stream: Any) -> None:
+        self._stream = stream
+        self.closed = False
+
+    def write(self, text: str) -> int:
+        if not self.closed:
+            try:
+                return self._stream.write(text)
+            except BrokenPipeError:
+                self._close()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.closed:
+            try:
+                self._stream.flush()
+            except BrokenPipeError:
+                self._close()
+
+    def _close(self) -> None:
+        self.closed = True
+        # What the stream still buffers would fail again when Python flushes it at exit (and
+        # print "Exception ignored ..."): its descriptor now leads nowhere.
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self._stream.fileno())
+            os.close(devnull)
+        except (OSError, ValueError, AttributeError):
+            pass
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
+
+
 def _terminate(signum: int, frame: object) -> None:
     raise Terminated(f"signal {signal.Signals(signum).name}")
 
@@ -109,8 +154,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     previous = None
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, _terminate)
+    stdout = sys.stdout
+    guard = _ClosedPipeGuard(stdout)
+    sys.stdout = guard
     try:
         code = int(args.func(args) or 0)
+        if guard.closed and code == 0:
+            code = EXIT_CLOSED_PIPE
         return code
     except AptktError as exc:
         print(f"{label}: error: {exc}", file=sys.stderr)
@@ -133,6 +183,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         code = 143 if terminated else 130
         return code
     finally:
+        guard.flush()
+        if guard.closed and code == 0:
+            code = EXIT_CLOSED_PIPE
+        sys.stdout = stdout
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
         if code != 0:

@@ -51,7 +51,8 @@ def _commands(path: Path) -> dict[str, list[str]]:
         "features": ["dataset", "features", str(path), "--no-progress"],
         "resume": ["dataset", "generate", "-o", str(path), "--resume", "--no-progress", *more],
         "repair": ["dataset", "repair", str(path), "--no-backup"],
-        "prior": ["prior", "build", str(path), "-o", str(path.with_suffix(".npz"))],
+        # (--force: every kill runs the build again onto the same prior file.)
+        "prior": ["prior", "build", str(path), "-o", str(path.with_suffix(".npz")), "--force"],
     }
 
 

@@ -170,7 +170,7 @@ def test_bad_options_give_one_line(tmp_path, capsys, args, message):
 def test_live_options_are_not_mixed_up(capsys):
     assert main(["learn", "--objects", "a,b", "--prior", "p.npz", "--runs", "2"]) == 1
     err = capsys.readouterr().err
-    assert "--robot is required (or learn offline with --table FILE)" in err
+    assert "--robot is required (or learn offline with --table TABLE)" in err
 
 
 def test_method_choices_reach_every_method_and_the_prior(tmp_path, capsys):

@@ -16,6 +16,12 @@ from aptkt.learning.transfer import CUTOFFS
 __all__ = ["add_method_arguments", "gp_settings", "learner_config"]
 
 
+def _by_reading(value: Any) -> str:
+    """The default of one choice, which the reading sets: "default: X (paper: Y)"."""
+    aptkt, paper = value(LearnerConfig()), value(LearnerConfig.paper())
+    return f"default: {aptkt}" + (f" (with --reading paper: {paper})" if paper != aptkt else "")
+
+
 def add_method_arguments(p: argparse.ArgumentParser) -> None:
     """The method's documented alternatives (docs/method.md). ``--reading`` picks the whole
     set; each other option overrides one setting of it."""
@@ -35,7 +41,7 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
         "--cutoff",
         choices=CUTOFFS,
         help="evidence: Eq. 3's eps_neg, then the new labels' evidence must favour the "
-        "transfer by --evidence-margin; paper: Eq. 3 alone",
+        "transfer by --evidence-margin; paper: Eq. 3 alone; " + _by_reading(lambda c: c.cutoff),
     )
     g.add_argument(
         "--evidence-margin",
@@ -49,14 +55,15 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
         choices=KERNELS,
         help="shared: one kernel per action (sigma^2 and one length-scale in noise units), "
         "learned on the old and new objects' observations together; per-classifier: each "
-        "classifier its own (a length-scale per modality and the weights of Eq. 1)",
+        "classifier its own (a length-scale per modality and the weights of Eq. 1); "
+        + _by_reading(lambda c: c.gp.kernel),
     )
     g.add_argument(
         "--prior-feature-scale",
         choices=FEATURE_SCALES,
         help="the metric of a prior built here (a loaded --prior keeps its own): whiten (the "
         "old objects' within-object noise, whitened) or spread (each column z-scored over "
-        "the old observations)",
+        "the old observations); " + _by_reading(lambda c: c.gp.prior_feature_scale),
     )
 
 

@@ -30,7 +30,7 @@ def add_session_arguments(p: argparse.ArgumentParser, *, robot_required: bool = 
     )
     g.add_argument(
         "--workspace",
-        metavar="FILE",
+        metavar="TOML",
         help="workspace file: where each object lies (ur10; required)",
     )
     g.add_argument(
@@ -55,7 +55,7 @@ def add_session_arguments(p: argparse.ArgumentParser, *, robot_required: bool = 
     )
     g.add_argument(
         "--patch",
-        metavar="FILE",
+        metavar="TOML",
         help="skin patch file (cells, force calibration); default: the 7-cell patch",
     )
     g.add_argument(

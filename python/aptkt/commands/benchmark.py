@@ -32,6 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--output",
         type=Path,
         default=Path("aptkt-benchmark"),
+        metavar="DIR",
         help="output directory (default %(default)s)",
     )
     for option, what in (
@@ -41,17 +42,32 @@ def register(sub: argparse._SubParsersAction) -> None:
         ("budget", "actively chosen observations after the first round"),
     ):
         p.add_argument(
-            f"--{option}", type=int, default=DEFAULTS[option], help=f"{what} (default %(default)s)"
+            f"--{option}",
+            type=int,
+            default=DEFAULTS[option],
+            metavar="N",
+            help=f"{what} (default %(default)s)",
         )
     p.add_argument(
         "--choices",
-        metavar="random,nearest,farthest",
-        help="how the priors are chosen (default: all three)",
+        metavar="KIND,...",
+        help="how the priors are chosen: random, nearest, farthest (default: all three)",
     )
     p.add_argument("--actions", metavar="A,B,...", help="only these actions (default: all)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the groups and runs (default 0)")
     p.add_argument(
-        "-j", "--jobs", type=int, default=os.cpu_count() or 1, help="processes (default: all cores)"
+        "--seed",
+        type=int,
+        default=0,
+        metavar="N",
+        help="seed of the groups and runs (default %(default)s)",
+    )
+    p.add_argument(
+        "-j",
+        "--jobs",
+        type=int,
+        default=os.cpu_count() or 1,
+        metavar="N",
+        help="processes (default: all cores)",
     )
     p.add_argument("--force", action="store_true", help="replace the results in --output")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -53,7 +53,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="K",
         help="number of the first trial (default %(default)s)",
     )
-    p.add_argument("-o", "--output", required=True, metavar="FILE", help="HDF5 data set to write")
+    p.add_argument(
+        "-o", "--output", required=True, metavar="DATASET", help="data set to write (HDF5)"
+    )
     p.add_argument(
         "--resume", action="store_true", help="complete an existing file: skip the trials it holds"
     )
@@ -64,7 +66,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="wait for Enter before each new trial round (re-place the objects by hand, paper §5.2)",
     )
     p.add_argument(
-        "--seed", type=int, default=0, help="world seed for --robot sim (default %(default)s)"
+        "--seed",
+        type=int,
+        default=0,
+        metavar="N",
+        help="world seed for --robot sim (default %(default)s)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress output")
     p.set_defaults(func=run)

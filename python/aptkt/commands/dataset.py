@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 from aptkt.commands._checks import (
     at_least,
@@ -32,7 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "on each of the 15 objects (§5.2). The same seed gives the same data, bit for bit, whatever "
         "--jobs is.",
     )
-    g.add_argument("-o", "--output", required=True, metavar="FILE", help="HDF5 file to write")
+    g.add_argument(
+        "-o", "--output", required=True, metavar="DATASET", help="data set to write (HDF5)"
+    )
     g.add_argument(
         "--objects", metavar="A,B,...", help="object names (default: every object of the library)"
     )
@@ -60,7 +63,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="K",
         help="number of the first trial (default %(default)s)",
     )
-    g.add_argument("--seed", type=int, default=0, help="world seed (default %(default)s)")
+    g.add_argument(
+        "--seed", type=int, default=0, metavar="N", help="world seed (default %(default)s)"
+    )
     g.add_argument(
         "-j",
         "--jobs",
@@ -86,8 +91,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "recording by recording; --check reads every recording and stored feature (about 8 ms "
         "per recording) to find damage anywhere.",
     )
-    i.add_argument("file", metavar="FILE")
-    i.add_argument("--json", action="store_true", help="print JSON")
+    i.add_argument("file", metavar="DATASET", help="data set (HDF5)")
+    i.add_argument("--json", action="store_true", help="print the summary as JSON")
     i.add_argument(
         "--check",
         action="store_true",
@@ -98,7 +103,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     f = ds.add_parser(
         "features", help="extract every recording's feature observation and store it in the file"
     )
-    f.add_argument("file")
+    f.add_argument("file", metavar="DATASET", help="data set (HDF5); the features are stored in it")
     f.add_argument(
         "--actions", metavar="P1,S1,...", help="only these actions (default: all recorded)"
     )
@@ -119,7 +124,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="One row per recording: object, action, trial and the feature columns "
         "<modality>.<k> (see docs/feature-tables.md). Features not yet stored are extracted first.",
     )
-    x.add_argument("file", metavar="FILE", help="data set (HDF5)")
+    x.add_argument("file", metavar="DATASET", help="data set (HDF5)")
     x.add_argument(
         "-o", "--output", required=True, metavar="TABLE", help="table to write (.csv, .h5)"
     )
@@ -127,6 +132,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--actions", metavar="P1,S1,...", help="only these actions (default: all recorded)"
     )
     x.add_argument("--objects", metavar="A,B,...", help="only these objects (default: all)")
+    x.add_argument("--force", action="store_true", help="replace an existing TABLE")
     x.add_argument("--no-progress", action="store_true", help="no progress bar")
     x.set_defaults(func=run_export_features)
 
@@ -160,9 +166,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "repair",
         help="make a file whose writer died appendable again (keeps every complete recording)",
     )
-    r.add_argument("file", metavar="FILE")
+    r.add_argument("file", metavar="DATASET", help="data set (HDF5) to repair in place")
     r.add_argument(
-        "--no-backup", action="store_true", help="do not keep the original as FILE.crashed"
+        "--no-backup", action="store_true", help="do not keep the original as DATASET.crashed"
     )
     r.set_defaults(func=run_repair)
 
@@ -228,7 +234,7 @@ def run_generate(args: argparse.Namespace) -> int:
 def run_info(args: argparse.Namespace) -> int:
     from aptkt.data.store import DatasetReader
 
-    input_file(args.file, "FILE")
+    input_file(args.file, "DATASET")
     with DatasetReader(args.file) as rd:
         info = rd.info(full=args.check)
     if args.json:
@@ -298,7 +304,7 @@ def run_features(args: argparse.Namespace) -> int:
 
     rewritable_file(args.file)
     jobs(args.jobs)
-    intact_data_set(args.file, "FILE")
+    intact_data_set(args.file, "DATASET")
     executor = LocalExecutor(args.jobs)
     try:
         counts = extract_features(
@@ -320,8 +326,10 @@ def run_export_features(args: argparse.Namespace) -> int:
     from aptkt.learning.dataset import load_observations
     from aptkt.learning.feature_table import write_feature_table
 
-    input_file(args.file, "FILE")
-    intact_data_set(args.file, "FILE")
+    input_file(args.file, "DATASET")
+    intact_data_set(args.file, "DATASET")
+    if Path(args.output).exists() and not args.force:
+        raise ConfigError(f"--output {args.output}: exists (give --force to replace it)")
     try:
         table = load_observations(
             args.file,

@@ -23,25 +23,43 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--output",
         type=Path,
         default=Path("aptkt-demo"),
-        help="output directory (default %(default)s)",
-    )
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument(
-        "-j", "--jobs", type=int, default=os.cpu_count() or 1, help="processes (default: all cores)"
+        metavar="DIR",
+        help="output directory (default %(default)s); a re-run of the same size reuses its "
+        "simulated data",
     )
     p.add_argument(
-        "--trials", type=int, default=3, help="learning runs per method (default %(default)s)"
+        "--seed",
+        type=int,
+        default=0,
+        metavar="N",
+        help="seed of the simulated world and the learners (default %(default)s)",
+    )
+    p.add_argument(
+        "-j",
+        "--jobs",
+        type=int,
+        default=os.cpu_count() or 1,
+        metavar="N",
+        help="processes (default: all cores)",
+    )
+    p.add_argument(
+        "--trials",
+        type=int,
+        default=3,
+        metavar="N",
+        help="learning runs per method (default %(default)s)",
     )
     p.add_argument(
         "--budget",
         type=int,
         default=LearnerConfig.budget,
+        metavar="N",
         help="actively chosen observations (default %(default)s)",
     )
     p.add_argument(
         "--quick", action="store_true", help="a reduced size that runs in well under a minute"
     )
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
 

@@ -34,18 +34,20 @@ from aptkt.learning.transfer import TRANSFER_MODES
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "learn",
-        help="learn new objects live with APTKT (active exploration, prior knowledge transfer)",
+        help="learn new objects with APTKT (active exploration, prior knowledge transfer): live "
+        "on the UR10 or the simulated world, or offline from a feature table (--table)",
         description="Explore new objects with the robot, choosing each next action and object by the "
         "models' uncertainty and transferring prior tactile knowledge (paper §4). Every recording is kept "
         "(--record); the run (steps, transfer decisions, settings) goes to --output as JSON and CSV, and the "
         "new objects' observations and models to OUTPUT/learned_prior.npz, usable later as --prior. A live "
-        "run has no test set: accuracy is reported only with --test FILE.",
+        "run has no test set: accuracy is reported only with --test DATASET. With --table TABLE "
+        "it learns offline from a feature table instead (below).",
     )
     add_session_arguments(p, robot_required=False)  # required unless --table
     p.add_argument(
         "--prior",
-        metavar="PRIOR.npz",
-        help="prior knowledge (aptkt.learning.PriorKnowledge file; required unless --table)",
+        metavar="PRIOR",
+        help="prior-knowledge file (.npz, of aptkt prior build; required unless --table)",
     )
     p.add_argument(
         "--objects",
@@ -79,8 +81,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--transfer",
         choices=TRANSFER_MODES,
         default=None,
-        help="paper: APTKT's transfer (Eq. 2-3); multi: from every prior above eps_neg; "
-        "none: the baseline (nothing of the prior); control: the prior's feature space without "
+        help="paper: APTKT's transfer (Eq. 2-3); none: the baseline (nothing of the prior); control: the prior's feature space without "
         "transfer (default paper)",
     )
     p.add_argument(
@@ -98,7 +99,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--record",
-        metavar="FILE",
+        metavar="DATASET",
         help="data set receiving every recording (default OUTPUT/recordings.h5; appended to if it exists)",
     )
     p.add_argument(
@@ -110,14 +111,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="output directory (default %(default)s)",
     )
     p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an earlier result in --output (live: run.json, steps.csv, transfer.csv, "
+        "learned_prior.npz; --table: summary.json, results.csv, prior.npz)",
+    )
+    p.add_argument(
         "--test",
-        metavar="FILE",
-        help="data set of the same objects and actions: report test accuracy",
+        metavar="DATASET",
+        help="data set (HDF5) of the same objects and actions: report test accuracy",
     )
     p.add_argument(
         "--seed",
         type=int,
         default=LearnerConfig.seed,
+        metavar="N",
         help="seed of the learner (and of the simulated world) (default %(default)s)",
     )
     learn_table.add_arguments(p)
@@ -132,12 +140,13 @@ def run(args: argparse.Namespace) -> int:
         return learn_table.run(args)
     for option, value in (("--robot", args.robot), ("--prior", args.prior)):
         if not value:
-            raise ConfigError(f"{option} is required (or learn offline with --table FILE)")
+            raise ConfigError(f"{option} is required (or learn offline with --table TABLE)")
     offline = learn_table.table_only(args)
     if offline:
-        raise ConfigError(f"{', '.join(offline)}: only with --table FILE")
+        raise ConfigError(f"{', '.join(offline)}: only with --table TABLE")
     args.transfer = args.transfer or "paper"
 
+    _refuse_earlier_run(args.output, args.force)  # before anything is loaded or checked
     input_file(args.prior, "--prior")
     at_least(args.seed, 0, "--seed")
     at_least(args.budget, 0, "--budget")
@@ -221,6 +230,19 @@ def run(args: argparse.Namespace) -> int:
         print(f"aptkt learn: fault: {exc}", file=sys.stderr)
         return EXIT_FAULT
     return 0
+
+
+#: What a live run writes to its output directory (its recordings are appended to).
+RUN_FILES = ("run.json", "steps.csv", "transfer.csv", "learned_prior.npz")
+
+
+def _refuse_earlier_run(out: Path, force: bool) -> None:
+    found = [name for name in RUN_FILES if (out / name).exists()]
+    if found and not force:
+        raise ConfigError(
+            f"--output {out}: holds an earlier result ({', '.join(found)}); give --force to "
+            "replace it, or choose another output directory"
+        )
 
 
 def _same_as_the_prior(actions: dict, recorded: object, path: str) -> None:

@@ -1,4 +1,4 @@
-"""``aptkt learn --table FILE``: learn new objects from a feature table of any sensor, offline.
+"""``aptkt learn --table TABLE``: learn new objects from a feature table of any sensor, offline.
 
 The options of this mode; :mod:`aptkt.commands.learn` dispatches to :func:`run` when ``--table``
 is given.
@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from aptkt.commands._checks import MAX_BUDGET, MAX_RUNS, at_most
+from aptkt.commands._checks import MAX_BUDGET, MAX_RUNS, at_most, output_dir
 from aptkt.commands._method import learner_config
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
@@ -20,11 +20,11 @@ DEFAULT_RUNS = 3
 def add_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group(
         "from a feature table (no robot)",
-        "--table FILE learns from recorded feature observations (CSV or HDF5: columns object, "
+        "--table TABLE learns from recorded feature observations (CSV or HDF5: columns object, "
         "action, trial, <modality>.<k>; see docs/feature-tables.md) and compares APTKT, APTKT "
         "with auxiliary features and the baseline, as the demo does.",
     )
-    g.add_argument("--table", metavar="FILE", help="feature table (.csv, .h5)")
+    g.add_argument("--table", metavar="TABLE", help="feature table (.csv, .h5)")
     g.add_argument(
         "--prior-objects",
         metavar="A,B,...",
@@ -65,7 +65,7 @@ def _trials(text: str) -> tuple[int, ...]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from aptkt.experiments.table_learning import TableSettings, learn_from_table
+    from aptkt.experiments.table_learning import TableSettings, learn_from_table, refuse_overwrite
 
     live_only = [
         option
@@ -104,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
         )
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
+    output_dir(args.output)
+    refuse_overwrite(args.output, args.force, how="--force", where=f"--output {args.output}:")
     settings = TableSettings(
         table=Path(args.table),
         prior_objects=tuple(priors),

@@ -32,10 +32,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         "fits one feature pipeline and one multi-modal Laplace GPC per action, and saves them with "
         "the observations to an .npz file (loads without executing code).",
     )
-    b.add_argument("data", type=Path, help="HDF5 data set (aptkt dataset generate / aptkt collect)")
     b.add_argument(
-        "-o", "--output", type=Path, required=True, help="prior-knowledge file to write (.npz)"
+        "data",
+        type=Path,
+        metavar="DATASET",
+        help="data set (HDF5) of aptkt dataset generate or aptkt collect",
     )
+    b.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        required=True,
+        metavar="PRIOR",
+        help="prior-knowledge file to write (.npz)",
+    )
+    b.add_argument("--force", action="store_true", help="replace an existing PRIOR")
     b.add_argument(
         "--objects", metavar="A,B,...", help="the prior objects (default: every object in the file)"
     )
@@ -43,11 +54,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--actions", metavar="P1,S1,...", help="actions (default: every recorded action)"
     )
     b.add_argument("--trials", metavar="FIRST:STOP", help="only these trial numbers, e.g. 0:20")
-    b.add_argument("--seed", type=int, default=0)
+    b.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        metavar="N",
+        help="seed of the models' optimiser starts (default %(default)s)",
+    )
     b.add_argument(
         "--restarts",
         type=int,
         default=GPSettings().n_restarts,
+        metavar="N",
         help="extra optimiser starts per model (default %(default)s)",
     )
     b.add_argument(
@@ -61,8 +79,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.set_defaults(func=run_build)
 
     i = ps.add_parser("inspect", help="summarise a prior-knowledge file")
-    i.add_argument("file", type=Path)
-    i.add_argument("--json", action="store_true")
+    i.add_argument("file", type=Path, metavar="PRIOR", help="prior-knowledge file (.npz)")
+    i.add_argument("--json", action="store_true", help="print the summary as JSON")
     i.set_defaults(func=run_inspect)
 
 
@@ -86,13 +104,15 @@ def run_build(args: argparse.Namespace) -> int:
 
     if not os.path.exists(args.data):  # (os.path: a name too long to exist is an answer too)
         raise ConfigError(f"{args.data}: no such data set")
-    input_file(args.data, "DATA")
-    intact_data_set(args.data, "DATA")
+    input_file(args.data, "DATASET")
+    intact_data_set(args.data, "DATASET")
     at_least(args.seed, 0, "--seed")
     at_least(args.restarts, 0, "--restarts")
     at_most(args.restarts, MAX_RESTARTS, "--restarts", "restarts bound every model's fit")
     # Before the features are extracted and the models fitted: not after.
     output_file(args.output)
+    if args.output.exists() and not args.force:
+        raise ConfigError(f"--output {args.output}: exists (give --force to replace it)")
     objects = split_names(args.objects, "--objects")
     if objects is not None and len(objects) < 2:
         raise ConfigError("--objects: prior knowledge needs at least two objects")

@@ -28,12 +28,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--output",
         type=Path,
         default=Path("aptkt-reproduce"),
+        metavar="DIR",
         help="output directory (default %(default)s)",
     )
     p.add_argument(
         "--data",
         type=Path,
-        metavar="FILE",
+        metavar="DATASET",
         help="data set (HDF5) to use instead of simulating one; features are extracted into it if missing",
     )
     p.add_argument(
@@ -46,6 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--jobs",
         type=int,
         default=os.cpu_count() or 1,
+        metavar="N",
         help="local processes (default: all cores)",
     )
     p.add_argument(
@@ -58,6 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--seed",
         type=int,
         default=0,
+        metavar="N",
         help="root seed of the data, the groups and the trials (default %(default)s)",
     )
     p.add_argument(

@@ -22,7 +22,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Open a skin source and show packet rate per cell, link health (bytes skipped, "
         "rejected packets, buffer overflows) and the current sensor values, refreshed live.",
     )
-    m.add_argument("port", nargs="?", help="serial port of the skin adapter, e.g. /dev/ttyUSB0")
+    m.add_argument(
+        "port", nargs="?", metavar="PORT", help="serial port of the skin adapter, e.g. /dev/ttyUSB0"
+    )
     m.add_argument(
         "--tsu", action="store_true", help="read from a Tactile Section Unit over UDP instead"
     )
@@ -40,7 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     m.add_argument(
         "--patch",
-        metavar="FILE",
+        metavar="TOML",
         help="patch TOML (cells and force calibration); default: the 7-cell patch",
     )
     m.add_argument(

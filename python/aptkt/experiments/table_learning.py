@@ -22,13 +22,19 @@ from typing import Any
 import numpy as np
 
 from aptkt import __version__
-from aptkt.errors import FeatureTableError
+from aptkt.errors import ConfigError, FeatureTableError
 from aptkt.experiments.demo import report_results
 from aptkt.experiments.runs import step_rows
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
-from aptkt.learning.feature_table import read_feature_table, split_held_out
+from aptkt.learning.feature_table import FeatureTable, read_feature_table, split_held_out
 
-__all__ = ["TableSettings", "learn_from_table"]
+__all__ = [
+    "TableSettings",
+    "compare_on_table",
+    "learn_from_table",
+    "refuse_overwrite",
+    "write_table_results",
+]
 
 
 @dataclass
@@ -68,9 +74,31 @@ def _check_objects(table, s: TableSettings, actions: list[str]) -> None:
                 )
 
 
-def learn_from_table(s: TableSettings, *, say=print) -> dict[str, Any]:
-    t_start = time.perf_counter()
-    table = read_feature_table(s.table)
+#: The files of a comparison's result (besides the plots): one of them in the output
+#: directory means a result would be replaced.
+RESULT_FILES = ("summary.json", "results.csv", "prior.npz")
+
+
+def refuse_overwrite(
+    out: Path, force: bool, how: str = "force=True", where: str | None = None
+) -> Path:
+    """``out``, unless it holds a result already and ``force`` is not given. ``how``: the
+    caller's way to give ``force``; ``where``: how messages name ``out``."""
+    found = [name for name in RESULT_FILES if (out / name).exists()]
+    if found and not force:
+        raise ConfigError(
+            f"{where or out} holds an earlier result ({', '.join(found)}); give {how} to "
+            "replace it, or choose another output directory"
+        )
+    return out
+
+
+def compare_on_table(
+    table: FeatureTable, s: TableSettings, *, say=print, prior_path: Path | None = None
+) -> tuple[list[dict[str, Any]], dict[str, LearnerConfig], list[str]]:
+    """The comparison itself, on a table read or built in memory: the step rows of every run
+    of every method, the methods' learner settings and the actions learnt. With
+    ``prior_path`` the prior knowledge is saved there."""
     actions = list(s.actions) if s.actions else table.action_names
     unknown = [a for a in actions if a not in set(table.action_names)]
     if unknown:
@@ -87,14 +115,12 @@ def learn_from_table(s: TableSettings, *, say=print) -> dict[str, Any]:
         f"[1/3] {table.path}: {len(table.trials)} rows; actions {', '.join(actions)}; "
         f"{int(pool_rows.sum())} rows to learn from and {int(test_rows.sum())} held out"
     )
-
-    out = Path(s.output)
-    out.mkdir(parents=True, exist_ok=True)
-    prior_path = out / "prior.npz"
-    say(f"[2/3] building prior knowledge on {', '.join(s.prior_objects)} -> {prior_path}")
+    to = f" -> {prior_path}" if prior_path is not None else ""
+    say(f"[2/3] building prior knowledge on {', '.join(s.prior_objects)}{to}")
     cfg = s.config
     prior = PriorKnowledge.build(table.observations(actions, prior_rows), gp=cfg.gp, seed=cfg.seed)
-    prior.save(prior_path)
+    if prior_path is not None:
+        prior.save(prior_path)
     pool = table.observations(actions, pool_rows)
     test = table.observations(actions, test_rows)
     methods = {
@@ -115,7 +141,35 @@ def learn_from_table(s: TableSettings, *, say=print) -> dict[str, Any]:
             )
             steps = step_rows(run, learner, s.new_objects)
             rows += [{"method": name, "trial": t, **r} for r in steps]
+    return rows, methods, actions
 
+
+def learn_from_table(s: TableSettings, *, say=print) -> dict[str, Any]:
+    """The comparison on the table file ``s.table``, with every file of the demo's results
+    written to ``s.output``; returns the summary."""
+    t_start = time.perf_counter()
+    table = read_feature_table(s.table)
+    out = Path(s.output)
+    out.mkdir(parents=True, exist_ok=True)
+    rows, methods, actions = compare_on_table(table, s, say=say, prior_path=out / "prior.npz")
+    return write_table_results(s, table, rows, methods, actions, t_start=t_start, say=say)
+
+
+def write_table_results(
+    s: TableSettings,
+    table: FeatureTable,
+    rows: list[dict[str, Any]],
+    methods: dict[str, LearnerConfig],
+    actions: list[str],
+    *,
+    t_start: float,
+    say=print,
+) -> dict[str, Any]:
+    """The demo's result files of a comparison in ``s.output`` (its ``prior.npz`` saved
+    already); returns the summary."""
+    out = Path(s.output)
+    prior_path = out / "prior.npz"
+    cfg = s.config
     settings = {
         k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(s).items() if k != "config"
     }

@@ -38,6 +38,8 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         Initial signal variance σ² (the kernel's amplitude).
     modalities : None, mapping name -> columns, or sequence of column lists
         Groups of feature columns with their own RBF kernel. ``None``: one group of all columns.
+        Columns are given by index, or by name when ``X`` is a DataFrame (names fitted in
+        ``feature_names_in_``, as scikit-learn records them).
     modality_weights : sequence of float, optional
         Initial weights γ (normalised to sum to 1); uniform by default.
     optimize : bool
@@ -161,7 +163,9 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         length_scale: float | str | Sequence[float] = DEFAULTS.length_scale,
         signal_variance: float = DEFAULTS.signal_variance,
         *,
-        modalities: Mapping[str, Sequence[int]] | Sequence[Sequence[int]] | None = None,
+        modalities: Mapping[str, Sequence[int] | Sequence[str]]
+        | Sequence[Sequence[int]]
+        | None = None,
         modality_weights: Sequence[float] | None = None,
         optimize: bool = True,
         n_restarts: int = DEFAULTS.n_restarts,

@@ -44,7 +44,11 @@ def as_matrix(X: Any, name: str, n_features: int | None = None) -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.float64)
 
 
-def normalise_modalities(modalities: Any, n_features: int) -> tuple[list[str], list[list[int]]]:
+def normalise_modalities(
+    modalities: Any, n_features: int, feature_names: Any = None
+) -> tuple[list[str], list[list[int]]]:
+    """Modality names and their column indices. A modality's columns are indices, a slice, or
+    (with ``feature_names``, the columns of the DataFrame the model is fitted to) column names."""
     if modalities is None:
         return ["all"], [list(range(n_features))]
     if isinstance(modalities, Mapping):
@@ -57,7 +61,17 @@ def normalise_modalities(modalities: Any, n_features: int) -> tuple[list[str], l
     for name, cols in items:
         if isinstance(cols, slice):
             cols = range(n_features)[cols]
-        idx = [int(c) for c in np.atleast_1d(np.asarray(cols, dtype=np.int64))]
+        elif isinstance(cols, str):
+            cols = [cols]
+        listed = list(np.atleast_1d(np.asarray(cols, dtype=object)))
+        if listed and all(isinstance(c, str) for c in listed):
+            idx = _by_name(str(name), [str(c) for c in listed], feature_names)
+        elif any(isinstance(c, str) for c in listed):
+            raise TypeError(
+                f"modality {name!r} mixes column names and indices: {listed}; give one kind"
+            )
+        else:
+            idx = [int(c) for c in np.atleast_1d(np.asarray(cols, dtype=np.int64))]
         bad = [c for c in idx if not 0 <= c < n_features]
         if not idx or bad:
             raise ValueError(
@@ -66,6 +80,21 @@ def normalise_modalities(modalities: Any, n_features: int) -> tuple[list[str], l
         names.append(str(name))
         groups.append(idx)
     return names, groups
+
+
+def _by_name(modality: str, columns: list[str], feature_names: Any) -> list[int]:
+    if feature_names is None:
+        raise TypeError(
+            f"modality {modality!r} names columns {columns}, but X has no column names: fit "
+            "to a DataFrame with these columns, or give column indices"
+        )
+    position = {str(n): i for i, n in enumerate(feature_names)}
+    unknown = [c for c in columns if c not in position]
+    if unknown:
+        raise ValueError(
+            f"modality {modality!r}: X has no column(s) {unknown}; its columns are {list(position)}"
+        )
+    return [position[c] for c in columns]
 
 
 class NotFitted(NotFittedError, _SklearnNotFitted):

@@ -158,7 +158,9 @@ def check_class_prior(*values: str | None) -> None:
 
 def fit_spec(est: Any, n_features: int) -> dict[str, Any]:
     """A LaplaceGPC's parameters, checked, for data with ``n_features`` columns."""
-    names, groups = normalise_modalities(est.modalities, n_features)
+    names, groups = normalise_modalities(
+        est.modalities, n_features, getattr(est, "feature_names_in_", None)
+    )
     m = len(groups)
     if isinstance(est.length_scale, str):
         if est.length_scale != "auto":

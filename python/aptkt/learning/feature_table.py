@@ -31,6 +31,7 @@ __all__ = [
     "ID_COLUMNS",
     "FeatureTable",
     "read_feature_table",
+    "table_from_columns",
     "split_held_out",
     "write_feature_table",
     "check_table_name",
@@ -125,6 +126,18 @@ def read_feature_table(path: str | Path) -> FeatureTable:
         raise _error(path, "no such file")
     header, cells = _read_csv(path) if path.suffix.lower() in _CSV else _read_hdf5(path)
     return _validate(path, header, cells)
+
+
+def table_from_columns(columns: Mapping[str, Sequence], name: str = "<columns>") -> FeatureTable:
+    """Validate a feature table held in memory: column name -> values (one per row), named as
+    in a file (``object``, ``action``, ``trial``, ``<modality>.<k>``; NaN where empty). ``name``
+    stands for the file in messages."""
+    path = Path(name)
+    cells: dict[str, list] = {str(k): list(v) for k, v in columns.items()}
+    lengths = {len(v) for v in cells.values()}
+    if len(lengths) > 1:
+        raise _error(path, "the columns have different lengths: " + _lengths(cells))
+    return _validate(path, list(cells), cells)
 
 
 def _read_csv(path: Path) -> tuple[list[str], dict[str, list]]:

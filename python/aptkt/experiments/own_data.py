@@ -1,0 +1,257 @@
+"""APTKT against the baseline on a user's own data, in one call from Python.
+
+``compare_on_data(frame, modalities={"force": ["fx", "fy"], ...}, prior_objects=...,
+new_objects=...)`` turns a DataFrame (pandas or anything with ``columns`` and ``frame[name]``)
+or a dict of equally long arrays into a feature table (:mod:`aptkt.learning.feature_table`),
+and runs the comparison of ``aptkt learn --table``
+(:func:`aptkt.experiments.table_learning.compare_on_table`). pandas is never imported: a frame
+is read column by column.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aptkt.errors import FeatureTableError
+from aptkt.experiments.table_learning import (
+    TableSettings,
+    compare_on_table,
+    refuse_overwrite,
+    write_table_results,
+)
+from aptkt.learning import LearnerConfig
+from aptkt.learning.feature_table import ID_COLUMNS, FeatureTable, table_from_columns
+
+__all__ = ["Comparison", "compare_on_data", "feature_table_from"]
+
+#: What messages call a table passed from Python.
+_NAME = "<data>"
+
+
+def _column_names(data: Any) -> list[str]:
+    if isinstance(data, Mapping):
+        return [str(k) for k in data]
+    if hasattr(data, "columns") and hasattr(data, "__getitem__"):
+        return [str(c) for c in data.columns]
+    raise TypeError(
+        "data must be a DataFrame (anything with .columns and frame[column]) or a dict of "
+        f"column name -> values, got {type(data).__name__}"
+    )
+
+
+def _column(data: Any, name: str) -> np.ndarray:
+    return np.asarray(data[name])
+
+
+def _numbers(values: np.ndarray, name: str) -> np.ndarray:
+    try:
+        return np.asarray(values, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise FeatureTableError(
+            f"{_NAME}, column {name}: holds values that are not numbers"
+        ) from None
+
+
+def feature_table_from(
+    data: Any,
+    modalities: Mapping[str, Sequence[str]] | None = None,
+    *,
+    object_column: str = "object",
+    action_column: str | None = "action",
+    trial_column: str | None = "trial",
+    single_action: str = "observe",
+) -> FeatureTable:
+    """A validated feature table from a frame or a dict of columns.
+
+    ``modalities`` maps each modality to its columns, in order (they become ``<modality>.0``,
+    ``<modality>.1``, ...); other columns are left out. Without it the feature columns must be
+    named ``<modality>.<k>`` already. ``action_column=None``: every row is one action named
+    ``single_action``; ``trial_column=None``: rows are numbered per object and action in order.
+    NaN marks a feature an action does not have, as an empty cell in a file.
+    """
+    names = _column_names(data)
+    for option, column in (
+        ("object_column", object_column),
+        ("action_column", action_column),
+        ("trial_column", trial_column),
+    ):
+        if column is not None and column not in names:
+            raise FeatureTableError(f"{_NAME}: no column {column!r} ({option}); it has {names}")
+    objects = [str(v) for v in _column(data, object_column).ravel()]
+    n = len(objects)
+    actions = (
+        [single_action] * n
+        if action_column is None
+        else [str(v) for v in _column(data, action_column).ravel()]
+    )
+    if trial_column is None:
+        seen: dict[tuple[str, str], int] = {}
+        trials: list = []
+        for key in zip(objects, actions):
+            trials.append(seen.get(key, 0))
+            seen[key] = trials[-1] + 1
+    else:
+        trials = list(_column(data, trial_column).ravel())
+    columns: dict[str, Sequence] = {"object": objects, "action": actions, "trial": trials}
+    if modalities is None:
+        taken = {object_column, action_column, trial_column}
+        features = {c: c for c in names if c not in taken}
+    else:
+        features = {}
+        for modality, listed in modalities.items():
+            if isinstance(listed, str):
+                listed = [listed]
+            unknown = [c for c in listed if c not in names]
+            if unknown:
+                raise FeatureTableError(
+                    f"{_NAME}: modality {modality!r} names column(s) {unknown} that the data "
+                    f"does not have; it has {names}"
+                )
+            if not listed:
+                raise FeatureTableError(f"{_NAME}: modality {modality!r} lists no columns")
+            for k, c in enumerate(listed):
+                features[f"{modality}.{k}"] = c
+    for new, old in features.items():
+        if new in ID_COLUMNS:
+            continue
+        columns[new] = _numbers(_column(data, old), str(old)).tolist()
+    return table_from_columns(columns, _NAME)
+
+
+@dataclass
+class Comparison:
+    """The accuracies of APTKT, APTKT with auxiliary features and the baseline, per step.
+
+    ``accuracy[method]`` is (runs, steps): each action's model on its own held-out
+    observations, averaged over actions (the paper's measure), after 0, 1, ... actively chosen
+    observations; ``fused_accuracy`` combines all actions' posteriors. ``rows`` holds every
+    step of every run as ``results.csv`` does."""
+
+    accuracy: dict[str, np.ndarray]
+    fused_accuracy: dict[str, np.ndarray]
+    prior_objects: tuple[str, ...]
+    new_objects: tuple[str, ...]
+    actions: list[str]
+    rows: list[dict[str, Any]] = field(repr=False)
+    output: Path | None = None
+
+    @property
+    def chance(self) -> float:
+        return 1.0 / len(self.new_objects)
+
+    def mean(self, method: str, fused: bool = False) -> np.ndarray:
+        """The mean over runs at each step."""
+        curves = self.fused_accuracy if fused else self.accuracy
+        return np.nanmean(curves[method], axis=0)
+
+    def __str__(self) -> str:
+        n = min(c.shape[1] for c in self.accuracy.values())
+        marks = sorted({0, n // 4, n // 2, n - 1})
+        head = f"{'method':<11}{'accuracy':<13}" + "".join(f"{f'+{m} obs':>9}" for m in marks)
+        lines = [
+            f"new objects {', '.join(self.new_objects)}; prior {', '.join(self.prior_objects)}; "
+            f"actions {', '.join(self.actions)}",
+            head,
+            "-" * len(head),
+        ]
+        for name in self.accuracy:
+            for kind, fused in (("action mean", False), ("fused", True)):
+                values = self.mean(name, fused)
+                cells = "".join(f"{values[m]:>9.3f}" for m in marks)
+                lines.append(f"{name if not fused else '':<11}{kind:<13}{cells}")
+        runs = next(iter(self.accuracy.values())).shape[0]
+        lines.append(f"mean over {runs} run(s); chance level {self.chance:.3f}")
+        if self.output is not None:
+            lines.append(f"files: {self.output}")
+        return "\n".join(lines)
+
+
+def _curves(rows: list[dict[str, Any]], method: str, key: str) -> np.ndarray:
+    runs = sorted({r["trial"] for r in rows if r["method"] == method})
+    steps = max(r["step"] for r in rows if r["method"] == method) + 1
+    out = np.full((len(runs), steps), np.nan)
+    for r in rows:
+        if r["method"] == method:
+            out[runs.index(r["trial"]), r["step"]] = r[key]
+    return out
+
+
+def compare_on_data(
+    data: Any,
+    *,
+    prior_objects: Sequence[str],
+    new_objects: Sequence[str],
+    modalities: Mapping[str, Sequence[str]] | None = None,
+    actions: Sequence[str] | None = None,
+    object_column: str = "object",
+    action_column: str | None = "action",
+    trial_column: str | None = "trial",
+    test_trials: Sequence[int] | None = None,
+    test_fraction: float = 0.5,
+    runs: int = 3,
+    config: LearnerConfig | None = None,
+    output: str | Path | None = None,
+    say: Callable[[str], None] | None = None,
+    force: bool = False,
+    **learner: Any,
+) -> Comparison:
+    """APTKT (with and without auxiliary features) against the baseline on your own data.
+
+    The rows of ``prior_objects`` build the prior knowledge; the rows of ``new_objects`` are
+    split by trial into a pool to learn from and a held-out test set (``test_trials``, or the
+    later ``test_fraction`` of each object's trials per action), as ``aptkt learn --table``
+    does. ``config`` (or keyword arguments such as ``budget=6, seed=0``, applied on top of
+    it) sets the learner. With ``output``, the files of ``aptkt learn --table`` are written
+    there too (an earlier result there is replaced only with ``force=True``). ``say`` receives the progress lines (default: silent). See
+    :func:`feature_table_from` for ``data`` and ``modalities``.
+    """
+    table = feature_table_from(
+        data,
+        modalities,
+        object_column=object_column,
+        action_column=action_column,
+        trial_column=trial_column,
+    )
+    cfg = config if config is not None else LearnerConfig()
+    if learner:
+        cfg = replace(cfg, **learner)
+    if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
+        raise ValueError(f"runs must be an integer >= 1, got {runs!r}")
+    settings = TableSettings(
+        table=table.path,
+        prior_objects=tuple(prior_objects),
+        new_objects=tuple(new_objects),
+        actions=tuple(actions) if actions else None,
+        test_trials=tuple(test_trials) if test_trials is not None else None,
+        test_fraction=test_fraction,
+        output=Path(output) if output is not None else Path("."),
+        runs=runs,
+        config=cfg,
+    )
+    quiet = say if say is not None else (lambda line: None)
+    t_start = time.perf_counter()
+    if output is None:
+        rows, _, chosen = compare_on_table(table, settings, say=quiet)
+    else:
+        out = refuse_overwrite(Path(output), force)
+        out.mkdir(parents=True, exist_ok=True)
+        rows, methods, chosen = compare_on_table(
+            table, settings, say=quiet, prior_path=out / "prior.npz"
+        )
+        write_table_results(settings, table, rows, methods, chosen, t_start=t_start, say=quiet)
+    names = list(dict.fromkeys(r["method"] for r in rows))
+    return Comparison(
+        accuracy={m: _curves(rows, m, "mean_accuracy") for m in names},
+        fused_accuracy={m: _curves(rows, m, "fused_accuracy") for m in names},
+        prior_objects=settings.prior_objects,
+        new_objects=settings.new_objects,
+        actions=list(chosen),
+        rows=rows,
+        output=Path(output) if output is not None else None,
+    )
