@@ -8,8 +8,11 @@
    ``aptkt --version`` against the workspace's version, the README's first example against the
    output the README prints, and ``aptkt learn --table`` on a generated table.
 4. The sdist built from source into the same environment (``pip install --no-deps
-   --force-reinstall``, cargo's build directory pointed at the repository's target/ so the
-   registry crates compiled by ``make test`` are reused) and step 3's checks again.
+   --force-reinstall``) and step 3's checks again. Cargo builds it in a new, temporary
+   directory, every crate from scratch: path crates get the same file names wherever their
+   sources lie, and the sdist's files carry a fixed old date, so in a directory holding an
+   earlier build (the checkout's target/, or a previous check's) cargo would take that build
+   as up to date and link it instead of compiling the sdist's sources.
 
 Each failure ends in one ``release-check: error: ...`` line and exit status 1.
 """
@@ -197,12 +200,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--wheel", type=Path, required=True)
     parser.add_argument("--sdist", type=Path, required=True)
     parser.add_argument("--manylinux", default="manylinux2014")
-    parser.add_argument(
-        "--cargo-target-dir",
-        type=Path,
-        default=ROOT / "target",
-        help="cargo's build directory for the sdist's build (default: the repository's)",
-    )
     args = parser.parse_args(argv)
     try:
         for path in (args.wheel, args.sdist):
@@ -233,7 +230,7 @@ def main(argv: list[str] | None = None) -> int:
             work.mkdir()
             check_installed(env, version, work)
 
-            build = _clean_env() | {"CARGO_TARGET_DIR": str(args.cargo_target_dir.resolve())}
+            build = _clean_env() | {"CARGO_TARGET_DIR": str(Path(tmp) / "cargo")}
             start = time.monotonic()
             _run(pip + ["--no-deps", "--force-reinstall", str(args.sdist.resolve())], ROOT, build)
             origin = glob.glob(str(env / "lib" / "python*" / "site-packages" / "aptkt-*.dist-info"))
