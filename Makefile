@@ -79,10 +79,13 @@ sdist: release-tools
 # The wheel's manylinux tag (auditwheel), both archives' metadata (twine), then the wheel and
 # the sdist installed into a fresh environment of the oldest supported Python, each running the
 # README's example and a learning run from a table (tests/packaging/release_check.py).
+# SDIST_INSTALL=no skips building the sdist: a full Rust build from scratch (docs/install.md).
+SDIST_INSTALL ?= yes
 release-check: wheel sdist
 	@echo "==> release check"
 	$(PY) tests/packaging/release_check.py --wheel "$$(ls $(DIST)/aptkt-*_$(ARCH).whl)" \
-		--sdist "$$(ls $(DIST)/aptkt-*.tar.gz)" --manylinux $(MANYLINUX)
+		--sdist "$$(ls $(DIST)/aptkt-*.tar.gz)" --manylinux $(MANYLINUX) \
+		$(if $(filter no,$(SDIST_INSTALL)),--no-sdist-install)
 
 # Static gates. mypy reads python/aptkt with the core's stub (_core.pyi), so it needs the
 # package's dependencies (numpy's types) but not the compiled extension. Clippy's lints are
