@@ -9,7 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from .release_check import (
+# By its folder on the path, not as a package: a package tests/packaging would be imported as
+# ``packaging`` and hide the library of that name from every test.
+sys.path.insert(0, str(Path(__file__).parent))
+from release_check import (  # noqa: E402
     ROOT,
     CheckFailed,
     check_manylinux,
@@ -29,6 +32,13 @@ The wheel references external versioned symbols in these
 system-provided shared libraries: libc.so.6 with versions
 {{'GLIBC_2.17'}}
 """
+
+
+def test_the_packaging_library_is_not_hidden_by_this_folder():
+    import packaging.version
+
+    assert Path(packaging.version.__file__).parent.name == "packaging"
+    assert not Path(packaging.version.__file__).is_relative_to(ROOT / "tests")
 
 
 def test_manylinux_tags_name_their_glibc():

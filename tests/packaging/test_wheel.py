@@ -25,14 +25,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from .release_check import manylinux_glibc
-
 if sys.version_info >= (3, 11):
     import tomllib
 else:
     import tomli as tomllib
 
 ROOT = Path(__file__).resolve().parents[2]
+
+
+# By its folder on the path (tests/packaging is no package: it would hide the library
+# ``packaging``).
+sys.path.insert(0, str(Path(__file__).parent))
+from release_check import manylinux_glibc  # noqa: E402
+
 # The one place the version is written.
 VERSION = tomllib.loads((ROOT / "Cargo.toml").read_text())["workspace"]["package"]["version"]
 
