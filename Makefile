@@ -3,6 +3,7 @@
 #   make test   -> virtual environment, Rust build, cargo tests of the core crates, pytest
 #   make lint   -> ruff (lint, format), mypy on the package, clippy and rustfmt
 #   make docs   -> the documentation site (mkdocs.yml) into site/, warnings as errors
+#   make release-check -> the manylinux wheel and the sdist, checked as a lab would install them
 #
 # Every build shares target/ and compiles each shared crate with the same profile (release) and
 # the same features (cargo resolves the whole workspace for the tests, the extension's crate
@@ -17,6 +18,7 @@ SHELL := /bin/bash
 SHOW_BUILD := grep -E --line-buffered "^ *(Compiling|Finished|Built wheel|Successfully installed)|[Ee]rror" | sed -u -e 's/^ */    /'
 
 .PHONY: venv install install-test install-lint demo wheel lint docs test test-rust test-python clean
+.PHONY: release-tools wheel-aarch64 sdist release-check
 
 venv:
 	@test -x $(PY) || { echo "==> creating the virtual environment $(VENV)"; python3 -m venv $(VENV); }
@@ -39,13 +41,53 @@ demo: install
 	@echo "==> aptkt demo (simulated world: 8 objects, 7 actions, 20 trials; 3 runs per method)"
 	$(VENV)/bin/aptkt demo
 
-# dist/aptkt-<version>-cp310-abi3-<platform>.whl; maturin shares cargo's target/ with the
-# editable install, so only what differs is rebuilt.
-wheel: venv
-	@echo "==> building the wheel (reuses target/)"
-	@$(PY) -m pip install --quiet "maturin>=1.8,<2"
-	rm -f dist/aptkt-*.whl
-	$(PY) -m maturin build --release --interpreter $(PY) --out dist
+# The release tools, pinned together here and nowhere else. maturin links the extension with
+# zig against glibc 2.17's symbols (manylinux2014) whatever glibc the build machine has;
+# maturin >= 1.15 carries the cargo-zigbuild that handles current Rust targets' link flags.
+RELEASE_TOOLS := "maturin>=1.16,<2" "ziglang>=0.14.1,<0.15" "auditwheel>=6.8,<7" "twine>=6.1,<8"
+MANYLINUX := manylinux2014
+DIST := dist
+ARCH := $(shell uname -m)
+# maturin finds zig as `python3 -m ziglang` on the PATH.
+ZIG_PATH := PATH="$(abspath $(VENV))/bin:$$PATH"
+
+release-tools: venv
+	@$(PY) -m pip install --quiet $(RELEASE_TOOLS)
+
+# dist/aptkt-<version>-cp310-abi3-manylinux2014_<arch>.manylinux_2_17_<arch>.whl. The zig
+# linker is part of every crate's build settings, so this build does not reuse the editable
+# install's crates: it compiles the workspace once more into target/<arch>-unknown-linux-gnu/
+# (reused by the next `make wheel`; build scripts and macros are shared): about 2 minutes on
+# 2 cores in a fresh clone (docs/install.md).
+wheel: release-tools
+	@echo "==> building the $(MANYLINUX) wheel (a full release build the first time)"
+	rm -f $(DIST)/aptkt-*_$(ARCH).whl
+	$(ZIG_PATH) $(PY) -m maturin build --release --zig --compatibility $(MANYLINUX) \
+		--target $(ARCH)-unknown-linux-gnu --interpreter $(PY) --out $(DIST)
+
+# Cross-built for 64-bit ARM (needs `rustup target add aarch64-unknown-linux-gnu`); it cannot
+# run here, so CI does not build it (docs/install.md).
+wheel-aarch64: release-tools
+	rm -f $(DIST)/aptkt-*_aarch64.whl
+	$(ZIG_PATH) $(PY) -m maturin build --release --zig --compatibility $(MANYLINUX) \
+		--target aarch64-unknown-linux-gnu --out $(DIST)
+
+# dist/aptkt-<version>.tar.gz: the Rust workspace and the Python package; installing it needs
+# a Rust toolchain.
+sdist: release-tools
+	rm -f $(DIST)/aptkt-*.tar.gz
+	$(PY) -m maturin sdist --out $(DIST)
+
+# The wheel's manylinux tag (auditwheel), both archives' metadata (twine), then the wheel and
+# the sdist installed into a fresh environment of the oldest supported Python, each running the
+# README's example and a learning run from a table (tests/packaging/release_check.py).
+# SDIST_INSTALL=no skips building the sdist: a full Rust build from scratch (docs/install.md).
+SDIST_INSTALL ?= yes
+release-check: wheel sdist
+	@echo "==> release check"
+	$(PY) tests/packaging/release_check.py --wheel "$$(ls $(DIST)/aptkt-*_$(ARCH).whl)" \
+		--sdist "$$(ls $(DIST)/aptkt-*.tar.gz)" --manylinux $(MANYLINUX) \
+		$(if $(filter no,$(SDIST_INSTALL)),--no-sdist-install)
 
 # Static gates. mypy reads python/aptkt with the core's stub (_core.pyi), so it needs the
 # package's dependencies (numpy's types) but not the compiled extension. Clippy's lints are
@@ -64,7 +106,7 @@ test-rust:
 # tests/packaging installs the wheel into a fresh virtual environment.
 test-python: install-test wheel
 	@echo "==> Python tests"
-	APTKT_WHEEL="$$(ls dist/aptkt-*.whl)" $(PY) -m pytest $(PYTEST_ARGS)
+	APTKT_WHEEL="$$(ls $(DIST)/aptkt-*_$(ARCH).whl)" $(PY) -m pytest $(PYTEST_ARGS)
 
 test: test-rust test-python
 

@@ -112,7 +112,10 @@ def test_citation_and_licence_match_the_metadata():
         rf'^version: "{re.escape(cargo["workspace"]["package"]["version"])}"$', cff, re.MULTILINE
     )
     assert "doi: 10.3390/s18020634" in cff
-    assert pyproject["project"]["license"] == {"text": "MIT"}
+    assert pyproject["project"]["license"] == "MIT"
+    assert pyproject["project"]["license-files"] == ["LICENSE"]
+    (author,) = pyproject["project"]["authors"]
+    assert f'- name: "{author["name"]}"' in cff
     assert re.search(r"^license: MIT$", cff, re.MULTILINE)
     licence = (ROOT / "LICENSE").read_text()
     assert licence.startswith("MIT License") and "WITHOUT WARRANTY OF ANY KIND" in licence

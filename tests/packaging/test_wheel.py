@@ -2,8 +2,7 @@
 source tree on the path.
 
 The wheel is the one ``make wheel`` built (``APTKT_WHEEL``, as ``make test`` passes it); without
-it the test builds one with maturin into a temporary directory (cargo reuses its target
-directory, so this costs a link step when the extension is already built).
+it the test runs ``make wheel`` (the pinned maturin and zig, into dist/).
 
 The fresh environment gets the wheel without dependencies; numpy, h5py, ... come from the
 environment running the tests through a path entry (not its ``.pth`` files, so an editable
@@ -14,17 +13,33 @@ imported from the fresh environment and nowhere else.
 from __future__ import annotations
 
 import os
+import platform
 import subprocess
 import sys
 import sysconfig
 import venv
 import zipfile
+from email.parser import Parser
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+if sys.version_info >= (3, 11):
+    import tomllib
+else:
+    import tomli as tomllib
+
 ROOT = Path(__file__).resolve().parents[2]
+
+
+# By its folder on the path (tests/packaging is no package: it would hide the library
+# ``packaging``).
+sys.path.insert(0, str(Path(__file__).parent))
+from release_check import manylinux_glibc  # noqa: E402
+
+# The one place the version is written.
+VERSION = tomllib.loads((ROOT / "Cargo.toml").read_text())["workspace"]["package"]["version"]
 
 pytestmark = pytest.mark.slow
 
@@ -36,15 +51,15 @@ def wheel(tmp_path_factory) -> Path:
         path = Path(given)
         assert path.is_file(), f"APTKT_WHEEL={given} is not a file"
         return path
-    out = tmp_path_factory.mktemp("dist")
-    subprocess.run(
-        [sys.executable, "-m", "maturin", "build", "--release", "--out", str(out)],
-        cwd=ROOT,
-        check=True,
-        capture_output=True,
-    )
-    (path,) = out.glob("aptkt-*.whl")
+    subprocess.run(["make", "wheel"], cwd=ROOT, check=True, capture_output=True)
+    (path,) = (ROOT / "dist").glob(f"aptkt-*_{platform.machine()}.whl")
     return path
+
+
+def _dist_info(wheel: Path, name: str) -> str:
+    with zipfile.ZipFile(wheel) as archive:
+        (member,) = [n for n in archive.namelist() if n.endswith(f".dist-info/{name}")]
+        return archive.read(member).decode()
 
 
 @pytest.fixture(scope="module")
@@ -89,12 +104,39 @@ def test_the_wheel_is_abi3_and_holds_the_extension_and_data(wheel):
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
 
 
-def test_installed_wheel_runs_without_the_source_tree(fresh, tmp_path):
-    import aptkt
+def test_the_wheel_runs_on_glibc_2_17(wheel):
+    """manylinux2014: every platform tag of the wheel asks for glibc 2.17 or older."""
+    tags = Parser().parsestr(_dist_info(wheel, "WHEEL")).get_all("Tag")
+    assert tags
+    for tag in tags:
+        python, abi, plat = tag.split("-")
+        assert (python, abi) == ("cp310", "abi3")
+        assert manylinux_glibc(plat) <= (2, 17), tag
 
+
+def test_the_wheel_carries_the_workspace_version_and_metadata(wheel):
+    meta = Parser().parsestr(_dist_info(wheel, "METADATA"))
+    assert meta["Version"] == VERSION
+    assert wheel.name.startswith(f"aptkt-{VERSION}-")
+    assert meta["Requires-Python"] == ">=3.10"
+    assert meta["License-Expression"] == "MIT"
+    assert "Paper, https://doi.org/10.3390/s18020634" in meta.get_all("Project-URL")
+
+
+def test_installed_wheel_runs_without_the_source_tree(fresh, tmp_path):
     out = _run(fresh, str(fresh / "bin" / "aptkt"), "--version", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["aptkt", aptkt.__version__]
+    assert out.stdout.split() == ["aptkt", VERSION]
+    versions = _run(
+        fresh,
+        str(fresh / "bin" / "python"),
+        "-c",
+        "import aptkt, aptkt._core, importlib.metadata as m;"
+        "print(aptkt.__version__, aptkt._core.__version__, m.version('aptkt'))",
+        cwd=tmp_path,
+    )
+    assert versions.returncode == 0, versions.stderr
+    assert versions.stdout.split() == [VERSION] * 3
 
     where = _run(
         fresh,
