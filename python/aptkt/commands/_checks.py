@@ -5,6 +5,7 @@ operating system deep inside a library reads as a traceback. Every failure is a
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 from collections import Counter
@@ -51,6 +52,18 @@ def max_jobs() -> int:
     """Processes a command may start (--jobs): four per core. More only share the same cores
     (the work is CPU-bound) while each holds its own copy of the simulated world."""
     return 4 * (os.cpu_count() or 1)
+
+
+def add_jobs_option(parser: argparse._ActionsContainer, help: str, *, all_cores: bool) -> None:
+    """The ``-j/--jobs N`` option every parallel command has: all cores or one by default."""
+    parser.add_argument(
+        "-j",
+        "--jobs",
+        type=int,
+        default=(os.cpu_count() or 1) if all_cores else 1,
+        metavar="N",
+        help=help,
+    )
 
 
 def jobs(value: int, option: str = "--jobs") -> None:

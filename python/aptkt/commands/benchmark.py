@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
+from aptkt.commands._checks import add_jobs_option
 from aptkt.commands._method import add_method_arguments
 
 DEFAULTS = {"groups": 60, "new": 5, "priors": 3, "budget": 20}
@@ -61,14 +61,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="seed of the groups and runs (default %(default)s)",
     )
-    p.add_argument(
-        "-j",
-        "--jobs",
-        type=int,
-        default=os.cpu_count() or 1,
-        metavar="N",
-        help="processes (default: all cores)",
-    )
+    add_jobs_option(p, "processes (default: all cores)", all_cores=True)
     p.add_argument("--force", action="store_true", help="replace the results in --output")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_method_arguments(p)

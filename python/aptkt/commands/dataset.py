@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from aptkt.commands._checks import (
+    add_jobs_option,
     at_least,
     input_file,
     intact_data_set,
@@ -66,14 +67,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument(
         "--seed", type=int, default=0, metavar="N", help="world seed (default %(default)s)"
     )
-    g.add_argument(
-        "-j",
-        "--jobs",
-        type=int,
-        default=1,
-        metavar="N",
-        help="simulate in N processes (default %(default)s)",
-    )
+    add_jobs_option(g, "simulate in N processes (default %(default)s)", all_cores=False)
     g.add_argument(
         "--resume",
         action="store_true",
@@ -107,14 +101,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     f.add_argument(
         "--actions", metavar="P1,S1,...", help="only these actions (default: all recorded)"
     )
-    f.add_argument(
-        "-j",
-        "--jobs",
-        type=int,
-        default=1,
-        metavar="N",
-        help="extract in N processes (default %(default)s)",
-    )
+    add_jobs_option(f, "extract in N processes (default %(default)s)", all_cores=False)
     f.add_argument("--no-progress", action="store_true", help="no progress bar")
     f.set_defaults(func=run_features)
 

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
+from aptkt.commands._checks import add_jobs_option
 from aptkt.learning.config import LearnerConfig
 
 
@@ -34,14 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="seed of the simulated world and the learners (default %(default)s)",
     )
-    p.add_argument(
-        "-j",
-        "--jobs",
-        type=int,
-        default=os.cpu_count() or 1,
-        metavar="N",
-        help="processes (default: all cores)",
-    )
+    add_jobs_option(p, "processes (default: all cores)", all_cores=True)
     p.add_argument(
         "--trials",
         type=int,

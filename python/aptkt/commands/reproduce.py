@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
+from aptkt.commands._checks import add_jobs_option
 from aptkt.commands._method import add_method_arguments, learner_config
 
 NAMES = ("fig6", "fig7", "fig8", "fig9", "fig10", "fig11", "all")
@@ -42,14 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="a reduced size (4 priors, 3 new objects, 3 actions) for tests and CI",
     )
-    p.add_argument(
-        "-j",
-        "--jobs",
-        type=int,
-        default=os.cpu_count() or 1,
-        metavar="N",
-        help="local processes (default: all cores)",
-    )
+    add_jobs_option(p, "local processes (default: all cores)", all_cores=True)
     p.add_argument(
         "--scheduler",
         metavar="ADDRESS",
