@@ -11,6 +11,7 @@ from __future__ import annotations
 import ctypes
 import functools
 import os
+import random
 import shutil
 import time
 from collections.abc import Callable
@@ -31,7 +32,7 @@ __all__ = [
     "readable_prefix",
 ]
 
-_LOCK_PATIENCE_S = 2.0
+_LOCK_PATIENCE_S = 10.0
 
 _T = TypeVar("_T")
 
@@ -40,7 +41,11 @@ def while_locked(step: Callable[[], _T]) -> _T:
     """Run an HDF5 open or create (or the switch to SWMR writing), retrying while another process
     holds the file's lock for a moment. A reader opening the file as the writer starts takes the lock
     briefly, and the writer's switch to SWMR mode would otherwise fail with errno 11 and end a
-    collection before its first trial (measured: 3 of 60 starts with a reader polling)."""
+    collection before its first trial (measured: 3 of 60 starts with a reader polling).
+
+    The waits are short and jittered: a reader that polls in a loop holds the lock most of the
+    time, and a writer backing off to long, regular waits kept missing the gaps between its
+    opens until the patience ran out (seen on a loaded machine)."""
     deadline = time.monotonic() + _LOCK_PATIENCE_S
     delay = 0.002
     while True:
@@ -49,8 +54,8 @@ def while_locked(step: Callable[[], _T]) -> _T:
         except (OSError, RuntimeError) as exc:
             if "unable to lock file" not in str(exc) or time.monotonic() > deadline:
                 raise
-        time.sleep(delay)
-        delay = min(2 * delay, 0.05)
+        time.sleep(delay * random.uniform(0.5, 1.5))
+        delay = min(2 * delay, 0.005)
 
 
 # A SWMR reader retries a metadata read whose checksum fails (the writer may be rewriting that
