@@ -30,6 +30,7 @@ __all__ = [
     "FeatureTableError",
     "RawDataError",
     "PriorFileError",
+    "IncompatiblePriorsError",
     "DatasetError",
     "Terminated",
     "WorkerDiedError",
@@ -56,6 +57,12 @@ class RawDataError(ConfigError):
 class PriorFileError(AptktError, ValueError):
     """A prior-knowledge file is not one, is damaged, or is inconsistent; the message names the
     file and the member."""
+
+
+class IncompatiblePriorsError(AptktError, ValueError):
+    """Prior-knowledge files that cannot be merged into one library: other actions, feature
+    columns, extraction settings, metric or action definitions, or an object in two of them;
+    the message names the difference."""
 
 
 class DatasetError(AptktError):

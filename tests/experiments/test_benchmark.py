@@ -57,9 +57,13 @@ def test_priors_are_chosen_at_random_nearest_and_farthest_by_noise_levels(tmp_pa
     assert 2.0 < d[i, j] < 4.5 and d[i, j] < d[i, names.index("o5")]
     new = ["o0", "o1"]
     rest = [f"o{k}" for k in range(2, N_OBJECTS)]
-    got = prior_choices(new, rest, 2, (names, d), np.random.default_rng(0))
-    assert got["nearest"] == ("o2", "o3") and got["farthest"] == ("o6", "o7")
+    both = prior_choices(new, rest, [2, 4], (names, d), np.random.default_rng(0))
+    got = both[2]
+    assert set(got["nearest"]) == {"o2", "o3"} and set(got["farthest"]) == {"o6", "o7"}
     assert len(set(got["random"])) == 2 and set(got["random"]) <= set(rest)
+    # A library that grows: the larger one holds the smaller one, whichever way it is chosen.
+    for choice in ("random", "nearest", "farthest"):
+        assert set(got[choice]) <= set(both[4][choice]) and len(set(both[4][choice])) == 4
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +71,7 @@ def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("bench")
     table = _table(out)
     argv = ["benchmark", str(table), "-o", str(out / "b"), "--groups", "3", "--new", "3"]
-    argv += ["--priors", "2", "--budget", "2", "-j", "1", "--no-progress"]
+    argv += ["--priors", "2,3", "--budget", "2", "-j", "1", "--no-progress"]
     assert main(argv) == 0
     return out / "b"
 
@@ -77,35 +81,46 @@ def _rows(path):
         return list(csv.DictReader(fh))
 
 
-def test_every_method_runs_for_every_group_and_prior_choice(run):
+def test_every_method_runs_for_every_group_library_and_prior_choice(run):
     rows = _rows(run)
     runs = defaultdict(list)
     for r in rows:
-        runs[(r["group"], r["priors"], r["method"])].append(int(r["step"]))
-    assert {k[1] for k in runs} == {"random", "nearest", "farthest"}
-    assert {k[2] for k in runs} == {"baseline", "APTKT", "APTKT+aux", "control", "1-NN"}
-    assert len(runs) == 3 * 3 * 5
-    for (_, _, method), steps in runs.items():
-        assert sorted(steps) == ([0] if method == "1-NN" else [0, 1, 2])
-    # The baseline uses no prior: one run serves all three choices of a group.
+        runs[(r["group"], r["library"], r["priors"], r["method"])].append(int(r["step"]))
+    assert {k[1] for k in runs} == {"2", "3"}
+    assert {k[2] for k in runs} == {"random", "nearest", "farthest"}
+    methods = {"baseline", "APTKT", "APTKT+aux", "control", "1-NN", "1-NN shrunk"}
+    assert {k[3] for k in runs} == methods
+    assert len(runs) == 3 * 2 * 3 * len(methods)
+    for (_, _, _, method), steps in runs.items():
+        assert sorted(steps) == ([0] if method.startswith("1-NN") else [0, 1, 2])
+    # The baseline uses no prior: one run serves every library and choice of a group.
     for g in ("0", "1", "2"):
-        curves = {r["priors"]: [] for r in rows if r["group"] == g and r["method"] == "baseline"}
+        curves = defaultdict(list)
         for r in rows:
             if r["group"] == g and r["method"] == "baseline":
-                curves[r["priors"]].append(r["accuracy"])
-        assert len({tuple(v) for v in curves.values()}) == 1
+                curves[(r["library"], r["priors"])].append(r["accuracy"])
+        assert len(curves) == 6 and len({tuple(v) for v in curves.values()}) == 1
+    # The libraries grow: a group's larger library holds its smaller one.
+    for g in ("0", "1", "2"):
+        for choice in ("random", "nearest", "farthest"):
+            libs = {
+                r["library"]: set(r["prior_objects"].split(","))
+                for r in rows
+                if r["group"] == g and r["priors"] == choice
+            }
+            assert libs["2"] < libs["3"]
 
 
 def test_the_reported_gains_are_the_paired_means_of_the_results(run):
     rows = _rows(run)
     summary = json.loads((run / "summary.json").read_text())
-    for choice in ("random", "nearest", "farthest"):
+    for size, choice in (("2", "random"), ("3", "nearest"), ("3", "farthest")):
         acc = defaultdict(dict)
         for r in rows:
-            if r["priors"] == choice and r["step"] == "0":
+            if r["priors"] == choice and r["step"] == "0" and r["library"] == size:
                 acc[r["method"]][r["group"]] = float(r["accuracy"])
         d = [acc["APTKT"][g] - acc["baseline"][g] for g in sorted(acc["APTKT"])]
-        gain = summary["results"][choice]["gain"]["APTKT"][0]
+        gain = summary["results"][size][choice]["gain"]["APTKT"][0]
         assert gain["mean"] == pytest.approx(np.mean(d))
         half = 4.303 * np.std(d, ddof=1) / np.sqrt(3)  # Student's t, 2 degrees of freedom
         assert gain["high"] - gain["mean"] == pytest.approx(half)
@@ -114,7 +129,10 @@ def test_the_reported_gains_are_the_paired_means_of_the_results(run):
     assert "## Checks" in report and "1-NN" in report
     assert (run / "benchmark.png").stat().st_size > 0 and (run / "benchmark.svg").exists()
     assert "## How the data's noise looks" in report and len(summary["noise_profile"]) == 2
-    assert summary["learner"]["gp"]["kernel"] == "shared"
+    assert summary["learner"]["gp"]["kernel"] == "library"
+    assert summary["libraries"] == [2, 3]
+    assert "## Gain against library size (random priors)" in report
+    assert (run / "library.png").stat().st_size > 0
 
 
 def test_the_nearest_neighbour_reference_is_the_plain_rule(run):
@@ -128,7 +146,9 @@ def test_the_nearest_neighbour_reference_is_the_plain_rule(run):
     learn_rows, test_rows = split_trials(table, ["touch"])
     learn = table.observations(["touch"], learn_rows)
     test = table.observations(["touch"], test_rows)
-    r0 = next(r for r in rows if r["method"] == "1-NN" and r["group"] == "0")
+    r0 = next(
+        r for r in rows if r["method"] == "1-NN" and r["group"] == "0" and r["library"] == "2"
+    )
     new, priors = r0["new_objects"].split(","), r0["prior_objects"].split(",")
     seed = 0  # the benchmark's seed for group 0 with --seed 0
     base = APTKT(LearnerConfig(transfer="none", budget=0, seed=seed))
@@ -143,22 +163,47 @@ def test_the_nearest_neighbour_reference_is_the_plain_rule(run):
     ]
     assert expected == pytest.approx(np.mean(nearest == _subset(test, new)["touch"].objects))
     assert float(r0["accuracy"]) == pytest.approx(expected)
+    # The shrunk-covariance rule, recomputed from the definition with scikit-learn's 1-NN.
+    from sklearn.neighbors import KNeighborsClassifier
+
+    from aptkt.learning.pipeline import within_object_residuals
+
+    old = _subset(learn, priors)["touch"]
+
+    def cols(o):
+        return np.hstack([o.modalities[m] for m in o.modality_names])
+
+    R, dof = within_object_residuals(cols(old), old.objects)
+    C = R.T @ R / dof
+    C = 0.8 * C + 0.2 * np.diag(np.diag(C))
+    L = np.linalg.cholesky(np.linalg.inv(C))  # x ↦ Lᵀx whitens as C^(-1/2) does (up to rotation)
+    knn = KNeighborsClassifier(1).fit(cols(first["touch"]) @ L, first["touch"].objects)
+    held = _subset(test, new)["touch"]
+    shrunk = np.mean(knn.predict(cols(held) @ L) == held.objects)
+    r1 = next(
+        r
+        for r in rows
+        if r["method"] == "1-NN shrunk" and r["group"] == "0" and r["library"] == "2"
+    )
+    assert float(r1["accuracy"]) == pytest.approx(shrunk)
 
 
-def _curves(base, aptkt, aux=None, nn=0.5, falls=False):
+def _curves(base, aptkt, aux=None, nn=0.5, falls=False, control=None, flat=False):
     n = 6
     rng = np.random.default_rng(1)
     steps = np.arange(4)
+    rise = 0.0 if flat else 0.02
     c = {
         "baseline": np.tile(base + 0.02 * steps, (n, 1)) + 0.001 * rng.normal(size=(n, 4)),
-        "APTKT": np.tile(aptkt + 0.02 * steps, (n, 1)) + 0.001 * rng.normal(size=(n, 4)),
-        "control": np.tile(aptkt + 0.02 * steps, (n, 1)),
+        "APTKT": np.tile(aptkt + rise * steps, (n, 1)) + 0.001 * rng.normal(size=(n, 4)),
+        "control": np.tile((aptkt if control is None else control) + rise * steps, (n, 1)),
         "1-NN": np.full((n, 1), nn),
+        "1-NN shrunk": np.full((n, 1), nn),
     }
     c["APTKT+aux"] = c["APTKT"] + (0.0 if aux is None else aux)
     if falls:
         c["baseline"][:, 2] -= 0.05
-    return {"random": c, "farthest": {k: v.copy() for k, v in c.items()}}
+    return {3: {"random": c, "farthest": {k: v.copy() for k, v in c.items()}}}
 
 
 @pytest.mark.parametrize(
@@ -166,19 +211,41 @@ def _curves(base, aptkt, aux=None, nn=0.5, falls=False):
     [
         (_curves(0.6, 0.75), []),
         (_curves(0.6, 0.65), ["baseline + 10 pp"]),
-        (_curves(0.6, 0.75, nn=0.8), ["nearest-neighbour"]),
-        (_curves(0.6, 0.55), ["baseline + 10 pp", "least similar"]),
+        (_curves(0.6, 0.75, nn=0.8), ["its own feature space", "shrunk covariance"]),
+        (
+            _curves(0.6, 0.55),
+            [
+                "baseline + 10 pp",
+                "least similar",
+                "random priors: APTKT never below the baseline",
+                "keeps learning",
+            ],
+        ),
         (_curves(0.6, 0.75, aux=-0.01), ["auxiliary"]),
         (_curves(0.6, 0.75, falls=True), ["unlearns"]),
+        (_curves(0.6, 0.75, control=0.76), ["never costs"]),
+        (_curves(0.6, 0.75, flat=True), ["keeps learning"]),
     ],
 )
 def test_each_check_fails_exactly_when_its_claim_does(curves, failing):
     found = br.checks(curves)
-    assert len(found) == 5
+    assert len(found) == 9
     failed = [k.claim for k in found if not k.holds]
     assert len(failed) == len(failing), failed
     for fragment in failing:
         assert any(fragment in claim for claim in failed), (fragment, failed)
+
+
+@pytest.mark.parametrize("large, holds", [(0.72, True), (0.69, False), (0.80, True)])
+def test_the_gain_must_not_shrink_as_the_library_grows(large, holds):
+    """With several library sizes: the largest library's one-shot gain at least the smallest's
+    − 1 pp and at least +10 pp."""
+    small = _curves(0.6, 0.71)[3]
+    grown = _curves(0.6, large)[3]
+    found = br.checks({3: small, 15: grown})
+    growth = [k for k in found if "does not shrink" in k.claim]
+    assert len(growth) == 1 and growth[0].holds is holds
+    assert any(k.claim.startswith("15 random priors") for k in found)
 
 
 def test_the_command_refuses_to_overwrite_and_reports_mistakes_in_one_line(run, tmp_path, capsys):
@@ -194,6 +261,11 @@ def test_the_command_refuses_to_overwrite_and_reports_mistakes_in_one_line(run, 
         (["--groups", "1000000"], "--groups must be at most 1000"),
         (["--budget", "1000000000"], "--budget must be at most 10000"),
         (["-j", "100000"], "--jobs must be at most"),
+        (["--priors", "5,3"], "distinct and increasing"),
+        (["--priors", "3,x"], "not a number"),
+        (["--priors", "3,1"], "--priors must be >= 2"),
+        (["--lifelong", "--groups", "5"], "--groups: not with --lifelong"),
+        (["--orders", "0"], "--orders must be >= 1"),
     ):
         assert main(["benchmark", str(table), "-o", str(tmp_path / "x"), *extra]) == 1
         err = capsys.readouterr().err.strip()
@@ -206,3 +278,98 @@ def test_the_command_refuses_to_overwrite_and_reports_mistakes_in_one_line(run, 
     assert "need at least 9 objects" in capsys.readouterr().err
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
     assert BenchmarkSettings().groups == 60
+
+
+def test_strict_exits_1_when_a_check_fails_and_writes_the_results(run, tmp_path, capsys):
+    """One group of 3 new objects: the +10 pp interval check cannot hold (no interval), so
+    --strict fails the command; without --strict it succeeds; the results exist either way."""
+    table = run.parent / "table.csv"
+    base = ["benchmark", str(table), "--groups", "1", "--new", "3", "--priors", "2"]
+    base += ["--budget", "1", "--choices", "random", "-j", "1", "--no-progress"]
+    assert main([*base, "-o", str(tmp_path / "lax")]) == 0
+    assert main([*base, "-o", str(tmp_path / "strict"), "--strict"]) == 1
+    err = capsys.readouterr().err
+    assert "check(s) failed (--strict)" in err
+    summary = json.loads((tmp_path / "strict" / "summary.json").read_text())
+    assert any(not c["holds"] for c in summary["checks"])
+    assert (tmp_path / "strict" / "report.md").exists()
+
+
+def test_progress_goes_to_a_log_as_lines(run, tmp_path, capfd):
+    """Not a terminal: progress lines with the time spent and left on standard error."""
+    table = run.parent / "table.csv"
+    argv = [
+        "benchmark",
+        str(table),
+        "--groups",
+        "2",
+        "--new",
+        "3",
+        "--priors",
+        "2",
+        "--budget",
+        "0",
+    ]
+    assert main([*argv, "--choices", "random", "-j", "1", "-o", str(tmp_path / "p")]) == 0
+    err = capfd.readouterr().err
+    assert "benchmark: 1/2 groups (50 %)" in err and "left" in err
+    assert "benchmark: 2/2 groups (100 %)" in err
+
+
+def test_the_lifelong_benchmark_grows_a_library_and_reports_it(tmp_path, capsys):
+    """8 objects in batches of 2: a library of 2, then three batches learned and merged; the
+    library's accuracy is its identity model's on every object it holds, the reference the
+    nearest class mean in its metric (both recomputed here)."""
+    from aptkt.experiments.lifelong import (
+        LifelongSettings,
+        _orders,
+        library_accuracy,
+        nearest_class_mean_accuracy,
+        run_order,
+    )
+
+    path = _table(tmp_path)
+    out = tmp_path / "life"
+    argv = ["benchmark", str(path), "--lifelong", "--orders", "2", "--new", "2", "--budget", "2"]
+    assert main([*argv, "-j", "1", "--no-progress", "-o", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "2 orders: a library of 2, then 3 batch(es) of 2" in said
+    rows = _rows(out)
+    assert {r["method"] for r in rows} == {"baseline", "APTKT", "library", "library GP", "NCM"}
+    sizes = sorted({(int(r["batch"]), int(r["library"])) for r in rows if r["method"] == "library"})
+    assert sizes == [(1, 4), (2, 6), (3, 8)]
+    summary = json.loads((out / "summary.json").read_text())
+    assert len(summary["checks"]) == 2 and (out / "lifelong.png").stat().st_size > 0
+    # The rows are what one order's run gives, recomputed.
+    table = read_feature_table(path)
+    learn_rows, test_rows = split_trials(table, ["touch"])
+    learn = table.observations(["touch"], learn_rows)
+    test = table.observations(["touch"], test_rows)
+    s = LifelongSettings(orders=2, batch=2, budget=2)
+    again = run_order(0, _orders(table.object_names, s)[0], learn, test, s)
+    first = [r for r in rows if r["order"] == "0"]
+    assert len(again) == len(first)
+    for a, b in zip(sorted(again, key=lambda r: (r["batch"], r["method"], r["step"])), first):
+        assert float(a["accuracy"]) == pytest.approx(float(b["accuracy"]))
+    assert library_accuracy and nearest_class_mean_accuracy  # documented entry points
+
+
+def test_nearest_class_mean_is_the_plain_rule():
+    from aptkt.experiments.lifelong import library_accuracy, nearest_class_mean_accuracy
+    from aptkt.learning import PriorKnowledge
+
+    rng = np.random.default_rng(3)
+    means = {"a": [0.0, 0.0], "b": [4.0, 0.0], "c": [0.0, 4.0]}
+    objects = np.repeat(list(means), 10)
+    X = np.array([means[o] for o in objects]) + rng.normal(size=(30, 2))
+    lib = PriorKnowledge.build({"t": Observations("t", {"m": X}, objects)}, seed=0)
+    T = np.array([means[o] for o in objects]) + rng.normal(size=(30, 2))
+    test = {"t": Observations("t", {"m": T}, objects)}
+    Z, Zt = (
+        lib["t"].pipeline.transform(lib["t"].observations)[0],
+        lib["t"].pipeline.transform(test["t"])[0],
+    )
+    centres = np.array([Z[objects == o].mean(axis=0) for o in "abc"])
+    nearest = np.array(list("abc"))[((Zt[:, None] - centres[None]) ** 2).sum(-1).argmin(1)]
+    assert nearest_class_mean_accuracy(lib, test) == pytest.approx(np.mean(nearest == objects))
+    assert library_accuracy(lib, test) > 0.8

@@ -82,7 +82,7 @@ def test_the_reproduction_figures_use_the_shared_style():
 def test_the_benchmark_plot_uses_the_shared_style():
     rng = np.random.default_rng(0)
     base = rng.uniform(0.5, 1.0, size=(6, 5))
-    c = {"random": {"baseline": base, "control": base, "APTKT": base, "APTKT+aux": base}}
+    c = {3: {"random": {"baseline": base, "control": base, "APTKT": base, "APTKT+aux": base}}}
     fig = benchmark_report.plot(c, chance=0.2)
     top = fig.axes[0]
     methods = ("baseline", "control", "APTKT", "APTKT+aux")

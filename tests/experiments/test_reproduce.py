@@ -353,9 +353,9 @@ def test_the_papers_reading_reaches_every_model_and_the_record(tmp_path, quick_d
 
 
 def test_the_prior_feature_scale_option_reaches_the_prior_files(tmp_path, quick_data):
-    """--prior-feature-scale: the prior files' transforms whiten each modality's within-object
-    noise (the default) or divide by each column's spread (recorded in config.json and the
-    command line)."""
+    """--prior-feature-scale: the prior files' transforms whiten the within-object noise (the
+    default: each modality, then across them) or divide by each column's spread (recorded in
+    config.json and the command line)."""
     out = tmp_path / "n"
     argv = ["reproduce", "fig7", "--quick", "--data", str(quick_data), "-o", str(out)]
     assert main([*argv, "--prior-feature-scale", "spread", "--jobs", "1", "--no-progress"]) == 0
@@ -374,7 +374,7 @@ def test_the_prior_feature_scale_option_reaches_the_prior_files(tmp_path, quick_
     argv = ["reproduce", "fig7", "--quick", "--data", str(quick_data), "-o", str(out)]
     assert main([*argv, "--jobs", "1", "--no-progress"]) == 0
     config = json.loads((out / "config.json").read_text())
-    assert config["learner"]["gp"]["prior_feature_scale"] == "whiten"
+    assert config["learner"]["gp"]["prior_feature_scale"] == "whiten-joint"
     assert "--prior-feature-scale" not in (out / "report.md").read_text()
     priors = list((out / "priors").glob("*.npz"))
     assert priors
@@ -392,3 +392,19 @@ def test_the_prior_feature_scale_option_reaches_the_prior_files(tmp_path, quick_
             dof = len(X) - len(set(objects))
             expected = np.sqrt((resid**2).sum(axis=0) / dof)
             assert np.allclose(transform.scale_, expected), (path.name, a)
+            # ... and across the modalities: the whole action's within-object noise is less
+            # correlated after the joint step than before it (its correlations were shrunk
+            # before they were removed, so strong ones are weakened, not removed).
+            joint = prior[a].pipeline.joint_
+            assert joint is not None, (path.name, a)
+            Z = prior[a].pipeline.transform(obs)[0]
+
+            def largest_correlation(Z, objects=objects):
+                R = np.vstack(
+                    [Z[objects == o] - Z[objects == o].mean(axis=0) for o in set(objects)]
+                )
+                corr = np.corrcoef(R.T)
+                return np.abs(corr[~np.eye(len(corr), dtype=bool)]).max()
+
+            before = Z @ np.linalg.inv(joint).T
+            assert largest_correlation(Z) < largest_correlation(before), (path.name, a)

@@ -77,7 +77,7 @@ def test_config_validates_round_trips_and_names_the_papers_reading():
     assert cfg.uses_prior and not cfg.transfers
     assert not LearnerConfig(transfer="none").uses_prior
     assert LearnerConfig(transfer="none", auxiliary=True).uses_prior
-    assert LearnerConfig().evidence_margin == 3.0 and LearnerConfig().cutoff == "evidence"
+    assert LearnerConfig().evidence_margin == 3.0 and LearnerConfig().cutoff == "same-object"
     paper = LearnerConfig.paper(budget=5)
     assert paper.cutoff == "paper" and paper.budget == 5
     assert paper.gp == GPSettings(
@@ -193,12 +193,12 @@ def _same_rows(a, b):
     return strip(a) == strip(b)
 
 
-def test_control_learns_one_kernel_from_the_old_and_new_observations(world):
-    """The control lives in the prior's space with the prior's kernel task beside its own: its
-    model is the one an independent call builds — a shared-kernel estimator given the old
-    observations (their one-vs-all task) as a kernel task — and every classifier has that one
-    kernel."""
-    learner, run = _run(world, transfer="control", budget=1)
+def test_shared_kernel_control_learns_one_kernel_from_the_old_and_new_observations(world):
+    """With ``kernel="shared"`` the control lives in the prior's space with the prior's kernel
+    task beside its own: its model is the one an independent call builds — a shared-kernel
+    estimator given the old observations (their one-vs-all task) as a kernel task — and every
+    classifier has that one kernel."""
+    learner, run = _run(world, transfer="control", budget=1, gp=GPSettings(kernel="shared"))
     assert run.prior_objects == world["prior"].objects
     for a, lrn in learner.learners.items():
         prior = world["prior"][a]
@@ -272,14 +272,25 @@ def test_hyperparameters_of_every_classifier_are_recorded(world):
 def test_transfer_from_a_related_prior_is_not_inert(world):
     """With related priors the evidence favours the transfers; with λ = p̄ they change the new
     objects' predictions materially at one observation per object, against the control (same
-    feature space and kernel, no transfer), and not for the worse."""
+    feature space and kernel, no transfer), and not for the worse. (The coupling itself: the
+    evidence cut-off, the per-modality metric and the kernel learned on old and new observations
+    together, as before the same-object test.)"""
     test = world["test"]
+    gp = GPSettings(kernel="shared", prior_feature_scale="whiten")
+    prior = world["prior"].subset(world["prior"].objects, gp=gp)
     changes, gains = [], []
     for seed in range(3):
         post = {}
         for transfer in ("paper", "control"):
-            cfg = LearnerConfig(transfer=transfer, budget=0, seed=seed, evidence_margin=0.0)
-            learner = APTKT(cfg, world["prior"])
+            cfg = LearnerConfig(
+                transfer=transfer,
+                budget=0,
+                seed=seed,
+                cutoff="evidence",
+                evidence_margin=0.0,
+                gp=gp,
+            )
+            learner = APTKT(cfg, prior)
             run = learner.run(
                 PoolEnvironment(world["pool"], seed=seed), list(ACTIONS), world["news"], test
             )
@@ -396,7 +407,7 @@ def test_transfer_evidence_reuses_only_the_source_factor(world):
         assert got == pytest.approx(
             coupling_evidence(fresh, 1 if fresh.theta_.shape[0] > 1 else 0), abs=1e-8
         )
-    assert set(ap._source_evidence) == {ap.objects[0], ap.objects[1]}
+    assert set(ap._source_evidence) == {(ap.objects[0], None), (ap.objects[1], None)}
 
 
 def _beyond_world(far, seed=1):

@@ -18,7 +18,7 @@ from aptkt.learning.transfer_summary import (
 )
 
 OLD = ["foam", "cardboard", "steel"]
-CONFIG = LearnerConfig()  # eps_neg 0.5, the evidence cut-off with margin 3
+CONFIG = LearnerConfig(cutoff="evidence")  # eps_neg 0.5, the evidence cut-off with margin 3
 
 
 def _decision(p, log_bf=None, new="sponge", config=CONFIG):
@@ -46,6 +46,18 @@ def test_the_evidence_cut_off_says_so_with_its_log_bayes_factor():
     assert verdict(d, CONFIG).outcome == EVIDENCE_CUTOFF
     assert describe(d, CONFIG) == (
         "sponge: no transfer, most like cardboard (p 0.84) but log BF 1.8 <= 3 (evidence cut-off)"
+    )
+
+
+def test_the_same_object_cut_off_says_so_with_its_log_odds():
+    """The default cut-off: the library's log odds that the new object is the old one."""
+    config = LearnerConfig()
+    d = _decision([0.8, 0.2, 0.1], log_bf=6.4, config=config)
+    assert describe(d, config) == "sponge <- foam (lambda 0.80, log odds 6.4 > 3)"
+    d = _decision([0.3, 0.84, 0.1], log_bf=-2.0, config=config)
+    assert describe(d, config) == (
+        "sponge: no transfer, most like cardboard (p 0.84) but log odds -2.0 <= 3 "
+        "(same-object cut-off)"
     )
 
 

@@ -59,9 +59,10 @@ def test_the_noise_metric_keeps_what_the_spread_squeezes():
 
 def test_the_prior_records_its_scale_and_the_transforms_hold_the_noise():
     table = _table(OLD_MEANS, 15, 0)
-    noise = PriorKnowledge.build(table, seed=0)  # the learner's default
+    noise = PriorKnowledge.build(table, gp=GPSettings(prior_feature_scale="whiten"), seed=0)
     spread = PriorKnowledge.build(table, gp=GPSettings(prior_feature_scale="spread"), seed=0)
     assert noise.metadata["gp"]["prior_feature_scale"] == "whiten"
+    assert PriorKnowledge.build(table, seed=0).feature_scale == "whiten-joint"  # the default
     # Unit noise in each column; the spread of column 1 is that of the three clusters (≈ 49).
     assert noise[ACTION].pipeline.transforms["shape"].scale_ == pytest.approx([1, 1], rel=0.25)
     # Whitened: the old observations' residuals within each object have unit noise, and their
@@ -92,7 +93,7 @@ def test_a_prior_knows_its_scale_through_files_subsets_and_inspect(tmp_path, cap
     sub = loaded.subset(OLD[:2])
     assert sub.feature_scale == "spread"
     assert sub[ACTION].pipeline.transforms["shape"].scale_[1] > 20  # two clusters 60 apart
-    assert PriorKnowledge.build(table, seed=0).subset(OLD[:2]).feature_scale == "whiten"
+    assert PriorKnowledge.build(table, seed=0).subset(OLD[:2]).feature_scale == "whiten-joint"
     # Files written before the setting existed carry no such field: they used the spread.
     del loaded.metadata["gp"]["prior_feature_scale"]
     assert loaded.feature_scale == "spread"

@@ -66,6 +66,29 @@ def add_jobs_option(parser: argparse._ActionsContainer, help: str, *, all_cores:
     )
 
 
+def add_scheduler_option(parser: argparse._ActionsContainer) -> None:
+    """``--scheduler ADDRESS``: the same option wherever work can run on a Dask cluster."""
+    parser.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run on a Dask distributed cluster (e.g. tcp://host:8786); the data and the output "
+        "directory must be on a file system the workers share",
+    )
+
+
+def scheduler_available(address: str | None) -> None:
+    """With ``--scheduler``, Dask's distributed scheduler must be installed (checked before any
+    work; the address itself is checked when it is reached)."""
+    if not address:
+        return
+    try:
+        import dask.distributed  # noqa: F401
+    except ImportError:
+        raise ConfigError(
+            "--scheduler needs dask[distributed]: pip install 'aptkt[dask]'"
+        ) from None
+
+
 def jobs(value: int, option: str = "--jobs") -> None:
     at_least(value, 1, option)
     at_most(value, max_jobs(), option, f"4 per core of this machine's {os.cpu_count() or 1}")

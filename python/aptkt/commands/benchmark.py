@@ -6,10 +6,10 @@ import argparse
 import sys
 from pathlib import Path
 
-from aptkt.commands._checks import add_jobs_option
+from aptkt.commands._checks import add_jobs_option, add_scheduler_option
 from aptkt.commands._method import add_method_arguments
 
-DEFAULTS = {"groups": 60, "new": 5, "priors": 3, "budget": 20}
+DEFAULTS = {"groups": 60, "new": 5, "priors": "3", "budget": 20}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -17,12 +17,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "benchmark",
         help="APTKT vs the baseline on a feature table of real data: paired gains, plots, report",
         description="Draws groups of new objects and, for each, prior objects at random, the "
-        "most similar and the least similar; learns the new objects with the baseline, APTKT, "
+        "most similar and the least similar (for every library size of --priors, larger "
+        "libraries holding the smaller ones); learns the new objects with the baseline, APTKT, "
         "APTKT with auxiliary features and the control (the prior's feature space and kernel, "
-        "no transfer), and compares them with a 1-nearest-neighbour rule in the prior's "
-        "metric. The first half of each object's trials builds the priors and is the pool; the "
-        "second half is held out. Writes report.md, benchmark.png/.svg, results.csv and "
-        "summary.json. See docs/real-data.md.",
+        "no transfer), and compares them with two 1-nearest-neighbour rules (in the prior's "
+        "metric, and in the priors' shrunk within-object covariance). The first half of each "
+        "object's trials builds the priors and is the pool; the second half is held out. "
+        "Writes report.md, benchmark.png/.svg, library.png/.svg (several sizes), results.csv "
+        "and summary.json. See docs/real-data.md.",
     )
     p.add_argument(
         "table", metavar="TABLE", help="feature table (.csv, .h5; docs/feature-tables.md)"
@@ -38,7 +40,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     for option, what in (
         ("groups", "groups of new objects"),
         ("new", "new objects per group"),
-        ("priors", "prior objects per group"),
         ("budget", "actively chosen observations after the first round"),
     ):
         p.add_argument(
@@ -49,11 +50,33 @@ def register(sub: argparse._SubParsersAction) -> None:
             help=f"{what} (default %(default)s)",
         )
     p.add_argument(
+        "--priors",
+        default=DEFAULTS["priors"],
+        metavar="N[,N...]",
+        help="prior objects per group: one library size, or several in increasing order to "
+        "sweep them on the same groups, e.g. 3,5,10,15 (default %(default)s)",
+    )
+    p.add_argument(
         "--choices",
         metavar="KIND,...",
         help="how the priors are chosen: random, nearest, farthest (default: all three)",
     )
     p.add_argument("--actions", metavar="A,B,...", help="only these actions (default: all)")
+    p.add_argument(
+        "--lifelong",
+        action="store_true",
+        help="instead: a library that grows — in --orders random orders of the objects, the "
+        "first --new objects start the library, then each next --new objects are learned "
+        "(APTKT with the library, the baseline with nothing) and merged into it; writes "
+        "report.md, lifelong.png/.svg, results.csv, summary.json",
+    )
+    p.add_argument(
+        "--orders",
+        type=int,
+        default=20,
+        metavar="N",
+        help="with --lifelong: random orders of the objects (default %(default)s)",
+    )
     p.add_argument(
         "--seed",
         type=int,
@@ -62,8 +85,20 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="seed of the groups and runs (default %(default)s)",
     )
     add_jobs_option(p, "processes (default: all cores)", all_cores=True)
+    add_scheduler_option(p)
     p.add_argument("--force", action="store_true", help="replace the results in --output")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help="exit with status 1 when a check fails (for a lab's CI); the results are written "
+        "either way",
+    )
+    p.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress (a bar on a terminal, otherwise a line every tenth of the groups or "
+        "30 s on standard error)",
+    )
     add_method_arguments(p)
     p.set_defaults(func=run)
 
@@ -77,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
         input_file,
         jobs,
         output_dir,
+        scheduler_available,
     )
     from aptkt.commands._method import learner_config
     from aptkt.commands._session import split_names
@@ -89,11 +125,29 @@ def run(args: argparse.Namespace) -> int:
     at_least(args.groups, 1, "--groups")
     at_most(args.groups, MAX_RUNS, "--groups")
     at_least(args.new, 2, "--new")
-    at_least(args.priors, 2, "--priors")
+    libraries = _library_sizes(args.priors)
     at_least(args.budget, 0, "--budget")
+    if args.lifelong:
+        sweep_only = [
+            option
+            for option, given in (
+                ("--groups", args.groups != DEFAULTS["groups"]),
+                ("--priors", args.priors != DEFAULTS["priors"]),
+                ("--choices", args.choices is not None),
+            )
+            if given
+        ]
+        if sweep_only:
+            raise ConfigError(
+                f"{', '.join(sweep_only)}: not with --lifelong (its library grows from --new "
+                "objects in --orders orders)"
+            )
+    at_least(args.orders, 1, "--orders")
+    at_most(args.orders, MAX_RUNS, "--orders")
     at_most(args.budget, MAX_BUDGET, "--budget")
     input_file(args.table, "TABLE")
     output_dir(args.output)
+    scheduler_available(args.scheduler)
     if (args.output / "report.md").exists() and not args.force:
         raise ConfigError(
             f"--output {args.output}: holds a benchmark already (give --force to replace it)"
@@ -109,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
         settings = BenchmarkSettings(
             groups=args.groups,
             new_objects=args.new,
-            prior_objects=args.priors,
+            libraries=libraries,
             budget=args.budget,
             seed=args.seed,
             choices=choices,
@@ -119,16 +173,70 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     table = read_feature_table(args.table)
-    run_benchmark(
+    if args.lifelong:
+        from aptkt.experiments.lifelong import LifelongSettings, run_lifelong
+
+        summary = run_lifelong(
+            table,
+            LifelongSettings(
+                orders=args.orders,
+                batch=args.new,
+                budget=args.budget,
+                seed=args.seed,
+                actions=settings.actions,
+                config=config,
+            ),
+            output=args.output,
+            jobs=args.jobs,
+            scheduler=args.scheduler,
+            command=_command(args),
+            progress=not args.no_progress,
+            say=lambda line: print(line, flush=True),
+        )
+        return _strict_exit(args, summary)
+    summary = run_benchmark(
         table,
         settings,
         output=args.output,
         jobs=args.jobs,
+        scheduler=args.scheduler,
         command=_command(args),
-        progress=not args.no_progress and sys.stderr.isatty(),
+        progress=not args.no_progress,
         say=lambda line: print(line, flush=True),
     )
+    return _strict_exit(args, summary)
+
+
+def _strict_exit(args: argparse.Namespace, summary: dict) -> int:
+    """0, or 1 with --strict when a check failed (the results are written either way)."""
+    failed = [c for c in summary["checks"] if not c["holds"]]
+    if args.strict and failed:
+        print(
+            f"aptkt benchmark: {len(failed)} check(s) failed (--strict): see "
+            f"{args.output / 'report.md'}",
+            file=sys.stderr,
+        )
+        return 1
     return 0
+
+
+def _library_sizes(text: str) -> tuple[int, ...]:
+    """``--priors``: one size or several, comma-separated, distinct, increasing, each >= 2."""
+    from aptkt.commands._checks import at_least
+    from aptkt.errors import ConfigError
+
+    parts = [p.strip() for p in str(text).split(",")]
+    try:
+        sizes = tuple(int(p) for p in parts)
+    except ValueError:
+        raise ConfigError(
+            f"--priors: {text!r} is not a number or a comma-separated list of numbers"
+        ) from None
+    for k in sizes:
+        at_least(k, 2, "--priors")
+    if list(sizes) != sorted(set(sizes)):
+        raise ConfigError(f"--priors: library sizes must be distinct and increasing, got {text}")
+    return sizes
 
 
 def _command(args: argparse.Namespace) -> str:
@@ -136,9 +244,15 @@ def _command(args: argparse.Namespace) -> str:
     for option, default in DEFAULTS.items():
         if getattr(args, option) != default:
             parts.append(f"--{option} {getattr(args, option)}")
-    for option in ("choices", "actions"):
+    for option in ("choices", "actions", "scheduler"):
         if getattr(args, option):
             parts.append(f"--{option} {getattr(args, option)}")
+    if args.lifelong:
+        parts.append("--lifelong")
+        if args.orders != 20:
+            parts.append(f"--orders {args.orders}")
+    if args.strict:
+        parts.append("--strict")
     if args.seed:
         parts.append(f"--seed {args.seed}")
     if args.reading != "aptkt":

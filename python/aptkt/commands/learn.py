@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 from aptkt.commands import learn_table
 from aptkt.commands._checks import (
@@ -117,6 +118,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         "learned_prior.npz; --table: summary.json, results.csv, prior.npz)",
     )
     p.add_argument(
+        "--merge-into",
+        type=Path,
+        metavar="PRIOR",
+        help="live: when the run ends, write the --prior library with the newly learned objects "
+        "merged in (refitted on all their observations, provenance recorded; aptkt prior "
+        "merge) to this file; refused before the robot moves if the run does not learn every "
+        "action of the library",
+    )
+    p.add_argument(
         "--test",
         metavar="DATASET",
         help="data set (HDF5) of the same objects and actions: report test accuracy",
@@ -137,6 +147,11 @@ def run(args: argparse.Namespace) -> int:
     from aptkt.runtime.live_learning import LiveLearningAborted, learn_live
 
     if args.table:
+        if args.merge_into is not None:
+            raise ConfigError(
+                "--merge-into: only for a live run (--robot); a table's objects become a library "
+                "with aptkt prior merge"
+            )
         return learn_table.run(args)
     for option, value in (("--robot", args.robot), ("--prior", args.prior)):
         if not value:
@@ -148,6 +163,12 @@ def run(args: argparse.Namespace) -> int:
 
     _refuse_earlier_run(args.output, args.force)  # before anything is loaded or checked
     input_file(args.prior, "--prior")
+    if args.merge_into is not None:
+        output_file(args.merge_into, "--merge-into")
+        if args.merge_into.exists() and not args.force:
+            raise ConfigError(
+                f"--merge-into {args.merge_into}: exists (give --force to replace it)"
+            )
     at_least(args.seed, 0, "--seed")
     at_least(args.budget, 0, "--budget")
     at_most(args.budget, MAX_BUDGET, "--budget")
@@ -177,6 +198,13 @@ def run(args: argparse.Namespace) -> int:
         )
     actions = {a.name: a for a in pick_actions(names, available_actions(args))}
     _same_as_the_prior(actions, prior.metadata.get("action_definitions"), args.prior)
+    unlearned = [a for a in prior.actions if a not in actions]
+    if args.merge_into is not None and unlearned:
+        raise ConfigError(
+            f"--merge-into: the library {args.prior} holds action(s) {', '.join(unlearned)} that "
+            "this run does not learn; the merged library would lack the new objects there "
+            "(learn every action, or merge later with aptkt prior merge)"
+        )
     try:
         config = learner_config(
             args,
@@ -228,8 +256,44 @@ def run(args: argparse.Namespace) -> int:
             )
     except LiveLearningAborted as exc:
         print(f"aptkt learn: fault: {exc}", file=sys.stderr)
+        if args.merge_into is not None:
+            print(
+                f"aptkt learn: {args.merge_into} not written (the run did not finish)",
+                file=sys.stderr,
+            )
         return EXIT_FAULT
+    if args.merge_into is not None:
+        _merge_learned(
+            args.prior, prior, args.output / "learned_prior.npz", args.merge_into, report
+        )
     return 0
+
+
+def _merge_learned(
+    library_path: str, library: Any, learned_path: Path, target: Path, report: Any
+) -> None:
+    """The library with the run's new objects merged in (:func:`aptkt.learning.library.
+    merge_priors`), written to ``target``."""
+    import hashlib
+
+    from aptkt.learning import PriorKnowledge
+    from aptkt.learning.library import merge_priors
+
+    if not learned_path.exists():
+        raise ConfigError(f"--merge-into: the run wrote no {learned_path}; nothing to merge")
+    learned = PriorKnowledge.load(learned_path)
+    digests = {
+        str(p): hashlib.sha256(Path(p).read_bytes()).hexdigest()
+        for p in (library_path, learned_path)
+    }
+    merged = merge_priors(
+        [(str(library_path), library), (str(learned_path), learned)], digests=digests
+    )
+    merged.save(target)
+    report(
+        f"{target}: the library of {len(merged.objects)} objects ({len(library.objects)} from "
+        f"{library_path}, {len(learned.objects)} learned now)"
+    )
 
 
 #: What a live run writes to its output directory (its recordings are appended to).

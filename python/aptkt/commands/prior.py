@@ -72,11 +72,45 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--feature-scale",
         choices=FEATURE_SCALES,
         default=GPSettings().prior_feature_scale,
-        help="the prior's metric: whiten (the within-object noise of the observations, "
-        "whitened) or spread (each column z-scored over the observations); default "
-        "%(default)s; docs/method.md",
+        help="the prior's metric: whiten-joint (the within-object noise of the observations, "
+        "whitened across the modalities), whiten (whitened per modality) or spread (each "
+        "column z-scored over the observations); default %(default)s; docs/method.md",
     )
     b.set_defaults(func=run_build)
+
+    m = ps.add_parser(
+        "merge",
+        help="merge prior-knowledge files into one library (e.g. the objects a run learned)",
+        description="Puts the objects of several prior-knowledge files into one library and "
+        "refits its metric and models on all their observations together. The files must "
+        "agree on actions, feature columns, extraction settings, metric and action "
+        "definitions, and share no object; the library records where each object came from "
+        "(prior inspect --json shows it). See docs/method.md.",
+    )
+    m.add_argument(
+        "files",
+        type=Path,
+        nargs="+",
+        metavar="PRIOR",
+        help="prior-knowledge files (.npz), two or more",
+    )
+    m.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        required=True,
+        metavar="PRIOR",
+        help="the library to write (.npz)",
+    )
+    m.add_argument("--force", action="store_true", help="replace an existing output file")
+    m.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        metavar="N",
+        help="seed of the models' optimiser starts (default %(default)s)",
+    )
+    m.set_defaults(func=run_merge)
 
     i = ps.add_parser("inspect", help="summarise a prior-knowledge file")
     i.add_argument("file", type=Path, metavar="PRIOR", help="prior-knowledge file (.npz)")
@@ -101,6 +135,7 @@ def run_build(args: argparse.Namespace) -> int:
 
     from aptkt.learning import GPSettings, PriorKnowledge
     from aptkt.learning.dataset import load_observations, stored_actions
+    from aptkt.learning.extract import ExtractionSettings
 
     if not os.path.exists(args.data):  # (os.path: a name too long to exist is an answer too)
         raise ConfigError(f"{args.data}: no such data set")
@@ -143,6 +178,7 @@ def run_build(args: argparse.Namespace) -> int:
         data=str(args.data),
         trials=args.trials,
         action_definitions={a: recorded[a].to_dict() for a in prior.actions if a in recorded},
+        extraction=ExtractionSettings().to_dict(),
     )
     prior.save(args.output)
     print(
@@ -152,16 +188,51 @@ def run_build(args: argparse.Namespace) -> int:
     return 0
 
 
-def run_inspect(args: argparse.Namespace) -> int:
+def load_prior(path: Path, option: str):
+    """A prior-knowledge file, checked as it is read (one line naming the file otherwise)."""
     from aptkt.learning import PriorKnowledge
 
-    input_file(args.file, "FILE")
+    input_file(path, option)
     try:
-        prior = PriorKnowledge.load(args.file)
+        return PriorKnowledge.load(path)
     except (ValueError, KeyError, OSError) as exc:
-        raise ConfigError(
-            str(exc) if str(args.file) in str(exc) else f"{args.file}: {exc}"
-        ) from None
+        raise ConfigError(str(exc) if str(path) in str(exc) else f"{path}: {exc}") from None
+
+
+def run_merge(args: argparse.Namespace) -> int:
+    import hashlib
+
+    from tqdm import tqdm
+
+    from aptkt.commands._checks import no_duplicates
+    from aptkt.learning.library import merge_priors
+
+    if len(args.files) < 2:
+        raise ConfigError("PRIOR: merging needs at least two prior-knowledge files")
+    no_duplicates([str(p.resolve()) for p in args.files], "PRIOR")
+    at_least(args.seed, 0, "--seed")
+    output_file(args.output)
+    if args.output.exists() and not args.force:
+        raise ConfigError(f"--output {args.output}: exists (give --force to replace it)")
+    libraries = [(str(p), load_prior(p, "PRIOR")) for p in args.files]
+    digests = {str(p): hashlib.sha256(p.read_bytes()).hexdigest() for p in args.files}
+    first = libraries[0][1]
+    with tqdm(
+        total=len(first.actions), unit="action", desc="fitting", disable=not sys.stderr.isatty()
+    ) as bar:
+        merged = merge_priors(libraries, seed=args.seed, digests=digests, progress=bar)
+    merged.save(args.output)
+    counts = ", ".join(f"{name}: {len(p.objects)}" for name, p in libraries)
+    print(
+        f"{args.output}: a library of {len(merged.objects)} objects ({counts}) for "
+        f"{len(merged.actions)} action(s), refitted on their {sum(len(a.observations) for a in merged.actions.values())} "
+        "observations"
+    )
+    return 0
+
+
+def run_inspect(args: argparse.Namespace) -> int:
+    prior = load_prior(args.file, "FILE")
     rows = prior.summary()
     for r in rows:
         r["uninformative"] = uninformative_modalities(prior[r["action"]])
@@ -174,6 +245,7 @@ def run_inspect(args: argparse.Namespace) -> int:
         return 0
     print(f"{args.file}: {len(prior.objects)} prior objects: {', '.join(prior.objects)}")
     metric = {
+        "whiten-joint": "the old objects' within-object noise, whitened across the modalities",
         "whiten": "the old objects' within-object noise, whitened per modality",
         "spread": "each column z-scored over the old objects' observations",
     }

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from aptkt.commands._checks import add_jobs_option
+from aptkt.commands._checks import add_jobs_option, add_scheduler_option
 from aptkt.commands._method import add_method_arguments, learner_config
 
 NAMES = ("fig6", "fig7", "fig8", "fig9", "fig10", "fig11", "all")
@@ -43,12 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="a reduced size (4 priors, 3 new objects, 3 actions) for tests and CI",
     )
     add_jobs_option(p, "local processes (default: all cores)", all_cores=True)
-    p.add_argument(
-        "--scheduler",
-        metavar="ADDRESS",
-        help="run on a Dask distributed cluster (e.g. tcp://host:8786); the data and the output "
-        "directory must be on a file system the workers share",
-    )
+    add_scheduler_option(p)
     p.add_argument(
         "--seed",
         type=int,
@@ -69,7 +64,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from aptkt.commands._checks import at_least, input_file, intact_data_set, jobs, output_dir
+    from aptkt.commands._checks import (
+        at_least,
+        input_file,
+        intact_data_set,
+        jobs,
+        output_dir,
+        scheduler_available,
+    )
     from aptkt.errors import ConfigError
     from aptkt.experiments.reproduce import FIGURE_NAMES, ReproduceSettings, reproduce
 
@@ -79,13 +81,7 @@ def run(args: argparse.Namespace) -> int:
     if args.data is not None:
         input_file(args.data, "--data")
         intact_data_set(args.data, "--data")
-    if args.scheduler:
-        try:
-            import dask.distributed  # noqa: F401
-        except ImportError:
-            raise ConfigError(
-                "--scheduler needs dask[distributed]: pip install 'aptkt[dask]'"
-            ) from None
+    scheduler_available(args.scheduler)
     figures = FIGURE_NAMES if args.name == "all" else (args.name,)
     if args.real_data is not None:
         from aptkt.experiments.beside_real import load_benchmark

@@ -1,16 +1,20 @@
 """The real-data benchmark: APTKT against its baseline on any sensor's feature table.
 
-Protocol (the paper's Fig. 7 and Fig. 11 on recorded data): each of ``groups`` draws
-``new_objects`` new objects from the table's objects, and from the others ``prior_objects``
-prior objects three ways — at random, the most similar and the least similar to the new ones
-(:func:`prior_choices`). Each object's trials are split by trial number: the first half builds
-the prior knowledge and is the pool the learners observe, the second half is held out. Every
-learner starts with one observation of each new object per action (step 0) and then chooses
-``budget`` more. Methods: the baseline (nothing of the prior), APTKT, APTKT with auxiliary
-features, the control (the prior's feature space and kernel, no transfer), and at step 0 a
-1-nearest-neighbour rule on the same one-shot observations in the prior's feature space — the
-plainest use of that metric, which the fitted model should at least match. Methods are paired
-by group: the same new objects, the same pool order, the same first observations.
+Protocol (the paper's Fig. 7, 9 and 11 on recorded data): each of ``groups`` draws
+``new_objects`` new objects from the table's objects, and from the others, for every library
+size in ``libraries``, that many prior objects three ways — at random, the most similar and the
+least similar to the new ones (:func:`prior_choices`). A group's libraries grow: each size's
+prior objects are the smaller sizes' and more, as a lab's library grows. Each object's trials
+are split by trial number: the first half builds the prior knowledge and is the pool the
+learners observe, the second half is held out. Every learner starts with one observation of
+each new object per action (step 0) and then chooses ``budget`` more. Methods: the baseline
+(nothing of the prior), APTKT, APTKT with auxiliary features, the control (the prior's feature
+space and kernel, no transfer), and at step 0 two nearest-neighbour rules on the same one-shot
+observations: in the prior's feature space ("1-NN"), the plainest use of that metric, and in the
+prior objects' within-object covariance of the table's own columns, shrunk towards its diagonal
+and whitened ("1-NN shrunk", :data:`SHRUNK_COVARIANCE`) — the strongest simple rule the fitted
+model should at least match. Methods are paired by group: the same new objects, the same pool
+order, the same first observations, whatever the library size.
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ from aptkt.learning.pipeline import within_object_residuals
 __all__ = [
     "PRIOR_CHOICES",
     "METHODS",
+    "SHRUNK_COVARIANCE",
     "BenchmarkSettings",
     "Group",
     "draw_groups",
@@ -41,6 +46,7 @@ __all__ = [
     "split_trials",
     "run_group",
     "nearest_neighbour_accuracy",
+    "shrunk_nearest_neighbour_accuracy",
     "run_benchmark",
 ]
 
@@ -53,15 +59,22 @@ METHODS: dict[str, dict[str, Any]] = {
     "APTKT+aux": {"transfer": "paper", "auxiliary": True},
     "control": {"transfer": "control", "auxiliary": False},
 }
-#: The reference rule's name in the results.
+#: The reference rules' names in the results.
 NEAREST_NEIGHBOUR = "1-NN"
+SHRUNK_NEAREST_NEIGHBOUR = "1-NN shrunk"
+#: The "1-NN shrunk" rule's metric: the prior objects' pooled within-object covariance C of the
+#: table's columns, as ``(1 − s) C + s diag C``, whitened.
+SHRUNK_COVARIANCE = 0.2
 
 
 @dataclass(frozen=True)
 class BenchmarkSettings:
+    """``libraries``: the library sizes (prior objects per group) to compare, in increasing
+    order; one size is the paper's Fig. 7, several are its Fig. 9 question."""
+
     groups: int = 60
     new_objects: int = 5
-    prior_objects: int = 3
+    libraries: tuple[int, ...] = (3,)
     budget: int = 20
     seed: int = 0
     choices: tuple[str, ...] = PRIOR_CHOICES
@@ -69,21 +82,34 @@ class BenchmarkSettings:
     config: LearnerConfig = LearnerConfig()
 
     def __post_init__(self) -> None:
-        for name in ("groups", "new_objects", "prior_objects"):
+        for name in ("groups", "new_objects"):
             if getattr(self, name) < (2 if name != "groups" else 1):
                 raise ValueError(f"{name} must be >= {2 if name != 'groups' else 1}")
+        sizes = tuple(int(k) for k in self.libraries)
+        object.__setattr__(self, "libraries", sizes)
+        if not sizes or min(sizes) < 2 or list(sizes) != sorted(set(sizes)):
+            raise ValueError(
+                f"library sizes must be distinct, increasing and >= 2, got {list(sizes)}"
+            )
         if self.budget < 0:
             raise ValueError(f"budget must be >= 0, got {self.budget}")
         unknown = [c for c in self.choices if c not in PRIOR_CHOICES]
         if unknown or not self.choices:
             raise ValueError(f"choices must be among {PRIOR_CHOICES}, got {self.choices}")
 
+    @property
+    def prior_objects(self) -> int:
+        """The largest library's size."""
+        return self.libraries[-1]
+
 
 @dataclass(frozen=True)
 class Group:
+    """One group's new objects and, per library size and prior choice, its prior objects."""
+
     index: int
     new: tuple[str, ...]
-    priors: dict[str, tuple[str, ...]]
+    libraries: dict[int, dict[str, tuple[str, ...]]]
 
 
 def split_trials(table: FeatureTable, actions: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
@@ -123,19 +149,27 @@ def object_distances(learn: ObservationTable) -> tuple[list[str], np.ndarray]:
 def prior_choices(
     new: Sequence[str],
     candidates: Sequence[str],
-    k: int,
+    sizes: Sequence[int],
     distances: tuple[list[str], np.ndarray],
     rng: np.random.Generator,
-) -> dict[str, tuple[str, ...]]:
-    """The three ways of choosing ``k`` prior objects among ``candidates``: at random; the
-    ``k`` whose distance to the nearest new object is smallest ("nearest") or largest
-    ("farthest")."""
+) -> dict[int, dict[str, tuple[str, ...]]]:
+    """The three ways of choosing ``k`` prior objects among ``candidates``, for each ``k`` in
+    ``sizes``: at random; the ``k`` whose distance to the nearest new object is smallest
+    ("nearest") or largest ("farthest"). Each way's larger libraries hold its smaller ones (one
+    random order, one order by distance): a library that grows."""
     names, d = distances
     index = {o: i for i, o in enumerate(names)}
     closeness = {c: min(d[index[c], index[n]] for n in new) for c in candidates}
     order = sorted(candidates, key=lambda c: (closeness[c], c))
-    random = tuple(str(c) for c in rng.choice(list(candidates), size=k, replace=False))
-    return {"random": random, "nearest": tuple(order[:k]), "farthest": tuple(order[-k:])}
+    shuffled = [str(c) for c in rng.permutation(list(candidates))]
+    return {
+        k: {
+            "random": tuple(shuffled[:k]),
+            "nearest": tuple(order[:k]),
+            "farthest": tuple(order[::-1][:k]),
+        }
+        for k in sizes
+    }
 
 
 def draw_groups(
@@ -151,8 +185,9 @@ def draw_groups(
     for g in range(s.groups):
         perm = [str(o) for o in rng.permutation(list(objects))]
         new, rest = perm[: s.new_objects], perm[s.new_objects :]
-        choices = prior_choices(new, rest, s.prior_objects, distances, rng)
-        groups.append(Group(g, tuple(new), {c: choices[c] for c in s.choices}))
+        chosen = prior_choices(new, rest, s.libraries, distances, rng)
+        libraries = {k: {c: per[c] for c in s.choices} for k, per in chosen.items()}
+        groups.append(Group(g, tuple(new), libraries))
     return groups
 
 
@@ -170,6 +205,35 @@ def nearest_neighbour_accuracy(
     return float(np.mean(accs))
 
 
+def shrunk_nearest_neighbour_accuracy(
+    prior_table: ObservationTable,
+    first: ObservationTable,
+    test: ObservationTable,
+    shrinkage: float = SHRUNK_COVARIANCE,
+) -> float:
+    """Mean over actions of the test accuracy of 1-nearest-neighbour on the ``first``
+    observations, in the metric of the prior objects' pooled within-object covariance C of the
+    table's own columns (every modality side by side), shrunk as ``(1 − s) C + s diag C`` and
+    whitened (Euclidean after multiplying by its inverse square root)."""
+    accs = []
+    for action, obs in first.items():
+        old = prior_table[action]
+
+        def columns(o: Observations) -> np.ndarray:
+            return np.hstack([o.modalities[m] for m in o.modality_names])
+
+        R, dof = within_object_residuals(columns(old), old.objects)
+        C = R.T @ R / max(dof, 1)
+        C = (1.0 - shrinkage) * C + shrinkage * np.diag(np.diag(C))
+        vals, vecs = np.linalg.eigh(C)
+        scale = max(float(vals.max()), 1e-300)
+        W = vecs @ np.diag(1.0 / np.sqrt(np.maximum(vals, 1e-12 * scale))) @ vecs.T
+        X, T = columns(obs) @ W, columns(test[action]) @ W
+        d = ((T[:, None, :] - X[None, :, :]) ** 2).sum(axis=-1)
+        accs.append(float(np.mean(obs.objects[d.argmin(axis=1)] == test[action].objects)))
+    return float(np.mean(accs))
+
+
 def _subset(table: ObservationTable, objects: Sequence[str]) -> dict[str, Observations]:
     return {a: obs.of_objects(objects) for a, obs in table.items()}
 
@@ -181,8 +245,9 @@ def run_group(
     s: BenchmarkSettings,
     on_run: Callable[[], None] | None = None,
 ) -> list[dict[str, Any]]:
-    """Every method's learning curve for one group: one row per (prior choice, method, step).
-    The baseline uses no prior, so it runs once and serves every choice."""
+    """Every method's learning curve for one group: one row per (library size, prior choice,
+    method, step). The baseline uses no prior, so it runs once and serves every library and
+    choice."""
     actions = list(learn)
     new = list(group.new)
     pool = _subset(learn, new)
@@ -205,33 +270,35 @@ def run_group(
         for a, lrn in base_learner.learners.items()
         if lrn.observations is not None
     }
-    for choice, priors in group.priors.items():
-        prior = PriorKnowledge.build(
-            _subset(learn, priors), gp=s.config.gp, seed=seed + zlib.crc32(choice.encode())
-        )
-        curves = {"baseline": baseline}
-        transfers: dict[str, list[int]] = {}
-        for name, overrides in METHODS.items():
-            if name == "baseline":
-                continue
-            curve, learner = run(replace(s.config, **overrides), prior)
-            curves[name] = curve
-            transfers[name] = [
-                sum(bool(d.sources) for d in lrn.decisions.values())
-                for lrn in learner.learners.values()
-            ]
-        nn = nearest_neighbour_accuracy(prior, first, held)
-        tags = {
-            "group": group.index,
-            "priors": choice,
-            "new_objects": ",".join(new),
-            "prior_objects": ",".join(priors),
-        }
-        for name, curve in curves.items():
-            rows += [
-                {**tags, "method": name, "step": k, "accuracy": v} for k, v in enumerate(curve)
-            ]
-        rows.append({**tags, "method": NEAREST_NEIGHBOUR, "step": 0, "accuracy": nn})
+    for size, per_choice in group.libraries.items():
+        for choice, priors in per_choice.items():
+            prior_table = _subset(learn, priors)
+            prior = PriorKnowledge.build(
+                prior_table, gp=s.config.gp, seed=seed + zlib.crc32(choice.encode())
+            )
+            curves = {"baseline": baseline}
+            for name, overrides in METHODS.items():
+                if name != "baseline":
+                    curves[name] = run(replace(s.config, **overrides), prior)[0]
+            tags = {
+                "group": group.index,
+                "library": size,
+                "priors": choice,
+                "new_objects": ",".join(new),
+                "prior_objects": ",".join(priors),
+            }
+            for name, curve in curves.items():
+                rows += [
+                    {**tags, "method": name, "step": k, "accuracy": v} for k, v in enumerate(curve)
+                ]
+            for name, accuracy in (
+                (NEAREST_NEIGHBOUR, nearest_neighbour_accuracy(prior, first, held)),
+                (
+                    SHRUNK_NEAREST_NEIGHBOUR,
+                    shrunk_nearest_neighbour_accuracy(prior_table, first, held),
+                ),
+            ):
+                rows.append({**tags, "method": name, "step": 0, "accuracy": accuracy})
     return rows
 
 
@@ -261,7 +328,7 @@ def benchmark(
         rows += r
         if on_group is not None:
             on_group(i)
-    rows.sort(key=lambda r: (r["group"], r["priors"], r["method"], r["step"]))
+    rows.sort(key=lambda r: (r["group"], r["library"], r["priors"], r["method"], r["step"]))
     return rows, time.perf_counter() - t0
 
 
@@ -275,43 +342,43 @@ def run_benchmark(
     *,
     output: Path,
     jobs: int = 1,
+    scheduler: Any = None,
     command: str = "",
-    progress: bool = False,
+    progress: bool = True,
     say: Callable[[str], None] = print,
 ) -> dict[str, Any]:
     """Run the benchmark and write its files to ``output``: results.csv (every group's curves),
-    summary.json (settings, mean curves, paired gains, checks), report.md and benchmark.png/.svg.
-    Returns the summary."""
+    summary.json (settings, mean curves, paired gains, checks), report.md, benchmark.png/.svg
+    and, with several library sizes, library.png/.svg. Groups run on ``jobs`` local processes,
+    or on the Dask cluster at ``scheduler``. Returns the summary (its "checks" say which
+    held)."""
     from aptkt import __version__
     from aptkt.experiments import benchmark_report as br
-    from aptkt.experiments.executors import LocalExecutor
+    from aptkt.experiments.executors import make_executor
     from aptkt.experiments.noise_profile import noise_profile
     from aptkt.experiments.plots import save_figure
+    from aptkt.experiments.progress import Progress
     from aptkt.experiments.tables import write_csv
 
     actions = list(s.actions) if s.actions else table.action_names
+    executor = make_executor(jobs, scheduler)
+    sizes = ", ".join(str(k) for k in s.libraries)
     say(
         f"{table.path}: {len(table.object_names)} objects, action(s) {', '.join(actions)}; "
-        f"{s.groups} groups of {s.new_objects} new objects with {s.prior_objects} priors "
-        f"({', '.join(s.choices)}), budget {s.budget}, on {jobs} process(es)"
+        f"{s.groups} groups of {s.new_objects} new objects with {sizes} priors "
+        f"({', '.join(s.choices)}), budget {s.budget}, on {executor.description}"
     )
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=s.groups, unit="group", desc="benchmark", leave=False)
-    executor = LocalExecutor(jobs)
+    bar = Progress(s.groups, "group", "benchmark", enabled=progress)
     try:
         rows, seconds = benchmark(
             table,
             s,
-            parallel_map=executor.imap_unordered if jobs > 1 else None,
-            on_group=None if bar is None else (lambda _i: bar.update(1)),
+            parallel_map=executor.imap_unordered if scheduler is not None or jobs > 1 else None,
+            on_group=lambda _i: bar.update(1),
         )
     finally:
         executor.close()
-        if bar is not None:
-            bar.close()
+        bar.close()
     output.mkdir(parents=True, exist_ok=True)
     write_csv(output / "results.csv", rows)
     c = br.curves(rows)
@@ -321,17 +388,21 @@ def run_benchmark(
         "command": command,
         "software_version": __version__,
         "seconds": seconds,
-        "jobs": jobs,
+        "jobs": jobs if scheduler is None else executor.description,
         "date": time.strftime("%Y-%m-%d"),
         "objects": len(table.object_names),
         "actions": actions,
         "groups": s.groups,
         "new": s.new_objects,
-        "priors": s.prior_objects,
+        "libraries": list(s.libraries),
         "budget": s.budget,
     }
     chance = 1.0 / s.new_objects
     save_figure(br.plot(c, chance), output / "benchmark")
+    written = [output / "report.md", output / "benchmark.png"]
+    if len(s.libraries) > 1 and "random" in s.choices:
+        save_figure(br.plot_library(c), output / "library")
+        written.append(output / "library.png")
     summary = {
         **head,
         "learner": s.config.to_dict(),
@@ -345,8 +416,9 @@ def run_benchmark(
     (output / "report.md").write_text(br.report_markdown(c, head, found, profiles))
     for k in found:
         say(f"  {'holds' if k.holds else 'FAILS'}: {k.claim} — {k.measured}")
+    held = sum(k.holds for k in found)
     say(
-        f"done in {seconds:.0f} s: {output / 'report.md'}, {output / 'benchmark.png'}, "
-        f"{output / 'results.csv'}"
+        f"{held} of {len(found)} checks hold; done in {seconds:.0f} s: "
+        f"{', '.join(str(p) for p in written)}, {output / 'results.csv'}"
     )
     return summary

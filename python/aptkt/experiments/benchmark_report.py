@@ -1,5 +1,8 @@
 """The real-data benchmark's analysis: paired gains with 95 % intervals, the checks the method
-must pass on real data, plots and report.md (see :mod:`aptkt.experiments.benchmark`)."""
+must pass on real data, plots and report.md (see :mod:`aptkt.experiments.benchmark`).
+
+Results are read as ``curves[library size][prior choice][method]``: a (groups × steps) array
+of accuracies, groups in order ("1-NN" and "1-NN shrunk" have one column, step 0)."""
 
 from __future__ import annotations
 
@@ -14,7 +17,16 @@ from aptkt.experiments.noise_profile import NoiseProfile
 from aptkt.experiments.plots import curve_styles, figure
 from aptkt.experiments.report import ci, markdown_table, pp
 
-__all__ = ["Check", "curves", "checks", "summary", "plot", "report_markdown"]
+__all__ = [
+    "Check",
+    "Curves",
+    "curves",
+    "checks",
+    "summary",
+    "plot",
+    "plot_library",
+    "report_markdown",
+]
 
 #: Steps the tables show (those within the budget).
 TABLE_STEPS = (0, 1, 2, 3, 5, 10, 20, 40)
@@ -23,29 +35,51 @@ TABLE_STEPS = (0, 1, 2, 3, 5, 10, 20, 40)
 UNLEARNING_TOLERANCE = 0.01
 #: APTKT's gain over the baseline at one observation per object the paper reports (Fig. 7).
 PAPER_ONE_SHOT_GAIN = 0.10
-#: How far below the baseline APTKT may be at any step with the least similar priors.
+#: How far below the baseline APTKT may be at any step (mean over groups).
 NO_HARM_TOLERANCE = 0.01
+#: How far below the control APTKT may be at any step: a transfer must not cost.
+TRANSFER_COST_TOLERANCE = 0.005
+#: How much APTKT must gain over its own one-shot accuracy by the end of the budget.
+KEEPS_LEARNING = 0.03
+#: How much smaller the one-shot gain of the largest library may be than the smallest's.
+GROWTH_TOLERANCE = 0.01
 METHOD_ORDER = ("baseline", "control", "APTKT", "APTKT+aux")
+REFERENCES = ("1-NN", "1-NN shrunk")
+_REFERENCE_LABELS = {
+    "1-NN": "1-NN (prior's metric)",
+    "1-NN shrunk": "1-NN (shrunk covariance)",
+}
+
+#: Accuracies are means of 0/1 outcomes: a claim at a bound holds up to rounding.
+_ROUNDING = 1e-9
+
+#: library size -> prior choice -> method -> (groups × steps) accuracies.
+Curves = Mapping[int, Mapping[str, Mapping[str, np.ndarray]]]
 
 
-def curves(rows: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, np.ndarray]]:
-    """Prior choice -> method -> (groups × steps) accuracies, groups in order; "1-NN" has one
-    column (step 0)."""
-    out: dict[str, dict[str, dict[int, dict[int, float]]]] = {}
+def curves(rows: Sequence[Mapping[str, Any]]) -> dict[int, dict[str, dict[str, np.ndarray]]]:
+    """Library size -> prior choice -> method -> (groups × steps) accuracies, groups in order.
+    Rows without a library size (results written before it existed) count as one library."""
+    out: dict[int, dict[str, dict[str, dict[int, dict[int, float]]]]] = {}
     for r in rows:
-        per = out.setdefault(str(r["priors"]), {}).setdefault(str(r["method"]), {})
-        per.setdefault(int(r["group"]), {})[int(r["step"])] = float(r["accuracy"])
-    result: dict[str, dict[str, np.ndarray]] = {}
-    for choice, methods in out.items():
-        result[choice] = {}
-        for method, groups in methods.items():
-            order = sorted(groups)
-            width = max(max(g) for g in groups.values()) + 1
-            values = np.full((len(order), width), np.nan)
-            for i, g in enumerate(order):
-                for step, v in groups[g].items():
-                    values[i, step] = v
-            result[choice][method] = values
+        size = int(r.get("library") or 0)
+        per = out.setdefault(size, {}).setdefault(str(r["priors"]), {})
+        per.setdefault(str(r["method"]), {}).setdefault(int(r["group"]), {})[int(r["step"])] = (
+            float(r["accuracy"])
+        )
+    result: dict[int, dict[str, dict[str, np.ndarray]]] = {}
+    for size in sorted(out):
+        result[size] = {}
+        for choice, methods in out[size].items():
+            result[size][choice] = {}
+            for method, groups in methods.items():
+                order = sorted(groups)
+                width = max(max(g) for g in groups.values()) + 1
+                values = np.full((len(order), width), np.nan)
+                for i, g in enumerate(order):
+                    for step, v in groups[g].items():
+                        values[i, step] = v
+                result[size][choice][method] = values
     return result
 
 
@@ -72,100 +106,175 @@ def _largest_fall(values: np.ndarray) -> tuple[float, int]:
     return float(-falls[k]), k + 1
 
 
-def checks(c: Mapping[str, Mapping[str, np.ndarray]]) -> list[Check]:
-    """The targets on real data: a one-shot gain of the paper's size with random priors, at
-    least the 1-NN reference; never below the baseline with the least similar priors; the
-    auxiliary features never below plain APTKT; no method's mean curve falling by more than
-    :data:`UNLEARNING_TOLERANCE` from one step to the next."""
+def _label(size: int, choice: str, sizes: int) -> str:
+    """How a check or section names its runs: the prior choice, and the library size when
+    several are compared."""
+    what = {"random": "random", "nearest": "most similar", "farthest": "least similar"}
+    base = f"{what.get(choice, choice)} priors"
+    return f"{size} {base}" if sizes > 1 and size else base
+
+
+def _never_below(a: np.ndarray, b: np.ndarray) -> tuple[float, int, Estimate]:
+    """The lowest mean of a − b over the steps, its step and its paired interval."""
+    mean = np.nanmean(a - b, axis=0)
+    k = int(np.argmin(mean))
+    return float(mean[k]), k, _paired(a[:, k], b[:, k])
+
+
+def _library_checks(size: int, choice: str, m: Mapping[str, np.ndarray], sizes: int) -> list[Check]:
+    """The checks of one library size and prior choice."""
+    who = _label(size, choice, sizes)
     out = []
-    if "random" in c:
-        r = c["random"]
-        gain = _paired(r["APTKT"][:, 0], r["baseline"][:, 0])
+    if choice == "random":
+        gain = _paired(m["APTKT"][:, 0], m["baseline"][:, 0])
         out.append(
             Check(
-                f"random priors: APTKT ≥ baseline + {100 * PAPER_ONE_SHOT_GAIN:.0f} pp at one "
+                f"{who}: APTKT ≥ baseline + {100 * PAPER_ONE_SHOT_GAIN:.0f} pp at one "
                 "observation per object, its interval above +5 pp",
                 ci(gain),
-                gain.mean >= PAPER_ONE_SHOT_GAIN and gain.low > 0.05,
+                gain.mean >= PAPER_ONE_SHOT_GAIN - _ROUNDING and gain.low > 0.05,
             )
         )
-        nn = _paired(r["APTKT"][:, 0], r["1-NN"][:, 0])
+        for ref, what in (
+            ("1-NN", "the 1-nearest-neighbour rule in its own feature space"),
+            ("1-NN shrunk", "the 1-nearest-neighbour rule in the priors' shrunk covariance"),
+        ):
+            if ref in m:
+                nn = _paired(m["APTKT"][:, 0], m[ref][:, 0])
+                out.append(
+                    Check(
+                        f"{who}: APTKT at one shot at least {what}", ci(nn), nn.mean >= -_ROUNDING
+                    )
+                )
+    if choice in ("random", "farthest"):
+        low, k, at = _never_below(m["APTKT"], m["baseline"])
         out.append(
             Check(
-                "random priors: APTKT at one shot at least the 1-nearest-neighbour rule in its "
-                "own feature space",
-                ci(nn),
-                nn.mean >= 0,
-            )
-        )
-    if "farthest" in c:
-        f = c["farthest"]
-        d = f["APTKT"] - f["baseline"]
-        mean = np.nanmean(d, axis=0)
-        k = int(np.argmin(mean))
-        out.append(
-            Check(
-                f"least similar priors: APTKT never below the baseline by more than "
+                f"{who}: APTKT never below the baseline by more than "
                 f"{100 * NO_HARM_TOLERANCE:.0f} pp at any step",
-                f"lowest {pp(mean[k])} at step {k} ({ci(_paired(f['APTKT'][:, k], f['baseline'][:, k]))})",
-                bool(mean[k] >= -NO_HARM_TOLERANCE),
+                f"lowest {pp(low)} at step {k} ({ci(at)})",
+                low >= -NO_HARM_TOLERANCE - _ROUNDING,
+            )
+        )
+    if choice == "random":
+        if "control" in m:
+            low, k, at = _never_below(m["APTKT"], m["control"])
+            out.append(
+                Check(
+                    f"{who}: a transfer never costs — APTKT never below the control by more "
+                    f"than {100 * TRANSFER_COST_TOLERANCE:.1f} pp at any step",
+                    f"lowest {pp(low)} at step {k} ({ci(at)})",
+                    low >= -TRANSFER_COST_TOLERANCE - _ROUNDING,
+                )
+            )
+        last = m["APTKT"].shape[1] - 1
+        if last > 0:
+            a, b = np.nanmean(m["APTKT"], axis=0), np.nanmean(m["baseline"], axis=0)
+            rise = a[last] - a[0]
+            out.append(
+                Check(
+                    f"{who}: APTKT keeps learning — at step {last} at least the baseline and "
+                    f"{100 * KEEPS_LEARNING:.0f} pp above its own step 0",
+                    f"{pp(a[last] - b[last])} against the baseline, {pp(rise)} since step 0",
+                    bool(a[last] >= b[last] - _ROUNDING and rise >= KEEPS_LEARNING - _ROUNDING),
+                )
+            )
+    return out
+
+
+def checks(c: Curves) -> list[Check]:
+    """The targets on real data, per library size: with random priors a one-shot gain of the
+    paper's size, at least both nearest-neighbour references, never below the baseline, a
+    transfer that never costs against the control, and learning that goes on; never below the
+    baseline with the least similar priors; then, over every library and choice, the auxiliary
+    features never below plain APTKT and no method's mean curve falling by more than
+    :data:`UNLEARNING_TOLERANCE` from one step to the next; and with several library sizes, a
+    one-shot gain that does not shrink as the library grows."""
+    out: list[Check] = []
+    sizes = len(c)
+    for size, per_choice in c.items():
+        for choice in sorted(per_choice, key=_choice_order):
+            out += _library_checks(size, choice, per_choice[choice], sizes)
+    random = {size: per["random"] for size, per in c.items() if "random" in per}
+    if len(random) > 1:
+        small, large = min(random), max(random)
+        g_small = _paired(random[small]["APTKT"][:, 0], random[small]["baseline"][:, 0])
+        g_large = _paired(random[large]["APTKT"][:, 0], random[large]["baseline"][:, 0])
+        out.append(
+            Check(
+                f"the one-shot gain does not shrink as the library grows: with {large} random "
+                f"priors at least the gain with {small} − {100 * GROWTH_TOLERANCE:.0f} pp, and "
+                f"at least +{100 * PAPER_ONE_SHOT_GAIN:.0f} pp",
+                f"{pp(g_large.mean)} with {large}, {pp(g_small.mean)} with {small}",
+                g_large.mean >= g_small.mean - GROWTH_TOLERANCE - _ROUNDING
+                and g_large.mean >= PAPER_ONE_SHOT_GAIN - _ROUNDING,
             )
         )
     worst = None
-    for choice, methods in c.items():
-        if "APTKT+aux" in methods:
-            d = np.nanmean(methods["APTKT+aux"] - methods["APTKT"], axis=0)
-            k = int(np.argmin(d))
-            if worst is None or d[k] < worst[0]:
-                low = _paired(methods["APTKT+aux"][:, k], methods["APTKT"][:, k])
-                worst = (float(d[k]), k, choice, low)
+    for size, per_choice in c.items():
+        for choice, methods in per_choice.items():
+            if "APTKT+aux" in methods:
+                low, k, at = _never_below(methods["APTKT+aux"], methods["APTKT"])
+                if worst is None or low < worst[0]:
+                    worst = (low, k, _label(size, choice, sizes), at)
     if worst is not None:
         out.append(
             Check(
                 "APTKT with auxiliary features never below plain APTKT (mean, any step, any "
-                "prior choice)",
-                f"lowest {pp(worst[0])} at step {worst[1]}, {worst[2]} priors ({ci(worst[3])})",
-                worst[0] >= 0,
+                "library and prior choice)",
+                f"lowest {pp(worst[0])} at step {worst[1]}, {worst[2]} ({ci(worst[3])})",
+                worst[0] >= -_ROUNDING,
             )
         )
     falls = []
-    for choice, methods in c.items():
-        for method in METHOD_ORDER:
-            if method in methods:
-                fall, step = _largest_fall(methods[method])
-                falls.append((fall, step, method, choice))
+    for size, per_choice in c.items():
+        for choice, methods in per_choice.items():
+            for method in METHOD_ORDER:
+                if method in methods:
+                    fall, step = _largest_fall(methods[method])
+                    falls.append((fall, step, method, _label(size, choice, sizes)))
     if falls:
-        fall, step, method, choice = max(falls)
+        fall, step, method, who = max(falls)
         out.append(
             Check(
                 f"no method unlearns: no mean curve falls by more than "
                 f"{100 * UNLEARNING_TOLERANCE:.0f} pp from one step to the next",
-                f"largest fall {100 * fall:.1f} pp ({method}, {choice} priors, step {step})",
-                fall <= UNLEARNING_TOLERANCE,
+                f"largest fall {100 * fall:.1f} pp ({method}, {who}, step {step})",
+                fall <= UNLEARNING_TOLERANCE + _ROUNDING,
             )
         )
     return out
 
 
-def summary(c: Mapping[str, Mapping[str, np.ndarray]]) -> dict[str, Any]:
-    """Per prior choice: each method's mean curve, and each method's paired gain over the
-    baseline (and the 1-NN reference) with its interval at every step."""
+def summary(c: Curves) -> dict[str, Any]:
+    """Per library size and prior choice: each method's mean curve, and each method's paired
+    gain over the baseline with its interval at every step (and APTKT against the control and
+    the nearest-neighbour references at step 0)."""
     out: dict[str, Any] = {}
-    for choice, methods in c.items():
-        base = methods["baseline"]
-        entry: dict[str, Any] = {"groups": int(base.shape[0]), "mean": {}, "gain": {}}
-        for method, values in methods.items():
-            entry["mean"][method] = np.nanmean(values, axis=0).tolist()
-            if method in ("baseline", "1-NN"):
-                continue
-            entry["gain"][method] = [
-                _paired(values[:, k], base[:, k]).as_dict() for k in range(values.shape[1])
-            ]
-        if "1-NN" in methods:
-            entry["gain"]["APTKT vs 1-NN"] = _paired(
-                methods["APTKT"][:, 0], methods["1-NN"][:, 0]
-            ).as_dict()
-        out[choice] = entry
+    for size, per_choice in c.items():
+        entry_size: dict[str, Any] = {}
+        for choice, methods in per_choice.items():
+            base = methods["baseline"]
+            entry: dict[str, Any] = {"groups": int(base.shape[0]), "mean": {}, "gain": {}}
+            for method, values in methods.items():
+                entry["mean"][method] = np.nanmean(values, axis=0).tolist()
+                if method == "baseline" or method in REFERENCES:
+                    continue
+                entry["gain"][method] = [
+                    _paired(values[:, k], base[:, k]).as_dict() for k in range(values.shape[1])
+                ]
+            if "control" in methods:
+                entry["gain"]["APTKT vs control"] = [
+                    _paired(methods["APTKT"][:, k], methods["control"][:, k]).as_dict()
+                    for k in range(base.shape[1])
+                ]
+            for ref in REFERENCES:
+                if ref in methods:
+                    entry["gain"][f"APTKT vs {ref}"] = _paired(
+                        methods["APTKT"][:, 0], methods[ref][:, 0]
+                    ).as_dict()
+            entry_size[choice] = entry
+        out[str(size)] = entry_size
     return out
 
 
@@ -176,16 +285,27 @@ _TITLES = {
 }
 
 
-def plot(c: Mapping[str, Mapping[str, np.ndarray]], chance: float) -> Any:
-    """Top: each method's mean accuracy per prior choice with its 95 % band (clipped to
-    [0, 1]) and the 1-NN reference at step 0; bottom: each method's paired gain over the
-    baseline with its band."""
+def _choice_order(choice: str) -> int:
+    return list(_TITLES).index(choice) if choice in _TITLES else 99
+
+
+def _panels(c: Curves) -> list[tuple[int, str, Mapping[str, np.ndarray]]]:
+    return [
+        (size, choice, per_choice[choice])
+        for size, per_choice in c.items()
+        for choice in sorted(per_choice, key=_choice_order)
+    ]
+
+
+def plot(c: Curves, chance: float) -> Any:
+    """One column per library size and prior choice. Top: each method's mean accuracy with its
+    95 % band (clipped to [0, 1]) and the nearest-neighbour references at step 0; bottom: each
+    method's paired gain over the baseline with its band."""
     from matplotlib.ticker import MaxNLocator  # matplotlib is imported when a plot is made
 
-    choices = sorted(c, key=lambda k: list(_TITLES).index(k) if k in _TITLES else 99)
-    fig, axes = figure(2, len(choices), figsize=(5.0 * len(choices), 7.6), squeeze=False)
-    for j, choice in enumerate(choices):
-        methods = c[choice]
+    panels = _panels(c)
+    fig, axes = figure(2, len(panels), figsize=(5.0 * len(panels), 7.6), squeeze=False)
+    for j, (size, choice, methods) in enumerate(panels):
         top, bottom = axes[0, j], axes[1, j]
         steps = np.arange(methods["baseline"].shape[1])
         styles = curve_styles((m for m in METHOD_ORDER if m in methods), len(steps))
@@ -202,24 +322,27 @@ def plot(c: Mapping[str, Mapping[str, np.ndarray]], chance: float) -> Any:
                 bottom.fill_between(
                     steps, 100 * d_low, 100 * d_high, color=colour, alpha=0.15, lw=0
                 )
-        if "1-NN" in methods:
-            nn = methods["1-NN"][:, 0]
+        for offset, (ref, marker) in enumerate(zip(REFERENCES, ("D", "s"))):
+            if ref not in methods:
+                continue
+            nn = methods[ref][:, 0]
+            _, low, high = mean_band(nn[:, None])
             top.errorbar(
-                [0],
+                [0.15 * offset],
                 [nn.mean()],
-                yerr=[
-                    [nn.mean() - mean_band(nn[:, None])[1][0]],
-                    [mean_band(nn[:, None])[2][0] - nn.mean()],
-                ],
-                fmt="D",
-                color="black",
+                yerr=[[nn.mean() - low[0]], [high[0] - nn.mean()]],
+                fmt=marker,
+                color="black" if offset == 0 else "0.45",
                 ms=6,
                 capsize=3,
-                label="1-NN (prior's metric)",
+                label=_REFERENCE_LABELS[ref],
             )
         top.axhline(chance, color="0.5", ls="--", lw=1, label=f"chance ({chance:.2f})")
         top.set_ylim(0, 1.0)
-        top.set_title(f"{_TITLES.get(choice, choice)} ({methods['baseline'].shape[0]} groups)")
+        title = _TITLES.get(choice, choice)
+        if size:
+            title = f"{size} {title.replace('the ', '')}"
+        top.set_title(f"{title} ({methods['baseline'].shape[0]} groups)")
         top.set_ylabel("accuracy on held-out trials")
         top.grid(alpha=0.3)
         bottom.axhline(0, color="0.3", lw=1)
@@ -235,14 +358,96 @@ def plot(c: Mapping[str, Mapping[str, np.ndarray]], chance: float) -> Any:
     return fig
 
 
+def plot_library(c: Curves) -> Any:
+    """Gain against library size (random priors): APTKT and the control over the baseline at
+    one observation per object and at the end of the budget, and APTKT over the control, each
+    with its 95 % interval — the paper's Fig. 9 question on this data."""
+    sizes = [s for s in c if "random" in c[s]]
+    fig, axes = figure(1, 2, figsize=(10.0, 4.2), squeeze=False)
+    left, right = axes[0]
+    last = c[sizes[0]]["random"]["baseline"].shape[1] - 1
+    for ax, step, title in ((left, 0, "one observation per object"), (right, last, f"step {last}")):
+        # Side by side, so that equal gains stay visible.
+        shift = 0.012 * (max(sizes) - min(sizes) or 1)
+        for offset, (method, other, look) in enumerate(
+            (
+                ("APTKT", "baseline", {"color": "C2", "marker": "o", "ls": "-"}),
+                ("control", "baseline", {"color": "C1", "marker": "s", "ls": "--"}),
+                ("APTKT", "control", {"color": "C3", "marker": "^", "ls": ":"}),
+            )
+        ):
+            est = [
+                _paired(c[s]["random"][method][:, step], c[s]["random"][other][:, step])
+                for s in sizes
+            ]
+            mean = np.array([100 * e.mean for e in est])
+            err = np.array([[100 * (e.mean - e.low), 100 * (e.high - e.mean)] for e in est]).T
+            x = np.asarray(sizes, dtype=float) + (offset - 1) * shift
+            ax.errorbar(x, mean, yerr=err, capsize=3, label=f"{method} − {other}", **look)
+        ax.axhline(0, color="0.3", lw=1)
+        ax.set_xticks(sizes)
+        ax.set_xlabel("prior objects in the library (random)")
+        ax.set_ylabel("paired gain (pp, 95 % intervals)")
+        ax.set_title(title)
+        ax.grid(alpha=0.3)
+    left.legend(loc="best", fontsize="small")
+    fig.tight_layout()
+    return fig
+
+
+def _library_table(c: Curves) -> list[str]:
+    """The gains against library size (random priors), one row per size."""
+    sizes = [s for s in c if "random" in c[s]]
+    if len(sizes) < 2:
+        return []
+    last = c[sizes[0]]["random"]["baseline"].shape[1] - 1
+    rows = []
+    for s in sizes:
+        m = c[s]["random"]
+        mean = {k: np.nanmean(v, axis=0) for k, v in m.items()}
+        rows.append(
+            [
+                str(s),
+                f"{mean['baseline'][0]:.3f} → {mean['baseline'][last]:.3f}",
+                f"{mean['control'][0]:.3f} → {mean['control'][last]:.3f}" if "control" in m else "",
+                f"{mean['APTKT'][0]:.3f} → {mean['APTKT'][last]:.3f}",
+                ci(_paired(m["APTKT"][:, 0], m["baseline"][:, 0])),
+                ci(_paired(m["APTKT"][:, last], m["baseline"][:, last])),
+                ci(_paired(m["APTKT"][:, 0], m["control"][:, 0])) if "control" in m else "",
+            ]
+        )
+    return [
+        "## Gain against library size (random priors)",
+        "",
+        "The same groups — new objects, pool order, first observations — with libraries that "
+        "grow: each size's prior objects hold the smaller sizes'. Plot: `library.png` / `.svg`.",
+        "",
+        markdown_table(
+            [
+                "priors",
+                f"baseline step 0 → {last}",
+                f"control step 0 → {last}",
+                f"APTKT step 0 → {last}",
+                "APTKT − baseline, step 0",
+                f"APTKT − baseline, step {last}",
+                "APTKT − control, step 0",
+            ],
+            rows,
+        ),
+        "",
+    ]
+
+
 def report_markdown(
-    c: Mapping[str, Mapping[str, np.ndarray]],
+    c: Curves,
     head: Mapping[str, Any],
     found: Sequence[Check],
     profiles: Sequence[NoiseProfile] = (),
 ) -> str:
-    """report.md: the set-up, each check with its verdict, the curves and the gains, and how
-    the data's noise looks."""
+    """report.md: the set-up, each check with its verdict, the gains against library size, the
+    curves and the gains of every library and choice, and how the data's noise looks."""
+    libraries = head.get("libraries") or [head.get("priors")]
+    sizes = ", ".join(str(s) for s in libraries)
     lines = [
         f"# Real-data benchmark: {head['table']}",
         "",
@@ -251,11 +456,12 @@ def report_markdown(
         f"{head['date']}.",
         "",
         f"{head['objects']} objects, action(s) {', '.join(head['actions'])}. Each of "
-        f"{head['groups']} groups draws {head['new']} new objects and {head['priors']} prior "
+        f"{head['groups']} groups draws {head['new']} new objects and libraries of {sizes} prior "
         "objects three ways (at random, the most and the least similar to the new ones: the "
-        "distance between object means in units of the pooled within-object noise). The first "
-        "half of every object's trials builds the prior and is the pool learned from; the second "
-        "half is held out. Step 0: one observation of each new object per action; then "
+        "distance between object means in units of the pooled within-object noise); a "
+        "group's larger libraries hold its smaller ones. The first half of every object's "
+        "trials builds the prior and is the pool learned from; the second half is held out. "
+        "Step 0: one observation of each new object per action; then "
         f"{head['budget']} actively chosen ones. Gains are paired by group; intervals are 95 % "
         "Student-t intervals over groups.",
         "",
@@ -267,13 +473,14 @@ def report_markdown(
         ),
         "",
     ]
-    for choice in sorted(c, key=lambda k: list(_TITLES).index(k) if k in _TITLES else 99):
-        methods = c[choice]
+    lines += _library_table(c)
+    n_sizes = len(c)
+    for size, choice, methods in _panels(c):
         n_steps = methods["baseline"].shape[1]
         steps = [s for s in TABLE_STEPS if s < n_steps]
-        lines += [f"## {_TITLES.get(choice, choice).capitalize()}", ""]
+        lines += [f"## {_label(size, choice, n_sizes).capitalize()}", ""]
         rows = []
-        for method in (*METHOD_ORDER, "1-NN"):
+        for method in (*METHOD_ORDER, *REFERENCES):
             if method not in methods:
                 continue
             mean = np.nanmean(methods[method], axis=0)
@@ -286,11 +493,12 @@ def report_markdown(
                     [f"{method} − baseline"]
                     + [ci(_paired(methods[method][:, s], methods["baseline"][:, s])) for s in steps]
                 )
-        if "APTKT+aux" in methods:
-            rows.append(
-                ["APTKT+aux − APTKT"]
-                + [ci(_paired(methods["APTKT+aux"][:, s], methods["APTKT"][:, s])) for s in steps]
-            )
+        for method, other in (("APTKT", "control"), ("APTKT+aux", "APTKT")):
+            if method in methods and other in methods:
+                rows.append(
+                    [f"{method} − {other}"]
+                    + [ci(_paired(methods[method][:, s], methods[other][:, s])) for s in steps]
+                )
         lines += [markdown_table(["paired gain", *(f"step {s}" for s in steps)], rows), ""]
     if profiles:
         lines += [
@@ -319,9 +527,9 @@ def report_markdown(
             "",
         ]
     lines += [
-        "Plots: `benchmark.png` / `.svg` (top: mean accuracy with 95 % bands, the 1-NN "
-        "reference at step 0; bottom: gains over the baseline). Every group's curves: "
-        "`results.csv`; the numbers above: `summary.json`.",
+        "Plots: `benchmark.png` / `.svg` (top: mean accuracy with 95 % bands, the "
+        "nearest-neighbour references at step 0; bottom: gains over the baseline). Every "
+        "group's curves: `results.csv`; the numbers above: `summary.json`.",
         "",
     ]
     return "\n".join(lines)

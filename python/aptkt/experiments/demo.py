@@ -382,10 +382,12 @@ def _report_markdown(
         "## Transfer",
         "",
         "Per action and new object: the prior object it learned from with λ (Eq. 2–3) and the "
-        "log Bayes factor that let it through, or why nothing was transferred — Eq. 3's "
-        "eps_neg, or the evidence cut-off (the new objects' labels must favour the transfer by "
-        "a log Bayes factor above the margin). The decisions are those in force at the end of "
-        "each run; outcomes are counted over runs, with their mean p̄, λ and log Bayes factor.",
+        "log odds that let it through, or why nothing was transferred — Eq. 3's eps_neg, or "
+        "the second cut-off: by default the same-object cut-off (the library's log odds that "
+        "the new object is that prior object, against every other one and an object it does "
+        "not hold, must exceed the margin; with --cutoff evidence, the log Bayes factor of the "
+        "coupling). The decisions are those in force at the end of each run; outcomes are "
+        "counted over runs, with their mean p̄, λ and log odds.",
         "",
     ]
     if not transfer:
@@ -399,7 +401,7 @@ def _report_markdown(
                     "",
                     "Cells: p̄, how much the new object (row) is like the prior object (column), "
                     "mean over runs; solid red outline: learned from it (λ, in how many runs); "
-                    "dashed grey: the evidence cut-off stopped it (its log Bayes factor, in how many runs).",
+                    "dashed grey: the second cut-off stopped it (its log odds, in how many runs).",
                     "",
                 ]
     return "\n".join(lines)

@@ -17,7 +17,13 @@ import numpy as np
 
 from aptkt.experiments.plots import figure, save_figure
 from aptkt.learning.config import LearnerConfig
-from aptkt.learning.transfer_summary import EVIDENCE_CUTOFF, TRANSFERS, by_pair, verdict
+from aptkt.learning.transfer_summary import (
+    EVIDENCE_CUTOFF,
+    TRANSFERS,
+    by_pair,
+    cutoff_words,
+    verdict,
+)
 
 __all__ = ["Relatedness", "relatedness", "plot_relatedness", "SOURCE_EDGE", "STOPPED_EDGE"]
 
@@ -29,10 +35,13 @@ STOPPED_EDGE = ("0.35", "--", 1.8)
 
 class Relatedness:
     """One action's new × old matrix of mean p̄ over runs, and per cell how many runs
-    transferred that old object (with their mean λ) or tested and stopped it (mean log BF)."""
+    transferred that old object (with their mean λ) or tested and stopped it (the mean of the
+    cut-off's log odds or log Bayes factor, named ``stat``)."""
 
-    def __init__(self, new: Sequence[str], old: Sequence[str], runs: int) -> None:
-        self.new, self.old, self.runs = list(new), list(old), runs
+    def __init__(
+        self, new: Sequence[str], old: Sequence[str], runs: int, stat: str = "log BF"
+    ) -> None:
+        self.new, self.old, self.runs, self.stat = list(new), list(old), runs, stat
         shape = (len(self.new), len(self.old))
         self.p = np.full(shape, np.nan)
         self.transferred = np.zeros(shape, dtype=int)
@@ -49,7 +58,7 @@ def relatedness(
     for action, objects in by_pair(runs).items():
         first = next(iter(objects.values()))[0]
         old = list(first["mean_posterior"])
-        m = Relatedness(list(objects), old, len(runs))
+        m = Relatedness(list(objects), old, len(runs), cutoff_words(config)[0])
         for i, decisions in enumerate(objects.values()):
             for k, o in enumerate(old):
                 m.p[i, k] = np.mean([d["mean_posterior"].get(o, np.nan) for d in decisions])
@@ -80,7 +89,7 @@ def _cell_text(m: Relatedness, i: int, k: int) -> str:
     if m.transferred[i, k]:
         text += f"\nλ {m.lam[i, k]:.2f}{_share(m, m.transferred[i, k])}"
     elif m.stopped[i, k]:
-        text += f"\nlog BF {m.log_bf[i, k]:.1f}{_share(m, m.stopped[i, k])}"
+        text += f"\n{m.stat} {m.log_bf[i, k]:.1f}{_share(m, m.stopped[i, k])}"
     return text
 
 
@@ -92,8 +101,8 @@ def plot_relatedness(
     matrices: Mapping[str, Relatedness], stem: Path, *, method: str, config: LearnerConfig
 ) -> list[Path]:
     """One panel per action: cells p̄ (mean over runs); a solid outline where the new object
-    learned from that old object (λ, in how many runs), a dashed one where the evidence
-    cut-off stopped it (log Bayes factor)."""
+    learned from that old object (λ, in how many runs), a dashed one where the second cut-off
+    (same-object or evidence) stopped it (its log odds or log Bayes factor)."""
     from matplotlib.patches import Patch, Rectangle  # matplotlib only when plotting
 
     n = len(matrices)
@@ -156,11 +165,12 @@ def plot_relatedness(
             lw=SOURCE_EDGE[2],
         )
     ]
-    if config.cutoff == "evidence":
+    if config.cutoff != "paper":
+        stat, cutoff = cutoff_words(config)
         handles.append(
             Patch(
                 fill=False,
-                label=f"stopped by the evidence cut-off (log BF <= {config.evidence_margin:g})",
+                label=f"stopped by the {cutoff} ({stat} <= {config.evidence_margin:g})",
                 ec=STOPPED_EDGE[0],
                 ls=STOPPED_EDGE[1],
                 lw=STOPPED_EDGE[2],

@@ -16,15 +16,23 @@ from aptkt.learning.transfer import CUTOFFS, SOURCE_CHOICES, TRANSFER_MODES
 __all__ = [
     "GPSettings",
     "KERNELS",
+    "LONE_OBSERVATION_POSTERIOR",
     "LearnerConfig",
     "READINGS",
+    "lone_observation_signal_variance",
     "recognisable_signal_variance",
 ]
 
-#: "shared": one kernel for every one-vs-all classifier of an action, learned on the old and the
-#: new objects' observations together wherever the model lives in the prior's feature space;
-#: "per-classifier": each classifier fits its own on its own labels (the paper's reading).
-KERNELS = ("shared", "per-classifier")
+#: "library": one kernel for every one-vs-all classifier of an action whose amplitude follows
+#: from how many new objects compete (:func:`lone_observation_signal_variance`) and whose
+#: length-scale the library's observations determine at that amplitude, once per library;
+#: "shared": one kernel learned on the old and the new objects' observations together, refitted
+#: at every update; "per-classifier": each classifier fits its own on its own labels (the
+#: paper's reading).
+KERNELS = ("library", "shared", "per-classifier")
+#: The class posterior that one observation of a new object, alone in its region of the feature
+#: space, reaches at itself among the new objects (see :func:`lone_observation_signal_variance`).
+LONE_OBSERVATION_POSTERIOR = 0.9
 #: The method as this package implements it by default, or the paper's exact reading.
 READINGS = ("aptkt", "paper")
 
@@ -44,12 +52,44 @@ def recognisable_signal_variance(probability: float = 0.95) -> float:
     return math.log(probability / (1.0 - probability)) / (1.0 - probability)
 
 
+def lone_observation_signal_variance(
+    n_classes: int, posterior: float = LONE_OBSERVATION_POSTERIOR
+) -> float:
+    """The signal variance σ² at which one observation of a class, alone in its region of the
+    feature space, reaches the class posterior ``posterior`` at itself among ``n_classes``
+    one-vs-all classifiers: its own classifier gives it p, each of the others 1 − p (the same
+    lone label, negative), so the normalised posterior is p / (p + (K − 1)(1 − p)), and σ² is
+    :func:`recognisable_signal_variance` of that p.
+
+    The amplitude of the new objects' kernel is a property of the task — how many objects the
+    observations must be told from — not of the library, whose evidence favours ever larger
+    amplitudes as it grows (its objects, observed many times each, are separable; measured on
+    real data: σ² ≈ 500 with 3 old objects, 1,500–2,100 with 15), and a kernel that certain of
+    every observation learns little from the next one (docs/method.md). Below σ² ≈ 60 with five
+    objects a one-vs-all model unlearns: the object observed once more claims territory."""
+    if n_classes < 2:
+        raise ValueError(f"n_classes must be >= 2, got {n_classes}")
+    if not 0.0 < posterior < 1.0:
+        raise ValueError(f"posterior must lie in (0, 1), got {posterior}")
+    others = n_classes - 1
+    p = posterior * others / (1.0 - posterior + posterior * others)
+    return recognisable_signal_variance(p)
+
+
 @dataclass(frozen=True)
 class GPSettings:
     """How the observation models (one-vs-all Laplace GPCs) are fitted.
 
-    kernel : "shared" (default): where the new objects' model lives in the prior's feature space
-        (APTKT and the control), one kernel serves every one-vs-all classifier of the action,
+    kernel : "library" (default): where the new objects' model lives in the prior's feature space
+        (APTKT and the control), one kernel with equal modality weights serves every one-vs-all
+        classifier of the action; its σ² follows from the number of new objects
+        (:func:`lone_observation_signal_variance`), and its one length-scale maximises the new
+        classifiers' summed evidence under a hyper-prior centred on the length-scale the
+        library's observations favour at that σ² (:mod:`aptkt.learning.kernel`). How
+        confident one observation may be depends on how many objects it must be told from,
+        which the new task sets; the library knows the sensor's length-scales, and the new
+        objects' labels correct it where they lie closer together (docs/method.md).
+        "shared": one kernel serves every one-vs-all classifier of the action,
         the old model's included, and is chosen on the old and the new objects' observations
         together (the sum of every classifier's Laplace evidence). In that space every modality
         is measured in the sensor's noise, so the kernel has two hyper-parameters: σ² and one
@@ -69,7 +109,10 @@ class GPSettings:
         probability 0.95), each one standard deviation a factor of 10. None: plain ML-II (the
         paper's "maximising the log marginal likelihood").
     prior_feature_scale : the metric of the prior's feature space, where the old models live and
-        the new objects' models are fitted (``pipeline.FEATURE_SCALES``). "whiten" (default):
+        the new objects' models are fitted (``pipeline.FEATURE_SCALES``). "whiten-joint"
+        (default): as "whiten", then the noise correlations between modalities removed as well
+        (shrunk by ``pipeline.CROSS_MODAL_SHRINKAGE`` first), so that noise one contact puts
+        into several modalities counts once. "whiten":
         each modality whitened by the old objects' pooled within-object covariance — distances
         count the sensor's noise levels, correlated noise counted once (the Mahalanobis metric
         of discriminant analysis): a property of the sensor and the action that carries over to
@@ -92,8 +135,8 @@ class GPSettings:
     approximation: str = DEFAULTS.approximation
     n_jobs: int | None = DEFAULTS.n_jobs
     hyper_prior: str | None = "weak"
-    kernel: str = "shared"
-    prior_feature_scale: str = "whiten"
+    kernel: str = "library"
+    prior_feature_scale: str = "whiten-joint"
 
     def __post_init__(self) -> None:
         if self.hyper_prior not in ("weak", None):
@@ -170,16 +213,19 @@ class LearnerConfig:
     eps_neg : Eq. 3's cut-off: no transfer when the most related old object's own classifier
         claims the new object's observations with mean probability below it. 0.5: its decision
         threshold; far from its data a classifier's probability returns to 0.5 ("don't know").
-    cutoff : "evidence" (default, beyond the paper): after Eq. 3's ε_neg, the new objects' own
-        labels must favour the transfer — the log Bayes factor of the dependent model (source
-        coupled by λ) against λ = 0, under the old classifier's kernel, must exceed
+    cutoff : "same-object" (default, beyond the paper): after Eq. 3's ε_neg, the library's
+        generative model of its objects (:class:`~aptkt.learning.identity.ObjectIdentity`) must
+        hold the new object's observations to be the chosen old object's — against every other
+        old object and against an object the library does not hold — with log posterior odds
+        above ``evidence_margin``. "evidence": instead, the log Bayes factor of the dependent
+        model (source coupled by λ) against λ = 0, under the new objects' kernel, must exceed
         ``evidence_margin``. "paper": Eq. 3 alone.
-    evidence_margin : the log Bayes factor a transfer must exceed; 3 by default, "strong
-        evidence" on Kass and Raftery's scale. A transfer makes the old object's observations
-        count as the new object's — its whole region of the feature space moves to the new
-        object — so a wrong transfer costs more than a missed one: on real materials, which are
-        all distinct, every transfer that positive evidence (a margin of 0 or ln N_old) let
-        through lowered accuracy against the control (docs/method.md).
+    evidence_margin : the log odds a transfer must exceed; 3 by default, "strong evidence" on
+        Kass and Raftery's scale. A transfer makes the old object's observations count as the
+        new object's — its whole region of the feature space moves to the new object — so a
+        wrong transfer costs more than a missed one: on real materials, which are all distinct,
+        the transfers a weaker test let through lowered accuracy against the control
+        (docs/method.md).
     eps_explor : probability of a uniformly random (action, object) pick (Eq. 4).
     budget : observations chosen actively after the initial round (every action once on every
         new object).
@@ -196,7 +242,7 @@ class LearnerConfig:
 
     transfer: str = "paper"
     eps_neg: float = 0.5
-    cutoff: str = "evidence"
+    cutoff: str = "same-object"
     evidence_margin: float = 3.0
     eps_explor: float = 0.1
     budget: int = 40

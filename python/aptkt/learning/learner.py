@@ -17,6 +17,7 @@ and the control differ by the transfer alone.
 
 from __future__ import annotations
 
+import math
 import time
 import zlib
 from collections.abc import Callable, Mapping, Sequence
@@ -27,9 +28,10 @@ import numpy as np
 
 from aptkt.gp import LaplaceGPC, TransferSource
 from aptkt.learning.active import entropy, select_next
-from aptkt.learning.config import LearnerConfig
+from aptkt.learning.config import LearnerConfig, lone_observation_signal_variance
 from aptkt.learning.environment import Environment
 from aptkt.learning.evaluation import accuracy, fused_accuracy
+from aptkt.learning.kernel import LibraryEvidence, fit_new_objects
 from aptkt.learning.observations import Observations, ObservationTable
 from aptkt.learning.pipeline import FeaturePipeline
 from aptkt.learning.prior import ActionPrior, PriorKnowledge
@@ -157,11 +159,44 @@ class ActionLearner:
         )
 
     def _evidence(self, X_prior: np.ndarray, positive: np.ndarray) -> Callable[[str, float], float]:
-        """The log Bayes factor of a transfer into one new object's classifier (``positive``:
-        its observations among every new one), judged in the prior's space by the old model."""
+        """The cut-off's log odds for a transfer into one new object's classifier
+        (``positive``: its observations among every new one), in the prior's space: the
+        library's posterior odds that they are the old object's (``cutoff="same-object"``), or
+        the log Bayes factor of the coupling under the new objects' kernel ("evidence")."""
         prior = self.prior
         assert prior is not None  # only called when transferring
-        return lambda old, lam: prior.transfer_evidence(X_prior, positive, old, lam)
+        if self.config.cutoff == "same-object":
+            mine = X_prior[np.asarray(positive, dtype=bool)]
+            identity = prior.identity
+            if identity is None:  # a library without repeats cannot vouch for any transfer
+                return lambda old, lam: -math.inf
+            return lambda old, lam: identity.log_odds(mine, old)
+        kernel = None
+        if self._kernel_kind() == "library":
+            # The old model's space (every modality, no auxiliary features) at the new objects'
+            # amplitude and the length-scale the library favours there.
+            X_old, groups = prior.pipeline.transform(prior.observations)
+            sv = lone_observation_signal_variance(len(self.new_objects))
+            curve = prior.library_evidence(X_old, groups, sv, self.config.gp.approximation)
+            kernel = (sv, curve.best())
+        return lambda old, lam: prior.transfer_evidence(X_prior, positive, old, lam, kernel)
+
+    def _kernel_kind(self) -> str:
+        """The kernel of the new objects' model: the configured one in the prior's space;
+        each classifier its own without a prior (the baseline)."""
+        return self.config.gp.kernel if self.prior is not None else "per-classifier"
+
+    def _library_evidence(
+        self, groups: Mapping[str, list[int]], drop_columns: int = 0
+    ) -> LibraryEvidence:
+        """The library's part of the "library" kernel for the model input ``groups`` (the old
+        observations' input without its last ``drop_columns`` columns) at the σ² the number of
+        new objects sets (:mod:`aptkt.learning.kernel`; cached by the prior)."""
+        assert self.prior is not None  # the library kernel lives in the prior's space
+        X_old, _ = self._old_features()
+        X_old = X_old[:, : X_old.shape[1] - drop_columns]
+        sv = lone_observation_signal_variance(len(self.new_objects))
+        return self.prior.library_evidence(X_old, dict(groups), sv, self.config.gp.approximation)
 
     # -- model -------------------------------------------------------------------------------
     def update(self, step: int) -> None:
@@ -188,7 +223,7 @@ class ActionLearner:
                     choice=cfg.source_choice,
                     forced_lambda=cfg.forced_lambda,
                     evidence=self._evidence(X_prior, obs.objects == obj)
-                    if cfg.cutoff == "evidence"
+                    if cfg.cutoff != "paper"
                     else None,
                     evidence_margin=cfg.evidence_margin,
                 )
@@ -247,7 +282,17 @@ class ActionLearner:
             for obj, d in self.decisions.items()
             if d.transfers
         }
-        shared = self.prior is not None and self.config.gp.kernel == "shared"
+        kind = self._kernel_kind()
+        if kind == "library":
+            return fit_new_objects(
+                X,
+                obs.objects,
+                groups,
+                self._library_evidence(groups, n_aux),
+                sources=sources,
+                approximation=self.config.gp.approximation,
+            )
+        shared = kind == "shared"
         model = self.config.gp.make(groups, random_state=seed, shared=shared)
         if shared:
             X_old, y_old = self._old_features()

@@ -25,6 +25,7 @@ __all__ = [
     "FeaturePipeline",
     "DEFAULT_TRANSFORMS",
     "noise_whitener",
+    "joint_noise_whitener",
     "within_object_residuals",
 ]
 
@@ -34,8 +35,16 @@ __all__ = [
 #: each object's rows (the sensor's variation between repeated observations of one object),
 #: then each modality's output multiplied by the inverse square root of its pooled
 #: within-object covariance (shrunk towards its diagonal), so that the sensor's noise is
-#: uncorrelated with unit variance in every direction — the Mahalanobis metric of the noise.
-FEATURE_SCALES = ("spread", "whiten")
+#: uncorrelated with unit variance in every direction of each modality — the Mahalanobis metric
+#: of the noise, one modality at a time; "whiten-joint": then the noise correlations *between*
+#: modalities are removed too (:func:`joint_noise_whitener`), so that noise one contact puts
+#: into several modalities at once counts once.
+FEATURE_SCALES = ("spread", "whiten", "whiten-joint")
+#: How far the noise correlations between modalities are shrunk towards none before they are
+#: removed (``(1 − s) C + s diag C``): they are estimated from the old objects only and, unlike a
+#: transducer's own noise, they come from the contact — how hard and where the finger touched —
+#: which depends on the object.
+CROSS_MODAL_SHRINKAGE = 0.2
 
 
 @dataclass
@@ -234,6 +243,41 @@ def noise_whitener(Z: np.ndarray, objects: np.ndarray) -> np.ndarray | None:
     return W
 
 
+def joint_noise_whitener(
+    Z: np.ndarray, objects: np.ndarray, shrinkage: float = CROSS_MODAL_SHRINKAGE
+) -> np.ndarray | None:
+    """The symmetric inverse square root M of the pooled within-object covariance C of all of
+    ``Z``'s columns, its correlations shrunk by ``shrinkage`` towards 0 (``(1 − s) C + s diag
+    C``), so that ``Z @ M.T`` has uncorrelated noise of unit variance; None where the repeats give too few degrees of freedom (as
+    :func:`noise_whitener`).
+
+    The symmetric root (ZCA whitening) is the whitening whose output columns stay closest to the
+    input columns — each output column is the one most correlated with its own input column
+    (Kessy, Lewin and Strimmer, *Optimal whitening and decorrelation*, 2018) — so after it the
+    columns still belong to their modalities, and a multi-modal kernel (Eq. 1) still weighs the
+    modalities. Columns without within-object variation pass through unchanged."""
+    if not 0.0 <= shrinkage <= 1.0:
+        raise ValueError(f"shrinkage must lie in [0, 1], got {shrinkage}")
+    R, dof = within_object_residuals(np.asarray(Z, dtype=np.float64), objects)
+    n_objects = R.shape[0] - dof
+    if dof < max(MIN_NOISE_DOF, n_objects) or R.shape[1] < 2:
+        return None
+    var = (R**2).sum(axis=0) / dof
+    noisy = var > 1e-24 * np.maximum(1.0, np.abs(Z).max(axis=0) ** 2)
+    if noisy.sum() < 2:
+        return None
+    sd = np.sqrt(var[noisy])
+    U = R[:, noisy] / sd
+    corr = (1.0 - shrinkage) * (U.T @ U / dof) + shrinkage * np.eye(U.shape[1])
+    vals, vecs = np.linalg.eigh(corr)
+    floor = 1e-12 * vals.max()
+    inv_sqrt = vecs @ np.diag(1.0 / np.sqrt(np.maximum(vals, floor))) @ vecs.T
+    M = np.eye(Z.shape[1])
+    idx = np.flatnonzero(noisy)
+    M[np.ix_(idx, idx)] = inv_sqrt / sd[None, :]
+    return M
+
+
 #: Transforms used for the skin's modalities unless configured otherwise. Texture columns 0-2
 #: are the Hjorth activities (variances); the other modalities are z-scored as they are.
 DEFAULT_TRANSFORMS: Mapping[str, ModalityTransform] = {
@@ -251,22 +295,30 @@ class FeaturePipeline:
         base = DEFAULT_TRANSFORMS if transforms is None else transforms
         self.transforms: dict[str, ModalityTransform] = {k: replace(v) for k, v in base.items()}
         self.modality_names_: tuple[str, ...] = ()
+        #: With ``scale="whiten-joint"``: the map applied to the modalities' outputs side by
+        #: side (:func:`joint_noise_whitener`); None otherwise.
+        self.joint_: np.ndarray | None = None
 
     def fit(self, obs: Observations, *, scale: str = "spread") -> FeaturePipeline:
         """Fit on training observations (never on test data). ``scale``
         (:data:`FEATURE_SCALES`): the metric — each column by its spread over the observations,
-        or the noise between repeated observations of the same object, whitened."""
+        or the noise between repeated observations of the same object, whitened per modality
+        ("whiten") or then across the modalities too ("whiten-joint")."""
         if scale not in FEATURE_SCALES:
             raise ValueError(f"scale must be one of {FEATURE_SCALES}, got {scale!r}")
-        objects = obs.objects if scale == "whiten" else None
+        whiten = scale in ("whiten", "whiten-joint")
+        objects = obs.objects if whiten else None
         fitted = {}
         for name in obs.modality_names:
             template = self.transforms.get(name, ModalityTransform())
             fitted[name] = replace(template, mean_=None, scale_=None, components_=None).fit(
-                obs.modalities[name], objects, whiten=scale == "whiten"
+                obs.modalities[name], objects, whiten=whiten
             )
         self.transforms = fitted
         self.modality_names_ = obs.modality_names
+        self.joint_ = None
+        if scale == "whiten-joint":
+            self.joint_ = joint_noise_whitener(self.transform(obs)[0], obs.objects)
         return self
 
     def transform(self, obs: Observations) -> tuple[np.ndarray, dict[str, list[int]]]:
@@ -284,7 +336,10 @@ class FeaturePipeline:
             blocks.append(block)
             groups[name] = list(range(start, start + block.shape[1]))
             start += block.shape[1]
-        return np.hstack(blocks), groups
+        X = np.hstack(blocks)
+        if self.joint_ is not None:
+            X = X @ self.joint_.T
+        return X, groups
 
     def state(self, prefix: str) -> dict[str, np.ndarray]:
         out: dict[str, np.ndarray] = {
@@ -293,6 +348,8 @@ class FeaturePipeline:
         for name in self.modality_names_:
             for key, value in self.transforms[name].state().items():
                 out[f"{prefix}/{name}/{key}"] = value
+        if self.joint_ is not None:
+            out[f"{prefix}/joint"] = self.joint_
         return out
 
     @classmethod
@@ -309,4 +366,7 @@ class FeaturePipeline:
             transforms[name] = ModalityTransform.from_state(sub)
         pipe.transforms = transforms
         pipe.modality_names_ = names
+        # Files written before the joint whitening existed have no such member.
+        joint = arrays.get(f"{prefix}/joint")
+        pipe.joint_ = None if joint is None else np.asarray(joint, dtype=np.float64)
         return pipe

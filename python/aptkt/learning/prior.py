@@ -22,8 +22,10 @@ from aptkt.errors import PriorFileError
 from aptkt.gp import LaplaceGPC, TransferSource
 from aptkt.learning.config import GPSettings
 from aptkt.learning.evidence import at_fitted_hyperparameters, uncoupled_evidence
+from aptkt.learning.identity import ObjectIdentity
+from aptkt.learning.kernel import LibraryEvidence, library_evidence
 from aptkt.learning.observations import Observations, ObservationTable
-from aptkt.learning.pipeline import FeaturePipeline, ModalityTransform
+from aptkt.learning.pipeline import FEATURE_SCALES, FeaturePipeline, ModalityTransform
 from aptkt.learning.prior_file import FORMAT as _FORMAT
 from aptkt.learning.prior_file import check_action, read_members
 
@@ -38,11 +40,15 @@ class ActionPrior:
     observations: Observations
     pipeline: FeaturePipeline
     model: LaplaceGPC
-    #: log Z of each source task the evidence test has judged, by old object.
-    _source_evidence: dict[str, float] = field(
+    #: log Z of each source task the evidence test has judged, by old object and kernel.
+    _source_evidence: dict[tuple[str, Any], float] = field(
         default_factory=dict, init=False, repr=False, compare=False
     )
     _loo: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
+    #: The library's evidence over the length-scale, by signal variance and model columns.
+    _evidence_curves: dict[tuple[Any, ...], LibraryEvidence] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
 
     @property
     def objects(self) -> list[str]:
@@ -85,6 +91,38 @@ class ActionPrior:
         them at every update)."""
         return self.training_features()
 
+    @cached_property
+    def identity(self) -> ObjectIdentity | None:
+        """The library's generative model of its objects in this prior's feature space: which
+        old object, if any, observations are of (:mod:`aptkt.learning.identity`). None when no
+        object was observed twice: without repeats the library knows no noise to judge by."""
+        objects = np.asarray(self.observations.objects)
+        if len(set(objects.tolist())) == objects.size:
+            return None
+        return ObjectIdentity(self._training_X, objects)
+
+    def library_evidence(
+        self,
+        X: np.ndarray,
+        groups: Mapping[str, list[int]],
+        signal_variance: float,
+        approximation: str = "erf",
+    ) -> LibraryEvidence:
+        """The old objects' summed evidence as a function of the shared length-scale at a fixed
+        ``signal_variance``, for the old observations ``X`` as a model sees them (its columns
+        ``groups``): the library's part of the "library" kernel
+        (:mod:`aptkt.learning.kernel`), computed once per signal variance and columns."""
+        key = (round(float(signal_variance), 12), tuple((m, tuple(c)) for m, c in groups.items()))
+        if key not in self._evidence_curves:
+            self._evidence_curves[key] = library_evidence(
+                X,
+                np.asarray(self.observations.objects),
+                groups,
+                signal_variance,
+                approximation=approximation,
+            )
+        return self._evidence_curves[key]
+
     def features_of(self, old_object: str) -> np.ndarray:
         return self.pipeline.transform(self.observations.of_objects([old_object]))[0]
 
@@ -94,6 +132,7 @@ class ActionPrior:
         positive: np.ndarray,
         old_object: str,
         transfer_lambda: float,
+        kernel: tuple[float, float] | None = None,
     ) -> float:
         """The log Bayes factor of transferring ``old_object`` into a new object's classifier.
 
@@ -101,7 +140,8 @@ class ActionPrior:
         ``positive``: which of them belong to the new object (its binary task's +1 labels).
         Model 1 couples the new object's latent function to the old object's one-vs-all task
         (its observations +1, the other old objects' −1) by λ, as Eq. 2 does; model 0 is the
-        same with λ = 0 (the two tasks independent). Both use the old object's own
+        same with λ = 0 (the two tasks independent). Both use ``kernel`` — (σ², length-scale) of
+        the new objects' model, equal modality weights — or without it the old object's own
         classifier's hyper-parameters, and no hyper-parameter is fitted, so the factor compares
         the two hypotheses only. With λ = 0 the joint marginal likelihood is the source's times
         the target's, so ``log Z(λ) − log Z(0) = log p(y_new | source, λ) − log p(y_new)``: how
@@ -115,22 +155,32 @@ class ActionPrior:
         if positive.shape != (X_new.shape[0],) or positive.all() or not positive.any():
             raise ValueError("positive must mark some, not all, of the new observations")
         labels = np.where(positive, 1, 0)
-        # Two fresh classifiers rather than a clone: scikit-learn's clone inspects the
-        # constructor's signature, a tenth of a decision's time.
-        coupled = at_fitted_hyperparameters(self.model, old_object)
-        coupled.fit(X_new, labels, sources={1: task})
+
+        def classifier() -> LaplaceGPC:
+            # Fresh classifiers rather than a clone: scikit-learn's clone inspects the
+            # constructor's signature, a tenth of a decision's time.
+            if kernel is None:
+                return at_fitted_hyperparameters(self.model, old_object)
+            names = list(self.model.modality_names_)
+            return LaplaceGPC(
+                length_scale=kernel[1],
+                signal_variance=kernel[0],
+                modalities=dict(zip(names, self.model.modalities_)),
+                optimize=False,
+                approximation=self.model.approximation,
+            )
+
+        coupled = classifier().fit(X_new, labels, sources={1: task})
         row = int(np.flatnonzero(coupled.classes_ == 1)[0])
         # log Z(0) = log Z_source + log Z_target. The source's factor is the same at every
-        # update (the old object's own hyper-parameters, the same old rows): it is computed
-        # once, from the first joint model at λ = 0, and only the small target task is
-        # evaluated afresh.
-        alone = at_fitted_hyperparameters(self.model, old_object).fit(X_new, labels)
+        # update (the same kernel, the same old rows): it is computed once, from the first
+        # joint model at λ = 0, and only the small target task is evaluated afresh.
+        alone = classifier().fit(X_new, labels)
         target = float(alone.log_marginal_likelihood_[0])
-        if old_object not in self._source_evidence:
-            self._source_evidence[old_object] = uncoupled_evidence(coupled)[row] - target
-        return float(
-            coupled.log_marginal_likelihood_[row] - self._source_evidence[old_object] - target
-        )
+        key = (old_object, kernel)
+        if key not in self._source_evidence:
+            self._source_evidence[key] = uncoupled_evidence(coupled)[row] - target
+        return float(coupled.log_marginal_likelihood_[row] - self._source_evidence[key] - target)
 
 
 def leave_one_out_posteriors(model: LaplaceGPC, X: np.ndarray) -> np.ndarray:
@@ -216,7 +266,8 @@ class PriorKnowledge:
                 raise ValueError(f"action {name!r}: prior knowledge needs at least two old objects")
             pipeline = FeaturePipeline(transforms).fit(obs, scale=gp.prior_feature_scale)
             X, groups = pipeline.transform(obs)
-            shared = gp.kernel == "shared"
+            # The old objects' own model: one kernel for their classifiers, learned on them.
+            shared = gp.kernel in ("library", "shared")
             model = gp.make(groups, random_state=seed + k, shared=shared).fit(X, obs.objects)
             actions[name] = ActionPrior(name, obs, pipeline, model)
             if progress is not None:
@@ -319,7 +370,7 @@ class PriorKnowledge:
             return GPSettings.from_dict(recorded) if isinstance(recorded, dict) else GPSettings()
         except (TypeError, ValueError):
             scale = self.feature_scale
-            return GPSettings(prior_feature_scale=scale if scale == "spread" else "whiten")
+            return GPSettings(prior_feature_scale=scale if scale in FEATURE_SCALES else "whiten")
 
     @property
     def feature_scale(self) -> str:

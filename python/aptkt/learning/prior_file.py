@@ -43,7 +43,7 @@ _MEMBER_PATTERNS = [
         r"meta",
         r"a\d+/obs/(objects|trials)",
         rf"a\d+/obs/modality/{_NAME}",
-        r"a\d+/pipeline/modalities",
+        r"a\d+/pipeline/(modalities|joint)",
         rf"a\d+/pipeline/{_NAME}/(log_columns|pca_components|mean|scale|pca_scale|components)",
         r"a\d+/model/(meta|X|y|theta)",
         r"a\d+/model/source_(X|lambda)_\d+",
@@ -228,6 +228,11 @@ def check_action(path: Path, arrays: dict[str, np.ndarray], prefix: str, action:
             if pca >= 0:
                 raise c.fail(f"pipeline/{m}/components", "missing (pca_components is set)")
             width += d
+    if f"{prefix}/pipeline/joint" in arrays:
+        # The noise whitening across modalities: a map of the modalities' outputs side by side.
+        c.get(
+            "pipeline/joint", "f", 2, lambda s: s == (width, width), f" of shape ({width}, {width})"
+        )
     X = c.get("model/X", "f", 2, lambda s: s == (n, width), f" of shape ({n}, {width})")
     del X
     y = c.get("model/y", "iu", 1, lambda s: s == (n,), f" of {n} class numbers")

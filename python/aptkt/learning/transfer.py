@@ -11,7 +11,15 @@ observations?") whatever the number of old objects.
 
 Whether the chosen old object is relevant at all (``cutoff``):
 
-* ``"evidence"`` (default, beyond the paper): Eq. 3's ε_neg, and then the target task decides.
+* ``"same-object"`` (default, beyond the paper): Eq. 3's ε_neg, and then the library's
+  generative model of its objects (:class:`~aptkt.learning.identity.ObjectIdentity`) decides:
+  the log posterior odds that the new object's observations so far are the chosen old
+  object's — against each other old object and against an object the library does not hold —
+  must exceed ``evidence_margin``. A transfer moves the old object's whole region of the feature
+  space to the new object; on real materials only a new object that is the old one (the same
+  material under another name) gains from it, and the more old objects compete, the more
+  evidence one of them needs (each holds 1/N of the prior).
+* ``"evidence"`` (beyond the paper): Eq. 3's ε_neg, and then the target task decides.
   ``p̄`` only asks which old object the new one is most like *among the old ones*; a one-vs-all
   classifier trained on the old objects alone also claims observations that are like none of
   them, as long as they lie on its side of the others. The transfer is kept only if it makes
@@ -47,9 +55,10 @@ TRANSFER_MODES = ("paper", "none", "control")
 #: Which old object Eq. 3 picks: the most related (the method) or, for a stress test of the
 #: cut-off, the least related.
 SOURCE_CHOICES = ("most", "least")
-#: Whether Eq. 3's ε_neg alone decides ("paper") or the target task's evidence must also favour
-#: the transfer ("evidence"; see the module docstring).
-CUTOFFS = ("evidence", "paper")
+#: Whether Eq. 3's ε_neg alone decides ("paper") or, after it, the library's model of its
+#: objects must hold the new object to be the chosen old one ("same-object") or the target
+#: task's evidence must favour the transfer ("evidence"; see the module docstring).
+CUTOFFS = ("same-object", "evidence", "paper")
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,10 @@ which cut-off stopped it and why.
 
 A decision is the plain dictionary a :class:`~aptkt.learning.learner.StepRecord` holds per
 action and new object (:meth:`~aptkt.learning.transfer.TransferDecision.as_dict`). The
-configuration that made it says which rule applied: Eq. 3's ``eps_neg`` and, with
-``cutoff="evidence"``, the log Bayes factor that must exceed ``evidence_margin``. One text
+configuration that made it says which rule applied: Eq. 3's ``eps_neg`` and then, with
+``cutoff="same-object"``, the library's log odds that the new object is the old one, or with
+``cutoff="evidence"`` the log Bayes factor of the coupling, which must exceed
+``evidence_margin``. One text
 serves one decision (a live run's steps, the README's example) and the same new object's
 decisions over several runs (the demo, learning from a table): outcomes that agree are told
 once, with their means and how many runs reached them.
@@ -82,18 +84,28 @@ def _mean(values: Sequence[float]) -> float:
     return sum(finite) / len(finite) if finite else math.nan
 
 
+def cutoff_words(config: LearnerConfig) -> tuple[str, str]:
+    """What the second cut-off's number is called, and the cut-off itself: the library's log
+    odds that the new object is the old one (``cutoff="same-object"``) or the log Bayes factor
+    of the coupling ("evidence")."""
+    if config.cutoff == "same-object":
+        return "log odds", "same-object cut-off"
+    return "log BF", "evidence cut-off"
+
+
 def _text(group: Sequence[Verdict], config: LearnerConfig) -> str:
     """One outcome, with the means over the verdicts that reached it."""
     first = group[0]
     p, lam, log_bf = (_mean([getattr(v, k) for v in group]) for k in ("p", "lam", "log_bf"))
     like = "most" if config.source_choice == "most" else "least"
+    stat, cutoff = cutoff_words(config)
     if first.outcome == TRANSFERS:
-        bf = f", log BF {log_bf:.1f} > {config.evidence_margin:g}" if math.isfinite(log_bf) else ""
+        bf = f", {stat} {log_bf:.1f} > {config.evidence_margin:g}" if math.isfinite(log_bf) else ""
         return f"<- {first.candidate} (lambda {lam:.2f}{bf})"
     if first.outcome == EVIDENCE_CUTOFF:
         return (
-            f"no transfer, {like} like {first.candidate} (p {p:.2f}) but log BF {log_bf:.1f} "
-            f"<= {config.evidence_margin:g} (evidence cut-off)"
+            f"no transfer, {like} like {first.candidate} (p {p:.2f}) but {stat} {log_bf:.1f} "
+            f"<= {config.evidence_margin:g} ({cutoff})"
         )
     p_text = _below(p, config.eps_neg)
     return f"no transfer, {like} like {first.candidate} (p {p_text} < eps_neg {config.eps_neg:g})"
@@ -126,8 +138,8 @@ def describe_runs(decisions: Sequence[Mapping[str, Any]], config: LearnerConfig)
 
 
 def describe(decision: Mapping[str, Any], config: LearnerConfig) -> str:
-    """One decision, e.g. ``sponge <- foam (lambda 0.84, log BF 5.2 > 3)`` or ``sponge: no
-    transfer, most like foam (p 0.84) but log BF 1.8 <= 3 (evidence cut-off)``."""
+    """One decision, e.g. ``sponge <- foam (lambda 0.84, log odds 5.2 > 3)`` or ``sponge: no
+    transfer, most like foam (p 0.84) but log odds 1.8 <= 3 (same-object cut-off)``."""
     return describe_runs([decision], config)
 
 

@@ -23,6 +23,7 @@ import json
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +35,7 @@ from aptkt.data.store import DatasetReader, DatasetWriter
 from aptkt.errors import AptktError
 from aptkt.learning.config import LearnerConfig
 from aptkt.learning.environment import RecordingEnvironment
+from aptkt.learning.extract import ExtractionSettings
 from aptkt.learning.learner import APTKT, StepRecord
 from aptkt.learning.observations import ObservationTable
 from aptkt.learning.prior import PriorKnowledge
@@ -240,7 +242,16 @@ def _finish(
     summary["learned_prior"] = None
     if table:
         try:
-            PriorKnowledge.build(table, gp=config.gp, seed=config.seed).save(learned)
+            # In the loaded library's metric, so that the two merge (aptkt prior merge).
+            gp = config.gp
+            if learner.prior is not None:
+                gp = replace(gp, prior_feature_scale=learner.prior.feature_scale)
+            new = PriorKnowledge.build(table, gp=gp, seed=config.seed)
+            new.metadata.update(
+                action_definitions=summary.get("actions", {}),
+                extraction=ExtractionSettings().to_dict(),
+            )
+            new.save(learned)
             summary["learned_prior"] = str(learned)
         except ValueError as exc:  # e.g. an action observed on one object only (an early fault)
             summary["learned_prior_error"] = str(exc)

@@ -1,0 +1,268 @@
+"""The lifelong benchmark: a library that grows batch by batch, on any sensor's feature table.
+
+In each of ``orders`` random orders of the table's objects, the first ``batch`` objects form
+the library a lab starts with (built from the first half of their trials). Then the next
+``batch`` objects arrive and are learned — with APTKT from the whole library, and with the
+baseline from nothing, from the same pool (the first half of their trials) in the same order —
+and the objects APTKT learned, with exactly the observations it made, are merged into the
+library (:func:`~aptkt.learning.library.merge_priors`), which is refitted. And so on until the
+objects run out (batches of ``batch``; the last, incomplete one is left out).
+
+Measured per batch, paired by order: APTKT and the baseline at one observation per object and
+at the end of the budget on the new objects' held-out trials (the second half); and the grown
+library's own accuracy on the held-out trials of every object it holds, against a
+nearest-class-mean rule on the same observations in the same metric (the library's).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aptkt.errors import FeatureTableError
+from aptkt.experiments.benchmark import _subset, split_trials
+from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
+from aptkt.learning.feature_table import FeatureTable
+from aptkt.learning.library import merge_priors
+from aptkt.learning.observations import ObservationTable
+
+__all__ = [
+    "LifelongSettings",
+    "library_accuracy",
+    "nearest_class_mean_accuracy",
+    "run_order",
+    "run_lifelong",
+]
+
+
+@dataclass(frozen=True)
+class LifelongSettings:
+    orders: int = 20
+    batch: int = 5
+    budget: int = 20
+    seed: int = 0
+    actions: tuple[str, ...] | None = None
+    config: LearnerConfig = LearnerConfig()
+
+    def __post_init__(self) -> None:
+        if self.orders < 1:
+            raise ValueError(f"orders must be >= 1, got {self.orders}")
+        if self.batch < 2:
+            raise ValueError(f"batch must be >= 2, got {self.batch}")
+        if self.budget < 0:
+            raise ValueError(f"budget must be >= 0, got {self.budget}")
+
+
+def library_accuracy(
+    library: PriorKnowledge, test: ObservationTable, model: str = "identity"
+) -> float:
+    """Mean over actions of the library's accuracy on ``test`` (observations of its objects),
+    in its feature space: by its generative model of its objects (``model="identity"``, the most
+    probable known object of each observation) or by its one-vs-all GP classifier ("gp")."""
+    accs = []
+    for action, obs in test.items():
+        ap = library[action]
+        X = ap.pipeline.transform(obs)[0]
+        if model == "gp":
+            predicted = np.asarray(ap.model.predict(X)).astype(str)
+        else:
+            ident = ap.identity
+            if ident is None:
+                raise ValueError(f"action {action!r}: no object of the library was observed twice")
+            predicted = np.array(
+                [ident.objects_[int(np.argmax(ident.log_posterior(x[None, :])[0]))] for x in X]
+            )
+        accs.append(float(np.mean(predicted == obs.objects)))
+    return float(np.mean(accs))
+
+
+def nearest_class_mean_accuracy(library: PriorKnowledge, test: ObservationTable) -> float:
+    """Mean over actions of the accuracy of the nearest class mean — each object's mean of the
+    library's observations, in the library's feature space — on ``test``."""
+    accs = []
+    for action, obs in test.items():
+        ap = library[action]
+        X = ap.pipeline.transform(ap.observations)[0]
+        objects = np.asarray(ap.observations.objects)
+        names = sorted(set(objects.tolist()))
+        means = np.array([X[objects == o].mean(axis=0) for o in names])
+        T = ap.pipeline.transform(obs)[0]
+        d = ((T[:, None, :] - means[None, :, :]) ** 2).sum(axis=-1)
+        accs.append(float(np.mean(np.asarray(names)[d.argmin(axis=1)] == obs.objects)))
+    return float(np.mean(accs))
+
+
+def _orders(objects: Sequence[str], s: LifelongSettings) -> list[list[str]]:
+    if len(objects) < 2 * s.batch:
+        raise FeatureTableError(
+            f"a lifelong benchmark in batches of {s.batch} needs at least {2 * s.batch} objects "
+            f"(a starting library and one batch); the table has {len(objects)}"
+        )
+    rng = np.random.default_rng(s.seed)
+    return [[str(o) for o in rng.permutation(list(objects))] for _ in range(s.orders)]
+
+
+def run_order(
+    index: int,
+    order: Sequence[str],
+    learn: ObservationTable,
+    test: ObservationTable,
+    s: LifelongSettings,
+) -> list[dict[str, Any]]:
+    """One order: the starting library, then batch after batch learned and merged. Rows: per
+    batch, each method's curve (``method`` baseline/APTKT, ``step``, ``accuracy``) and the grown
+    library's accuracy (``method`` library / NCM, step 0)."""
+    actions = list(learn)
+    seed = s.seed * 1_000_003 + index
+    library_objects = list(order[: s.batch])
+    library = PriorKnowledge.build(_subset(learn, library_objects), gp=s.config.gp, seed=seed)
+    rows: list[dict[str, Any]] = []
+    n_batches = (len(order) - s.batch) // s.batch
+    for b in range(1, n_batches + 1):
+        new = list(order[b * s.batch : (b + 1) * s.batch])
+        pool, held = _subset(learn, new), _subset(test, new)
+        tags = {
+            "order": index,
+            "batch": b,
+            "library": len(library.objects),
+            "new_objects": ",".join(new),
+        }
+        learned: dict[str, Any] = {}
+        for method, transfer in (("baseline", "none"), ("APTKT", "paper")):
+            cfg = replace(s.config, budget=s.budget, seed=seed + b, transfer=transfer)
+            learner = APTKT(cfg, library if method == "APTKT" else None)
+            run = learner.run(PoolEnvironment(pool, seed=seed + b), actions, new, test=held)
+            rows += [
+                {**tags, "method": method, "step": k, "accuracy": step.mean_accuracy}
+                for k, step in enumerate(run.steps)
+            ]
+            if method == "APTKT":
+                learned = {a: lrn.observations for a, lrn in learner.learners.items()}
+        # What the robot observed of the new objects becomes a library of its own, then joins.
+        new_library = PriorKnowledge.build(learned, gp=library.gp_settings, seed=seed + b)
+        library = merge_priors(
+            [(f"library {b - 1}", library), (f"batch {b}", new_library)], seed=seed + b
+        )
+        library_objects += new
+        everything = _subset(test, library_objects)
+        tags["library"] = len(library.objects)
+        rows.append(
+            {
+                **tags,
+                "method": "library",
+                "step": 0,
+                "accuracy": library_accuracy(library, everything),
+            }
+        )
+        rows.append(
+            {
+                **tags,
+                "method": "library GP",
+                "step": 0,
+                "accuracy": library_accuracy(library, everything, "gp"),
+            }
+        )
+        rows.append(
+            {
+                **tags,
+                "method": "NCM",
+                "step": 0,
+                "accuracy": nearest_class_mean_accuracy(library, everything),
+            }
+        )
+    return rows
+
+
+def _task(task: tuple[int, list[str], ObservationTable, ObservationTable, LifelongSettings]):
+    return run_order(*task)
+
+
+def run_lifelong(
+    table: FeatureTable,
+    s: LifelongSettings,
+    *,
+    output: Path,
+    jobs: int = 1,
+    scheduler: Any = None,
+    command: str = "",
+    progress: bool = True,
+    say: Callable[[str], None] = print,
+) -> dict[str, Any]:
+    """Run the lifelong benchmark and write results.csv, summary.json, report.md and
+    lifelong.png/.svg to ``output``. Returns the summary (its "checks" say which held)."""
+    from aptkt import __version__
+    from aptkt.experiments import lifelong_report as lr
+    from aptkt.experiments.executors import make_executor
+    from aptkt.experiments.plots import save_figure
+    from aptkt.experiments.progress import Progress
+    from aptkt.experiments.tables import write_csv
+
+    actions = list(s.actions) if s.actions else table.action_names
+    learn_rows, test_rows = split_trials(table, actions)
+    learn = table.observations(actions, learn_rows)
+    test = table.observations(actions, test_rows)
+    orders = _orders(table.object_names, s)
+    executor = make_executor(jobs, scheduler)
+    n_batches = (len(table.object_names) - s.batch) // s.batch
+    say(
+        f"{table.path}: {len(table.object_names)} objects, action(s) {', '.join(actions)}; "
+        f"{s.orders} orders: a library of {s.batch}, then {n_batches} batch(es) of {s.batch} "
+        f"learned and merged, budget {s.budget}, on {executor.description}"
+    )
+    t0 = time.perf_counter()
+    bar = Progress(s.orders, "order", "lifelong", enabled=progress)
+    tasks = [(i, order, learn, test, s) for i, order in enumerate(orders)]
+    rows: list[dict[str, Any]] = []
+    try:
+        results = (
+            ((i, _task(t)) for i, t in enumerate(tasks))
+            if scheduler is None and jobs <= 1
+            else executor.imap_unordered(_task, tasks)
+        )
+        for _, r in results:
+            rows += r
+            bar.update(1)
+    finally:
+        executor.close()
+        bar.close()
+    seconds = time.perf_counter() - t0
+    rows.sort(key=lambda r: (r["order"], r["batch"], r["method"], r["step"]))
+    output.mkdir(parents=True, exist_ok=True)
+    write_csv(output / "results.csv", rows)
+    c = lr.tables(rows)
+    found = lr.checks(c)
+    head = {
+        "table": str(table.path),
+        "command": command,
+        "software_version": __version__,
+        "seconds": seconds,
+        "jobs": jobs if scheduler is None else executor.description,
+        "date": time.strftime("%Y-%m-%d"),
+        "objects": len(table.object_names),
+        "actions": actions,
+        "orders": s.orders,
+        "batch": s.batch,
+        "budget": s.budget,
+    }
+    save_figure(lr.plot(c), output / "lifelong")
+    summary = {
+        **head,
+        "learner": s.config.to_dict(),
+        "results": lr.summary(c),
+        "checks": [{"claim": k.claim, "measured": k.measured, "holds": k.holds} for k in found],
+    }
+    (output / "summary.json").write_text(json.dumps(summary, indent=1))
+    (output / "report.md").write_text(lr.report_markdown(c, head, found))
+    for k in found:
+        say(f"  {'holds' if k.holds else 'FAILS'}: {k.claim} — {k.measured}")
+    say(
+        f"{sum(k.holds for k in found)} of {len(found)} checks hold; done in {seconds:.0f} s: "
+        f"{output / 'report.md'}, {output / 'lifelong.png'}, {output / 'results.csv'}"
+    )
+    return summary

@@ -1,0 +1,145 @@
+"""Which known object is this, or none of them: a generative model of a library's objects in
+its noise-whitened feature space.
+
+The two-covariance model of probabilistic linear discriminant analysis (Ioffe, *Probabilistic
+linear discriminant analysis*, ECCV 2006; Prince and Elder, ICCV 2007), as speaker
+verification uses it to ask "is this the enrolled speaker, or someone else?":
+
+* an object's observations scatter around the object's mean with the sensor's within-object
+  noise W (pooled over the library), scaled per object by how noisy that object is
+  (``noise_levels_``: a scalar per object, its own residual variance over the pooled one,
+  shrunk towards 1 by one observation's worth of the pooled noise);
+* the means of objects — known or not — scatter around the library's centre with the
+  between-object covariance B (the object means' covariance, Ledoit–Wolf shrunk, minus the
+  share of the noise each mean still carries).
+
+For a set V of n observations of one object, the model compares "V is old object i" — V's mean
+lies within the noise of i's mean, and V scatters as i does — with "V is an object not in the
+library" — V's mean is a fresh draw from B. With a prior probability ``p_new`` that an object
+is not in the library, and the rest shared equally among the N known objects, the posterior is
+``P(i | V) ∝ (1 − p_new)/N · p(V | i)`` and ``P(new | V) ∝ p_new · p(V | new)``: a known object
+must beat every other known object *and* the chance of being a new one, and the more objects
+the library holds, the more evidence one of them needs (each starts with 1/N of the prior).
+Unlike a discriminative classifier of the old objects, whose one-vs-all probabilities also
+claim observations that are like none of them, the likelihood of "none of them" is explicit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.special import logsumexp
+from sklearn.covariance import ledoit_wolf
+
+__all__ = ["ObjectIdentity", "NEW_OBJECT_PRIOR"]
+
+#: Prior probability that an object presented to the robot is not one of the library's: as
+#: likely as not — neither the library nor the lab knows better before the first touch.
+NEW_OBJECT_PRIOR = 0.5
+
+
+class ObjectIdentity:
+    """The library's two-covariance model, fitted on its observations (rows of ``X``, in the
+    library's feature space) and their objects. Needs at least two objects and one repeated
+    observation."""
+
+    def __init__(self, X: np.ndarray, objects: np.ndarray) -> None:
+        X = np.asarray(X, dtype=np.float64)
+        labels = np.asarray(objects).astype(str)
+        if X.ndim != 2 or labels.shape != (X.shape[0],):
+            raise ValueError(f"X must be (n, d) with one object per row, got {X.shape}")
+        names, index, counts = np.unique(labels, return_inverse=True, return_counts=True)
+        if names.size < 2:
+            raise ValueError("an identity model needs at least two objects")
+        n, d = X.shape
+        dof = n - names.size
+        if dof < 1:
+            raise ValueError("an identity model needs at least one repeated observation")
+        means = np.zeros((names.size, d))
+        np.add.at(means, index, X)
+        means /= counts[:, None]
+        R = X - means[index]
+        W = R.T @ R / dof
+        scale = np.trace(W) / d
+        # A column without any noise would make W singular: give it a sliver of the average.
+        W = W + np.eye(d) * max(1e-9 * scale, 1e-300)
+        own = np.zeros(names.size)
+        np.add.at(own, index, (R**2).sum(axis=1))
+        own_dof = (counts - 1) * d
+        # Each object's noise relative to the pool, with one observation's worth of the pooled
+        # noise as its prior (objects observed once keep the pooled level).
+        levels = (own / scale + d) / (own_dof + d)
+        cov_means = ledoit_wolf(means)[0] if names.size > 1 else np.zeros((d, d))
+        B = cov_means - W * float(np.mean(1.0 / counts))
+        vals, vecs = np.linalg.eigh((B + B.T) / 2)
+        floor = 1e-3 * max(float(np.mean(np.maximum(vals, 0.0))), scale)
+        self.objects_ = [str(o) for o in names]
+        self.means_ = means
+        self.counts_ = counts
+        self.noise_levels_ = levels
+        self.within_ = W
+        self.between_ = vecs @ np.diag(np.maximum(vals, floor)) @ vecs.T
+        self.centre_ = means.mean(axis=0)
+        self._W_inv = np.linalg.inv(W)
+        self._W_logdet = float(np.linalg.slogdet(W)[1])
+
+    @property
+    def n_features(self) -> int:
+        return int(self.means_.shape[1])
+
+    def log_likelihoods(self, V: np.ndarray) -> tuple[np.ndarray, float]:
+        """``log p(V | old object i)`` for every known object, and ``log p(V | new object)``,
+        for the rows of ``V`` (observations of one object)."""
+        V = np.atleast_2d(np.asarray(V, dtype=np.float64))
+        if V.ndim != 2 or V.shape[1] != self.n_features or V.shape[0] == 0:
+            raise ValueError(
+                f"expected observations with {self.n_features} features, got shape {V.shape}"
+            )
+        n, d = V.shape
+        mean = V.mean(axis=0)
+        D = V - mean
+        scatter = float(np.einsum("ij,jk,ik->", D, self._W_inv, D))
+
+        # The scatter around V's own mean: the same under every hypothesis but for the noise
+        # level it is measured in.
+        def scatter_term(level: float) -> float:
+            return -0.5 * (
+                scatter / level + (n - 1) * (d * np.log(2 * np.pi * level) + self._W_logdet)
+            )
+
+        old = np.empty(len(self.objects_))
+        for i, level in enumerate(self.noise_levels_):
+            C = self.within_ * level * (1.0 / n + 1.0 / self.counts_[i])
+            old[i] = _log_normal(mean, self.means_[i], C) + scatter_term(level)
+        new = _log_normal(mean, self.centre_, self.between_ + self.within_ / n) + scatter_term(1.0)
+        return old, float(new)
+
+    def log_posterior(
+        self, V: np.ndarray, new_object_prior: float = NEW_OBJECT_PRIOR
+    ) -> tuple[np.ndarray, float]:
+        """``log P(old object i | V)`` for every known object and ``log P(new object | V)``."""
+        if not 0.0 < new_object_prior < 1.0:
+            raise ValueError(f"new_object_prior must lie in (0, 1), got {new_object_prior}")
+        old, new = self.log_likelihoods(V)
+        joint = np.concatenate(
+            [[np.log(new_object_prior) + new], np.log((1 - new_object_prior) / old.size) + old]
+        )
+        joint -= logsumexp(joint)
+        return joint[1:], float(joint[0])
+
+    def log_odds(
+        self, V: np.ndarray, old_object: str, new_object_prior: float = NEW_OBJECT_PRIOR
+    ) -> float:
+        """The log posterior odds that the observations ``V`` are of ``old_object`` rather than
+        of any other known object or of one not in the library."""
+        try:
+            i = self.objects_.index(str(old_object))
+        except ValueError:
+            raise KeyError(f"{old_object!r} is not one of the library's objects") from None
+        log_p = float(self.log_posterior(V, new_object_prior)[0][i])
+        return log_p - float(np.log(-np.expm1(min(log_p, -1e-300))))
+
+
+def _log_normal(x: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> float:
+    L = np.linalg.cholesky(cov)
+    z = np.linalg.solve(L, x - mean)
+    return float(-0.5 * z @ z - np.log(np.diag(L)).sum() - 0.5 * x.size * np.log(2 * np.pi))
