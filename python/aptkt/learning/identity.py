@@ -26,6 +26,8 @@ claim observations that are like none of them, the likelihood of "none of them" 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.special import logsumexp
 from sklearn.covariance import ledoit_wolf
@@ -79,8 +81,13 @@ class ObjectIdentity:
         self.within_ = W
         self.between_ = vecs @ np.diag(np.maximum(vals, floor)) @ vecs.T
         self.centre_ = means.mean(axis=0)
-        self._W_inv = np.linalg.inv(W)
-        self._W_logdet = float(np.linalg.slogdet(W)[1])
+        self._W_chol = np.linalg.cholesky(W)
+        self._W_logdet = 2.0 * float(np.log(np.diag(self._W_chol)).sum())
+        # The old objects' means in W's whitened coordinates: every "same object" density is a
+        # scaled W, so one triangular solve serves them all.
+        self._white_means = np.linalg.solve(self._W_chol, means.T).T
+        self._impostors: dict[int, float] = {}
+        self._X, self._labels = X, labels
 
     @property
     def n_features(self) -> int:
@@ -96,22 +103,25 @@ class ObjectIdentity:
             )
         n, d = V.shape
         mean = V.mean(axis=0)
-        D = V - mean
-        scatter = float(np.einsum("ij,jk,ik->", D, self._W_inv, D))
-
         # The scatter around V's own mean: the same under every hypothesis but for the noise
-        # level it is measured in.
-        def scatter_term(level: float) -> float:
-            return -0.5 * (
-                scatter / level + (n - 1) * (d * np.log(2 * np.pi * level) + self._W_logdet)
-            )
+        # level it is measured in — n − 1 directions' worth of N(0, level W).
+        Z = np.linalg.solve(self._W_chol, (V - mean).T)
+        scatter = float((Z**2).sum())
+        logdet = self._W_logdet
 
-        old = np.empty(len(self.objects_))
-        for i, level in enumerate(self.noise_levels_):
-            C = self.within_ * level * (1.0 / n + 1.0 / self.counts_[i])
-            old[i] = _log_normal(mean, self.means_[i], C) + scatter_term(level)
+        def scatter_term(level: Any) -> Any:
+            return -0.5 * (scatter / level + (n - 1) * (d * np.log(2 * np.pi * level) + logdet))
+
+        # Same object i: V's mean ~ N(m_i, a_i W) with a_i = level_i (1/n + 1/n_i).
+        a = self.noise_levels_ * (1.0 / n + 1.0 / self.counts_)
+        z = np.linalg.solve(self._W_chol, mean) - self._white_means
+        old = (
+            -0.5 * (z**2).sum(axis=1) / a
+            - 0.5 * (d * np.log(2 * np.pi * a) + logdet)
+            + scatter_term(self.noise_levels_)
+        )
         new = _log_normal(mean, self.centre_, self.between_ + self.within_ / n) + scatter_term(1.0)
-        return old, float(new)
+        return np.asarray(old, dtype=np.float64), float(new)
 
     def log_posterior(
         self, V: np.ndarray, new_object_prior: float = NEW_OBJECT_PRIOR
@@ -137,6 +147,34 @@ class ObjectIdentity:
             raise KeyError(f"{old_object!r} is not one of the library's objects") from None
         log_p = float(self.log_posterior(V, new_object_prior)[0][i])
         return log_p - float(np.log(-np.expm1(min(log_p, -1e-300))))
+
+    def impostor_log_odds(self, n: int) -> float:
+        """The largest log odds that one library object, left out of the library and presented
+        as ``n`` of its observations (consecutive rows, every such set), receives for being some
+        other library object: how alike the library's own distinct objects can look. A claim
+        that a new object *is* an old one needs more than this (the same-object cut-off): a
+        library whose objects include look-alikes asks for more evidence than one whose
+        objects are far apart. -inf where no object has ``n`` observations or leaving one
+        out leaves fewer than two."""
+        if n < 1:
+            raise ValueError(f"n must be >= 1, got {n}")
+        if n not in self._impostors:
+            best = -np.inf
+            for o in self.objects_:
+                keep = self._labels != o
+                rows = self._X[~keep]
+                others = self._labels[keep]
+                if rows.shape[0] < n or len(set(others.tolist())) < 2:
+                    continue
+                if others.size == len(set(others.tolist())):
+                    continue  # no repeats left: no noise to judge by
+                model = ObjectIdentity(self._X[keep], others)
+                for start in range(0, rows.shape[0] - n + 1, n):
+                    old, _ = model.log_posterior(rows[start : start + n])
+                    log_p = float(old.max())
+                    best = max(best, log_p - float(np.log(-np.expm1(min(log_p, -1e-300)))))
+            self._impostors[n] = best
+        return self._impostors[n]
 
 
 def _log_normal(x: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> float:

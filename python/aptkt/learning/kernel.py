@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -49,8 +50,11 @@ __all__ = [
 LENGTH_SCALE_PRIOR_SD = math.log(10.0)
 #: The library's evidence is evaluated on this many length-scales, from the data scale divided by
 #: :data:`GRID_SPAN` to the data scale times it (evenly in log), and interpolated between them.
-GRID_POINTS = 25
+GRID_POINTS = 17
 GRID_SPAN = 30.0
+#: A search that starts from an earlier optimum scans this many grid points on either side of it
+#: first (and the whole grid if the best of them lies at the edge of that window).
+WINDOW = 2
 
 
 def data_scale(X: np.ndarray, columns: list[int]) -> float:
@@ -87,8 +91,12 @@ class LibraryEvidence:
     values: np.ndarray
     centre: float
 
+    @cached_property
+    def _spline(self) -> CubicSpline:
+        return CubicSpline(self.log_grid, self.values)
+
     def __call__(self, log_length_scale: float) -> float:
-        return float(CubicSpline(self.log_grid, self.values)(log_length_scale))
+        return float(self._spline(log_length_scale))
 
     def log_prior(self, log_length_scale: float) -> float:
         z = (log_length_scale - math.log(self.centre)) / LENGTH_SCALE_PRIOR_SD
@@ -129,12 +137,27 @@ def library_evidence(
     return LibraryEvidence(float(signal_variance), log_grid, values, centre)
 
 
-def _maximise(objective, log_grid: np.ndarray) -> float:
-    """The maximiser of a smooth objective of log ℓ over the grid's range: the best grid point,
-    then Brent's method in the interval around it."""
-    values = [objective(t) for t in log_grid]
-    k = int(np.argmax(values))
-    lo, hi = log_grid[max(k - 1, 0)], log_grid[min(k + 1, log_grid.size - 1)]
+def _maximise(objective, log_grid: np.ndarray, start: float | None = None) -> float:
+    """The maximiser of a smooth objective of log ℓ over the grid's range: the best grid point
+    (near ``start`` first, the whole grid if that best lies at the window's edge), then
+    Brent's method in the interval around it."""
+    values: dict[int, float] = {}
+
+    def at(k: int) -> float:
+        if k not in values:
+            values[k] = objective(log_grid[k])
+        return values[k]
+
+    last = log_grid.size - 1
+    if start is None:
+        window = range(log_grid.size)
+    else:
+        near = int(np.argmin(np.abs(log_grid - start)))
+        window = range(max(near - WINDOW, 0), min(near + WINDOW, last) + 1)
+    k = max(window, key=at)
+    if start is not None and k in (window.start, window.stop - 1) and k not in (0, last):
+        k = max(range(log_grid.size), key=at)
+    lo, hi = log_grid[max(k - 1, 0)], log_grid[min(k + 1, last)]
     if hi <= lo:
         return float(log_grid[k])
     found = minimize_scalar(
@@ -151,17 +174,28 @@ def fit_new_objects(
     *,
     sources: Mapping[Any, list[Any]] | None = None,
     approximation: str = "erf",
+    start: float | None = None,
 ) -> LaplaceGPC:
     """The new objects' model on ``X`` (with ``sources`` per class, as :meth:`LaplaceGPC.fit`
     takes them) at the library's σ² and the length-scale maximising the library's evidence plus
-    the new classifiers' plus the hyper-prior."""
+    the new classifiers' plus the hyper-prior; ``start``: an earlier optimum's length-scale
+    (its log), where the search begins. The chosen log length-scale is ``model.theta_[0, 1]``."""
 
-    def new(t: float) -> LaplaceGPC:
+    def fitted(t: float) -> LaplaceGPC:
         return _model(groups, library.signal_variance, math.exp(t), approximation).fit(
             X, objects, sources=sources or None
         )
 
-    def objective(t: float) -> float:
-        return library(t) + float(new(t).log_marginal_likelihood_.sum()) + library.log_prior(t)
+    first = fitted(library.log_grid[library.log_grid.size // 2] if start is None else start)
+    theta = first.theta_.copy()
+    n_modalities = len(groups)
 
-    return new(_maximise(objective, library.log_grid))
+    def objective(t: float) -> float:
+        # One model evaluated at other length-scales: the core's Laplace evidence per
+        # classifier, each row its own λ.
+        theta[:, 1 : 1 + n_modalities] = t
+        evidence = np.asarray(first.log_marginal_likelihood(theta)).sum()
+        return library(t) + float(evidence) + library.log_prior(t)
+
+    best = _maximise(objective, library.log_grid, start)
+    return fitted(best)

@@ -79,6 +79,9 @@ class ActionLearner:
         # Every old object's observations in the prior's space and their objects (the source
         # tasks and the shared kernel's old task), computed once.
         self._old: tuple[np.ndarray, np.ndarray] | None = None
+        # The "library" kernel's last log length-scale per model input (with or without the
+        # auxiliary features).
+        self._log_length_scales: dict[tuple[str, ...], float] = {}
 
     # -- data --------------------------------------------------------------------------------
     def add(self, obj: str, observation: Mapping[str, np.ndarray], trial: int = 0) -> None:
@@ -181,6 +184,18 @@ class ActionLearner:
             kernel = (sv, curve.best())
         return lambda old, lam: prior.transfer_evidence(X_prior, positive, old, lam, kernel)
 
+    def _cutoff_threshold(self, n: int) -> float:
+        """What the second cut-off's log odds must exceed for a new object observed ``n``
+        times: ``evidence_margin``, and with the same-object cut-off at least the log odds the
+        library's own distinct objects give each other (left out one at a time and presented
+        as ``n`` observations: :meth:`ObjectIdentity.impostor_log_odds`) — a library holding
+        look-alikes asks for more evidence that a new object is one of its objects."""
+        margin = float(self.config.evidence_margin)
+        identity = self.prior.identity if self.prior is not None else None
+        if self.config.cutoff != "same-object" or identity is None:
+            return margin
+        return max(margin, identity.impostor_log_odds(n))
+
     def _kernel_kind(self) -> str:
         """The kernel of the new objects' model: the configured one in the prior's space;
         each classifier its own without a prior (the baseline)."""
@@ -214,18 +229,17 @@ class ActionLearner:
             X_prior = self.prior.pipeline.transform(obs)[0]
             related = self.prior.binary_probabilities(X_prior)
             for obj in self.new_objects:
+                mine = obs.objects == obj
                 self.decisions[obj] = decide_transfer(
                     obj,
                     self.prior.objects,
-                    related[obs.objects == obj],
+                    related[mine],
                     cfg.eps_neg,
                     cfg.transfer,
                     choice=cfg.source_choice,
                     forced_lambda=cfg.forced_lambda,
-                    evidence=self._evidence(X_prior, obs.objects == obj)
-                    if cfg.cutoff != "paper"
-                    else None,
-                    evidence_margin=cfg.evidence_margin,
+                    evidence=self._evidence(X_prior, mine) if cfg.cutoff != "paper" else None,
+                    evidence_margin=self._cutoff_threshold(int(mine.sum())),
                 )
         self.model, X = self._fit(pipeline, step)
         self.space = "prior" if self.prior is not None else "new"
@@ -284,14 +298,20 @@ class ActionLearner:
         }
         kind = self._kernel_kind()
         if kind == "library":
-            return fit_new_objects(
+            key = tuple(groups)
+            model = fit_new_objects(
                 X,
                 obs.objects,
                 groups,
                 self._library_evidence(groups, n_aux),
                 sources=sources,
                 approximation=self.config.gp.approximation,
+                start=self._log_length_scales.get(key),
             )
+            # The next update's search starts where this one ended: one observation more
+            # moves the optimum little.
+            self._log_length_scales[key] = float(model.theta_[0, 1])
+            return model
         shared = kind == "shared"
         model = self.config.gp.make(groups, random_state=seed, shared=shared)
         if shared:

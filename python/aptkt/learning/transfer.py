@@ -67,8 +67,10 @@ class TransferDecision:
 
     ``sources`` and ``lambdas`` list the transferred old object and its λ (none when nothing
     passes the cut-off).
-    ``evidence`` holds, for every old object that passed ε_neg and was tested, the log Bayes
-    factor of transferring it (``cutoff="evidence"``; empty otherwise).
+    ``evidence`` holds, for every old object that passed ε_neg and was tested, the second
+    cut-off's log odds for transferring it (the library's log odds that the new object is that
+    old one with ``cutoff="same-object"``, the log Bayes factor of the coupling with
+    ``"evidence"``; empty otherwise), and ``threshold`` what it had to exceed.
     """
 
     new_object: str
@@ -77,6 +79,7 @@ class TransferDecision:
     sources: tuple[str, ...] = ()
     lambdas: tuple[float, ...] = ()
     evidence: tuple[tuple[str, float], ...] = ()
+    threshold: float | None = None
 
     @property
     def transfers(self) -> bool:
@@ -100,6 +103,7 @@ class TransferDecision:
             "sources": dict(zip(self.sources, self.lambdas)),
             "mean_posterior": dict(zip(self.old_objects, self.mean_posterior)),
             "log_bayes_factor": dict(self.evidence),
+            "threshold": self.threshold,
         }
 
 
@@ -131,9 +135,9 @@ def decide_transfer(
     related old object, and a λ that replaces ``p̄`` once the cut-off has let the transfer
     through (the cut-off always looks at the chosen object's own ``p̄``).
 
-    ``evidence(old_object, λ)``, if given, is the log Bayes factor of transferring that old
-    object with that λ (``cutoff="evidence"``); an old object that passed ε_neg is then kept
-    only if it exceeds ``evidence_margin``.
+    ``evidence(old_object, λ)``, if given, is the second cut-off's log odds for transferring
+    that old object with that λ (see :class:`TransferDecision`); an old object that passed
+    ε_neg is then kept only if it exceeds ``evidence_margin``.
     """
     if mode not in TRANSFER_MODES:
         raise ValueError(f"transfer mode must be one of {TRANSFER_MODES}, got {mode!r}")
@@ -167,4 +171,5 @@ def decide_transfer(
         sources=tuple(str(old_objects[i]) for i in picked),
         lambdas=tuple(lambdas[i] for i in picked),
         evidence=tuple(tested),
+        threshold=float(evidence_margin) if evidence is not None else None,
     )

@@ -44,8 +44,10 @@ EVIDENCE_CUTOFF = "evidence cut-off"
 class Verdict:
     """One decision, read: the old object it weighed (``candidate``: the transferred one, or
     the one Eq. 3 picked before a cut-off stopped it), its mean probability ``p``, the λ
-    transferred (0 without), the log Bayes factor of the transfer (NaN where not tested) and
-    the outcome (:data:`TRANSFERS`, :data:`BELOW_EPS_NEG` or :data:`EVIDENCE_CUTOFF`)."""
+    transferred (0 without), the second cut-off's log odds for the transfer (``log_bf``; NaN
+    where not tested), what they had to exceed (``threshold``: the margin, or more where the
+    library's own look-alikes ask for more; NaN where not tested) and the outcome
+    (:data:`TRANSFERS`, :data:`BELOW_EPS_NEG` or :data:`EVIDENCE_CUTOFF`)."""
 
     new_object: str
     candidate: str
@@ -53,6 +55,7 @@ class Verdict:
     lam: float
     log_bf: float
     outcome: str
+    threshold: float = math.nan
 
 
 def verdict(decision: Mapping[str, Any], config: LearnerConfig) -> Verdict:
@@ -76,6 +79,7 @@ def verdict(decision: Mapping[str, Any], config: LearnerConfig) -> Verdict:
         lam=float(decision.get("lambda") or 0.0),
         log_bf=float(tested.get(candidate, math.nan)),
         outcome=outcome,
+        threshold=float(decision.get("threshold") or math.nan) if tested else math.nan,
     )
 
 
@@ -99,13 +103,15 @@ def _text(group: Sequence[Verdict], config: LearnerConfig) -> str:
     p, lam, log_bf = (_mean([getattr(v, k) for v in group]) for k in ("p", "lam", "log_bf"))
     like = "most" if config.source_choice == "most" else "least"
     stat, cutoff = cutoff_words(config)
+    bar = _mean([v.threshold for v in group])
+    bar_text = f"{bar:.3g}" if math.isfinite(bar) else f"{config.evidence_margin:g}"
     if first.outcome == TRANSFERS:
-        bf = f", {stat} {log_bf:.1f} > {config.evidence_margin:g}" if math.isfinite(log_bf) else ""
+        bf = f", {stat} {log_bf:.1f} > {bar_text}" if math.isfinite(log_bf) else ""
         return f"<- {first.candidate} (lambda {lam:.2f}{bf})"
     if first.outcome == EVIDENCE_CUTOFF:
         return (
             f"no transfer, {like} like {first.candidate} (p {p:.2f}) but {stat} {log_bf:.1f} "
-            f"<= {config.evidence_margin:g} ({cutoff})"
+            f"<= {bar_text} ({cutoff})"
         )
     p_text = _below(p, config.eps_neg)
     return f"no transfer, {like} like {first.candidate} (p {p_text} < eps_neg {config.eps_neg:g})"
