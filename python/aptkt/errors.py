@@ -30,6 +30,7 @@ __all__ = [
     "FeatureTableError",
     "RawDataError",
     "PriorFileError",
+    "ModelFileError",
     "DatasetError",
     "Terminated",
     "WorkerDiedError",
@@ -56,6 +57,11 @@ class RawDataError(ConfigError):
 class PriorFileError(AptktError, ValueError):
     """A prior-knowledge file is not one, is damaged, or is inconsistent; the message names the
     file and the member."""
+
+
+class ModelFileError(AptktError, ValueError):
+    """A saved model (``LaplaceGPC.save``) is not one, is damaged, inconsistent or too large;
+    the message names the file and the member."""
 
 
 class DatasetError(AptktError):
