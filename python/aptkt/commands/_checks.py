@@ -13,6 +13,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from aptkt.errors import ConfigError
+from aptkt.files import not_a_regular_file
 
 #: Trials one command may plan (objects x actions x repetitions): 50 times the paper's test set
 #: (2,100 trials). The plan is held in memory before the first trial runs, and a larger one
@@ -162,8 +163,20 @@ def output_file(path: str | Path, option: str = "--output") -> Path:
     path = Path(path)
     if path.is_dir():
         raise ConfigError(f"{option} {path}: is a directory (give a file name)")
+    _regular(path, option)
     _writable(_existing_ancestor(path, option), path, option)
     return path
+
+
+def _regular(path: Path, option: str) -> None:
+    """Only regular files are ours: a device, a FIFO or a socket under the name is neither
+    read (it may block, or never end) nor renamed away and replaced by a file."""
+    kind = not_a_regular_file(path)
+    if kind is not None:
+        raise ConfigError(
+            f"{option} {path}: is {kind}, not a regular file (aptkt reads and writes only "
+            "regular files)"
+        )
 
 
 def output_dir(path: str | Path, option: str = "--output") -> Path:
@@ -175,9 +188,34 @@ def output_dir(path: str | Path, option: str = "--output") -> Path:
         if not path.is_dir():
             raise ConfigError(f"{option} {path}: is a file, not a directory")
         _writable(path, path, option)
+        _holds_only_files(path, option)
     else:
         _writable(_existing_ancestor(path, option), path, option)
     return path
+
+
+#: What the names of the files aptkt writes into an output directory end in (results, plots,
+#: data, and their temporary versions).
+_RESULT_SUFFIXES = (".md", ".json", ".jsonl", ".csv", ".png", ".svg", ".npz", ".h5", ".tmp")
+
+
+def _holds_only_files(directory: Path, option: str) -> None:
+    """An output directory holds no device, FIFO or socket named as aptkt's files are
+    (``*.json``, ``*.csv``, ...): aptkt would block on one, or replace it, when it writes its
+    results there. (Others, a database's socket in /tmp say, are none of aptkt's business.)"""
+    try:
+        entries = list(os.scandir(directory))
+    except OSError:
+        return  # (what cannot be listed is reported when it is written)
+    for entry in entries:
+        if not entry.name.endswith(_RESULT_SUFFIXES) or entry.is_dir() or entry.is_file():
+            continue
+        kind = not_a_regular_file(entry.path)
+        if kind is not None and kind != "a directory":
+            raise ConfigError(
+                f"{option} {directory}: holds {entry.name}, {kind}; aptkt writes its results "
+                "only among regular files: choose another directory"
+            )
 
 
 def input_file(path: str | Path, option: str) -> Path:
@@ -187,6 +225,7 @@ def input_file(path: str | Path, option: str) -> Path:
         raise ConfigError(f"{option} {path}: no such file")
     if path.is_dir():
         raise ConfigError(f"{option} {path}: is a directory, not a file")
+    _regular(path, option)
     return path
 
 

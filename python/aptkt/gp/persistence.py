@@ -220,6 +220,10 @@ def load(cls: Any, path: str | Path) -> Any:
     return from_state(cls, arrays, str(path))
 
 
+def _known(member: str) -> bool:
+    return _MEMBER.fullmatch(member) is not None
+
+
 def _jsonable(value: Any) -> Any:
     if isinstance(value, HyperPrior):
         return asdict(value)
