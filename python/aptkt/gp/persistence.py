@@ -216,7 +216,7 @@ def save(gpc: Any, path: str | Path) -> None:
 
 def load(cls: Any, path: str | Path) -> Any:
     """The model saved at ``path``; every member checked before it is read (see the module)."""
-    arrays = read_npz(path, known=_MEMBER.fullmatch, error=ModelFileError, kind="saved LaplaceGPC")
+    arrays = read_npz(path, known=_known, error=ModelFileError, kind="saved LaplaceGPC")
     return from_state(cls, arrays, str(path))
 
 
