@@ -230,15 +230,24 @@ def input_file(path: str | Path, option: str) -> Path:
 
 
 def intact_data_set(path: str | Path, option: str) -> None:
-    """A data set file that is not cut short, or whose shortened end damaged nothing: bytes
-    past the end of a file read as zeros, and a command must not learn from those. (Damage in
-    the middle of a file is found when the damaged recording or feature is read.)"""
+    """A data set file that holds recordings and is not cut short, or whose shortened end
+    damaged nothing: bytes past the end of a file read as zeros, and a command must not learn
+    from those. (Damage in the middle of a file is found when the damaged recording or feature
+    is read.)"""
     from aptkt.data.store import DatasetReader
 
     with DatasetReader(path) as rd:
         problem = rd.damage() if rd.cut_short else None
+        empty = len(rd) == 0 and not rd.lost
+        left_empty = rd.holds_nothing
+    where = f"{option} {path}" if option.startswith("-") else str(path)
+    if empty and not problem:
+        raise ConfigError(
+            f"{where}: holds no recordings"
+            + (" (its writer was killed as it created it)" if left_empty else "")
+            + "; there is nothing to read"
+        )
     if problem:
-        where = f"{option} {path}" if option.startswith("-") else str(path)
         raise ConfigError(
             f"{where}: damaged (the file is cut short): {problem}; 'aptkt dataset repair "
             f"{path}' keeps every readable recording"
