@@ -39,7 +39,7 @@ from typing import IO
 import numpy as np
 
 from aptkt.errors import RawDataError
-from aptkt.features import hjorth
+from aptkt.features import MAX_MAGNITUDE, hjorth
 from aptkt.files import open_regular
 from aptkt.learning.observations import Observations
 
@@ -78,10 +78,6 @@ MIN_FRAMES = 50
 MAX_TRIAL_BYTES = 64 << 20
 #: Longest line read: a frame's 45 numbers take under 1 kB.
 MAX_LINE_BYTES = 64 << 10
-#: Largest magnitude of a value: the sensor's readings are 12-bit counts and the timestamps
-#: seconds since 1970. Beyond this, squares in the features' statistics (a standard
-#: deviation, a variance) could overflow, and a feature would be no finite number.
-MAX_MAGNITUDE = 1e100
 
 _TRIAL = re.compile(r"^(mat\d+)_(\d+)_bio\.csv$")
 
@@ -129,7 +125,8 @@ def read_trial(path: str | Path) -> np.ndarray:
     """The frames of one ``*_bio.csv`` file, (frames, len(COLUMNS)), checked: a regular file of
     at most :data:`MAX_TRIAL_BYTES`, read line by line (no line longer than
     :data:`MAX_LINE_BYTES`), the header, one finite number per cell within
-    ±:data:`MAX_MAGNITUDE`, at least :data:`MIN_FRAMES` frames, increasing timestamps. Every
+    ±:data:`aptkt.features.MAX_MAGNITUDE` (the sensor's readings are 12-bit counts, its
+    timestamps seconds since 1970), at least :data:`MIN_FRAMES` frames, increasing timestamps. Every
     problem is a :class:`~aptkt.errors.RawDataError` naming the file and the line."""
     path = Path(path)
     values = array("d")
