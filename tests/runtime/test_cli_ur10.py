@@ -7,7 +7,7 @@ depends on timing is measured, not fixed (``timing.py``): the skin's silence tim
 press's hold from the lateness seen before the first run, each assertion on a duration, a
 sample count or a contact found while moving from the lateness seen during its own run; and
 states that come after a delay are waited for, not assumed after a sleep. Shown to hold with
-the machine loaded (docs/dev/testing.md)."""
+the machine loaded (docs/reliability.md, "Tests that depend on timing")."""
 
 from __future__ import annotations
 

@@ -29,7 +29,7 @@ MAX_RUNS = 1_000
 #: Seconds aptkt waits for the temperature sensors after an action (--thermal-wait): an hour.
 MAX_THERMAL_WAIT = 3600.0
 #: aptkt writes side files next to a data set, named after it (``.features-tmp``,
-#: ``.repairing``, ``.crashed``, ``.creating``, ``.aborted-<k>.h5``): a name must leave this
+#: ``.repairing``, ``.crashed``, ``.creating``, ``.lock``, ``.aborted-<k>.h5``): a name must leave this
 #: many bytes of the file system's limit for them.
 SIDE_FILE_ROOM = 16
 
