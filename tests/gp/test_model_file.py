@@ -4,7 +4,6 @@ any problem is a ModelFileError naming the file and the member."""
 
 from __future__ import annotations
 
-import io
 import json
 import os
 import threading
@@ -14,6 +13,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from npz_files import npy_header, opened_members
 
 from aptkt.errors import ModelFileError
 from aptkt.files import NPZ_MAX_BYTES
@@ -40,15 +40,6 @@ def _members(path):
         return {k: d[k] for k in d.files}
 
 
-def _npy_header(shape, dtype="<f8"):
-    """A .npy member that declares ``shape`` but holds only a few bytes of data."""
-    buf = io.BytesIO()
-    np.lib.format.write_array_header_1_0(
-        buf, {"descr": dtype, "fortran_order": False, "shape": shape}
-    )
-    return buf.getvalue() + b"\0" * 64
-
-
 def _with_member(src, dst, member, data):
     with zipfile.ZipFile(src) as a, zipfile.ZipFile(dst, "w", zipfile.ZIP_DEFLATED) as b:
         for item in a.infolist():
@@ -68,7 +59,7 @@ def test_the_saved_model_loads(saved):
 def test_declared_sizes_are_checked_before_anything_is_read(saved, tmp_path, monkeypatch, member):
     # The report: a 4 MB file whose extra member held 4 GiB of zeros, or one declaring 10**11
     # floats, ended in "MemoryError: Unable to allocate".
-    bad = _with_member(saved, tmp_path / "huge.npz", member, _npy_header((10**11,)))
+    bad = _with_member(saved, tmp_path / "huge.npz", member, npy_header((10**11,)))
     assert 10**11 * 8 > NPZ_MAX_BYTES
     read = []
     original = np.lib.format.read_array
@@ -81,15 +72,8 @@ def test_declared_sizes_are_checked_before_anything_is_read(saved, tmp_path, mon
 
 
 def test_an_extra_member_is_never_opened(saved, tmp_path, monkeypatch):
-    bad = _with_member(saved, tmp_path / "zeros.npz", "zeros", _npy_header((2**29,)))
-    opened = []
-    original = zipfile.ZipFile.open
-
-    def spy(self, name, *args, **kwargs):
-        opened.append(name if isinstance(name, str) else name.filename)
-        return original(self, name, *args, **kwargs)
-
-    monkeypatch.setattr(zipfile.ZipFile, "open", spy)
+    bad = _with_member(saved, tmp_path / "zeros.npz", "zeros", npy_header((2**29,)))
+    opened = opened_members(monkeypatch)
     with pytest.raises(ModelFileError, match="'zeros.npy' is not part of a saved LaplaceGPC"):
         LaplaceGPC.load(bad)
     assert "zeros.npy" not in opened

@@ -230,10 +230,19 @@ def argv_of(cell, command: str, *args: str) -> list[str]:
     ]
 
 
-def run_cli(cell, command: str, *args: str) -> int:
-    """``aptkt command ...`` in this process, the arm back at its start."""
-    cell[1].reset(pose=START)
-    return main(argv_of(cell, command, *args))
+def run_cli(
+    cell, command: str, *args: str, fault_at: tuple[int, Callable[[], object]] | None = None
+) -> int:
+    """``aptkt command ...`` in this process, the arm back at its start; ``fault_at``: ``(n,
+    fault)``, inject the fault in the ``n``-th press of the run (:func:`on_press`)."""
+    lb = cell[1]
+    lb.reset(pose=START)
+    watcher = None if fault_at is None else on_press(lb, *fault_at)
+    try:
+        return main(argv_of(cell, command, *args))
+    finally:
+        if watcher is not None:
+            watcher.stop()
 
 
 class PressWatcher:
@@ -313,11 +322,11 @@ def test_collect_survives_faults_and_resumes_to_a_complete_data_set(cell, capsys
     capsys.readouterr()
 
     # A protective stop in the middle of the second new trial (block_b, trial 1).
+    def collision() -> None:
+        lb.protective_stop("injected: collision")
+
     def stopped() -> int:
-        watcher = on_press(lb, 2, lambda: lb.protective_stop("injected: collision"))
-        rc = run_cli(cell, "collect", *common, "-n", "3", "--resume")
-        watcher.stop()
-        return rc
+        return run_cli(cell, "collect", *common, "-n", "3", "--resume", fault_at=(2, collision))
 
     def after_the_stop(rc: object) -> None:
         err = capsys.readouterr().err
@@ -341,10 +350,9 @@ def test_collect_survives_faults_and_resumes_to_a_complete_data_set(cell, capsys
     # The skin goes silent in the middle of the next trial (block_b, trial 1 again).
     def silenced() -> int:
         lb.restore_skin()
-        watcher = on_press(lb, 1, lambda: lb.silence_skin())
-        rc = run_cli(cell, "collect", *common, "-n", "3", "--resume")
-        watcher.stop()
-        return rc
+        return run_cli(
+            cell, "collect", *common, "-n", "3", "--resume", fault_at=(1, lb.silence_skin)
+        )
 
     def after_the_silence(rc: object) -> None:
         err = capsys.readouterr().err
@@ -530,10 +538,7 @@ def test_a_dropped_link_mid_press_is_a_fault_that_keeps_the_data(cell, capsys):
     args = ("--objects", "block_a,block_b", "-n", "1", "-o", str(data), "--no-progress")
 
     def dropped() -> int:
-        watcher = on_press(lb, 2, lambda: lb.drop_connections())
-        rc = run_cli(cell, "collect", *args)
-        watcher.stop()
-        return rc
+        return run_cli(cell, "collect", *args, fault_at=(2, lb.drop_connections))
 
     def kept(rc: object) -> None:
         err = capsys.readouterr().err
