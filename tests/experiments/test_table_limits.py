@@ -241,3 +241,21 @@ def test_compare_on_data_refuses_a_value_beyond_the_limit_naming_row_and_column(
 def test_compare_on_data_still_runs_with_good_arguments():
     result = compare_on_data(_data(), **GOOD, runs=1, budget=1, test_fraction=0.5)
     assert set(result.accuracy) == {"APTKT", "APTKT+aux", "baseline"}
+
+
+@pytest.mark.parametrize("named", [False, True], ids=["columns as named", "modalities"])
+def test_compare_on_data_refuses_a_wide_frame_before_building_a_table(named):
+    """The table's own checks compare every column with every other: 10**5 columns are
+    refused before it is built (they used to take minutes)."""
+    data = _data()
+    wide = {f"x{k}": data["x"] for k in range(10**5)}
+    modalities = {"m": list(wide)} if named else None
+    t0 = time.perf_counter()
+    with pytest.raises(FeatureTableError, match="100000 feature columns, more than the 1000"):
+        compare_on_data(
+            {**{k: data[k] for k in ("object", "action", "trial")}, **wide},
+            prior_objects=["o0", "o1"],
+            new_objects=["o2", "o3"],
+            modalities=modalities,
+        )
+    assert time.perf_counter() - t0 < 30

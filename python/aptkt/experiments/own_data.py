@@ -11,6 +11,7 @@ is read column by column.
 from __future__ import annotations
 
 import time
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -25,7 +26,7 @@ from aptkt.experiments.table_learning import (
     refuse_overwrite,
     write_table_results,
 )
-from aptkt.experiments.table_limits import check_table
+from aptkt.experiments.table_limits import check_size, check_table
 from aptkt.learning import LearnerConfig
 from aptkt.learning.feature_table import ID_COLUMNS, FeatureTable, table_from_columns
 
@@ -105,10 +106,11 @@ def feature_table_from(
         features = {c: c for c in names if c not in taken}
     else:
         features = {}
+        known = set(names)
         for modality, listed in modalities.items():
             if isinstance(listed, str):
                 listed = [listed]
-            unknown = [c for c in listed if c not in names]
+            unknown = [c for c in listed if c not in known]
             if unknown:
                 raise FeatureTableError(
                     f"{_NAME}: modality {modality!r} names column(s) {unknown} that the data "
@@ -118,6 +120,8 @@ def feature_table_from(
                 raise FeatureTableError(f"{_NAME}: modality {modality!r} lists no columns")
             for k, c in enumerate(listed):
                 features[f"{modality}.{k}"] = c
+    # (Before the table is built: its validation compares every column with every other.)
+    check_size(_NAME, n, len([c for c in features if c not in ID_COLUMNS]))
     for new, old in features.items():
         if new in ID_COLUMNS:
             continue
@@ -191,7 +195,7 @@ def _names(value: Any, name: str, *, at_least: int = 0) -> None:
     bad = [v for v in value if not isinstance(v, str) or not v]
     if bad:
         raise ConfigError(f"{name}: names must be non-empty text, got {bad[0]!r}")
-    twice = sorted({v for v in value if list(value).count(v) > 1})
+    twice = sorted(v for v, k in Counter(value).items() if k > 1)
     if twice:
         raise ConfigError(f"{name}: {', '.join(twice)} given more than once")
     if len(value) < at_least:

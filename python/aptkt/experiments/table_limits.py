@@ -33,6 +33,7 @@ __all__ = [
     "MAX_OBJECTS",
     "MAX_GP_ROWS",
     "MAX_DISTANCE_CELLS",
+    "check_size",
     "check_table_file",
     "check_table",
     "read_table_within_limits",
@@ -103,10 +104,13 @@ def check_table_file(path: str | Path) -> None:
                 return  # not HDF5: the reader says so
             columns = len(shapes)
             rows = max((s[0] if s else 0 for s in shapes), default=0)
-    _within(path, rows, columns - len(ID_COLUMNS), "lines of rows")
+    check_size(path, rows, columns - len(ID_COLUMNS), "lines of rows")
 
 
-def _within(path: Path, rows: int, features: int, what: str = "rows") -> None:
+def check_size(path: str | Path, rows: int, features: int, what: str = "rows") -> None:
+    """``rows`` and ``features`` (feature columns) within the limits; ``path`` names the table
+    in the message, ``what`` the rows."""
+    path = Path(path)
     if features > MAX_FEATURE_COLUMNS:
         raise _fail(
             path,
@@ -137,7 +141,7 @@ def check_table(
     ``priors_per_group`` objects with the most rows, together with its comparison of every
     two objects."""
     path = table.path
-    _within(path, len(table.trials), len(table.columns))
+    check_size(path, len(table.trials), len(table.columns))
     objects = table.object_names
     if len(objects) > MAX_OBJECTS:
         raise _fail(
