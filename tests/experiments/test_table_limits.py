@@ -210,6 +210,10 @@ BAD = [
     ("runs", 0),
     ("runs", 1.5),
     ("runs", True),
+    ("runs", 10**12),  # (the command line's bound: learn --runs)
+    ("budget", 10**12),
+    ("patience", 10**12),
+    ("test_trials", [10**30]),
     ("config", {"budget": 2}),
     ("output", 5),
     ("say", "print"),

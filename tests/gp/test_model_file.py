@@ -79,6 +79,18 @@ def test_an_extra_member_is_never_opened(saved, tmp_path, monkeypatch):
     assert "zeros.npy" not in opened
 
 
+def test_a_model_too_large_to_rebuild_is_refused_before_allocating(saved, tmp_path):
+    # 10^5 rows declare 1.6 MB, within the cap; their kernel matrices would need 720 GB.
+    members = _members(saved)
+    del members["source_X_0"], members["source_y_0"]
+    meta = _meta(members)
+    meta["sources"] = []
+    members.update(meta=_json(meta), X=np.zeros((100_000, 2)), y=np.arange(100_000) % 3)
+    np.savez(tmp_path / "m.npz", **members)
+    with pytest.raises(ModelFileError, match="member 'X': the model cannot be rebuilt"):
+        LaplaceGPC.load(tmp_path / "m.npz")
+
+
 @pytest.mark.parametrize("member", ["X", "y", "theta", "meta", "source_X_0", "source_y_0"])
 def test_a_missing_member_is_named(saved, tmp_path, member):
     # The report: a model file without X raised a bare KeyError: 'X'.

@@ -279,3 +279,13 @@ def test_a_trial_given_twice_is_refused_naming_both_files(tmp_path, capsys):
         find_trials(root)
     assert "mat1_01_bio.csv" in str(err.value) and "mat1_1_bio.csv" in str(err.value)
     assert "both trial 1 of mat1" in _import_line(tmp_path, root, capsys)
+
+
+def test_a_trial_number_beyond_an_integer_is_one_error_line(tmp_path, capsys):
+    # (Found by a sweep: mat1_<30 nines>_bio.csv ended in an OverflowError traceback.)
+    root = write_raw_set(tmp_path / "set", materials=2, trials=2)
+    src = root / "raw_data" / "mat1" / "mat1_1_bio.csv"
+    (src.parent / ("mat1_" + "9" * 30 + "_bio.csv")).write_bytes(src.read_bytes())
+    with pytest.raises(RawDataError, match="trial number 9+ is beyond 999999999"):
+        find_trials(root)
+    assert "is beyond 999999999" in _import_line(tmp_path, root, capsys)

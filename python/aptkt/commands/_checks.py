@@ -13,6 +13,9 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from aptkt.errors import ConfigError
+
+# (Re-exported: the bounds of learning runs and budgets, shared with the Python entry points.)
+from aptkt.experiments.bounds import MAX_BUDGET, MAX_RUNS  # noqa: F401
 from aptkt.files import not_a_regular_file
 
 #: Trials one command may plan (objects x actions x repetitions): 50 times the paper's test set
@@ -21,11 +24,6 @@ from aptkt.files import not_a_regular_file
 MAX_TRIALS = 100_000
 #: Trial numbers are stored as 32-bit integers in a data set's index.
 MAX_TRIAL_NUMBER = 2**31 - 1
-#: Observations a learning run may choose (--budget, --patience): every one is a trial on the
-#: robot, and the models are refitted on all of them after each.
-MAX_BUDGET = 10_000
-#: Learning runs per method (demo --trials, learn --runs).
-MAX_RUNS = 1_000
 #: Seconds aptkt waits for the temperature sensors after an action (--thermal-wait): an hour.
 MAX_THERMAL_WAIT = 3600.0
 #: aptkt writes side files next to a data set, named after it (``.features-tmp``,

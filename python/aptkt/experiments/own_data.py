@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.errors import ConfigError, FeatureTableError
+from aptkt.experiments.bounds import MAX_BUDGET, MAX_RUNS
 from aptkt.experiments.table_learning import (
     TableSettings,
     compare_on_table,
@@ -249,11 +250,12 @@ def _arguments(
         bad = [
             t
             for t in test_trials
-            if isinstance(t, bool) or not isinstance(t, (int, np.integer)) or t < 0
+            if isinstance(t, bool) or not isinstance(t, (int, np.integer)) or not 0 <= t < 2**63
         ]
         if bad or not test_trials:
             raise ConfigError(
-                f"test_trials must be trial numbers >= 0, got {bad[0] if bad else test_trials!r}"
+                "test_trials must be trial numbers >= 0 (64-bit integers), got "
+                f"{bad[0] if bad else test_trials!r}"
             )
     if (
         isinstance(test_fraction, bool)
@@ -266,6 +268,8 @@ def _arguments(
         )
     if isinstance(runs, bool) or not isinstance(runs, (int, np.integer)) or runs < 1:
         raise ConfigError(f"runs must be an integer >= 1, got {runs!r}")
+    if runs > MAX_RUNS:
+        raise ConfigError(f"runs must be at most {MAX_RUNS}, got {runs}")
     if config is not None and not isinstance(config, LearnerConfig):
         raise TypeError(f"config must be a LearnerConfig or None, got {type(config).__name__}")
     if output is not None:
@@ -287,6 +291,8 @@ def _arguments(
     defaults = {f.name: getattr(cfg, f.name) for f in fields(LearnerConfig)}
     for name, value in learner.items():
         _like(name, value, defaults[name])
+        if name in ("budget", "patience") and value is not None and value > MAX_BUDGET:
+            raise ConfigError(f"{name} must be at most {MAX_BUDGET}, got {value}")
     try:
         return replace(cfg, **learner) if learner else cfg
     except (TypeError, ValueError) as exc:

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.errors import ModelFileError
+from aptkt.errors import ModelFileError, ProblemTooLargeError
 from aptkt.files import json_member, read_npz
 from aptkt.gp.settings import DEFAULTS, HyperPrior
 from aptkt.gp.sources import TransferSource
@@ -114,6 +114,8 @@ def from_state(cls: Any, arrays: Mapping[str, np.ndarray], where: str = _IN_MEMO
         raise ModelFileError(f"{where}: member 'source_X_{i}' or its labels: {exc}") from None
     try:
         return model._fit(np.asarray(arrays["X"]), y, sources, thetas=np.asarray(arrays["theta"]))
+    except ProblemTooLargeError as exc:  # (refused before allocating: a model too large here)
+        raise ModelFileError(f"{where}: member 'X': the model cannot be rebuilt: {exc}") from None
     except (ValueError, TypeError) as exc:
         raise ModelFileError(
             f"{where}: the members X, y, theta and 'meta' do not make a model ({exc})"

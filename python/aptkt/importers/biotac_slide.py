@@ -72,6 +72,8 @@ COLUMNS: tuple[str, ...] = (
 MODALITIES: dict[str, int] = {"vibration": 3, "pressure": 2, "temperature": 3, "electrodes": 19}
 #: Fewest frames a trial must hold (0.5 s): fewer cannot be a slide, only a broken recording.
 MIN_FRAMES = 50
+#: Largest trial number (the set's are 1 to 50).
+MAX_TRIAL_NUMBER = 999_999_999
 #: Largest trial file read. The set's files hold a few seconds of frames (under 1 MB); this
 #: leaves room for minutes of them while a wrong file (a disk image, /dev/zero behind a link)
 #: is refused before it is read.
@@ -104,6 +106,10 @@ def find_trials(directory: str | Path) -> list[TrialFile]:
         for path in folder.iterdir():
             m = _TRIAL.match(path.name)
             if m and m.group(1) == folder.name:
+                if len(m.group(2).lstrip("0")) > 9:  # (a table stores trial numbers as integers)
+                    raise RawDataError(
+                        f"{path}: trial number {m.group(2)[:30]} is beyond {MAX_TRIAL_NUMBER}"
+                    )
                 trial = TrialFile(m.group(1), int(m.group(2)), path)
                 key = (trial.material, trial.trial)
                 if key in found:
