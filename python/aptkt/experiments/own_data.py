@@ -321,10 +321,8 @@ def _like(name: str, value: Any, default: Any) -> None:
     else:
         return  # (None by default, or settings of their own type: checked by LearnerConfig)
     if not ok:
-        kind = (
-            type(default).__name__.replace("int", "integer >= 0").replace("float", "finite number")
-        )
-        raise ConfigError(f"{name} must be a {kind}, got {value!r}")
+        kind = {bool: "True or False", int: "an integer >= 0", float: "a finite number"}
+        raise ConfigError(f"{name} must be {kind.get(type(default), 'text')}, got {value!r}")
 
 
 def compare_on_data(
