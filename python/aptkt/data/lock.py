@@ -19,6 +19,7 @@ import fcntl
 import json
 import os
 import socket
+import stat
 import sys
 import time
 from pathlib import Path
@@ -77,7 +78,7 @@ def describe(record: dict[str, Any] | None) -> str:
         else "?"
     )
     command = str(record.get("command") or "")[:200]
-    text = f"process {record.get('pid')} on {record.get('host')} (since {when}"
+    text = f"process {str(record.get('pid'))[:20]} on {str(record.get('host'))[:100]} (since {when}"
     return text + (f": {command})" if command else ")")
 
 
@@ -140,6 +141,9 @@ class WriterLock:
                 raise DatasetError(
                     f"{path}: cannot create its lock file {file}: {exc.strerror or exc}"
                 ) from None
+            if not stat.S_ISREG(os.fstat(fd).st_mode):  # (swapped in since the check above)
+                os.close(fd)
+                continue
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError as exc:
@@ -172,9 +176,14 @@ class WriterLock:
                 "since": time.time(),
                 "command": _command(),
             }
-            data = json.dumps(record).encode()
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, data, 0)
+            try:
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, json.dumps(record).encode(), 0)
+            except OSError as exc:  # (a full disk: no lock rather than a lock naming no one)
+                os.close(fd)
+                raise DatasetError(
+                    f"{path}: cannot write its lock file {file}: {exc.strerror or exc}"
+                ) from None
             return cls(path, fd, taken_over)
 
     @property
@@ -201,4 +210,7 @@ class WriterLock:
         self.release()
 
     def __del__(self) -> None:
-        self.release()
+        try:
+            self.release()
+        except Exception:  # noqa: BLE001 - (at interpreter exit the kernel releases it anyway)
+            pass
