@@ -20,7 +20,7 @@ import threading
 import time
 from collections.abc import Callable
 
-__all__ = ["LatenessProbe", "MachineProbe", "wait_for"]
+__all__ = ["LatenessProbe", "MachineProbe", "repeat_if_disturbed", "wait_for"]
 
 
 class LatenessProbe:
@@ -127,3 +127,33 @@ def wait_for(condition: Callable[[], bool], timeout: float, poll: float = 0.01) 
         if time.monotonic() >= deadline:
             return False
         time.sleep(poll)
+
+
+def repeat_if_disturbed(
+    attempt: Callable[[], object],
+    check: Callable[[object], None],
+    *,
+    stall: Callable[[], float],
+    budget: float,
+    begin: Callable[[], None] = lambda: None,
+    restore: Callable[[], None] = lambda: None,
+    attempts: int = 4,
+) -> None:
+    """``check(attempt())``; again (after ``restore()``) if the check failed while ``stall()``
+    — the lateness measured since ``begin()`` — exceeded ``budget``: then a timeout may have
+    fired that a machine keeping to time would not have reached, and the run is no evidence
+    either way. A failure without such a stall fails at once, as does the last attempt."""
+    for k in range(1, attempts + 1):
+        begin()
+        result = attempt()
+        try:
+            check(result)
+            return
+        except Exception:  # (an assertion, or a file the check reads missing)
+            late = stall()
+            if late <= budget or k == attempts:
+                raise
+            print(
+                f"attempt {k} disturbed: kept waiting {late:.2f} s, more than {budget:.2f} s; again"
+            )
+        restore()

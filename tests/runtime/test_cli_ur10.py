@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a missing one must fail, not skip
 from loopback_helpers import free_loopback_host  # noqa: E402
-from timing import LatenessProbe, MachineProbe, wait_for  # noqa: E402
+from timing import LatenessProbe, MachineProbe, repeat_if_disturbed, wait_for  # noqa: E402
 
 from aptkt.cli import main  # noqa: E402
 from aptkt.data import DatasetReader  # noqa: E402
@@ -107,28 +107,14 @@ def undisturbed(
     attempt: Callable[[], object],
     check: Callable[[object], None],
     keep: Iterable[Path] = (),
-    attempts: int = 4,
 ) -> None:
-    """``check(attempt())``; again, with the files ``keep`` as they were before, if the check
-    failed while the machine stalled for more than half the timeouts: then a timeout may have
-    fired that a faster machine's run would not have reached, and the run is no evidence
-    either way. A failure without such a stall fails at once."""
+    """``check(attempt())``, repeated with the files ``keep`` as they were before if the
+    machine stalled for more than half the timeouts while the check failed
+    (:func:`timing.repeat_if_disturbed`)."""
     keep = list(keep)
     saved = {p: p.read_bytes() for p in keep if p.exists()}
-    for k in range(1, attempts + 1):
-        timing.start_run()
-        result = attempt()
-        try:
-            check(result)
-            return
-        except Exception:  # (an assertion, or a file the check reads missing)
-            stall = timing.stall()
-            if stall <= timing.timeout / 2 or k == attempts:
-                raise
-            print(
-                f"attempt {k} disturbed: the machine stalled {stall:.2f} s, more than half the "
-                f"timeouts of {timing.timeout} s; again"
-            )
+
+    def restore() -> None:
         for p in keep:
             if p in saved:
                 p.write_bytes(saved[p])
@@ -136,6 +122,15 @@ def undisturbed(
                 shutil.rmtree(p)
             else:
                 p.unlink(missing_ok=True)
+
+    repeat_if_disturbed(
+        attempt,
+        check,
+        begin=timing.start_run,
+        stall=timing.stall,
+        budget=timing.timeout / 2,
+        restore=restore,
+    )
 
 
 def cell_toml(host: str, watchdog: float) -> str:
