@@ -30,11 +30,11 @@ __all__ = [
     "FeatureTableError",
     "RawDataError",
     "PriorFileError",
-    "ModelFileError",
     "DatasetError",
     "Terminated",
     "WorkerDiedError",
     "NotFittedError",
+    "ModelFileError",
     "KernelNotPositiveDefiniteError",
     "ProblemTooLargeError",
     "NonFiniteResultError",
@@ -59,11 +59,6 @@ class PriorFileError(AptktError, ValueError):
     file and the member."""
 
 
-class ModelFileError(AptktError, ValueError):
-    """A saved model (``LaplaceGPC.save``) is not one, is damaged, inconsistent or too large;
-    the message names the file and the member."""
-
-
 class DatasetError(AptktError):
     """A data set file is missing, not an aptkt data set, of another schema version, or
     cannot be written (e.g. a writer died: run ``aptkt dataset repair``)."""
@@ -81,6 +76,11 @@ class WorkerDiedError(AptktError):
 
 class NotFittedError(AptktError, AttributeError):
     """A model was used before ``fit``."""
+
+
+class ModelFileError(AptktError, ValueError):
+    """A saved model (``LaplaceGPC.save``) is not one, is damaged, inconsistent or too large;
+    the message names the file and the member."""
 
 
 class SkinError(AptktError):

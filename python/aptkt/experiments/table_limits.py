@@ -201,9 +201,12 @@ def read_table_within_limits(path: str | Path, settings: Any = None, **limits: A
     check_table_file(path)
     table = read_feature_table(path)
     if settings is not None:
+        priors = getattr(settings, "prior_objects", None)
+        if priors is not None and not isinstance(priors, int):  # (several sizes: the largest)
+            priors = max(priors)
         limits = {
-            "actions": settings.actions,
-            "priors_per_group": settings.prior_objects,
+            "actions": getattr(settings, "actions", None),
+            "priors_per_group": priors,
             **limits,
         }
     check_table(table, **limits)
