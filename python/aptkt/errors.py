@@ -35,6 +35,7 @@ __all__ = [
     "Terminated",
     "WorkerDiedError",
     "NotFittedError",
+    "ModelFileError",
     "KernelNotPositiveDefiniteError",
     "ProblemTooLargeError",
     "NonFiniteResultError",
@@ -82,6 +83,11 @@ class WorkerDiedError(AptktError):
 
 class NotFittedError(AptktError, AttributeError):
     """A model was used before ``fit``."""
+
+
+class ModelFileError(AptktError, ValueError):
+    """A saved model (``LaplaceGPC.save``) is not one, is damaged, inconsistent or too large;
+    the message names the file and the member."""
 
 
 class SkinError(AptktError):

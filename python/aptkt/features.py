@@ -33,7 +33,15 @@ __all__ = [
     "thermal_curve",
     "TEXTURE_DIM",
     "TEXTURE_NAMES",
+    "MAX_MAGNITUDE",
 ]
+
+#: Largest magnitude of a feature value, or of a raw reading, that aptkt computes with.
+#: Statistics square their inputs and sum them (a variance, a distance, a kernel): values up to
+#: 1e100 keep every such number finite with room to spare, and no sensor's reading in any unit
+#: comes near it. A larger value is refused where it enters (a feature table, an importer),
+#: naming its row and column, rather than turning into an overflow and a NaN in a report.
+MAX_MAGNITUDE = 1e100
 
 #: Length of the texture descriptor.
 TEXTURE_DIM: int = _core.TEXTURE_DIM

@@ -8,8 +8,11 @@ unless another test run holds it).
 
 from __future__ import annotations
 
+import fcntl
 import math
+import os
 import socket
+import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -37,14 +40,31 @@ FAST = dict(approach_speed=0.01, max_approach_travel=0.03)
 
 _claimed: set[str] = set()
 _claim_lock = threading.Lock()
+_claim_files: list[int] = []
+
+
+def _claim_across_processes(host: str) -> bool:
+    """Hold a lock on ``host`` for as long as this process lives: two test runs at once (a
+    loaded machine's CI, or a load test) would otherwise both find its ports free and both
+    start a loopback on it."""
+    path = os.path.join(tempfile.gettempdir(), f"aptkt-tests-loopback-{host}.lock")
+    fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        return False
+    _claim_files.append(fd)  # released by the kernel when this process ends
+    return True
 
 
 def free_loopback_host() -> str:
-    """First 127.0.0.x whose UR ports are free (and not handed out in this run)."""
+    """First 127.0.0.x whose UR ports are free (and not handed out in this run, nor to another
+    test run on this machine)."""
     with _claim_lock:
         for last in range(1, 60):
             host = f"127.0.0.{last}"
-            if host in _claimed:
+            if host in _claimed or not _claim_across_processes(host):
                 continue
             try:
                 for port in (30004, 30003, 30002, 30001, 29999):

@@ -47,6 +47,56 @@ def test_errors_are_clear(data, tmp_path, capsys):
     assert "no such data set" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("empty", ["no bytes", "no recordings"])
+def test_a_data_set_without_recordings_is_one_error_line(data, tmp_path, capsys, empty):
+    # The report: `: > e.h5; aptkt prior build e.h5 -o e.npz` ended in a traceback
+    # ("ValueError: prior knowledge needs at least one action").
+    from aptkt.data import DatasetWriter
+    from aptkt.learning.dataset import load_observations
+
+    prior = PriorKnowledge.build(load_observations(data)).save(tmp_path / "p.npz")
+    path = tmp_path / "e.h5"
+    if empty == "no bytes":
+        path.write_bytes(b"")
+    else:
+        DatasetWriter(path, "w").close()
+    commands = {
+        "prior build": ["prior", "build", str(path), "-o", str(tmp_path / "e.npz")],
+        "export-features": ["dataset", "export-features", str(path), "-o", str(tmp_path / "t.csv")],
+        "features": ["dataset", "features", str(path), "--no-progress"],
+        "learn --test": [
+            "learn",
+            "--robot",
+            "sim",
+            "--prior",
+            str(prior),
+            "--actions",
+            "P1",
+            "--test",
+            str(path),
+            "--objects",
+            "towel,cork_board",
+            "-o",
+            str(tmp_path / "run"),
+        ],
+        "reproduce --data": [
+            "reproduce",
+            "fig7",
+            "--quick",
+            "--data",
+            str(path),
+            "-o",
+            str(tmp_path / "r"),
+        ],
+    }
+    for name, argv in commands.items():
+        assert main(argv) == 1, name
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and "Traceback" not in err, (name, err)
+        assert f"{path}: holds no recordings" in err, (name, err)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["e.h5", "p.npz"]
+
+
 def test_inspect_flags_an_effectively_constant_kernel(tmp_path, capsys):
     """A length-scale far beyond the data's range makes a modality's kernel constant: inspect
     says so, whatever the modality's weight (seen: texture weight 0.36 at length-scale 2.9e4)."""

@@ -3,12 +3,12 @@ corrupt, inconsistent, foreign or oversized files are a PriorFileError naming th
 
 from __future__ import annotations
 
-import io
 import json
 import zipfile
 
 import numpy as np
 import pytest
+from npz_files import npy_header, opened_members
 
 from aptkt.cli import main
 from aptkt.errors import PriorFileError
@@ -136,15 +136,6 @@ def test_corrupt_members_are_named(good, tmp_path, corrupt):
     assert str(bad) in str(info.value)
 
 
-def _npy_header(shape, dtype="<f8"):
-    """A .npy member that declares ``shape`` but holds only a few bytes of data."""
-    buf = io.BytesIO()
-    np.lib.format.write_array_header_1_0(
-        buf, {"descr": dtype, "fortran_order": False, "shape": shape}
-    )
-    return buf.getvalue() + b"\0" * 64
-
-
 @pytest.mark.parametrize("member", ["a0/model/X", "zeros"])
 def test_declared_sizes_are_checked_before_reading(good, tmp_path, member):
     bad = tmp_path / "huge.npz"
@@ -152,7 +143,7 @@ def test_declared_sizes_are_checked_before_reading(good, tmp_path, member):
         for item in src.infolist():
             if item.filename != member + ".npy":
                 dst.writestr(item, src.read(item))
-        dst.writestr(member + ".npy", _npy_header((10**11,)))
+        dst.writestr(member + ".npy", npy_header((10**11,)))
     assert 10**11 * 8 > PRIOR_FILE_MAX_BYTES
     with pytest.raises(PriorFileError, match=member):
         PriorKnowledge.load(bad)
@@ -164,7 +155,7 @@ def test_object_arrays_are_refused(good, tmp_path):
         for item in src.infolist():
             if item.filename != "a0/obs/objects.npy":
                 dst.writestr(item, src.read(item))
-        dst.writestr("a0/obs/objects.npy", _npy_header((3,), "|O"))
+        dst.writestr("a0/obs/objects.npy", npy_header((3,), "|O"))
     with pytest.raises(PriorFileError, match="a0/obs/objects"):
         PriorKnowledge.load(bad)
 
@@ -188,14 +179,7 @@ def test_an_unknown_member_is_never_opened(good, tmp_path, monkeypatch):
     members = _members(good)
     members["zeros"] = np.zeros(1000)
     bad = _write(tmp_path / "zeros.npz", members)
-    opened = []
-    original = zipfile.ZipFile.open
-
-    def spy(self, name, *args, **kwargs):
-        opened.append(name if isinstance(name, str) else name.filename)
-        return original(self, name, *args, **kwargs)
-
-    monkeypatch.setattr(zipfile.ZipFile, "open", spy)
+    opened = opened_members(monkeypatch)
     with pytest.raises(PriorFileError, match="zeros"):
         PriorKnowledge.load(bad)
     assert "zeros.npy" not in opened

@@ -47,8 +47,9 @@ _RUST_STRING = re.compile(r'"(?:\\.|[^"\\])*"')
 
 def _fact(text: str) -> str | None:
     digits = text.replace("_", "").lower()
-    value = float(int(digits, 16)) if digits.startswith("0x") else float(digits)
-    floating = not digits.startswith("0x") and ("." in digits or "e" in digits)
+    integer = digits.startswith(("0x", "0o", "0b"))  # (a file mode, 0o644, is an integer too)
+    value = float(int(digits, 0)) if integer else float(digits)
+    floating = not integer and ("." in digits or "e" in digits)
     return WIRE_FACTS.get(value) or (FLOAT_ONLY.get(value) if floating else None)
 
 

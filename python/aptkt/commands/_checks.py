@@ -14,21 +14,20 @@ from pathlib import Path
 
 from aptkt.errors import ConfigError
 
+# (Re-exported: the bounds of learning runs and budgets, shared with the Python entry points.)
+from aptkt.experiments.bounds import MAX_BUDGET, MAX_RUNS  # noqa: F401
+from aptkt.files import not_a_regular_file
+
 #: Trials one command may plan (objects x actions x repetitions): 50 times the paper's test set
 #: (2,100 trials). The plan is held in memory before the first trial runs, and a larger one
 #: would run for days; split bigger collections with --first-trial.
 MAX_TRIALS = 100_000
 #: Trial numbers are stored as 32-bit integers in a data set's index.
 MAX_TRIAL_NUMBER = 2**31 - 1
-#: Observations a learning run may choose (--budget, --patience): every one is a trial on the
-#: robot, and the models are refitted on all of them after each.
-MAX_BUDGET = 10_000
-#: Learning runs per method (demo --trials, learn --runs).
-MAX_RUNS = 1_000
 #: Seconds aptkt waits for the temperature sensors after an action (--thermal-wait): an hour.
 MAX_THERMAL_WAIT = 3600.0
 #: aptkt writes side files next to a data set, named after it (``.features-tmp``,
-#: ``.repairing``, ``.crashed``, ``.creating``, ``.aborted-<k>.h5``): a name must leave this
+#: ``.repairing``, ``.crashed``, ``.creating``, ``.lock``, ``.aborted-<k>.h5``): a name must leave this
 #: many bytes of the file system's limit for them.
 SIDE_FILE_ROOM = 16
 
@@ -185,8 +184,20 @@ def output_file(path: str | Path, option: str = "--output") -> Path:
     path = Path(path)
     if path.is_dir():
         raise ConfigError(f"{option} {path}: is a directory (give a file name)")
+    _regular(path, option)
     _writable(_existing_ancestor(path, option), path, option)
     return path
+
+
+def _regular(path: Path, option: str) -> None:
+    """Only regular files are ours: a device, a FIFO or a socket under the name is neither
+    read (it may block, or never end) nor renamed away and replaced by a file."""
+    kind = not_a_regular_file(path)
+    if kind is not None:
+        raise ConfigError(
+            f"{option} {path}: is {kind}, not a regular file (aptkt reads and writes only "
+            "regular files)"
+        )
 
 
 def output_dir(path: str | Path, option: str = "--output") -> Path:
@@ -198,9 +209,34 @@ def output_dir(path: str | Path, option: str = "--output") -> Path:
         if not path.is_dir():
             raise ConfigError(f"{option} {path}: is a file, not a directory")
         _writable(path, path, option)
+        _holds_only_files(path, option)
     else:
         _writable(_existing_ancestor(path, option), path, option)
     return path
+
+
+#: What the names of the files aptkt writes into an output directory end in (results, plots,
+#: data, and their temporary versions).
+_RESULT_SUFFIXES = (".md", ".json", ".jsonl", ".csv", ".png", ".svg", ".npz", ".h5", ".tmp")
+
+
+def _holds_only_files(directory: Path, option: str) -> None:
+    """An output directory holds no device, FIFO or socket named as aptkt's files are
+    (``*.json``, ``*.csv``, ...): aptkt would block on one, or replace it, when it writes its
+    results there. (Others, a database's socket in /tmp say, are none of aptkt's business.)"""
+    try:
+        entries = list(os.scandir(directory))
+    except OSError:
+        return  # (what cannot be listed is reported when it is written)
+    for entry in entries:
+        if not entry.name.endswith(_RESULT_SUFFIXES) or entry.is_dir() or entry.is_file():
+            continue
+        kind = not_a_regular_file(entry.path)
+        if kind is not None and kind != "a directory":
+            raise ConfigError(
+                f"{option} {directory}: holds {entry.name}, {kind}; aptkt writes its results "
+                "only among regular files: choose another directory"
+            )
 
 
 def input_file(path: str | Path, option: str) -> Path:
@@ -210,19 +246,29 @@ def input_file(path: str | Path, option: str) -> Path:
         raise ConfigError(f"{option} {path}: no such file")
     if path.is_dir():
         raise ConfigError(f"{option} {path}: is a directory, not a file")
+    _regular(path, option)
     return path
 
 
 def intact_data_set(path: str | Path, option: str) -> None:
-    """A data set file that is not cut short, or whose shortened end damaged nothing: bytes
-    past the end of a file read as zeros, and a command must not learn from those. (Damage in
-    the middle of a file is found when the damaged recording or feature is read.)"""
+    """A data set file that holds recordings and is not cut short, or whose shortened end
+    damaged nothing: bytes past the end of a file read as zeros, and a command must not learn
+    from those. (Damage in the middle of a file is found when the damaged recording or feature
+    is read.)"""
     from aptkt.data.store import DatasetReader
 
     with DatasetReader(path) as rd:
         problem = rd.damage() if rd.cut_short else None
+        empty = len(rd) == 0 and not rd.lost
+        left_empty = rd.holds_nothing
+    where = f"{option} {path}" if option.startswith("-") else str(path)
+    if empty and not problem:
+        raise ConfigError(
+            f"{where}: holds no recordings"
+            + (" (its writer was killed as it created it)" if left_empty else "")
+            + "; there is nothing to read"
+        )
     if problem:
-        where = f"{option} {path}" if option.startswith("-") else str(path)
         raise ConfigError(
             f"{where}: damaged (the file is cut short): {problem}; 'aptkt dataset repair "
             f"{path}' keeps every readable recording"

@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     from aptkt.commands._session import split_names
     from aptkt.errors import ConfigError
     from aptkt.experiments.benchmark import PRIOR_CHOICES, BenchmarkSettings, run_benchmark
-    from aptkt.learning.feature_table import read_feature_table
+    from aptkt.experiments.table_limits import read_table_within_limits
 
     jobs(args.jobs)
     at_least(args.seed, 0, "--seed")
@@ -172,7 +172,7 @@ def run(args: argparse.Namespace) -> int:
         )
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
-    table = read_feature_table(args.table)
+    table = read_table_within_limits(args.table, settings)
     if args.lifelong:
         from aptkt.experiments.lifelong import LifelongSettings, run_lifelong
 

@@ -259,7 +259,11 @@ def run_info(args: argparse.Namespace) -> int:
             f"  {info['incomplete']} more recording was being appended when its writer stopped "
             "(left out)"
         )
-    if info["writer_died"]:
+    if info["writer"]:
+        from aptkt.data.lock import describe
+
+        print(f"  being written now by {describe(info['writer'])}")
+    elif info["writer_died"]:
         print(
             "  its writer died without closing it: readable as it is; run "
             f"'aptkt dataset repair {args.file}' before appending to it"
@@ -286,12 +290,16 @@ def run_info(args: argparse.Namespace) -> int:
 
 
 def run_features(args: argparse.Namespace) -> int:
+    from aptkt.data.lock import WriterLock
     from aptkt.experiments.executors import LocalExecutor
     from aptkt.learning.dataset import extract_features
 
     rewritable_file(args.file)
     jobs(args.jobs)
     intact_data_set(args.file, "DATASET")
+    # A live writer is refused now, not after the extraction (the features are stored under
+    # the data set's lock, taken again then).
+    WriterLock.acquire(args.file).release()
     executor = LocalExecutor(args.jobs)
     try:
         counts = extract_features(
@@ -315,6 +323,7 @@ def run_export_features(args: argparse.Namespace) -> int:
 
     input_file(args.file, "DATASET")
     intact_data_set(args.file, "DATASET")
+    output_file(args.output)
     if Path(args.output).exists() and not args.force:
         raise ConfigError(f"--output {args.output}: exists (give --force to replace it)")
     try:

@@ -26,6 +26,8 @@ import numpy as np
 from aptkt import __version__
 from aptkt.data.codec import CHUNK_ROWS, COMPRESSION, META_CHUNK_BYTES, json_default
 from aptkt.data.schema import INDEX_DTYPE, SAMPLE_FIELDS, SCHEMA, SCHEMA_VERSION
+from aptkt.errors import DatasetError
+from aptkt.files import not_a_regular_file, refuse_unless_regular
 
 __all__ = [
     "CREATING_SUFFIX",
@@ -53,6 +55,8 @@ def create(path: Path, build: Callable[[Path], None]) -> None:
     if len(os.fsencode(name)) > 240:  # the suffix must not take the name past the limit
         name = name[:120]
     tmp = path.with_name(name + CREATING_SUFFIX)
+    for target in (path, tmp):  # only regular files are replaced, or removed
+        refuse_unless_regular(target, DatasetError)
     tmp.unlink(missing_ok=True)
     try:
         build(tmp)
@@ -134,7 +138,10 @@ def holds_nothing(path: str | Path) -> bool:
     """Whether ``path`` is a data set file that a writer killed as it created it left empty:
     no bytes, or an HDF5 file too small for any data set whose structure HDF5 cannot read (or
     that has none). Such a file holds no recording, so nothing is lost by starting it afresh.
-    Any other file, HDF5 or not, is not such a file."""
+    Any other file, HDF5 or not, is not such a file; nor is anything but a regular file (a
+    device reads as empty too)."""
+    if not_a_regular_file(path) is not None:
+        return False
     try:
         size = os.path.getsize(path)
     except OSError:

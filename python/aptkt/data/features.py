@@ -15,8 +15,10 @@ import h5py
 import numpy as np
 
 from aptkt.data.hdf5 import cut_short, writer_mark
+from aptkt.data.lock import WriterLock
 from aptkt.data.store import check_schema
 from aptkt.errors import DatasetError
+from aptkt.files import refuse_unless_regular
 
 __all__ = ["store_features", "write_features"]
 
@@ -47,7 +49,8 @@ def store_features(
 
     The file is never modified in place: the features are written into a copy that then
     replaces it (a rename), so a kill at any moment leaves the file as it was, or with all the
-    features. No writer may be running (the copy would miss its later appends)."""
+    features. No writer may be running (the copy would miss its later appends): the data
+    set's lock is held meanwhile (:mod:`aptkt.data.lock`)."""
     path = Path(path)
     checked = {}
     for action, (recordings, mods) in features.items():
@@ -59,6 +62,15 @@ def store_features(
                     "values must be (n_recordings, dim) with one row per recording number"
                 )
         checked[action] = (recs, vals)
+    with WriterLock.acquire(path):
+        _store(path, checked, settings)
+
+
+def _store(
+    path: Path,
+    checked: Mapping[str, tuple[np.ndarray, Mapping[str, np.ndarray]]],
+    settings: Mapping[str, Any] | None,
+) -> None:
     if writer_mark(path):
         raise DatasetError(
             f"{path}: a writer has the file open, or died without closing it; wait for it to "
@@ -71,6 +83,7 @@ def store_features(
             "keeps every readable recording)"
         )
     tmp = path.with_name(path.name + ".features-tmp")
+    refuse_unless_regular(tmp, DatasetError)
     try:
         shutil.copyfile(path, tmp)
         with h5py.File(tmp, "a", libver="latest") as f:

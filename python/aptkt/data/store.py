@@ -59,8 +59,10 @@ from aptkt.data.hdf5 import (
     refused_for_writer_mark,
     while_locked,
 )
+from aptkt.data.lock import WriterLock, holder
 from aptkt.data.schema import INDEX_DTYPE, READABLE_VERSIONS, SAMPLE_FIELDS, SCHEMA, SCHEMA_VERSION
 from aptkt.errors import DatasetError
+from aptkt.files import refuse_unless_regular
 from aptkt.skin.samples import Recording
 
 # DatasetError lives with the other errors; the codec's names are importable from here too.
@@ -82,6 +84,10 @@ class DatasetWriter:
 
     ``mode="w"`` creates a new file (an existing one is an error unless ``overwrite``);
     ``mode="a"`` appends to an existing data set (create it if missing).
+
+    The writer holds the data set's lock (:mod:`aptkt.data.lock`) until :meth:`close`: a
+    second writer is refused, naming this one. ``lock``: the lock, taken already by the caller
+    (who releases it), e.g. for a repair's copy of the file it holds.
     """
 
     def __init__(
@@ -91,11 +97,21 @@ class DatasetWriter:
         *,
         description: Mapping[str, Any] | None = None,
         overwrite: bool = False,
+        lock: WriterLock | None = None,
     ):
 
         self.path = Path(path)
         if mode not in ("w", "a"):
             raise ValueError("mode must be 'w' or 'a'")
+        self._own_lock = lock is None
+        self.lock = WriterLock.acquire(self.path) if lock is None else lock
+        try:
+            self._open(mode, description, overwrite)
+        except BaseException:
+            self._release()
+            raise
+
+    def _open(self, mode: str, description: Mapping[str, Any] | None, overwrite: bool) -> None:
         if mode == "a" and atomic.holds_nothing(self.path):
             # Left by a writer killed as it created the file: nothing to append to.
             mode, overwrite = "w", True
@@ -222,9 +238,16 @@ class DatasetWriter:
         return i
 
     def close(self) -> None:
-        if getattr(self, "_f", None) is not None and self._f.id.valid:
-            self._f.flush()
-            self._f.close()
+        try:
+            if getattr(self, "_f", None) is not None and self._f.id.valid:
+                self._f.flush()
+                self._f.close()
+        finally:
+            self._release()
+
+    def _release(self) -> None:
+        if self._own_lock:
+            self.lock.release()
 
 
 def check_schema(f: h5py.File, path: Path, *, for_writing: bool = False) -> int:
@@ -255,6 +278,7 @@ class DatasetReader:
         self.path = Path(path)
         if not self.path.exists():
             raise DatasetError(f"{self.path}: no such file")
+        refuse_unless_regular(self.path, DatasetError)
         #: The file's writer died outside SWMR mode: it is read through a private copy.
         self.writer_died = False
         #: The file holds nothing: its writer was killed as it created it (an aptkt that
@@ -521,7 +545,8 @@ class DatasetReader:
         """A summary of the readable recordings: counts per object and action, samples, size on
         disk, schema; ``damaged`` lists ``object/action/trial`` of those that are not,
         ``damaged_features`` the stored features that are not, ``lost`` counts index rows past
-        the end of a file cut short. ``full``: read everything to find damage (see
+        the end of a file cut short, ``writer`` records the process writing the file now
+        (:func:`aptkt.data.lock.holder`). ``full``: read everything to find damage (see
         :meth:`damaged`)."""
         damaged = self.damaged(full=full)
         index = np.delete(self.index, damaged)
@@ -539,6 +564,7 @@ class DatasetReader:
             "lost": self.lost,
             "holds_nothing": self.holds_nothing,
             "writer_died": self.writer_died,
+            "writer": holder(self.path),
             "incomplete": self.incomplete,
             "objects": dict(objects),
             "actions": dict(actions),
@@ -551,19 +577,36 @@ class DatasetReader:
         }
 
 
-def repair(path: str | Path, *, backup: bool = True) -> int:
+def repair(path: str | Path, *, backup: bool = True, lock: WriterLock | None = None) -> int:
     """Make a file whose writer died appendable again: copy every readable recording into a
     fresh file and put that in its place (the original is kept as ``<name>.crashed`` when
     ``backup``). Returns the number of recordings kept (:attr:`DatasetReader.damaged` tells
     which were not). Also rewrites a file of an older schema version in the current one. On
-    any failure the file is left as it was and no temporary file remains."""
+    any failure the file is left as it was and no temporary file remains.
+
+    The data set's lock is held throughout (``lock``: the caller holds it already), so a file
+    a live writer is writing is refused, naming that writer. Only regular files are renamed: a
+    device, a FIFO or a directory at the file's name or at the backup's is refused."""
     path = Path(path)
+    held = WriterLock.acquire(path) if lock is None else lock
+    try:
+        return _repair(path, backup, held)
+    finally:
+        if lock is None:
+            held.release()
+
+
+def _repair(path: Path, backup: bool, lock: WriterLock) -> int:
     tmp = path.with_name(path.name + ".repairing")
+    crashed = path.with_name(path.name + ".crashed")
+    for side in (tmp, crashed) if backup else (tmp,):
+        refuse_unless_regular(side, DatasetError)
     try:
         with DatasetReader(path) as src:
             desc = src.description
             skip = set(src._implausible())
-            with DatasetWriter(tmp, "w", description=desc, overwrite=True) as dst:
+            # (The copy is under the original's lock: it is the original's next version.)
+            with DatasetWriter(tmp, "w", description=desc, overwrite=True, lock=lock) as dst:
                 n = 0
                 for i in range(len(src)):
                     if i in skip:
@@ -580,7 +623,7 @@ def repair(path: str | Path, *, backup: bool = True) -> int:
                     )
                     n += 1
         if backup:
-            os.replace(path, path.with_name(path.name + ".crashed"))
+            os.replace(path, crashed)
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)

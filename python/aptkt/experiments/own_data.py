@@ -11,20 +11,23 @@ is read column by column.
 from __future__ import annotations
 
 import time
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from aptkt.errors import FeatureTableError
+from aptkt.errors import ConfigError, FeatureTableError
+from aptkt.experiments.bounds import MAX_BUDGET, MAX_RUNS
 from aptkt.experiments.table_learning import (
     TableSettings,
     compare_on_table,
     refuse_overwrite,
     write_table_results,
 )
+from aptkt.experiments.table_limits import check_size, check_table
 from aptkt.learning import LearnerConfig
 from aptkt.learning.feature_table import ID_COLUMNS, FeatureTable, table_from_columns
 
@@ -104,10 +107,11 @@ def feature_table_from(
         features = {c: c for c in names if c not in taken}
     else:
         features = {}
+        known = set(names)
         for modality, listed in modalities.items():
             if isinstance(listed, str):
                 listed = [listed]
-            unknown = [c for c in listed if c not in names]
+            unknown = [c for c in listed if c not in known]
             if unknown:
                 raise FeatureTableError(
                     f"{_NAME}: modality {modality!r} names column(s) {unknown} that the data "
@@ -117,6 +121,8 @@ def feature_table_from(
                 raise FeatureTableError(f"{_NAME}: modality {modality!r} lists no columns")
             for k, c in enumerate(listed):
                 features[f"{modality}.{k}"] = c
+    # (Before the table is built: its validation compares every column with every other.)
+    check_size(_NAME, n, len([c for c in features if c not in ID_COLUMNS]))
     for new, old in features.items():
         if new in ID_COLUMNS:
             continue
@@ -182,6 +188,143 @@ def _curves(rows: list[dict[str, Any]], method: str, key: str) -> np.ndarray:
     return out
 
 
+def _names(value: Any, name: str, *, at_least: int = 0) -> None:
+    """A sequence of distinct text names (a single string is not one: it would be read as
+    its letters)."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
+        raise ConfigError(f"{name} must be a list of names, got {value!r}")
+    bad = [v for v in value if not isinstance(v, str) or not v]
+    if bad:
+        raise ConfigError(f"{name}: names must be non-empty text, got {bad[0]!r}")
+    twice = sorted(v for v, k in Counter(value).items() if k > 1)
+    if twice:
+        raise ConfigError(f"{name}: {', '.join(twice)} given more than once")
+    if len(value) < at_least:
+        raise ConfigError(f"{name} must name at least {at_least}, got {list(value)!r}")
+
+
+def _arguments(
+    *,
+    prior_objects: Any,
+    new_objects: Any,
+    modalities: Any,
+    actions: Any,
+    object_column: Any,
+    action_column: Any,
+    trial_column: Any,
+    test_trials: Any,
+    test_fraction: Any,
+    runs: Any,
+    config: Any,
+    output: Any,
+    say: Any,
+    force: Any,
+    learner: Mapping[str, Any],
+) -> LearnerConfig:
+    """Every argument of :func:`compare_on_data` checked (a :class:`ConfigError`, or a
+    ``TypeError`` for an argument of the wrong kind, naming it); the learner's settings."""
+    _names(prior_objects, "prior_objects", at_least=2)
+    _names(new_objects, "new_objects", at_least=2)
+    if actions is not None:
+        _names(actions, "actions", at_least=1)
+    if modalities is not None:
+        if not isinstance(modalities, Mapping) or not modalities:
+            raise ConfigError(f"modalities must map modality names to columns, got {modalities!r}")
+        for m, listed in modalities.items():
+            if not isinstance(m, str) or not m:
+                raise ConfigError(f"modalities: a modality name must be text, got {m!r}")
+            if not isinstance(listed, str):
+                _names(listed, f"modalities[{m!r}]", at_least=1)
+    for option, column, optional in (
+        ("object_column", object_column, False),
+        ("action_column", action_column, True),
+        ("trial_column", trial_column, True),
+    ):
+        if not (isinstance(column, str) or (optional and column is None)):
+            raise ConfigError(
+                f"{option} must be a column name{' or None' if optional else ''}, got {column!r}"
+            )
+    if test_trials is not None:
+        if isinstance(test_trials, (str, bytes)) or not isinstance(test_trials, Sequence):
+            raise ConfigError(f"test_trials must be a list of trial numbers, got {test_trials!r}")
+        bad = [
+            t
+            for t in test_trials
+            if isinstance(t, bool) or not isinstance(t, (int, np.integer)) or not 0 <= t < 2**63
+        ]
+        if bad or not test_trials:
+            raise ConfigError(
+                "test_trials must be trial numbers >= 0 (64-bit integers), got "
+                f"{bad[0] if bad else test_trials!r}"
+            )
+    if (
+        isinstance(test_fraction, bool)
+        or not isinstance(test_fraction, (int, float, np.floating))
+        or not 0.0 < float(test_fraction) < 1.0
+    ):
+        raise ConfigError(
+            f"test_fraction must be a number between 0 and 1 (the share of each object's rows "
+            f"held out), got {test_fraction!r}"
+        )
+    if isinstance(runs, bool) or not isinstance(runs, (int, np.integer)) or runs < 1:
+        raise ConfigError(f"runs must be an integer >= 1, got {runs!r}")
+    if runs > MAX_RUNS:
+        raise ConfigError(f"runs must be at most {MAX_RUNS}, got {runs}")
+    if config is not None and not isinstance(config, LearnerConfig):
+        raise TypeError(f"config must be a LearnerConfig or None, got {type(config).__name__}")
+    if output is not None:
+        if not isinstance(output, (str, Path)) or not str(output):
+            raise ConfigError(f"output must be a directory's path or None, got {output!r}")
+        if Path(output).exists() and not Path(output).is_dir():
+            raise ConfigError(f"output {output}: is a file, not a directory")
+    if say is not None and not callable(say):
+        raise TypeError(f"say must be a function of one line, or None, got {say!r}")
+    if not isinstance(force, bool):
+        raise ConfigError(f"force must be True or False, got {force!r}")
+    cfg = config if config is not None else LearnerConfig()
+    unknown = sorted(set(learner) - {f.name for f in fields(LearnerConfig)})
+    if unknown:
+        raise ConfigError(
+            f"unknown argument(s) {', '.join(unknown)}: neither compare_on_data's nor a "
+            "LearnerConfig setting"
+        )
+    defaults = {f.name: getattr(cfg, f.name) for f in fields(LearnerConfig)}
+    for name, value in learner.items():
+        _like(name, value, defaults[name])
+        if name in ("budget", "patience") and value is not None and value > MAX_BUDGET:
+            raise ConfigError(f"{name} must be at most {MAX_BUDGET}, got {value}")
+    try:
+        return replace(cfg, **learner) if learner else cfg
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"learner settings: {exc}") from None
+
+
+def _like(name: str, value: Any, default: Any) -> None:
+    """A learner setting of the kind its default is (a count an integer, a threshold a finite
+    number, a choice a string): LearnerConfig checks the values, not their kinds."""
+    if isinstance(default, bool):
+        ok = isinstance(value, bool)
+    elif isinstance(default, int):
+        ok = (
+            isinstance(value, (int, np.integer))
+            and not isinstance(value, bool)
+            and bool(value >= 0)
+        )
+    elif isinstance(default, float):
+        ok = (
+            isinstance(value, (int, float, np.integer, np.floating))
+            and not isinstance(value, bool)
+            and bool(np.isfinite(value))
+        )
+    elif isinstance(default, str):
+        ok = isinstance(value, str)
+    else:
+        return  # (None by default, or settings of their own type: checked by LearnerConfig)
+    if not ok:
+        kind = {bool: "True or False", int: "an integer >= 0", float: "a finite number"}
+        raise ConfigError(f"{name} must be {kind.get(type(default), 'text')}, got {value!r}")
+
+
 def compare_on_data(
     data: Any,
     *,
@@ -210,7 +353,29 @@ def compare_on_data(
     it) sets the learner. With ``output``, the files of ``aptkt learn --table`` are written
     there too (an earlier result there is replaced only with ``force=True``). ``say`` receives the progress lines (default: silent). See
     :func:`feature_table_from` for ``data`` and ``modalities``.
+
+    Every argument is checked before any work: a mistake is a
+    :class:`~aptkt.errors.ConfigError` (a ``TypeError`` for ``data``, ``config`` or ``say`` of
+    the wrong kind) naming it; the table is checked against
+    :mod:`aptkt.experiments.table_limits`.
     """
+    cfg = _arguments(
+        prior_objects=prior_objects,
+        new_objects=new_objects,
+        modalities=modalities,
+        actions=actions,
+        object_column=object_column,
+        action_column=action_column,
+        trial_column=trial_column,
+        test_trials=test_trials,
+        test_fraction=test_fraction,
+        runs=runs,
+        config=config,
+        output=output,
+        say=say,
+        force=force,
+        learner=learner,
+    )
     table = feature_table_from(
         data,
         modalities,
@@ -218,11 +383,7 @@ def compare_on_data(
         action_column=action_column,
         trial_column=trial_column,
     )
-    cfg = config if config is not None else LearnerConfig()
-    if learner:
-        cfg = replace(cfg, **learner)
-    if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
-        raise ValueError(f"runs must be an integer >= 1, got {runs!r}")
+    check_table(table, actions=actions, prior_objects=prior_objects)
     settings = TableSettings(
         table=table.path,
         prior_objects=tuple(prior_objects),

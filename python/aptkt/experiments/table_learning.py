@@ -25,8 +25,9 @@ from aptkt import __version__
 from aptkt.errors import ConfigError, FeatureTableError
 from aptkt.experiments.demo import report_results
 from aptkt.experiments.runs import step_rows
+from aptkt.experiments.table_limits import read_table_within_limits
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
-from aptkt.learning.feature_table import FeatureTable, read_feature_table, split_held_out
+from aptkt.learning.feature_table import FeatureTable, split_held_out
 
 __all__ = [
     "TableSettings",
@@ -148,7 +149,7 @@ def learn_from_table(s: TableSettings, *, say=print) -> dict[str, Any]:
     """The comparison on the table file ``s.table``, with every file of the demo's results
     written to ``s.output``; returns the summary."""
     t_start = time.perf_counter()
-    table = read_feature_table(s.table)
+    table = read_table_within_limits(s.table, prior_objects=s.prior_objects, actions=s.actions)
     out = Path(s.output)
     out.mkdir(parents=True, exist_ok=True)
     rows, methods, actions = compare_on_table(table, s, say=say, prior_path=out / "prior.npz")

@@ -30,14 +30,17 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable, Iterable
+from array import array
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
 import numpy as np
 
 from aptkt.errors import RawDataError
-from aptkt.features import hjorth
+from aptkt.features import MAX_MAGNITUDE, hjorth
+from aptkt.files import open_regular
 from aptkt.learning.observations import Observations
 
 __all__ = [
@@ -69,6 +72,14 @@ COLUMNS: tuple[str, ...] = (
 MODALITIES: dict[str, int] = {"vibration": 3, "pressure": 2, "temperature": 3, "electrodes": 19}
 #: Fewest frames a trial must hold (0.5 s): fewer cannot be a slide, only a broken recording.
 MIN_FRAMES = 50
+#: Largest trial number (the set's are 1 to 50).
+MAX_TRIAL_NUMBER = 999_999_999
+#: Largest trial file read. The set's files hold a few seconds of frames (under 1 MB); this
+#: leaves room for minutes of them while a wrong file (a disk image, /dev/zero behind a link)
+#: is refused before it is read.
+MAX_TRIAL_BYTES = 64 << 20
+#: Longest line read: a frame's 45 numbers take under 1 kB.
+MAX_LINE_BYTES = 64 << 10
 
 _TRIAL = re.compile(r"^(mat\d+)_(\d+)_bio\.csv$")
 
@@ -82,71 +93,124 @@ class TrialFile:
 
 def find_trials(directory: str | Path) -> list[TrialFile]:
     """Every ``matX/matX_N_bio.csv`` below ``directory`` (the repository or its ``raw_data``),
-    sorted by material number and trial."""
+    sorted by material number and trial. Two files of one trial (``mat1_01_bio.csv`` and
+    ``mat1_1_bio.csv``) are an error naming both: the table would hold the trial twice."""
     root = Path(directory)
     if not root.is_dir():
         raise RawDataError(f"{root}: no such directory")
     base = root / "raw_data" if (root / "raw_data").is_dir() else root
-    found = []
+    found: dict[tuple[str, int], TrialFile] = {}
     for folder in base.iterdir():
         if not (folder.is_dir() and re.fullmatch(r"mat\d+", folder.name)):
             continue
         for path in folder.iterdir():
             m = _TRIAL.match(path.name)
             if m and m.group(1) == folder.name:
-                found.append(TrialFile(m.group(1), int(m.group(2)), path))
+                if len(m.group(2).lstrip("0")) > 9:  # (a table stores trial numbers as integers)
+                    raise RawDataError(
+                        f"{path}: trial number {m.group(2)[:30]} is beyond {MAX_TRIAL_NUMBER}"
+                    )
+                trial = TrialFile(m.group(1), int(m.group(2)), path)
+                key = (trial.material, trial.trial)
+                if key in found:
+                    first, second = sorted((found[key].path, path))
+                    raise RawDataError(
+                        f"{first} and {second} are both trial {trial.trial} of "
+                        f"{trial.material}: keep one of them"
+                    )
+                found[key] = trial
     if not found:
         raise RawDataError(
             f"{root}: no BioTac trials (expected raw_data/matX/matX_N_bio.csv files, as in the "
             "repository dexrob/BioTac_slide_20_50)"
         )
-    return sorted(found, key=lambda t: (int(t.material[3:]), t.trial))
+    return sorted(found.values(), key=lambda t: (int(t.material[3:]), t.trial))
 
 
 def read_trial(path: str | Path) -> np.ndarray:
-    """The frames of one ``*_bio.csv`` file, (frames, len(COLUMNS)), checked: the header, one
-    finite number per cell, at least :data:`MIN_FRAMES` frames, increasing timestamps. Every
+    """The frames of one ``*_bio.csv`` file, (frames, len(COLUMNS)), checked: a regular file of
+    at most :data:`MAX_TRIAL_BYTES`, read line by line (no line longer than
+    :data:`MAX_LINE_BYTES`), the header, one finite number per cell within
+    ±:data:`aptkt.features.MAX_MAGNITUDE` (the sensor's readings are 12-bit counts, its
+    timestamps seconds since 1970), at least :data:`MIN_FRAMES` frames, increasing timestamps. Every
     problem is a :class:`~aptkt.errors.RawDataError` naming the file and the line."""
     path = Path(path)
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise RawDataError(f"{path}: cannot read the file: {exc}") from None
-    if not any(line.strip() for line in lines):
+    values = array("d")
+    frames = 0
+    header: list[str] | None = None
+    with open_regular(path, MAX_TRIAL_BYTES, RawDataError, "a BioTac trial file") as fh:
+        for number, line in _lines(fh, path):
+            if not line.strip():
+                if number == 1:
+                    header = []  # (a blank first line is no header: said at the next line)
+                continue
+            if not header:
+                header = _cells(line) if number == 1 else []
+                if tuple(h.strip() for h in header) != COLUMNS:
+                    raise RawDataError(
+                        f"{path}, line 1: not a BioTac frame header (expected "
+                        f"{', '.join(COLUMNS[:5])}, …, {COLUMNS[-1]}; got {_shown(header[:5])}"
+                        f"{', …' if len(header) > 5 else ''})"
+                    )
+                continue
+            values.extend(_frame(line, path, number))
+            frames += 1
+    if not header:
         raise RawDataError(f"{path}: the file is empty")
-    header = _cells(lines[0])
-    if tuple(h.strip() for h in header) != COLUMNS:
-        raise RawDataError(
-            f"{path}, line 1: not a BioTac frame header (expected {', '.join(COLUMNS[:5])}, …, "
-            f"{COLUMNS[-1]}; got {', '.join(header[:5])}{', …' if len(header) > 5 else ''})"
-        )
-    rows = []
-    for number, line in enumerate(lines[1:], start=2):
-        if not line.strip():
-            continue
-        cells = _cells(line)
-        if len(cells) != len(COLUMNS):
-            raise RawDataError(
-                f"{path}, line {number}: {len(cells)} values, the header has {len(COLUMNS)}"
-            )
-        try:
-            row = [float(c) for c in cells]
-        except ValueError:
-            bad = next(c for c in cells if not _is_number(c))
-            raise RawDataError(f"{path}, line {number}: {bad!r} is not a number") from None
-        if not all(math.isfinite(v) for v in row):
-            raise RawDataError(f"{path}, line {number}: a value is not finite")
-        rows.append(row)
-    if len(rows) < MIN_FRAMES:
-        raise RawDataError(
-            f"{path}: {len(rows)} frames; a slide needs at least {MIN_FRAMES} (0.5 s)"
-        )
-    frames = np.asarray(rows)
-    steps = np.diff(frames[:, 0])
+    if frames < MIN_FRAMES:
+        raise RawDataError(f"{path}: {frames} frames; a slide needs at least {MIN_FRAMES} (0.5 s)")
+    table = np.frombuffer(values, dtype=np.float64).reshape(frames, len(COLUMNS))
+    steps = np.diff(table[:, 0])
     if np.any(steps <= 0):
         at = int(np.flatnonzero(steps <= 0)[0]) + 3
         raise RawDataError(f"{path}, line {at}: the timestamp does not increase")
-    return frames
+    return table
+
+
+def _shown(cells: list[str]) -> str:
+    return ", ".join(c if len(c) <= 20 else c[:20] + "…" for c in cells)
+
+
+def _lines(fh: IO[bytes], path: Path) -> Iterator[tuple[int, str]]:
+    """``(line number, text)`` of each line, read one at a time, each at most
+    :data:`MAX_LINE_BYTES` long."""
+    number = 0
+    while True:
+        raw = fh.readline(MAX_LINE_BYTES + 1)
+        if not raw:
+            return
+        number += 1
+        if len(raw) > MAX_LINE_BYTES:
+            raise RawDataError(
+                f"{path}, line {number}: longer than {MAX_LINE_BYTES} bytes; a frame of "
+                f"{len(COLUMNS)} numbers is far shorter"
+            )
+        try:
+            yield number, raw.decode("utf-8")
+        except UnicodeDecodeError:
+            raise RawDataError(f"{path}, line {number}: not text (UTF-8)") from None
+
+
+def _frame(line: str, path: Path, number: int) -> list[float]:
+    cells = _cells(line)
+    if len(cells) != len(COLUMNS):
+        raise RawDataError(
+            f"{path}, line {number}: {len(cells)} values, the header has {len(COLUMNS)}"
+        )
+    try:
+        row = [float(c) for c in cells]
+    except ValueError:
+        bad = next(c for c in cells if not _is_number(c))
+        raise RawDataError(f"{path}, line {number}: {bad!r} is not a number") from None
+    if not all(math.isfinite(v) for v in row):
+        raise RawDataError(f"{path}, line {number}: a value is not finite")
+    for column, v in zip(COLUMNS, row):
+        if abs(v) > MAX_MAGNITUDE:
+            raise RawDataError(
+                f"{path}, line {number}, column {column}: {v:g} is beyond ±{MAX_MAGNITUDE:g}, "
+                "no reading of a BioTac (its features would not be finite numbers)"
+            )
+    return row
 
 
 def _cells(line: str) -> list[str]:
@@ -173,12 +237,16 @@ def trial_features(frames: np.ndarray) -> dict[str, np.ndarray]:
     if not (activity > 0 and math.isfinite(mobility) and math.isfinite(complexity)):
         raise RawDataError("the vibration (PAC) signal is constant: no texture can be measured")
     slope = float(np.polyfit(t, tdc, 1)[0])
-    return {
+    features = {
         "vibration": np.array([math.log10(activity), mobility, complexity]),
         "pressure": np.array([pdc.mean(), pdc.std()]),
         "temperature": np.array([tdc.mean(), slope, tac.mean()]),
         "electrodes": electrodes.mean(axis=0),
     }
+    for name, v in features.items():  # (values within MAX_MAGNITUDE keep them finite)
+        if not np.all(np.isfinite(v)):
+            raise RawDataError(f"the {name} features are not finite numbers")
+    return features
 
 
 def import_biotac_slide(

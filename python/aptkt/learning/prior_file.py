@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import json
 import re
-import zipfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -25,15 +24,15 @@ from typing import Any
 import numpy as np
 
 from aptkt.errors import PriorFileError
+from aptkt.files import NPZ_MAX_BYTES, json_member, read_npz
 
 __all__ = ["FORMAT", "PRIOR_FILE_MAX_BYTES", "check_action", "read_members"]
 
 FORMAT = "aptkt.PriorKnowledge/1"
 
-#: Largest total (uncompressed) size of the arrays of a prior file. The paper's prior knowledge
-#: (15 objects, 7 actions, 20 trials) takes about 2 MB; the limit leaves room for a thousand
-#: times that while keeping a hostile or corrupt file from exhausting memory.
-PRIOR_FILE_MAX_BYTES = 2 << 30
+#: Largest total (uncompressed) size of the arrays of a prior file (that of every ``.npz``
+#: file aptkt reads, :data:`aptkt.files.NPZ_MAX_BYTES`).
+PRIOR_FILE_MAX_BYTES = NPZ_MAX_BYTES
 
 _META_MAX_BYTES = 1 << 20
 _NAME = r"[A-Za-z0-9_.\-]+"
@@ -55,74 +54,23 @@ def expected_member(name: str) -> bool:
     return any(p.fullmatch(name) for p in _MEMBER_PATTERNS)
 
 
-def _header(zf: zipfile.ZipFile, member: str, path: Path) -> tuple[tuple[int, ...], np.dtype]:
-    with zf.open(member + ".npy") as fh:
-        try:
-            version = np.lib.format.read_magic(fh)
-            if version == (1, 0):
-                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
-            elif version == (2, 0):
-                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
-            else:
-                raise ValueError(f"format version {version}")
-        except (ValueError, OSError, SyntaxError) as exc:
-            raise PriorFileError(f"{path}: member {member!r}: not a NumPy array ({exc})") from None
-    if dtype.hasobject or dtype.kind not in "biufU":
-        raise PriorFileError(
-            f"{path}: member {member!r}: arrays of {dtype} are not allowed in a prior file"
-        )
-    return tuple(int(n) for n in shape), dtype
-
-
 def read_members(path: Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """The file's metadata (checked) and its arrays, each member checked before it is read."""
-    if not zipfile.is_zipfile(path):
-        raise PriorFileError(f"{path}: not a prior-knowledge file (not an .npz archive)")
-    try:
-        with zipfile.ZipFile(path) as zf:
-            names = zf.namelist()
-            bad = [n for n in names if not n.endswith(".npy") or not expected_member(n[:-4])]
-            if bad:
-                raise PriorFileError(
-                    f"{path}: member {bad[0]!r} is not part of a prior-knowledge file "
-                    f"({len(bad)} unknown member(s)); the file was not read"
-                )
-            members = [n[:-4] for n in names]
-            if "meta" not in members:
-                raise PriorFileError(f"{path}: not a prior-knowledge file (no member 'meta')")
-            headers = {m: _header(zf, m, path) for m in members}
-            total = 0
-            for m, (shape, dtype) in headers.items():
-                size = int(np.prod(shape, dtype=object)) * dtype.itemsize
-                total += size
-                if m == "meta" and size > _META_MAX_BYTES:
-                    raise PriorFileError(f"{path}: member 'meta' declares {size} bytes")
-                if total > PRIOR_FILE_MAX_BYTES:
-                    raise PriorFileError(
-                        f"{path}: member {m!r} declares {shape} of {dtype}: the file's arrays "
-                        f"exceed the limit of {PRIOR_FILE_MAX_BYTES} bytes for a prior file"
-                    )
-            arrays = {}
-            for m in members:
-                with zf.open(m + ".npy") as fh:
-                    arrays[m] = np.lib.format.read_array(fh, allow_pickle=False)
-    except (zipfile.BadZipFile, OSError, EOFError, ValueError) as exc:
-        if isinstance(exc, PriorFileError):
-            raise
-        raise PriorFileError(f"{path}: damaged prior-knowledge file ({exc})") from None
+    """The file's metadata (checked) and its arrays, each member checked before it is read
+    (:func:`aptkt.files.read_npz`)."""
+    arrays = read_npz(
+        path,
+        known=expected_member,
+        error=PriorFileError,
+        kind="prior-knowledge file",
+        max_bytes=PRIOR_FILE_MAX_BYTES,
+        member_max_bytes={"meta": _META_MAX_BYTES},
+    )
     meta = _meta(arrays.pop("meta"), path)
     return meta, arrays
 
 
 def _meta(raw: np.ndarray, path: Path) -> dict[str, Any]:
-    if raw.dtype != np.uint8 or raw.ndim != 1:
-        raise PriorFileError(f"{path}: member 'meta': expected JSON bytes (uint8, 1-D)")
-    try:
-        meta = json.loads(raw.tobytes().decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise PriorFileError(f"{path}: member 'meta': not JSON ({exc})") from None
-    if not isinstance(meta, dict):
-        raise PriorFileError(f"{path}: member 'meta': expected a JSON object")
+    meta = json_member(raw, path, "meta", PriorFileError)
     if meta.get("format") != FORMAT:
         raise PriorFileError(
             f"{path}: unsupported format {meta.get('format')!r} (expected {FORMAT})"
@@ -244,7 +192,7 @@ def check_action(path: Path, arrays: dict[str, np.ndarray], prefix: str, action:
     meta_raw = c.get("model/meta", "u", 1)
     try:
         meta = json.loads(meta_raw.tobytes().decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
         raise c.fail("model/meta", f"not JSON ({exc})") from None
     if not isinstance(meta, dict) or meta.get("classes") != classes:
         got = meta.get("classes") if isinstance(meta, dict) else meta

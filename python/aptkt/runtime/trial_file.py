@@ -11,6 +11,7 @@ from typing import Any
 from tqdm import tqdm
 
 from aptkt.actions import ExploratoryAction
+from aptkt.data.lock import WriterLock
 from aptkt.data.store import DatasetReader, DatasetWriter, repair
 from aptkt.errors import DatasetError
 from aptkt.runtime.grid import TrialGrid
@@ -23,7 +24,11 @@ class TrialFile:
     order). With ``resume`` an existing file is completed: ``check`` first sees its description
     (and raises if the file belongs to another plan), a file whose writer died is repaired
     (:attr:`repaired`: the recordings it kept). Without it an existing file is an error unless
-    ``overwrite``. ``bar``: tqdm options for a progress bar over the plan (None: no bar)."""
+    ``overwrite``. ``bar``: tqdm options for a progress bar over the plan (None: no bar).
+
+    The data set's lock (:mod:`aptkt.data.lock`) is taken before anything else and held until
+    :meth:`close`: while another process writes the file, resuming, repairing and replacing
+    it are all refused, naming that process."""
 
     def __init__(
         self,
@@ -40,24 +45,12 @@ class TrialFile:
         self.plan = plan
         #: Recordings kept by repairing a file whose writer died (None: no repair).
         self.repaired: int | None = None
-        if resume and self.path.exists():
-            if check is not None:
-                with DatasetReader(self.path) as rd:
-                    check(rd.description)
-            try:
-                # (The description serves a file that holds nothing yet, started afresh.)
-                self.writer = DatasetWriter(self.path, "a", description=description)
-            except DatasetError:
-                self.repaired = repair(self.path)  # its writer died: keep every complete recording
-                self.writer = DatasetWriter(self.path, "a")
-        else:
-            if self.path.exists() and not overwrite:
-                raise DatasetError(
-                    f"{self.path} exists: use --resume to complete it or --overwrite to replace it"
-                )
-            self.writer = DatasetWriter(
-                self.path, "w", description=description, overwrite=overwrite
-            )
+        self.lock = WriterLock.acquire(self.path)
+        try:
+            self.writer = self._writer(description, resume, overwrite, check)
+        except BaseException:
+            self.lock.release()
+            raise
         done = self.writer.keys()
         self.todo: list[tuple[str, ExploratoryAction, int]] = [
             (o, a, t) for o, a, t in plan.trials() if (o, a.name, t) not in done
@@ -74,6 +67,34 @@ class TrialFile:
             )
         )
 
+    def _writer(
+        self,
+        description: Mapping[str, Any],
+        resume: bool,
+        overwrite: bool,
+        check: Callable[[dict[str, Any]], None] | None,
+    ) -> DatasetWriter:
+        lock = self.lock
+        if resume and self.path.exists():
+            if check is not None:
+                with DatasetReader(self.path) as rd:
+                    check(rd.description)
+            try:
+                # (The description serves a file that holds nothing yet, started afresh.)
+                return DatasetWriter(self.path, "a", description=description, lock=lock)
+            except DatasetError:
+                # Its writer died (no other runs: we hold the lock): keep every complete
+                # recording.
+                self.repaired = repair(self.path, lock=lock)
+                return DatasetWriter(self.path, "a", lock=lock)
+        if self.path.exists() and not overwrite:
+            raise DatasetError(
+                f"{self.path} exists: use --resume to complete it or --overwrite to replace it"
+            )
+        return DatasetWriter(
+            self.path, "w", description=description, overwrite=overwrite, lock=lock
+        )
+
     def __enter__(self) -> TrialFile:
         return self
 
@@ -81,9 +102,12 @@ class TrialFile:
         self.close()
 
     def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-        self.writer.close()
+        try:
+            if self.bar is not None:
+                self.bar.close()
+            self.writer.close()
+        finally:
+            self.lock.release()
 
     def summary(self, **extra: Any) -> dict[str, Any]:
         """The file's :meth:`~aptkt.data.DatasetReader.info`, whether it was repaired, and

@@ -69,6 +69,9 @@ class SimulatedController:
         if self.config.skin is not None:
             self.skin = SimulatedSkin(SkinConfig.from_spec(self.config.skin))
         self._skin_errors = 0
+        #: Linear moves commanded to a pose in contact with an object (presses), since the
+        #: start: a test waits for the n-th, whatever the machine's load did to its timing.
+        self.moves_into_contact = 0
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -150,6 +153,7 @@ class SimulatedController:
                 "motion": None if self.motion is None else self.motion.kind,
                 "watchdog": None if self.watchdog is None else self.watchdog.describe(),
                 "moving": bool(np.any(np.abs(self.velocity) > 1e-9)),
+                "moves_into_contact": self.moves_into_contact,
                 "skin": None if self.skin is None else self.skin.stats(),
                 "text_log": [m for _, m in list(self.text_log)[-40:]],
             }
@@ -284,6 +288,8 @@ class SimulatedController:
     def move_linear(self, pose: np.ndarray, v: float, a: float, asynchronous: bool) -> None:
         self.motion = Motion.movel(self.pose, pose, self.velocity, v, a, asynchronous, self._free)
         self._target_waypoint = pose.copy()
+        if self.contact.normal_force(pose) > 0:
+            self.moves_into_contact += 1
 
     def speed_linear(self, velocity: np.ndarray, acceleration: float) -> None:
         if self.motion is None or self.motion.kind != "speedl":

@@ -104,6 +104,8 @@ def serve_stdio(
             with controller.lock:
                 _need_skin(controller).restore()
             return None
+        if op == "clock_lag":
+            return server.take_worst_lag()
         if op == "ping":
             return "pong"
         raise ValueError(f"unknown loopback command {op!r}")
@@ -347,6 +349,11 @@ class Loopback:
     def restore_skin(self) -> None:
         """Every skin cell sends again."""
         self.call("skin_restore")
+
+    def clock_lag(self) -> float:
+        """The most the controller's control cycle has run behind real time (s) since the
+        previous call (:meth:`LoopbackServer.take_worst_lag`)."""
+        return float(self.call("clock_lag"))
 
     def scripts(self) -> list[str]:
         """The last programs received on the script ports (newest last)."""

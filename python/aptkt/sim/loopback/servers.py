@@ -245,6 +245,7 @@ class LoopbackServer:
         self._reopen_timer: threading.Timer | None = None
         self._threads: list[threading.Thread] = []
         self.ticks = 0
+        self._worst_lag = 0.0
 
     # ------------------------------------------------------------ lifecycle
     def start(self) -> LoopbackServer:
@@ -352,8 +353,17 @@ class LoopbackServer:
             delay = next_t - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
-            elif delay < -0.25:
-                next_t = time.monotonic()  # fell far behind (loaded machine): do not burst
+            else:
+                self._worst_lag = max(self._worst_lag, -delay)
+                if delay < -0.25:
+                    next_t = time.monotonic()  # fell far behind (loaded machine): do not burst
+
+    def take_worst_lag(self) -> float:
+        """The most the control cycle has run behind real time (s) since the previous call:
+        how long a loaded machine kept the controller — its motions, its skin's packets —
+        waiting. Tests derive their timing margins from it."""
+        worst, self._worst_lag = self._worst_lag, 0.0
+        return worst
 
     def _publish(self) -> None:
         with self._lock:
