@@ -231,10 +231,11 @@ def test_identity_tells_a_twin_from_a_look_alike_and_more_priors_need_more_evide
 
 
 def test_transfers_go_to_twins_and_not_to_look_alikes():
-    """One action, one 4-column modality. New objects that are old ones under other names get
-    their transfer; new objects between the old ones do not, even with many old objects."""
+    """One action, one 4-column modality, old objects well apart. New objects that are old ones
+    under other names get their transfer; new objects 2.5 noise levels from old ones in every
+    column do not."""
     rng = np.random.default_rng(0)
-    old_means = rng.normal(scale=4.0, size=(8, 4))
+    old_means = rng.normal(scale=8.0, size=(8, 4))
     old = [f"old{i}" for i in range(8)]
 
     def table(spec, n, seed):
@@ -268,3 +269,31 @@ def test_kernel_settings_are_validated():
         GPSettings(kernel="library-ish")
     with pytest.raises(ValueError, match="cutoff"):
         LearnerConfig(cutoff="same")
+
+
+def test_a_library_holding_look_alikes_asks_for_more_evidence():
+    """The cut-off's threshold: at least the log odds the library's own distinct objects give
+    each other when each is left out — high where two of them are look-alikes, at the margin
+    where they are far apart."""
+    rng = np.random.default_rng(1)
+    apart = rng.normal(scale=10.0, size=(5, 4))
+    alike = apart.copy()
+    alike[1] = alike[0] + 0.3  # two distinct objects within a noise level
+
+    def identity(means):
+        X = np.concatenate([m + rng.normal(size=(12, 4)) for m in means])
+        return ObjectIdentity(X, np.repeat([f"o{i}" for i in range(len(means))], 12))
+
+    assert identity(alike).impostor_log_odds(1) > 3 > identity(apart).impostor_log_odds(1)
+    with pytest.raises(ValueError):
+        identity(apart).impostor_log_odds(0)
+
+
+def test_a_far_observation_is_new_even_for_a_library_of_two():
+    """Two objects span one direction; a new object off that line is not forced onto them."""
+    rng = np.random.default_rng(2)
+    X = np.concatenate([m + rng.normal(size=(10, 6)) for m in (np.zeros(6), np.full(6, 5.0))])
+    model = ObjectIdentity(X, np.repeat(["a", "b"], 10))
+    far = np.array([[0.0, 0.0, 0.0, 30.0, -30.0, 30.0]])
+    assert model.log_posterior(far)[1] > math.log(0.99)
+    assert model.log_odds(rng.normal(size=(2, 6)), "a") > 3

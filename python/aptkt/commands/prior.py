@@ -251,11 +251,21 @@ def run_inspect(args: argparse.Namespace) -> int:
     }
     scale = prior.feature_scale
     print(f"  feature space: {metric.get(scale, scale)}")
-    if prior.metadata:
-        print(
-            "  "
-            + ", ".join(f"{k}={v}" for k, v in prior.metadata.items() if not isinstance(v, dict))
-        )
+    plain = {
+        k: v
+        for k, v in prior.metadata.items()
+        if not isinstance(v, dict) and k not in ("provenance", "merged_from")
+    }
+    if plain:
+        print("  " + ", ".join(f"{k}={v}" for k, v in plain.items()))
+    provenance = prior.metadata.get("provenance")
+    if isinstance(provenance, list) and provenance:
+        parts = [
+            f"{p.get('source')} ({', '.join(p.get('objects', []))})"
+            for p in provenance
+            if isinstance(p, dict)
+        ]
+        print(f"  merged from: {'; '.join(parts)} (details: --json)")
     for r in rows:
         mods = ", ".join(
             f"{m} (weight {w:.2f}, length-scale {ls:.3g})"

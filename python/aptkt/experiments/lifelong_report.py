@@ -153,7 +153,8 @@ def plot(c: Tables) -> Any:
             label="the library's model" if method == "library" else "nearest class mean",
             **look,
         )
-    right.set_ylim(0, 1.0)
+    lowest = min(float(np.nanmin(c[b][m])) for b in batches for m in ("library", "NCM"))
+    right.set_ylim(max(0.0, lowest - 0.1), 1.0)
     right.set_ylabel("accuracy on every object it holds")
     right.set_title("the grown library")
     for ax in (left, right):

@@ -6,11 +6,12 @@ linear discriminant analysis*, ECCV 2006; Prince and Elder, ICCV 2007), as speak
 verification uses it to ask "is this the enrolled speaker, or someone else?":
 
 * an object's observations scatter around the object's mean with the sensor's within-object
-  noise W (pooled over the library), scaled per object by how noisy that object is
+  noise W (pooled over the library, Ledoit–Wolf shrunk), scaled per object by how noisy that object is
   (``noise_levels_``: a scalar per object, its own residual variance over the pooled one,
   shrunk towards 1 by one observation's worth of the pooled noise);
 * the means of objects — known or not — scatter around the library's centre with the
-  between-object covariance B (the object means' covariance, Ledoit–Wolf shrunk, minus the
+  between-object covariance B (the object means' covariance, with a prior worth as many objects
+  as there are columns that makes it isotropic where the few means say nothing, minus the
   share of the noise each mean still carries).
 
 For a set V of n observations of one object, the model compares "V is old object i" — V's mean
@@ -30,7 +31,7 @@ from typing import Any
 
 import numpy as np
 from scipy.special import logsumexp
-from sklearn.covariance import ledoit_wolf
+from sklearn.covariance import ledoit_wolf_shrinkage
 
 __all__ = ["ObjectIdentity", "NEW_OBJECT_PRIOR"]
 
@@ -62,7 +63,13 @@ class ObjectIdentity:
         R = X - means[index]
         W = R.T @ R / dof
         scale = np.trace(W) / d
-        # A column without any noise would make W singular: give it a sliver of the average.
+        # Few repeats in many columns leave the noise's covariance singular in some directions,
+        # which would make "the same object" infinitely unlikely there: shrink it towards its
+        # average variance by Ledoit and Wolf's intensity (as the metric's whitening does).
+        if d > 1 and scale > 0:
+            delta = float(ledoit_wolf_shrinkage(R, assume_centered=True))
+            W = (1.0 - delta) * W + delta * scale * np.eye(d)
+        # A column without any noise would still make W singular: give it a sliver.
         W = W + np.eye(d) * max(1e-9 * scale, 1e-300)
         own = np.zeros(names.size)
         np.add.at(own, index, (R**2).sum(axis=1))
@@ -70,7 +77,14 @@ class ObjectIdentity:
         # Each object's noise relative to the pool, with one observation's worth of the pooled
         # noise as its prior (objects observed once keep the pooled level).
         levels = (own / scale + d) / (own_dof + d)
-        cov_means = ledoit_wolf(means)[0] if names.size > 1 else np.zeros((d, d))
+        # The objects' means span at most N − 1 of d directions: their covariance alone would
+        # say that a new object can only lie where the old ones do. A prior worth d objects,
+        # isotropic at the means' average variance, spreads it over every direction (the
+        # conjugate normal-inverse-Wishart reading): the fewer objects, the rounder.
+        centred = means - means.mean(axis=0)
+        cov_means = centred.T @ centred / max(names.size - 1, 1)
+        spread = np.trace(cov_means) / d
+        cov_means = ((names.size - 1) * cov_means + d * spread * np.eye(d)) / (names.size - 1 + d)
         B = cov_means - W * float(np.mean(1.0 / counts))
         vals, vecs = np.linalg.eigh((B + B.T) / 2)
         floor = 1e-3 * max(float(np.mean(np.maximum(vals, 0.0))), scale)
@@ -123,16 +137,20 @@ class ObjectIdentity:
         new = _log_normal(mean, self.centre_, self.between_ + self.within_ / n) + scatter_term(1.0)
         return np.asarray(old, dtype=np.float64), float(new)
 
+    def _log_joint(self, V: np.ndarray, new_object_prior: float) -> np.ndarray:
+        """Unnormalised log posterior: [new object, old object 0, 1, ...]."""
+        if not 0.0 < new_object_prior < 1.0:
+            raise ValueError(f"new_object_prior must lie in (0, 1), got {new_object_prior}")
+        old, new = self.log_likelihoods(V)
+        return np.concatenate(
+            [[np.log(new_object_prior) + new], np.log((1 - new_object_prior) / old.size) + old]
+        )
+
     def log_posterior(
         self, V: np.ndarray, new_object_prior: float = NEW_OBJECT_PRIOR
     ) -> tuple[np.ndarray, float]:
         """``log P(old object i | V)`` for every known object and ``log P(new object | V)``."""
-        if not 0.0 < new_object_prior < 1.0:
-            raise ValueError(f"new_object_prior must lie in (0, 1), got {new_object_prior}")
-        old, new = self.log_likelihoods(V)
-        joint = np.concatenate(
-            [[np.log(new_object_prior) + new], np.log((1 - new_object_prior) / old.size) + old]
-        )
+        joint = self._log_joint(V, new_object_prior)
         joint -= logsumexp(joint)
         return joint[1:], float(joint[0])
 
@@ -145,8 +163,7 @@ class ObjectIdentity:
             i = self.objects_.index(str(old_object))
         except ValueError:
             raise KeyError(f"{old_object!r} is not one of the library's objects") from None
-        log_p = float(self.log_posterior(V, new_object_prior)[0][i])
-        return log_p - float(np.log(-np.expm1(min(log_p, -1e-300))))
+        return _log_odds(self._log_joint(V, new_object_prior), 1 + i)
 
     def impostor_log_odds(self, n: int) -> float:
         """The largest log odds that one library object, left out of the library and presented
@@ -170,11 +187,16 @@ class ObjectIdentity:
                     continue  # no repeats left: no noise to judge by
                 model = ObjectIdentity(self._X[keep], others)
                 for start in range(0, rows.shape[0] - n + 1, n):
-                    old, _ = model.log_posterior(rows[start : start + n])
-                    log_p = float(old.max())
-                    best = max(best, log_p - float(np.log(-np.expm1(min(log_p, -1e-300)))))
+                    joint = model._log_joint(rows[start : start + n], NEW_OBJECT_PRIOR)
+                    best = max(best, _log_odds(joint, 1 + int(np.argmax(joint[1:]))))
             self._impostors[n] = best
         return self._impostors[n]
+
+
+def _log_odds(joint: np.ndarray, k: int) -> float:
+    """log P(k) − log(1 − P(k)) from unnormalised log posteriors, without forming 1 − P(k)
+    (which rounds to 0 where one hypothesis takes nearly all the mass)."""
+    return float(joint[k] - logsumexp(np.delete(joint, k)))
 
 
 def _log_normal(x: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> float:
