@@ -88,7 +88,9 @@ def main() -> None:
         row: dict[str, object] = {"priors": k, "old rows": len(old)}
         for kernel in ("library", "shared"):
             gp = GPSettings(kernel=kernel)
-            prior, t_prior = cpu(lambda gp=gp: PriorKnowledge.build({"A": old}, gp=gp, seed=0))
+            prior, t_prior = cpu(
+                lambda gp=gp, old=old: PriorKnowledge.build({"A": old}, gp=gp, seed=0)
+            )
             cfg = LearnerConfig(transfer="control", budget=args.budget, seed=0, gp=gp)
             learner = APTKT(cfg, prior)
             t0 = time.process_time()
