@@ -222,6 +222,7 @@ def _curves(base, aptkt, aux=None, nn=0.5, falls=False, control=None, flat=False
             ],
         ),
         (_curves(0.6, 0.75, aux=-0.01), ["auxiliary"]),
+        (_curves(0.6, 0.75, aux=-0.003), []),  # within the tolerance of an addition
         (_curves(0.6, 0.75, falls=True), ["unlearns"]),
         (_curves(0.6, 0.75, control=0.76), ["never costs"]),
         (_curves(0.6, 0.75, flat=True), ["keeps learning"]),
@@ -373,3 +374,24 @@ def test_nearest_class_mean_is_the_plain_rule():
     nearest = np.array(list("abc"))[((Zt[:, None] - centres[None]) ** 2).sum(-1).argmin(1)]
     assert nearest_class_mean_accuracy(lib, test) == pytest.approx(np.mean(nearest == objects))
     assert library_accuracy(lib, test) > 0.8
+
+
+def test_a_dask_cluster_gives_the_same_benchmark(run, tmp_path):
+    """--scheduler: the groups run on a Dask cluster and give the local run's rows."""
+    from dask.distributed import LocalCluster
+
+    table = run.parent / "table.csv"
+    argv = ["benchmark", str(table), "--groups", "2", "--new", "3", "--priors", "2,3"]
+    argv += ["--budget", "1", "--choices", "random", "--no-progress"]
+    assert main([*argv, "-j", "1", "-o", str(tmp_path / "local")]) == 0
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
+    ) as cluster:
+        assert (
+            main([*argv, "--scheduler", cluster.scheduler_address, "-o", str(tmp_path / "dask")])
+            == 0
+        )
+    local, remote = _rows(tmp_path / "local"), _rows(tmp_path / "dask")
+    assert len(local) == len(remote)
+    for a, b in zip(local, remote):
+        assert a == b

@@ -208,9 +208,10 @@ def test_identity_posterior_is_a_distribution(seed, n):
     old, new = model.log_posterior(V)
     assert np.exp(old).sum() + np.exp(new) == pytest.approx(1.0, abs=1e-9)
     for i, o in enumerate(model.objects_):
-        if old[i] < -1e-9:  # log(p / (1 − p)) from log p, also where p underflows
-            expected = old[i] - math.log(-math.expm1(old[i]))
-            assert model.log_odds(V, o) == pytest.approx(expected, rel=1e-9, abs=1e-9)
+        # log(p / (1 − p)): the mass of every other hypothesis, from the posterior itself.
+        others = np.concatenate([[new], np.delete(old, i)])
+        expected = old[i] - np.logaddexp.reduce(others)
+        assert model.log_odds(V, o) == pytest.approx(expected, rel=1e-6, abs=1e-6)
 
 
 def test_identity_tells_a_twin_from_a_look_alike_and_more_priors_need_more_evidence():

@@ -29,7 +29,11 @@ from aptkt.learning.pipeline import FEATURE_SCALES, FeaturePipeline, ModalityTra
 from aptkt.learning.prior_file import FORMAT as _FORMAT
 from aptkt.learning.prior_file import check_action, read_members
 
-__all__ = ["ActionPrior", "PriorKnowledge"]
+__all__ = ["ActionPrior", "PriorKnowledge", "AUXILIARY"]
+
+#: The name of the auxiliary features' modality (Eq. 5: the old model's posteriors) in a new
+#: objects' model.
+AUXILIARY = "auxiliary"
 
 
 @dataclass
@@ -120,6 +124,8 @@ class ActionPrior:
                 groups,
                 signal_variance,
                 approximation=approximation,
+                # The old model's posteriors are probabilities, not noise levels.
+                own_scale=(AUXILIARY,),
             )
         return self._evidence_curves[key]
 
