@@ -22,6 +22,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "aptkt.commands.skin",
     "aptkt.commands.dataset",
     "aptkt.commands.prior",
+    "aptkt.commands.recognise",
     "aptkt.commands.collect",
     "aptkt.commands.learn",
     "aptkt.commands.reproduce",

@@ -395,3 +395,18 @@ def test_a_dask_cluster_gives_the_same_benchmark(run, tmp_path):
     assert len(local) == len(remote)
     for a, b in zip(local, remote):
         assert a == b
+
+
+def test_the_recognition_benchmark_reports_accuracy_auroc_and_false_alarms(tmp_path, capsys):
+    path = _table(tmp_path)
+    out = tmp_path / "rec"
+    argv = ["benchmark", str(path), "--recognition", "--priors", "5", "--new", "3", "--groups", "2"]
+    assert main([*argv, "-j", "1", "-o", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "novelty AUROC" in said and "nearest class mean" in said
+    summary = json.loads((out / "summary.json").read_text())
+    assert set(summary["results"]) >= {"accuracy", "ncm", "auroc", "false_alarms", "detected"}
+    rows = _rows(out)
+    assert len(rows) == 2 and all(len(r["library"].split(",")) == 5 for r in rows)
+    assert main([*argv, "--priors", "3,5", "-o", str(tmp_path / "x")]) == 1
+    assert "one library size" in capsys.readouterr().err

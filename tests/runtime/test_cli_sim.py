@@ -535,3 +535,34 @@ def test_learn_says_what_each_new_object_learned_from_or_why_not(
             assert told[action, obj].startswith(f"{obj} <- {d['source']} (lambda {d['lambda']:.2f}")
         else:
             assert told[action, obj].startswith(f"{obj}: no transfer, most like ")
+
+
+def test_learn_can_start_from_recognition_and_grow_the_library(workdir: Path, prior: Path, capsys):
+    """--recognise: each candidate is touched once with every action and recognised; the known
+    ones are reported and left alone, the new ones learned (their touches are the first round:
+    never repeated) and, with --merge-into, added to the library."""
+    out = workdir / "recognise"
+    grown = workdir / "grown.npz"
+    candidates = "rough_sponge,metal_toolbox,smooth_sponge,hard_box"
+    argv = ["--objects", candidates, "--actions", "Pq,Sq", "--budget", "2", "--recognise"]
+    assert learn(workdir, prior, out, *argv, "--merge-into", str(grown)) == 0
+    said = capsys.readouterr().out
+    assert "recognised: rough_sponge is rough_sponge" in said
+    assert "recognised: metal_toolbox is metal_toolbox" in said
+    assert "recognised: smooth_sponge is new" in said and "recognised: hard_box is new" in said
+    run = json.loads((out / "run.json").read_text())
+    assert run["new_objects"] == ["smooth_sponge", "hard_box"]
+    assert len(run["recognition"]) == 4
+    # The recognition touches are the learner's first round: 4 objects × 2 actions, then the
+    # budget — nothing repeated.
+    with DatasetReader(out / "recordings.h5") as rd:
+        assert len(rd) == 4 * 2 + 2
+    library = PriorKnowledge.load(grown)
+    assert set(library.objects) == set(PRIORS.split(",")) | {"smooth_sponge", "hard_box"}
+    assert [p["source"] for p in library.metadata["provenance"]] == [
+        str(prior),
+        str(out / "learned_prior.npz"),
+    ]
+    # --recognise and --merge-into are for live runs only.
+    assert main(["learn", "--table", "x.csv", "--recognise", "--objects", "a,b"]) == 1
+    assert "--recognise: only for a live run" in capsys.readouterr().err

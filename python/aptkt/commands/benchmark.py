@@ -71,6 +71,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "report.md, lifelong.png/.svg, results.csv, summary.json",
     )
     p.add_argument(
+        "--recognition",
+        action="store_true",
+        help="instead: recognition — in --groups random draws, a library of --priors objects "
+        "(the first half of their trials) recognises the second half of their trials and of "
+        "--new objects it does not hold; accuracy against a nearest-class-mean rule, novelty "
+        "AUROC, false alarms (docs/recognition.md)",
+    )
+    p.add_argument(
         "--orders",
         type=int,
         default=20,
@@ -142,6 +150,8 @@ def run(args: argparse.Namespace) -> int:
                 f"{', '.join(sweep_only)}: not with --lifelong (its library grows from --new "
                 "objects in --orders orders)"
             )
+    if args.recognition and (args.lifelong or len(libraries) > 1):
+        raise ConfigError("--recognition: one library size (--priors N), and not with --lifelong")
     at_least(args.orders, 1, "--orders")
     at_most(args.orders, MAX_RUNS, "--orders")
     at_most(args.budget, MAX_BUDGET, "--budget")
@@ -173,6 +183,22 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     table = read_table_within_limits(args.table, settings)
+    if args.recognition:
+        from aptkt.experiments.recognition_benchmark import run_recognition_benchmark
+
+        run_recognition_benchmark(
+            table,
+            groups=args.groups,
+            library=libraries[0],
+            unseen=args.new,
+            seed=args.seed,
+            actions=list(settings.actions) if settings.actions else None,
+            output=args.output,
+            jobs=args.jobs,
+            command=_command(args),
+            say=lambda line: print(line, flush=True),
+        )
+        return 0
     if args.lifelong:
         from aptkt.experiments.lifelong import LifelongSettings, run_lifelong
 
@@ -247,6 +273,8 @@ def _command(args: argparse.Namespace) -> str:
     for option in ("choices", "actions", "scheduler"):
         if getattr(args, option):
             parts.append(f"--{option} {getattr(args, option)}")
+    if args.recognition:
+        parts.append("--recognition")
     if args.lifelong:
         parts.append("--lifelong")
         if args.orders != 20:

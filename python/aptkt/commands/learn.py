@@ -118,6 +118,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "learned_prior.npz; --table: summary.json, results.csv, prior.npz)",
     )
     p.add_argument(
+        "--recognise",
+        action="store_true",
+        help="live: first touch each of --objects once with every action and recognise it with "
+        "the --prior library; learn only the objects it flags as new (docs/recognition.md)",
+    )
+    p.add_argument(
         "--merge-into",
         type=Path,
         metavar="PRIOR",
@@ -147,6 +153,10 @@ def run(args: argparse.Namespace) -> int:
     from aptkt.runtime.live_learning import LiveLearningAborted, learn_live
 
     if args.table:
+        if args.recognise:
+            raise ConfigError(
+                "--recognise: only for a live run (--robot); a table's touches are recognised with aptkt recognise"
+            )
         if args.merge_into is not None:
             raise ConfigError(
                 "--merge-into: only for a live run (--robot); a table's objects become a library "
@@ -185,7 +195,7 @@ def run(args: argparse.Namespace) -> int:
     if len(objects) < 2:
         raise ConfigError("--objects: learning needs at least two new objects")
     overlap = sorted(set(objects) & set(prior.objects))
-    if overlap:
+    if overlap and not args.recognise:
         raise ConfigError(
             f"--objects: {', '.join(overlap)} already in the prior knowledge ({args.prior})"
         )
@@ -253,6 +263,7 @@ def run(args: argparse.Namespace) -> int:
                     "prior": {"path": str(args.prior)},
                     "test": {"path": args.test} if args.test else {},
                 },
+                recognise_first=args.recognise,
             )
     except LiveLearningAborted as exc:
         print(f"aptkt learn: fault: {exc}", file=sys.stderr)

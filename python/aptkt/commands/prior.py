@@ -27,16 +27,20 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     b = ps.add_parser(
         "build",
-        help="fit the observation models of the prior (old) objects from a data set",
-        description="Extracts the features of the given objects' recordings (if not stored yet), "
-        "fits one feature pipeline and one multi-modal Laplace GPC per action, and saves them with "
-        "the observations to an .npz file (loads without executing code).",
+        help="fit the observation models of the prior (old) objects from a data set or a "
+        "feature table",
+        description="From a data set of this skin, extracts the features of the given objects' "
+        "recordings (if not stored yet); from a feature table of any sensor "
+        "(docs/feature-tables.md), reads its rows. Then fits one feature pipeline and one "
+        "multi-modal Laplace GPC per action, and saves them with the observations to an .npz "
+        "file (loads without executing code).",
     )
     b.add_argument(
         "data",
         type=Path,
-        metavar="DATASET",
-        help="data set (HDF5) of aptkt dataset generate or aptkt collect",
+        metavar="DATASET|TABLE",
+        help="data set (HDF5) of aptkt dataset generate or aptkt collect, or a feature table "
+        "(.csv, .h5)",
     )
     b.add_argument(
         "-o",
@@ -138,9 +142,13 @@ def run_build(args: argparse.Namespace) -> int:
     from aptkt.learning.extract import ExtractionSettings
 
     if not os.path.exists(args.data):  # (os.path: a name too long to exist is an answer too)
-        raise ConfigError(f"{args.data}: no such data set")
-    input_file(args.data, "DATASET")
-    intact_data_set(args.data, "DATASET")
+        raise ConfigError(f"{args.data}: no such data set or feature table")
+    input_file(args.data, "DATASET|TABLE")
+    from aptkt.learning.feature_table import is_feature_table
+
+    from_table = is_feature_table(args.data)
+    if not from_table:
+        intact_data_set(args.data, "DATASET")
     at_least(args.seed, 0, "--seed")
     at_least(args.restarts, 0, "--restarts")
     at_most(args.restarts, MAX_RESTARTS, "--restarts", "restarts bound every model's fit")
@@ -152,13 +160,18 @@ def run_build(args: argparse.Namespace) -> int:
     if objects is not None and len(objects) < 2:
         raise ConfigError("--objects: prior knowledge needs at least two objects")
     trials = _trials(args.trials)
-    table = load_observations(
-        args.data,
-        actions=split_names(args.actions, "--actions"),
-        objects=objects,
-        trials=trials,
-        progress=sys.stderr.isatty(),
-    )
+    if from_table:
+        table, columns = _from_table(
+            args.data, split_names(args.actions, "--actions"), objects, trials
+        )
+    else:
+        table = load_observations(
+            args.data,
+            actions=split_names(args.actions, "--actions"),
+            objects=objects,
+            trials=trials,
+            progress=sys.stderr.isatty(),
+        )
     empty = [a for a, obs in table.items() if len(obs) == 0]
     if empty:
         raise ConfigError(f"no observations of {empty} for the chosen objects/trials")
@@ -171,21 +184,59 @@ def run_build(args: argparse.Namespace) -> int:
             seed=args.seed,
             progress=bar,
         )
-    # What each action was, so that `learn` refuses an actions file that gives one of these
-    # names to another movement.
-    recorded = stored_actions(args.data)
-    prior.metadata.update(
-        data=str(args.data),
-        trials=args.trials,
-        action_definitions={a: recorded[a].to_dict() for a in prior.actions if a in recorded},
-        extraction=ExtractionSettings().to_dict(),
-    )
+    if from_table:
+        # Which columns the features are, so that libraries of other tables do not merge.
+        prior.metadata.update(
+            table=str(args.data), trials=args.trials, feature_table_columns=columns
+        )
+    else:
+        # What each action was, so that `learn` refuses an actions file that gives one of these
+        # names to another movement.
+        recorded = stored_actions(args.data)
+        prior.metadata.update(
+            data=str(args.data),
+            trials=args.trials,
+            action_definitions={a: recorded[a].to_dict() for a in prior.actions if a in recorded},
+            extraction=ExtractionSettings().to_dict(),
+        )
     prior.save(args.output)
     print(
         f"{args.output}: prior knowledge of {len(prior.objects)} objects ({', '.join(prior.objects)}) "
         f"for {len(prior.actions)} actions"
     )
     return 0
+
+
+def _from_table(
+    path: Path, actions: list[str] | None, objects: list[str] | None, trials: range | None
+):
+    """A feature table's observations of the chosen actions, objects and trials, and each
+    action's feature columns by modality."""
+    import numpy as np
+
+    from aptkt.experiments.table_limits import read_table_within_limits
+    from aptkt.learning.feature_table import table_columns
+
+    table = read_table_within_limits(path)
+    names = actions or table.action_names
+    rows = np.ones(len(table.objects), dtype=bool)
+    if objects is not None:
+        missing = [o for o in objects if o not in set(table.object_names)]
+        if missing:
+            raise ConfigError(
+                f"--objects: {', '.join(missing)} not in {path} (it has {', '.join(table.object_names)})"
+            )
+        rows &= np.isin(table.objects, objects)
+    if trials is not None:
+        rows &= (table.trials >= trials.start) & (table.trials < trials.stop)
+    observations = table.observations(names, rows)
+    for action, obs in observations.items():
+        if len(set(obs.objects.tolist())) < 2:
+            raise ConfigError(
+                f"{path}: action {action} has {len(set(obs.objects.tolist()))} object(s) with "
+                "the chosen objects and trials; prior knowledge needs at least two"
+            )
+    return observations, {a: table_columns(table, a) for a in names}
 
 
 def load_prior(path: Path, option: str):

@@ -13,7 +13,13 @@ from aptkt.errors import AptktError
 from aptkt.learning.extract import observe_recording
 from aptkt.learning.observations import ObservationTable
 
-__all__ = ["Environment", "PoolEnvironment", "PoolExhaustedError", "RecordingEnvironment"]
+__all__ = [
+    "Environment",
+    "PoolEnvironment",
+    "PoolExhaustedError",
+    "PrefetchedEnvironment",
+    "RecordingEnvironment",
+]
 
 
 class PoolExhaustedError(AptktError):
@@ -96,3 +102,23 @@ class RecordingEnvironment:
         if self._on_recording is not None:
             self._on_recording(recording)
         return observe_recording(recording, self.actions[action], self._settings)
+
+
+class PrefetchedEnvironment:
+    """Another environment whose first observation of some (action, object) pairs was made
+    already — e.g. the touches that recognised which objects are new — and is handed out
+    before the robot is asked again."""
+
+    def __init__(
+        self, env: Environment, prefetched: Mapping[tuple[str, str], Mapping[str, np.ndarray]]
+    ) -> None:
+        self._env = env
+        self._ready = dict(prefetched)
+
+    def available(self, action: str, obj: str) -> bool:
+        return (action, obj) in self._ready or self._env.available(action, obj)
+
+    def observe(self, action: str, obj: str) -> Mapping[str, np.ndarray]:
+        if (action, obj) in self._ready:
+            return self._ready.pop((action, obj))
+        return self._env.observe(action, obj)

@@ -310,6 +310,26 @@ def _check_rows(table: FeatureTable) -> None:
         keys[key] = i
 
 
+def is_feature_table(path: str | Path) -> bool:
+    """Whether ``path`` names a feature table rather than a data set of this skin: a CSV file,
+    or an HDF5 file whose top level holds an ``object`` column (a data set's holds groups)."""
+    path = Path(path)
+    if path.suffix.lower() in _CSV:
+        return True
+    if path.suffix.lower() not in _HDF5:
+        return False
+    try:
+        with h5py.File(path, "r") as f:
+            return isinstance(f.get("object"), h5py.Dataset)
+    except OSError:
+        return False
+
+
+def table_columns(table: FeatureTable, action: str) -> dict[str, list[str]]:
+    """The feature columns of each modality of ``action``, by name."""
+    return {m: [table.columns[c] for c in cols] for m, cols in table._modalities(action).items()}
+
+
 def check_table_name(path: str | Path) -> Path:
     """A feature table's file name: its suffix says the format."""
     path = Path(path)

@@ -25,7 +25,7 @@ update does not grow with the library.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -68,15 +68,10 @@ def data_scale(X: np.ndarray, columns: list[int]) -> float:
 
 
 def _model(
-    groups: Mapping[str, list[int]],
-    signal_variance: float,
-    length_scale: float,
-    approximation: str,
-    own: Mapping[str, float] | None = None,
+    groups: Mapping[str, list[int]], signal_variance: float, length_scale: float, approximation: str
 ) -> LaplaceGPC:
-    own = own or {}
     return LaplaceGPC(
-        length_scale=[float(own.get(m, length_scale)) for m in groups],
+        length_scale=float(length_scale),
         signal_variance=float(signal_variance),
         modalities=dict(groups),
         optimize=False,
@@ -95,9 +90,6 @@ class LibraryEvidence:
     log_grid: np.ndarray
     values: np.ndarray
     centre: float
-    #: Modalities not measured in noise levels (the auxiliary features: probabilities), each at
-    #: its own data scale, which the search leaves alone.
-    own_scales: tuple[tuple[str, float], ...] = ()
 
     @cached_property
     def _spline(self) -> CubicSpline:
@@ -122,14 +114,12 @@ def library_evidence(
     signal_variance: float,
     *,
     approximation: str = "erf",
-    own_scale: Sequence[str] = (),
 ) -> LibraryEvidence:
     """:class:`LibraryEvidence` of the library's observations ``X`` (their objects, the model
-    input's columns ``groups``) at ``signal_variance``; the modalities in ``own_scale`` keep
-    their data scale as their length-scale instead of the shared one."""
-    own = {m: data_scale(X, list(groups[m])) for m in own_scale if m in groups}
-    shared = [cols for m, cols in groups.items() if m not in own]
-    centre = math.exp(float(np.mean([math.log(data_scale(X, list(cols))) for cols in shared])))
+    input's columns ``groups``) at ``signal_variance``."""
+    centre = math.exp(
+        float(np.mean([math.log(data_scale(X, list(cols))) for cols in groups.values()]))
+    )
     log_grid = math.log(centre) + np.linspace(
         -math.log(GRID_SPAN), math.log(GRID_SPAN), GRID_POINTS
     )
@@ -137,14 +127,14 @@ def library_evidence(
     values = np.array(
         [
             float(
-                _model(groups, signal_variance, math.exp(t), approximation, own)
+                _model(groups, signal_variance, math.exp(t), approximation)
                 .fit(X, labels)
                 .log_marginal_likelihood_.sum()
             )
             for t in log_grid
         ]
     )
-    return LibraryEvidence(float(signal_variance), log_grid, values, centre, tuple(own.items()))
+    return LibraryEvidence(float(signal_variance), log_grid, values, centre)
 
 
 def _maximise(objective, log_grid: np.ndarray, start: float | None = None) -> float:
@@ -189,19 +179,16 @@ def fit_new_objects(
     """The new objects' model on ``X`` (with ``sources`` per class, as :meth:`LaplaceGPC.fit`
     takes them) at the library's σ² and the length-scale maximising the library's evidence plus
     the new classifiers' plus the hyper-prior; ``start``: an earlier optimum's length-scale
-    (its log), where the search begins. The chosen log length-scale is the model's first
-    modality's (``model.theta_[0, 1]``; the first modality is always one of the searched)."""
-
-    own = dict(library.own_scales)
+    (its log), where the search begins. The chosen log length-scale is ``model.theta_[0, 1]``."""
 
     def fitted(t: float) -> LaplaceGPC:
-        return _model(groups, library.signal_variance, math.exp(t), approximation, own).fit(
+        return _model(groups, library.signal_variance, math.exp(t), approximation).fit(
             X, objects, sources=sources or None
         )
 
     first = fitted(library.log_grid[library.log_grid.size // 2] if start is None else start)
     theta = first.theta_.copy()
-    searched = [1 + k for k, m in enumerate(groups) if m not in own]
+    searched = list(range(1, 1 + len(groups)))
 
     def objective(t: float) -> float:
         # One model evaluated at other length-scales: the core's Laplace evidence per

@@ -13,7 +13,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,6 +24,9 @@ from aptkt.learning.config import GPSettings
 from aptkt.learning.evidence import at_fitted_hyperparameters, uncoupled_evidence
 from aptkt.learning.identity import ObjectIdentity
 from aptkt.learning.kernel import LibraryEvidence, library_evidence
+
+if TYPE_CHECKING:
+    from aptkt.learning.recognition import Calibration, Recognition
 from aptkt.learning.observations import Observations, ObservationTable
 from aptkt.learning.pipeline import FEATURE_SCALES, FeaturePipeline, ModalityTransform
 from aptkt.learning.prior_file import FORMAT as _FORMAT
@@ -124,8 +127,6 @@ class ActionPrior:
                 groups,
                 signal_variance,
                 approximation=approximation,
-                # The old model's posteriors are probabilities, not noise levels.
-                own_scale=(AUXILIARY,),
             )
         return self._evidence_curves[key]
 
@@ -235,6 +236,7 @@ class PriorKnowledge:
             raise ValueError("prior knowledge needs at least one action")
         self.actions: dict[str, ActionPrior] = dict(actions)
         self.metadata: dict[str, Any] = dict(metadata or {})
+        self._calibrations: dict[float, Calibration] = {}
 
     def __getitem__(self, action: str) -> ActionPrior:
         try:
@@ -338,6 +340,30 @@ class PriorKnowledge:
                 )
             actions[name] = ActionPrior(name, obs, pipeline, model)
         return cls(actions, meta.get("metadata", {}))
+
+    def recognise(
+        self,
+        observations: Mapping[str, Observations] | Observations,
+        *,
+        false_alarm_rate: float = 0.05,
+    ) -> Recognition:
+        """Which of the library's objects each touch is, how sure, and whether it is one of
+        them at all (:mod:`aptkt.learning.recognition`): ``observations`` of one action, or
+        action -> observations (rows of several actions with the same object and trial are one
+        touch, their evidence fused). The novelty threshold is chosen on the library itself for
+        ``false_alarm_rate`` (computed once per rate). ``pandas.DataFrame(result.rows())`` is
+        the table."""
+        from aptkt.learning.recognition import calibrate, recognise
+
+        table = (
+            {observations.action: observations}
+            if isinstance(observations, Observations)
+            else dict(observations)
+        )
+        key = round(float(false_alarm_rate), 12)
+        if key not in self._calibrations:
+            self._calibrations[key] = calibrate(self, false_alarm_rate)
+        return recognise(self, table, calibration=self._calibrations[key])
 
     def summary(self) -> list[dict[str, Any]]:
         """One row per action: objects, observations, modality weights and length-scales."""

@@ -19,7 +19,7 @@ independent evidence: their log-likelihoods add, as the paper's fused posteriors
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -134,10 +134,10 @@ def calibrate(prior: PriorKnowledge, false_alarm_rate: float = FALSE_ALARM_RATE)
             model = _identity(X[~mine], labels[~mine])
             if model is None:
                 continue
-            o, n = _likelihoods(model, X[mine])
-            cols = [objects.index(m) for m in model.objects_]
-            lo2[np.ix_(np.flatnonzero(mine), cols)] = o
-            ln2[mine] = n
+            out_old, out_new = _likelihoods(model, X[mine])
+            cols = np.array([objects.index(m) for m in model.objects_], dtype=np.int64)
+            lo2[np.ix_(np.flatnonzero(mine), cols)] = out_old
+            ln2[mine] = out_new
         held_out[action] = (lo2, ln2)
     old, new, _ = _fused(held_in, index, len(keys), len(objects))
     _, novelty = _posterior(old, new)

@@ -34,7 +34,7 @@ from aptkt.actions import ExploratoryAction
 from aptkt.data.store import DatasetReader, DatasetWriter
 from aptkt.errors import AptktError
 from aptkt.learning.config import LearnerConfig
-from aptkt.learning.environment import RecordingEnvironment
+from aptkt.learning.environment import PrefetchedEnvironment, RecordingEnvironment
 from aptkt.learning.extract import ExtractionSettings
 from aptkt.learning.learner import APTKT, StepRecord
 from aptkt.learning.observations import ObservationTable
@@ -105,8 +105,14 @@ def learn_live(
     test: ObservationTable | None = None,
     report: Callable[[str], None] = print,
     extra: Mapping[str, Any] | None = None,
+    recognise_first: bool = False,
 ) -> dict[str, Any]:
     """Run APTKT on an entered live ``session``; write the run to ``output``; return the summary.
+
+    ``recognise_first``: ``new_objects`` are candidates. Each is touched once with every action
+    and recognised with the library (:meth:`PriorKnowledge.recognise`); the known ones are
+    reported and left alone, the ones the library flags as new are learned (their touches are
+    the learner's first round: the robot does not repeat them).
 
     Every recording is appended to the data set ``record`` (created if missing; trial numbers
     continue after the ones it holds). Raises :class:`LiveLearningAborted` after a fault, once
@@ -171,7 +177,7 @@ def learn_live(
         steps.append(rec)
         report(describe_step(rec, config, n_pairs))
 
-    env = RecordingEnvironment(
+    env: Any = RecordingEnvironment(
         explore, actions, first_trial=first_trial, on_recording=writer.append
     )
     learner = APTKT(config, prior)
@@ -179,6 +185,24 @@ def learn_live(
         report(f"note: {NO_TEST_NOTE}")
     status = "completed"
     try:
+        if recognise_first:
+            assert prior is not None  # recognition needs a library
+            touched = _recognise(env, prior, list(actions), list(new_objects), report)
+            summary["recognition"] = touched["rows"]
+            new_objects = touched["new"]
+            summary["new_objects"] = list(new_objects)
+            if len(new_objects) < 2:
+                report(
+                    f"{len(new_objects)} new object(s): learning needs at least two; the "
+                    "recognition is in run.json"
+                )
+                summary["status"] = "recognised"
+                summary["seconds"] = time.perf_counter() - t0
+                (output / "run.json").write_text(
+                    json.dumps(_finite(summary), indent=2, default=_json)
+                )
+                return summary
+            env = PrefetchedEnvironment(env, touched["observations"])
         run = learner.run(env, list(actions), list(new_objects), test=test, on_step=on_step)
         summary["stopped_early"] = run.stopped_early
     except (AptktError, KeyboardInterrupt) as exc:
@@ -216,6 +240,50 @@ def learn_live(
         writer.close()
     _finish(summary, steps, learner, config, output, status, t0, report)
     return summary
+
+
+def _recognise(
+    env: Any,
+    prior: PriorKnowledge,
+    actions: list[str],
+    candidates: list[str],
+    report: Callable[[str], None],
+) -> dict[str, Any]:
+    """Touch each candidate once with every action and recognise it with the library: its
+    rows, the observations made, and the candidates flagged as new."""
+    from aptkt.learning.observations import Observations
+
+    made: dict[tuple[str, str], Mapping[str, np.ndarray]] = {}
+    parts: dict[str, list[Observations]] = {a: [] for a in actions}
+    for obj in candidates:
+        for action in actions:
+            observation = env.observe(action, obj)
+            made[(action, obj)] = observation
+            # One touch: the same trial number for every action of it.
+            parts[action].append(Observations.single(action, obj, observation, 0))
+    table = {a: Observations.concat(p) for a, p in parts.items()}
+    result = prior.recognise(table)
+    new = []
+    for row in result.rows():
+        if not row["known"] and row["object"] in prior.objects:
+            report(
+                f"recognised: {row['object']} is new (novelty {row['novelty']:.1f}), but the "
+                "library holds an object of that name: not learned again (rename it to learn it "
+                "as a new object)"
+            )
+        elif row["known"]:
+            report(
+                f"recognised: {row['object']} is {row['predicted']} (probability "
+                f"{row['probability']:.2f}, runner-up {row['runner_up']}, novelty "
+                f"{row['novelty']:.1f})"
+            )
+        else:
+            new.append(row["object"])
+            report(
+                f"recognised: {row['object']} is new (novelty {row['novelty']:.1f} > "
+                f"{result.calibration.threshold:.1f}; most like {row['predicted']})"
+            )
+    return {"rows": result.rows(), "new": new, "observations": made}
 
 
 def _finish(
