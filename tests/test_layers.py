@@ -4,7 +4,7 @@ imports itself back through others (no cycles).
 Layers, low to high (a room may import from its own room and from lower layers only; rooms
 on one layer do not import each other, e.g. ``sim`` and ``learning`` stand side by side)::
 
-    _core | errors | files | skin, features, gp | robot, data | actions | sim, learning
+    _core | errors | files, progress | skin, features, gp | robot, data | actions | sim, learning
     | runtime, importers | experiments | commands, cli
 
 Imports under ``if TYPE_CHECKING:`` are for annotations only and are not counted. Imports
@@ -24,7 +24,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "python" / "aptkt"
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("_core",),  # the compiled core: the errors below derive from its AptktError
     ("", "errors"),
-    ("files",),  # files from elsewhere: regular files only, bounded reads, checked archives
+    ("files", "progress"),  # files from elsewhere (regular, bounded, checked); progress lines
     ("skin", "features", "gp"),
     ("robot", "data"),
     ("actions",),

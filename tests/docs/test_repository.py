@@ -127,9 +127,10 @@ def test_ci_needs_nothing_outside_the_repository():
 
 
 def test_every_docs_page_named_in_code_or_docs_exists():
-    """`docs/reproduce.md` in a help text, a docstring, a bench or a page names a page that
-    exists (pages move: the code must follow)."""
-    files = [ROOT / "README.md", *(ROOT / "docs").rglob("*.md"), *(ROOT / "benches").glob("*.md")]
+    """`docs/reproduce.md` in a help text, a docstring, a bench, a page or the changelog names a
+    page that exists (pages move: the code and the changelog must follow)."""
+    files = [ROOT / "README.md", ROOT / "CHANGELOG.md", *(ROOT / "docs").rglob("*.md")]
+    files += (ROOT / "benches").glob("*.md")
     for folder in ("python", "benches", "tests"):
         files += (ROOT / folder).rglob("*.py")
     for path in files:

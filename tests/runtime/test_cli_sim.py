@@ -495,7 +495,8 @@ def test_learn_says_what_each_new_object_learned_from_or_why_not(
     workdir: Path, prior: Path, capsys
 ):
     """Each step's decisions, and at the end the ones in force, name the prior object learned
-    from with λ or the rule that stopped the transfer: eps_neg, or the evidence cut-off."""
+    from with λ or the rule that stopped the transfer: eps_neg, or the same-object cut-off with
+    the threshold it had to beat."""
     out = workdir / "run-words"
     assert learn(workdir, prior, out, "--objects", NEW, "--budget", "2", "--seed", "3") == 0
     text = capsys.readouterr().out
@@ -509,12 +510,13 @@ def test_learn_says_what_each_new_object_learned_from_or_why_not(
     stopped = [d for d in decided if not d["source"] and d["log_bayes_factor"]]
     below = [d for d in decided if not d["source"] and not d["log_bayes_factor"]]
     assert words.count(" <- ") == len(sources)
-    assert words.count(f"<= {margin:g} (evidence cut-off)") == len(stopped)
+    assert words.count("(same-object cut-off)") == len(stopped)
     assert words.count(f"< eps_neg {eps_neg:g})") == len(below)
-    for d in stopped:  # the look-alike and its log Bayes factor, as the learner judged it
-        ((old, log_bf),) = d["log_bayes_factor"].items()
+    for d in stopped:  # the look-alike and its log odds, as the learner judged them
+        ((old, log_odds),) = d["log_bayes_factor"].items()
+        assert d["threshold"] >= margin
         assert f"{d['new_object']}: no transfer, most like {old}" in words
-        assert f"log BF {log_bf:.1f} <= {margin:g}" in words
+        assert f"log odds {log_odds:.1f} <= {d['threshold']:.3g}" in words
     # The decisions in force at the end: the last one of each action and new object.
     final: dict[tuple[str, str], dict] = {}
     for step in run["steps"]:

@@ -32,37 +32,45 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
         "--reading",
         choices=READINGS,
         default="aptkt",
-        help="aptkt: the noise-whitened prior space, one kernel per action learned on the old "
-        "and new observations, strong evidence for a transfer (default); paper: the paper's "
+        help="aptkt: the jointly noise-whitened prior space, one kernel per action (its "
+        "amplitude set by the task, its length-scale by every label's evidence), a transfer "
+        "only to an object the library recognises as the same (default); paper: the paper's "
         "exact reading (spread-scaled features, each classifier its own ML-II kernel with "
         "fitted weights, Eq. 3's cut-off alone)",
     )
     g.add_argument(
         "--cutoff",
         choices=CUTOFFS,
-        help="evidence: Eq. 3's eps_neg, then the new labels' evidence must favour the "
-        "transfer by --evidence-margin; paper: Eq. 3 alone; " + _by_reading(lambda c: c.cutoff),
+        help="same-object: Eq. 3's eps_neg, then the library's model of its objects must "
+        "find the new object the same as the source, by log odds above --evidence-margin and "
+        "above what its own distinct objects reach; evidence: Eq. 3's eps_neg, then the new "
+        "labels' evidence must favour the transfer by --evidence-margin; paper: Eq. 3 alone; "
+        + _by_reading(lambda c: c.cutoff),
     )
     g.add_argument(
         "--evidence-margin",
         type=float,
         metavar="M",
-        help=f"log Bayes factor a transfer must exceed with --cutoff evidence (default "
+        help=f"log odds (same-object) or log Bayes factor (evidence) a transfer must exceed "
+        f"(default "
         f"{LearnerConfig.evidence_margin:g}: strong evidence)",
     )
     g.add_argument(
         "--kernel",
         choices=KERNELS,
-        help="shared: one kernel per action (sigma^2 and one length-scale in noise units), "
-        "learned on the old and new objects' observations together; per-classifier: each "
+        help="library: one kernel per action, sigma^2 set by the number of new objects and "
+        "the length-scale (in noise units) by the evidence of the old and new labels; shared: "
+        "one kernel per action, sigma^2 and the length-scale learned on the old and new "
+        "objects' observations together; per-classifier: each "
         "classifier its own (a length-scale per modality and the weights of Eq. 1); "
         + _by_reading(lambda c: c.gp.kernel),
     )
     g.add_argument(
         "--prior-feature-scale",
         choices=FEATURE_SCALES,
-        help="the metric of a prior built here (a loaded --prior keeps its own): whiten (the "
-        "old objects' within-object noise, whitened) or spread (each column z-scored over "
+        help="the metric of a prior built here (a loaded --prior keeps its own): "
+        "whiten-joint (the old objects' within-object noise, whitened across modalities), "
+        "whiten (the same, each modality on its own) or spread (each column z-scored over "
         "the old observations); " + _by_reading(lambda c: c.gp.prior_feature_scale),
     )
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 from aptkt.commands._checks import (
@@ -20,6 +19,7 @@ from aptkt.commands._checks import (
 )
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
+from aptkt.progress import Progress
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -212,7 +212,7 @@ def run_generate(args: argparse.Namespace) -> int:
         jobs=args.jobs,
         resume=args.resume,
         overwrite=args.overwrite,
-        progress=not args.no_progress and sys.stderr.isatty(),
+        progress=not args.no_progress,
     )
     print(dumps(info) if args.json else describe_summary(info))
     return 0
@@ -305,7 +305,7 @@ def run_features(args: argparse.Namespace) -> int:
         counts = extract_features(
             args.file,
             actions=split_names(args.actions, "--actions"),
-            progress=not args.no_progress and sys.stderr.isatty(),
+            progress=not args.no_progress,
             parallel_map=executor.imap_unordered if args.jobs > 1 else None,
         )
     finally:
@@ -331,7 +331,7 @@ def run_export_features(args: argparse.Namespace) -> int:
             args.file,
             actions=split_names(args.actions, "--actions"),
             objects=split_names(args.objects, "--objects"),
-            progress=not args.no_progress and sys.stderr.isatty(),
+            progress=not args.no_progress,
         )
     except (DatasetError, KeyError, OSError) as exc:
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
@@ -367,11 +367,7 @@ def run_import(args: argparse.Namespace) -> int:
         raise ConfigError(f"--output {output}: exists (give --force to replace it)")
     materials = split_names(args.materials, "--materials")
     total = len(find_trials(args.directory))
-    bar = None
-    if not args.no_progress and sys.stderr.isatty():
-        from tqdm import tqdm
-
-        bar = tqdm(total=total, unit="trial", desc="importing", leave=False)
+    bar = None if args.no_progress else Progress(total, "trial", "importing")
     try:
         observations = import_biotac_slide(
             args.directory,

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from aptkt.commands._checks import add_jobs_option
@@ -73,5 +72,5 @@ def run(args: argparse.Namespace) -> int:
         if args.quick
         else DemoSettings(**common, trials=args.trials, budget=args.budget)
     )
-    run_demo(settings, progress=not args.no_progress and sys.stderr.isatty())
+    run_demo(settings, progress=not args.no_progress)
     return 0

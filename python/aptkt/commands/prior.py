@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 from pathlib import Path
 
 from aptkt.commands._checks import at_least, at_most, input_file, intact_data_set, output_file
@@ -14,6 +13,7 @@ from aptkt.errors import ConfigError
 from aptkt.gp import MAX_RESTARTS
 from aptkt.learning.config import GPSettings
 from aptkt.learning.pipeline import FEATURE_SCALES
+from aptkt.progress import Progress
 
 #: A modality's RBF kernel that varies by less than this over the training data (between the two
 #: most distant observations) is effectively constant: it cannot tell observations apart, so
@@ -135,7 +135,6 @@ def _trials(text: str | None) -> range | None:
 
 
 def run_build(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
 
     from aptkt.learning import GPSettings, PriorKnowledge
     from aptkt.learning.dataset import load_observations, stored_actions
@@ -170,14 +169,12 @@ def run_build(args: argparse.Namespace) -> int:
             actions=split_names(args.actions, "--actions"),
             objects=objects,
             trials=trials,
-            progress=sys.stderr.isatty(),
+            progress=True,
         )
     empty = [a for a, obs in table.items() if len(obs) == 0]
     if empty:
         raise ConfigError(f"no observations of {empty} for the chosen objects/trials")
-    with tqdm(
-        total=len(table), unit="action", desc="fitting", disable=not sys.stderr.isatty()
-    ) as bar:
+    with Progress(len(table), "action", "fitting") as bar:
         prior = PriorKnowledge.build(
             table,
             gp=GPSettings(n_restarts=args.restarts, prior_feature_scale=args.feature_scale),
@@ -253,8 +250,6 @@ def load_prior(path: Path, option: str):
 def run_merge(args: argparse.Namespace) -> int:
     import hashlib
 
-    from tqdm import tqdm
-
     from aptkt.commands._checks import no_duplicates
     from aptkt.learning.library import merge_priors
 
@@ -268,9 +263,7 @@ def run_merge(args: argparse.Namespace) -> int:
     libraries = [(str(p), load_prior(p, "PRIOR")) for p in args.files]
     digests = {str(p): hashlib.sha256(p.read_bytes()).hexdigest() for p in args.files}
     first = libraries[0][1]
-    with tqdm(
-        total=len(first.actions), unit="action", desc="fitting", disable=not sys.stderr.isatty()
-    ) as bar:
+    with Progress(len(first.actions), "action", "fitting") as bar:
         merged = merge_priors(libraries, seed=args.seed, digests=digests, progress=bar)
     merged.save(args.output)
     counts = ", ".join(f"{name}: {len(p.objects)}" for name, p in libraries)

@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
         jobs=args.jobs,
         scheduler=args.scheduler,
         seed=args.seed,
-        progress=not args.no_progress and sys.stderr.isatty(),
+        progress=not args.no_progress,
         base=base,
         real_data=args.real_data,
         command=_command(args),

@@ -9,12 +9,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
-
 from aptkt.experiments.executors import Executor
 from aptkt.experiments.priors import PriorTask, build_prior
 from aptkt.experiments.run_store import RunStore, run_key
 from aptkt.experiments.runs import RunSpec, run_steps
+from aptkt.progress import Progress
 
 __all__ = ["BatchResult", "StoredSteps", "run_batch", "build_priors"]
 
@@ -61,10 +60,8 @@ class BatchResult:
     run_seconds: float
 
 
-def _bar(progress: bool, total: int, initial: int, desc: str):
-    return tqdm(
-        total=total, initial=initial, unit="run", desc=desc, disable=not progress, smoothing=0.05
-    )
+def _bar(progress: bool, total: int, initial: int, desc: str) -> Progress:
+    return Progress(total, "run", desc, initial=initial, enabled=progress)
 
 
 def build_priors(tasks: Sequence[PriorTask], executor: Executor, *, progress: bool = True) -> None:

@@ -357,8 +357,8 @@ def run_benchmark(
     from aptkt.experiments.executors import make_executor
     from aptkt.experiments.noise_profile import noise_profile
     from aptkt.experiments.plots import save_figure
-    from aptkt.experiments.progress import Progress
     from aptkt.experiments.tables import write_csv
+    from aptkt.progress import Progress
 
     actions = list(s.actions) if s.actions else table.action_names
     executor = make_executor(jobs, scheduler)

@@ -28,7 +28,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from aptkt import __version__
 from aptkt.actions import PAPER_ACTIONS
@@ -42,6 +41,7 @@ from aptkt.experiments.tables import write_csv
 from aptkt.learning import GPSettings, LearnerConfig, PriorKnowledge
 from aptkt.learning.dataset import extract_features, load_observations, stale_features
 from aptkt.learning.transfer_summary import summary_lines
+from aptkt.progress import Progress
 from aptkt.runtime.generation import GenerationPlan, generate
 
 __all__ = ["DemoSettings", "report_results", "run_demo", "DEMO_PRIORS", "DEMO_NEW"]
@@ -111,7 +111,7 @@ def run_demo(s: DemoSettings, *, progress: bool = True) -> dict[str, Any]:
         )
         methods = _methods(s, gp)
         specs = _specs(s, methods, data, prior_path, trials)
-        bar = tqdm(total=len(specs), unit="run", desc="learning", disable=not progress)
+        bar = Progress(len(specs), "run", "learning", enabled=progress)
         results = run_many(specs, progress=bar.update, executor=executor)
         bar.close()
     finally:

@@ -200,8 +200,8 @@ def run_lifelong(
     from aptkt.experiments import lifelong_report as lr
     from aptkt.experiments.executors import make_executor
     from aptkt.experiments.plots import save_figure
-    from aptkt.experiments.progress import Progress
     from aptkt.experiments.tables import write_csv
+    from aptkt.progress import Progress
 
     actions = list(s.actions) if s.actions else table.action_names
     learn_rows, test_rows = split_trials(table, actions)

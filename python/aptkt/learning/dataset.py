@@ -14,12 +14,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from aptkt.actions import ExploratoryAction
 from aptkt.data import DatasetError, DatasetReader, store_features
 from aptkt.learning.extract import ExtractionSettings, observe_recording
 from aptkt.learning.observations import Observations
+from aptkt.progress import Progress
 from aptkt.skin.samples import Recording
 
 __all__ = ["extract_features", "load_observations", "stored_actions", "stale_features"]
@@ -72,7 +72,7 @@ def _extract(
 ) -> dict[str, dict[str, np.ndarray]]:
     """Feature values per action and modality, one row per recording of ``by_action``."""
     total = sum(len(v) for v in by_action.values())
-    bar = tqdm(total=total, unit="rec", desc=desc) if progress else None
+    bar = Progress(total, "recording", desc) if progress else None
     values: dict[str, dict[str, np.ndarray]] = {}
     try:
         for name, rows in by_action.items():
@@ -175,7 +175,7 @@ def _extract_in_chunks(
     ]
     parts: list[dict[str, np.ndarray] | None] = [None] * len(tasks)
     total = sum(len(v) for v in by_action.values())
-    bar = tqdm(total=total, unit="rec", desc=f"features {path.name}") if progress else None
+    bar = Progress(total, "recording", f"features {path.name}") if progress else None
     try:
         for i, part in parallel_map(_extract_chunk, tasks):
             parts[i] = part

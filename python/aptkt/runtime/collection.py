@@ -15,7 +15,6 @@ trial in the data set itself, with the error in its metadata (:mod:`aptkt.runtim
 from __future__ import annotations
 
 import json
-import sys
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -138,7 +137,7 @@ def collect(
         resume=resume,
         overwrite=overwrite,
         check=lambda stored: _check_resumable(Path(path), stored, plan, session_desc),
-        bar={"file": sys.stderr} if progress is True else None,
+        progress=progress is True,
     ) as out:
         writer, bar = out.writer, out.bar
         for obj, action, trial in out.todo:
@@ -149,7 +148,7 @@ def collect(
                     between_trials(trial)
                 current_round = trial
             if bar is not None:
-                bar.set_postfix_str(f"{obj} {action.name} trial {trial}")
+                bar.note(f"{obj} {action.name} trial {trial}")
             try:
                 rec = session.explore(obj, action, trial)
             except KeyboardInterrupt as exc:

@@ -124,14 +124,14 @@ def generate(
         resume=resume,
         overwrite=overwrite,
         check=same_seed,
-        bar={"smoothing": 0.05} if progress is True else None,
+        progress=progress is True,
     ) as out:
         writer, bar = out.writer, out.bar
         for rec in _run(plan, out.todo, jobs, lambda: len(writer), out.path):
             writer.append_packed(rec)
             if bar is not None:
                 bar.update(1)
-                bar.set_postfix_str(f"{rec.key[0]} {rec.key[1]}", refresh=False)
+                bar.note(f"{rec.key[0]} {rec.key[1]}")
             elif callable(progress):
                 progress(len(writer), len(plan))
     return out.summary(wall_seconds=time.perf_counter() - t0, simulated=len(out.todo))

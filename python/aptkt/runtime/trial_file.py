@@ -8,12 +8,11 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
-
 from aptkt.actions import ExploratoryAction
 from aptkt.data.lock import WriterLock
 from aptkt.data.store import DatasetReader, DatasetWriter, repair
 from aptkt.errors import DatasetError
+from aptkt.progress import Progress
 from aptkt.runtime.grid import TrialGrid
 
 __all__ = ["TrialFile"]
@@ -24,7 +23,7 @@ class TrialFile:
     order). With ``resume`` an existing file is completed: ``check`` first sees its description
     (and raises if the file belongs to another plan), a file whose writer died is repaired
     (:attr:`repaired`: the recordings it kept). Without it an existing file is an error unless
-    ``overwrite``. ``bar``: tqdm options for a progress bar over the plan (None: no bar).
+    ``overwrite``. ``progress``: report progress over the whole plan (:class:`Progress`).
 
     The data set's lock (:mod:`aptkt.data.lock`) is taken before anything else and held until
     :meth:`close`: while another process writes the file, resuming, repairing and replacing
@@ -39,7 +38,7 @@ class TrialFile:
         resume: bool,
         overwrite: bool,
         check: Callable[[dict[str, Any]], None] | None = None,
-        bar: Mapping[str, Any] | None = None,
+        progress: bool = False,
     ):
         self.path = Path(path)
         self.plan = plan
@@ -56,15 +55,9 @@ class TrialFile:
             (o, a, t) for o, a, t in plan.trials() if (o, a.name, t) not in done
         ]
         self.bar = (
-            None
-            if bar is None
-            else tqdm(
-                total=len(plan),
-                initial=len(plan) - len(self.todo),
-                unit="trial",
-                desc=self.path.name,
-                **bar,
-            )
+            Progress(len(plan), "trial", self.path.name, initial=len(plan) - len(self.todo))
+            if progress
+            else None
         )
 
     def _writer(

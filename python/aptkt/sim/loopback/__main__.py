@@ -24,7 +24,8 @@ from aptkt.sim.loopback.servers import LoopbackServer
 from aptkt.sim.loopback.tcp_skin import SkinConfig
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line, apart from running it: the docs' commands are checked against it."""
     parser = argparse.ArgumentParser(
         prog="python -m aptkt.sim.loopback", description=__doc__.split("\n")[0]
     )
@@ -87,6 +88,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--stdio", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--config-json", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--ports-json", default=None, help=argparse.SUPPRESS)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
 
     ports: dict[str, Any] = {"rtde": 30004, "dashboard": 29999, "script": [30001, 30002, 30003]}

@@ -2,12 +2,14 @@
 
 A redirected run would otherwise show its first line and nothing until it ends; here it writes
 a line when another tenth of the work is done or half a minute has passed since the last line,
-with the time spent and an estimate of the time left."""
+with the time spent and an estimate of the time left. Every long command reports through this
+one class, so that a log shows the same lines whichever command wrote it."""
 
 from __future__ import annotations
 
 import sys
 import time
+from types import TracebackType
 from typing import Any, TextIO
 
 __all__ = ["Progress"]
@@ -29,19 +31,52 @@ class Progress:
         *,
         stream: TextIO | None = None,
         enabled: bool = True,
+        initial: int = 0,
     ) -> None:
         self.total = max(int(total), 1)
         self.unit, self.desc = unit, desc
         self.stream = sys.stderr if stream is None else stream
-        self.done = 0
+        # Work done before this run (a resumed data set) counts as done but not in the rate.
+        self.done = self._last_done = self._initial = int(initial)
         self._start = self._last_time = time.monotonic()
-        self._last_done = 0
+        self._note = ""
         self._bar: Any = None
         self.enabled = enabled
         if enabled and _is_terminal(self.stream):
             from tqdm import tqdm
 
-            self._bar = tqdm(total=self.total, unit=unit, desc=desc, leave=False, file=self.stream)
+            self._bar = tqdm(
+                total=self.total,
+                initial=self._initial,
+                unit=unit,
+                desc=desc,
+                leave=False,
+                file=self.stream,
+                smoothing=0.05,
+            )
+
+    def __enter__(self) -> Progress:
+        return self
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def note(self, text: str) -> None:
+        """What is being worked on (``rough_sponge P1 trial 3``): beside the bar, or at the end
+        of the next line."""
+        self._note = text
+        if self._bar is not None:
+            self._bar.set_postfix_str(text, refresh=False)
+
+    def clear(self) -> None:
+        """Clear the bar before other output goes to the same terminal; lines need nothing."""
+        if self._bar is not None:
+            self._bar.clear()
 
     def update(self, n: int = 1) -> None:
         self.done += n
@@ -66,8 +101,12 @@ class Progress:
             f"{self.desc}: {self.done}/{self.total} {self.unit}s "
             f"({100 * self.done / self.total:.0f} %), {_duration(elapsed)}"
         )
-        if 0 < self.done < self.total:
-            text += f", about {_duration(elapsed * (self.total - self.done) / self.done)} left"
+        done_now = self.done - self._initial
+        if 0 < done_now and self.done < self.total:
+            left = elapsed * (self.total - self.done) / done_now
+            text += f", about {_duration(left)} left"
+        if self._note:
+            text += f" ({self._note})"
         return text
 
     def close(self) -> None:
