@@ -5,7 +5,7 @@ Layers, low to high (a room may import from its own room and from lower layers o
 on one layer do not import each other, e.g. ``sim`` and ``learning`` stand side by side)::
 
     _core | errors | files, progress | skin, features, gp | robot, data | actions | sim, learning
-    | runtime, importers | experiments | commands, cli
+    | runtime, importers | experiments | commands, cli | reference
 
 Imports under ``if TYPE_CHECKING:`` are for annotations only and are not counted. Imports
 inside functions are: they are real dependencies, only deferred. The package root (``aptkt``,
@@ -32,6 +32,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("runtime", "importers"),
     ("experiments",),
     ("commands", "cli"),
+    ("reference",),  # the command-line reference page, generated from the parsers
 )
 LAYER_OF = {room: i for i, rooms in enumerate(LAYERS) for room in rooms}
 

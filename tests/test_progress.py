@@ -58,6 +58,15 @@ def test_resumed_work_counts_as_done_but_not_in_the_rate(clock):
     )
 
 
+def test_quick_work_writes_nothing(clock):
+    out = io.StringIO()
+    bar = Progress(6, "recording", "features d.h5", stream=out)
+    for _ in range(6):
+        clock.now += 0.1
+        bar.update()
+    assert out.getvalue() == ""
+
+
 def test_disabled_writes_nothing_and_a_context_closes_it(clock):
     out = io.StringIO()
     with Progress(3, "run", "learning", stream=out, enabled=False) as bar:

@@ -17,6 +17,8 @@ __all__ = ["Progress"]
 #: Seconds between two lines at most, and the share of the work between two lines at most.
 LINE_EVERY_SECONDS = 30.0
 LINE_EVERY_SHARE = 0.1
+#: Seconds between two lines at least: work done in a moment needs no account of itself.
+LINE_AFTER_SECONDS = 2.0
 
 
 class Progress:
@@ -87,10 +89,10 @@ class Progress:
             return
         now = time.monotonic()
         share = (self.done - self._last_done) / self.total
-        if (
-            self.done >= self.total
-            or share >= LINE_EVERY_SHARE
-            or now - self._last_time >= LINE_EVERY_SECONDS
+        since = now - self._last_time
+        if since >= LINE_EVERY_SECONDS or (
+            since >= LINE_AFTER_SECONDS
+            and (self.done >= self.total or share >= LINE_EVERY_SHARE)
         ):
             self._last_time, self._last_done = now, self.done
             print(self.line(now - self._start), file=self.stream, flush=True)

@@ -82,7 +82,7 @@ def test_no_command_touches_what_is_not_a_regular_file(kind, small, tmp_path, ca
         "repair": ["dataset", "repair", str(node)],
         "repair --no-backup": ["dataset", "repair", str(node), "--no-backup"],
         "resume": ["dataset", "generate", "-o", str(node), "-n", "1", "--resume", *PLAN],
-        "overwrite": ["dataset", "generate", "-o", str(node), "-n", "1", "--overwrite", *PLAN],
+        "overwrite": ["dataset", "generate", "-o", str(node), "-n", "1", "--force", *PLAN],
         "collect": ["collect", "--robot", "sim", "-o", str(node), "-n", "1", "--resume", *PLAN],
         "features": ["dataset", "features", str(node), "--no-progress"],
         "export": ["dataset", "export-features", str(node), "-o", str(tmp_path / "t.csv")],
@@ -130,7 +130,7 @@ def test_a_side_file_that_is_not_a_regular_file_is_never_replaced(small, tmp_pat
     data.write_bytes(small.read_bytes())
     node = make("fifo", tmp_path / f"d.h5{side}")
     argv = (
-        ["dataset", "generate", "-o", str(data), "-n", "1", "--overwrite", *PLAN]
+        ["dataset", "generate", "-o", str(data), "-n", "1", "--force", *PLAN]
         if side == ".creating"
         else ["dataset", "repair", str(data)]
     )
@@ -196,7 +196,7 @@ def test_a_second_writer_is_refused_naming_the_first(tmp_path):
     wait_for_recordings(data, 2, first)
     rivals = {
         "resume": [*generate_argv, "--resume"],
-        "overwrite": [*generate_argv, "--overwrite"],
+        "overwrite": [*generate_argv, "--force"],
         "repair": ["dataset", "repair", str(data)],
         "features": ["dataset", "features", str(data), "--no-progress"],
         "collect": ["collect", "--robot", "sim", "-o", str(data), "-n", "6", "--resume", *PLAN],

@@ -115,5 +115,5 @@ def test_quick_demo_refuses_to_overwrite_a_full_result(tmp_path, capsys):
     assert not (out / "data.h5").exists()
     # ... and a full run refuses a quick result's directory the same way.
     (out / "summary.json").write_text(json.dumps({"size": "quick"}))
-    assert main(["demo", "-o", str(out), "--no-progress", "--trials", "1"]) == 1
+    assert main(["demo", "-o", str(out), "--no-progress", "--runs", "1"]) == 1
     assert "quick-size demo result" in capsys.readouterr().err

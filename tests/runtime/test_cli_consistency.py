@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from aptkt.cli import build_parser, main
+from aptkt.commands._checks import RENAMED_OPTIONS
 
 ROOT = Path(__file__).resolve().parents[2]
 PYTHON_DIR = ROOT / "python"
@@ -40,9 +41,54 @@ def _name(command: str, action: argparse.Action) -> str:
     return f"{command} {'/'.join(action.option_strings) or action.dest}"
 
 
+def _renamed(action: argparse.Action) -> bool:
+    """An old spelling kept only to be refused (``prior build --trials``, trial numbers, is
+    not the demo's old ``--trials``, runs)."""
+    return action.help == argparse.SUPPRESS and any(
+        o in RENAMED_OPTIONS for o in action.option_strings
+    )
+
+
 def test_every_option_has_help() -> None:
-    missing = [_name(c, a) for c, a in ACTIONS if not a.help or a.help == argparse.SUPPRESS]
+    missing = [
+        _name(c, a)
+        for c, a in ACTIONS
+        if (not a.help or a.help == argparse.SUPPRESS) and not _renamed(a)
+    ]
     assert not missing, f"options without help: {missing}"
+
+
+def test_one_word_per_concept() -> None:
+    """Learning runs are --runs, replacing is --force, the prior's metric is
+    --prior-feature-scale, and --jobs defaults to every core, in every command."""
+    live = {o for _, a in ACTIONS if not _renamed(a) for o in a.option_strings}
+    # "--trials" lives on as trial numbers (prior build, learn --test-trials style FIRST:STOP).
+    assert not live & (set(RENAMED_OPTIONS) - {"--trials"}), live & set(RENAMED_OPTIONS)
+    trials = [a for _, a in ACTIONS if "--trials" in a.option_strings and not _renamed(a)]
+    assert trials and all(a.metavar == "FIRST:STOP" for a in trials)
+    assert set(RENAMED_OPTIONS.values()) <= live
+    jobs = {c: a.default for c, a in ACTIONS if "--jobs" in a.option_strings}
+    assert len(jobs) >= 5 and set(jobs.values()) == {os.cpu_count() or 1}, jobs
+
+
+RENAMED_IN = [(c, o) for c, a in ACTIONS if _renamed(a) for o in a.option_strings]
+
+
+@pytest.mark.parametrize(("command", "old"), RENAMED_IN, ids=[f"{c} {o}" for c, o in RENAMED_IN])
+def test_an_old_spelling_is_refused_with_the_new_one(command, old, capsys) -> None:
+    argv = [*command.split()[1:], old, "1"]
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    assert stop.value.code == 2
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert (
+        last
+        == f"{command}: error: {old} is now {RENAMED_OPTIONS[old]} (the same meaning in every command)"
+    )
+
+
+def test_every_old_spelling_is_still_caught_somewhere() -> None:
+    assert {o for _, o in RENAMED_IN} == set(RENAMED_OPTIONS)
 
 
 def test_stated_defaults_are_the_defaults() -> None:
@@ -66,8 +112,8 @@ def test_stated_defaults_are_the_defaults() -> None:
 def test_arguments_are_named_after_what_they_are() -> None:
     bad = []
     for command, a in ACTIONS:
-        if a.nargs == 0:
-            continue  # a flag
+        if a.nargs == 0 or _renamed(a):
+            continue  # a flag, or an old spelling that only refuses
         metavar = a.metavar
         if metavar is None and a.choices is not None:
             continue  # argparse shows the choices

@@ -57,7 +57,7 @@ MISTAKES = [
     (["prior", "build", "{d}/d.h5", "-o", "{d}/afile/x.npz"], "is a file"),
     (["collect", *SIM, "--objects", "towel", "-n", "1", "-o", "{d}/afile/x.h5"], "is a file"),
     # an output path that is a directory
-    (["dataset", "generate", "-o", "{d}/dir", "--overwrite", *DATA_GEN], "is a directory"),
+    (["dataset", "generate", "-o", "{d}/dir", "--force", *DATA_GEN], "is a directory"),
     (["prior", "build", "{d}/d.h5", "-o", "{d}/dir"], "is a directory"),
     # negative values
     (["dataset", "generate", "-o", "{d}/new/s.h5", "--seed", "-5", *DATA_GEN], "--seed"),
@@ -173,8 +173,8 @@ MISTAKES = [
     ),
     # contradicting options
     (
-        ["dataset", "generate", "-o", "{d}/new/s.h5", "--resume", "--overwrite", *DATA_GEN],
-        "--resume and --overwrite",
+        ["dataset", "generate", "-o", "{d}/new/s.h5", "--resume", "--force", *DATA_GEN],
+        "--resume and --force",
     ),
     (
         [
@@ -187,9 +187,9 @@ MISTAKES = [
             "-o",
             "{d}/new/c.h5",
             "--resume",
-            "--overwrite",
+            "--force",
         ],
-        "--resume and --overwrite",
+        "--resume and --force",
     ),
     (["skin", "monitor"], "PORT"),
     # names the file system refuses, values without bound: before any file is created
@@ -287,8 +287,8 @@ MISTAKES = [
     (["dataset", "features", "{d}/d.h5", "-j", "100000"], "--jobs must be at most"),
     (["reproduce", "fig6", "--quick", "-j", "100000", "-o", "{d}/new/r"], "--jobs must be at most"),
     (
-        ["demo", "--quick", "--trials", "1000000000", "-o", "{d}/new/demo"],
-        "--trials must be at most",
+        ["demo", "--quick", "--runs", "1000000000", "-o", "{d}/new/demo"],
+        "--runs must be at most",
     ),
     (
         ["prior", "build", "{d}/d.h5", "-o", "{d}/new/r.npz", "--restarts", "1000000000"],

@@ -53,15 +53,44 @@ def max_jobs() -> int:
     return 4 * (os.cpu_count() or 1)
 
 
-def add_jobs_option(parser: argparse._ActionsContainer, help: str, *, all_cores: bool) -> None:
-    """The ``-j/--jobs N`` option every parallel command has: all cores or one by default."""
+def add_jobs_option(parser: argparse._ActionsContainer, what: str) -> None:
+    """The ``-j/--jobs N`` option every parallel command has, with one default: all cores."""
     parser.add_argument(
         "-j",
         "--jobs",
         type=int,
-        default=(os.cpu_count() or 1) if all_cores else 1,
+        default=os.cpu_count() or 1,
         metavar="N",
-        help=help,
+        help=f"{what} in N processes (default: all cores)",
+    )
+
+
+#: Old spellings of options, refused with the new one for one release: one word per concept
+#: across the commands (runs: learning runs; trials: trial numbers; --force: replace what
+#: exists; --prior-feature-scale: the prior's metric).
+RENAMED_OPTIONS = {
+    "--trials": "--runs",
+    "--overwrite": "--force",
+    "--feature-scale": "--prior-feature-scale",
+}
+
+
+def add_renamed_option(parser: argparse._ActionsContainer, old: str) -> None:
+    """``old`` (a key of :data:`RENAMED_OPTIONS`) is refused with a hint at its new name."""
+    new = RENAMED_OPTIONS[old]
+
+    class Renamed(argparse.Action):
+        def __call__(
+            self,
+            parser: argparse.ArgumentParser,
+            namespace: argparse.Namespace,
+            values: object,
+            option_string: str | None = None,
+        ) -> None:
+            parser.error(f"{old} is now {new} (the same meaning in every command)")
+
+    parser.add_argument(
+        old, nargs="?", action=Renamed, help=argparse.SUPPRESS, dest=argparse.SUPPRESS
     )
 
 
@@ -275,10 +304,10 @@ def intact_data_set(path: str | Path, option: str) -> None:
         )
 
 
-def resume_or_overwrite(resume: bool, overwrite: bool) -> None:
-    if resume and overwrite:
+def resume_or_force(resume: bool, force: bool) -> None:
+    if resume and force:
         raise ConfigError(
-            "--resume and --overwrite exclude each other (complete the file, or replace it)"
+            "--resume and --force exclude each other (complete the file, or replace it)"
         )
 
 

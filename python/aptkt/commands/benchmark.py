@@ -92,7 +92,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="seed of the groups and runs (default %(default)s)",
     )
-    add_jobs_option(p, "processes (default: all cores)", all_cores=True)
+    add_jobs_option(p, "learn")
     add_scheduler_option(p)
     p.add_argument("--force", action="store_true", help="replace the results in --output")
     p.add_argument(

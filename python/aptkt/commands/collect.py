@@ -7,7 +7,13 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from aptkt.commands._checks import at_least, output_file, resume_or_overwrite, trial_plan
+from aptkt.commands._checks import (
+    add_renamed_option,
+    at_least,
+    output_file,
+    resume_or_force,
+    trial_plan,
+)
 from aptkt.commands._session import (
     EXIT_FAULT,
     add_action_arguments,
@@ -59,7 +65,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--resume", action="store_true", help="complete an existing file: skip the trials it holds"
     )
-    p.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    p.add_argument("--force", action="store_true", help="replace an existing file")
+    add_renamed_option(p, "--overwrite")
     p.add_argument(
         "--prompt-between-trials",
         action="store_true",
@@ -93,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
     at_least(args.repetitions, 1, "--repetitions")
     at_least(args.first_trial, 0, "--first-trial")
     at_least(args.seed, 0, "--seed")
-    resume_or_overwrite(args.resume, args.overwrite)
+    resume_or_force(args.resume, args.force)
     output_file(args.output)
     objects = split_names(args.objects, "--objects") or []  # a required option
     available = available_actions(args)
@@ -105,10 +112,10 @@ def run(args: argparse.Namespace) -> int:
     session = make_session(args, seed=args.seed)
     session.check_objects(plan.objects)
     session.check_actions(plan.actions, plan.objects)
-    if Path(args.output).exists() and not (args.resume or args.overwrite):
+    if Path(args.output).exists() and not (args.resume or args.force):
         # Before the arm moves, not after.
         raise ConfigError(
-            f"{args.output} exists: use --resume to complete it or --overwrite to replace it"
+            f"{args.output} exists: use --resume to complete it or --force to replace it"
         )
     progress: bool | Callable[[str], None]
     if args.no_progress:
@@ -125,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
                 plan,
                 session,
                 resume=args.resume,
-                overwrite=args.overwrite,
+                overwrite=args.force,
                 progress=progress,
                 between_trials=_prompt if args.prompt_between_trials else None,
             )

@@ -8,12 +8,13 @@ from pathlib import Path
 
 from aptkt.commands._checks import (
     add_jobs_option,
+    add_renamed_option,
     at_least,
     input_file,
     intact_data_set,
     jobs,
     output_file,
-    resume_or_overwrite,
+    resume_or_force,
     rewritable_file,
     trial_plan,
 )
@@ -67,13 +68,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument(
         "--seed", type=int, default=0, metavar="N", help="world seed (default %(default)s)"
     )
-    add_jobs_option(g, "simulate in N processes (default %(default)s)", all_cores=False)
+    add_jobs_option(g, "simulate")
     g.add_argument(
         "--resume",
         action="store_true",
         help="complete an existing file (repairs it if its writer died)",
     )
-    g.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    g.add_argument("--force", action="store_true", help="replace an existing file")
+    add_renamed_option(g, "--overwrite")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     g.add_argument("--json", action="store_true", help="print the summary as JSON")
     g.set_defaults(func=run_generate)
@@ -101,7 +103,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     f.add_argument(
         "--actions", metavar="P1,S1,...", help="only these actions (default: all recorded)"
     )
-    add_jobs_option(f, "extract in N processes (default %(default)s)", all_cores=False)
+    add_jobs_option(f, "extract")
     f.add_argument("--no-progress", action="store_true", help="no progress bar")
     f.set_defaults(func=run_features)
 
@@ -169,7 +171,7 @@ def build_plan(args: argparse.Namespace):  # -> GenerationPlan
     at_least(args.first_trial, 0, "--first-trial")
     at_least(args.repetitions, 1, "--repetitions")
     jobs(args.jobs)
-    resume_or_overwrite(args.resume, args.overwrite)
+    resume_or_force(args.resume, args.force)
     output_file(args.output)
     library = load_library(*args.objects_file)
     objects = split_names(args.objects, "--objects") or list(library)
@@ -211,7 +213,7 @@ def run_generate(args: argparse.Namespace) -> int:
         plan,
         jobs=args.jobs,
         resume=args.resume,
-        overwrite=args.overwrite,
+        overwrite=args.force,
         progress=not args.no_progress,
     )
     print(dumps(info) if args.json else describe_summary(info))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from aptkt.commands._checks import add_jobs_option
+from aptkt.commands._checks import add_jobs_option, add_renamed_option
 from aptkt.learning.config import LearnerConfig
 
 
@@ -33,9 +33,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="seed of the simulated world and the learners (default %(default)s)",
     )
-    add_jobs_option(p, "processes (default: all cores)", all_cores=True)
+    add_jobs_option(p, "learn")
+    add_renamed_option(p, "--trials")
     p.add_argument(
-        "--trials",
+        "--runs",
         type=int,
         default=3,
         metavar="N",
@@ -60,8 +61,8 @@ def run(args: argparse.Namespace) -> int:
     from aptkt.experiments.demo import DemoSettings, run_demo
 
     jobs(args.jobs)
-    at_least(args.trials, 1, "--trials")
-    at_most(args.trials, MAX_RUNS, "--trials")
+    at_least(args.runs, 1, "--runs")
+    at_most(args.runs, MAX_RUNS, "--runs")
     at_least(args.budget, 0, "--budget")
     at_most(args.budget, MAX_BUDGET, "--budget")
     at_least(args.seed, 0, "--seed")
@@ -70,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     settings = (
         DemoSettings.quick(**common)
         if args.quick
-        else DemoSettings(**common, trials=args.trials, budget=args.budget)
+        else DemoSettings(**common, trials=args.runs, budget=args.budget)
     )
     run_demo(settings, progress=not args.no_progress)
     return 0

@@ -7,7 +7,14 @@ import json
 import os
 from pathlib import Path
 
-from aptkt.commands._checks import at_least, at_most, input_file, intact_data_set, output_file
+from aptkt.commands._checks import (
+    add_renamed_option,
+    at_least,
+    at_most,
+    input_file,
+    intact_data_set,
+    output_file,
+)
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
 from aptkt.gp import MAX_RESTARTS
@@ -73,13 +80,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="extra optimiser starts per model (default %(default)s)",
     )
     b.add_argument(
-        "--feature-scale",
+        "--prior-feature-scale",
         choices=FEATURE_SCALES,
         default=GPSettings().prior_feature_scale,
         help="the prior's metric: whiten-joint (the within-object noise of the observations, "
         "whitened across the modalities), whiten (whitened per modality) or spread (each "
         "column z-scored over the observations); default %(default)s; docs/method.md",
     )
+    add_renamed_option(b, "--feature-scale")
     b.set_defaults(func=run_build)
 
     m = ps.add_parser(
@@ -177,7 +185,7 @@ def run_build(args: argparse.Namespace) -> int:
     with Progress(len(table), "action", "fitting") as bar:
         prior = PriorKnowledge.build(
             table,
-            gp=GPSettings(n_restarts=args.restarts, prior_feature_scale=args.feature_scale),
+            gp=GPSettings(n_restarts=args.restarts, prior_feature_scale=args.prior_feature_scale),
             seed=args.seed,
             progress=bar,
         )

@@ -42,7 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="a reduced size (4 priors, 3 new objects, 3 actions) for tests and CI",
     )
-    add_jobs_option(p, "local processes (default: all cores)", all_cores=True)
+    add_jobs_option(p, "run locally")
     add_scheduler_option(p)
     p.add_argument(
         "--seed",

@@ -120,7 +120,7 @@ class DatasetWriter:
         else:
             if self.path.exists() and not overwrite:
                 raise DatasetError(
-                    f"{self.path} exists (use overwrite=True / --overwrite, or append)"
+                    f"{self.path} exists (use overwrite=True / --force, or append)"
                 )
             self._f = self._create(description)
         try:

@@ -9,5 +9,5 @@ __all__ = ["MAX_BUDGET", "MAX_RUNS"]
 #: Observations a learning run may choose (--budget, --patience): every one is a trial on the
 #: robot, and the models are refitted on all of them after each.
 MAX_BUDGET = 10_000
-#: Learning runs per method (demo --trials, learn --runs).
+#: Learning runs per method (demo --runs, learn --runs).
 MAX_RUNS = 1_000

@@ -101,7 +101,7 @@ def _check_compatible(named: Sequence[tuple[str, PriorKnowledge]]) -> None:
         if other.feature_scale != first.feature_scale:
             raise IncompatiblePriorsError(
                 f"{name} and {first_name}: another metric (feature scale {other.feature_scale!r} "
-                f"against {first.feature_scale!r}); rebuild one with --feature-scale "
+                f"against {first.feature_scale!r}); rebuild one with --prior-feature-scale "
                 f"{first.feature_scale}"
             )
         defs_a = first.metadata.get("action_definitions") or {}

@@ -82,7 +82,7 @@ class TrialFile:
                 return DatasetWriter(self.path, "a", lock=lock)
         if self.path.exists() and not overwrite:
             raise DatasetError(
-                f"{self.path} exists: use --resume to complete it or --overwrite to replace it"
+                f"{self.path} exists: use --resume to complete it or --force to replace it"
             )
         return DatasetWriter(
             self.path, "w", description=description, overwrite=overwrite, lock=lock
