@@ -91,8 +91,7 @@ class Progress:
         share = (self.done - self._last_done) / self.total
         since = now - self._last_time
         if since >= LINE_EVERY_SECONDS or (
-            since >= LINE_AFTER_SECONDS
-            and (self.done >= self.total or share >= LINE_EVERY_SHARE)
+            since >= LINE_AFTER_SECONDS and (self.done >= self.total or share >= LINE_EVERY_SHARE)
         ):
             self._last_time, self._last_done = now, self.done
             print(self.line(now - self._start), file=self.stream, flush=True)

@@ -14,8 +14,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_the_cli_reference_is_what_the_parsers_say():
     page = (ROOT / "docs" / "cli.md").read_text(encoding="utf-8")
     assert page == markdown_reference(build_parser()), (
-        "docs/cli.md differs from the command line: "
-        "run `python -m aptkt.reference > docs/cli.md`"
+        "docs/cli.md differs from the command line: run `python -m aptkt.reference > docs/cli.md`"
     )
 
 

@@ -119,9 +119,7 @@ class DatasetWriter:
             self._f = self._open_for_appending()
         else:
             if self.path.exists() and not overwrite:
-                raise DatasetError(
-                    f"{self.path} exists (use overwrite=True / --force, or append)"
-                )
+                raise DatasetError(f"{self.path} exists (use overwrite=True / --force, or append)")
             self._f = self._create(description)
         try:
             while_locked(self._start_swmr)
