@@ -69,7 +69,7 @@ def run_steps(spec: RunSpec) -> list[dict[str, Any]]:
     Besides the step record, each row counts the transfer decisions made at that step
     (``decisions``: every action's new objects at step 0, the updated action's afterwards),
     how many of them transferred a prior object (``transfers``), how many sources they
-    transferred in all (``sources``: more than ``transfers`` only with ``transfer="multi"``)
+    transferred in all (``sources``)
     and the mean λ over those sources (``mean_lambda``, NaN without a transfer); and how many
     models were fitted at that step (``updates``) and how many of them in the prior's feature
     space (``prior_space``; the others in the new objects' own or the pooled space).
