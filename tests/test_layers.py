@@ -22,7 +22,7 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "python" / "aptkt"
 
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("_core",),  # the compiled core: the errors below derive from its AptktError
+    ("_core",),  # the compiled core (it raises the classes of aptkt.errors, fetched when raised)
     ("", "errors"),
     ("files", "progress"),  # files from elsewhere (regular, bounded, checked); progress lines
     ("skin", "features", "gp"),

@@ -2,18 +2,76 @@
 (:mod:`aptkt.features`, :mod:`aptkt.gp`, :mod:`aptkt.skin`) rather than these functions."""
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, final
 
 import numpy as np
 from numpy.typing import NDArray
+from typing_extensions import Self
+
+# The names pyo3 added to the module, in the order they were added.
+__all__ = [
+    "__version__",
+    "hjorth",
+    "axis_pair_correlations",
+    "texture_descriptor",
+    "mean_all",
+    "gradient",
+    "thermal_curve",
+    "TEXTURE_DIM",
+    "KernelStart",
+    "FreeHyperparameters",
+    "Search",
+    "Laplace",
+    "HyperPriors",
+    "FitSettings",
+    "GpcModel",
+    "fit_gpc",
+    "fit_gpc_shared",
+    "kernel_matrix",
+    "PatchCells",
+    "SurfaceShape",
+    "ContactLaw",
+    "ForceSensors",
+    "TextureField",
+    "ContactVibration",
+    "TextureCoupling",
+    "TextureResponse",
+    "Ringing",
+    "SlipParams",
+    "Surface",
+    "CellFrames",
+    "Accelerometers",
+    "Thermometers",
+    "Proximity",
+    "ContactHeat",
+    "Readout",
+    "ForceControl",
+    "PhysicsState",
+    "MechChunk",
+    "Segments",
+    "SimThermal",
+    "ThermalSystem",
+    "ThermalContact",
+    "SimContact",
+    "ForcePhase",
+    "LeanQueue",
+    "TickOutcome",
+    "HeatKernel",
+    "SlipState",
+    "sim_texture",
+    "sim_slip",
+    "_flush_subnormals",
+    "StreamParser",
+    "_quantize",
+    "_encode_sensor_packets",
+    "encode_packet_bytes",
+    "PACKET_LEN",
+    "SENSOR_FIELDS",
+    "PACKET_TYPES",
+]
 
 __version__: str
 TEXTURE_DIM: int
-
-class AptktError(Exception): ...
-class KernelNotPositiveDefiniteError(AptktError): ...
-class ProblemTooLargeError(AptktError): ...
-class NonFiniteResultError(AptktError): ...
 
 # -- feature kernels --------------------------------------------------------------------------
 def hjorth(
@@ -41,6 +99,7 @@ def thermal_curve(
 ) -> NDArray[np.float64]: ...
 
 # -- Laplace GPC ------------------------------------------------------------------------------
+@final
 class GpcModel:
     def predict_proba(self, x: NDArray[np.float64]) -> NDArray[np.float64]: ...
     def predict_proba_binary(self, x: NDArray[np.float64]) -> NDArray[np.float64]: ...
@@ -73,28 +132,31 @@ class GpcModel:
     @property
     def n_lambdas(self) -> int: ...
 
+@final
 class KernelStart:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         modalities: Sequence[Sequence[int]],
         signal_variance: float,
         length_scales: Sequence[float],
         weights: Sequence[float],
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class FreeHyperparameters:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         signal_variance: bool,
         length_scales: bool,
         weights: bool,
         transfer_lambda: bool,
         tie_length_scales: bool = False,
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class Search:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         optimize: bool,
         n_restarts: int,
         seed: int,
@@ -102,29 +164,32 @@ class Search:
         optimizer_tol: float,
         signal_variance_bounds: tuple[float, float],
         length_scale_bounds: tuple[float, float],
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class Laplace:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         newton_max_iter: int,
         newton_tol: float,
         max_jitter: float,
         approximation: str,
         latent_mean: str,
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class HyperPriors:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         signal_variance: tuple[float, float] | None,
         length_scale: tuple[float, float] | None,
         weight_logit: float | None,
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class FitSettings:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         *,
         start: KernelStart,
         free: FreeHyperparameters,
@@ -132,7 +197,7 @@ class FitSettings:
         laplace: Laplace,
         n_threads: int,
         hyper_prior: HyperPriors | None = None,
-    ) -> None: ...
+    ) -> Self: ...
 
 def fit_gpc(
     x: NDArray[np.float64],
@@ -168,8 +233,9 @@ PACKET_TYPES: dict[str, int]
 #: (name, numpy dtype, vector field, ((min, max, scale, offset) per column)) per sensor field
 SENSOR_FIELDS: list[tuple[str, str, bool, list[tuple[int, int, float, float]]]]
 
+@final
 class StreamParser:
-    def __init__(self) -> None: ...
+    def __new__(cls) -> Self: ...
     def feed(
         self, data: bytes | bytearray | memoryview, *, raw: bool = False
     ) -> dict[str, NDArray]: ...
@@ -202,18 +268,20 @@ _Rows = Sequence[Sequence[float]]
 def _flush_subnormals(on: bool, previous: int | None = None) -> int: ...
 
 # Settings of one trial's physics (frozen; by keyword or position).
+@final
 class PatchCells:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         clock_rate: Sequence[float],
         clock_phase: Sequence[float],
         sensor_height: _Rows,
         sensor_xy: Sequence[_Rows],
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class SurfaceShape:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         centre: tuple[float, float],
         rotation: float,
         surface_z: float,
@@ -221,68 +289,76 @@ class SurfaceShape:
         crown_radius: float,
         waves: _Rows,
         size: tuple[float, float],
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class ContactLaw:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         delta: Sequence[float],
         sigma: Sequence[float],
         skin_stiffness: float,
         relax_weights: Sequence[float],
         relax_times: Sequence[float],
         sensor_area: float,
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class ForceSensors:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         noise_key: tuple[int, int],
         gain: _Rows,
         offset: _Rows,
         force_noise: float,
         latency_ns: int,
         jitter_s: float,
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class TextureField:
-    def __init__(self, kvec: _Rows, amplitude: Sequence[float], phase: Sequence[float]) -> None: ...
+    def __new__(cls, kvec: _Rows, amplitude: Sequence[float], phase: Sequence[float]) -> Self: ...
 
+@final
 class ContactVibration:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         cover_contact_length: float,
         contact_resonance: float,
         contact_damping: float,
         acc_bandwidth: float,
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class TextureCoupling:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         coupling_modulus: float,
         coupling_pressure: float,
         tangential_coupling: float,
         lateral_coupling: float,
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class TextureResponse:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         vibration: ContactVibration,
         coupling: TextureCoupling,
         top_modulus: float,
         mu_kinetic: float,
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class Ringing:
-    def __init__(
-        self, coupling: float, omega: float, decay: float, gain: float, lag: float
-    ) -> None: ...
+    def __new__(
+        cls, coupling: float, omega: float, decay: float, gain: float, lag: float
+    ) -> Self: ...
 
+@final
 class SlipParams:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         mu_s: float,
         mu_k: float,
         tangential_stiffness: float,
@@ -290,92 +366,101 @@ class SlipParams:
         threshold_sd: float,
         rate_hz: float,
         ring: Ringing,
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class Surface:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         texture: TextureField,
         response: TextureResponse,
         slip: SlipParams,
         slip_keys: Sequence[tuple[int, int]],
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class CellFrames:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         centres: _Rows,
         axes: Sequence[_Rows],
         acc_bias: _Rows,
         cell_ids: Sequence[int],
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class Accelerometers:
-    def __init__(
-        self, gravity: float, acc_noise: float, arm_vibration: float, arm_modes: _Rows
-    ) -> None: ...
+    def __new__(
+        cls, gravity: float, acc_noise: float, arm_vibration: float, arm_modes: _Rows
+    ) -> Self: ...
 
+@final
 class Thermometers:
-    def __init__(
-        self, die_self_heating: float, die_temp_noise: float, temp_noise: float
-    ) -> None: ...
+    def __new__(cls, die_self_heating: float, die_temp_noise: float, temp_noise: float) -> Self: ...
 
+@final
 class Proximity:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         prox_dark: float,
         prox_gain: float,
         prox_distance: float,
         prox_noise: float,
         reflectivity: float,
         table_reflectivity: float,
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class ContactHeat:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         contact_pressure_half: float,
         conductance_scale: float,
         contact_steps: float,
         speed_step: float,
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class Readout:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         cells: CellFrames,
         acc: Accelerometers,
         temp: Thermometers,
         prox: Proximity,
         heat: ContactHeat,
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class SimThermal:
-    def __init__(self, nodes: int) -> None: ...
+    def __new__(cls, nodes: int) -> Self: ...
     def __len__(self) -> int: ...
 
+@final
 class ThermalSystem:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         u: NDArray[np.float64],
         mu: NDArray[np.float64],
         ss_heater: NDArray[np.float64],
         ss_ambient: NDArray[np.float64],
         ss_object: NDArray[np.float64],
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class ThermalContact:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         network: SimThermal,
         make: Callable[[int, int], ThermalSystem],
         sqrt_c: Sequence[float],
         heater_power: float,
         ambient: float,
         object_temperature: float,
-    ) -> None: ...
+    ) -> Self: ...
 
 # A trial's state, its samples, its trajectory.
+@final
 class PhysicsState:
     def copy(self) -> PhysicsState: ...
     @property
@@ -403,6 +488,7 @@ class PhysicsState:
     @property
     def slip_ringing(self) -> list[list[tuple[float, float]]]: ...
 
+@final
 class MechChunk:
     @staticmethod
     def concat(chunks: Sequence[MechChunk]) -> MechChunk: ...
@@ -426,14 +512,15 @@ class MechChunk:
     @property
     def sigma(self) -> NDArray[np.float64]: ...
 
+@final
 class Segments:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         t0: NDArray[np.int64],
         p0: NDArray[np.float64],
         v0: NDArray[np.float64],
         a: NDArray[np.float64],
-    ) -> None: ...
+    ) -> Self: ...
     def __len__(self) -> int: ...
     @property
     def t0(self) -> NDArray[np.int64]: ...
@@ -445,9 +532,10 @@ class Segments:
     def a(self) -> NDArray[np.float64]: ...
 
 # The force loop.
+@final
 class ForceControl:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         target: float,
         gain: float,
         max_vz: float,
@@ -455,8 +543,9 @@ class ForceControl:
         max_depth: float,
         tick_ns: int,
         wrench_limit: float,
-    ) -> None: ...
+    ) -> Self: ...
 
+@final
 class ForcePhase:
     @staticmethod
     def settle(t_limit_ns: int) -> ForcePhase: ...
@@ -469,14 +558,15 @@ class ForcePhase:
     @property
     def guarded(self) -> bool: ...
 
+@final
 class LeanQueue:
     samples: int
-    def __init__(
-        self,
+    def __new__(
+        cls,
         cal_gain: NDArray[np.float64],
         cal_offset: NDArray[np.float64],
         latest: NDArray[np.float64],
-    ) -> None: ...
+    ) -> Self: ...
     def push(
         self, t_ns: NDArray[np.int64], cells: NDArray[np.int64], force_norm: NDArray[np.float64]
     ) -> None: ...
@@ -486,6 +576,7 @@ class LeanQueue:
     def latest(self) -> NDArray[np.float64]: ...
     def __len__(self) -> int: ...
 
+@final
 class TickOutcome:
     status: str
     error: float
@@ -494,9 +585,10 @@ class TickOutcome:
 
 _Arrays = dict[str, NDArray[Any]]
 
+@final
 class SimContact:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         cells: PatchCells,
         shape: SurfaceShape,
         law: ContactLaw,
@@ -504,7 +596,7 @@ class SimContact:
         surface: Surface,
         readout: Readout,
         thermal: ThermalContact,
-    ) -> None: ...
+    ) -> Self: ...
     def rest_state(
         self,
         t_ns: int,
@@ -532,14 +624,15 @@ class SimContact:
     ) -> TickOutcome: ...
 
 # The loops on their own (the tests compare them with numpy).
+@final
 class HeatKernel:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         u: NDArray[np.float64],
         mu: NDArray[np.float64],
         t_ss: NDArray[np.float64],
         sqrt_c: NDArray[np.float64],
-    ) -> None: ...
+    ) -> Self: ...
     def heat(
         self,
         cells: NDArray[np.int64],
@@ -557,14 +650,15 @@ def sim_texture(
     pressure: NDArray[np.float64],
 ) -> NDArray[np.float64]: ...
 
+@final
 class SlipState:
     load: float
     threshold: float
     events: int
     ring: list[tuple[float, float]]
-    def __init__(
-        self, load: float, threshold: float, events: int, ring: Sequence[tuple[float, float]]
-    ) -> None: ...
+    def __new__(
+        cls, load: float, threshold: float, events: int, ring: Sequence[tuple[float, float]]
+    ) -> Self: ...
 
 def sim_slip(
     params: SlipParams,

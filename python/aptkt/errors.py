@@ -4,18 +4,16 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from aptkt._core import (
-    AptktError,
-    KernelNotPositiveDefiniteError,
-    NonFiniteResultError,
-    ProblemTooLargeError,
-)
-
 if TYPE_CHECKING:  # for annotations only: errors are the bottom layer and import nothing above
     from aptkt.skin.samples import Recording
 
 __all__ = [
     "AptktError",
+    "InvalidInputError",
+    "InvalidTypeError",
+    "UnknownNameError",
+    "IndexOutOfRangeError",
+    "InvalidStateError",
     "SkinError",
     "SkinDisconnectedError",
     "SilentCellError",
@@ -40,6 +38,68 @@ __all__ = [
     "ProblemTooLargeError",
     "NonFiniteResultError",
 ]
+
+
+class AptktError(Exception):
+    """Base class of every error raised on purpose by aptkt.
+
+    Each typed error also derives from the builtin a Python user would catch for the same
+    mistake (as numpy's ``AxisError`` is a ``ValueError`` and an ``IndexError``), so
+    ``except ValueError`` written before the typed errors existed keeps working.
+    """
+
+
+class InvalidInputError(AptktError, ValueError):
+    """An argument or an input array has a bad value: a wrong shape, a value out of range, NaN
+    or infinity where a finite number is needed; the message names it. The Rust core's checks
+    of its input raise this too."""
+
+
+class InvalidTypeError(AptktError, TypeError):
+    """An argument is of the wrong type or dtype; the message names the argument."""
+
+
+class UnknownNameError(AptktError, KeyError):
+    """A name (an action, an object, a field, a stored result) that is not among the known
+    ones; the message names it and, where they are few, the known ones."""
+
+    def __str__(self) -> str:
+        # KeyError's own __str__ shows the repr of its argument, quotes and escapes included:
+        # the message is a sentence, not a key.
+        return str(self.args[0]) if len(self.args) == 1 else super().__str__()
+
+
+class IndexOutOfRangeError(AptktError, IndexError):
+    """An index (a recording, a classifier) outside the valid range, which the message gives."""
+
+
+class InvalidStateError(AptktError, RuntimeError):
+    """An operation the object cannot do in its current state: used before it was fitted or
+    given data, outside its ``with`` block, twice at once; or a state the work cannot go on
+    from (a stored result that disappeared, a worker thread that failed)."""
+
+
+class KernelNotPositiveDefiniteError(AptktError, ValueError):
+    """A kernel matrix stayed non-positive-definite even after the largest permitted jitter.
+
+    A ``ValueError``, as numpy's ``LinAlgError`` is: the matrix is degenerate because of the
+    input (duplicate rows, hyper-parameters such as a transfer lambda outside [0, 1]), not
+    because of a fault of the machine. The message says what to check.
+    """
+
+
+class ProblemTooLargeError(AptktError, MemoryError):
+    """The work needs more memory than this machine has; found before allocating it. The
+    message names the rows and the bytes needed.
+
+    A ``MemoryError``, which is what the allocation would have raised had it been tried.
+    """
+
+
+class NonFiniteResultError(InvalidInputError):
+    """A computation on finite input overflowed to infinity or NaN (the input's values are too
+    large for float64 arithmetic); the message names the input. A ``ValueError``: the remedy
+    is to rescale the input."""
 
 
 class ConfigError(AptktError, ValueError):

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from aptkt import _core
+from aptkt.errors import InvalidInputError, InvalidTypeError
 
 __all__ = [
     "hjorth",
@@ -69,7 +70,7 @@ def _samples(x: Any, name: str) -> np.ndarray:
     if arr.dtype in _NATIVE:
         return arr
     if arr.dtype.kind not in "biuf":
-        raise TypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
+        raise InvalidTypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
     return arr.astype(np.float64)
 
 
@@ -91,7 +92,7 @@ def hjorth(x: Any, axis: int = -1) -> tuple[Any, Any, Any]:
     """
     arr = _samples(x, "x")
     if arr.ndim == 0:
-        raise ValueError("x must have at least one dimension")
+        raise InvalidInputError("x must have at least one dimension")
     a, m, c = _core.hjorth(arr, axis, "x")
     return _scalar_or_array(a), _scalar_or_array(m), _scalar_or_array(c)
 
@@ -123,7 +124,7 @@ def temperature_gradient(temp: Any, axis: int = -1) -> np.ndarray:
     """Gradient per time step with ``numpy.gradient``'s rule (central inside, one-sided ends)."""
     arr = _samples(temp, "temp")
     if arr.ndim == 0:
-        raise ValueError("temp must have at least one dimension")
+        raise InvalidInputError("temp must have at least one dimension")
     return _core.gradient(arr, axis, "temp")
 
 
@@ -135,5 +136,5 @@ def thermal_curve(temp: Any, axis: int = -1) -> np.ndarray:
     """
     arr = _samples(temp, "temp")
     if arr.ndim == 0:
-        raise ValueError("temp must have at least one dimension")
+        raise InvalidInputError("temp must have at least one dimension")
     return _core.thermal_curve(arr, axis, "temp")

@@ -26,7 +26,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from aptkt.errors import AptktError
+from aptkt.errors import AptktError, InvalidInputError
 
 __all__ = [
     "NPZ_MAX_BYTES",
@@ -119,7 +119,7 @@ def _header(
             elif version == (2, 0):
                 shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
             else:
-                raise ValueError(f"format version {version}")
+                raise InvalidInputError(f"format version {version}")
         except (ValueError, OSError, SyntaxError) as exc:
             raise error(f"{path}: member {member!r}: not a NumPy array ({exc})") from None
     if dtype.hasobject or dtype.kind not in "biufU":

@@ -14,6 +14,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from aptkt.errors import InvalidInputError
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover - exercised on Python 3.10 only
@@ -72,7 +74,7 @@ class ExploratoryAction:
     def __post_init__(self) -> None:
         object.__setattr__(self, "movement", Movement(self.movement))
         if not self.name or not self.name.strip():
-            raise ValueError("an exploratory action needs a non-empty name")
+            raise InvalidInputError("an exploratory action needs a non-empty name")
         for key in ("depth", "hold_time", "normal_force", "speed", "slide_time"):
             value = getattr(self, key)
             # A bool is an int to Python: `hold_time = true` would hold for 1 s.
@@ -82,12 +84,12 @@ class ExploratoryAction:
                 or not math.isfinite(value)
                 or value < 0
             ):
-                raise ValueError(
+                raise InvalidInputError(
                     f"action {self.name!r}: {key} must be a finite number >= 0, got {value!r}"
                 )
         for key in _REQUIRED[self.movement]:
             if getattr(self, key) <= 0:
-                raise ValueError(
+                raise InvalidInputError(
                     f"action {self.name!r}: a {self.movement.value} movement needs {key} > 0"
                 )
         # A parameter the movement does not use would be silently ignored: a typo'd action
@@ -98,7 +100,7 @@ class ExploratoryAction:
             if k not in _REQUIRED[self.movement] and getattr(self, k) != 0
         ]
         if unused:
-            raise ValueError(
+            raise InvalidInputError(
                 f"action {self.name!r}: a {self.movement.value} movement does not use "
                 f"{', '.join(unused)} (it uses {', '.join(_REQUIRED[self.movement])})"
             )
@@ -123,7 +125,9 @@ class ExploratoryAction:
         known = {f for f in cls.__dataclass_fields__}
         unknown = set(data) - known
         if unknown:
-            raise ValueError(f"action {data.get('name')!r}: unknown field(s) {sorted(unknown)}")
+            raise InvalidInputError(
+                f"action {data.get('name')!r}: unknown field(s) {sorted(unknown)}"
+            )
         return cls(**dict(data))
 
 
@@ -213,22 +217,22 @@ def actions_from_toml(path: str | Path) -> dict[str, ExploratoryAction]:
         try:
             doc = tomllib.load(fh)
         except UnicodeDecodeError:
-            raise ValueError(
+            raise InvalidInputError(
                 f"{path}: not an actions file (TOML text), not even UTF-8 text"
             ) from None
     tables = doc.get("action")
     if not isinstance(tables, list) or not tables:
-        raise ValueError(f"{path}: expected one or more [[action]] tables")
+        raise InvalidInputError(f"{path}: expected one or more [[action]] tables")
     actions: dict[str, ExploratoryAction] = {}
     for i, table in enumerate(tables):
         try:
             action = ExploratoryAction.from_dict(table)
         except (TypeError, ValueError) as exc:
-            raise ValueError(f"{path}: action #{i + 1}: {exc}") from None
+            raise InvalidInputError(f"{path}: action #{i + 1}: {exc}") from None
         if action.name in actions:
-            raise ValueError(f"{path}: action {action.name!r} is defined twice")
+            raise InvalidInputError(f"{path}: action {action.name!r} is defined twice")
         why = redefinition(action, PAPER_ACTIONS, "the paper's")
         if why:
-            raise ValueError(f"{path}: {why}")
+            raise InvalidInputError(f"{path}: {why}")
         actions[action.name] = action
     return actions

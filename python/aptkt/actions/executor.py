@@ -25,7 +25,7 @@ from typing import Any
 
 from aptkt import __version__
 from aptkt.actions.definition import ExploratoryAction, Movement
-from aptkt.errors import AptktError, TrialFault
+from aptkt.errors import AptktError, InvalidInputError, TrialFault
 from aptkt.robot.base import Placement, Robot
 from aptkt.skin.base import SkinSource
 from aptkt.skin.config import ForceCalibration
@@ -49,9 +49,9 @@ class ExplorationSettings:
         # having pressed the object and the trial's recording lost.
         for name in ("clearance", "contact_threshold", "lift_height"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
-                raise ValueError(f"ExplorationSettings.{name} must be a finite number > 0")
+                raise InvalidInputError(f"ExplorationSettings.{name} must be a finite number > 0")
         if not (math.isfinite(self.thermal_wait) and self.thermal_wait >= 0):
-            raise ValueError("ExplorationSettings.thermal_wait must be a finite number >= 0")
+            raise InvalidInputError("ExplorationSettings.thermal_wait must be a finite number >= 0")
 
 
 def crop_recording(rec: Recording, start_ns: int, stop_ns: int) -> Recording:

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.data.schema import SAMPLE_FIELDS
+from aptkt.errors import InvalidInputError
 from aptkt.skin.config import ForceCalibration
 from aptkt.skin.protocol import RAW_FIELDS, SCALE, to_physical
 from aptkt.skin.samples import Recording, SkinSamples
@@ -49,7 +50,7 @@ def recording_key(rec: Recording) -> tuple[str, str, int]:
         or not isinstance(name, str)
         or not isinstance(meta.get("trial"), int)
     ):
-        raise ValueError(
+        raise InvalidInputError(
             "recording metadata needs 'object' (str), 'action' (name or dict with 'name') and 'trial' (int)"
         )
     return meta["object"], name, int(meta["trial"])
@@ -73,7 +74,7 @@ def _to_raw(name: str, values: np.ndarray, column: int = 0) -> np.ndarray:
     off_grid = (raw * scale + offset) != values
     if np.any(off_grid):
         bad = int(np.flatnonzero(off_grid.reshape(off_grid.shape[0], -1).any(axis=1))[0])
-        raise ValueError(
+        raise InvalidInputError(
             f"{name}: values are not on the protocol's grid (row {bad}); only skin data can be stored raw"
         )
     return raw
@@ -83,7 +84,7 @@ def _calibration_of(metadata: Mapping[str, Any]) -> ForceCalibration:
     try:
         return ForceCalibration.from_metadata(metadata.get("calibration"))
     except ValueError as exc:
-        raise ValueError(f"{exc} (needed to store and read raw forces)") from None
+        raise InvalidInputError(f"{exc} (needed to store and read raw forces)") from None
 
 
 def samples_to_raw(samples: SkinSamples, metadata: Mapping[str, Any]) -> dict[str, np.ndarray]:
@@ -108,7 +109,7 @@ def samples_to_raw(samples: SkinSamples, metadata: Mapping[str, Any]) -> dict[st
     if cal is not None:
         back = cal.to_newtons(samples.cell_id, force * force_scale)
         if not np.allclose(back, samples.force, rtol=1e-9, atol=1e-12):
-            raise ValueError(
+            raise InvalidInputError(
                 "force: calibrated values do not come from 12-bit readings with this calibration"
             )
     out.update(
@@ -182,13 +183,13 @@ def pack_raw(
     """Raw sample fields (see :data:`SAMPLE_FIELDS`) and metadata → a :class:`PackedRecording`."""
     obj, action, trial = key
     if len(obj.encode()) > 64 or len(action.encode()) > 32:
-        raise ValueError("object names are limited to 64 bytes and action names to 32")
+        raise InvalidInputError("object names are limited to 64 bytes and action names to 32")
     n = int(np.asarray(raw["cell_id"]).shape[0])
     chunks = {}
     for name, (tail, dtype) in SAMPLE_FIELDS.items():
         values = np.asarray(raw[name])
         if values.shape != (n, *tail):
-            raise ValueError(f"{name}: expected shape {(n, *tail)}, got {values.shape}")
+            raise InvalidInputError(f"{name}: expected shape {(n, *tail)}, got {values.shape}")
         chunks[name] = _compress_chunks(values.astype(dtype, copy=False), tail, dtype)
     return PackedRecording(
         (str(obj), str(action), int(trial)), int(start_ns), int(stop_ns), n, meta_json, chunks

@@ -17,7 +17,7 @@ import numpy as np
 from aptkt.data.hdf5 import cut_short, writer_mark
 from aptkt.data.lock import WriterLock
 from aptkt.data.store import check_schema
-from aptkt.errors import DatasetError
+from aptkt.errors import DatasetError, InvalidInputError
 from aptkt.files import refuse_unless_regular
 
 __all__ = ["store_features", "write_features"]
@@ -58,7 +58,7 @@ def store_features(
         vals = {m: np.asarray(v, dtype=np.float64) for m, v in mods.items()}
         for v in vals.values():
             if v.ndim != 2 or v.shape[0] != recs.shape[0]:
-                raise ValueError(
+                raise InvalidInputError(
                     "values must be (n_recordings, dim) with one row per recording number"
                 )
         checked[action] = (recs, vals)
@@ -91,11 +91,11 @@ def _store(
             n = f["recordings/index"].shape[0]
             for action, (recs, vals) in checked.items():
                 if recs.size and (recs.min() < 0 or recs.max() >= n):
-                    raise ValueError(f"recording numbers must be in 0..{n - 1}")
+                    raise InvalidInputError(f"recording numbers must be in 0..{n - 1}")
                 g = f.require_group(f"features/{action}")
                 if "recording" in g and not np.array_equal(g["recording"][...], recs):
                     if not set(vals) >= set(g) - {"recording"}:
-                        raise ValueError(
+                        raise InvalidInputError(
                             f"features of {action!r} exist for other recordings; write all "
                             "modalities together"
                         )

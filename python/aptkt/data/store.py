@@ -61,7 +61,7 @@ from aptkt.data.hdf5 import (
 )
 from aptkt.data.lock import WriterLock, holder
 from aptkt.data.schema import INDEX_DTYPE, READABLE_VERSIONS, SAMPLE_FIELDS, SCHEMA, SCHEMA_VERSION
-from aptkt.errors import DatasetError
+from aptkt.errors import DatasetError, IndexOutOfRangeError, InvalidInputError, UnknownNameError
 from aptkt.files import refuse_unless_regular
 from aptkt.skin.samples import Recording
 
@@ -102,7 +102,7 @@ class DatasetWriter:
 
         self.path = Path(path)
         if mode not in ("w", "a"):
-            raise ValueError("mode must be 'w' or 'a'")
+            raise InvalidInputError("mode must be 'w' or 'a'")
         self._own_lock = lock is None
         self.lock = WriterLock.acquire(self.path) if lock is None else lock
         try:
@@ -196,7 +196,7 @@ class DatasetWriter:
         n = rec.rows
         want = next_chunk_start(n, CHUNK_ROWS) // CHUNK_ROWS
         if any(len(rec.chunks.get(name, ())) != want for name in self._samples):
-            raise ValueError(f"packed recording {key}: expected {want} chunks per field")
+            raise InvalidInputError(f"packed recording {key}: expected {want} chunks per field")
         # Each recording starts on a fresh chunk of every dataset: chunks are then written once,
         # never rewritten by a later append — a rewritten compressed chunk moves, and a writer
         # killed before the move is on disk must not take an earlier recording with it. The
@@ -421,13 +421,13 @@ class DatasetReader:
 
     def metadata(self, i: int) -> dict[str, Any]:
         if not (0 <= i < len(self)):
-            raise IndexError(f"recording {i} out of range (0..{len(self) - 1})")
+            raise IndexOutOfRangeError(f"recording {i} out of range (0..{len(self) - 1})")
         return self._read_metadata(self.index[i], i)
 
     def raw(self, i: int) -> dict[str, np.ndarray]:
         """The stored raw integers of recording ``i``."""
         if not (0 <= i < len(self)):
-            raise IndexError(f"recording {i} out of range (0..{len(self) - 1})")
+            raise IndexOutOfRangeError(f"recording {i} out of range (0..{len(self) - 1})")
         r = self.index[i]
         sl = slice(int(r["row_start"]), int(r["row_stop"]))
         return {name: ds[sl] for name, ds in self._samples.items()}
@@ -462,7 +462,7 @@ class DatasetReader:
                 "extract the features again"
             ) from None
         if not stored:
-            raise KeyError(f"no stored {modality!r} features for action {action!r}")
+            raise UnknownNameError(f"no stored {modality!r} features for action {action!r}")
         problem = self._feature_damage(action, modality, read=True)
         if problem is not None:
             raise DatasetError(

@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError, UnknownNameError
+
 __all__ = [
     "Curves",
     "Estimate",
@@ -68,7 +70,7 @@ _T975 = {
 def t_quantile(df: int) -> float:
     """The 97.5 % quantile of Student's t with ``df`` degrees of freedom."""
     if df < 1:
-        raise ValueError(f"degrees of freedom must be >= 1, got {df}")
+        raise InvalidInputError(f"degrees of freedom must be >= 1, got {df}")
     if df in _T975:
         return _T975[df]
     keys = sorted(_T975)
@@ -88,7 +90,7 @@ def mean_band(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     Where fewer than two runs have a value the interval is NaN (no band can be drawn)."""
     v = np.asarray(values, dtype=float)
     if v.ndim != 2:
-        raise ValueError(f"values must be (runs, x), got shape {v.shape}")
+        raise InvalidInputError(f"values must be (runs, x), got shape {v.shape}")
     n = np.sum(np.isfinite(v), axis=0)
     mean = _quiet(np.nanmean, v, axis=0)
     half = np.full(v.shape[1], np.nan)
@@ -118,11 +120,11 @@ class Curves:
         self.x = np.asarray(self.x)
         self.values = np.asarray(self.values, dtype=float)
         if self.values.shape != (len(self.runs), len(self.x)):
-            raise ValueError(
+            raise InvalidInputError(
                 f"values have shape {self.values.shape}, expected ({len(self.runs)}, {len(self.x)})"
             )
         if len(set(self.runs)) != len(self.runs):
-            raise ValueError("a run occurs twice")
+            raise InvalidInputError("a run occurs twice")
 
     @property
     def n_runs(self) -> int:
@@ -140,7 +142,7 @@ class Curves:
     def column(self, x_value: Any) -> np.ndarray:
         where = np.flatnonzero(self.x == x_value)
         if where.size != 1:
-            raise KeyError(f"x = {x_value!r} is not on this curve's axis {self.x.tolist()}")
+            raise UnknownNameError(f"x = {x_value!r} is not on this curve's axis {self.x.tolist()}")
         return self.values[:, int(where[0])]
 
     def run_means(self) -> np.ndarray:
@@ -191,18 +193,18 @@ def collect(
             continue
         missing = [k for k in (*run_by, x) if k not in row]
         if missing:
-            raise KeyError(f"a result row has no {missing} (row: {dict(row)})")
+            raise UnknownNameError(f"a result row has no {missing} (row: {dict(row)})")
         run = tuple(row[k] for k in run_by)
         per = cells.setdefault(run, {})
         if row[x] in per:
-            raise ValueError(
+            raise InvalidInputError(
                 f"run {dict(zip(run_by, run))} has two rows at {x} = {row[x]} (filter {where})"
             )
         v = row.get(value)
         per[row[x]] = float("nan") if v is None or v == "" else float(v)
         xs.add(row[x])
     if not cells:
-        raise LookupError(f"no result rows match {where}")
+        raise UnknownNameError(f"no result rows match {where}")
     axis = sorted(xs)
     pos = {v: i for i, v in enumerate(axis)}
     runs = sorted(cells)
@@ -216,10 +218,10 @@ def collect(
 def difference(a: Curves, b: Curves) -> Curves:
     """Run-by-run ``a - b`` on the runs both have (paired comparison)."""
     if a.x.shape != b.x.shape or not np.array_equal(a.x, b.x):
-        raise ValueError(f"different x axes: {a.x.tolist()} vs {b.x.tolist()}")
+        raise InvalidInputError(f"different x axes: {a.x.tolist()} vs {b.x.tolist()}")
     common = [r for r in a.runs if r in set(b.runs)]
     if not common:
-        raise ValueError("the two curves share no run")
+        raise InvalidInputError("the two curves share no run")
     ia = {r: i for i, r in enumerate(a.runs)}
     ib = {r: i for i, r in enumerate(b.runs)}
     values = np.array([a.values[ia[r]] - b.values[ib[r]] for r in common])
@@ -230,11 +232,11 @@ def mean_over_panels(panels: Sequence[Curves]) -> Curves:
     """Per run, the mean of several panels' curves (e.g. over actions); panels must have the
     same runs and x axis."""
     if not panels:
-        raise ValueError("no panels to average")
+        raise InvalidInputError("no panels to average")
     first = panels[0]
     for p in panels[1:]:
         if p.runs != first.runs or not np.array_equal(p.x, first.x):
-            raise ValueError("panels to average must have the same runs and x axis")
+            raise InvalidInputError("panels to average must have the same runs and x axis")
     return Curves(
         first.x, _quiet(np.nanmean, np.stack([p.values for p in panels]), axis=0), list(first.runs)
     )
@@ -282,7 +284,7 @@ def estimate(
     if units is not None:
         u = list(units)
         if len(u) != v.size:
-            raise ValueError("one unit per value is needed")
+            raise InvalidInputError("one unit per value is needed")
         u = [x for x, k in zip(u, keep) if k]
     v = v[keep]
     if v.size == 0:

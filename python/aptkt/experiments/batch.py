@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from aptkt.errors import InvalidStateError, UnknownNameError
 from aptkt.experiments.executors import Executor
 from aptkt.experiments.priors import PriorTask, build_prior
 from aptkt.experiments.run_store import RunStore, run_key
@@ -30,10 +31,10 @@ class StoredSteps(Mapping[str, list[dict[str, Any]]]):
 
     def __getitem__(self, key: str) -> list[dict[str, Any]]:
         if key not in self._keys:
-            raise KeyError(key)
+            raise UnknownNameError(key)
         rows = self._store.load(key)
         if rows is None:
-            raise RuntimeError(
+            raise InvalidStateError(
                 f"run {key}: its result file {self._store.path(key)} disappeared or was damaged "
                 "after the batch stored or found it"
             )
@@ -116,7 +117,7 @@ def run_batch(
         for i, seconds in executor.imap_unordered(stored_run, [(k, todo[k]) for k in order]):
             key = order[i]
             if key not in store:
-                raise RuntimeError(
+                raise InvalidStateError(
                     f"run {key}: a worker stored it, but {store.path(key)} is not there for this "
                     "process; with a cluster, the output directory must be on a file system the "
                     "workers share"

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.errors import FeatureTableError
+from aptkt.errors import FeatureTableError, InvalidInputError
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
 from aptkt.learning.observations import Observations, ObservationTable
@@ -84,18 +84,18 @@ class BenchmarkSettings:
     def __post_init__(self) -> None:
         for name in ("groups", "new_objects"):
             if getattr(self, name) < (2 if name != "groups" else 1):
-                raise ValueError(f"{name} must be >= {2 if name != 'groups' else 1}")
+                raise InvalidInputError(f"{name} must be >= {2 if name != 'groups' else 1}")
         sizes = tuple(int(k) for k in self.libraries)
         object.__setattr__(self, "libraries", sizes)
         if not sizes or min(sizes) < 2 or list(sizes) != sorted(set(sizes)):
-            raise ValueError(
+            raise InvalidInputError(
                 f"library sizes must be distinct, increasing and >= 2, got {list(sizes)}"
             )
         if self.budget < 0:
-            raise ValueError(f"budget must be >= 0, got {self.budget}")
+            raise InvalidInputError(f"budget must be >= 0, got {self.budget}")
         unknown = [c for c in self.choices if c not in PRIOR_CHOICES]
         if unknown or not self.choices:
-            raise ValueError(f"choices must be among {PRIOR_CHOICES}, got {self.choices}")
+            raise InvalidInputError(f"choices must be among {PRIOR_CHOICES}, got {self.choices}")
 
     @property
     def prior_objects(self) -> int:

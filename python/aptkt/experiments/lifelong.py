@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.errors import FeatureTableError
+from aptkt.errors import FeatureTableError, InvalidInputError
 from aptkt.experiments.benchmark import _subset, split_trials
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
@@ -52,11 +52,11 @@ class LifelongSettings:
 
     def __post_init__(self) -> None:
         if self.orders < 1:
-            raise ValueError(f"orders must be >= 1, got {self.orders}")
+            raise InvalidInputError(f"orders must be >= 1, got {self.orders}")
         if self.batch < 2:
-            raise ValueError(f"batch must be >= 2, got {self.batch}")
+            raise InvalidInputError(f"batch must be >= 2, got {self.batch}")
         if self.budget < 0:
-            raise ValueError(f"budget must be >= 0, got {self.budget}")
+            raise InvalidInputError(f"budget must be >= 0, got {self.budget}")
 
 
 def library_accuracy(
@@ -74,7 +74,9 @@ def library_accuracy(
         else:
             ident = ap.identity
             if ident is None:
-                raise ValueError(f"action {action!r}: no object of the library was observed twice")
+                raise InvalidInputError(
+                    f"action {action!r}: no object of the library was observed twice"
+                )
             predicted = np.array(
                 [ident.objects_[int(np.argmax(ident.log_posterior(x[None, :])[0]))] for x in X]
             )

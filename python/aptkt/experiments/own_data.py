@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.errors import ConfigError, FeatureTableError
+from aptkt.errors import ConfigError, FeatureTableError, InvalidTypeError
 from aptkt.experiments.bounds import MAX_BUDGET, MAX_RUNS
 from aptkt.experiments.table_learning import (
     TableSettings,
@@ -42,7 +42,7 @@ def _column_names(data: Any) -> list[str]:
         return [str(k) for k in data]
     if hasattr(data, "columns") and hasattr(data, "__getitem__"):
         return [str(c) for c in data.columns]
-    raise TypeError(
+    raise InvalidTypeError(
         "data must be a DataFrame (anything with .columns and frame[column]) or a dict of "
         f"column name -> values, got {type(data).__name__}"
     )
@@ -271,14 +271,16 @@ def _arguments(
     if runs > MAX_RUNS:
         raise ConfigError(f"runs must be at most {MAX_RUNS}, got {runs}")
     if config is not None and not isinstance(config, LearnerConfig):
-        raise TypeError(f"config must be a LearnerConfig or None, got {type(config).__name__}")
+        raise InvalidTypeError(
+            f"config must be a LearnerConfig or None, got {type(config).__name__}"
+        )
     if output is not None:
         if not isinstance(output, (str, Path)) or not str(output):
             raise ConfigError(f"output must be a directory's path or None, got {output!r}")
         if Path(output).exists() and not Path(output).is_dir():
             raise ConfigError(f"output {output}: is a file, not a directory")
     if say is not None and not callable(say):
-        raise TypeError(f"say must be a function of one line, or None, got {say!r}")
+        raise InvalidTypeError(f"say must be a function of one line, or None, got {say!r}")
     if not isinstance(force, bool):
         raise ConfigError(f"force must be True or False, got {force!r}")
     cfg = config if config is not None else LearnerConfig()

@@ -14,13 +14,15 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
+
 __all__ = ["derive_seed", "draw_groups"]
 
 
 def _part(key: int | str) -> int:
     if isinstance(key, (int, np.integer)):
         if key < 0:
-            raise ValueError(f"seed keys must be >= 0, got {key}")
+            raise InvalidInputError(f"seed keys must be >= 0, got {key}")
         return int(key)
     return zlib.crc32(str(key).encode())
 
@@ -32,7 +34,7 @@ def derive_seed(root: int, *keys: int | str) -> int:
     machines and Python versions (strings enter through CRC-32, not ``hash``).
     """
     if root < 0:
-        raise ValueError(f"the root seed must be >= 0, got {root}")
+        raise InvalidInputError(f"the root seed must be >= 0, got {root}")
     seq = np.random.SeedSequence(entropy=int(root), spawn_key=tuple(_part(k) for k in keys))
     return int(seq.generate_state(1, np.uint32)[0] >> 1)
 
@@ -46,9 +48,9 @@ def draw_groups(objects: Sequence[str], size: int, count: int, seed: int) -> lis
     """
     objects = list(objects)
     if not 1 <= size <= len(objects):
-        raise ValueError(f"cannot draw groups of {size} from {len(objects)} objects")
+        raise InvalidInputError(f"cannot draw groups of {size} from {len(objects)} objects")
     if count < 1:
-        raise ValueError(f"count must be >= 1, got {count}")
+        raise InvalidInputError(f"count must be >= 1, got {count}")
     possible = math.comb(len(objects), size)
     count = min(count, possible)
     rng = np.random.default_rng(seed)

@@ -22,6 +22,7 @@ from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 from aptkt.actions import PAPER_ACTIONS
+from aptkt.errors import InvalidInputError
 from aptkt.learning.config import LearnerConfig
 from aptkt.sim.objects import default_library
 
@@ -50,26 +51,26 @@ class Scale:
 
     def __post_init__(self) -> None:
         if self.repetitions < 2:
-            raise ValueError("repetitions must be >= 2 (a pool and a test half)")
+            raise InvalidInputError("repetitions must be >= 2 (a pool and a test half)")
         if len(self.new_objects) < 2:
-            raise ValueError("at least two new objects are needed")
+            raise InvalidInputError("at least two new objects are needed")
         if not 1 <= self.n_priors <= len(self.priors):
-            raise ValueError(f"n_priors must lie in 1..{len(self.priors)}")
+            raise InvalidInputError(f"n_priors must lie in 1..{len(self.priors)}")
         if any(not 1 <= n <= len(self.priors) for n in self.prior_counts):
-            raise ValueError(f"prior_counts must lie in 1..{len(self.priors)}")
+            raise InvalidInputError(f"prior_counts must lie in 1..{len(self.priors)}")
         if not 2 <= self.fig6_group_size <= len(self.priors) + len(self.new_objects):
-            raise ValueError("fig6_group_size must lie in 2..number of objects")
+            raise InvalidInputError("fig6_group_size must lie in 2..number of objects")
         if not 1 <= self.dissimilar_count <= len(self.priors):
-            raise ValueError(f"dissimilar_count must lie in 1..{len(self.priors)}")
+            raise InvalidInputError(f"dissimilar_count must lie in 1..{len(self.priors)}")
         for name in ("budget", "fig6_budget"):
             if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be >= 0")
+                raise InvalidInputError(f"{name} must be >= 0")
         for name in ("groups", "trials", "fig6_trials", "fig11_trials"):
             if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1")
+                raise InvalidInputError(f"{name} must be >= 1")
         unknown = [a for a in self.actions if a not in PAPER_ACTIONS]
         if unknown:
-            raise ValueError(
+            raise InvalidInputError(
                 f"unknown action(s) {unknown}; the experiments use the paper's {list(PAPER_ACTIONS)}"
             )
 

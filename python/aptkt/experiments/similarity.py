@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
+
 __all__ = [
     "MixtureFit",
     "fit_mixture",
@@ -117,24 +119,26 @@ def fit_mixture(
     ``init_labels == k`` (every component needs at least one). ``reg_covar`` is added to the
     covariances' diagonals (as scikit-learn does)."""
     if covariance_type not in COVARIANCE_TYPES:
-        raise ValueError(
+        raise InvalidInputError(
             f"covariance_type must be one of {COVARIANCE_TYPES}, got {covariance_type!r}"
         )
     X = np.asarray(X, dtype=float)
     labels = np.asarray(init_labels)
     if X.ndim != 2 or labels.shape != (X.shape[0],):
-        raise ValueError(f"expected X (n, d) and n labels, got {X.shape} and {labels.shape}")
+        raise InvalidInputError(f"expected X (n, d) and n labels, got {X.shape} and {labels.shape}")
     if not np.all(np.isfinite(X)):
-        raise ValueError("X holds non-finite values")
+        raise InvalidInputError("X holds non-finite values")
     if max_iter < 1:
-        raise ValueError("max_iter must be >= 1")
+        raise InvalidInputError("max_iter must be >= 1")
     if (
         labels.size == 0
         or labels.min() < 0
         or labels.max() >= n_components
         or np.any(np.bincount(labels, minlength=n_components) == 0)
     ):
-        raise ValueError(f"every component 0..{n_components - 1} needs at least one initial sample")
+        raise InvalidInputError(
+            f"every component 0..{n_components - 1} needs at least one initial sample"
+        )
     resp = np.zeros((X.shape[0], n_components))
     resp[np.arange(X.shape[0]), labels] = 1.0
     params = _m_step(X, resp, reg_covar, covariance_type)
@@ -164,7 +168,7 @@ def log_confusion(
     for i in range(n_objects):
         rows = log_resp[label == i]
         if rows.shape[0] == 0:
-            raise ValueError(f"object {i} has no samples")
+            raise InvalidInputError(f"object {i} has no samples")
         top = rows.max(axis=0)
         out[i] = top + np.log(np.exp(rows - top).sum(axis=0)) - np.log(rows.shape[0])
     return out
@@ -189,7 +193,7 @@ def dissimilar_priors(
     earlier object. Rescaling the matrix to 0–1 is monotone, so it does not change the order."""
     objects = list(objects)
     if not 1 <= count <= len(priors):
-        raise ValueError(f"cannot pick {count} of {len(priors)} priors")
+        raise InvalidInputError(f"cannot pick {count} of {len(priors)} priors")
     logs = np.asarray(log_similarity, dtype=float)
     sym = np.logaddexp(logs, logs.T) - np.log(2.0)
     cols = [objects.index(o) for o in new_objects]

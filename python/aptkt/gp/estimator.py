@@ -13,6 +13,7 @@ from scipy.special import expit, logit
 from sklearn.base import BaseEstimator, ClassifierMixin
 
 from aptkt import _core
+from aptkt.errors import InvalidInputError
 from aptkt.gp import persistence
 from aptkt.gp.hyperparameters import hyperparameter_names
 from aptkt.gp.hyperparameters import start_rows as hyper_start_rows
@@ -262,7 +263,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         itself is fitted to ``X`` and ``y`` only. Their classes need not be this model's.
         """
         if kernel_tasks is not None and hyperparameters is not None:
-            raise ValueError("hyperparameters (starts) cannot be combined with kernel_tasks")
+            raise InvalidInputError("hyperparameters (starts) cannot be combined with kernel_tasks")
         return self._fit(
             X, y, sources, thetas=None, starts=hyperparameters, kernel_tasks=kernel_tasks
         )
@@ -282,7 +283,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         check_classification_targets(y)
         classes, labels, counts = np.unique(y, return_inverse=True, return_counts=True)
         if classes.size < 2:
-            raise ValueError(
+            raise InvalidInputError(
                 f"LaplaceGPC needs at least two classes in y, got only one class: "
                 f"{classes.tolist()!r}"
             )
@@ -303,14 +304,16 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
             )
         shared = thetas is None and (self.kernel == "shared" or kernel_tasks is not None)
         if shared and spec["free"]["transfer_lambda"]:
-            raise ValueError(
+            raise InvalidInputError(
                 'a shared kernel keeps each classifier\'s λ fixed: include "transfer_lambda" '
                 "in fixed"
             )
         if shared and starts is not None:
-            raise ValueError('hyperparameters (starts) work with kernel="per-classifier" only')
+            raise InvalidInputError(
+                'hyperparameters (starts) work with kernel="per-classifier" only'
+            )
         if self.tie_length_scales and thetas is None and not shared:
-            raise ValueError('tie_length_scales needs kernel="shared"')
+            raise InvalidInputError('tie_length_scales needs kernel="shared"')
         if shared:
             tasks = [(X, labels.astype(np.int64), int(classes.size), source_lists)]
             tasks += kernel_task_lists(kernel_tasks or (), X.shape[1])
@@ -468,7 +471,7 @@ class LaplaceGPC(ClassifierMixin, BaseEstimator):
         if t.ndim == 1:
             t = np.tile(t, (self.theta_.shape[0], 1))
         if t.shape != self.theta_.shape:
-            raise ValueError(
+            raise InvalidInputError(
                 f"theta must have shape {self.theta_.shape[1:]} or {self.theta_.shape}, got {t.shape}"
             )
         lml, grad = self._model.log_marginal_likelihood(
@@ -505,7 +508,7 @@ def uniform_class_prior(binary: np.ndarray, base_rates: np.ndarray) -> np.ndarra
     tasks the rates are the class counts over their sum.)"""
     rates = np.asarray(base_rates, dtype=np.float64)
     if rates.ndim != 1 or not np.all((rates > 0) & (rates < 1)):
-        raise ValueError(f"base_rates must be K rates strictly between 0 and 1, got {rates}")
+        raise InvalidInputError(f"base_rates must be K rates strictly between 0 and 1, got {rates}")
     k = rates.size
     shift = np.log(1.0 / (k - 1)) - np.log(rates / (1.0 - rates))
     adjusted = expit(logit(np.asarray(binary, dtype=np.float64)) + shift)

@@ -8,6 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
+
 __all__ = ["HYPER_KEYS", "hyperparameter_names", "start_rows"]
 
 HYPER_KEYS = ("signal_variance", "length_scales", "modality_weights", "transfer_lambda")
@@ -16,7 +18,7 @@ HYPER_KEYS = ("signal_variance", "length_scales", "modality_weights", "transfer_
 def _positive(value: Any, what: str) -> float:
     v = float(value)
     if not (np.isfinite(v) and v > 0):
-        raise ValueError(f"{what} must be a finite number > 0, got {value!r}")
+        raise InvalidInputError(f"{what} must be a finite number > 0, got {value!r}")
     return v
 
 
@@ -27,13 +29,13 @@ def _per_modality(values: Any, names: list[str], what: str, partial: bool = Fals
         missing = [n for n in names if n not in values]
         extra = [k for k in values if k not in names]
         if (missing and not partial) or extra:
-            raise ValueError(f"{what} must name the modalities {names}, got {list(values)}")
+            raise InvalidInputError(f"{what} must name the modalities {names}, got {list(values)}")
         return [float(values[n]) if n in values else float("nan") for n in names]
     arr = np.atleast_1d(np.asarray(values, dtype=np.float64))
     if arr.size == 1:
         arr = np.repeat(arr, len(names))
     if arr.size != len(names):
-        raise ValueError(f"{what} has {arr.size} values for {len(names)} modalities")
+        raise InvalidInputError(f"{what} has {arr.size} values for {len(names)} modalities")
     return arr.tolist()
 
 
@@ -50,7 +52,7 @@ def start_rows(
     m = len(names)
     unknown = [label for label in starts if not np.any(classes == label)]
     if unknown:
-        raise ValueError(
+        raise InvalidInputError(
             f"hyperparameters: class(es) {unknown!r} do not occur in y "
             f"(classes: {classes.tolist()})"
         )
@@ -65,7 +67,7 @@ def start_rows(
             continue
         bad = set(given) - set(HYPER_KEYS)
         if bad:
-            raise ValueError(
+            raise InvalidInputError(
                 f"hyperparameters[{classes[k]!r}]: unknown key(s) {sorted(bad)}; "
                 f"choose from {list(HYPER_KEYS)}"
             )
@@ -87,7 +89,7 @@ def start_rows(
                 dtype=np.float64,
             )
             if not (np.all(np.isfinite(w)) and np.all(w >= 0) and w.sum() > 0):
-                raise ValueError(f"{what}.modality_weights must be >= 0 with a positive sum")
+                raise InvalidInputError(f"{what}.modality_weights must be >= 0 with a positive sum")
             with np.errstate(divide="ignore"):
                 row[1 + m : 1 + 2 * m] = np.maximum(np.log(w / w.sum()), -50.0).tolist()
         if "transfer_lambda" in given and lambda_free and n_lambdas:

@@ -14,7 +14,7 @@ from sklearn.exceptions import NotFittedError as _SklearnNotFitted
 from sklearn.utils.multiclass import check_classification_targets as _sklearn_targets
 from sklearn.utils.validation import validate_data
 
-from aptkt.errors import NotFittedError
+from aptkt.errors import InvalidInputError, InvalidTypeError, NotFittedError
 
 __all__ = [
     "NotFitted",
@@ -32,15 +32,15 @@ __all__ = [
 def as_matrix(X: Any, name: str, n_features: int | None = None) -> np.ndarray:
     arr = np.asarray(X)
     if arr.dtype.kind not in "biuf":
-        raise TypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
+        raise InvalidTypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
     if arr.ndim != 2:
-        raise ValueError(
+        raise InvalidInputError(
             f"{name} must be a 2-D array (n_samples, n_features), got shape {arr.shape}"
         )
     if arr.shape[0] == 0:
-        raise ValueError(f"{name} has no rows")
+        raise InvalidInputError(f"{name} has no rows")
     if n_features is not None and arr.shape[1] != n_features:
-        raise ValueError(f"{name} has {arr.shape[1]} features, expected {n_features}")
+        raise InvalidInputError(f"{name} has {arr.shape[1]} features, expected {n_features}")
     return np.ascontiguousarray(arr, dtype=np.float64)
 
 
@@ -56,7 +56,7 @@ def normalise_modalities(
     else:
         items = [(f"m{i}", cols) for i, cols in enumerate(modalities)]
     if not items:
-        raise ValueError("modalities must name at least one group of feature columns")
+        raise InvalidInputError("modalities must name at least one group of feature columns")
     names, groups = [], []
     for name, cols in items:
         if isinstance(cols, slice):
@@ -67,14 +67,14 @@ def normalise_modalities(
         if listed and all(isinstance(c, str) for c in listed):
             idx = _by_name(str(name), [str(c) for c in listed], feature_names)
         elif any(isinstance(c, str) for c in listed):
-            raise TypeError(
+            raise InvalidTypeError(
                 f"modality {name!r} mixes column names and indices: {listed}; give one kind"
             )
         else:
             idx = [int(c) for c in np.atleast_1d(np.asarray(cols, dtype=np.int64))]
         bad = [c for c in idx if not 0 <= c < n_features]
         if not idx or bad:
-            raise ValueError(
+            raise InvalidInputError(
                 f"modality {name!r} must list feature columns in [0, {n_features}), got {list(cols)}"
             )
         names.append(str(name))
@@ -84,14 +84,14 @@ def normalise_modalities(
 
 def _by_name(modality: str, columns: list[str], feature_names: Any) -> list[int]:
     if feature_names is None:
-        raise TypeError(
+        raise InvalidTypeError(
             f"modality {modality!r} names columns {columns}, but X has no column names: fit "
             "to a DataFrame with these columns, or give column indices"
         )
     position = {str(n): i for i, n in enumerate(feature_names)}
     unknown = [c for c in columns if c not in position]
     if unknown:
-        raise ValueError(
+        raise InvalidInputError(
             f"modality {modality!r}: X has no column(s) {unknown}; its columns are {list(position)}"
         )
     return [position[c] for c in columns]
@@ -147,7 +147,7 @@ def validate(estimator: BaseEstimator, X: Any, y: Any = _NO_TARGET, *, reset: bo
     if reset:
         estimator.n_features_in_ = X.shape[1]
     elif X.shape[1] != estimator.n_features_in_:
-        raise ValueError(
+        raise InvalidInputError(
             f"X has {X.shape[1]} features, but {type(estimator).__name__} is expecting "
             f"{estimator.n_features_in_} features as input."
         )
@@ -161,7 +161,7 @@ def threads(n_jobs: Any) -> int:
     if n_jobs is None:
         return 1
     if isinstance(n_jobs, bool) or not isinstance(n_jobs, (int, np.integer)) or n_jobs == 0:
-        raise ValueError(f"n_jobs must be None or a non-zero integer, got {n_jobs!r}")
+        raise InvalidInputError(f"n_jobs must be None or a non-zero integer, got {n_jobs!r}")
     cores = os.cpu_count() or 1
     if n_jobs > 0:
         return min(int(n_jobs), cores)
@@ -176,7 +176,7 @@ def real(value: Any, name: str, *, positive: bool = False) -> float:
         or not np.isfinite(value)
         or not (value > 0 if positive else value >= 0)
     ):
-        raise ValueError(
+        raise InvalidInputError(
             f"{name} must be a finite number {'>' if positive else '>='} 0, got {value!r}"
         )
     return float(value)
@@ -185,9 +185,9 @@ def real(value: Any, name: str, *, positive: bool = False) -> float:
 def count(value: Any, name: str, maximum: int) -> int:
     """A setting that must be an integer (not a bool) in ``0..maximum``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
-        raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
+        raise InvalidInputError(f"{name} must be a non-negative integer, got {value!r}")
     if value > maximum:
-        raise ValueError(f"{name} must be at most {maximum}, got {value}")
+        raise InvalidInputError(f"{name} must be at most {maximum}, got {value}")
     return int(value)
 
 
@@ -196,12 +196,12 @@ def seed_of(random_state: Any) -> int:
         return int(np.random.SeedSequence().generate_state(1, np.uint64)[0])
     if isinstance(random_state, (int, np.integer)):
         if random_state < 0:
-            raise ValueError(f"random_state must be >= 0, got {random_state}")
+            raise InvalidInputError(f"random_state must be >= 0, got {random_state}")
         return int(random_state) & 0xFFFF_FFFF_FFFF_FFFF
     if isinstance(random_state, np.random.Generator):
         return int(random_state.integers(0, 2**63))
     if isinstance(random_state, np.random.RandomState):
         return int(random_state.randint(0, 2**31 - 1))
-    raise TypeError(
+    raise InvalidTypeError(
         f"random_state must be None, an int or a numpy Generator, got {type(random_state).__name__}"
     )

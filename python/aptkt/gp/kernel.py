@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from aptkt import _core
+from aptkt.errors import InvalidInputError
 from aptkt.gp.inputs import as_matrix, normalise_modalities
 
 __all__ = ["kernel_matrix"]
@@ -33,5 +34,5 @@ def kernel_matrix(
     else:
         sizes = [int(v) for v in n_source]
     if any(v < 0 for v in sizes):
-        raise ValueError(f"n_source must hold counts >= 0, got {n_source!r}")
+        raise InvalidInputError(f"n_source must hold counts >= 0, got {n_source!r}")
     return np.asarray(_core.kernel_matrix(X, [float(v) for v in np.ravel(theta)], groups, sizes))

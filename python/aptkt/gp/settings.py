@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from aptkt import _core
+from aptkt.errors import InvalidInputError, InvalidTypeError
 from aptkt.gp.inputs import count, normalise_modalities, real, seed_of, threads
 
 __all__ = [
@@ -100,13 +101,13 @@ class HyperPrior:
         for name in ("length_scale_centre", "signal_variance_centre"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0):
-                raise ValueError(f"HyperPrior.{name} must be a finite number > 0, got {v!r}")
+                raise InvalidInputError(f"HyperPrior.{name} must be a finite number > 0, got {v!r}")
         for name in ("length_scale_sd", "signal_variance_sd", "modality_weight_sd"):
             v = getattr(self, name)
             if v is not None and not (
                 isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0
             ):
-                raise ValueError(
+                raise InvalidInputError(
                     f"HyperPrior.{name} must be None or a finite number > 0, got {v!r}"
                 )
 
@@ -122,10 +123,12 @@ class HyperPrior:
         if isinstance(value, str):
             if value == "weak":
                 return cls.weak()
-            raise ValueError(f"hyper_prior must be None, 'weak' or a HyperPrior, got {value!r}")
+            raise InvalidInputError(
+                f"hyper_prior must be None, 'weak' or a HyperPrior, got {value!r}"
+            )
         if isinstance(value, Mapping):
             return cls(**value)
-        raise TypeError(
+        raise InvalidTypeError(
             f"hyper_prior must be None, 'weak' or a HyperPrior, got {type(value).__name__}"
         )
 
@@ -153,7 +156,7 @@ def check_class_prior(*values: str | None) -> None:
     """Each given class prior (None: not given) must be one of :data:`CLASS_PRIORS`."""
     for value in values:
         if value is not None and value not in CLASS_PRIORS:
-            raise ValueError(f"class_prior must be one of {CLASS_PRIORS}, got {value!r}")
+            raise InvalidInputError(f"class_prior must be one of {CLASS_PRIORS}, got {value!r}")
 
 
 def fit_spec(est: Any, n_features: int) -> dict[str, Any]:
@@ -164,7 +167,7 @@ def fit_spec(est: Any, n_features: int) -> dict[str, Any]:
     m = len(groups)
     if isinstance(est.length_scale, str):
         if est.length_scale != "auto":
-            raise ValueError(
+            raise InvalidInputError(
                 f"length_scale must be a number, a sequence or 'auto', got {est.length_scale!r}"
             )
         length_scales = [float("nan")] * m
@@ -173,9 +176,9 @@ def fit_spec(est: Any, n_features: int) -> dict[str, Any]:
         if ls.size == 1:
             ls = np.repeat(ls, m)
         if ls.size != m:
-            raise ValueError(f"length_scale has {ls.size} values for {m} modalities")
+            raise InvalidInputError(f"length_scale has {ls.size} values for {m} modalities")
         if not np.all(np.isfinite(ls) & (ls > 0)):
-            raise ValueError(
+            raise InvalidInputError(
                 f"length_scale must be 'auto' or finite numbers > 0, got {est.length_scale!r}"
             )
         length_scales = [float(v) for v in ls]
@@ -184,22 +187,26 @@ def fit_spec(est: Any, n_features: int) -> dict[str, Any]:
     else:
         weights = [real(w, "modality_weights") for w in est.modality_weights]
         if len(weights) != m:
-            raise ValueError(f"modality_weights has {len(weights)} values for {m} modalities")
+            raise InvalidInputError(
+                f"modality_weights has {len(weights)} values for {m} modalities"
+            )
         if sum(weights) <= 0:
-            raise ValueError(f"modality_weights must have a positive sum, got {weights}")
+            raise InvalidInputError(f"modality_weights must have a positive sum, got {weights}")
     fixed = set(est.fixed)
     unknown = fixed - set(_FIXABLE)
     if unknown:
-        raise ValueError(
+        raise InvalidInputError(
             f"fixed: unknown hyper-parameter(s) {sorted(unknown)}; choose from {list(_FIXABLE)}"
         )
     check_class_prior(est.class_prior)
     if est.kernel not in KERNELS:
-        raise ValueError(f"kernel must be one of {KERNELS}, got {est.kernel!r}")
+        raise InvalidInputError(f"kernel must be one of {KERNELS}, got {est.kernel!r}")
     if est.latent_mean not in LATENT_MEANS:
-        raise ValueError(f"latent_mean must be one of {LATENT_MEANS}, got {est.latent_mean!r}")
+        raise InvalidInputError(
+            f"latent_mean must be one of {LATENT_MEANS}, got {est.latent_mean!r}"
+        )
     if est.approximation not in _APPROXIMATIONS:
-        raise ValueError(
+        raise InvalidInputError(
             f"approximation must be one of {_APPROXIMATIONS}, got {est.approximation!r}"
         )
     # Every number is checked here, before the core sees it: NaN, infinity or a bool would
@@ -215,10 +222,10 @@ def fit_spec(est: Any, n_features: int) -> dict[str, Any]:
     for name in ("signal_variance_bounds", "length_scale_bounds"):
         value = getattr(est, name)
         if isinstance(value, (str, bytes)) or np.ndim(value) != 1 or len(value) != 2:
-            raise ValueError(f"{name} must be a pair (low, high), got {value!r}")
+            raise InvalidInputError(f"{name} must be a pair (low, high), got {value!r}")
         lo, hi = (real(v, name, positive=True) for v in value)
         if not lo < hi:
-            raise ValueError(f"{name} must satisfy low < high, got {value!r}")
+            raise InvalidInputError(f"{name} must satisfy low < high, got {value!r}")
         bounds[name] = (lo, hi)
     return {
         "modality_names": names,

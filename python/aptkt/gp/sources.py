@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError, InvalidTypeError
 from aptkt.gp.inputs import as_matrix
 
 __all__ = ["TransferSource", "normalise_sources", "start_lambda"]
@@ -44,7 +45,7 @@ class TransferSource:
         name: str | None = None,
     ) -> None:
         if y is not None and np.ndim(y) == 0:
-            raise TypeError(
+            raise InvalidTypeError(
                 "TransferSource(X, y, transfer_lambda): y must be an array of labels or None, "
                 f"got the scalar {y!r}; pass the relatedness as transfer_lambda=..."
             )
@@ -54,7 +55,9 @@ class TransferSource:
         if transfer_lambda is not None:
             lam = float(transfer_lambda)
             if not 0.0 <= lam <= 1.0:  # also rejects NaN
-                raise ValueError(f"transfer_lambda must lie in [0, 1], got {transfer_lambda!r}")
+                raise InvalidInputError(
+                    f"transfer_lambda must lie in [0, 1], got {transfer_lambda!r}"
+                )
             transfer_lambda = lam
         self.transfer_lambda = transfer_lambda
         self.name = None if name is None else str(name)
@@ -76,22 +79,24 @@ def _binary_labels(y: Any, n: int) -> np.ndarray:
     """±1 float labels from {+1, -1}, {1, 0} or booleans, checked for length and finiteness."""
     arr = np.asarray(y)
     if arr.ndim != 1 or arr.shape[0] != n:
-        raise ValueError(
+        raise InvalidInputError(
             f"TransferSource.y must have one label per row of X ({n}), got shape {arr.shape}"
         )
     if arr.dtype.kind == "b":
         return np.where(arr, 1.0, -1.0)
     if arr.dtype.kind not in "iuf":
-        raise TypeError(f"TransferSource.y must hold numbers or booleans, got dtype {arr.dtype}")
+        raise InvalidTypeError(
+            f"TransferSource.y must hold numbers or booleans, got dtype {arr.dtype}"
+        )
     values = arr.astype(np.float64)
     if not np.all(np.isfinite(values)):
-        raise ValueError("TransferSource.y contains a non-finite value")
+        raise InvalidInputError("TransferSource.y contains a non-finite value")
     positive = values == 1.0
     if np.all(positive | (values == -1.0)):
         return values
     if np.all(positive | (values == 0.0)):
         return np.where(positive, 1.0, -1.0)
-    raise ValueError(
+    raise InvalidInputError(
         "TransferSource.y must be binary (+1/-1, 1/0 or booleans), got values "
         f"{sorted(set(np.unique(values).tolist()))}"
     )
@@ -102,7 +107,7 @@ def _as_source(value: Any, where: str) -> TransferSource:
         return value
     if isinstance(value, tuple) and len(value) == 2 and np.ndim(value[1]) == 0:
         return TransferSource(value[0], transfer_lambda=value[1])
-    raise TypeError(
+    raise InvalidTypeError(
         f"{where} must be a TransferSource, an (X, transfer_lambda) tuple or a list of those, "
         f"got {type(value).__name__}"
     )
@@ -116,7 +121,7 @@ def normalise_sources(
     for label, value in (sources or {}).items():
         where = f"sources[{label!r}]"
         if np.flatnonzero(classes == label).size != 1:
-            raise ValueError(
+            raise InvalidInputError(
                 f"sources: class {label!r} does not occur in y (classes: {classes.tolist()})"
             )
         items = value if isinstance(value, list) else [value]
@@ -126,9 +131,11 @@ def normalise_sources(
         for k, item in enumerate(items):
             src = _as_source(item, where)
             if src.X.shape[1] != n_features:
-                raise ValueError(f"{where}.X has {src.X.shape[1]} features, expected {n_features}")
+                raise InvalidInputError(
+                    f"{where}.X has {src.X.shape[1]} features, expected {n_features}"
+                )
             if src.transfer_lambda is None and not lambda_free:
-                raise ValueError(
+                raise InvalidInputError(
                     f"{where}: transfer_lambda is required while λ is fixed "
                     "(fixed includes 'transfer_lambda')"
                 )
@@ -136,7 +143,7 @@ def normalise_sources(
             out.append(TransferSource(src.X, src.y, src.transfer_lambda, name=name))
         names = [s.name for s in out]
         if len(set(names)) != len(names):
-            raise ValueError(f"{where}: source names must differ, got {names}")
+            raise InvalidInputError(f"{where}: source names must differ, got {names}")
         used[label] = out
     return used
 
@@ -157,19 +164,19 @@ def kernel_task_lists(
     out = []
     for i, task in enumerate(kernel_tasks):
         if not isinstance(task, (tuple, list)) or len(task) not in (2, 3):
-            raise ValueError(
+            raise InvalidInputError(
                 f"kernel_tasks[{i}] must be (X, y) or (X, y, sources), got {type(task).__name__}"
             )
         X = np.ascontiguousarray(as_matrix(task[0], f"kernel_tasks[{i}] X", n_features))
         y = np.asarray(task[1])
         if y.ndim != 1 or y.shape[0] != X.shape[0]:
-            raise ValueError(
+            raise InvalidInputError(
                 f"kernel_tasks[{i}]: X has {X.shape[0]} rows but y has shape {y.shape}"
             )
         check_classification_targets(y)
         classes, labels = np.unique(y, return_inverse=True)
         if classes.size < 2:
-            raise ValueError(f"kernel_tasks[{i}] needs at least two classes")
+            raise InvalidInputError(f"kernel_tasks[{i}] needs at least two classes")
         lists: list[list[tuple[np.ndarray, np.ndarray, float]]] = [[] for _ in classes]
         if len(task) == 3 and task[2]:
             for label, lst in normalise_sources(task[2], classes, n_features, False).items():

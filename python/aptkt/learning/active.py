@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
+
 __all__ = ["entropy", "uncertainty", "Selection", "select_next"]
 
 Pair = tuple[str, str]
@@ -21,7 +23,7 @@ def entropy(posteriors: np.ndarray) -> np.ndarray:
     """Shannon entropy (nats) of each row of a probability matrix; 0 log 0 = 0."""
     p = np.asarray(posteriors, dtype=np.float64)
     if p.ndim != 2:
-        raise ValueError(f"expected a 2-D array of posteriors, got shape {p.shape}")
+        raise InvalidInputError(f"expected a 2-D array of posteriors, got shape {p.shape}")
     with np.errstate(divide="ignore", invalid="ignore"):
         terms = np.where(p > 0, -p * np.log(p), 0.0)
     return terms.sum(axis=1)
@@ -31,7 +33,7 @@ def uncertainty(posteriors: np.ndarray) -> float:
     """UNC of one (action, object) pair: the mean entropy over its observations."""
     h = entropy(posteriors)
     if h.size == 0:
-        raise ValueError("UNC needs at least one observation")
+        raise InvalidInputError("UNC needs at least one observation")
     return float(h.mean())
 
 
@@ -56,12 +58,12 @@ def select_next(
     ``available`` restricts both branches to pairs that can still be observed (a finite pool).
     """
     if not 0.0 <= eps_explor <= 1.0:
-        raise ValueError(f"eps_explor must lie in [0, 1], got {eps_explor}")
+        raise InvalidInputError(f"eps_explor must lie in [0, 1], got {eps_explor}")
     pairs = [(a, o) for a in actions for o in objects]
     allowed = set(pairs if available is None else available)
     pairs = [p for p in pairs if p in allowed]
     if not pairs:
-        raise ValueError("no (action, object) pair is available")
+        raise InvalidInputError("no (action, object) pair is available")
     if rng.uniform() < eps_explor:
         # Uniform over actions, then over objects, among what is still available.
         acts = [a for a in actions if any((a, o) in allowed for o in objects)]

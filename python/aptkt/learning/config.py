@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
 from aptkt.gp import DEFAULTS, HyperPrior, LaplaceGPC, check_optimizer_tol
 from aptkt.learning.pipeline import FEATURE_SCALES
 from aptkt.learning.transfer import CUTOFFS, SOURCE_CHOICES, TRANSFER_MODES
@@ -48,7 +49,7 @@ def recognisable_signal_variance(probability: float = 0.95) -> float:
     observed once more than the others claims more of the feature space, and accuracy falls
     after the first actively chosen observation (docs/method.md, "Never unlearning")."""
     if not 0.5 < probability < 1.0:
-        raise ValueError(f"probability must lie in (0.5, 1), got {probability}")
+        raise InvalidInputError(f"probability must lie in (0.5, 1), got {probability}")
     return math.log(probability / (1.0 - probability)) / (1.0 - probability)
 
 
@@ -68,9 +69,9 @@ def lone_observation_signal_variance(
     every observation learns little from the next one (docs/method.md). Below σ² ≈ 60 with five
     objects a one-vs-all model unlearns: the object observed once more claims territory."""
     if n_classes < 2:
-        raise ValueError(f"n_classes must be >= 2, got {n_classes}")
+        raise InvalidInputError(f"n_classes must be >= 2, got {n_classes}")
     if not 0.0 < posterior < 1.0:
-        raise ValueError(f"posterior must lie in (0, 1), got {posterior}")
+        raise InvalidInputError(f"posterior must lie in (0, 1), got {posterior}")
     others = n_classes - 1
     p = posterior * others / (1.0 - posterior + posterior * others)
     return recognisable_signal_variance(p)
@@ -140,10 +141,12 @@ class GPSettings:
 
     def __post_init__(self) -> None:
         if self.hyper_prior not in ("weak", None):
-            raise ValueError(f"hyper_prior must be 'weak' or None, got {self.hyper_prior!r}")
+            raise InvalidInputError(f"hyper_prior must be 'weak' or None, got {self.hyper_prior!r}")
         for name, allowed in (("kernel", KERNELS), ("prior_feature_scale", FEATURE_SCALES)):
             if getattr(self, name) not in allowed:
-                raise ValueError(f"{name} must be one of {allowed}, got {getattr(self, name)!r}")
+                raise InvalidInputError(
+                    f"{name} must be one of {allowed}, got {getattr(self, name)!r}"
+                )
         check_optimizer_tol(self.optimizer_tol)
 
     @classmethod
@@ -163,7 +166,7 @@ class GPSettings:
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(data) - known)
         if unknown:
-            raise ValueError(
+            raise InvalidInputError(
                 f"unknown GP setting(s) {unknown}: written by another version of aptkt"
             )
         return cls(**data)
@@ -261,25 +264,27 @@ class LearnerConfig:
             ("cutoff", CUTOFFS),
         ):
             if getattr(self, name) not in allowed:
-                raise ValueError(f"{name} must be one of {allowed}, got {getattr(self, name)!r}")
+                raise InvalidInputError(
+                    f"{name} must be one of {allowed}, got {getattr(self, name)!r}"
+                )
         if self.forced_lambda is not None and not 0.0 <= self.forced_lambda <= 1.0:
-            raise ValueError(
+            raise InvalidInputError(
                 f"forced_lambda must be None or lie in [0, 1], got {self.forced_lambda}"
             )
         if not np.isfinite(self.evidence_margin):
-            raise ValueError(f"evidence_margin must be finite, got {self.evidence_margin}")
+            raise InvalidInputError(f"evidence_margin must be finite, got {self.evidence_margin}")
         for name in ("eps_neg", "eps_explor"):
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:
-                raise ValueError(f"{name} must lie in [0, 1], got {v}")
+                raise InvalidInputError(f"{name} must lie in [0, 1], got {v}")
         if self.budget < 0:
-            raise ValueError(f"budget must be >= 0, got {self.budget}")
+            raise InvalidInputError(f"budget must be >= 0, got {self.budget}")
         if self.modalities is not None:
             object.__setattr__(self, "modalities", tuple(str(m) for m in self.modalities))
             if not self.modalities:
-                raise ValueError("modalities must name at least one modality (or be None)")
+                raise InvalidInputError("modalities must name at least one modality (or be None)")
         if self.patience is not None and self.patience < 1:
-            raise ValueError(f"patience must be None or >= 1, got {self.patience}")
+            raise InvalidInputError(f"patience must be None or >= 1, got {self.patience}")
 
     @classmethod
     def paper(cls, **changes: Any) -> LearnerConfig:
@@ -307,7 +312,7 @@ class LearnerConfig:
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(data) - known)
         if unknown:
-            raise ValueError(
+            raise InvalidInputError(
                 f"unknown learner setting(s) {unknown}: written by another version of aptkt"
             )
         return cls(gp=gp, **data)

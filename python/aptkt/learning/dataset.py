@@ -17,6 +17,7 @@ import numpy as np
 
 from aptkt.actions import ExploratoryAction
 from aptkt.data import DatasetError, DatasetReader, store_features
+from aptkt.errors import InvalidStateError
 from aptkt.learning.extract import ExtractionSettings, observe_recording
 from aptkt.learning.observations import Observations
 from aptkt.progress import Progress
@@ -188,7 +189,7 @@ def _extract_in_chunks(
     for name in by_action:
         mine = [p for (_, n, _, _), p in zip(tasks, parts) if n == name and p is not None]
         if len(mine) != sum(1 for t in tasks if t[1] == name):
-            raise RuntimeError(f"features of {name}: a parallel task returned no result")
+            raise InvalidStateError(f"features of {name}: a parallel task returned no result")
         values[name] = {m: np.concatenate([p[m] for p in mine]) for m in mine[0]}
     return values
 

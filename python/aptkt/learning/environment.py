@@ -9,7 +9,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from aptkt.errors import AptktError
+from aptkt.errors import AptktError, UnknownNameError
 from aptkt.learning.extract import observe_recording
 from aptkt.learning.observations import ObservationTable
 
@@ -57,7 +57,9 @@ class PoolEnvironment:
 
     def observe(self, action: str, obj: str) -> Mapping[str, np.ndarray]:
         if (action, obj) not in self._queues:
-            raise KeyError(f"the pool has no observations of action {action!r} on object {obj!r}")
+            raise UnknownNameError(
+                f"the pool has no observations of action {action!r} on object {obj!r}"
+            )
         queue = self._queues[(action, obj)]
         if not queue:
             raise PoolExhaustedError(
@@ -95,7 +97,7 @@ class RecordingEnvironment:
 
     def observe(self, action: str, obj: str) -> Mapping[str, np.ndarray]:
         if action not in self.actions:
-            raise KeyError(f"unknown action {action!r}; known: {sorted(self.actions)}")
+            raise UnknownNameError(f"unknown action {action!r}; known: {sorted(self.actions)}")
         trial = self._next.get((action, obj), self._first)
         self._next[(action, obj)] = trial + 1
         recording = self._explore(obj, self.actions[action], trial)

@@ -6,6 +6,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
+
 __all__ = ["accuracy", "fused_accuracy"]
 
 
@@ -13,7 +15,7 @@ def accuracy(posteriors: np.ndarray, classes: Sequence[str], truth: Sequence[str
     """Fraction of rows whose most probable class is the true one."""
     p = np.asarray(posteriors)
     if p.shape[0] == 0:
-        raise ValueError("no test observations")
+        raise InvalidInputError("no test observations")
     predicted = np.asarray(classes)[np.argmax(p, axis=1)]
     return float(np.mean(predicted == np.asarray(truth)))
 
@@ -31,7 +33,7 @@ def fused_accuracy(
     """
     actions = list(posteriors)
     if not actions:
-        raise ValueError("no actions to fuse")
+        raise InvalidInputError("no actions to fuse")
     classes = list(classes)
     correct = total = 0
     for obj in classes:
@@ -45,5 +47,5 @@ def fused_accuracy(
         correct += int(np.sum(np.argmax(log_post, axis=1) == classes.index(obj)))
         total += k
     if total == 0:
-        raise ValueError("no object has test observations for every action")
+        raise InvalidInputError("no object has test observations for every action")
     return correct / total

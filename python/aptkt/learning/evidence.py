@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from aptkt.errors import IndexOutOfRangeError, InvalidInputError
 from aptkt.gp import LaplaceGPC
 
 __all__ = [
@@ -30,7 +31,7 @@ def _row(model: LaplaceGPC, k: int) -> tuple[int, object]:
     """Classifier ``k``'s row of ``theta_`` and the class whose labels are its +1."""
     single = model.theta_.shape[0] == 1
     if not 0 <= k < model.theta_.shape[0]:
-        raise IndexError(f"classifier {k} of {model.theta_.shape[0]}")
+        raise IndexOutOfRangeError(f"classifier {k} of {model.theta_.shape[0]}")
     return (0, model.classes_[1]) if single else (k, model.classes_[k])
 
 
@@ -41,7 +42,7 @@ def _sources(model: LaplaceGPC, label: object) -> list:
 def _one_source(model: LaplaceGPC, label: object) -> None:
     n = len(_sources(model, label))
     if n != 1:
-        raise ValueError(
+        raise InvalidInputError(
             f"classifier of class {label!r} has {n} source tasks; the coupling evidence needs "
             "exactly one"
         )

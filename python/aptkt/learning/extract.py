@@ -23,6 +23,7 @@ import numpy as np
 
 from aptkt import features
 from aptkt.actions import ExploratoryAction
+from aptkt.errors import InvalidInputError
 from aptkt.learning.observations import Observations
 from aptkt.skin.protocol import PACKET_RATE_HZ
 from aptkt.skin.samples import Recording
@@ -38,7 +39,7 @@ class ExtractionSettings:
 
     def __init__(self, rate_hz: float = PACKET_RATE_HZ, thermal_bin_s: float = 0.1) -> None:
         if rate_hz <= 0 or thermal_bin_s <= 0:
-            raise ValueError("rates and bin widths must be > 0")
+            raise InvalidInputError("rates and bin widths must be > 0")
         self.rate_hz = float(rate_hz)
         self.thermal_bin_s = float(thermal_bin_s)
 
@@ -67,7 +68,7 @@ def _acc_per_cell(rec: Recording) -> np.ndarray:
     per_cell = [rec.samples.acc[rec.samples.cell_id == c] for c in rec.cells]
     n = min(len(a) for a in per_cell)
     if n < 3:
-        raise ValueError(f"a texture descriptor needs at least 3 samples per cell, got {n}")
+        raise InvalidInputError(f"a texture descriptor needs at least 3 samples per cell, got {n}")
     return np.ascontiguousarray(np.stack([a[:n].T for a in per_cell]))
 
 
@@ -77,9 +78,9 @@ def observe_recording(
     """The raw feature observation (modality -> vector) of one recording of ``action``."""
     settings = settings or ExtractionSettings()
     if len(rec.samples) == 0:
-        raise ValueError(f"the recording of {action.name!r} holds no samples")
+        raise InvalidInputError(f"the recording of {action.name!r} holds no samples")
     if rec.silent_cells:
-        raise ValueError(
+        raise InvalidInputError(
             f"the recording of {action.name!r} has silent cells {list(rec.silent_cells)}: "
             "its features would silently differ from complete recordings"
         )
@@ -92,7 +93,7 @@ def observe_recording(
         elif modality == "thermal":
             out["thermal"] = _thermal(rec, action, settings)
         else:
-            raise ValueError(f"no extractor for modality {modality!r}")
+            raise InvalidInputError(f"no extractor for modality {modality!r}")
     return out
 
 
@@ -109,6 +110,6 @@ def observations_from_recordings(
         objects.append(obj)
         trials.append(trial)
     if not rows:
-        raise ValueError(f"no recordings of action {action.name!r}")
+        raise InvalidInputError(f"no recordings of action {action.name!r}")
     mods = {m: np.stack([r[m] for r in rows]) for m in rows[0]}
     return Observations(action.name, mods, np.asarray(objects), np.asarray(trials))

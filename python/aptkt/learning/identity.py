@@ -33,6 +33,8 @@ import numpy as np
 from scipy.special import logsumexp
 from sklearn.covariance import ledoit_wolf_shrinkage
 
+from aptkt.errors import InvalidInputError, UnknownNameError
+
 __all__ = ["ObjectIdentity", "NEW_OBJECT_PRIOR"]
 
 #: Prior probability that an object presented to the robot is not one of the library's: as
@@ -49,14 +51,14 @@ class ObjectIdentity:
         X = np.asarray(X, dtype=np.float64)
         labels = np.asarray(objects).astype(str)
         if X.ndim != 2 or labels.shape != (X.shape[0],):
-            raise ValueError(f"X must be (n, d) with one object per row, got {X.shape}")
+            raise InvalidInputError(f"X must be (n, d) with one object per row, got {X.shape}")
         names, index, counts = np.unique(labels, return_inverse=True, return_counts=True)
         if names.size < 2:
-            raise ValueError("an identity model needs at least two objects")
+            raise InvalidInputError("an identity model needs at least two objects")
         n, d = X.shape
         dof = n - names.size
         if dof < 1:
-            raise ValueError("an identity model needs at least one repeated observation")
+            raise InvalidInputError("an identity model needs at least one repeated observation")
         means = np.zeros((names.size, d))
         np.add.at(means, index, X)
         means /= counts[:, None]
@@ -112,7 +114,7 @@ class ObjectIdentity:
         for the rows of ``V`` (observations of one object)."""
         V = np.atleast_2d(np.asarray(V, dtype=np.float64))
         if V.ndim != 2 or V.shape[1] != self.n_features or V.shape[0] == 0:
-            raise ValueError(
+            raise InvalidInputError(
                 f"expected observations with {self.n_features} features, got shape {V.shape}"
             )
         n, d = V.shape
@@ -140,7 +142,7 @@ class ObjectIdentity:
     def _log_joint(self, V: np.ndarray, new_object_prior: float) -> np.ndarray:
         """Unnormalised log posterior: [new object, old object 0, 1, ...]."""
         if not 0.0 < new_object_prior < 1.0:
-            raise ValueError(f"new_object_prior must lie in (0, 1), got {new_object_prior}")
+            raise InvalidInputError(f"new_object_prior must lie in (0, 1), got {new_object_prior}")
         old, new = self.log_likelihoods(V)
         return np.concatenate(
             [[np.log(new_object_prior) + new], np.log((1 - new_object_prior) / old.size) + old]
@@ -162,7 +164,7 @@ class ObjectIdentity:
         try:
             i = self.objects_.index(str(old_object))
         except ValueError:
-            raise KeyError(f"{old_object!r} is not one of the library's objects") from None
+            raise UnknownNameError(f"{old_object!r} is not one of the library's objects") from None
         return _log_odds(self._log_joint(V, new_object_prior), 1 + i)
 
     def impostor_log_odds(self, n: int) -> float:
@@ -174,7 +176,7 @@ class ObjectIdentity:
         objects are far apart. -inf where no object has ``n`` observations or leaving one
         out leaves fewer than two."""
         if n < 1:
-            raise ValueError(f"n must be >= 1, got {n}")
+            raise InvalidInputError(f"n must be >= 1, got {n}")
         if n not in self._impostors:
             best = -np.inf
             for o in self.objects_:

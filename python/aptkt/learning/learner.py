@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError, InvalidStateError
 from aptkt.gp import LaplaceGPC, TransferSource
 from aptkt.learning.active import entropy, select_next
 from aptkt.learning.config import LearnerConfig, lone_observation_signal_variance
@@ -116,7 +117,7 @@ class ActionLearner:
         wanted = self.config.modalities
         names = [m for m in groups if wanted is None or m in wanted]
         if not names:
-            raise ValueError(
+            raise InvalidInputError(
                 f"action {self.action!r} has none of the modalities {list(wanted or [])}; "
                 f"it has {list(groups)}"
             )
@@ -217,7 +218,7 @@ class ActionLearner:
         obs = self.observations
         missing = [o for o in self.new_objects if self.count(o) == 0]
         if missing or obs is None:
-            raise RuntimeError(f"action {self.action!r}: no observation yet of {missing}")
+            raise InvalidStateError(f"action {self.action!r}: no observation yet of {missing}")
         self._accuracy = self._hyperparameters = None
         cfg = self.config
         pipeline = self._pipeline()
@@ -336,19 +337,19 @@ class ActionLearner:
     def uncertainty(self, obj: str) -> float:
         """UNC(α, c_j): mean entropy of the posterior over this pair's observations."""
         if self.observations is None:
-            raise RuntimeError(f"action {self.action!r}: nothing observed yet")
+            raise InvalidStateError(f"action {self.action!r}: nothing observed yet")
         mask = self.observations.objects == obj
         return float(self.train_entropy[mask].mean())
 
     @property
     def test_objects(self) -> np.ndarray:
         if self._test is None:
-            raise RuntimeError("no test observations were given")
+            raise InvalidStateError("no test observations were given")
         return self._test.objects
 
     def test_accuracy(self) -> float:
         if self._test is None or self.test_posteriors is None or self.model is None:
-            raise RuntimeError("no test observations were given")
+            raise InvalidStateError("no test observations were given")
         if self._accuracy is None:
             self._accuracy = accuracy(
                 self.test_posteriors,
@@ -465,7 +466,7 @@ class APTKT:
     ) -> None:
         self.config = config or LearnerConfig()
         if self.config.uses_prior and prior is None:
-            raise ValueError(
+            raise InvalidInputError(
                 "transfer and auxiliary features need prior knowledge; pass prior=... "
                 "or use LearnerConfig(transfer='none') for the baseline"
             )
@@ -484,14 +485,16 @@ class APTKT:
         actions = [str(a) for a in actions]
         new_objects = [str(o) for o in new_objects]
         if len(new_objects) < 2:
-            raise ValueError("learning needs at least two new objects")
+            raise InvalidInputError("learning needs at least two new objects")
         if self.prior is not None and cfg.uses_prior:
             missing = [a for a in actions if a not in self.prior]
             if missing:
-                raise ValueError(f"the prior knowledge has no experience of action(s) {missing}")
+                raise InvalidInputError(
+                    f"the prior knowledge has no experience of action(s) {missing}"
+                )
             overlap = set(new_objects) & set(self.prior.objects)
             if overlap:
-                raise ValueError(f"objects {sorted(overlap)} are both prior and new")
+                raise InvalidInputError(f"objects {sorted(overlap)} are both prior and new")
         rng = np.random.default_rng(cfg.seed)
         self.learners = {
             a: ActionLearner(

@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
+
 __all__ = ["Observations", "ObservationTable", "validate_table"]
 
 
@@ -31,22 +33,22 @@ class Observations:
         self.objects = np.asarray(self.objects).astype(str)
         n = self.objects.shape[0]
         if self.objects.ndim != 1:
-            raise ValueError(f"action {self.action!r}: objects must be 1-D")
+            raise InvalidInputError(f"action {self.action!r}: objects must be 1-D")
         if not self.modalities:
-            raise ValueError(f"action {self.action!r}: at least one modality is needed")
+            raise InvalidInputError(f"action {self.action!r}: at least one modality is needed")
         mods = {}
         for name, values in self.modalities.items():
             arr = np.asarray(values, dtype=np.float64)
             if arr.ndim == 1:
                 arr = arr[:, None]
             if arr.ndim != 2 or arr.shape[0] != n:
-                raise ValueError(
+                raise InvalidInputError(
                     f"action {self.action!r}, modality {name!r}: expected shape ({n}, d), got {arr.shape}"
                 )
             bad = np.argwhere(~np.isfinite(arr))
             if bad.size:
                 r, c = bad[0]
-                raise ValueError(
+                raise InvalidInputError(
                     f"action {self.action!r}, modality {name!r}: non-finite value {arr[r, c]} "
                     f"in observation {r} (object {str(self.objects[r])!r}), column {c}"
                 )
@@ -99,11 +101,11 @@ class Observations:
     @classmethod
     def concat(cls, parts: Sequence[Observations]) -> Observations:
         if not parts:
-            raise ValueError("nothing to concatenate")
+            raise InvalidInputError("nothing to concatenate")
         names = parts[0].modality_names
         for p in parts[1:]:
             if p.action != parts[0].action or p.modality_names != names:
-                raise ValueError(
+                raise InvalidInputError(
                     "can only concatenate observations of the same action and modalities"
                 )
         return cls(
@@ -152,4 +154,6 @@ ObservationTable = Mapping[str, Observations]
 def validate_table(table: ObservationTable) -> None:
     for name, obs in table.items():
         if obs.action != name:
-            raise ValueError(f"table entry {name!r} holds observations of action {obs.action!r}")
+            raise InvalidInputError(
+                f"table entry {name!r} holds observations of action {obs.action!r}"
+            )

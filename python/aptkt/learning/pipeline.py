@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from sklearn.covariance import ledoit_wolf_shrinkage
 
+from aptkt.errors import InvalidInputError, InvalidStateError
 from aptkt.learning.observations import Observations
 
 __all__ = [
@@ -83,7 +84,7 @@ class ModalityTransform:
         covariance (:func:`noise_whitener`)."""
         X = self._prepare(X)
         if X.shape[0] < 1:
-            raise ValueError("cannot fit a feature transform on zero observations")
+            raise InvalidInputError("cannot fit a feature transform on zero observations")
         self.mean_ = X.mean(axis=0)
         scale = X.std(axis=0)
         if objects is not None:
@@ -106,7 +107,9 @@ class ModalityTransform:
             self.pca_scale_ = float(first_sd) if first_sd > 1e-12 else 1.0
         if whiten:
             if objects is None:
-                raise ValueError("whitening needs the objects of the rows (the noise's classes)")
+                raise InvalidInputError(
+                    "whitening needs the objects of the rows (the noise's classes)"
+                )
             whitener = noise_whitener(self.transform_prepared(X), objects)
             if whitener is not None:
                 pca = (
@@ -134,7 +137,7 @@ class ModalityTransform:
     @property
     def n_features_out(self) -> int:
         if not self.fitted:
-            raise RuntimeError("transform not fitted")
+            raise InvalidStateError("transform not fitted")
         if self.components_ is not None:
             return int(self.components_.shape[0])
         assert self.mean_ is not None  # fitted
@@ -142,7 +145,7 @@ class ModalityTransform:
 
     def transform(self, X: np.ndarray) -> np.ndarray:
         if not self.fitted:
-            raise RuntimeError("transform not fitted")
+            raise InvalidStateError("transform not fitted")
         return self.transform_prepared(self._prepare(X))
 
     def state(self) -> dict[str, np.ndarray]:
@@ -187,7 +190,9 @@ def _noise_scale(X: np.ndarray, objects: np.ndarray) -> np.ndarray:
     :data:`MIN_NOISE_DOF` degrees of freedom, or fewer than there are objects."""
     labels = np.asarray(objects)
     if labels.shape != (X.shape[0],):
-        raise ValueError(f"objects must hold one label per row ({X.shape[0]}), got {labels.shape}")
+        raise InvalidInputError(
+            f"objects must hold one label per row ({X.shape[0]}), got {labels.shape}"
+        )
     _, index = np.unique(labels, return_inverse=True)
     n_objects = index.max() + 1
     dof = X.shape[0] - n_objects
@@ -203,7 +208,9 @@ def within_object_residuals(X: np.ndarray, objects: np.ndarray) -> tuple[np.ndar
     """Each row minus its object's mean, and the degrees of freedom (rows − objects)."""
     labels = np.asarray(objects)
     if labels.shape != (X.shape[0],):
-        raise ValueError(f"objects must hold one label per row ({X.shape[0]}), got {labels.shape}")
+        raise InvalidInputError(
+            f"objects must hold one label per row ({X.shape[0]}), got {labels.shape}"
+        )
     _, index = np.unique(labels, return_inverse=True)
     means = np.zeros((index.max() + 1, X.shape[1]))
     np.add.at(means, index, X)
@@ -257,7 +264,7 @@ def joint_noise_whitener(
     columns still belong to their modalities, and a multi-modal kernel (Eq. 1) still weighs the
     modalities. Columns without within-object variation pass through unchanged."""
     if not 0.0 <= shrinkage <= 1.0:
-        raise ValueError(f"shrinkage must lie in [0, 1], got {shrinkage}")
+        raise InvalidInputError(f"shrinkage must lie in [0, 1], got {shrinkage}")
     R, dof = within_object_residuals(np.asarray(Z, dtype=np.float64), objects)
     n_objects = R.shape[0] - dof
     if dof < max(MIN_NOISE_DOF, n_objects) or R.shape[1] < 2:
@@ -305,7 +312,7 @@ class FeaturePipeline:
         or the noise between repeated observations of the same object, whitened per modality
         ("whiten") or then across the modalities too ("whiten-joint")."""
         if scale not in FEATURE_SCALES:
-            raise ValueError(f"scale must be one of {FEATURE_SCALES}, got {scale!r}")
+            raise InvalidInputError(f"scale must be one of {FEATURE_SCALES}, got {scale!r}")
         whiten = scale in ("whiten", "whiten-joint")
         objects = obs.objects if whiten else None
         fitted = {}
@@ -324,9 +331,9 @@ class FeaturePipeline:
     def transform(self, obs: Observations) -> tuple[np.ndarray, dict[str, list[int]]]:
         """Feature matrix and the column group of each modality (for the multi-modal kernel)."""
         if not self.modality_names_:
-            raise RuntimeError("FeaturePipeline is not fitted")
+            raise InvalidStateError("FeaturePipeline is not fitted")
         if obs.modality_names != self.modality_names_:
-            raise ValueError(
+            raise InvalidInputError(
                 f"action {obs.action!r}: observations have modalities {obs.modality_names}, "
                 f"the pipeline was fitted on {self.modality_names_}"
             )

@@ -27,6 +27,7 @@ from aptkt.learning.kernel import LibraryEvidence, library_evidence
 
 if TYPE_CHECKING:
     from aptkt.learning.recognition import Calibration, Recognition
+from aptkt.errors import InvalidInputError, UnknownNameError
 from aptkt.learning.observations import Observations, ObservationTable
 from aptkt.learning.pipeline import FEATURE_SCALES, FeaturePipeline, ModalityTransform
 from aptkt.learning.prior_file import FORMAT as _FORMAT
@@ -160,7 +161,7 @@ class ActionPrior:
         task = TransferSource(X_old, np.where(mine, 1.0, -1.0), transfer_lambda=transfer_lambda)
         positive = np.asarray(positive, dtype=bool)
         if positive.shape != (X_new.shape[0],) or positive.all() or not positive.any():
-            raise ValueError("positive must mark some, not all, of the new observations")
+            raise InvalidInputError("positive must mark some, not all, of the new observations")
         labels = np.where(positive, 1, 0)
 
         def classifier() -> LaplaceGPC:
@@ -233,7 +234,7 @@ class PriorKnowledge:
         self, actions: Mapping[str, ActionPrior], metadata: Mapping[str, Any] | None = None
     ) -> None:
         if not actions:
-            raise ValueError("prior knowledge needs at least one action")
+            raise InvalidInputError("prior knowledge needs at least one action")
         self.actions: dict[str, ActionPrior] = dict(actions)
         self.metadata: dict[str, Any] = dict(metadata or {})
         self._calibrations: dict[float, Calibration] = {}
@@ -242,7 +243,7 @@ class PriorKnowledge:
         try:
             return self.actions[action]
         except KeyError:
-            raise KeyError(
+            raise UnknownNameError(
                 f"no prior knowledge for action {action!r}; known: {sorted(self.actions)}"
             ) from None
 
@@ -271,7 +272,9 @@ class PriorKnowledge:
             if objects is not None:
                 obs = obs.of_objects(objects)
             if len(obs.object_names) < 2:
-                raise ValueError(f"action {name!r}: prior knowledge needs at least two old objects")
+                raise InvalidInputError(
+                    f"action {name!r}: prior knowledge needs at least two old objects"
+                )
             pipeline = FeaturePipeline(transforms).fit(obs, scale=gp.prior_feature_scale)
             X, groups = pipeline.transform(obs)
             # The old objects' own model: one kernel for their classifiers, learned on them.

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy.special import logsumexp
 
+from aptkt.errors import InvalidInputError
 from aptkt.learning.identity import NEW_OBJECT_PRIOR, ObjectIdentity
 from aptkt.learning.observations import Observations
 
@@ -104,7 +105,7 @@ def _likelihoods(identity: ObjectIdentity, X: np.ndarray) -> tuple[np.ndarray, n
 def calibrate(prior: PriorKnowledge, false_alarm_rate: float = FALSE_ALARM_RATE) -> Calibration:
     """The library's novelty threshold for ``false_alarm_rate`` (see :class:`Calibration`)."""
     if not 0.0 < false_alarm_rate < 1.0:
-        raise ValueError(f"false_alarm_rate must lie in (0, 1), got {false_alarm_rate}")
+        raise InvalidInputError(f"false_alarm_rate must lie in (0, 1), got {false_alarm_rate}")
     table = {a: ap.observations for a, ap in prior.actions.items()}
     keys, index = _touches(table)
     objects = prior.objects
@@ -251,14 +252,14 @@ def recognise(
     with the same object and trial are one touch) with the library ``prior``."""
     unknown = [a for a in table if a not in prior]
     if unknown:
-        raise ValueError(
+        raise InvalidInputError(
             f"the library has no experience of action(s) {unknown}; it has {list(prior.actions)}"
         )
     if not table or all(len(obs) == 0 for obs in table.values()):
-        raise ValueError("nothing to recognise: no observations")
+        raise InvalidInputError("nothing to recognise: no observations")
     for action, obs in table.items():
         if obs.modality_names != prior[action].pipeline.modality_names_:
-            raise ValueError(
+            raise InvalidInputError(
                 f"action {action!r}: observations have modalities {list(obs.modality_names)}, "
                 f"the library's {list(prior[action].pipeline.modality_names_)}"
             )
@@ -270,7 +271,9 @@ def recognise(
         ap = prior[action]
         identity = ap.identity
         if identity is None:
-            raise ValueError(f"action {action!r}: no object of the library was observed twice")
+            raise InvalidInputError(
+                f"action {action!r}: no object of the library was observed twice"
+            )
         X = ap.pipeline.transform(obs)[0]
         lo, ln = _likelihoods(identity, X)
         full = np.full((lo.shape[0], len(objects)), -np.inf)

@@ -39,6 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
+
 __all__ = [
     "TransferDecision",
     "mean_posteriors",
@@ -111,7 +113,7 @@ def mean_posteriors(old_posteriors: np.ndarray) -> np.ndarray:
     """``p̄_i``: the mean over a new object's observations (rows) of the old probabilities."""
     p = np.asarray(old_posteriors, dtype=np.float64)
     if p.ndim != 2 or p.shape[0] == 0:
-        raise ValueError(
+        raise InvalidInputError(
             f"expected a (n_observations >= 1, n_old_objects) array, got shape {p.shape}"
         )
     return p.mean(axis=0)
@@ -140,16 +142,18 @@ def decide_transfer(
     ε_neg is then kept only if it exceeds ``evidence_margin``.
     """
     if mode not in TRANSFER_MODES:
-        raise ValueError(f"transfer mode must be one of {TRANSFER_MODES}, got {mode!r}")
+        raise InvalidInputError(f"transfer mode must be one of {TRANSFER_MODES}, got {mode!r}")
     if choice not in SOURCE_CHOICES:
-        raise ValueError(f"choice must be one of {SOURCE_CHOICES}, got {choice!r}")
+        raise InvalidInputError(f"choice must be one of {SOURCE_CHOICES}, got {choice!r}")
     if not 0.0 <= eps_neg <= 1.0:
-        raise ValueError(f"eps_neg must lie in [0, 1], got {eps_neg}")
+        raise InvalidInputError(f"eps_neg must lie in [0, 1], got {eps_neg}")
     if forced_lambda is not None and not 0.0 <= forced_lambda <= 1.0:
-        raise ValueError(f"forced_lambda must lie in [0, 1], got {forced_lambda}")
+        raise InvalidInputError(f"forced_lambda must lie in [0, 1], got {forced_lambda}")
     p_bar = mean_posteriors(old_posteriors)
     if p_bar.shape[0] != len(old_objects):
-        raise ValueError(f"{len(old_objects)} old objects but posteriors over {p_bar.shape[0]}")
+        raise InvalidInputError(
+            f"{len(old_objects)} old objects but posteriors over {p_bar.shape[0]}"
+        )
     picked: list[int] = []
     if mode == "paper":
         best = int(np.argmax(p_bar) if choice == "most" else np.argmin(p_bar))

@@ -19,6 +19,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from aptkt.errors import InvalidInputError
 from aptkt.learning.config import LearnerConfig
 
 __all__ = [
@@ -132,7 +133,7 @@ def describe_runs(decisions: Sequence[Mapping[str, Any]], config: LearnerConfig)
     object once, the most frequent first, with mean p, λ and log Bayes factor."""
     verdicts = [verdict(d, config) for d in decisions]
     if not verdicts:
-        raise ValueError("no decisions to describe")
+        raise InvalidInputError("no decisions to describe")
     groups: dict[tuple[str, str], list[Verdict]] = {}
     for v in verdicts:
         groups.setdefault((v.outcome, v.candidate), []).append(v)

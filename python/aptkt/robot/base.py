@@ -11,6 +11,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
+from aptkt.errors import InvalidInputError
+
 __all__ = ["Robot", "SafetyLimits", "Placement", "ForceReading", "TimedForceReading"]
 
 #: A function returning the current total normal force on the skin in newtons.
@@ -50,7 +52,7 @@ class SafetyLimits:
         for name in self.__dataclass_fields__:
             value = getattr(self, name)
             if not (value > 0):
-                raise ValueError(f"SafetyLimits.{name} must be > 0, got {value!r}")
+                raise InvalidInputError(f"SafetyLimits.{name} must be > 0, got {value!r}")
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from threadpoolctl import threadpool_limits
 
 from aptkt.actions import PAPER_ACTIONS, ExploratoryAction
 from aptkt.data.codec import PackedRecording, pack_recording
-from aptkt.errors import DatasetError, WorkerDiedError
+from aptkt.errors import DatasetError, InvalidInputError, WorkerDiedError
 from aptkt.runtime.grid import TrialGrid
 from aptkt.runtime.trial_file import TrialFile
 from aptkt.runtime.worker_start import start_worker
@@ -48,12 +48,12 @@ class GenerationPlan(TrialGrid):
 
     def __post_init__(self) -> None:
         if not self.objects or not self.actions:
-            raise ValueError("a plan needs at least one object and one action")
+            raise InvalidInputError("a plan needs at least one object and one action")
         if self.repetitions < 1 or self.first_trial < 0 or self.seed < 0:
-            raise ValueError("repetitions must be >= 1, first_trial and seed >= 0")
+            raise InvalidInputError("repetitions must be >= 1, first_trial and seed >= 0")
         names = [a.name for a in self.actions]
         if len(set(names)) != len(names):
-            raise ValueError(f"action names must be unique, got {names}")
+            raise InvalidInputError(f"action names must be unique, got {names}")
 
     def describe(self) -> dict[str, Any]:
         return {

@@ -22,6 +22,7 @@ from aptkt.actions.executor import ExplorationSettings, calibration_metadata, ex
 from aptkt.actions.limits import check_action_limits
 from aptkt.errors import (
     ConfigError,
+    InvalidStateError,
     SafetyLimitError,
     SilentCellError,
     TrialFault,
@@ -190,7 +191,7 @@ class RobotSession:
 
     def explore(self, obj: str, action: ExploratoryAction, trial: int) -> Recording:
         if self.robot is None:
-            raise RuntimeError("RobotSession.explore outside 'with session:'")
+            raise InvalidStateError("RobotSession.explore outside 'with session:'")
         try:
             return _require_complete(
                 explore(

@@ -26,6 +26,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
 from aptkt.sim.objects import ObjectSpec
 from aptkt.sim.seeding import seed_sequence, spawn_generators
 
@@ -46,9 +47,9 @@ class Wander:
         for name in ("session", "run"):
             value = getattr(self, name)
             if not math.isfinite(value) or value < 0:
-                raise ValueError(f"Wander.{name} must be finite and >= 0, got {value!r}")
+                raise InvalidInputError(f"Wander.{name} must be finite and >= 0, got {value!r}")
         if not math.isfinite(self.trials) or self.trials <= 0:
-            raise ValueError(f"Wander.trials must be finite and > 0, got {self.trials!r}")
+            raise InvalidInputError(f"Wander.trials must be finite and > 0, got {self.trials!r}")
 
     def path(self, rng: np.random.Generator, length: int, width: int = 1) -> np.ndarray:
         """The run's wander at trials 0 .. length-1, shape (length, width). Trial t's value uses
@@ -105,13 +106,15 @@ class RecordingDrift:
 
     def __post_init__(self) -> None:
         if not math.isfinite(self.storage) or self.storage < 0:
-            raise ValueError(
+            raise InvalidInputError(
                 f"RecordingDrift.storage must be finite and >= 0, got {self.storage!r}"
             )
         for name in ("trial_period", "object_heat_loss"):
             value = getattr(self, name)
             if not math.isfinite(value) or value <= 0:
-                raise ValueError(f"RecordingDrift.{name} must be finite and > 0, got {value!r}")
+                raise InvalidInputError(
+                    f"RecordingDrift.{name} must be finite and > 0, got {value!r}"
+                )
 
     @classmethod
     def off(cls) -> RecordingDrift:
@@ -137,7 +140,7 @@ class RecordingDrift:
     ) -> SlowConditions:
         """The slow conditions of trial ``trial`` of the run (session, object, action)."""
         if trial < 0:
-            raise ValueError(f"trial must be >= 0, got {trial}")
+            raise InvalidInputError(f"trial must be >= 0, got {trial}")
         quantities = (
             "room",
             "force_offset",

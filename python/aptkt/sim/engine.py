@@ -24,6 +24,7 @@ from typing import Protocol
 import numpy as np
 
 from aptkt._core import ForceControl, ForcePhase, LeanQueue
+from aptkt.errors import InvalidStateError
 from aptkt.sim.kinematics import Trajectory
 from aptkt.sim.physics import ContactPhysics, ForceTrace, Frames, MechChunk
 
@@ -187,7 +188,7 @@ class SimEngine:
         per cell by arrival time — starting from the skin's ``latest_force`` (n_cells, 3, N).
         """
         if self._lean is not None:
-            raise RuntimeError("lean force control is already running")
+            raise InvalidStateError("lean force control is already running")
         self._lean = _Lean(
             LeanQueue(
                 np.ascontiguousarray(calibration_gain, dtype=np.float64),
@@ -228,7 +229,7 @@ class SimEngine:
         "timeout", "too_deep", "wrench", "triggered") and the force error of the last tick."""
         lean = self._lean
         if lean is None:
-            raise RuntimeError("lean_ticks needs a running lean force loop")
+            raise InvalidStateError("lean_ticks needs a running lean force loop")
         st = self.state
         while True:
             # Force phases start from the segment in force; a guard follows the plan from it.
@@ -337,7 +338,7 @@ class FastDriver:
     ) -> tuple[int, str]:
         if self.engine._lean is not None:
             if stop is not None:
-                raise RuntimeError("a guarded move inside a force-control loop")
+                raise InvalidStateError("a guarded move inside a force-control loop")
             why = self.engine.lean_advance(t_end_ns, wrench_limit)
             return self.engine.now_ns, why
         return self.engine.run(t_end_ns, tick_ns, stop=stop, wrench_limit=wrench_limit)
@@ -439,7 +440,7 @@ class RealTimeDriver:
         next_tick = self.now_ns() + tick_ns
         while True:
             if self._error is not None:
-                raise RuntimeError("simulation clock thread failed") from self._error
+                raise InvalidStateError("simulation clock thread failed") from self._error
             now = self.now_ns()
             if now >= min(next_tick, t_end_ns):
                 if wrench_limit is not None and self.engine.wrench() > wrench_limit:

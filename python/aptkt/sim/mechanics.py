@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
 from aptkt.sim.objects import Layer, Relaxation
 from aptkt.sim.recurrence import linear_recurrence
 
@@ -38,7 +39,7 @@ class IndentationLaw:
 
     def __init__(self, layers: Sequence[Layer], skin_stiffness: float, modulus_scale: float = 1.0):
         if skin_stiffness <= 0:
-            raise ValueError("skin stiffness must be > 0")
+            raise InvalidInputError("skin stiffness must be > 0")
         self.layers = tuple(layers)
         self.skin_stiffness = float(skin_stiffness)
         sigma = np.concatenate([[0.0], np.logspace(-4, 7, 4000)])

@@ -22,7 +22,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
-from aptkt.errors import ConfigError
+from aptkt.errors import ConfigError, UnknownNameError
 
 __all__ = [
     "Layer",
@@ -181,7 +181,9 @@ class ObjectLibrary(Mapping[str, ObjectSpec]):
         try:
             return self._objects[name]
         except KeyError:
-            raise KeyError(f"unknown object {name!r}; known: {', '.join(self._objects)}") from None
+            raise UnknownNameError(
+                f"unknown object {name!r}; known: {', '.join(self._objects)}"
+            ) from None
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._objects)
@@ -193,7 +195,7 @@ class ObjectLibrary(Mapping[str, ObjectSpec]):
         for obj in self._objects.values():
             if obj.index == index:
                 return obj
-        raise KeyError(f"no object with index {index}")
+        raise UnknownNameError(f"no object with index {index}")
 
     def with_role(self, role: str) -> list[str]:
         return [name for name, obj in self._objects.items() if obj.role == role]

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
 from aptkt.sim.seeding import seed_sequence, spawn_generators
 from aptkt.skin.protocol import PACKET_RATE_HZ, RAW_RANGES
 
@@ -109,7 +110,7 @@ class PatchGeometry:
         object.__setattr__(self, "cell_ids", ids)
         ((_, broadcast),) = RAW_RANGES["cell_id"]
         if not ids or len(set(ids)) != len(ids) or not all(0 < c < broadcast for c in ids):
-            raise ValueError(f"cell ids must be distinct, in 1..{broadcast - 1}, got {ids}")
+            raise InvalidInputError(f"cell ids must be distinct, in 1..{broadcast - 1}, got {ids}")
         if not self.centres:
             p = self.constants.pitch
             ring = [
@@ -118,10 +119,10 @@ class PatchGeometry:
             ]
             nominal = [(0.0, 0.0), *ring]
             if len(ids) > len(nominal):
-                raise ValueError(f"give cell centres for a patch of {len(ids)} cells")
+                raise InvalidInputError(f"give cell centres for a patch of {len(ids)} cells")
             object.__setattr__(self, "centres", tuple(nominal[: len(ids)]))
         if len(self.centres) != len(ids):
-            raise ValueError(f"{len(ids)} cell ids but {len(self.centres)} centres")
+            raise InvalidInputError(f"{len(ids)} cell ids but {len(self.centres)} centres")
 
     @classmethod
     def from_patch(

@@ -22,6 +22,7 @@ import numpy as np
 
 from aptkt import _core
 from aptkt._core import MechChunk, PhysicsState
+from aptkt.errors import InvalidInputError
 from aptkt.sim.kinematics import Trajectory
 from aptkt.sim.mechanics import IndentationLaw, SurfaceShape
 from aptkt.sim.objects import ObjectSpec, Relaxation
@@ -215,7 +216,7 @@ class ContactPhysics:
             conditions.force_gain_drift, dtype=np.float64
         )  # > 1: reads high
         if self._gain_drift.shape != (n,):
-            raise ValueError(
+            raise InvalidInputError(
                 f"trial conditions are for {self._gain_drift.size} cells, the patch has {n}"
             )
         #: The sensors' zero-load readings in this trial: the patch's own, moved by the zero's

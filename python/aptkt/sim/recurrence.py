@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
+
 __all__ = ["linear_recurrence", "linear_recurrence_rows"]
 
 
@@ -23,7 +25,7 @@ def linear_recurrence(a: float, x: np.ndarray, y0: np.ndarray | float) -> np.nda
     if n == 0:
         return out
     if not (0.0 < a <= 1.0):
-        raise ValueError(f"decay factor must be in (0, 1], got {a}")
+        raise InvalidInputError(f"decay factor must be in (0, 1], got {a}")
     if a == 1.0:
         out[:] = y_prev + np.cumsum(x, axis=0)
         return out
@@ -60,7 +62,7 @@ def linear_recurrence_rows(a: np.ndarray, x: np.ndarray, y0: np.ndarray) -> np.n
             out[:, step] = y
         return out
     if np.any((a <= 0) | (a > 1)):
-        raise ValueError("decay factors must be in (0, 1]")
+        raise InvalidInputError("decay factors must be in (0, 1]")
     worst = float(np.min(a))
     block = length if worst == 1.0 else max(1, min(length, int(600.0 / -math.log(worst))))
     for start in range(0, length, block):

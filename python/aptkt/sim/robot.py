@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from aptkt._core import ForceControl, ForcePhase
-from aptkt.errors import RobotError, SafetyLimitError
+from aptkt.errors import InvalidInputError, RobotError, SafetyLimitError
 from aptkt.robot.base import ForceReading, Placement, SafetyLimits
 from aptkt.sim.engine import Driver, StopReason
 from aptkt.sim.kinematics import trapezoid
@@ -115,7 +115,7 @@ class SimRobot:
     # ------------------------------------------------------------------ Robot protocol
     def move_above(self, placement: Placement, clearance: float) -> None:
         if clearance <= 0:
-            raise ValueError("clearance must be > 0")
+            raise InvalidInputError("clearance must be > 0")
         self._placement = placement
         target = np.array([placement.x, placement.y, placement.surface_z + clearance])
         self._check_point(target, "move_above")
@@ -185,7 +185,7 @@ class SimRobot:
                 f"press depth {depth * 1e3:.2f} mm is outside (0, {self.limits.max_depth * 1e3:.2f}] mm"
             )
         if hold_time < 0 or not math.isfinite(hold_time):
-            raise ValueError("hold_time must be a finite number >= 0")
+            raise InvalidInputError("hold_time must be a finite number >= 0")
         p, _ = self._pose()
         target = np.array([p[0], p[1], self._contact_z - depth - self.depth_error])
         self._check_point(target, "press")
@@ -217,10 +217,12 @@ class SimRobot:
         if not (0 < speed <= lim.max_speed):
             raise SafetyLimitError(f"slide speed {speed} m/s is outside (0, {lim.max_speed}] m/s")
         if duration <= 0 or not math.isfinite(duration):
-            raise ValueError("slide duration must be a finite number > 0")
+            raise InvalidInputError("slide duration must be a finite number > 0")
         d = np.array([direction[0], direction[1], 0.0], dtype=np.float64)
         if not np.all(np.isfinite(d)) or np.linalg.norm(d) < 1e-9:
-            raise ValueError(f"slide direction must be a non-zero 2-vector, got {direction!r}")
+            raise InvalidInputError(
+                f"slide direction must be a non-zero 2-vector, got {direction!r}"
+            )
         d /= np.linalg.norm(d)
         p, _ = self._pose()
         t_acc = speed / lim.max_acceleration
@@ -350,14 +352,14 @@ class SimRobot:
 
     def lift(self, height: float) -> None:
         if height <= 0:
-            raise ValueError("lift height must be > 0")
+            raise InvalidInputError("lift height must be > 0")
         p, _ = self._pose()
         self._linear(p + np.array([0.0, 0.0, height]), self.limits.max_speed, check=False)
         self._contact_z = None
 
     def wait(self, seconds: float) -> None:
         if seconds < 0 or not math.isfinite(seconds):
-            raise ValueError("wait time must be a finite number >= 0")
+            raise InvalidInputError("wait time must be a finite number >= 0")
         self.stop()
         t_end = self.now_ns() + int(round(seconds * 1e9))
         _, why = self.driver.run(t_end, self.tick_ns, wrench_limit=self.limits.max_normal_force)

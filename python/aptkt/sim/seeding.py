@@ -21,6 +21,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError, InvalidTypeError
+
 __all__ = [
     "stable_words",
     "seed_sequence",
@@ -37,7 +39,7 @@ def stable_words(*parts: object) -> list[int]:
     h = hashlib.blake2b(digest_size=16, person=b"aptkt-sim")
     for part in parts:
         if isinstance(part, bool) or not isinstance(part, (str, int, float, bytes)):
-            raise TypeError(f"cannot key a seed on {type(part).__name__}")
+            raise InvalidTypeError(f"cannot key a seed on {type(part).__name__}")
         if isinstance(part, bytes):
             data, tag = part, b"b"
         elif isinstance(part, str):
@@ -53,7 +55,7 @@ def stable_words(*parts: object) -> list[int]:
 def seed_sequence(seed: int, *key: object) -> np.random.SeedSequence:
     """A SeedSequence for ``seed`` and a structured key (e.g. ``("object", "rough_sponge")``)."""
     if not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+        raise InvalidInputError(f"seed must be an integer >= 0, got {seed!r}")
     return np.random.SeedSequence([int(seed) & 0xFFFFFFFF, int(seed) >> 32, *stable_words(*key)])
 
 
@@ -75,7 +77,7 @@ class CounterStream:
 
     def __init__(self, seq: np.random.SeedSequence, slots: int):
         if slots <= 0:
-            raise ValueError("slots must be > 0")
+            raise InvalidInputError("slots must be > 0")
         self.slots = int(slots)
         self._blocks = -(-self.slots // 4)  # Philox blocks per sample
         self._key = seq.generate_state(2, dtype=np.uint64)
@@ -90,7 +92,7 @@ class CounterStream:
         if count <= 0:
             return np.zeros((0, self.slots), dtype=np.uint64)
         if start < 0:
-            raise ValueError("sample index must be >= 0")
+            raise InvalidInputError("sample index must be >= 0")
         counter = np.zeros(4, dtype=np.uint64)
         counter[0] = np.uint64(start * self._blocks)
         bg = np.random.Philox(key=self._key, counter=counter)
@@ -107,7 +109,7 @@ class CounterStream:
     def normal(self, start: int, count: int) -> np.ndarray:
         """Standard normal deviates, shape ``(count, slots)`` (slots must be even)."""
         if self.slots % 2:
-            raise ValueError("normal() needs an even number of slots")
+            raise InvalidInputError("normal() needs an even number of slots")
         u = self.uniform(start, count)
         u1 = 1.0 - u[:, 0::2]  # (0, 1]: log is finite
         u2 = u[:, 1::2]

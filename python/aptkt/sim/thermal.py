@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aptkt._core import SimThermal, _flush_subnormals
+from aptkt.errors import InvalidInputError
 from aptkt.sim.objects import Layer
 from aptkt.sim.patch import SkinConstants
 
@@ -211,7 +212,7 @@ def thermal_network(
 def interface_level(scale: float) -> float:
     """``scale`` rounded to the nearest of the levels 2^(i / INTERFACE_LEVELS_PER_OCTAVE)."""
     if not scale > 0 or not math.isfinite(scale):
-        raise ValueError(f"an interface scale must be finite and > 0, got {scale!r}")
+        raise InvalidInputError(f"an interface scale must be finite and > 0, got {scale!r}")
     steps = round(math.log2(scale) * INTERFACE_LEVELS_PER_OCTAVE)
     return float(2.0 ** (steps / INTERFACE_LEVELS_PER_OCTAVE))
 

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
 from aptkt.sim.drift import SlowConditions
 from aptkt.sim.objects import ObjectSpec
 from aptkt.sim.seeding import spawn_generators
@@ -56,10 +57,12 @@ class TrialVariation:
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
             if not math.isfinite(value) or (value < 0 and name != "ambient"):
-                raise ValueError(f"TrialVariation.{name} must be finite and >= 0, got {value!r}")
+                raise InvalidInputError(
+                    f"TrialVariation.{name} must be finite and >= 0, got {value!r}"
+                )
         for name in ("conformity_roughness", "cover_modulus"):
             if getattr(self, name) <= 0:
-                raise ValueError(f"TrialVariation.{name} must be > 0")
+                raise InvalidInputError(f"TrialVariation.{name} must be > 0")
 
     def interface_spread(self, obj: ObjectSpec) -> float:
         """Relative (log) spread between trials of the interface conductance on ``obj``'s face:

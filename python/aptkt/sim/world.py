@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.actions import PAPER_ACTIONS, ExplorationSettings, ExploratoryAction, Movement, explore
+from aptkt.errors import InvalidInputError, UnknownNameError
 from aptkt.robot.base import Placement, SafetyLimits
 from aptkt.sim.drift import RecordingDrift
 from aptkt.sim.engine import FastDriver, RealTimeDriver, SimEngine
@@ -82,7 +83,7 @@ class SimWorld:
         drift: RecordingDrift | None = None,
     ):
         if not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+            raise InvalidInputError(f"seed must be an integer >= 0, got {seed!r}")
         self.objects = objects if objects is not None else default_library()
         self.seed = int(seed)
         self.variation = variation or TrialVariation()
@@ -160,7 +161,7 @@ class SimWorld:
         try:
             return PAPER_ACTIONS[action]
         except KeyError:
-            raise KeyError(
+            raise UnknownNameError(
                 f"unknown action {action!r}; paper actions: {', '.join(PAPER_ACTIONS)}"
             ) from None
 

@@ -31,7 +31,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from aptkt.errors import ConfigError
+from aptkt.errors import ConfigError, InvalidInputError
 from aptkt.skin.protocol import RAW_RANGES
 
 if sys.version_info >= (3, 11):
@@ -105,11 +105,11 @@ class ForceCalibration:
     def from_metadata(cls, data: Mapping[str, Any] | None) -> ForceCalibration:
         """Inverse of :meth:`to_metadata`; ``ValueError`` if ``data`` is missing or malformed."""
         if not data:
-            raise ValueError("the recording's metadata has no 'calibration'")
+            raise InvalidInputError("the recording's metadata has no 'calibration'")
         try:
             return cls(data["cell_ids"], data["offset"], data["gain"])
         except (KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"the recording's calibration is malformed: {exc}") from None
+            raise InvalidInputError(f"the recording's calibration is malformed: {exc}") from None
 
     def rows(self, cell_id: np.ndarray) -> np.ndarray:
         """Row of each cell id, -1 for cells the patch does not describe."""
@@ -122,7 +122,7 @@ class ForceCalibration:
         rows = self.rows(cell_id)
         if (rows < 0).any():
             unknown = sorted(set(np.asarray(cell_id)[rows < 0].tolist()))
-            raise ValueError(f"no force calibration for cell(s) {unknown}")
+            raise InvalidInputError(f"no force calibration for cell(s) {unknown}")
         return rows
 
     def to_newtons(self, cell_id: np.ndarray, force_norm: np.ndarray) -> np.ndarray:

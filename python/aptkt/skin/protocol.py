@@ -22,6 +22,7 @@ from aptkt._core import PACKET_LEN, PACKET_TYPES, SENSOR_FIELDS, StreamParser
 from aptkt._core import _encode_sensor_packets as _encode_core
 from aptkt._core import _quantize as _quantize_core
 from aptkt._core import encode_packet_bytes as _encode_packet_core
+from aptkt.errors import InvalidInputError, InvalidTypeError, UnknownNameError
 
 __all__ = [
     "StreamParser",
@@ -96,16 +97,18 @@ def _float_rows(name: str, value: ArrayLike, n: int, width: int | None) -> np.nd
     try:
         arr = np.broadcast_to(arr, shape)
     except ValueError:
-        raise ValueError(f"{name}: shape {arr.shape} does not broadcast to {shape}") from None
+        raise InvalidInputError(
+            f"{name}: shape {arr.shape} does not broadcast to {shape}"
+        ) from None
     return np.ascontiguousarray(arr)
 
 
 def _int64(name: str, value: ArrayLike) -> np.ndarray:
     arr = np.asarray(value)
     if arr.dtype.kind not in "iu":
-        raise TypeError(f"{name} must hold integers, got dtype {arr.dtype}")
+        raise InvalidTypeError(f"{name} must hold integers, got dtype {arr.dtype}")
     if arr.dtype == np.uint64 and arr.size and int(arr.max()) > np.iinfo(np.int64).max:
-        raise ValueError(f"{name}: value {int(arr.max())} is outside every field's range")
+        raise InvalidInputError(f"{name}: value {int(arr.max())} is outside every field's range")
     return np.ascontiguousarray(arr, dtype=np.int64)
 
 
@@ -127,7 +130,7 @@ def quantize(
     """
     cells = _int64("cell_id", np.atleast_1d(cell_id))
     if cells.ndim != 1:
-        raise ValueError(f"cell_id must be 1-D, got shape {cells.shape}")
+        raise InvalidInputError(f"cell_id must be 1-D, got shape {cells.shape}")
     n = cells.shape[0]
     return _quantize_core(
         cells,
@@ -147,18 +150,18 @@ def encode_sensor_packets(raw: Mapping[str, np.ndarray]) -> bytes:
     """
     missing = [k for k in RAW_FIELDS if k not in raw]
     if missing:
-        raise KeyError(f"encode_sensor_packets: missing field(s) {', '.join(missing)}")
+        raise UnknownNameError(f"encode_sensor_packets: missing field(s) {', '.join(missing)}")
     cols = {}
     n = None
     for name, (tail, _) in RAW_FIELDS.items():
         arr = _int64(name, raw[name])
         if arr.ndim != 1 + len(tail) or arr.shape[1:] != tail:
             expected = "(" + ", ".join(["n", *map(str, tail)]) + (",)" if not tail else ")")
-            raise ValueError(f"{name} must have shape {expected}, got {arr.shape}")
+            raise InvalidInputError(f"{name} must have shape {expected}, got {arr.shape}")
         if n is None:
             n = arr.shape[0]
         elif arr.shape[0] != n:
-            raise ValueError(f"{name} has {arr.shape[0]} rows, cell_id has {n}")
+            raise InvalidInputError(f"{name} has {arr.shape[0]} rows, cell_id has {n}")
         cols[name] = arr
     return _encode_core(
         cols["cell_id"], cols["proximity"], cols["acc"], cols["temp"], cols["force"]

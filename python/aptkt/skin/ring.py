@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
 from aptkt.skin.samples import FIELDS, SkinSamples
 
 __all__ = ["SampleRing"]
@@ -18,7 +19,7 @@ class SampleRing:
 
     def __init__(self, capacity: int) -> None:
         if capacity < 1:
-            raise ValueError(f"ring capacity must be >= 1, got {capacity}")
+            raise InvalidInputError(f"ring capacity must be >= 1, got {capacity}")
         self.capacity = int(capacity)
         self._cols: dict[str, Any] = {
             name: np.zeros((self.capacity, *tail), dtype) for name, (tail, dtype) in FIELDS.items()

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
 from aptkt.skin.protocol import RAW_FIELDS
 
 __all__ = ["SkinSamples", "Recording", "FIELDS"]
@@ -49,18 +50,20 @@ class SkinSamples:
         for name, (tail, dtype) in FIELDS.items():
             arr = np.asarray(getattr(self, name), dtype=dtype)
             if arr.shape[1:] != tail:
-                raise ValueError(f"SkinSamples.{name}: expected shape (n, {tail}), got {arr.shape}")
+                raise InvalidInputError(
+                    f"SkinSamples.{name}: expected shape (n, {tail}), got {arr.shape}"
+                )
             if n is None:
                 n = arr.shape[0]
             elif arr.shape[0] != n:
-                raise ValueError(f"SkinSamples.{name}: {arr.shape[0]} rows, expected {n}")
+                raise InvalidInputError(f"SkinSamples.{name}: {arr.shape[0]} rows, expected {n}")
             setattr(self, name, arr)
         if self.raw is not None:
             raw = {}
             for name, (raw_tail, raw_dtype) in RAW_FIELDS.items():
                 col = np.asarray(self.raw[name], dtype=raw_dtype)
                 if col.shape != (n, *raw_tail):
-                    raise ValueError(
+                    raise InvalidInputError(
                         f"SkinSamples.raw[{name!r}]: shape {col.shape}, expected {(n, *raw_tail)}"
                     )
                 raw[name] = col
@@ -144,16 +147,16 @@ class Recording:
         Cells without samples raise :class:`ValueError`.
         """
         if (rate_hz is None) == (n_steps is None):
-            raise ValueError("give exactly one of rate_hz and n_steps")
+            raise InvalidInputError("give exactly one of rate_hz and n_steps")
         if rate_hz is not None:
             if rate_hz <= 0:
-                raise ValueError("rate_hz must be > 0")
+                raise InvalidInputError("rate_hz must be > 0")
             n_steps = max(int(round(self.duration * rate_hz)), 1)
             step_ns = 1e9 / rate_hz
         else:
             assert n_steps is not None  # exactly one of the two was given
             if n_steps < 1:
-                raise ValueError("n_steps must be >= 1")
+                raise InvalidInputError("n_steps must be >= 1")
             step_ns = (self.stop_ns - self.start_ns) / n_steps
         t_grid = self.start_ns + np.arange(n_steps) * step_ns
         cells = tuple(self.cells if cells is None else cells)
@@ -163,7 +166,7 @@ class Recording:
         for i, cid in enumerate(cells):
             mask = self.samples.cell_id == cid
             if not mask.any():
-                raise ValueError(f"cell {cid} has no samples in this recording")
+                raise InvalidInputError(f"cell {cid} has no samples in this recording")
             t = self.samples.t_ns[mask].astype(np.float64)
             v = values[mask].reshape(int(mask.sum()), -1)
             flat = np.empty((n_steps, v.shape[1]))

@@ -3,10 +3,9 @@
 
 use aptkt_features as core;
 use numpy::{IntoPyArray, PyArray1, PyArrayDyn, PyReadonlyArrayDyn};
-use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 
-use crate::errors::NonFiniteResultError;
+use crate::errors::{invalid_type, Result};
 
 /// A numpy array of one of the sample types the kernels accept.
 pub enum SampleArray<'py> {
@@ -16,7 +15,7 @@ pub enum SampleArray<'py> {
 }
 
 impl<'py> SampleArray<'py> {
-    pub fn extract(ob: &Bound<'py, PyAny>, name: &str) -> PyResult<Self> {
+    pub fn extract(ob: &Bound<'py, PyAny>, name: &str) -> Result<Self> {
         if let Ok(a) = ob.extract::<PyReadonlyArrayDyn<'py, f64>>() {
             return Ok(Self::F64(a));
         }
@@ -26,7 +25,7 @@ impl<'py> SampleArray<'py> {
         if let Ok(a) = ob.extract::<PyReadonlyArrayDyn<'py, i16>>() {
             return Ok(Self::I16(a));
         }
-        Err(PyTypeError::new_err(format!(
+        Err(invalid_type(format!(
             "{name} must be a numpy array of float64, float32 or int16"
         )))
     }
@@ -53,13 +52,6 @@ macro_rules! with_view {
     };
 }
 
-fn to_py_err(e: core::FeatureError) -> PyErr {
-    match e {
-        core::FeatureError::NonFiniteResult { .. } => NonFiniteResultError::new_err(e.to_string()),
-        _ => PyValueError::new_err(e.to_string()),
-    }
-}
-
 type ArrayTriple<'py> = (
     Bound<'py, PyArrayDyn<f64>>,
     Bound<'py, PyArrayDyn<f64>>,
@@ -73,9 +65,9 @@ fn hjorth<'py>(
     x: &Bound<'py, PyAny>,
     axis: isize,
     name: &str,
-) -> PyResult<ArrayTriple<'py>> {
+) -> Result<ArrayTriple<'py>> {
     let arr = SampleArray::extract(x, name)?;
-    let r = with_view!(py, arr, |v| core::hjorth_along(name, v, axis)).map_err(to_py_err)?;
+    let r = with_view!(py, arr, |v| core::hjorth_along(name, v, axis))?;
     Ok((
         r.activity.into_pyarray(py),
         r.mobility.into_pyarray(py),
@@ -91,15 +83,14 @@ fn axis_pair_correlations<'py>(
     channel_axis: isize,
     time_axis: isize,
     name: &str,
-) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+) -> Result<Bound<'py, PyArrayDyn<f64>>> {
     let arr = SampleArray::extract(acc, name)?;
     let r = with_view!(py, arr, |v| core::axis_pair_correlations(
         name,
         v,
         channel_axis,
         time_axis
-    ))
-    .map_err(to_py_err)?;
+    ))?;
     Ok(r.into_pyarray(py))
 }
 
@@ -109,17 +100,17 @@ fn texture_descriptor<'py>(
     py: Python<'py>,
     acc: &Bound<'py, PyAny>,
     name: &str,
-) -> PyResult<Bound<'py, PyArray1<f64>>> {
+) -> Result<Bound<'py, PyArray1<f64>>> {
     let arr = SampleArray::extract(acc, name)?;
-    let r = with_view!(py, arr, |v| core::texture_descriptor(name, v)).map_err(to_py_err)?;
+    let r = with_view!(py, arr, |v| core::texture_descriptor(name, v))?;
     Ok(r.into_pyarray(py))
 }
 
 #[pyfunction]
 #[pyo3(signature = (x, name = "x"))]
-fn mean_all(py: Python<'_>, x: &Bound<'_, PyAny>, name: &str) -> PyResult<f64> {
+fn mean_all(py: Python<'_>, x: &Bound<'_, PyAny>, name: &str) -> Result<f64> {
     let arr = SampleArray::extract(x, name)?;
-    with_view!(py, arr, |v| core::mean_all(name, v)).map_err(to_py_err)
+    Ok(with_view!(py, arr, |v| core::mean_all(name, v))?)
 }
 
 #[pyfunction]
@@ -129,9 +120,9 @@ fn gradient<'py>(
     x: &Bound<'py, PyAny>,
     axis: isize,
     name: &str,
-) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+) -> Result<Bound<'py, PyArrayDyn<f64>>> {
     let arr = SampleArray::extract(x, name)?;
-    let r = with_view!(py, arr, |v| core::gradient_along(name, v, axis)).map_err(to_py_err)?;
+    let r = with_view!(py, arr, |v| core::gradient_along(name, v, axis))?;
     Ok(r.into_pyarray(py))
 }
 
@@ -142,9 +133,9 @@ fn thermal_curve<'py>(
     temp: &Bound<'py, PyAny>,
     axis: isize,
     name: &str,
-) -> PyResult<Bound<'py, PyArray1<f64>>> {
+) -> Result<Bound<'py, PyArray1<f64>>> {
     let arr = SampleArray::extract(temp, name)?;
-    let r = with_view!(py, arr, |v| core::thermal_curve(name, v, axis)).map_err(to_py_err)?;
+    let r = with_view!(py, arr, |v| core::thermal_curve(name, v, axis))?;
     Ok(r.into_pyarray(py))
 }
 

@@ -43,7 +43,6 @@ fn fix_mmap_threshold() {}
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     fix_mmap_threshold();
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
-    errors::register(m)?;
     features::register(m)?;
     gp::register(m)?;
     sim::register(m)?;

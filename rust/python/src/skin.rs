@@ -10,19 +10,19 @@ use aptkt_skin::{
 };
 use numpy::ndarray::{Array1, Array2};
 use numpy::{Element, IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyMemoryView};
+
+use crate::errors::{internal, invalid_input, invalid_type, Result};
 
 /// Rows of a 2-D field as a `(n, width)` array, taking ownership of the buffer.
 fn rows_array<'py, T: Element>(
     py: Python<'py>,
     v: Vec<T>,
     width: usize,
-) -> PyResult<Bound<'py, PyAny>> {
+) -> Result<Bound<'py, PyAny>> {
     let n = v.len() / width;
-    let a =
-        Array2::from_shape_vec((n, width), v).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let a = Array2::from_shape_vec((n, width), v).map_err(|e| internal(e.to_string()))?;
     Ok(a.into_pyarray(py).into_any())
 }
 
@@ -30,7 +30,7 @@ fn column<'py, T: Element>(py: Python<'py>, v: Vec<T>) -> Bound<'py, PyAny> {
     Array1::from_vec(v).into_pyarray(py).into_any()
 }
 
-fn physical_dict<'py>(py: Python<'py>, c: PhysicalColumns) -> PyResult<Bound<'py, PyDict>> {
+fn physical_dict<'py>(py: Python<'py>, c: PhysicalColumns) -> Result<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("cell_id", column(py, c.cell_id))?;
     d.set_item("proximity", column(py, c.proximity))?;
@@ -40,7 +40,7 @@ fn physical_dict<'py>(py: Python<'py>, c: PhysicalColumns) -> PyResult<Bound<'py
     Ok(d)
 }
 
-fn raw_dict<'py>(py: Python<'py>, c: RawColumns) -> PyResult<Bound<'py, PyDict>> {
+fn raw_dict<'py>(py: Python<'py>, c: RawColumns) -> Result<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("cell_id", column(py, c.cell_id))?;
     d.set_item("proximity", column(py, c.proximity))?;
@@ -50,7 +50,7 @@ fn raw_dict<'py>(py: Python<'py>, c: RawColumns) -> PyResult<Bound<'py, PyDict>>
     Ok(d)
 }
 
-fn stats_dict<'py>(py: Python<'py>, s: &Stats, pending: usize) -> PyResult<Bound<'py, PyDict>> {
+fn stats_dict<'py>(py: Python<'py>, s: &Stats, pending: usize) -> Result<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("packets", s.sensor_packets)?;
     d.set_item("bytes", s.bytes_in)?;
@@ -99,7 +99,7 @@ impl PyStreamParser {
         py: Python<'py>,
         data: &Bound<'py, PyAny>,
         raw: bool,
-    ) -> PyResult<Bound<'py, PyDict>> {
+    ) -> Result<Bound<'py, PyDict>> {
         let converted;
         let bytes: &[u8] = if let Ok(b) = data.cast::<PyBytes>() {
             b.as_bytes()
@@ -115,7 +115,7 @@ impl PyStreamParser {
                 .map(|n| n.to_string())
                 .unwrap_or_default();
             let view = PyMemoryView::from(data).map_err(|_| {
-                pyo3::exceptions::PyTypeError::new_err(format!(
+                invalid_type(format!(
                     "StreamParser.feed expects bytes-like data, got {type_name}"
                 ))
             })?;
@@ -123,7 +123,7 @@ impl PyStreamParser {
             let format: String = view.getattr("format")?.extract()?;
             let code = format.trim_start_matches(['@', '=', '<', '>', '!']);
             if itemsize != 1 || !matches!(code, "B" | "b" | "c") {
-                return Err(pyo3::exceptions::PyTypeError::new_err(format!(
+                return Err(invalid_type(format!(
                     "StreamParser.feed expects single bytes (bytes, bytearray, or a buffer of \
                      uint8/int8), got {type_name} of item format {format:?} \
                      ({itemsize} bytes per item)"
@@ -154,7 +154,7 @@ impl PyStreamParser {
     /// ``pending_bytes``, ``rejected`` (by reason), ``rejected_total``, ``other_packets``
     /// (valid non-sensor packets by type).
     #[getter]
-    fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+    fn stats<'py>(&self, py: Python<'py>) -> Result<Bound<'py, PyDict>> {
         stats_dict(py, self.inner.stats(), self.inner.pending())
     }
 
@@ -186,9 +186,9 @@ impl PyStreamParser {
     }
 }
 
-fn same_rows(name: &str, got: usize, n: usize) -> PyResult<()> {
+fn same_rows(name: &str, got: usize, n: usize) -> Result<()> {
     if got != n {
-        return Err(PyValueError::new_err(format!(
+        return Err(invalid_input(format!(
             "{name} has {got} rows, cell_id has {n}"
         )));
     }
@@ -198,9 +198,9 @@ fn same_rows(name: &str, got: usize, n: usize) -> PyResult<()> {
 fn contiguous<'a, T: Element, D: numpy::ndarray::Dimension>(
     name: &str,
     a: &'a numpy::PyReadonlyArray<'_, T, D>,
-) -> PyResult<&'a [T]> {
+) -> Result<&'a [T]> {
     a.as_slice()
-        .map_err(|_| PyValueError::new_err(format!("{name} must be C-contiguous")))
+        .map_err(|_| invalid_input(format!("{name} must be C-contiguous")))
 }
 
 /// Physical values → raw integers (round half to even, clip to each field's range).
@@ -215,7 +215,7 @@ fn quantize<'py>(
     acc_g: PyReadonlyArray2<'py, f64>,
     temp_c: PyReadonlyArray2<'py, f64>,
     force_norm: PyReadonlyArray2<'py, f64>,
-) -> PyResult<Bound<'py, PyDict>> {
+) -> Result<Bound<'py, PyDict>> {
     let n = cell_id.len();
     same_rows("proximity", proximity.len(), n)?;
     for (name, a, width) in [
@@ -225,7 +225,7 @@ fn quantize<'py>(
     ] {
         let shape = a.shape();
         if shape[0] != n || shape[1] != width {
-            return Err(PyValueError::new_err(format!(
+            return Err(invalid_input(format!(
                 "{name} must have shape ({n}, {width}), got {shape:?}"
             )));
         }
@@ -260,7 +260,7 @@ fn quantize<'py>(
         }
         Ok(out)
     });
-    raw_dict(py, result.map_err(PyValueError::new_err)?)
+    raw_dict(py, result.map_err(invalid_input)?)
 }
 
 /// Raw integer columns (int64; shapes as ``feed(raw=True)`` returns) → consecutive 20-byte
@@ -274,7 +274,7 @@ fn encode_sensor_packets<'py>(
     acc: PyReadonlyArray2<'py, i64>,
     temp: PyReadonlyArray2<'py, i64>,
     force: PyReadonlyArray2<'py, i64>,
-) -> PyResult<Bound<'py, PyBytes>> {
+) -> Result<Bound<'py, PyBytes>> {
     let cols = RawColumnsRef {
         cell_id: contiguous("cell_id", &cell_id)?,
         proximity: contiguous("proximity", &proximity)?,
@@ -284,15 +284,13 @@ fn encode_sensor_packets<'py>(
     };
     for (name, a, width) in [("acc", &acc, 3), ("temp", &temp, 2), ("force", &force, 3)] {
         if a.shape()[1] != width {
-            return Err(PyValueError::new_err(format!(
+            return Err(invalid_input(format!(
                 "{name} must have {width} columns, got {:?}",
                 a.shape()
             )));
         }
     }
-    let bytes = py
-        .detach(|| encode_sensor_columns(&cols))
-        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let bytes = py.detach(|| encode_sensor_columns(&cols))?;
     Ok(PyBytes::new(py, &bytes))
 }
 
@@ -302,17 +300,16 @@ fn encode_packet_bytes<'py>(
     py: Python<'py>,
     header: u8,
     payload: &[u8],
-) -> PyResult<Bound<'py, PyBytes>> {
-    let kind = PacketType::from_header(header).ok_or_else(|| {
-        PyValueError::new_err(format!("{header:#04x} is not a known packet header"))
-    })?;
+) -> Result<Bound<'py, PyBytes>> {
+    let kind = PacketType::from_header(header)
+        .ok_or_else(|| invalid_input(format!("{header:#04x} is not a known packet header")))?;
     let payload: &[u8; PAYLOAD_LEN] = payload.try_into().map_err(|_| {
-        PyValueError::new_err(format!(
+        invalid_input(format!(
             "payload must be {PAYLOAD_LEN} bytes, got {}",
             payload.len()
         ))
     })?;
-    let packet = encode_packet(kind, payload).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let packet = encode_packet(kind, payload)?;
     Ok(PyBytes::new(py, &packet))
 }
 

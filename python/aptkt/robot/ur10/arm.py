@@ -10,7 +10,7 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 
-from aptkt.errors import AptktError, ConfigError, RobotError
+from aptkt.errors import AptktError, ConfigError, InvalidInputError, RobotError
 from aptkt.robot.base import ForceReading, Placement, SafetyLimits
 from aptkt.robot.ur10.connection import Connection
 from aptkt.robot.ur10.motions import Motions
@@ -115,7 +115,7 @@ class UR10:
             self.workspace = (tuple(map(float, workspace[0])), tuple(map(float, workspace[1])))
         self.tool_orientation = tuple(float(v) for v in tool_orientation)
         if len(self.tool_orientation) != 3:
-            raise ValueError("tool_orientation must be a rotation vector of 3 numbers")
+            raise InvalidInputError("tool_orientation must be a rotation vector of 3 numbers")
         self._clock = clock
         self._trace = Trace(trace_seconds)
         self._link = Connection(host, self.limits.watchdog_timeout, frequency)

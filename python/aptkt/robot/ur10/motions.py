@@ -13,6 +13,7 @@ import numpy as np
 
 from aptkt.errors import (
     AptktError,
+    InvalidInputError,
     ProgramStoppedError,
     ProtectiveStopError,
     RobotError,
@@ -195,7 +196,7 @@ class Motions:
         dx, dy = float(direction[0]), float(direction[1])
         norm = math.hypot(dx, dy)
         if not norm > 1e-9:
-            raise ValueError("slide direction must not be zero")
+            raise InvalidInputError("slide direction must not be zero")
         dx, dy = dx / norm, dy / norm
         pose = link.peek_pose()
         # Ramp up, `duration` at full speed, ramp down: all of it must stay in the box.
@@ -401,9 +402,9 @@ def _note(exc: BaseException, text: str) -> None:
 
 def _positive(value: float, name: str) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+        raise InvalidInputError(f"{name} must be a finite number > 0, got {value!r}")
 
 
 def _non_negative(value: float, name: str) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-        raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+        raise InvalidInputError(f"{name} must be a finite number >= 0, got {value!r}")

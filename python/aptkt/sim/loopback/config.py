@@ -8,6 +8,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from aptkt.errors import InvalidInputError
+
 __all__ = [
     "CB3_VERSION",
     "E_SERIES_VERSION",
@@ -51,10 +53,10 @@ class ControllerConfig:
     def __post_init__(self) -> None:
         self.version = tuple(int(v) for v in self.version)  # type: ignore[assignment]
         if len(self.version) != 4:
-            raise ValueError(f"version must have 4 numbers, got {self.version!r}")
+            raise InvalidInputError(f"version must have 4 numbers, got {self.version!r}")
         self.start_pose = tuple(float(v) for v in self.start_pose)
         if len(self.start_pose) != 6:
-            raise ValueError("start_pose must be [x, y, z, rx, ry, rz]")
+            raise InvalidInputError("start_pose must be [x, y, z, rx, ry, rz]")
 
     @property
     def frequency(self) -> float:

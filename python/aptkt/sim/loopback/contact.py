@@ -37,6 +37,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
 from aptkt.robot.workspace import load_workspace
 from aptkt.sim.loopback.object_surface import SimObjectSurface
 from aptkt.sim.loopback.thermal_contact import ThermalContact
@@ -89,11 +90,11 @@ class SpringSurface:
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.stiffness) and self.stiffness > 0):
-            raise ValueError(
+            raise InvalidInputError(
                 f"SpringSurface.stiffness must be a finite number > 0, got {self.stiffness!r}"
             )
         if not (math.isfinite(self.friction) and self.friction >= 0):
-            raise ValueError(f"SpringSurface.friction must be >= 0, got {self.friction!r}")
+            raise InvalidInputError(f"SpringSurface.friction must be >= 0, got {self.friction!r}")
         # JSON brings ranges as lists; keep the dataclass hashable and comparable.
         for name in ("x_range", "y_range"):
             value = getattr(self, name)
@@ -119,12 +120,12 @@ class Scene:
     def __init__(self, items: Sequence[Any]):
         self.items = list(items)
         if not self.items:
-            raise ValueError("a scene needs at least one contact model")
+            raise InvalidInputError("a scene needs at least one contact model")
         normals = {
             tuple(float(v) for v in getattr(m, "normal", (0.0, 0.0, 1.0))) for m in self.items
         }
         if len(normals) != 1:
-            raise ValueError(
+            raise InvalidInputError(
                 f"the items of a scene must share one surface normal, got {sorted(normals)}"
             )
         self.normal = normals.pop()
@@ -213,7 +214,7 @@ def scene_from_workspace(
                 }
             )
     if not items:
-        raise ValueError(f"{path}: the workspace file places no objects")
+        raise InvalidInputError(f"{path}: the workspace file places no objects")
     return {"type": "scene", "items": items}
 
 
@@ -236,10 +237,10 @@ def build(spec: Mapping[str, Any] | None) -> Any:
         target = spec.pop("factory")
         params = spec.pop("params", {}) or {}
         if spec:
-            raise ValueError(f"contact spec: unknown keys {sorted(spec)} next to 'factory'")
+            raise InvalidInputError(f"contact spec: unknown keys {sorted(spec)} next to 'factory'")
         module_name, _, attr = str(target).partition(":")
         if not module_name or not attr:
-            raise ValueError(f"contact spec: factory must be 'module:attr', got {target!r}")
+            raise InvalidInputError(f"contact spec: factory must be 'module:attr', got {target!r}")
         factory = getattr(importlib.import_module(module_name), attr)
         model = factory(**params)
     else:
@@ -247,22 +248,24 @@ def build(spec: Mapping[str, Any] | None) -> Any:
         if kind == "scene":
             items = spec.pop("items", None)
             if spec or not isinstance(items, list):
-                raise ValueError("contact spec: a scene is {'type': 'scene', 'items': [spec, ...]}")
+                raise InvalidInputError(
+                    "contact spec: a scene is {'type': 'scene', 'items': [spec, ...]}"
+                )
             return Scene([build(item) for item in items])
         if kind == "workspace":
             if "file" not in spec:
-                raise ValueError("contact spec: a workspace scene needs 'file'")
+                raise InvalidInputError("contact spec: a workspace scene needs 'file'")
             return build(scene_from_workspace(spec.pop("file"), **spec))
         if kind == "sim_object":
             # The simulated world's contact physics (imported only when asked for).
 
             return SimObjectSurface(**spec)
         if kind not in _BUILTIN:
-            raise ValueError(
+            raise InvalidInputError(
                 f"contact spec: unknown type {kind!r} "
                 f"(known: {sorted([*_BUILTIN, 'sim_object', 'scene', 'workspace'])})"
             )
         model = _BUILTIN[kind](**spec)
     if not callable(getattr(model, "normal_force", None)):
-        raise ValueError(f"contact model {model!r} has no normal_force(pose) method")
+        raise InvalidInputError(f"contact model {model!r} has no normal_force(pose) method")
     return model

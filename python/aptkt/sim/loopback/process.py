@@ -20,6 +20,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from typing import Any
 
+from aptkt.errors import InvalidInputError
 from aptkt.sim.loopback.config import CB3_VERSION, E_SERIES_VERSION, ControllerConfig
 from aptkt.sim.loopback.controller import SimulatedController
 from aptkt.sim.loopback.servers import LoopbackServer
@@ -108,7 +109,7 @@ def serve_stdio(
             return server.take_worst_lag()
         if op == "ping":
             return "pong"
-        raise ValueError(f"unknown loopback command {op!r}")
+        raise InvalidInputError(f"unknown loopback command {op!r}")
 
     try:
         for line in stdin:
@@ -135,7 +136,7 @@ def serve_stdio(
 
 def _need_skin(controller: Any) -> Any:
     if controller.skin is None:
-        raise ValueError(
+        raise InvalidInputError(
             "this loopback has no simulated skin (start it with skin=True / --skin-pty)"
         )
     return controller.skin
@@ -173,7 +174,7 @@ class Loopback:
         self._skin_port: str | None = None
         if "version" not in config:
             if series not in ("cb3", "e-series"):
-                raise ValueError(f"series must be 'cb3' or 'e-series', got {series!r}")
+                raise InvalidInputError(f"series must be 'cb3' or 'e-series', got {series!r}")
             config["version"] = CB3_VERSION if series == "cb3" else E_SERIES_VERSION
         self.config = ControllerConfig(contact=None if contact is None else dict(contact), **config)
         self.host = host

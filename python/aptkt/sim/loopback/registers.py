@@ -9,6 +9,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from aptkt.errors import UnknownNameError
 from aptkt.sim.loopback.config import ROBOT_MODE_POWER_OFF, SAFETY_NORMAL
 from aptkt.sim.loopback.rtde import input_type, output_type
 from aptkt.sim.physics import GRAVITY
@@ -85,7 +86,7 @@ class RtdeRegisters:
         ):
             if name.startswith(prefix):
                 return registers[_index(name)]
-        raise KeyError(name)
+        raise UnknownNameError(name)
 
 
 def _index(name: str) -> int:

@@ -15,6 +15,7 @@ import threading
 import time
 from collections.abc import Sequence
 
+from aptkt.errors import InvalidInputError
 from aptkt.sim.loopback import rtde
 from aptkt.sim.loopback.controller import SimulatedController
 
@@ -101,7 +102,7 @@ class _RtdeClient(_Client):
         while not self.closed:
             size, kind = rtde.HEADER.unpack(_recv_exact(self.sock, rtde.HEADER.size))
             if size < rtde.HEADER.size:
-                raise ValueError("bad RTDE package size")
+                raise InvalidInputError("bad RTDE package size")
             payload = _recv_exact(self.sock, size - rtde.HEADER.size)
             if self.server.frozen:
                 continue  # a pulled cable: nothing arrives at the controller

@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
 from aptkt.sim.loopback.rotvec import rotvec_to_matrix
 from aptkt.sim.loopback.thermal_contact import ThermalContact
 from aptkt.sim.objects import Layer
@@ -80,11 +81,11 @@ class SkinConfig:
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.rate_hz) and 0 < self.rate_hz <= 1000):
-            raise ValueError(f"skin rate_hz must be in (0, 1000], got {self.rate_hz!r}")
+            raise InvalidInputError(f"skin rate_hz must be in (0, 1000], got {self.rate_hz!r}")
         for name in ("force_noise", "acc_noise", "temp_noise", "die_temp_noise", "proximity_noise"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"skin {name} must be >= 0, got {value!r}")
+                raise InvalidInputError(f"skin {name} must be >= 0, got {value!r}")
 
     @classmethod
     def from_spec(cls, spec: Mapping[str, Any] | bool | None) -> SkinConfig | None:
@@ -95,7 +96,7 @@ class SkinConfig:
             return cls()
         unknown = set(spec) - set(cls.__dataclass_fields__)
         if unknown:
-            raise ValueError(f"skin: unknown setting(s) {sorted(unknown)}")
+            raise InvalidInputError(f"skin: unknown setting(s) {sorted(unknown)}")
         return cls(**dict(spec))
 
     def to_dict(self) -> dict[str, Any]:
@@ -150,7 +151,9 @@ class SimulatedSkin:
         ids = set(self.cell_ids.tolist()) if cells is None else {int(c) for c in cells}
         unknown = ids - set(self.cell_ids.tolist())
         if unknown:
-            raise ValueError(f"no cell(s) {sorted(unknown)} in the patch {self.patch.name!r}")
+            raise InvalidInputError(
+                f"no cell(s) {sorted(unknown)} in the patch {self.patch.name!r}"
+            )
         self._silent |= ids
 
     def restore(self) -> None:

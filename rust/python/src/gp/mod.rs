@@ -7,7 +7,6 @@ use aptkt_gp::{
     BinaryFit, Data, GpError, GpResult, KernelTask, Layout, Modalities, OneVsAll, Source,
 };
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use std::cell::RefCell;
 use std::collections::HashMap;
@@ -15,7 +14,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::Duration;
 
-use crate::errors::gp_error;
+use crate::errors::{internal, invalid_input, Result};
 
 mod settings;
 
@@ -32,10 +31,10 @@ fn matrix<'py>(
     values: Vec<f64>,
     rows: usize,
     cols: usize,
-) -> PyResult<Bound<'py, PyArray2<f64>>> {
+) -> Result<Bound<'py, PyArray2<f64>>> {
     PyArray1::from_vec(py, values)
         .reshape([rows, cols])
-        .map_err(|e| PyValueError::new_err(format!("internal shape error: {e}")))
+        .map_err(|e| internal(format!("a result's shape: {e}")))
 }
 
 /// Where the work of [`run_interruptible`] leaves its result (or its panic).
@@ -53,12 +52,12 @@ fn run_interruptible<T: Send>(
     cancel: &AtomicBool,
     n_threads: usize,
     work: impl FnOnce() -> T + Send,
-) -> PyResult<T> {
+) -> Result<T> {
     let done: Done<T> = (Mutex::new(None), Condvar::new());
     if n_threads == 0 {
         rayon::in_place_scope(|scope| spawn_and_poll(scope, py, cancel, &done, work))?;
     } else {
-        let pool = pool(n_threads).map_err(gp_error)?;
+        let pool = pool(n_threads)?;
         pool.in_place_scope(|scope| spawn_and_poll(scope, py, cancel, &done, work))?;
     }
     let out = done.0.lock().unwrap_or_else(|e| e.into_inner()).take();
@@ -70,13 +69,9 @@ fn run_interruptible<T: Send>(
                 .map(|s| s.to_string())
                 .or_else(|| payload.downcast_ref::<String>().cloned())
                 .unwrap_or_else(|| "no message".to_string());
-            Err(PyValueError::new_err(format!(
-                "internal error: the fit's thread panicked: {why}"
-            )))
+            Err(internal(format!("the fit's thread panicked: {why}")))
         }
-        None => Err(PyValueError::new_err(
-            "internal error: the fit's thread ended without a result",
-        )),
+        None => Err(internal("the fit's thread ended without a result")),
     }
 }
 
@@ -86,7 +81,7 @@ fn spawn_and_poll<'scope, T: Send + 'scope>(
     cancel: &AtomicBool,
     done: &'scope Done<T>,
     work: impl FnOnce() -> T + Send + 'scope,
-) -> PyResult<()> {
+) -> Result<()> {
     scope.spawn(move |_| {
         let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(work));
         *done.0.lock().unwrap_or_else(|e| e.into_inner()) = Some(out);
@@ -116,7 +111,7 @@ fn spawn_and_poll<'scope, T: Send + 'scope>(
             cancel.store(true, Ordering::Relaxed);
             // The result of a cancelled fit is of no use; only its end is waited for.
             ended(None);
-            return Err(e);
+            return Err(e.into());
         }
     }
     Ok(())
@@ -194,13 +189,13 @@ fn fit_gpc(
     settings: PyRef<'_, FitSettings>,
     thetas: Option<PyReadonlyArray2<'_, f64>>,
     starts: Option<Vec<Option<Vec<f64>>>>,
-) -> PyResult<GpcModel> {
+) -> Result<GpcModel> {
     let py = x.py();
     let thetas: Option<Vec<Vec<f64>>> =
         thetas.map(|t| t.as_array().outer_iter().map(|r| r.to_vec()).collect());
-    let data = data_from(&x).map_err(gp_error)?;
+    let data = data_from(&x)?;
     let labels = class_indices(&labels)?;
-    let sources = sources_from(&sources).map_err(gp_error)?;
+    let sources = sources_from(&sources)?;
     let mut spec = settings.spec(data.d)?;
     let cancel = Arc::new(AtomicBool::new(false));
     spec.newton.cancel = Some(cancel.clone());
@@ -211,8 +206,7 @@ fn fit_gpc(
         (Some(t), _) => aptkt_gp::fit_at(&data, &labels, n_classes, &sources, &spec, t),
         (None, Some(s)) => aptkt_gp::fit_from(&data, &labels, n_classes, &sources, &spec, s),
         (None, None) => aptkt_gp::fit(&data, &labels, n_classes, &sources, &spec),
-    })?
-    .map_err(gp_error)?;
+    })??;
     Ok(GpcModel { model, n_threads })
 }
 
@@ -225,13 +219,12 @@ type PyKernelTask<'py> = (
     Vec<PySources<'py>>,
 );
 
-fn class_indices(labels: &PyReadonlyArray1<'_, i64>) -> PyResult<Vec<usize>> {
+fn class_indices(labels: &PyReadonlyArray1<'_, i64>) -> Result<Vec<usize>> {
     labels
         .as_array()
         .iter()
         .map(|&v| {
-            usize::try_from(v)
-                .map_err(|_| PyValueError::new_err(format!("negative label index {v}")))
+            usize::try_from(v).map_err(|_| invalid_input(format!("negative label index {v}")))
         })
         .collect()
 }
@@ -261,11 +254,11 @@ fn fit_gpc_shared(
     tasks: Vec<PyKernelTask<'_>>,
     target: usize,
     settings: PyRef<'_, FitSettings>,
-) -> PyResult<GpcModel> {
+) -> Result<GpcModel> {
     let mut owned = Vec::with_capacity(tasks.len());
     for (x, labels, n_classes, sources) in &tasks {
-        let data = data_from(x).map_err(gp_error)?;
-        let sources = sources_from(sources).map_err(gp_error)?;
+        let data = data_from(x)?;
+        let sources = sources_from(sources)?;
         owned.push((data, class_indices(labels)?, *n_classes, sources));
     }
     let d = owned.get(target).map_or(0, |t| t.0.d);
@@ -284,8 +277,7 @@ fn fit_gpc_shared(
             })
             .collect();
         aptkt_gp::fit_shared(&tasks, target, &spec)
-    })?
-    .map_err(gp_error)?;
+    })??;
     Ok(GpcModel { model, n_threads })
 }
 
@@ -296,12 +288,11 @@ impl GpcModel {
         py: Python<'py>,
         x: &PyReadonlyArray2<'py, f64>,
         predict: fn(&OneVsAll, &Data) -> GpResult<Vec<f64>>,
-    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let data = data_from(x).map_err(gp_error)?;
+    ) -> Result<Bound<'py, PyArray2<f64>>> {
+        let data = data_from(x)?;
         let probs = py
             .detach(|| run_in_pool(self.n_threads, || predict(&self.model, &data)))
-            .and_then(|r| r)
-            .map_err(gp_error)?;
+            .and_then(|r| r)?;
         matrix(py, probs, data.n, self.model.n_classes)
     }
 
@@ -318,7 +309,7 @@ impl GpcModel {
         &self,
         py: Python<'py>,
         x: PyReadonlyArray2<'py, f64>,
-    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    ) -> Result<Bound<'py, PyArray2<f64>>> {
         self.per_class(py, &x, OneVsAll::predict_proba)
     }
 
@@ -327,7 +318,7 @@ impl GpcModel {
         &self,
         py: Python<'py>,
         x: PyReadonlyArray2<'py, f64>,
-    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    ) -> Result<Bound<'py, PyArray2<f64>>> {
         self.per_class(py, &x, OneVsAll::predict_binary)
     }
 
@@ -336,12 +327,11 @@ impl GpcModel {
         &self,
         py: Python<'py>,
         x: PyReadonlyArray2<'py, f64>,
-    ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>)> {
-        let data = data_from(&x).map_err(gp_error)?;
+    ) -> Result<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>)> {
+        let data = data_from(&x)?;
         let (mean, var) = py
             .detach(|| run_in_pool(self.n_threads, || self.model.latent(&data)))
-            .and_then(|r| r)
-            .map_err(gp_error)?;
+            .and_then(|r| r)?;
         let k = self.model.classifiers.len();
         Ok((matrix(py, mean, data.n, k)?, matrix(py, var, data.n, k)?))
     }
@@ -356,7 +346,7 @@ impl GpcModel {
         theta: PyReadonlyArray2<'py, f64>,
         gradient: bool,
         include_prior: bool,
-    ) -> PyResult<(Bound<'py, PyArray1<f64>>, Option<Bound<'py, PyArray2<f64>>>)> {
+    ) -> Result<(Bound<'py, PyArray1<f64>>, Option<Bound<'py, PyArray2<f64>>>)> {
         let rows: Vec<Vec<f64>> = theta.as_array().outer_iter().map(|r| r.to_vec()).collect();
         let results = py
             .detach(|| {
@@ -365,8 +355,7 @@ impl GpcModel {
                         .log_marginal_likelihood(&rows, gradient, include_prior)
                 })
             })
-            .and_then(|r| r)
-            .map_err(gp_error)?;
+            .and_then(|r| r)?;
         let lml: Vec<f64> = results.iter().map(|(v, _)| *v).collect();
         let grad = if gradient {
             let p = self.model.layout.len();
@@ -383,7 +372,7 @@ impl GpcModel {
 
     /// Fitted theta, one row per classifier.
     #[getter]
-    fn theta<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    fn theta<'py>(&self, py: Python<'py>) -> Result<Bound<'py, PyArray2<f64>>> {
         let k = self.model.classifiers.len();
         let flat: Vec<f64> = self
             .model
@@ -464,22 +453,20 @@ fn kernel_matrix<'py>(
     theta: Vec<f64>,
     modalities: Vec<Vec<usize>>,
     source_sizes: Vec<usize>,
-) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    let data = data_from(&x).map_err(gp_error)?;
-    data.check_finite("X").map_err(gp_error)?;
+) -> Result<Bound<'py, PyArray2<f64>>> {
+    let data = data_from(&x)?;
+    data.check_finite("X")?;
     let n_source: usize = source_sizes.iter().sum();
     if n_source > data.n {
-        return Err(PyValueError::new_err(format!(
+        return Err(invalid_input(format!(
             "the source tasks' {n_source} rows exceed the {} rows of X",
             data.n
         )));
     }
     if source_sizes.contains(&0) {
-        return Err(PyValueError::new_err(
-            "every source task needs at least one row",
-        ));
+        return Err(invalid_input("every source task needs at least one row"));
     }
-    let mods = Modalities::new(modalities, data.d).map_err(gp_error)?;
+    let mods = Modalities::new(modalities, data.d)?;
     // The distances per modality, the kernel, and its copy handed to numpy.
     let n_big = data.n as u128;
     aptkt_gp::memory::check(
@@ -488,13 +475,12 @@ fn kernel_matrix<'py>(
         n_big * n_big * 8 * (mods.len() as u128 + 2),
         aptkt_gp::memory::available_bytes(),
         "; compute it on fewer rows",
-    )
-    .map_err(gp_error)?;
+    )?;
     let layout = Layout {
         n_modalities: mods.len(),
         n_lambdas: source_sizes.len(),
     };
-    let h = layout.decode(&theta).map_err(gp_error)?;
+    let h = layout.decode(&theta)?;
     let n = data.n;
     let k = py.detach(|| {
         let dist = PairDistances::new(

@@ -4,10 +4,9 @@
 //! (`aptkt.gp.DEFAULTS`), which passes every field.
 
 use aptkt_gp::{Free, HyperPrior, LatentMean, Modalities, ModelSpec, Predictive};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use crate::errors::gp_error;
+use crate::errors::{invalid_input, Result};
 use crate::settings::settings_class;
 
 settings_class! {
@@ -155,9 +154,9 @@ impl FitSettings {
 
 impl FitSettings {
     /// The core's model specification for data with `d` columns.
-    pub fn spec(&self, d: usize) -> PyResult<ModelSpec> {
+    pub fn spec(&self, d: usize) -> Result<ModelSpec> {
         let (start, search, laplace) = (&self.start, &self.search, &self.laplace);
-        let modalities = Modalities::new(start.modalities.clone(), d).map_err(gp_error)?;
+        let modalities = Modalities::new(start.modalities.clone(), d)?;
         let mut spec = ModelSpec::new(modalities);
         spec.signal_variance = start.signal_variance;
         spec.length_scales = start.length_scales.clone();
@@ -183,21 +182,21 @@ impl FitSettings {
     }
 }
 
-fn parse_predictive(name: &str) -> PyResult<Predictive> {
+fn parse_predictive(name: &str) -> Result<Predictive> {
     match name {
         "erf" => Ok(Predictive::ErfMixture),
         "quadrature" => Ok(Predictive::Quadrature),
-        other => Err(PyValueError::new_err(format!(
+        other => Err(invalid_input(format!(
             "approximation must be 'erf' or 'quadrature', got {other:?}"
         ))),
     }
 }
 
-fn parse_latent_mean(name: &str) -> PyResult<LatentMean> {
+fn parse_latent_mean(name: &str) -> Result<LatentMean> {
     match name {
         "zero" => Ok(LatentMean::Zero),
         "base-rate" => Ok(LatentMean::BaseRate),
-        other => Err(PyValueError::new_err(format!(
+        other => Err(invalid_input(format!(
             "latent_mean must be 'zero' or 'base-rate', got {other:?}"
         ))),
     }

@@ -10,7 +10,6 @@ use aptkt_sim::readout::{ObjectSystem, Physics, ThermalSystems, TrialState};
 use aptkt_sim::sensors::NORMALS;
 use aptkt_sim::slip::SlipCell;
 use numpy::{PyReadonlyArray1, PyReadonlyArray2};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use super::control::{ForcePhase, LeanQueue, TickOutcome};
@@ -18,7 +17,8 @@ use super::settings::{
     ContactLaw, ForceControl, ForceSensors, PatchCells, Readout, Surface, SurfaceShape,
 };
 use super::state::{FramesOut, MechChunk, PhysicsState, Segments, TraceOut};
-use super::{col, mat, sim_err, vec1};
+use super::{col, mat, vec1};
+use crate::errors::{internal, invalid_input, Result};
 
 /// The thermal solution operators of one object (`ThermalNetwork`), by (contact step, speed
 /// step), shared by the object's trials in this process: each is made once (on the Python
@@ -32,9 +32,9 @@ pub struct SimThermal {
 #[pymethods]
 impl SimThermal {
     #[new]
-    fn new(nodes: usize) -> PyResult<Self> {
+    fn new(nodes: usize) -> Result<Self> {
         if nodes < 2 {
-            return Err(PyValueError::new_err("a thermal network has >= 2 nodes"));
+            return Err(invalid_input("a thermal network has >= 2 nodes"));
         }
         Ok(Self {
             nodes,
@@ -42,14 +42,14 @@ impl SimThermal {
         })
     }
 
-    fn __len__(&self) -> PyResult<usize> {
+    fn __len__(&self) -> Result<usize> {
         Ok(lock(&self.systems)?.len())
     }
 }
 
-fn lock<T>(m: &Mutex<T>) -> PyResult<MutexGuard<'_, T>> {
+fn lock<T>(m: &Mutex<T>) -> Result<MutexGuard<'_, T>> {
     m.lock()
-        .map_err(|_| PyValueError::new_err("thermal systems: poisoned lock"))
+        .map_err(|_| internal("thermal systems: poisoned lock"))
 }
 
 /// One (contact, speed) configuration's operator of an object's thermal network: eigenvectors
@@ -129,12 +129,12 @@ impl SimContact {
         &self.physics.mech
     }
 
-    fn lock(&self) -> PyResult<MutexGuard<'_, ThermalSystems>> {
+    fn lock(&self) -> Result<MutexGuard<'_, ThermalSystems>> {
         lock(&self.thermal)
     }
 
     /// The thermal configurations of `chunk`, fetching the systems not met yet.
-    fn thermal_keys(&self, py: Python<'_>, chunk: &Chunk) -> PyResult<Vec<(i64, i64)>> {
+    fn thermal_keys(&self, py: Python<'_>, chunk: &Chunk) -> Result<Vec<(i64, i64)>> {
         let keys = self.physics.thermal_keys(chunk);
         let missing = self.lock()?.missing(&keys);
         let shared = self.shared.get();
@@ -145,7 +145,7 @@ impl SimContact {
                 None => {
                     let made = self.make.bind(py).call1(key)?;
                     let o = made.cast::<ThermalSystem>()?.get().0.clone();
-                    o.check(shared.nodes).map_err(sim_err)?;
+                    o.check(shared.nodes)?;
                     let o = Arc::new(o);
                     lock(&shared.systems)?.insert(key, o.clone());
                     o
@@ -153,8 +153,7 @@ impl SimContact {
             };
             let [heater, ambient, object_temperature] = self.sources;
             self.lock()?
-                .insert(key, object.for_trial(heater, ambient, object_temperature))
-                .map_err(sim_err)?;
+                .insert(key, object.for_trial(heater, ambient, object_temperature))?;
         }
         Ok(keys)
     }
@@ -166,12 +165,11 @@ impl SimContact {
         st: &mut TrialState,
         chunk: &Chunk,
         detail: bool,
-    ) -> PyResult<(FramesOut<'py>, TraceOut<'py>)> {
+    ) -> Result<(FramesOut<'py>, TraceOut<'py>)> {
         let keys = self.thermal_keys(py, chunk)?;
         let thermal = self.lock()?;
-        let (frames, trace) = py
-            .detach(|| self.physics.finish(&thermal, st, chunk, &keys, detail))
-            .map_err(sim_err)?;
+        let (frames, trace) =
+            py.detach(|| self.physics.finish(&thermal, st, chunk, &keys, detail))?;
         drop(thermal);
         Ok((FramesOut::new(py, frames)?, TraceOut::new(py, trace)))
     }
@@ -188,15 +186,14 @@ impl SimContact {
         surface: PyRef<'_, Surface>,
         readout: PyRef<'_, Readout>,
         thermal: PyRef<'_, ThermalContact>,
-    ) -> PyResult<Self> {
+    ) -> Result<Self> {
         let mech = Mechanics::new(
             cells.0.clone(),
             shape.0.clone(),
             law.law.clone(),
             law.relaxation.clone(),
             law.sensor_area,
-        )
-        .map_err(sim_err)?;
+        )?;
         let physics = Physics::new(
             mech,
             sensors.0.clone(),
@@ -205,11 +202,10 @@ impl SimContact {
             surface.slip,
             surface.slip_keys.clone(),
             readout.0.clone(),
-        )
-        .map_err(sim_err)?;
-        let own = ThermalSystems::new(thermal.sqrt_c.clone()).map_err(sim_err)?;
+        )?;
+        let own = ThermalSystems::new(thermal.sqrt_c.clone())?;
         if own.nodes() != thermal.network.get().nodes {
-            return Err(PyValueError::new_err(
+            return Err(invalid_input(
                 "sqrt_c must have one entry per node of the thermal network",
             ));
         }
@@ -230,7 +226,7 @@ impl SimContact {
         next_k: Vec<i64>,
         thermal: Vec<f64>,
         last_xy: Vec<[f64; 2]>,
-    ) -> PyResult<PhysicsState> {
+    ) -> Result<PhysicsState> {
         let n = self.mech().cells.len();
         let terms = self.mech().relaxation.weights.len();
         let st = TrialState {
@@ -254,9 +250,7 @@ impl SimContact {
                 n
             ],
         };
-        self.physics
-            .check_state(&st, thermal.len())
-            .map_err(sim_err)?;
+        self.physics.check_state(&st, thermal.len())?;
         Ok(PhysicsState(st))
     }
 
@@ -267,10 +261,10 @@ impl SimContact {
         state: &Bound<'_, PhysicsState>,
         segments: PyRef<'_, Segments>,
         t_end_ns: i64,
-    ) -> PyResult<MechChunk> {
+    ) -> Result<MechChunk> {
         let mut st = state.borrow_mut();
         let mech = &mut st.0.mech;
-        self.mech().check_state(mech).map_err(sim_err)?;
+        self.mech().check_state(mech)?;
         let segs = &segments.0;
         let chunk = state.py().detach(|| {
             let mut c = Chunk::default();
@@ -288,7 +282,7 @@ impl SimContact {
         state: &Bound<'py, PhysicsState>,
         chunk: PyRef<'py, MechChunk>,
         detail: bool,
-    ) -> PyResult<(FramesOut<'py>, TraceOut<'py>)> {
+    ) -> Result<(FramesOut<'py>, TraceOut<'py>)> {
         let mut st = state.borrow_mut();
         self.readings(state.py(), &mut st.0, &chunk.0, detail)
     }
@@ -300,11 +294,11 @@ impl SimContact {
         segments: PyRef<'py, Segments>,
         t_end_ns: i64,
         detail: bool,
-    ) -> PyResult<(FramesOut<'py>, TraceOut<'py>)> {
+    ) -> Result<(FramesOut<'py>, TraceOut<'py>)> {
         let py = state.py();
         let mut st = state.borrow_mut();
         let trial = &mut st.0;
-        self.mech().check_state(&trial.mech).map_err(sim_err)?;
+        self.mech().check_state(&trial.mech)?;
         let segs = &segments.0;
         let chunk = py.detach(|| {
             let mut c = Chunk::default();
@@ -320,18 +314,18 @@ impl SimContact {
         ks: PyReadonlyArray1<'py, i64>,
         cells: PyReadonlyArray1<'py, i64>,
         t_ns: PyReadonlyArray1<'py, i64>,
-    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    ) -> Result<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
         let py = ks.py();
         let sensors = &self.physics.sensors;
         let (ks, cells, t_ns) = (vec1(&ks), vec1(&cells), vec1(&t_ns));
         if cells.len() != ks.len() || t_ns.len() != ks.len() {
-            return Err(PyValueError::new_err(
+            return Err(invalid_input(
                 "ks, cells and t_ns must have the same length",
             ));
         }
         let n = sensors.n_cells as i64;
         if cells.iter().any(|&c| c < 0 || c >= n) || ks.iter().any(|&k| k < 0) {
-            return Err(PyValueError::new_err("cell or sample index out of range"));
+            return Err(invalid_input("cell or sample index out of range"));
         }
         let (z, arrival): (Vec<[f64; NORMALS]>, Vec<i64>) = py.detach(|| {
             (0..ks.len())
@@ -353,15 +347,15 @@ impl SimContact {
         queue: &Bound<'_, LeanQueue>,
         control: PyRef<'_, ForceControl>,
         phase: &Bound<'_, ForcePhase>,
-    ) -> PyResult<TickOutcome> {
+    ) -> Result<TickOutcome> {
         let py = state.py();
         let ctl = control.0;
         if ctl.tick_ns <= 0 {
-            return Err(PyValueError::new_err("tick_ns must be > 0"));
+            return Err(invalid_input("tick_ns must be > 0"));
         }
         let (mut st, mut q, mut ph) = (state.borrow_mut(), queue.borrow_mut(), phase.borrow_mut());
         let mech = &mut st.0.mech;
-        self.mech().check_state(mech).map_err(sim_err)?;
+        self.mech().check_state(mech)?;
         q.check(self.mech().cells.len())?;
         let mut run = TickRun {
             phase: ph.0,

@@ -5,11 +5,11 @@
 use aptkt_sim::control::{self, Phase, Status};
 use aptkt_sim::mechanics::{Chunk, Segment};
 use numpy::{PyReadonlyArray1, PyReadonlyArray2};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use super::state::{MechChunk, Segments};
 use super::{mat, rows, vec1};
+use crate::errors::{invalid_input, Result};
 
 /// What a run of force-control ticks does, and how far it got (the ticks carry it on after
 /// a flush): settle on the target force, a ramp along a direction, or a guarded move.
@@ -75,14 +75,14 @@ pub struct LeanQueue {
 
 impl LeanQueue {
     /// The calibration and readings match a patch of `cells` cells, the queue its cells.
-    pub fn check(&self, cells: usize) -> PyResult<()> {
+    pub fn check(&self, cells: usize) -> Result<()> {
         let q = &self.queue;
         if q.latest.len() != cells
             || q.cal_gain.len() != cells
             || q.cal_offset.len() != cells
             || q.cell.iter().any(|&c| c < 0 || c as usize >= cells)
         {
-            return Err(PyValueError::new_err(
+            return Err(invalid_input(
                 "force queue or calibration does not match the patch",
             ));
         }
@@ -97,7 +97,7 @@ impl LeanQueue {
         cal_gain: PyReadonlyArray2<'_, f64>,
         cal_offset: PyReadonlyArray2<'_, f64>,
         latest: PyReadonlyArray2<'_, f64>,
-    ) -> PyResult<Self> {
+    ) -> Result<Self> {
         let queue = control::LeanQueue {
             cal_gain: rows::<3>(&cal_gain, "cal_gain")?,
             cal_offset: rows::<3>(&cal_offset, "cal_offset")?,
@@ -106,7 +106,7 @@ impl LeanQueue {
         };
         let cells = queue.latest.len();
         if queue.cal_gain.len() != cells || queue.cal_offset.len() != cells {
-            return Err(PyValueError::new_err(
+            return Err(invalid_input(
                 "calibration and readings need one row per cell",
             ));
         }
@@ -120,7 +120,7 @@ impl LeanQueue {
         t_ns: PyReadonlyArray1<'_, i64>,
         cells: PyReadonlyArray1<'_, i64>,
         force_norm: PyReadonlyArray2<'_, f64>,
-    ) -> PyResult<()> {
+    ) -> Result<()> {
         let (t, c, f) = (
             vec1(&t_ns),
             vec1(&cells),
@@ -128,7 +128,7 @@ impl LeanQueue {
         );
         let n = self.queue.latest.len();
         if c.len() != t.len() || f.len() != t.len() || c.iter().any(|&x| x < 0 || x as usize >= n) {
-            return Err(PyValueError::new_err(
+            return Err(invalid_input(
                 "packets: one time, cell of the patch and force row each",
             ));
         }
@@ -150,7 +150,7 @@ impl LeanQueue {
 
     /// Each cell's newest calibrated reading (C, 3) N.
     #[getter]
-    fn latest<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+    fn latest<'py>(&self, py: Python<'py>) -> Result<Bound<'py, PyAny>> {
         mat(py, self.queue.latest.clone())
     }
 
@@ -178,7 +178,7 @@ impl TickOutcome {
         error: f64,
         segment: Segment,
         chunk: Chunk,
-    ) -> PyResult<Self> {
+    ) -> Result<Self> {
         Ok(Self {
             status: match status {
                 Status::Done => "done",

@@ -11,11 +11,11 @@ use numpy::{
     PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadwriteArray1, PyReadwriteArray2,
     PyUntypedArrayMethods,
 };
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use super::settings::{SlipParams, TextureField, TextureResponse};
-use super::{col, mat, rows, sim_err, vec1};
+use super::{col, mat, rows, vec1};
+use crate::errors::{invalid_input, Result};
 
 /// The exact solution of the cells' thermal networks (`aptkt_sim::thermal::heat`) with the
 /// configurations' operators `u` (k, N, N), `mu` and `t_ss` (k, N), and C^1/2 (N).
@@ -33,12 +33,12 @@ impl HeatKernel {
         mu: PyReadonlyArray2<'_, f64>,
         t_ss: PyReadonlyArray2<'_, f64>,
         sqrt_c: PyReadonlyArray1<'_, f64>,
-    ) -> PyResult<Self> {
+    ) -> Result<Self> {
         let (u, mu, t_ss) = (u.as_array(), mu.as_array(), t_ss.as_array());
         let k = u.shape()[0];
         let n = sqrt_c.len();
         if u.shape() != [k, n, n] || mu.shape() != [k, n] || t_ss.shape() != [k, n] {
-            return Err(PyValueError::new_err(
+            return Err(invalid_input(
                 "systems must be u (k, N, N), mu and t_ss (k, N)",
             ));
         }
@@ -65,17 +65,15 @@ impl HeatKernel {
         config: PyReadonlyArray1<'py, i64>,
         mut state: PyReadwriteArray2<'py, f64>,
         mut state_t: PyReadwriteArray1<'py, f64>,
-    ) -> PyResult<Bound<'py, PyAny>> {
+    ) -> Result<Bound<'py, PyAny>> {
         let py = cells.py();
         let config: Vec<usize> = config
             .as_array()
             .iter()
-            .map(|&c| {
-                usize::try_from(c).map_err(|_| PyValueError::new_err("negative configuration"))
-            })
-            .collect::<PyResult<_>>()?;
+            .map(|&c| usize::try_from(c).map_err(|_| invalid_input("negative configuration")))
+            .collect::<Result<_>>()?;
         if state.as_array().ncols() != self.sqrt_c.len() {
-            return Err(PyValueError::new_err("state must be (cells, N)"));
+            return Err(invalid_input("state must be (cells, N)"));
         }
         let (cells, t_s) = (vec1(&cells), vec1(&t_s));
         let mut st: Vec<f64> = state.as_array().iter().copied().collect();
@@ -85,9 +83,7 @@ impl HeatKernel {
             t_s: &t_s,
             config: &config,
         };
-        let out = py
-            .detach(|| heat(&self.systems, &self.sqrt_c, &samples, &mut st, &mut stt))
-            .map_err(sim_err)?;
+        let out = py.detach(|| heat(&self.systems, &self.sqrt_c, &samples, &mut st, &mut stt))?;
         state
             .as_array_mut()
             .iter_mut()
@@ -111,17 +107,17 @@ fn sim_texture<'py>(
     u: PyReadonlyArray2<'py, f64>,
     w: PyReadonlyArray2<'py, f64>,
     pressure: PyReadonlyArray1<'py, f64>,
-) -> PyResult<Bound<'py, PyAny>> {
+) -> Result<Bound<'py, PyAny>> {
     let py = u.py();
     let tex = &texture.0;
     if tex.amplitude.len() != tex.kvec.len() || tex.phase.len() != tex.kvec.len() {
-        return Err(PyValueError::new_err(
+        return Err(invalid_input(
             "kvec, amplitude and phase must have one row per wave",
         ));
     }
     let (u, w, p) = (rows::<2>(&u, "u")?, rows::<2>(&w, "w")?, vec1(&pressure));
     if w.len() != u.len() || p.len() != u.len() {
-        return Err(PyValueError::new_err(
+        return Err(invalid_input(
             "u, w and pressure must have one row per sample",
         ));
     }
@@ -165,11 +161,11 @@ fn sim_slip<'py>(
     path: PyReadonlyArray1<'py, f64>,
     force: PyReadonlyArray1<'py, f64>,
     speed: PyReadonlyArray1<'py, f64>,
-) -> PyResult<Bound<'py, PyAny>> {
+) -> Result<Bound<'py, PyAny>> {
     let py = cell.py();
     let (t, path, force, speed) = (vec1(&t), vec1(&path), vec1(&force), vec1(&speed));
     if path.len() != t.len() || force.len() != t.len() || speed.len() != t.len() {
-        return Err(PyValueError::new_err(
+        return Err(invalid_input(
             "t, path, force and speed must have the same length",
         ));
     }

@@ -11,11 +11,11 @@
 //!
 //! Arrays are converted once per call; the GIL is released around the loops.
 
-use aptkt_sim::SimError;
 use numpy::ndarray::{Array1, Array2};
 use numpy::{Element, IntoPyArray, PyReadonlyArray1, PyReadonlyArray2};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+
+use crate::errors::{internal, invalid_input, Result};
 
 mod contact;
 mod control;
@@ -23,17 +23,11 @@ mod kernels;
 mod settings;
 mod state;
 
-fn sim_err(e: SimError) -> PyErr {
-    PyValueError::new_err(e.to_string())
-}
-
 /// The rows of an (n, W) array.
-fn rows<const W: usize>(a: &PyReadonlyArray2<'_, f64>, name: &str) -> PyResult<Vec<[f64; W]>> {
+fn rows<const W: usize>(a: &PyReadonlyArray2<'_, f64>, name: &str) -> Result<Vec<[f64; W]>> {
     let v = a.as_array();
     if v.ncols() != W {
-        return Err(PyValueError::new_err(format!(
-            "{name} must have {W} columns"
-        )));
+        return Err(invalid_input(format!("{name} must have {W} columns")));
     }
     Ok(v.rows()
         .into_iter()
@@ -51,11 +45,10 @@ fn col<'py, T: Element>(py: Python<'py>, v: Vec<T>) -> Bound<'py, PyAny> {
 }
 
 /// A numpy matrix (n, W) of the rows `v`.
-fn mat<'py, const W: usize>(py: Python<'py>, v: Vec<[f64; W]>) -> PyResult<Bound<'py, PyAny>> {
+fn mat<'py, const W: usize>(py: Python<'py>, v: Vec<[f64; W]>) -> Result<Bound<'py, PyAny>> {
     let n = v.len();
     let flat: Vec<f64> = v.into_iter().flatten().collect();
-    let a =
-        Array2::from_shape_vec((n, W), flat).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let a = Array2::from_shape_vec((n, W), flat).map_err(|e| internal(e.to_string()))?;
     Ok(a.into_pyarray(py).into_any())
 }
 

@@ -7,7 +7,7 @@ use aptkt_sim::sensors::Sensors;
 use aptkt_sim::{control, mechanics, readout, slip, texture};
 use pyo3::prelude::*;
 
-use super::sim_err;
+use crate::errors::Result;
 use crate::settings::settings_class;
 
 settings_class! {
@@ -273,9 +273,9 @@ impl ContactLaw {
         relax_weights: Vec<f64>,
         relax_times: Vec<f64>,
         sensor_area: f64,
-    ) -> PyResult<Self> {
+    ) -> Result<Self> {
         Ok(Self {
-            law: Law::new(delta, sigma, skin_stiffness).map_err(sim_err)?,
+            law: Law::new(delta, sigma, skin_stiffness)?,
             relaxation: Relaxation {
                 weights: relax_weights,
                 times: relax_times,
@@ -300,10 +300,10 @@ impl ForceSensors {
         force_noise: f64,
         latency_ns: i64,
         jitter_s: f64,
-    ) -> PyResult<Self> {
+    ) -> Result<Self> {
         Sensors::new(noise_key, gain, offset, force_noise, latency_ns, jitter_s)
             .map(Self)
-            .map_err(sim_err)
+            .map_err(Into::into)
     }
 }
 

@@ -5,10 +5,10 @@
 use aptkt_sim::mechanics::{Chunk, Segment};
 use aptkt_sim::readout::{Frames, Trace, TrialState};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use super::{col, mat, rows, vec1};
+use crate::errors::{invalid_input, Result};
 
 /// The whole state of one trial's physics: what the mechanics, the heat, the stick-slip and
 /// the readings carry from one step to the next. Made by `SimContact.rest_state`, advanced in
@@ -43,7 +43,7 @@ impl PhysicsState {
 
     /// (terms, C, 3) relaxing parts of the stress
     #[getter]
-    fn relax_h<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+    fn relax_h<'py>(&self, py: Python<'py>) -> Result<Bound<'py, PyAny>> {
         let c = self.cells();
         let terms = self.0.mech.relax_h.len().checked_div(3 * c).unwrap_or(0);
         Ok(PyArray1::from_slice(py, &self.0.mech.relax_h)
@@ -53,7 +53,7 @@ impl PhysicsState {
 
     /// (C, 3) elastic stress at each cell's previous sample
     #[getter]
-    fn relax_last<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+    fn relax_last<'py>(&self, py: Python<'py>) -> Result<Bound<'py, PyAny>> {
         matrix(py, &self.0.mech.relax_last, 3)
     }
 
@@ -65,7 +65,7 @@ impl PhysicsState {
 
     /// (C, N) temperatures of each cell's thermal network
     #[getter]
-    fn thermal<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+    fn thermal<'py>(&self, py: Python<'py>) -> Result<Bound<'py, PyAny>> {
         let nodes = self.0.thermal.len().checked_div(self.cells()).unwrap_or(0);
         matrix(py, &self.0.thermal, nodes)
     }
@@ -78,7 +78,7 @@ impl PhysicsState {
 
     /// (C, 2) cell centre at its last sample (for sliding distances)
     #[getter]
-    fn last_xy<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+    fn last_xy<'py>(&self, py: Python<'py>) -> Result<Bound<'py, PyAny>> {
         mat(py, self.0.last_xy.clone())
     }
 
@@ -108,7 +108,7 @@ impl PhysicsState {
 }
 
 /// A (len / width, width) copy of a flat row-major array.
-fn matrix<'py>(py: Python<'py>, v: &[f64], width: usize) -> PyResult<Bound<'py, PyAny>> {
+fn matrix<'py>(py: Python<'py>, v: &[f64], width: usize) -> Result<Bound<'py, PyAny>> {
     let rows = v.len().checked_div(width).unwrap_or(0);
     Ok(PyArray1::from_slice(py, v)
         .reshape([rows, width])?
@@ -164,25 +164,25 @@ impl MechChunk {
 
     /// (m, 3) TCP position
     #[getter]
-    fn pos<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+    fn pos<'py>(&self, py: Python<'py>) -> Result<Bound<'py, PyAny>> {
         mat(py, self.0.pos.clone())
     }
 
     /// (m, 3) TCP velocity
     #[getter]
-    fn vel<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+    fn vel<'py>(&self, py: Python<'py>) -> Result<Bound<'py, PyAny>> {
         mat(py, self.0.vel.clone())
     }
 
     /// (m, 3) TCP acceleration
     #[getter]
-    fn acc<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+    fn acc<'py>(&self, py: Python<'py>) -> Result<Bound<'py, PyAny>> {
         mat(py, self.0.acc.clone())
     }
 
     /// (m, 3) Pa at the force sensors
     #[getter]
-    fn sigma<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+    fn sigma<'py>(&self, py: Python<'py>) -> Result<Bound<'py, PyAny>> {
         mat(py, self.0.sigma.clone())
     }
 }
@@ -200,7 +200,7 @@ impl Segments {
         p0: PyReadonlyArray2<'_, f64>,
         v0: PyReadonlyArray2<'_, f64>,
         a: PyReadonlyArray2<'_, f64>,
-    ) -> PyResult<Self> {
+    ) -> Result<Self> {
         let t = vec1(&t0);
         let (p, v, acc) = (
             rows::<3>(&p0, "p0")?,
@@ -208,7 +208,7 @@ impl Segments {
             rows::<3>(&a, "a")?,
         );
         if t.is_empty() || p.len() != t.len() || v.len() != t.len() || acc.len() != t.len() {
-            return Err(PyValueError::new_err(
+            return Err(invalid_input(
                 "trajectory: one row per segment, at least one",
             ));
         }
@@ -234,17 +234,17 @@ impl Segments {
     }
 
     #[getter]
-    fn p0<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+    fn p0<'py>(&self, py: Python<'py>) -> Result<Bound<'py, PyAny>> {
         mat(py, self.0.iter().map(|s| s.p0).collect())
     }
 
     #[getter]
-    fn v0<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+    fn v0<'py>(&self, py: Python<'py>) -> Result<Bound<'py, PyAny>> {
         mat(py, self.0.iter().map(|s| s.v0).collect())
     }
 
     #[getter]
-    fn a<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+    fn a<'py>(&self, py: Python<'py>) -> Result<Bound<'py, PyAny>> {
         mat(py, self.0.iter().map(|s| s.a).collect())
     }
 }
@@ -264,7 +264,7 @@ pub struct FramesOut<'py> {
 }
 
 impl<'py> FramesOut<'py> {
-    pub fn new(py: Python<'py>, f: Frames) -> PyResult<Self> {
+    pub fn new(py: Python<'py>, f: Frames) -> Result<Self> {
         Ok(Self {
             cell_index: col(py, f.cell_index),
             cell_id: col(py, f.cell_id),
