@@ -1,11 +1,22 @@
-"""HDF5 below h5py (aptkt.data.hdf5): the superblock checksum and the writer mark."""
+"""HDF5 below h5py (aptkt.data.hdf5): the superblock checksum, the writer mark and the metadata
+read attempts."""
 
 from __future__ import annotations
+
+import ctypes
 
 import h5py
 import pytest
 
-from aptkt.data.hdf5 import copy_without_writer_mark, cut_short, lookup3, writer_mark
+from aptkt.data.hdf5 import (
+    _hdf5_candidates,
+    _hdf5_library,
+    copy_without_writer_mark,
+    cut_short,
+    lookup3,
+    open_swmr_read,
+    writer_mark,
+)
 
 
 @pytest.mark.parametrize(
@@ -48,3 +59,34 @@ def test_a_copy_without_the_writer_mark_opens(tmp_path):
     with h5py.File(copy, "r") as g:
         assert list(g["x"][...]) == [1, 2, 3]
     f.close()
+
+
+# -- the metadata read attempts, set in the HDF5 library h5py runs on --------------------------
+
+
+def _attempts(f: h5py.File) -> int:
+    lib = _hdf5_library()
+    get = lib.H5Pget_metadata_read_attempts
+    get.argtypes = [ctypes.c_int64, ctypes.POINTER(ctypes.c_uint)]
+    fapl, n = f.id.get_access_plist(), ctypes.c_uint()
+    assert get(fapl.id, ctypes.byref(n)) >= 0
+    return n.value
+
+
+def test_swmr_reads_get_few_metadata_read_attempts(tmp_path):
+    """The HDF5 library h5py runs on is found (a renamed library must fail here, not silently
+    leave HDF5's 100 attempts, with which one read of a damaged block never returns)."""
+    path = tmp_path / "f.h5"
+    with h5py.File(path, "w", libver="latest") as f:
+        f["x"] = [1, 2, 3]
+    assert _hdf5_library() is not None
+    with open_swmr_read(path) as f:
+        assert _attempts(f) == 12
+    with h5py.File(path, "r", swmr=True) as f:
+        assert _attempts(f) == 100  # HDF5's default for SWMR reads: what the setting replaces
+
+
+def test_the_library_is_found_whatever_its_file_is_called():
+    # The first place looked in is h5py's own extension module, not a file name.
+    lib = ctypes.CDLL(str(_hdf5_candidates()[0]))
+    assert lib.H5Pset_metadata_read_attempts is not None

@@ -68,20 +68,7 @@ _SWMR_READ_ATTEMPTS = 12
 @functools.cache
 def _hdf5_library() -> ctypes.CDLL | None:
     """The HDF5 library h5py runs on (for the one setting h5py does not expose)."""
-    candidates = sorted((Path(h5py.__file__).parent.parent / "h5py.libs").glob("libhdf5-*"))
-    if not candidates:
-        try:
-            with open("/proc/self/maps") as fh:
-                candidates = sorted(
-                    {
-                        Path(line.split()[-1])
-                        for line in fh
-                        if "/libhdf5." in line or "/libhdf5-" in line
-                    }
-                )
-        except OSError:
-            return None
-    for lib in candidates:
+    for lib in _hdf5_candidates():
         try:
             handle = ctypes.CDLL(str(lib))
             handle.H5Pset_metadata_read_attempts.argtypes = [ctypes.c_int64, ctypes.c_uint]
@@ -89,6 +76,25 @@ def _hdf5_library() -> ctypes.CDLL | None:
         except (OSError, AttributeError):
             continue
     return None
+
+
+def _hdf5_candidates() -> list[Path]:
+    """Where to look up HDF5's functions: first h5py's own extension module, whose symbol
+    lookup (dlsym through its handle) reaches the HDF5 library it was linked with, whatever
+    that library's file is called (``h5py.libs/libhdf5-<hash>.so.<version>`` in a Linux wheel);
+    then the bundled libraries by name, and the libraries loaded in this process."""
+    candidates = [Path(h5py.h5p.__file__)]
+    bundled = sorted((Path(h5py.__file__).parent.parent / "h5py.libs").glob("libhdf5-*"))
+    if bundled:
+        return candidates + bundled
+    try:
+        with open("/proc/self/maps") as fh:
+            loaded = {
+                Path(line.split()[-1]) for line in fh if "/libhdf5." in line or "/libhdf5-" in line
+            }
+    except OSError:
+        loaded = set()
+    return candidates + sorted(loaded)
 
 
 def open_swmr_read(path: Path) -> h5py.File:
