@@ -4,6 +4,35 @@ Retries while another process holds a file's lock for a moment; SWMR reads with 
 retries (a setting h5py does not expose, set through ctypes); and the superblock's writer mark
 — HDF5's "open for writing" flags, their lookup3 checksum, and whether a file was cut short —
 so that a file whose writer died outside SWMR mode can be read through a private copy.
+
+Why not h5py's own options: measured with h5py 3.16.0 on its bundled HDF5 2.0.0 (files as the
+store writes them, writers ended by ``os._exit`` or SIGKILL), and read in HDF5's source.
+
+- *Metadata read attempts.* h5py has no way to set them: no ``PropFAID`` method, no
+  ``h5py.File`` keyword (none in h5py's development tree either), though the library exports
+  ``H5Pset_metadata_read_attempts``. A SWMR reader retries a metadata block whose checksum fails
+  up to that many times, sleeping 1 ns, then twice as long each time (``H5C__load_entry``,
+  src/H5Centry.c): HDF5's SWMR default of 100 attempts sleeps 2**99 ns in all, so one read of
+  a damaged block never returns (measured: none returned within 120 s; 30 attempts: 1.1 s;
+  12 attempts: under 10 ms). SWMR reading itself cannot be dropped: it reads files a live or
+  dead SWMR writer holds, and files cut short (a non-SWMR open refuses those: "truncated
+  file"). So the setting stays, set through the library h5py runs on, found through h5py's
+  own extension module whatever that library's file is named (:func:`_hdf5_library`; a test
+  fails if it is not found, or if h5py starts to expose the setting).
+- *The writer mark.* HDF5 checks a file's consistency flags as it opens it, for a version 3
+  superblock only (``H5F_open``, src/H5Fint.c), and whatever the file locking: a file whose
+  writer died outside SWMR mode (flags 0x01) is refused by ``h5py.File(path, "r")`` ("already
+  open for write"), with ``swmr=True`` ("not already open for SWMR writing"), with
+  ``locking=False`` or ``"best-effort"``, with ``HDF5_USE_FILE_LOCKING=FALSE``, and with
+  ``libver=("earliest", "v108")``; a copy opened ``"r+"`` is refused too. A writer killed in
+  SWMR mode leaves 0x05, which ``swmr=True`` reads as it is (no copy needed then).
+- *libver bounds.* ``"earliest"`` gives superblock 0 and ``"v108"`` superblock 2, whose flags
+  HDF5 does not check on open; ``"v110"`` up to ``"latest"`` give superblock 3. But SWMR
+  writing needs superblock 3 ("superblock version for SWMR is less than 3", src/H5Fsuper.c;
+  measured: ``swmr_mode = True`` fails on superblocks 0 and 2), and SWMR is what keeps every
+  completed recording readable after a kill (:mod:`aptkt.data.store`). Clearing the flags is
+  what HDF5's ``h5clear`` does, through a private property h5py does not reach: hence the
+  rewrite of the superblock, on a private copy, never on the file.
 """
 
 from __future__ import annotations
@@ -68,20 +97,7 @@ _SWMR_READ_ATTEMPTS = 12
 @functools.cache
 def _hdf5_library() -> ctypes.CDLL | None:
     """The HDF5 library h5py runs on (for the one setting h5py does not expose)."""
-    candidates = sorted((Path(h5py.__file__).parent.parent / "h5py.libs").glob("libhdf5-*"))
-    if not candidates:
-        try:
-            with open("/proc/self/maps") as fh:
-                candidates = sorted(
-                    {
-                        Path(line.split()[-1])
-                        for line in fh
-                        if "/libhdf5." in line or "/libhdf5-" in line
-                    }
-                )
-        except OSError:
-            return None
-    for lib in candidates:
+    for lib in _hdf5_candidates():
         try:
             handle = ctypes.CDLL(str(lib))
             handle.H5Pset_metadata_read_attempts.argtypes = [ctypes.c_int64, ctypes.c_uint]
@@ -89,6 +105,25 @@ def _hdf5_library() -> ctypes.CDLL | None:
         except (OSError, AttributeError):
             continue
     return None
+
+
+def _hdf5_candidates() -> list[Path]:
+    """Where to look up HDF5's functions: first h5py's own extension module, whose symbol
+    lookup (dlsym through its handle) reaches the HDF5 library it was linked with, whatever
+    that library's file is called (``h5py.libs/libhdf5-<hash>.so.<version>`` in a Linux wheel);
+    then the bundled libraries by name, and the libraries loaded in this process."""
+    candidates = [Path(h5py.h5p.__file__)]
+    bundled = sorted((Path(h5py.__file__).parent.parent / "h5py.libs").glob("libhdf5-*"))
+    if bundled:
+        return candidates + bundled
+    try:
+        with open("/proc/self/maps") as fh:
+            loaded = {
+                Path(line.split()[-1]) for line in fh if "/libhdf5." in line or "/libhdf5-" in line
+            }
+    except OSError:
+        loaded = set()
+    return candidates + sorted(loaded)
 
 
 def open_swmr_read(path: Path) -> h5py.File:
