@@ -277,3 +277,19 @@ def test_a_name_near_the_limit_takes_the_side_files_suffixes(tmp_path):
     os.waitpid(pid, 0)
     with DatasetReader(path) as rd:
         assert rd.writer_died and len(rd) == 0
+
+
+@pytest.mark.parametrize("keep", [10_000, 20_000, 40_000])
+def test_a_file_cut_to_its_first_bytes_is_one_line(data, tmp_path, capsys, keep):
+    """Only the first tens of kB left: HDF5 finds metadata whose checksum never matches and
+    raises a RuntimeError after its read attempts, which ended `dataset info` in a traceback."""
+    plain = tmp_path / "plain.h5"  # no features: the index's chunks lie in the first bytes
+    plan = GenerationPlan(OBJECTS[:3], (PAPER_ACTIONS["P1"],), 2, seed=2)
+    generate(plain, plan, progress=False)
+    t = tmp_path / "t.h5"
+    t.write_bytes(plain.read_bytes()[:keep])
+    if main(["dataset", "info", str(t)]) == 0:
+        assert "DAMAGED" in capsys.readouterr().out
+    else:
+        line = _one_line(capsys, "aptkt dataset info")
+        assert str(t) in line and "damaged" in line

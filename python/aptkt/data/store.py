@@ -303,7 +303,7 @@ class DatasetReader:
             # A snapshot: recordings appended after opening are not seen (reopen to see them).
             index = readable_prefix(self._f["recordings/index"])
             beyond = self._beyond(self._f["recordings/index"])
-        except (OSError, KeyError) as exc:
+        except (OSError, KeyError, RuntimeError) as exc:  # HDF5: a checksum that never matched
             self.close()
             raise DatasetError(
                 f"{self.path}: damaged: the file's structure cannot be read ({exc}); "
