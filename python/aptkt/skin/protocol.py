@@ -87,7 +87,9 @@ def to_physical(name: str, raw: ArrayLike) -> np.ndarray:
     int16 for ``acc`` and ``temp``); a vector field's columns are its last axis.
     """
     if name not in SCALE:
-        raise UnknownNameError(f"to_physical: {name!r} is not a measured field ({', '.join(SCALE)})")
+        raise UnknownNameError(
+            f"to_physical: {name!r} is not a measured field ({', '.join(SCALE)})"
+        )
     _, dtype = RAW_FIELDS[name]
     arr = np.asarray(raw)
     if arr.dtype != dtype:
