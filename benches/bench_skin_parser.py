@@ -25,7 +25,13 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from aptkt.skin import StreamParser, encode_packet, encode_sensor_packets, quantize  # noqa: E402
+from aptkt.skin import (  # noqa: E402
+    StreamParser,
+    encode_packet,
+    encode_sensor_packets,
+    quantize,
+)
+from aptkt.skin.protocol import to_physical  # noqa: E402
 
 LINK_BYTES_PER_S = 400_000
 PATCH = np.arange(1, 8)
@@ -111,16 +117,25 @@ def split(stream: bytes, chunk: int) -> list[bytes]:
     return [stream[i : i + chunk] for i in range(0, len(stream), chunk)]
 
 
-def throughput(stream: bytes, chunk: int, repeat: int, raw: bool) -> tuple[float, float]:
-    """Times to feed the whole stream in chunks of ``chunk`` bytes to a fresh parser."""
+def throughput(stream: bytes, chunk: int, repeat: int, raw: bool | str) -> tuple[float, float]:
+    """Times to feed the whole stream in chunks of ``chunk`` bytes to a fresh parser.
+    ``raw="source"``: what a skin source does with each chunk, the raw integers (kept for the
+    store) and their conversion to physical units."""
     chunks = split(stream, chunk)
 
     def run() -> None:
         parser = StreamParser()
         for c in chunks:
-            parser.feed(c, raw=raw)
+            parser.feed(c, raw=bool(raw))
 
-    return best_times(run, repeat)
+    def run_source() -> None:
+        parser = StreamParser()
+        for c in chunks:
+            parsed = parser.feed(c, raw=True)
+            for name in ("proximity", "acc", "temp", "force"):
+                to_physical(name, parsed[name])
+
+    return best_times(run_source if raw == "source" else run, repeat)
 
 
 def peer_time(stream: bytes, chunk: int, repeat: int) -> tuple[float, float]:
@@ -158,6 +173,10 @@ def main() -> None:
         help="sensor packets in the stream (default 1e6 = 20 MB)",
     )
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument(
+        "--only", help="run only the streams whose label contains this text (e.g. 'source')"
+    )
+    ap.add_argument("--output", type=Path, help="results file (default benches/results/...)")
     args = ap.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
@@ -174,8 +193,11 @@ def main() -> None:
     for label, stream, raw in [
         ("clean", clean, False),
         ("clean, raw=True", clean, True),
+        ("clean, raw=True + to_physical (skin source)", clean, "source"),
         ("1 % damaged", noisy, False),
     ]:
+        if args.only and args.only not in label:
+            continue
         for chunk in (4096, 65536, 1 << 20, len(stream)):
             wall, cpu = throughput(stream, chunk, args.repeat, raw)
             n = StreamParser().feed(stream, raw=True)["cell_id"].shape[0]
@@ -209,7 +231,7 @@ def main() -> None:
         f"p99 {latency['p99_us']:.2f} µs"
     )
 
-    out = Path(__file__).parent / "results" / "skin_parser.json"
+    out = args.output or Path(__file__).parent / "results" / "skin_parser.json"
     out.parent.mkdir(exist_ok=True)
     out.write_text(
         json.dumps(

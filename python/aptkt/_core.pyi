@@ -63,6 +63,7 @@ __all__ = [
     "_flush_subnormals",
     "StreamParser",
     "_quantize",
+    "_to_physical",
     "_encode_sensor_packets",
     "encode_packet_bytes",
     "PACKET_LEN",
@@ -253,6 +254,7 @@ def _quantize(
     temp_c: NDArray[np.float64],
     force_norm: NDArray[np.float64],
 ) -> dict[str, NDArray]: ...
+def _to_physical(name: str, raw: NDArray[np.uint16] | NDArray[np.int16]) -> NDArray[np.float64]: ...
 def _encode_sensor_packets(
     cell_id: NDArray[np.int64],
     proximity: NDArray[np.int64],

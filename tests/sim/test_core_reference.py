@@ -253,7 +253,7 @@ def test_the_lean_queue_reads_what_the_skin_reads():
         cells = rng.integers(0, n, m).astype(np.int64)
         force = rng.uniform(-0.1, 4.5, (m, 3))  # beyond the field's range at both ends
         queue.push(t, cells, force)
-        raw = np.clip(np.rint(force / scale), *lo_hi)
+        raw = np.clip(np.rint(force / scale), *lo_hi).astype(np.int64)
         newtons = gain[cells] * (to_physical("force", raw) - offset[cells])
         order = np.argsort(np.concatenate([q_t, t]), kind="stable")
         q_t = np.concatenate([q_t, t])[order]

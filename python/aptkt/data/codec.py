@@ -15,7 +15,7 @@ import numpy as np
 from aptkt.data.schema import SAMPLE_FIELDS
 from aptkt.errors import InvalidInputError
 from aptkt.skin.config import ForceCalibration
-from aptkt.skin.protocol import RAW_FIELDS, SCALE, to_physical
+from aptkt.skin.protocol import RAW_FIELDS, quantize, to_physical
 from aptkt.skin.samples import Recording, SkinSamples
 
 __all__ = [
@@ -68,18 +68,6 @@ def json_default(obj: Any) -> Any:
     raise TypeError(f"metadata value of type {type(obj).__name__} is not JSON-serialisable")
 
 
-def _to_raw(name: str, values: np.ndarray, column: int = 0) -> np.ndarray:
-    scale, offset = SCALE[name][column]
-    raw = np.rint((values - offset) / scale)
-    off_grid = (raw * scale + offset) != values
-    if np.any(off_grid):
-        bad = int(np.flatnonzero(off_grid.reshape(off_grid.shape[0], -1).any(axis=1))[0])
-        raise InvalidInputError(
-            f"{name}: values are not on the protocol's grid (row {bad}); only skin data can be stored raw"
-        )
-    return raw
-
-
 def _calibration_of(metadata: Mapping[str, Any]) -> ForceCalibration:
     try:
         return ForceCalibration.from_metadata(metadata.get("calibration"))
@@ -104,23 +92,29 @@ def samples_to_raw(samples: SkinSamples, metadata: Mapping[str, Any]) -> dict[st
         force_norm = cal.to_normalised(samples.cell_id, samples.force)
     else:
         cal, force_norm = None, np.zeros((0, 3))
-    ((force_scale, _),) = SCALE["force"]
-    force = np.rint(force_norm / force_scale)
+    # The core's quantiser (round half to even, clip to the field's range) maps the values onto
+    # the grid, and its conversion back must give the values themselves: a value off the grid
+    # or out of range is refused rather than stored as something else.
+    try:
+        raw = quantize(samples.cell_id, samples.proximity, samples.acc, samples.temp, force_norm)
+    except InvalidInputError as exc:
+        raise InvalidInputError(f"{exc}; only skin data can be stored raw") from None
+    for name in ("proximity", "acc", "temp"):
+        off_grid = to_physical(name, raw[name]) != getattr(samples, name)
+        if np.any(off_grid):
+            bad = int(np.flatnonzero(off_grid.reshape(off_grid.shape[0], -1).any(axis=1))[0])
+            raise InvalidInputError(
+                f"{name}: values are not on the protocol's grid or outside its range (row {bad}); "
+                "only skin data can be stored raw"
+            )
     if cal is not None:
-        back = cal.to_newtons(samples.cell_id, force * force_scale)
+        # Calibration is float arithmetic in both directions: compare in newtons, to rounding.
+        back = cal.to_newtons(samples.cell_id, to_physical("force", raw["force"]))
         if not np.allclose(back, samples.force, rtol=1e-9, atol=1e-12):
             raise InvalidInputError(
                 "force: calibrated values do not come from 12-bit readings with this calibration"
             )
-    out.update(
-        cell_id=samples.cell_id.astype(fields["cell_id"]),
-        proximity=_to_raw("proximity", samples.proximity).astype(fields["proximity"]),
-        acc=_to_raw("acc", samples.acc).astype(fields["acc"]),
-        temp=np.stack(
-            [_to_raw("temp", samples.temp[:, 0], 0), _to_raw("temp", samples.temp[:, 1], 1)], axis=1
-        ).astype(fields["temp"]),
-        force=force.astype(fields["force"]),
-    )
+    out.update({name: raw[name].astype(fields[name]) for name in RAW_FIELDS})
     return {name: out[name] for name in SAMPLE_FIELDS}
 
 

@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike
 from aptkt._core import PACKET_LEN, PACKET_TYPES, SENSOR_FIELDS, StreamParser
 from aptkt._core import _encode_sensor_packets as _encode_core
 from aptkt._core import _quantize as _quantize_core
+from aptkt._core import _to_physical as _to_physical_core
 from aptkt._core import encode_packet_bytes as _encode_packet_core
 from aptkt.errors import InvalidInputError, InvalidTypeError, UnknownNameError
 
@@ -79,16 +80,29 @@ SCALE: Mapping[str, tuple[tuple[float, float], ...]] = MappingProxyType(
 
 
 def to_physical(name: str, raw: ArrayLike) -> np.ndarray:
-    """Raw integers of field ``name`` → physical units (float64), column by column."""
-    values = np.asarray(raw, dtype=np.float64)
-    scales = SCALE[name]
-    if len(scales) == 1:
-        scale, offset = scales[0]
-        return values * scale + offset
-    out = np.empty_like(values)
-    for c, (scale, offset) in enumerate(scales):
-        out[..., c] = values[..., c] * scale + offset
-    return out
+    """Raw integers of field ``name`` → physical units (float64, same shape), with the Rust
+    core's conversion: the one :meth:`StreamParser.feed` applies, bit for bit.
+
+    ``raw`` holds integers of any dtype whose values fit the field's 16-bit type (uint16, or
+    int16 for ``acc`` and ``temp``); a vector field's columns are its last axis.
+    """
+    if name not in SCALE:
+        raise UnknownNameError(
+            f"to_physical: {name!r} is not a measured field ({', '.join(SCALE)})"
+        )
+    _, dtype = RAW_FIELDS[name]
+    arr = np.asarray(raw)
+    if arr.dtype != dtype:
+        if arr.dtype.kind not in "iu":
+            raise InvalidTypeError(f"{name}: raw values must be integers, got dtype {arr.dtype}")
+        info = np.iinfo(dtype)
+        if arr.size and (arr.min() < info.min or arr.max() > info.max):
+            raise InvalidInputError(
+                f"{name}: raw values must fit {dtype} ({info.min}..{info.max}), got "
+                f"{arr.min()}..{arr.max()}"
+            )
+        arr = arr.astype(dtype)
+    return _to_physical_core(name, np.ascontiguousarray(arr))
 
 
 def _float_rows(name: str, value: ArrayLike, n: int, width: int | None) -> np.ndarray:

@@ -4,12 +4,15 @@
 //! become the numpy arrays' memory (no copy); 2-D fields are row-major `(n, 3)` / `(n, 2)`.
 
 use aptkt_skin::{
-    encode_packet, encode_sensor_columns, quantize as quantize_one, PacketType, PhysicalColumns,
-    RawColumns, RawColumnsRef, RejectReason, Stats, StreamParser, PACKET_LEN, PAYLOAD_LEN,
-    SENSOR_FIELDS,
+    encode_packet, encode_sensor_columns, quantize as quantize_one, sensor_field, FieldSpec,
+    PacketType, PhysicalColumns, RawColumns, RawColumnsRef, RejectReason, Stats, StreamParser,
+    PACKET_LEN, PAYLOAD_LEN, SENSOR_FIELDS,
 };
-use numpy::ndarray::{Array1, Array2};
-use numpy::{Element, IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::ndarray::{Array1, Array2, ArrayD, IxDyn};
+use numpy::{
+    Element, IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn,
+    PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyMemoryView};
 
@@ -263,6 +266,57 @@ fn quantize<'py>(
     raw_dict(py, result.map_err(invalid_input)?)
 }
 
+/// The physical values of one field's raw array, in its shape.
+fn field_physical<'py, T: Element + Copy + Into<f64>>(
+    py: Python<'py>,
+    field: &FieldSpec,
+    raw: &PyReadonlyArrayDyn<'py, T>,
+) -> Result<Bound<'py, PyAny>> {
+    let shape = raw.shape().to_vec();
+    let width = field.columns.len();
+    if field.vector && shape.last() != Some(&width) {
+        return Err(invalid_input(format!(
+            "{} must have {width} columns, got shape {shape:?}",
+            field.name
+        )));
+    }
+    let values = contiguous(field.name, raw)?;
+    let out = py.detach(|| field.to_physical(values));
+    let a = ArrayD::from_shape_vec(IxDyn(&shape), out).map_err(|e| internal(e.to_string()))?;
+    Ok(a.into_pyarray(py).into_any())
+}
+
+/// Raw integers of the field ``name`` (its dtype: uint16, or int16 for a signed field; a
+/// vector field's columns last) → float64 physical values in the same shape, with the crate's
+/// conversion (the parser's, bit for bit).
+#[pyfunction]
+#[pyo3(name = "_to_physical")]
+fn to_physical<'py>(
+    py: Python<'py>,
+    name: &str,
+    raw: &Bound<'py, PyAny>,
+) -> Result<Bound<'py, PyAny>> {
+    let field = sensor_field(name)
+        .ok_or_else(|| invalid_input(format!("{name:?} is not a sensor field")))?;
+    let dtype = if field.signed { "int16" } else { "uint16" };
+    let wrong_type = |_| invalid_type(format!("{name} must be a numpy array of {dtype}"));
+    if field.signed {
+        field_physical(
+            py,
+            field,
+            &raw.extract::<PyReadonlyArrayDyn<'py, i16>>()
+                .map_err(wrong_type)?,
+        )
+    } else {
+        field_physical(
+            py,
+            field,
+            &raw.extract::<PyReadonlyArrayDyn<'py, u16>>()
+                .map_err(wrong_type)?,
+        )
+    }
+}
+
 /// Raw integer columns (int64; shapes as ``feed(raw=True)`` returns) → consecutive 20-byte
 /// sensor packets. Values outside a field's bit width raise ``ValueError`` naming field and row.
 #[pyfunction]
@@ -317,6 +371,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add_class::<PyStreamParser>()?;
     m.add_function(wrap_pyfunction!(quantize, m)?)?;
+    m.add_function(wrap_pyfunction!(to_physical, m)?)?;
     m.add_function(wrap_pyfunction!(encode_sensor_packets, m)?)?;
     m.add_function(wrap_pyfunction!(encode_packet_bytes, m)?)?;
     m.add("PACKET_LEN", PACKET_LEN)?;

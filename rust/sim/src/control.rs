@@ -3,7 +3,7 @@
 //! they are made (`SimEngine.lean_*`): the force fields quantised to the wire's 12 bits,
 //! calibrated with the skin's calibration, newest packet per cell by arrival time.
 
-use aptkt_skin::{scale, RANGE_FORCE};
+use aptkt_skin::column;
 
 use crate::mechanics::{Chunk, MechState, Mechanics, Segment, SENSORS};
 use crate::sensors::Sensors;
@@ -40,11 +40,11 @@ impl LeanQueue {
     /// `arrival`, as the skin reads them: quantised to the wire's force field, calibrated with
     /// the skin's calibration (after every packet queued with an arrival at or before it).
     pub fn push(&mut self, arrival: i64, c: usize, norm: [f64; SENSORS]) {
-        let (lo, hi) = (*RANGE_FORCE.start() as f64, *RANGE_FORCE.end() as f64);
         let mut newtons = [0.0; SENSORS];
         for s in 0..SENSORS {
-            let raw = (norm[s] / scale::FORCE).round_ties_even().clamp(lo, hi);
-            newtons[s] = self.cal_gain[c][s] * (raw * scale::FORCE - self.cal_offset[c][s]);
+            let raw = column::FORCE.nearest_raw(norm[s]);
+            newtons[s] =
+                self.cal_gain[c][s] * (column::FORCE.to_physical(raw) - self.cal_offset[c][s]);
         }
         let at = self.t.partition_point(|&t| t <= arrival);
         self.t.insert(at, arrival);

@@ -6,7 +6,7 @@ use crate::parser::PacketSink;
 use std::ops::RangeInclusive;
 
 use crate::sensor::{
-    decode_sensor, scale, SensorRaw, RANGE_ACC, RANGE_CELL_ID, RANGE_FORCE, RANGE_PROXIMITY,
+    decode_sensor, SensorRaw, RANGE_ACC, RANGE_CELL_ID, RANGE_FORCE, RANGE_PROXIMITY,
     RANGE_TEMP_ACC, RANGE_TEMP_LM71,
 };
 use crate::{EncodeError, PacketType};
@@ -45,17 +45,12 @@ impl PacketSink for PhysicalColumns {
 
     #[inline(always)]
     fn sensor(&mut self, p: &SensorRaw) {
+        let p = p.to_physical();
         self.cell_id.push(p.cell_id);
-        self.proximity
-            .push(f64::from(p.proximity) * scale::PROXIMITY);
-        self.acc
-            .extend_from_slice(&p.acc.map(|a| f64::from(a) * scale::ACC));
-        self.temp.extend_from_slice(&[
-            f64::from(p.temp[0]) * scale::TEMP_ACC + scale::TEMP_ACC_OFFSET,
-            f64::from(p.temp[1]) * scale::TEMP_LM71,
-        ]);
-        self.force
-            .extend_from_slice(&p.force.map(|f| f64::from(f) * scale::FORCE));
+        self.proximity.push(p.proximity);
+        self.acc.extend_from_slice(&p.acc);
+        self.temp.extend_from_slice(&p.temp);
+        self.force.extend_from_slice(&p.force);
     }
 
     fn reserve(&mut self, n: usize) {
@@ -90,15 +85,12 @@ impl PhysicalColumns {
             let Some(p) = p.first_chunk::<PACKET_LEN>() else {
                 continue;
             };
-            let r = decode_sensor(p);
+            let r = decode_sensor(p).to_physical();
             *cell = r.cell_id;
-            *prox = f64::from(r.proximity) * scale::PROXIMITY;
-            acc.copy_from_slice(&r.acc.map(|a| f64::from(a) * scale::ACC));
-            temp.copy_from_slice(&[
-                f64::from(r.temp[0]) * scale::TEMP_ACC + scale::TEMP_ACC_OFFSET,
-                f64::from(r.temp[1]) * scale::TEMP_LM71,
-            ]);
-            force.copy_from_slice(&r.force.map(|f| f64::from(f) * scale::FORCE));
+            *prox = r.proximity;
+            acc.copy_from_slice(&r.acc);
+            temp.copy_from_slice(&r.temp);
+            force.copy_from_slice(&r.force);
         }
     }
 }

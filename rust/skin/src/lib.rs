@@ -12,6 +12,9 @@
 //! * [`SensorRaw`] holds the raw fields of a sensor packet; [`encode_sensor`] and
 //!   [`decode_sensor`] convert between it and the 20 wire bytes; [`quantize`] maps physical
 //!   values onto the representable raw values.
+//! * [`SENSOR_FIELDS`] is the one table of the fields' names, ranges and scales, and its
+//!   [`ColumnSpec`]s hold the one raw ↔ physical conversion ([`ColumnSpec::to_physical`],
+//!   [`ColumnSpec::nearest_raw`]) that the sinks, the binding and the simulator call.
 //!
 //! No function of this crate panics on any input.
 
@@ -31,7 +34,7 @@ pub use error::{EncodeError, QuantizeError};
 pub use packet::{encode_packet, is_valid_packet, PacketType, END_MARKER, PACKET_LEN, PAYLOAD_LEN};
 pub use parser::{PacketSink, RejectReason, Stats, StreamParser, MAX_CARRY};
 pub use sensor::{
-    decode_sensor, encode_sensor, encode_sensor_into, quantize, scale, ColumnSpec, FieldSpec,
-    SensorPhysical, SensorRaw, RANGE_ACC, RANGE_CELL_ID, RANGE_FORCE, RANGE_PROXIMITY,
-    RANGE_TEMP_ACC, RANGE_TEMP_LM71, SENSOR_FIELDS,
+    column, decode_sensor, encode_sensor, encode_sensor_into, quantize, scale, sensor_field,
+    ColumnSpec, FieldSpec, SensorPhysical, SensorRaw, RANGE_ACC, RANGE_CELL_ID, RANGE_FORCE,
+    RANGE_PROXIMITY, RANGE_TEMP_ACC, RANGE_TEMP_LM71, SENSOR_FIELDS,
 };

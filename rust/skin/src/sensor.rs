@@ -31,12 +31,47 @@ pub mod scale {
 
 /// One column of a raw sensor field: its representable range and its conversion to physical
 /// units (`physical = raw * scale + offset`; `cell_id` is an identity, scale 1, offset 0).
+///
+/// [`ColumnSpec::to_physical`] and [`ColumnSpec::nearest_raw`] are the crate's only raw ↔
+/// physical arithmetic: the decoder's sinks, [`quantize`], the Python binding and the
+/// simulator's force loop all call them, so that a recording converts the same way wherever
+/// it is converted.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ColumnSpec {
     pub min: i64,
     pub max: i64,
     pub scale: f64,
     pub offset: f64,
+}
+
+impl ColumnSpec {
+    /// Raw value → physical units. Total over any raw value (in range or not): data stored
+    /// before the range was checked must still read as it did.
+    #[inline(always)]
+    pub fn to_physical(&self, raw: impl Into<f64>) -> f64 {
+        raw.into() * self.scale + self.offset
+    }
+
+    /// Physical value → the nearest representable raw value, as a float: rounded half to even
+    /// (like numpy) and clipped to the range. NaN stays NaN, so that a caller that cannot
+    /// report an error (the simulator's force loop) carries it instead of inventing a value.
+    #[inline(always)]
+    pub fn nearest_raw(&self, physical: f64) -> f64 {
+        // Clip in floating point: ±inf and huge values then land on the range's ends instead
+        // of relying on the saturating float → int cast.
+        ((physical - self.offset) / self.scale)
+            .round_ties_even()
+            .clamp(self.min as f64, self.max as f64)
+    }
+
+    /// [`Self::nearest_raw`] as an integer; NaN is an error naming `field`.
+    #[inline]
+    pub fn quantize(&self, field: &'static str, physical: f64) -> Result<i64, QuantizeError> {
+        if physical.is_nan() {
+            return Err(QuantizeError::NaN { field });
+        }
+        Ok(self.nearest_raw(physical) as i64)
+    }
 }
 
 /// One raw field of a sensor packet: its name, whether it is signed (all fields are 16-bit
@@ -50,6 +85,32 @@ pub struct FieldSpec {
     pub columns: &'static [ColumnSpec],
 }
 
+impl FieldSpec {
+    /// Row-major raw values of this field (`columns.len()` per row) → physical units, in the
+    /// same layout. A trailing partial row is converted column by column as far as it goes.
+    pub fn to_physical<T: Copy + Into<f64>>(&self, raw: &[T]) -> Vec<f64> {
+        match self.columns {
+            // One conversion for every value (scalar fields, acc, force): a flat loop the
+            // compiler vectorises.
+            [first, rest @ ..] if rest.iter().all(|c| c == first) => {
+                raw.iter().map(|&v| first.to_physical(v)).collect()
+            }
+            columns => {
+                let mut out = Vec::with_capacity(raw.len());
+                for row in raw.chunks(columns.len()) {
+                    out.extend(row.iter().zip(columns).map(|(&v, c)| c.to_physical(v)));
+                }
+                out
+            }
+        }
+    }
+}
+
+/// The field of [`SENSOR_FIELDS`] named `name`.
+pub fn sensor_field(name: &str) -> Option<&'static FieldSpec> {
+    SENSOR_FIELDS.iter().find(|f| f.name == name)
+}
+
 const fn col(range: RangeInclusive<i64>, scale: f64, offset: f64) -> ColumnSpec {
     ColumnSpec {
         min: *range.start(),
@@ -59,6 +120,21 @@ const fn col(range: RangeInclusive<i64>, scale: f64, offset: f64) -> ColumnSpec 
     }
 }
 
+/// Each column's [`ColumnSpec`], by name, for code that handles one field (the decoder, the
+/// simulator's force loop); [`SENSOR_FIELDS`] is made of these.
+pub mod column {
+    use super::{col, scale, ColumnSpec};
+    use super::{RANGE_ACC, RANGE_CELL_ID, RANGE_FORCE, RANGE_PROXIMITY};
+    use super::{RANGE_TEMP_ACC, RANGE_TEMP_LM71};
+
+    pub const CELL_ID: ColumnSpec = col(RANGE_CELL_ID, 1.0, 0.0);
+    pub const PROXIMITY: ColumnSpec = col(RANGE_PROXIMITY, scale::PROXIMITY, 0.0);
+    pub const ACC: ColumnSpec = col(RANGE_ACC, scale::ACC, 0.0);
+    pub const TEMP_ACC: ColumnSpec = col(RANGE_TEMP_ACC, scale::TEMP_ACC, scale::TEMP_ACC_OFFSET);
+    pub const TEMP_LM71: ColumnSpec = col(RANGE_TEMP_LM71, scale::TEMP_LM71, 0.0);
+    pub const FORCE: ColumnSpec = col(RANGE_FORCE, scale::FORCE, 0.0);
+}
+
 /// The sensor packet's fields in the order of [`SensorRaw`]: the one table of names, ranges
 /// and scales that the Python package reads (through the binding) instead of keeping copies.
 pub const SENSOR_FIELDS: [FieldSpec; 5] = [
@@ -66,42 +142,31 @@ pub const SENSOR_FIELDS: [FieldSpec; 5] = [
         name: "cell_id",
         signed: false,
         vector: false,
-        columns: &[col(RANGE_CELL_ID, 1.0, 0.0)],
+        columns: &[column::CELL_ID],
     },
     FieldSpec {
         name: "proximity",
         signed: false,
         vector: false,
-        columns: &[col(RANGE_PROXIMITY, scale::PROXIMITY, 0.0)],
+        columns: &[column::PROXIMITY],
     },
     FieldSpec {
         name: "acc",
         signed: true,
         vector: true,
-        columns: &[
-            col(RANGE_ACC, scale::ACC, 0.0),
-            col(RANGE_ACC, scale::ACC, 0.0),
-            col(RANGE_ACC, scale::ACC, 0.0),
-        ],
+        columns: &[column::ACC, column::ACC, column::ACC],
     },
     FieldSpec {
         name: "temp",
         signed: true,
         vector: true,
-        columns: &[
-            col(RANGE_TEMP_ACC, scale::TEMP_ACC, scale::TEMP_ACC_OFFSET),
-            col(RANGE_TEMP_LM71, scale::TEMP_LM71, 0.0),
-        ],
+        columns: &[column::TEMP_ACC, column::TEMP_LM71],
     },
     FieldSpec {
         name: "force",
         signed: false,
         vector: true,
-        columns: &[
-            col(RANGE_FORCE, scale::FORCE, 0.0),
-            col(RANGE_FORCE, scale::FORCE, 0.0),
-            col(RANGE_FORCE, scale::FORCE, 0.0),
-        ],
+        columns: &[column::FORCE, column::FORCE, column::FORCE],
     },
 ];
 
@@ -163,13 +228,13 @@ impl SensorRaw {
     pub fn to_physical(&self) -> SensorPhysical {
         SensorPhysical {
             cell_id: self.cell_id,
-            proximity: f64::from(self.proximity) * scale::PROXIMITY,
-            acc: self.acc.map(|a| f64::from(a) * scale::ACC),
+            proximity: column::PROXIMITY.to_physical(self.proximity),
+            acc: self.acc.map(|a| column::ACC.to_physical(a)),
             temp: [
-                f64::from(self.temp[0]) * scale::TEMP_ACC + scale::TEMP_ACC_OFFSET,
-                f64::from(self.temp[1]) * scale::TEMP_LM71,
+                column::TEMP_ACC.to_physical(self.temp[0]),
+                column::TEMP_LM71.to_physical(self.temp[1]),
             ],
-            force: self.force.map(|f| f64::from(f) * scale::FORCE),
+            force: self.force.map(|f| column::FORCE.to_physical(f)),
         }
     }
 
@@ -245,23 +310,6 @@ pub fn encode_sensor(raw: &SensorRaw) -> Result<[u8; PACKET_LEN], EncodeError> {
     Ok(out)
 }
 
-/// Rounds half to even (like numpy) and clips to the representable range.
-#[inline]
-fn quantize_one(
-    field: &'static str,
-    value: f64,
-    range: RangeInclusive<i64>,
-) -> Result<i64, QuantizeError> {
-    if value.is_nan() {
-        return Err(QuantizeError::NaN { field });
-    }
-    let (lo, hi) = (*range.start(), *range.end());
-    // Clip in floating point first: casting an out-of-range float would saturate anyway, but
-    // clipping first keeps ±inf and huge values well defined.
-    let r = value.round_ties_even().clamp(lo as f64, hi as f64);
-    Ok(r as i64)
-}
-
 /// Physical values → the nearest representable raw values (round half to even, clip to the
 /// field's range). `cell_id` is an identity, not a measurement: out of range is an error.
 pub fn quantize(
@@ -274,25 +322,22 @@ pub fn quantize(
     if !RANGE_CELL_ID.contains(&cell_id) {
         return Err(QuantizeError::CellId(cell_id));
     }
+    // The casts cannot truncate: quantize() returns values within each column's range.
     let mut acc = [0i16; 3];
     for (o, a) in acc.iter_mut().zip(acc_g) {
-        *o = quantize_one("acc", a / scale::ACC, RANGE_ACC)? as i16;
+        *o = column::ACC.quantize("acc", a)? as i16;
     }
     let mut force = [0u16; 3];
     for (o, f) in force.iter_mut().zip(force_norm) {
-        *o = quantize_one("force", f / scale::FORCE, RANGE_FORCE)? as u16;
+        *o = column::FORCE.quantize("force", f)? as u16;
     }
     Ok(SensorRaw {
         cell_id: cell_id as u16,
-        proximity: quantize_one("proximity", proximity / scale::PROXIMITY, RANGE_PROXIMITY)? as u16,
+        proximity: column::PROXIMITY.quantize("proximity", proximity)? as u16,
         acc,
         temp: [
-            quantize_one(
-                "temp",
-                (temp_c[0] - scale::TEMP_ACC_OFFSET) / scale::TEMP_ACC,
-                RANGE_TEMP_ACC,
-            )? as i16,
-            quantize_one("temp", temp_c[1] / scale::TEMP_LM71, RANGE_TEMP_LM71)? as i16,
+            column::TEMP_ACC.quantize("temp", temp_c[0])? as i16,
+            column::TEMP_LM71.quantize("temp", temp_c[1])? as i16,
         ],
         force,
     })
@@ -314,7 +359,7 @@ mod tests {
         }
     }
 
-    fn physical(p: &SensorPhysical, name: &str, c: usize) -> f64 {
+    fn physical_of(p: &SensorPhysical, name: &str, c: usize) -> f64 {
         match name {
             "cell_id" => f64::from(p.cell_id),
             "proximity" => p.proximity,
@@ -339,7 +384,7 @@ mod tests {
                     let mut raw = SensorRaw::default();
                     set(&mut raw, field.name, c, v);
                     assert!(raw.validate().is_ok(), "{} = {v}", field.name);
-                    let got = physical(&raw.to_physical(), field.name, c);
+                    let got = physical_of(&raw.to_physical(), field.name, c);
                     assert_eq!(
                         got,
                         v as f64 * spec.scale + spec.offset,
@@ -359,6 +404,46 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Every representable raw value of every column: raw → physical → raw is the identity,
+    /// and the column-wise conversion (what the binding calls) is the per-packet one.
+    #[test]
+    fn every_raw_value_round_trips_through_physical() {
+        for field in SENSOR_FIELDS {
+            for (c, spec) in field.columns.iter().enumerate() {
+                for v in spec.min..=spec.max {
+                    let physical = spec.to_physical(v as f64);
+                    assert_eq!(spec.quantize(field.name, physical), Ok(v), "{}", field.name);
+                    let mut raw = SensorRaw::default();
+                    set(&mut raw, field.name, c, v);
+                    assert_eq!(
+                        physical,
+                        physical_of(&raw.to_physical(), field.name, c),
+                        "{}[{c}] = {v}",
+                        field.name
+                    );
+                }
+            }
+        }
+        let temp = sensor_field("temp").unwrap();
+        let got = temp.to_physical(&[-128i16, -8192, 127, 8191, 5]);
+        assert_eq!(got, [-40.0, -256.0, 87.5, 8191.0 * 0.03125, 26.5]);
+        let acc = sensor_field("acc").unwrap();
+        assert_eq!(
+            acc.to_physical(&[-512i16, 256, 1]),
+            [-2.0, 1.0, 1.0 / 256.0]
+        );
+        assert!(sensor_field("nope").is_none());
+    }
+
+    #[test]
+    fn nearest_raw_carries_nan_and_clips_infinities() {
+        assert!(column::FORCE.nearest_raw(f64::NAN).is_nan());
+        assert_eq!(column::FORCE.nearest_raw(f64::INFINITY), 4095.0);
+        assert_eq!(column::TEMP_ACC.nearest_raw(f64::NEG_INFINITY), -128.0);
+        assert_eq!(column::TEMP_ACC.nearest_raw(24.25), 0.0); // half to even
+        assert_eq!(column::TEMP_ACC.nearest_raw(24.75), 2.0);
     }
 
     /// A packet written out by hand from the protocol table, bit by bit.
