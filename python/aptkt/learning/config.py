@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.gp import DEFAULTS, HyperPrior, LaplaceGPC, check_optimizer_tol
+from aptkt.gp import KERNELS as ESTIMATOR_KERNELS
 from aptkt.learning.pipeline import FEATURE_SCALES
 from aptkt.learning.transfer import CUTOFFS, SOURCE_CHOICES, TRANSFER_MODES
 
@@ -26,10 +27,11 @@ __all__ = [
 #: "library": one kernel for every one-vs-all classifier of an action whose amplitude follows
 #: from how many new objects compete (:func:`lone_observation_signal_variance`) and whose
 #: length-scale the library's observations determine at that amplitude, once per library;
-#: "shared": one kernel learned on the old and the new objects' observations together, refitted
-#: at every update; "per-classifier": each classifier fits its own on its own labels (the
-#: paper's reading).
-KERNELS = ("library", "shared", "per-classifier")
+#: then the estimator's own (:data:`aptkt.gp.KERNELS`, defined there only): "shared", one
+#: kernel learned on the old and the new objects' observations together, refitted at every
+#: update; "per-classifier", each classifier fits its own on its own labels (the paper's
+#: reading).
+KERNELS = ("library", *ESTIMATOR_KERNELS)
 #: The class posterior that one observation of a new object, alone in its region of the feature
 #: space, reaches at itself among the new objects (see :func:`lone_observation_signal_variance`).
 LONE_OBSERVATION_POSTERIOR = 0.9
