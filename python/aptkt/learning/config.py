@@ -12,7 +12,7 @@ import numpy as np
 from aptkt.gp import DEFAULTS, HyperPrior, LaplaceGPC, check_optimizer_tol
 from aptkt.gp import KERNELS as ESTIMATOR_KERNELS
 from aptkt.learning.pipeline import FEATURE_SCALES
-from aptkt.learning.transfer import CUTOFFS, SOURCE_CHOICES, TRANSFER_MODES
+from aptkt.learning.transfer import CUTOFFS, TRANSFER_MODES
 
 __all__ = [
     "GPSettings",
@@ -237,9 +237,6 @@ class LearnerConfig:
     seed : seeds the pool order's use, the exploration and the GP optimiser's starts.
     modalities : only these modalities in the new objects' models (Fig. 6's single-modality
         models); None: every modality of each action. The prior models see all of theirs.
-    source_choice, forced_lambda : stress tests of the cut-off only — transfer the "least"
-        related old object instead of the "most", and replace λ = p̄ by a fixed value once the
-        cut-off has let the transfer through.
     """
 
     transfer: str = "paper"
@@ -252,22 +249,12 @@ class LearnerConfig:
     patience: int | None = None
     seed: int = 0
     modalities: tuple[str, ...] | None = None
-    source_choice: str = "most"
-    forced_lambda: float | None = None
     gp: GPSettings = field(default_factory=GPSettings)
 
     def __post_init__(self) -> None:
-        for name, allowed in (
-            ("transfer", TRANSFER_MODES),
-            ("source_choice", SOURCE_CHOICES),
-            ("cutoff", CUTOFFS),
-        ):
+        for name, allowed in (("transfer", TRANSFER_MODES), ("cutoff", CUTOFFS)):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"{name} must be one of {allowed}, got {getattr(self, name)!r}")
-        if self.forced_lambda is not None and not 0.0 <= self.forced_lambda <= 1.0:
-            raise ValueError(
-                f"forced_lambda must be None or lie in [0, 1], got {self.forced_lambda}"
-            )
         if not np.isfinite(self.evidence_margin):
             raise ValueError(f"evidence_margin must be finite, got {self.evidence_margin}")
         for name in ("eps_neg", "eps_explor"):
@@ -287,6 +274,12 @@ class LearnerConfig:
     def paper(cls, **changes: Any) -> LearnerConfig:
         """The paper's exact reading: Eq. 3's cut-off alone and :meth:`GPSettings.paper`."""
         return replace(cls(cutoff="paper", gp=GPSettings.paper()), **changes)
+
+    def _transfer_pick(self) -> tuple[str, float | None]:
+        """Which related old object a transfer takes ("most": Eq. 2) and its λ (None: p̄).
+        Only the reproduction's stress test of the cut-off picks otherwise
+        (:mod:`aptkt.experiments.stress`)."""
+        return "most", None
 
     @property
     def uses_prior(self) -> bool:

@@ -226,6 +226,7 @@ class ActionLearner:
             # The old models judge the new observations in their own space.
             X_prior = self.prior.pipeline.transform(obs)[0]
             related = self.prior.binary_probabilities(X_prior)
+            choice, forced_lambda = cfg._transfer_pick()
             for obj in self.new_objects:
                 mine = obs.objects == obj
                 self.decisions[obj] = decide_transfer(
@@ -234,8 +235,8 @@ class ActionLearner:
                     related[mine],
                     cfg.eps_neg,
                     cfg.transfer,
-                    choice=cfg.source_choice,
-                    forced_lambda=cfg.forced_lambda,
+                    choice=choice,
+                    forced_lambda=forced_lambda,
                     evidence=self._evidence(X_prior, mine) if cfg.cutoff != "paper" else None,
                     evidence_margin=self._cutoff_threshold(int(mine.sum())),
                 )
