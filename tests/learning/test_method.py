@@ -450,7 +450,7 @@ def test_step_records_equal_values_computed_afresh_at_every_step(world):
     record must still equal a fresh computation from the learners at that step."""
     from aptkt.learning.evaluation import accuracy
 
-    cfg = LearnerConfig(budget=6, seed=1, evidence_margin=0.0, auxiliary=True)
+    cfg = LearnerConfig(budget=6, seed=1, evidence_margin=0.0, aux_gate_margin=0.0, auxiliary=True)
     learner = APTKT(cfg, world["prior"])
     checked = []
 

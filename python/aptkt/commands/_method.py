@@ -35,7 +35,7 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
         help="aptkt: the noise-whitened prior space, one kernel per action learned on the old "
         "and new observations, strong evidence for a transfer (default); paper: the paper's "
         "exact reading (spread-scaled features, each classifier its own ML-II kernel with "
-        "fitted weights, Eq. 3's cut-off alone)",
+        "fitted weights, Eq. 3's cut-off alone, auxiliary features without an evidence gate)",
     )
     g.add_argument(
         "--cutoff",

@@ -257,9 +257,9 @@ class ActionLearner:
         current transfer decisions' sources; and its input rows. In the prior's space with
         ``GPSettings(kernel="shared")`` the old model's one-vs-all task shares the kernel.
 
-        With auxiliary features (Eq. 5) the model is fitted with and without them, and they are
-        kept only when the new labels' Laplace evidence favours them by ``evidence_margin`` —
-        the same test the transfer passes: an extra modality that the labels do not ask for
+        With auxiliary features (Eq. 5) and a gate (``aux_gate_margin``, not None) the model is
+        fitted with and without them, and they are kept only when the new labels' Laplace
+        evidence favours them by that margin: an extra modality that the labels do not ask for
         only dilutes the kernel (measured: −1.4 pp at one observation per object on real
         data, docs/method.md)."""
         obs = self.observations
@@ -268,7 +268,8 @@ class ActionLearner:
         seed = (self.config.seed * 1_000_003 + zlib.crc32(self.action.encode()) + step) % 2**32
         model = self._fit_columns(X, groups, seed, drop_auxiliary=False)
         self.uses_auxiliary = AUXILIARY in groups
-        if self.uses_auxiliary:
+        gate = self.config.aux_gate_margin
+        if self.uses_auxiliary and gate is not None:
             plain = self._fit_columns(X, groups, seed, drop_auxiliary=True)
             # The new labels' evidence only: the library's own evidence favours the old
             # model's posteriors on its own objects (measured: counted in, the auxiliary
@@ -277,7 +278,7 @@ class ActionLearner:
                 model.log_marginal_likelihood_.sum() - plain.log_marginal_likelihood_.sum()
             )
             self.auxiliary_evidence = gain
-            if not gain > self.config.evidence_margin:
+            if not gain > gate:
                 self.uses_auxiliary = False
                 return plain, X[:, : X.shape[1] - len(groups[AUXILIARY])]
         return model, X
