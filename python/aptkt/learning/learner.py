@@ -33,7 +33,7 @@ from aptkt.learning.environment import Environment
 from aptkt.learning.evaluation import accuracy, fused_accuracy
 from aptkt.learning.kernel import LibraryEvidence, fit_new_objects
 from aptkt.learning.observations import Observations, ObservationTable
-from aptkt.learning.pipeline import FeaturePipeline
+from aptkt.learning.pipeline import FeaturePipeline, ModalityTransform
 from aptkt.learning.prior import AUXILIARY, ActionPrior, PriorKnowledge
 from aptkt.learning.transfer import TransferDecision, decide_transfer
 
@@ -50,8 +50,11 @@ class ActionLearner:
         config: LearnerConfig,
         prior: ActionPrior | None,
         test: Observations | None = None,
+        transforms: Mapping[str, ModalityTransform] | None = None,
     ) -> None:
         self.action = action
+        #: The baseline's feature transforms (None: this skin's; see FeaturePipeline).
+        self.transforms = transforms
         self.new_objects = [str(o) for o in new_objects]
         self.config = config
         self.prior = prior
@@ -99,7 +102,7 @@ class ActionLearner:
         if self.prior is not None:
             return self.prior.pipeline
         assert self.observations is not None  # update() checks every object was observed
-        return FeaturePipeline().fit(self.observations)
+        return FeaturePipeline(self.transforms).fit(self.observations)
 
     def _features(
         self, obs: Observations, pipeline: FeaturePipeline
@@ -463,8 +466,16 @@ class APTKT:
     """
 
     def __init__(
-        self, config: LearnerConfig | None = None, prior: PriorKnowledge | None = None
+        self,
+        config: LearnerConfig | None = None,
+        prior: PriorKnowledge | None = None,
+        *,
+        transforms: Mapping[str, ModalityTransform] | None = None,
     ) -> None:
+        """``transforms``: the baseline's feature transforms (None: this skin's,
+        :data:`~aptkt.learning.pipeline.SKIN_TRANSFORMS`; a feature table's learners pass
+        :data:`~aptkt.learning.pipeline.GENERIC_TRANSFORMS`). A prior's space is the prior's."""
+        self.transforms = transforms
         self.config = config or LearnerConfig()
         if self.config.uses_prior and prior is None:
             raise ValueError(
@@ -502,6 +513,7 @@ class APTKT:
                 cfg,
                 self.prior[a] if self.prior is not None and cfg.uses_prior else None,
                 None if test is None else test[a],
+                self.transforms,
             )
             for a in actions
         }

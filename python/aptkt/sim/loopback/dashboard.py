@@ -48,6 +48,7 @@ class DashboardTarget(Protocol):
 
     def pause(self) -> None: ...
 
+
 _ROBOT_MODES = {
     ROBOT_MODE_POWER_OFF: "POWER_OFF",
     ROBOT_MODE_IDLE: "IDLE",
