@@ -7,14 +7,17 @@ on one layer do not import each other, e.g. ``sim`` and ``learning`` stand side 
     _core | errors | files, progress | skin, features, gp | robot, data | actions | sim, learning
     | runtime, importers | experiments | commands, cli | reference
 
-Imports under ``if TYPE_CHECKING:`` are for annotations only and are not counted. Imports
-inside functions are: they are real dependencies, only deferred. The package root (``aptkt``,
+Imports under ``if TYPE_CHECKING:`` are for annotations only and are not counted for the layers;
+for cycles they are (two modules that name each other cannot be read apart). Imports inside
+functions are counted for both: they are real dependencies, only deferred. The package root (``aptkt``,
 which re-exports the core's version) counts as the bottom layer.
 """
 
 from __future__ import annotations
 
 import ast
+import importlib
+import sys
 from pathlib import Path
 
 import pytest
@@ -55,14 +58,15 @@ def _is_type_checking(test: ast.expr) -> bool:
     )
 
 
-def imports_of(path: Path) -> list[tuple[str, int]]:
-    """``(imported aptkt module, line)`` for every import of the file that runs."""
+def imports_of(path: Path, *, annotations: bool = False) -> list[tuple[str, int]]:
+    """``(imported aptkt module, line)`` for every import of the file that runs; with
+    ``annotations`` also those under ``if TYPE_CHECKING:``."""
     name = module_name(path)
     package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
     found: list[tuple[str, int]] = []
 
     def visit(node: ast.AST) -> None:
-        if isinstance(node, ast.If) and _is_type_checking(node.test):
+        if isinstance(node, ast.If) and _is_type_checking(node.test) and not annotations:
             for child in node.orelse:
                 visit(child)
             return
@@ -108,12 +112,9 @@ def test_imports_only_run_downwards():
     assert not wrong, "imports against the layers:\n" + "\n".join(wrong)
 
 
-def test_no_module_imports_itself_back():
-    edges = {m: {t for t, _ in imps if t in GRAPH and t != m} for m, imps in GRAPH.items()}
-    # A package's __init__ importing its own modules is how re-exports work; a module of the
-    # package importing the package (its __init__) back is the cycle that matters.
-    for m in list(edges):
-        edges[m] = {t for t in edges[m] if not m.startswith(t + ".")}
+def import_cycles(edges: dict[str, set[str]]) -> list[str]:
+    """Every cycle a depth-first walk of ``edges`` (module -> modules it imports) closes, as
+    ``a -> b -> a``."""
     cycles = []
     state: dict[str, int] = {}
     stack: list[str] = []
@@ -121,7 +122,7 @@ def test_no_module_imports_itself_back():
     def walk(m: str) -> None:
         state[m] = 1
         stack.append(m)
-        for t in sorted(edges[m]):
+        for t in sorted(edges.get(m, ())):
             if state.get(t) == 1:
                 cycles.append(" -> ".join([*stack[stack.index(t) :], t]))
             elif t not in state:
@@ -132,7 +133,79 @@ def test_no_module_imports_itself_back():
     for m in sorted(edges):
         if m not in state:
             walk(m)
+    return cycles
+
+
+def module_edges(graph: dict[str, list[tuple[str, int]]]) -> dict[str, set[str]]:
+    edges = {m: {t for t, _ in imps if t in graph and t != m} for m, imps in graph.items()}
+    # A package's __init__ importing its own modules is how re-exports work; a module of the
+    # package importing the package (its __init__) back is the cycle that matters.
+    return {m: {t for t in ts if not m.startswith(t + ".")} for m, ts in edges.items()}
+
+
+def test_no_module_imports_itself_back():
+    cycles = import_cycles(module_edges(GRAPH))
     assert not cycles, "import cycles:\n" + "\n".join(cycles)
+
+
+#: Modules that name each other under ``if TYPE_CHECKING:`` only (annotations): not a cycle
+#: when the package is imported, but two modules that cannot be read apart. None may be added;
+#: each listed one must still be there (the test says when it is gone).
+KNOWN_ANNOTATION_CYCLES = {
+    # PriorKnowledge.recognise calls the recognition module (deferred), which annotates the
+    # library it is given as a PriorKnowledge.
+    "aptkt.learning.prior -> aptkt.learning.recognition -> aptkt.learning.prior",
+}
+
+
+def test_no_modules_name_each_other_even_for_annotations():
+    """Imports under ``if TYPE_CHECKING:`` counted too: such a pair (the loopback's controller
+    and dashboard were one) is a circle in the design even if Python never runs it; the piece
+    both need belongs below them (a Protocol, a shared module)."""
+    graph = {module_name(p): imports_of(p, annotations=True) for p in FILES}
+    cycles = set(import_cycles(module_edges(graph)))
+    assert cycles - KNOWN_ANNOTATION_CYCLES == set(), "import cycles:\n" + "\n".join(
+        sorted(cycles - KNOWN_ANNOTATION_CYCLES)
+    )
+    assert KNOWN_ANNOTATION_CYCLES <= cycles, "no longer a cycle: remove it from the list"
+
+
+def test_every_module_imports():
+    """Every module of the package imports (a cycle that runs at import time fails here as
+    the ImportError of a partly initialised module)."""
+    for name in sorted(MODULES - {"aptkt._core"}):
+        importlib.import_module(name)
+
+
+@pytest.mark.parametrize(
+    ("edges", "expected"),
+    [
+        ({"a": {"b"}, "b": {"a"}}, ["a -> b -> a"]),
+        ({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}, ["a -> b -> c -> a"]),
+        ({"a": {"b", "c"}, "b": {"c"}, "c": set()}, []),
+    ],
+    ids=["two modules", "three modules", "a diamond, no cycle"],
+)
+def test_the_cycle_checker_finds_a_cycle(edges, expected):
+    # The checker itself: one that missed cycles would pass any package.
+    assert import_cycles(edges) == expected
+
+
+def test_the_cycle_checker_sees_a_cycle_made_of_annotations(monkeypatch):
+    sources = {
+        "a.py": "from aptkt.learning import b\n",
+        "b.py": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from aptkt.learning import a\n",
+    }
+    monkeypatch.setattr(Path, "read_text", lambda self, encoding=None: sources[self.name])
+    modules = {"aptkt.learning.a", "aptkt.learning.b"}
+    monkeypatch.setattr(sys.modules[__name__], "MODULES", MODULES | modules)
+    files = [PACKAGE / "learning" / "a.py", PACKAGE / "learning" / "b.py"]
+    strict = {module_name(f): imports_of(f, annotations=True) for f in files}
+    loose = {module_name(f): imports_of(f) for f in files}
+    assert import_cycles(module_edges(strict)) == [
+        "aptkt.learning.a -> aptkt.learning.b -> aptkt.learning.a"
+    ]
+    assert import_cycles(module_edges(loose)) == []
 
 
 @pytest.mark.parametrize(

@@ -9,6 +9,10 @@ checked before aptkt acts on them or allocates memory for them.
 * **Reads are bounded.** :func:`open_regular` opens a file without blocking (opening a FIFO
   waits for a writer), checks that it is a regular file and its size before a byte is read;
   the caller reads it in pieces (lines of bounded length) rather than whole.
+* **A file appears whole or not at all.** Every file aptkt writes is written through
+  :func:`replaced_atomically` (or :func:`open_atomically`): under a temporary name in the same
+  directory, synced, then renamed onto its name and the directory synced. A failure or a kill
+  leaves the previous file (or none) and no temporary file behind the failure.
 * **NumPy archives** (``.npz``: prior knowledge, saved models) are read member by member
   (:func:`read_npz`): only known members, each header first, the declared sizes of all members
   checked against a limit before any data is decompressed, no pickles.
@@ -19,8 +23,10 @@ from __future__ import annotations
 import json
 import os
 import stat
+import uuid
 import zipfile
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
@@ -35,6 +41,8 @@ __all__ = [
     "open_regular",
     "read_npz",
     "json_member",
+    "replaced_atomically",
+    "open_atomically",
 ]
 
 #: Largest total (uncompressed) size of the arrays of a ``.npz`` file aptkt reads (prior
@@ -79,6 +87,86 @@ def refuse_unless_regular(
             f"{where or path}: is {kind}, not a regular file; aptkt reads and writes only "
             "regular files"
         )
+
+
+#: Longest file name (bytes) whose temporary name keeps its whole name: most file systems allow
+#: 255, and the temporary name adds a suffix (and with a unique name a dot and 34 characters).
+_NAME_ROOM = 200
+
+
+@contextmanager
+def replaced_atomically(
+    path: str | Path, error: type[AptktError], *, temp_suffix: str | None = None
+) -> Iterator[Path]:
+    """A temporary path beside ``path`` for the caller to write a complete file at (and close
+    it); when the block ends without an exception the file is synced, renamed onto ``path``
+    (replacing a file there) and the directory synced, so that after a kill or a power cut
+    ``path`` holds the old file or the new one, never a part. When the block raises, the
+    temporary file is removed and ``path`` is left as it was.
+
+    ``path`` is refused (``error`` naming it) if it exists and is not a regular file: a device
+    or a FIFO under that name is never replaced. The temporary name is unique to this write
+    (``.<name>.<random>.tmp``, created exclusively), so that writers of the same file at once
+    each rename only their own complete file. ``temp_suffix`` names it ``<name><temp_suffix>``
+    instead, for side files whose name is documented (a data set's ``.creating``): the caller
+    must be the file's only writer (it holds the data set's lock), a leftover of a killed
+    write is replaced, and a non-regular file under that name is refused too."""
+    path = Path(path)
+    refuse_unless_regular(path, error)
+    name = path.name
+    if len(os.fsencode(name)) > _NAME_ROOM:  # the temporary name must fit the limit too
+        name = name[: _NAME_ROOM // 2]
+    if temp_suffix is None:
+        tmp = path.with_name(f".{name}.{uuid.uuid4().hex}.tmp")
+        # Exclusive: never a file someone else made, nor through a link planted there.
+        os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o666))
+    else:
+        tmp = path.with_name(name + temp_suffix)
+        refuse_unless_regular(tmp, error)
+        tmp.unlink(missing_ok=True)
+    try:
+        yield tmp
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    _sync_directory(path.parent)
+
+
+@contextmanager
+def open_atomically(
+    path: str | Path,
+    error: type[AptktError],
+    mode: str = "w",
+    *,
+    encoding: str | None = None,
+    newline: str | None = None,
+) -> Iterator[IO[Any]]:
+    """:func:`replaced_atomically` for a file written through one handle: the open temporary
+    file (``mode`` "w" or "wb"; ``encoding`` UTF-8 by default in text mode)."""
+    if mode not in ("w", "wb"):
+        raise InvalidInputError(f"mode must be 'w' or 'wb', got {mode!r}")
+    if mode == "w" and encoding is None:
+        encoding = "utf-8"
+    with replaced_atomically(path, error) as tmp:
+        with open(tmp, mode, encoding=encoding, newline=newline) as fh:
+            yield fh
+
+
+def _sync_directory(directory: Path) -> None:
+    """The rename made durable (for a power cut; a kill needs nothing more). File systems that
+    cannot sync a directory are left as they are."""
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def open_regular(

@@ -223,6 +223,17 @@ def test_n_restarts_is_bounded():
     LaplaceGPC(n_restarts=MAX_RESTARTS, max_iter=1, random_state=0).fit(X[:20], y[:20])
 
 
+def test_the_core_bounds_n_restarts_where_python_does(monkeypatch):
+    """The bound lives in Python (aptkt.gp.MAX_RESTARTS) and in the Rust core; past Python's
+    check the core refuses exactly one more."""
+    from aptkt.gp import MAX_RESTARTS, settings
+
+    X, y = make_blobs(4, 2, 2, seed=2)
+    monkeypatch.setattr(settings, "MAX_RESTARTS", 10 * MAX_RESTARTS)
+    with pytest.raises(ValueError, match=f"n_restarts must be at most {MAX_RESTARTS}, got"):
+        LaplaceGPC(n_restarts=MAX_RESTARTS + 1, max_iter=1).fit(X[:20], y[:20])
+
+
 THREADS_CHILD = textwrap.dedent(
     """
     import os

@@ -80,8 +80,9 @@ def test_transfer_decisions_follow_relatedness(related_world):
 def test_auxiliary_features_are_an_extra_modality_the_evidence_admits(related_world, margin):
     """Eq. 5: the prior model's posteriors of each observation, in its own feature space, are
     one more modality; the model keeps it only when the new labels' evidence favours it by the
-    margin (a margin below any evidence: always; above any: never)."""
-    cfg = LearnerConfig(auxiliary=True, budget=1, evidence_margin=margin)
+    margin (a margin below any evidence: always; above any: never), its own: the transfer's
+    margin is the other extreme."""
+    cfg = LearnerConfig(auxiliary=True, budget=1, aux_gate_margin=margin, evidence_margin=-margin)
     learner = APTKT(cfg, related_world["prior"])
     learner.run(
         PoolEnvironment(related_world["pool"]),
@@ -103,6 +104,32 @@ def test_auxiliary_features_are_an_extra_modality_the_evidence_admits(related_wo
     names = ["force", "thermal"] + (["auxiliary"] if margin < 0 else [])
     assert lrn.model.modality_names_ == names
     np.testing.assert_allclose(lrn.model.X_train_, X[:, : lrn.model.n_features_in_])
+
+
+def test_without_a_gate_the_auxiliary_features_are_always_used(related_world):
+    """The paper's reading (Eq. 5 has no test): the features are a modality of every model,
+    and no model without them is fitted to compare."""
+    for cfg in (
+        LearnerConfig(auxiliary=True, budget=1, aux_gate_margin=None),
+        LearnerConfig.paper(auxiliary=True, budget=1),
+    ):
+        assert cfg.aux_gate_margin is None
+        learner = APTKT(cfg, related_world["prior"])
+        learner.run(
+            PoolEnvironment(related_world["pool"]),
+            list(ACTIONS),
+            related_world["news"],
+            related_world["test"],
+        )
+        for lrn in learner.learners.values():
+            assert lrn.uses_auxiliary and lrn.model.modality_names_[-1] == "auxiliary"
+            assert np.isnan(lrn.auxiliary_evidence)
+
+
+def test_the_auxiliary_gate_margin_is_a_finite_number_or_none():
+    assert LearnerConfig().aux_gate_margin == LearnerConfig().evidence_margin == 3.0
+    with pytest.raises(ValueError, match="aux_gate_margin"):
+        LearnerConfig(aux_gate_margin=float("inf"))
 
 
 def test_budget_steps_and_reproducibility(related_world):

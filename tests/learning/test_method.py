@@ -72,7 +72,7 @@ def test_evidence_filters_what_passed_eps_neg_and_paper_is_eq3_exactly():
 
 
 def test_config_validates_round_trips_and_names_the_papers_reading():
-    cfg = LearnerConfig(transfer="control", forced_lambda=1.0, evidence_margin=1.0)
+    cfg = LearnerConfig(transfer="control", evidence_margin=1.0)
     assert LearnerConfig.from_dict(cfg.to_dict()) == cfg
     assert cfg.uses_prior and not cfg.transfers
     assert not LearnerConfig(transfer="none").uses_prior
@@ -83,18 +83,12 @@ def test_config_validates_round_trips_and_names_the_papers_reading():
     assert paper.gp == GPSettings(
         n_restarts=1, hyper_prior=None, kernel="per-classifier", prior_feature_scale="spread"
     )
-    for field, bad in (
-        ("transfer", "multi"),
-        ("source_choice", "random"),
-        ("cutoff", "fitted"),
-    ):
+    for field, bad in (("transfer", "multi"), ("cutoff", "fitted")):
         with pytest.raises(ValueError, match=field):
             LearnerConfig(**{field: bad})
     for field, bad in (("kernel", "joint"), ("prior_feature_scale", "noise")):
         with pytest.raises(ValueError, match=field):
             GPSettings(**{field: bad})
-    with pytest.raises(ValueError, match="forced_lambda"):
-        LearnerConfig(forced_lambda=-0.1)
     with pytest.raises(ValueError, match="evidence_margin"):
         LearnerConfig(evidence_margin=float("nan"))
     # A record of another version's settings is refused by name, not misread.
@@ -456,7 +450,7 @@ def test_step_records_equal_values_computed_afresh_at_every_step(world):
     record must still equal a fresh computation from the learners at that step."""
     from aptkt.learning.evaluation import accuracy
 
-    cfg = LearnerConfig(budget=6, seed=1, evidence_margin=0.0, auxiliary=True)
+    cfg = LearnerConfig(budget=6, seed=1, evidence_margin=0.0, aux_gate_margin=0.0, auxiliary=True)
     learner = APTKT(cfg, world["prior"])
     checked = []
 

@@ -36,7 +36,7 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
         "amplitude set by the task, its length-scale by every label's evidence), a transfer "
         "only to an object the library recognises as the same (default); paper: the paper's "
         "exact reading (spread-scaled features, each classifier its own ML-II kernel with "
-        "fitted weights, Eq. 3's cut-off alone)",
+        "fitted weights, Eq. 3's cut-off alone, auxiliary features without an evidence gate)",
     )
     g.add_argument(
         "--cutoff",

@@ -147,6 +147,7 @@ def run_build(args: argparse.Namespace) -> int:
     from aptkt.learning import GPSettings, PriorKnowledge
     from aptkt.learning.dataset import load_observations, stored_actions
     from aptkt.learning.extract import ExtractionSettings
+    from aptkt.learning.pipeline import GENERIC_TRANSFORMS
 
     if not os.path.exists(args.data):  # (os.path: a name too long to exist is an answer too)
         raise ConfigError(f"{args.data}: no such data set or feature table")
@@ -186,6 +187,8 @@ def run_build(args: argparse.Namespace) -> int:
         prior = PriorKnowledge.build(
             table,
             gp=GPSettings(n_restarts=args.restarts, prior_feature_scale=args.prior_feature_scale),
+            # A feature table is any sensor's: its groups get no transform of this skin's.
+            transforms=GENERIC_TRANSFORMS if from_table else None,
             seed=args.seed,
             progress=bar,
         )

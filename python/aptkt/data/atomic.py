@@ -27,7 +27,7 @@ from aptkt import __version__
 from aptkt.data.codec import CHUNK_ROWS, COMPRESSION, META_CHUNK_BYTES, json_default
 from aptkt.data.schema import INDEX_DTYPE, SAMPLE_FIELDS, SCHEMA, SCHEMA_VERSION
 from aptkt.errors import DatasetError
-from aptkt.files import not_a_regular_file, refuse_unless_regular
+from aptkt.files import not_a_regular_file, replaced_atomically
 
 __all__ = [
     "CREATING_SUFFIX",
@@ -48,33 +48,12 @@ _SMALLER_THAN_ANY_DATA_SET = 4096
 
 
 def create(path: Path, build: Callable[[Path], None]) -> None:
-    """Create ``path`` by ``build(tmp)``, which writes and closes a complete file at ``tmp``; it
-    is synced and renamed onto ``path`` (replacing a file there). A failure or a kill leaves
-    ``path`` as it was; the next creation replaces a leftover ``tmp``."""
-    name = path.name
-    if len(os.fsencode(name)) > 240:  # the suffix must not take the name past the limit
-        name = name[:120]
-    tmp = path.with_name(name + CREATING_SUFFIX)
-    for target in (path, tmp):  # only regular files are replaced, or removed
-        refuse_unless_regular(target, DatasetError)
-    tmp.unlink(missing_ok=True)
-    try:
+    """Create ``path`` by ``build(tmp)``, which writes and closes a complete file at ``tmp``
+    (``<name>.creating``); it is synced and renamed onto ``path`` (replacing a file there) by
+    :func:`aptkt.files.replaced_atomically`. A failure or a kill leaves ``path`` as it was;
+    the next creation replaces a leftover ``tmp``."""
+    with replaced_atomically(path, DatasetError, temp_suffix=CREATING_SUFFIX) as tmp:
         build(tmp)
-        with open(tmp, "rb") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    try:  # the rename itself, for a power cut (a kill needs nothing more)
-        fd = os.open(path.parent, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 def create_data_set(path: Path, description: Mapping[str, Any] | None) -> None:

@@ -5,7 +5,6 @@ is never changed in place, the features are written into a copy that replaces it
 from __future__ import annotations
 
 import json
-import os
 import shutil
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -18,7 +17,7 @@ from aptkt.data.hdf5 import cut_short, writer_mark
 from aptkt.data.lock import WriterLock
 from aptkt.data.store import check_schema
 from aptkt.errors import DatasetError, InvalidInputError
-from aptkt.files import refuse_unless_regular
+from aptkt.files import replaced_atomically
 
 __all__ = ["store_features", "write_features"]
 
@@ -82,9 +81,7 @@ def _store(
             f"features cannot be stored in it; run 'aptkt dataset repair {path}' first (it "
             "keeps every readable recording)"
         )
-    tmp = path.with_name(path.name + ".features-tmp")
-    refuse_unless_regular(tmp, DatasetError)
-    try:
+    with replaced_atomically(path, DatasetError, temp_suffix=".features-tmp") as tmp:
         shutil.copyfile(path, tmp)
         with h5py.File(tmp, "a", libver="latest") as f:
             check_schema(f, path)
@@ -113,8 +110,3 @@ def _store(
                     g.attrs.pop("extraction", None)
                 else:
                     g.attrs["extraction"] = json.dumps(dict(settings), sort_keys=True)
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)

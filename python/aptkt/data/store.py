@@ -62,7 +62,7 @@ from aptkt.data.hdf5 import (
 from aptkt.data.lock import WriterLock, holder
 from aptkt.data.schema import INDEX_DTYPE, READABLE_VERSIONS, SAMPLE_FIELDS, SCHEMA, SCHEMA_VERSION
 from aptkt.errors import DatasetError, IndexOutOfRangeError, InvalidInputError, UnknownNameError
-from aptkt.files import refuse_unless_regular
+from aptkt.files import refuse_unless_regular, replaced_atomically
 from aptkt.skin.samples import Recording
 
 # DatasetError lives with the other errors; the codec's names are importable from here too.
@@ -595,11 +595,10 @@ def repair(path: str | Path, *, backup: bool = True, lock: WriterLock | None = N
 
 
 def _repair(path: Path, backup: bool, lock: WriterLock) -> int:
-    tmp = path.with_name(path.name + ".repairing")
     crashed = path.with_name(path.name + ".crashed")
-    for side in (tmp, crashed) if backup else (tmp,):
-        refuse_unless_regular(side, DatasetError)
-    try:
+    if backup:
+        refuse_unless_regular(crashed, DatasetError)
+    with replaced_atomically(path, DatasetError, temp_suffix=".repairing") as tmp:
         with DatasetReader(path) as src:
             desc = src.description
             skip = set(src._implausible())
@@ -620,9 +619,6 @@ def _repair(path: Path, backup: bool, lock: WriterLock) -> int:
                         src.key(i), int(r["start_ns"]), int(r["stop_ns"]), raw, meta_json
                     )
                     n += 1
-        if backup:
+        if backup:  # (the copy is complete: the original steps aside just before it replaces it)
             os.replace(path, crashed)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
     return n

@@ -33,7 +33,7 @@ from aptkt.errors import FeatureTableError, InvalidInputError
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
 from aptkt.learning.observations import Observations, ObservationTable
-from aptkt.learning.pipeline import within_object_residuals
+from aptkt.learning.pipeline import GENERIC_TRANSFORMS, within_object_residuals
 
 __all__ = [
     "PRIOR_CHOICES",
@@ -256,7 +256,10 @@ def run_group(
     rows: list[dict[str, Any]] = []
 
     def run(cfg: LearnerConfig, prior: PriorKnowledge | None) -> tuple[list[float], APTKT]:
-        learner = APTKT(replace(cfg, budget=s.budget, seed=seed), prior)
+        # A feature table is any sensor's: no transform of this skin's, whatever its groups' names.
+        learner = APTKT(
+            replace(cfg, budget=s.budget, seed=seed), prior, transforms=GENERIC_TRANSFORMS
+        )
         result = learner.run(PoolEnvironment(pool, seed=seed), actions, new, test=held)
         if on_run is not None:
             on_run()
@@ -274,7 +277,10 @@ def run_group(
         for choice, priors in per_choice.items():
             prior_table = _subset(learn, priors)
             prior = PriorKnowledge.build(
-                prior_table, gp=s.config.gp, seed=seed + zlib.crc32(choice.encode())
+                prior_table,
+                gp=s.config.gp,
+                seed=seed + zlib.crc32(choice.encode()),
+                transforms=GENERIC_TRANSFORMS,
             )
             curves = {"baseline": baseline}
             for name, overrides in METHODS.items():

@@ -31,6 +31,7 @@ from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
 from aptkt.learning.library import merge_priors
 from aptkt.learning.observations import ObservationTable
+from aptkt.learning.pipeline import GENERIC_TRANSFORMS
 
 __all__ = [
     "LifelongSettings",
@@ -123,7 +124,10 @@ def run_order(
     actions = list(learn)
     seed = s.seed * 1_000_003 + index
     library_objects = list(order[: s.batch])
-    library = PriorKnowledge.build(_subset(learn, library_objects), gp=s.config.gp, seed=seed)
+    # A feature table is any sensor's: no transform of this skin's, whatever its groups' names.
+    library = PriorKnowledge.build(
+        _subset(learn, library_objects), gp=s.config.gp, seed=seed, transforms=GENERIC_TRANSFORMS
+    )
     rows: list[dict[str, Any]] = []
     n_batches = (len(order) - s.batch) // s.batch
     for b in range(1, n_batches + 1):
@@ -138,7 +142,9 @@ def run_order(
         learned: dict[str, Any] = {}
         for method, transfer in (("baseline", "none"), ("APTKT", "paper")):
             cfg = replace(s.config, budget=s.budget, seed=seed + b, transfer=transfer)
-            learner = APTKT(cfg, library if method == "APTKT" else None)
+            learner = APTKT(
+                cfg, library if method == "APTKT" else None, transforms=GENERIC_TRANSFORMS
+            )
             run = learner.run(PoolEnvironment(pool, seed=seed + b), actions, new, test=held)
             rows += [
                 {**tags, "method": method, "step": k, "accuracy": step.mean_accuracy}
@@ -147,7 +153,9 @@ def run_order(
             if method == "APTKT":
                 learned = {a: lrn.observations for a, lrn in learner.learners.items()}
         # What the robot observed of the new objects becomes a library of its own, then joins.
-        new_library = PriorKnowledge.build(learned, gp=library.gp_settings, seed=seed + b)
+        new_library = PriorKnowledge.build(
+            learned, gp=library.gp_settings, seed=seed + b, transforms=GENERIC_TRANSFORMS
+        )
         library = merge_priors(
             [(f"library {b - 1}", library), (f"batch {b}", new_library)], seed=seed + b
         )

@@ -291,8 +291,11 @@ def _arguments(
             "LearnerConfig setting"
         )
     defaults = {f.name: getattr(cfg, f.name) for f in fields(LearnerConfig)}
+    # (A setting that may be None, aux_gate_margin say, is checked as a number when it is one.)
+    may_be_none = {f.name for f in fields(LearnerConfig) if "None" in str(f.type)}
     for name, value in learner.items():
-        _like(name, value, defaults[name])
+        if not (value is None and name in may_be_none):
+            _like(name, value, defaults[name])
         if name in ("budget", "patience") and value is not None and value > MAX_BUDGET:
             raise ConfigError(f"{name} must be at most {MAX_BUDGET}, got {value}")
     try:

@@ -22,6 +22,7 @@ from aptkt.experiments.benchmark import split_trials
 from aptkt.experiments.report import markdown_table
 from aptkt.learning import PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
+from aptkt.learning.pipeline import GENERIC_TRANSFORMS
 
 __all__ = ["recognition_draw", "run_recognition_benchmark", "METRICS"]
 
@@ -40,7 +41,11 @@ def recognition_draw(
     learn_rows, test_rows = split_trials(table, actions)
     learn = table.observations(actions, learn_rows)
     test = table.observations(actions, test_rows)
-    prior = PriorKnowledge.build({a: o.of_objects(library) for a, o in learn.items()}, seed=seed)
+    prior = PriorKnowledge.build(
+        {a: o.of_objects(library) for a, o in learn.items()},
+        seed=seed,
+        transforms=GENERIC_TRANSFORMS,  # a feature table: any sensor's
+    )
     touches = {a: o.of_objects(library + unseen) for a, o in test.items()}
     result = prior.recognise(touches)
     from aptkt.experiments.lifelong import nearest_class_mean_accuracy

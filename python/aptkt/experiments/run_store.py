@@ -14,7 +14,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import uuid
 from collections.abc import Iterable
 from functools import lru_cache
 from pathlib import Path
@@ -24,7 +23,9 @@ import numpy as np
 
 from aptkt import __version__
 from aptkt.data import DatasetReader
+from aptkt.errors import ConfigError
 from aptkt.experiments.runs import RunSpec
+from aptkt.files import open_atomically
 
 __all__ = ["RunStore", "data_fingerprint", "run_key", "canonical_json"]
 
@@ -115,16 +116,12 @@ class RunStore:
             "steps": list(steps),
         }
         final = self.path(key)
-        # Unique per write: workers on several hosts (same pid) or a retried task may save the
-        # same run at once; each renames its own complete file.
-        tmp = final.with_name(f".{final.name}.{os.getpid()}.{uuid.uuid4().hex[:12]}.tmp")
         # One C-encoded string: json.dump's streaming encoder is the pure-Python one (2× slower).
         text = json.dumps(doc)
-        with tmp.open("w") as fh:
+        # (The temporary name is unique per write: workers on several hosts, or a retried task,
+        # may save the same run at once; each renames its own complete file.)
+        with open_atomically(final, ConfigError) as fh:
             fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        tmp.replace(final)
         return final
 
     def keys(self) -> list[str]:

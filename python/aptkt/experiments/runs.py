@@ -10,6 +10,7 @@ from functools import lru_cache
 from typing import Any
 
 from aptkt.experiments.executors import Executor, LocalExecutor
+from aptkt.experiments.stress import learner_config_from_dict
 from aptkt.learning import APTKT, LearnerConfig, LearningRun, PoolEnvironment, PriorKnowledge
 from aptkt.learning.dataset import load_observations
 from aptkt.learning.transfer_summary import final_decisions
@@ -46,7 +47,7 @@ class RunSpec:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> RunSpec:
         d = dict(d)
-        d["config"] = LearnerConfig.from_dict(d["config"])
+        d["config"] = learner_config_from_dict(d["config"])
         for key in ("actions", "new_objects", "pool_trials", "test_trials"):
             d[key] = tuple(d[key])
         return cls(**d)

@@ -28,6 +28,7 @@ from aptkt.experiments.runs import step_rows
 from aptkt.experiments.table_limits import read_table_within_limits
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable, split_held_out
+from aptkt.learning.pipeline import GENERIC_TRANSFORMS
 
 __all__ = [
     "TableSettings",
@@ -119,7 +120,13 @@ def compare_on_table(
     to = f" -> {prior_path}" if prior_path is not None else ""
     say(f"[2/3] building prior knowledge on {', '.join(s.prior_objects)}{to}")
     cfg = s.config
-    prior = PriorKnowledge.build(table.observations(actions, prior_rows), gp=cfg.gp, seed=cfg.seed)
+    # Any sensor's features: a group named "texture" is not this skin's texture.
+    prior = PriorKnowledge.build(
+        table.observations(actions, prior_rows),
+        gp=cfg.gp,
+        seed=cfg.seed,
+        transforms=GENERIC_TRANSFORMS,
+    )
     if prior_path is not None:
         prior.save(prior_path)
     pool = table.observations(actions, pool_rows)
@@ -136,7 +143,9 @@ def compare_on_table(
     rows: list[dict[str, Any]] = []
     for t in range(s.runs):
         for name, method in methods.items():
-            learner = APTKT(replace(method, seed=cfg.seed + t), prior)
+            learner = APTKT(
+                replace(method, seed=cfg.seed + t), prior, transforms=GENERIC_TRANSFORMS
+            )
             run = learner.run(
                 PoolEnvironment(pool, seed=cfg.seed + t), actions, s.new_objects, test
             )

@@ -7,7 +7,9 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+from aptkt.errors import ConfigError
 from aptkt.experiments.aggregate import Curves
+from aptkt.files import open_atomically
 
 __all__ = ["write_csv", "read_csv", "curves_rows"]
 
@@ -23,13 +25,12 @@ def write_csv(path: str | Path, rows: Iterable[Mapping[str, Any]]) -> Path:
                 seen.add(k)
                 keys.append(k)
     path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
     # Rows are sparse (a single-action run fills one action's columns of seven): filling a
     # blank line from each row's own keys, rather than asking every row for every column as
     # csv.DictWriter does, writes the same bytes at a fraction of the cost on full-size runs.
     column = {k: i for i, k in enumerate(keys)}
     blank = [""] * len(keys)
-    with tmp.open("w", newline="") as fh:
+    with open_atomically(path, ConfigError, newline="") as fh:
         w = csv.writer(fh)
         w.writerow(keys)
         for r in rows:
@@ -37,7 +38,6 @@ def write_csv(path: str | Path, rows: Iterable[Mapping[str, Any]]) -> Path:
             for k, v in r.items():
                 line[column[k]] = v
             w.writerow(line)
-    tmp.replace(path)
     return path
 
 

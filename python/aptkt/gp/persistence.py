@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.errors import ModelFileError, ProblemTooLargeError
-from aptkt.files import json_member, read_npz
+from aptkt.files import json_member, open_atomically, read_npz
 from aptkt.gp.settings import DEFAULTS, HyperPrior
 from aptkt.gp.sources import TransferSource
 
@@ -211,9 +211,15 @@ def _source_members(fmt: str, sources: list[tuple[Any, bool, Any, Any]]) -> set[
 
 
 def save(gpc: Any, path: str | Path) -> None:
-    """Save to a ``.npz`` file (arrays + JSON; loading executes no code)."""
+    """Save to a ``.npz`` file (arrays + JSON; loading executes no code); ``.npz`` is appended
+    to a name without it, as NumPy does. The file appears whole or not at all
+    (:func:`aptkt.files.replaced_atomically`)."""
     arrays: dict[str, Any] = gpc.state()
-    np.savez_compressed(Path(path), **arrays)
+    path = Path(path)
+    if path.suffix != ".npz":
+        path = path.with_name(path.name + ".npz")
+    with open_atomically(path, ModelFileError, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
 
 
 def load(cls: Any, path: str | Path) -> Any:

@@ -57,7 +57,8 @@ CLASS_PRIORS = ("training", "uniform")
 KERNELS = ("per-classifier", "shared")
 LATENT_MEANS = ("zero", "base-rate")
 #: Optimiser starts a fit may add to the first (``n_restarts``): each is a whole optimisation
-#: (the defaults make one more), and the starts are held in memory together.
+#: (the defaults make one more), and the starts are held in memory together. The core refuses
+#: more too (its own constant, which this one must equal: tests/gp/test_hardening.py).
 MAX_RESTARTS = 1000
 #: Iterations of the optimiser (``max_iter``) and of the search for the mode
 #: (``newton_max_iter``).

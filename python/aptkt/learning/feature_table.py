@@ -25,6 +25,7 @@ import h5py
 import numpy as np
 
 from aptkt.errors import FeatureTableError
+from aptkt.files import open_atomically, replaced_atomically
 from aptkt.learning.observations import Observations, ObservationTable
 
 __all__ = [
@@ -358,15 +359,17 @@ def write_feature_table(path: str | Path, table: ObservationTable) -> Path:
         trials += obs.trials.tolist()
         blocks.append(block)
     values = np.vstack(blocks) if blocks else np.zeros((0, len(columns)))
-    tmp = path.with_name(path.name + ".tmp")
     if suffix in _CSV:
-        with tmp.open("w", newline="", encoding="utf-8") as fh:
+        with open_atomically(path, FeatureTableError, newline="") as fh:
             w = csv.writer(fh)
             w.writerow([*ID_COLUMNS, *columns])
             for o, a, t, row in zip(objects, actions, trials, values):
                 w.writerow([o, a, t, *("" if math.isnan(x) else repr(float(x)) for x in row)])
     else:
-        with h5py.File(tmp, "w", track_order=True) as f:
+        with (
+            replaced_atomically(path, FeatureTableError) as tmp,
+            h5py.File(tmp, "w", track_order=True) as f,
+        ):
             f.create_dataset(
                 "object", data=np.array(objects, dtype=object), dtype=h5py.string_dtype()
             )
@@ -376,7 +379,6 @@ def write_feature_table(path: str | Path, table: ObservationTable) -> Path:
             f.create_dataset("trial", data=np.asarray(trials, dtype=np.int64))
             for c, name in enumerate(columns):
                 f.create_dataset(name, data=values[:, c])
-    tmp.replace(path)
     return path
 
 

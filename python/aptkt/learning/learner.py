@@ -34,7 +34,7 @@ from aptkt.learning.environment import Environment
 from aptkt.learning.evaluation import accuracy, fused_accuracy
 from aptkt.learning.kernel import LibraryEvidence, fit_new_objects
 from aptkt.learning.observations import Observations, ObservationTable
-from aptkt.learning.pipeline import FeaturePipeline
+from aptkt.learning.pipeline import FeaturePipeline, ModalityTransform
 from aptkt.learning.prior import AUXILIARY, ActionPrior, PriorKnowledge
 from aptkt.learning.transfer import TransferDecision, decide_transfer
 
@@ -51,8 +51,11 @@ class ActionLearner:
         config: LearnerConfig,
         prior: ActionPrior | None,
         test: Observations | None = None,
+        transforms: Mapping[str, ModalityTransform] | None = None,
     ) -> None:
         self.action = action
+        #: The baseline's feature transforms (None: this skin's; see FeaturePipeline).
+        self.transforms = transforms
         self.new_objects = [str(o) for o in new_objects]
         self.config = config
         self.prior = prior
@@ -100,7 +103,7 @@ class ActionLearner:
         if self.prior is not None:
             return self.prior.pipeline
         assert self.observations is not None  # update() checks every object was observed
-        return FeaturePipeline().fit(self.observations)
+        return FeaturePipeline(self.transforms).fit(self.observations)
 
     def _features(
         self, obs: Observations, pipeline: FeaturePipeline
@@ -227,6 +230,7 @@ class ActionLearner:
             # The old models judge the new observations in their own space.
             X_prior = self.prior.pipeline.transform(obs)[0]
             related = self.prior.binary_probabilities(X_prior)
+            choice, forced_lambda = cfg._transfer_pick()
             for obj in self.new_objects:
                 mine = obs.objects == obj
                 self.decisions[obj] = decide_transfer(
@@ -235,8 +239,8 @@ class ActionLearner:
                     related[mine],
                     cfg.eps_neg,
                     cfg.transfer,
-                    choice=cfg.source_choice,
-                    forced_lambda=cfg.forced_lambda,
+                    choice=choice,
+                    forced_lambda=forced_lambda,
                     evidence=self._evidence(X_prior, mine) if cfg.cutoff != "paper" else None,
                     evidence_margin=self._cutoff_threshold(int(mine.sum())),
                 )
@@ -257,9 +261,9 @@ class ActionLearner:
         current transfer decisions' sources; and its input rows. In the prior's space with
         ``GPSettings(kernel="shared")`` the old model's one-vs-all task shares the kernel.
 
-        With auxiliary features (Eq. 5) the model is fitted with and without them, and they are
-        kept only when the new labels' Laplace evidence favours them by ``evidence_margin`` —
-        the same test the transfer passes: an extra modality that the labels do not ask for
+        With auxiliary features (Eq. 5) and a gate (``aux_gate_margin``, not None) the model is
+        fitted with and without them, and they are kept only when the new labels' Laplace
+        evidence favours them by that margin: an extra modality that the labels do not ask for
         only dilutes the kernel (measured: −1.4 pp at one observation per object on real
         data, docs/method.md)."""
         obs = self.observations
@@ -268,7 +272,8 @@ class ActionLearner:
         seed = (self.config.seed * 1_000_003 + zlib.crc32(self.action.encode()) + step) % 2**32
         model = self._fit_columns(X, groups, seed, drop_auxiliary=False)
         self.uses_auxiliary = AUXILIARY in groups
-        if self.uses_auxiliary:
+        gate = self.config.aux_gate_margin
+        if self.uses_auxiliary and gate is not None:
             plain = self._fit_columns(X, groups, seed, drop_auxiliary=True)
             # The new labels' evidence only: the library's own evidence favours the old
             # model's posteriors on its own objects (measured: counted in, the auxiliary
@@ -277,7 +282,7 @@ class ActionLearner:
                 model.log_marginal_likelihood_.sum() - plain.log_marginal_likelihood_.sum()
             )
             self.auxiliary_evidence = gain
-            if not gain > self.config.evidence_margin:
+            if not gain > gate:
                 self.uses_auxiliary = False
                 return plain, X[:, : X.shape[1] - len(groups[AUXILIARY])]
         return model, X
@@ -462,8 +467,16 @@ class APTKT:
     """
 
     def __init__(
-        self, config: LearnerConfig | None = None, prior: PriorKnowledge | None = None
+        self,
+        config: LearnerConfig | None = None,
+        prior: PriorKnowledge | None = None,
+        *,
+        transforms: Mapping[str, ModalityTransform] | None = None,
     ) -> None:
+        """``transforms``: the baseline's feature transforms (None: this skin's,
+        :data:`~aptkt.learning.pipeline.SKIN_TRANSFORMS`; a feature table's learners pass
+        :data:`~aptkt.learning.pipeline.GENERIC_TRANSFORMS`). A prior's space is the prior's."""
+        self.transforms = transforms
         self.config = config or LearnerConfig()
         if self.config.uses_prior and prior is None:
             raise InvalidInputError(
@@ -503,6 +516,7 @@ class APTKT:
                 cfg,
                 self.prior[a] if self.prior is not None and cfg.uses_prior else None,
                 None if test is None else test[a],
+                self.transforms,
             )
             for a in actions
         }

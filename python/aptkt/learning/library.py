@@ -22,6 +22,7 @@ from aptkt import __version__
 from aptkt.errors import IncompatiblePriorsError
 from aptkt.learning.config import GPSettings
 from aptkt.learning.observations import Observations
+from aptkt.learning.pipeline import ModalityTransform
 from aptkt.learning.prior import PriorKnowledge
 
 __all__ = ["merge_priors", "provenance_of"]
@@ -155,7 +156,14 @@ def merge_priors(
         action: Observations.concat([prior[action].observations for _, prior in named])
         for action in first.actions
     }
-    merged = PriorKnowledge.build(table, gp=gp, seed=seed, progress=progress)
+    # The library's own transforms: one built from a feature table (any sensor's) has none of
+    # this skin's, and merging must not give it them.
+    transforms = {
+        m: ModalityTransform(log_columns=t.log_columns, pca_components=t.pca_components)
+        for action in first.actions.values()
+        for m, t in action.pipeline.transforms.items()
+    }
+    merged = PriorKnowledge.build(table, gp=gp, seed=seed, progress=progress, transforms=transforms)
     provenance = [
         entry
         for name, prior in named

@@ -17,14 +17,15 @@ from typing import Any
 import numpy as np
 from sklearn.covariance import ledoit_wolf_shrinkage
 
-from aptkt.errors import InvalidInputError, InvalidStateError
+from aptkt.errors import ConfigError, InvalidInputError, InvalidStateError
 from aptkt.learning.observations import Observations
 
 __all__ = [
     "FEATURE_SCALES",
     "ModalityTransform",
     "FeaturePipeline",
-    "DEFAULT_TRANSFORMS",
+    "SKIN_TRANSFORMS",
+    "GENERIC_TRANSFORMS",
     "noise_whitener",
     "joint_noise_whitener",
     "within_object_residuals",
@@ -61,6 +62,11 @@ class ModalityTransform:
 
     def _prepare(self, X: np.ndarray) -> np.ndarray:
         X = np.array(X, dtype=np.float64)
+        if self.log_columns and max(self.log_columns) >= X.shape[1]:
+            raise ConfigError(
+                f"a transform takes the log of columns {list(self.log_columns)} of a modality "
+                f"of {X.shape[1]} column(s): it is another sensor's (see SKIN_TRANSFORMS)"
+            )
         if self.log_columns:
             cols = list(self.log_columns)
             # Clamp at a tiny positive value: a perfectly still accelerometer axis has activity
@@ -285,21 +291,27 @@ def joint_noise_whitener(
     return M
 
 
-#: Transforms used for the skin's modalities unless configured otherwise. Texture columns 0-2
-#: are the Hjorth activities (variances); the other modalities are z-scored as they are.
-DEFAULT_TRANSFORMS: Mapping[str, ModalityTransform] = {
+#: The transforms of this skin's modalities, for features this package extracted from the
+#: skin's recordings (its data sets, the simulated world): texture columns 0-2 are the Hjorth
+#: activities (variances); the other modalities are z-scored as they are. Another sensor's
+#: table whose groups happen to share these names gets :data:`GENERIC_TRANSFORMS`.
+SKIN_TRANSFORMS: Mapping[str, ModalityTransform] = {
     "force": ModalityTransform(),
     "texture": ModalityTransform(log_columns=(0, 1, 2)),
     "thermal": ModalityTransform(pca_components=10),
 }
 
 
+#: Every modality z-scored as it is: for feature tables (any sensor's features).
+GENERIC_TRANSFORMS: Mapping[str, ModalityTransform] = {}
+
+
 class FeaturePipeline:
     """Per-modality transforms for one action; modalities without a configured transform are
-    z-scored."""
+    z-scored. ``transforms`` None: this skin's (:data:`SKIN_TRANSFORMS`)."""
 
     def __init__(self, transforms: Mapping[str, ModalityTransform] | None = None) -> None:
-        base = DEFAULT_TRANSFORMS if transforms is None else transforms
+        base = SKIN_TRANSFORMS if transforms is None else transforms
         self.transforms: dict[str, ModalityTransform] = {k: replace(v) for k, v in base.items()}
         self.modality_names_: tuple[str, ...] = ()
         #: With ``scale="whiten-joint"``: the map applied to the modalities' outputs side by

@@ -19,6 +19,7 @@ import numpy as np
 
 from aptkt import __version__
 from aptkt.errors import PriorFileError
+from aptkt.files import open_atomically
 from aptkt.gp import LaplaceGPC, TransferSource
 from aptkt.learning.config import GPSettings
 from aptkt.learning.evidence import at_fitted_hyperparameters, uncoupled_evidence
@@ -298,15 +299,9 @@ class PriorKnowledge:
                 arrays[f"{p}/model/{key}"] = value
         meta = {"format": _FORMAT, "actions": list(self.actions), "metadata": self.metadata}
         arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
-        tmp = path.with_name(path.name + ".tmp")
         path.parent.mkdir(parents=True, exist_ok=True)
-        try:
-            with tmp.open("wb") as fh:
-                np.savez_compressed(fh, **arrays)
-            tmp.replace(path)  # never leave a half-written file under the real name
-        except BaseException:
-            tmp.unlink(missing_ok=True)
-            raise
+        with open_atomically(path, PriorFileError, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
         return path
 
     @classmethod

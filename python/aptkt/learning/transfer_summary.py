@@ -70,7 +70,7 @@ def verdict(decision: Mapping[str, Any], config: LearnerConfig) -> Verdict:
         candidate = next(iter(tested))
         outcome = EVIDENCE_CUTOFF
     else:
-        pick = max if config.source_choice == "most" else min
+        pick = max if config._transfer_pick()[0] == "most" else min
         candidate = str(pick(posterior, key=posterior.__getitem__)) if posterior else "?"
         outcome = BELOW_EPS_NEG
     return Verdict(
@@ -102,7 +102,7 @@ def _text(group: Sequence[Verdict], config: LearnerConfig) -> str:
     """One outcome, with the means over the verdicts that reached it."""
     first = group[0]
     p, lam, log_bf = (_mean([getattr(v, k) for v in group]) for k in ("p", "lam", "log_bf"))
-    like = "most" if config.source_choice == "most" else "least"
+    like = config._transfer_pick()[0]
     stat, cutoff = cutoff_words(config)
     bar = _mean([v.threshold for v in group])
     bar_text = f"{bar:.3g}" if math.isfinite(bar) else f"{config.evidence_margin:g}"

@@ -4,7 +4,7 @@ data, output directory), the learning methods, and how runs and prior knowledge 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +15,7 @@ from aptkt.experiments.report import TOO_FEW, too_few
 from aptkt.experiments.runs import RunSpec
 from aptkt.experiments.sampling import derive_seed
 from aptkt.experiments.scale import Scale
+from aptkt.experiments.stress import with_stress
 from aptkt.experiments.tables import write_csv
 from aptkt.learning import GPSettings, LearnerConfig
 
@@ -115,7 +116,7 @@ class Context:
             **METHODS.get(method, {}),
             **overrides,
         }
-        return replace(self.base, **settings)
+        return with_stress(self.base, settings)
 
     def spec(
         self,
