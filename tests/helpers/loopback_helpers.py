@@ -8,6 +8,7 @@ unless another test run holds it).
 
 from __future__ import annotations
 
+import dataclasses
 import fcntl
 import math
 import os
@@ -145,8 +146,13 @@ class LoopbackSkin(SkinSourceBase):
     """A skin source for end-to-end tests: 7 cells at 250 Hz, their force sensors sharing the
     loopback's contact force, through the real protocol encoder, parser and calibration."""
 
-    def __init__(self, loopback: Loopback, rate_hz: float = 250.0):
-        super().__init__(default_patch())
+    def __init__(
+        self, loopback: Loopback, rate_hz: float = 250.0, silence_timeout_s: float | None = None
+    ):
+        patch = default_patch()
+        if silence_timeout_s is not None:  # (a loaded machine stalls this thread for longer)
+            patch = dataclasses.replace(patch, silence_timeout_s=silence_timeout_s)
+        super().__init__(patch)
         self.loopback = loopback
         self.period = 1.0 / rate_hz
         self.cells = np.array(self.patch.cell_ids, dtype=np.int64)

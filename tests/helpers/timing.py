@@ -14,13 +14,26 @@ measures its own lateness the same way (``Loopback.clock_lag``).
 from __future__ import annotations
 
 import bisect
+import math
 import subprocess
 import sys
 import threading
 import time
 from collections.abc import Callable
 
-__all__ = ["LatenessProbe", "MachineProbe", "repeat_if_disturbed", "wait_for"]
+__all__ = [
+    "LatenessProbe",
+    "MachineProbe",
+    "repeat_if_disturbed",
+    "timeout_for",
+    "wait_for",
+]
+
+
+def timeout_for(lateness: float) -> float:
+    """A timeout (a skin's silence, a robot's watchdog) that this machine's measured
+    ``lateness`` does not reach: four times it, at least 0.4 s, at most 3 s, in tenths."""
+    return min(3.0, max(0.4, math.ceil(4 * lateness * 10) / 10))
 
 
 class LatenessProbe:

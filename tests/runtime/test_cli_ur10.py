@@ -28,7 +28,13 @@ import numpy as np
 import pytest
 import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a missing one must fail, not skip
 from loopback_helpers import free_loopback_host  # noqa: E402
-from timing import LatenessProbe, MachineProbe, repeat_if_disturbed, wait_for  # noqa: E402
+from timing import (  # noqa: E402
+    LatenessProbe,
+    MachineProbe,
+    repeat_if_disturbed,
+    timeout_for,
+    wait_for,
+)
 
 from aptkt.cli import main  # noqa: E402
 from aptkt.data import DatasetReader  # noqa: E402
@@ -188,7 +194,7 @@ def cell(tmp_path_factory: pytest.TempPathFactory):
             machine.worst()
             time.sleep(3.0)
             late = max(machine.worst(), lb.clock_lag())
-            timeout = min(3.0, max(0.4, math.ceil(4 * late * 10) / 10))
+            timeout = timeout_for(late)
             print(f"lateness before the first run {late:.3f} s: timeouts {timeout} s")
             (d / "cell.toml").write_text(cell_toml(host, timeout))
             from aptkt.skin.config import default_patch
