@@ -87,3 +87,41 @@ def test_a_killed_worker_is_one_error_line_and_resume_completes_the_file(tmp_pat
             assert raw_a.keys() == raw_b.keys()
             for name in raw_b:
                 assert (raw_a[name] == raw_b[name]).all(), (key, name)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def test_workers_end_when_their_parent_is_killed(tmp_path):
+    """SIGKILL of the command itself (no chance to shut its pool down): its simulating workers
+    end within seconds instead of waiting on their pipe for ever (they lived on for an hour)."""
+    proc = subprocess.Popen(
+        _aptkt("-o", str(tmp_path / "gen.h5"), "-j", "2", *ARGS),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    workers: list[int] = []
+    deadline = time.monotonic() + 120
+    while len(workers) < 2 and time.monotonic() < deadline and proc.poll() is None:
+        workers = [
+            kid
+            for kid in _children(proc.pid)
+            if b"spawn_main" in (Path("/proc") / str(kid) / "cmdline").read_bytes()
+        ]
+        time.sleep(0.05)
+    assert len(workers) >= 2, "the workers never started"
+    time.sleep(1.0)  # (their initializer, which starts the watch, has run)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    deadline = time.monotonic() + 15
+    while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    left = [w for w in workers if _alive(w)]
+    for w in left:
+        os.kill(w, signal.SIGKILL)
+    assert not left, f"workers {left} outlived their killed parent"

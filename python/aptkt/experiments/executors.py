@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterator, Sequence
 from typing import Any, Protocol
 
 from aptkt.errors import ConfigError, WorkerDiedError
-from aptkt.runtime.worker_start import limit_thread_pools
+from aptkt.runtime.worker_start import exit_with_parent, limit_thread_pools
 
 __all__ = ["Executor", "LocalExecutor", "DaskExecutor", "make_executor"]
 
@@ -27,7 +27,9 @@ def _share_cores(threads: int) -> None:
     """Worker initializer: each of ``jobs`` processes gets its share of the cores, so that
     ``jobs`` workers, each fitting its one-vs-all classifiers in parallel, do not run
     ``jobs × cores`` threads on ``cores`` cores. Runs before the first task, i.e. before any
-    thread pool exists; a value the user set in the environment wins."""
+    thread pool exists; a value the user set in the environment wins. Like every worker of
+    aptkt's, it ends when the process that started it dies."""
+    exit_with_parent()
     limit_thread_pools(threads)
 
 
