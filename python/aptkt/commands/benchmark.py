@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 from aptkt.commands._checks import add_jobs_option, add_scheduler_option
 from aptkt.commands._method import add_method_arguments
@@ -199,6 +200,15 @@ def run(args: argparse.Namespace) -> int:
             say=lambda line: print(line, flush=True),
         )
         return 0
+    # How either benchmark runs and reports, whichever it is.
+    run: dict[str, Any] = {
+        "output": args.output,
+        "jobs": args.jobs,
+        "scheduler": args.scheduler,
+        "command": _command(args),
+        "progress": not args.no_progress,
+        "say": lambda line: print(line, flush=True),
+    }
     if args.lifelong:
         from aptkt.experiments.lifelong import LifelongSettings, run_lifelong
 
@@ -212,25 +222,10 @@ def run(args: argparse.Namespace) -> int:
                 actions=settings.actions,
                 config=config,
             ),
-            output=args.output,
-            jobs=args.jobs,
-            scheduler=args.scheduler,
-            command=_command(args),
-            progress=not args.no_progress,
-            say=lambda line: print(line, flush=True),
+            **run,
         )
         return _strict_exit(args, summary)
-    summary = run_benchmark(
-        table,
-        settings,
-        output=args.output,
-        jobs=args.jobs,
-        scheduler=args.scheduler,
-        command=_command(args),
-        progress=not args.no_progress,
-        say=lambda line: print(line, flush=True),
-    )
-    return _strict_exit(args, summary)
+    return _strict_exit(args, run_benchmark(table, settings, **run))
 
 
 def _strict_exit(args: argparse.Namespace, summary: dict) -> int:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 import time
 import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -325,12 +325,7 @@ def benchmark(
     groups = draw_groups(table.object_names, distances, s)
     tasks = [(g, learn, test, s) for g in groups]
     rows: list[dict[str, Any]] = []
-    results = (
-        ((i, _task(t)) for i, t in enumerate(tasks))
-        if parallel_map is None
-        else parallel_map(_task, tasks)
-    )
-    for i, r in results:
+    for i, r in each_result(_task, tasks, parallel_map):
         rows += r
         if on_group is not None:
             on_group(i)
@@ -340,6 +335,23 @@ def benchmark(
 
 def _task(task: tuple[Group, ObservationTable, ObservationTable, BenchmarkSettings]):
     return run_group(*task)
+
+
+def each_result(
+    fn: Callable[[Any], Any],
+    tasks: Sequence[Any],
+    parallel_map: Callable[[Callable[[Any], Any], Sequence[Any]], Any] | None,
+) -> Iterator[tuple[int, Any]]:
+    """``(index, fn(task))`` for every task: here, in order, or as ``parallel_map`` (an
+    executor's ``imap_unordered``) delivers them."""
+    if parallel_map is None:
+        return ((i, fn(t)) for i, t in enumerate(tasks))
+    return iter(parallel_map(fn, tasks))
+
+
+def parallel_map_of(executor: Any, jobs: int, scheduler: Any) -> Any:
+    """The executor's map where work leaves this process (a cluster, or several jobs)."""
+    return executor.imap_unordered if scheduler is not None or jobs > 1 else None
 
 
 def run_benchmark(
@@ -379,7 +391,7 @@ def run_benchmark(
         rows, seconds = benchmark(
             table,
             s,
-            parallel_map=executor.imap_unordered if scheduler is not None or jobs > 1 else None,
+            parallel_map=parallel_map_of(executor, jobs, scheduler),
             on_group=lambda _i: bar.update(1),
         )
     finally:
@@ -414,15 +426,13 @@ def run_benchmark(
         "learner": s.config.to_dict(),
         "choices": list(s.choices),
         "results": br.summary(c),
-        "checks": [{"claim": k.claim, "measured": k.measured, "holds": k.holds} for k in found],
+        "checks": [k.as_dict() for k in found],
     }
     profiles = noise_profile(table.observations(actions))
     summary["noise_profile"] = [p.as_dict() for p in profiles]
     (output / "summary.json").write_text(json.dumps(summary, indent=1))
     (output / "report.md").write_text(br.report_markdown(c, head, found, profiles))
-    for k in found:
-        say(f"  {'holds' if k.holds else 'FAILS'}: {k.claim} — {k.measured}")
-    held = sum(k.holds for k in found)
+    held = br.announce_checks(found, say)
     say(
         f"{held} of {len(found)} checks hold; done in {seconds:.0f} s: "
         f"{', '.join(str(p) for p in written)}, {output / 'results.csv'}"

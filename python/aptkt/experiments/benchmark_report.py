@@ -6,7 +6,7 @@ of accuracies, groups in order ("1-NN" and "1-NN shrunk" have one column, step 0
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -52,7 +52,7 @@ _REFERENCE_LABELS = {
 }
 
 #: Accuracies are means of 0/1 outcomes: a claim at a bound holds up to rounding.
-_ROUNDING = 1e-9
+ROUNDING = 1e-9
 
 #: library size -> prior choice -> method -> (groups × steps) accuracies.
 Curves = Mapping[int, Mapping[str, Mapping[str, np.ndarray]]]
@@ -68,20 +68,25 @@ def curves(rows: Sequence[Mapping[str, Any]]) -> dict[int, dict[str, dict[str, n
         per.setdefault(str(r["method"]), {}).setdefault(int(r["group"]), {})[int(r["step"])] = (
             float(r["accuracy"])
         )
-    result: dict[int, dict[str, dict[str, np.ndarray]]] = {}
-    for size in sorted(out):
-        result[size] = {}
-        for choice, methods in out[size].items():
-            result[size][choice] = {}
-            for method, groups in methods.items():
-                order = sorted(groups)
-                width = max(max(g) for g in groups.values()) + 1
-                values = np.full((len(order), width), np.nan)
-                for i, g in enumerate(order):
-                    for step, v in groups[g].items():
-                        values[i, step] = v
-                result[size][choice][method] = values
-    return result
+    return {
+        size: {
+            choice: {method: curve_matrix(groups) for method, groups in methods.items()}
+            for choice, methods in out[size].items()
+        }
+        for size in sorted(out)
+    }
+
+
+def curve_matrix(per_unit: Mapping[int, Mapping[int, float]]) -> np.ndarray:
+    """(units × steps) values from unit -> step -> value, units in order (groups, orders); a
+    step a unit never reached is NaN."""
+    order = sorted(per_unit)
+    width = max(max(steps) for steps in per_unit.values()) + 1
+    values = np.full((len(order), width), np.nan)
+    for i, unit in enumerate(order):
+        for step, v in per_unit[unit].items():
+            values[i, step] = v
+    return values
 
 
 def _paired(a: np.ndarray, b: np.ndarray) -> Estimate:
@@ -96,6 +101,24 @@ class Check:
     claim: str
     measured: str
     holds: bool
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"claim": self.claim, "measured": self.measured, "holds": self.holds}
+
+
+def checks_table(found: Sequence[Check]) -> str:
+    """The report's table of checks."""
+    return markdown_table(
+        ["", "claim", "measured"],
+        [["holds" if k.holds else "**fails**", k.claim, k.measured] for k in found],
+    )
+
+
+def announce_checks(found: Sequence[Check], say: Callable[[str], None]) -> int:
+    """One line per check on the console; returns how many hold."""
+    for k in found:
+        say(f"  {'holds' if k.holds else 'FAILS'}: {k.claim} — {k.measured}")
+    return sum(k.holds for k in found)
 
 
 def _largest_fall(values: np.ndarray) -> tuple[float, int]:
@@ -133,7 +156,7 @@ def _library_checks(size: int, choice: str, m: Mapping[str, np.ndarray], sizes: 
                 f"{who}: APTKT ≥ baseline + {100 * PAPER_ONE_SHOT_GAIN:.0f} pp at one "
                 "observation per object, its interval above +5 pp",
                 ci(gain),
-                gain.mean >= PAPER_ONE_SHOT_GAIN - _ROUNDING and gain.low > 0.05,
+                gain.mean >= PAPER_ONE_SHOT_GAIN - ROUNDING and gain.low > 0.05,
             )
         )
         for ref, what in (
@@ -143,9 +166,7 @@ def _library_checks(size: int, choice: str, m: Mapping[str, np.ndarray], sizes: 
             if ref in m:
                 nn = _paired(m["APTKT"][:, 0], m[ref][:, 0])
                 out.append(
-                    Check(
-                        f"{who}: APTKT at one shot at least {what}", ci(nn), nn.mean >= -_ROUNDING
-                    )
+                    Check(f"{who}: APTKT at one shot at least {what}", ci(nn), nn.mean >= -ROUNDING)
                 )
     if choice in ("random", "farthest"):
         low, k, at = _never_below(m["APTKT"], m["baseline"])
@@ -154,7 +175,7 @@ def _library_checks(size: int, choice: str, m: Mapping[str, np.ndarray], sizes: 
                 f"{who}: APTKT never below the baseline by more than "
                 f"{100 * NO_HARM_TOLERANCE:.0f} pp at any step",
                 f"lowest {pp(low)} at step {k} ({ci(at)})",
-                low >= -NO_HARM_TOLERANCE - _ROUNDING,
+                low >= -NO_HARM_TOLERANCE - ROUNDING,
             )
         )
     if choice == "random":
@@ -165,7 +186,7 @@ def _library_checks(size: int, choice: str, m: Mapping[str, np.ndarray], sizes: 
                     f"{who}: a transfer never costs — APTKT never below the control by more "
                     f"than {100 * TRANSFER_COST_TOLERANCE:.1f} pp at any step",
                     f"lowest {pp(low)} at step {k} ({ci(at)})",
-                    low >= -TRANSFER_COST_TOLERANCE - _ROUNDING,
+                    low >= -TRANSFER_COST_TOLERANCE - ROUNDING,
                 )
             )
         last = m["APTKT"].shape[1] - 1
@@ -177,7 +198,7 @@ def _library_checks(size: int, choice: str, m: Mapping[str, np.ndarray], sizes: 
                     f"{who}: APTKT keeps learning — at step {last} at least the baseline and "
                     f"{100 * KEEPS_LEARNING:.0f} pp above its own step 0",
                     f"{pp(a[last] - b[last])} against the baseline, {pp(rise)} since step 0",
-                    bool(a[last] >= b[last] - _ROUNDING and rise >= KEEPS_LEARNING - _ROUNDING),
+                    bool(a[last] >= b[last] - ROUNDING and rise >= KEEPS_LEARNING - ROUNDING),
                 )
             )
     return out
@@ -207,8 +228,8 @@ def checks(c: Curves) -> list[Check]:
                 f"priors at least the gain with {small} − {100 * GROWTH_TOLERANCE:.0f} pp, and "
                 f"at least +{100 * PAPER_ONE_SHOT_GAIN:.0f} pp",
                 f"{pp(g_large.mean)} with {large}, {pp(g_small.mean)} with {small}",
-                g_large.mean >= g_small.mean - GROWTH_TOLERANCE - _ROUNDING
-                and g_large.mean >= PAPER_ONE_SHOT_GAIN - _ROUNDING,
+                g_large.mean >= g_small.mean - GROWTH_TOLERANCE - ROUNDING
+                and g_large.mean >= PAPER_ONE_SHOT_GAIN - ROUNDING,
             )
         )
     worst = None
@@ -225,7 +246,7 @@ def checks(c: Curves) -> list[Check]:
                 f"{100 * TRANSFER_COST_TOLERANCE:.1f} pp (mean, any step, any library and prior "
                 "choice)",
                 f"lowest {pp(worst[0])} at step {worst[1]}, {worst[2]} ({ci(worst[3])})",
-                worst[0] >= -TRANSFER_COST_TOLERANCE - _ROUNDING,
+                worst[0] >= -TRANSFER_COST_TOLERANCE - ROUNDING,
             )
         )
     falls = []
@@ -242,7 +263,7 @@ def checks(c: Curves) -> list[Check]:
                 f"no method unlearns: no mean curve falls by more than "
                 f"{100 * UNLEARNING_TOLERANCE:.0f} pp from one step to the next",
                 f"largest fall {100 * fall:.1f} pp ({method}, {who}, step {step})",
-                fall <= UNLEARNING_TOLERANCE + _ROUNDING,
+                fall <= UNLEARNING_TOLERANCE + ROUNDING,
             )
         )
     return out
@@ -469,10 +490,7 @@ def report_markdown(
         "",
         "## Checks",
         "",
-        markdown_table(
-            ["", "claim", "measured"],
-            [["holds" if k.holds else "**fails**", k.claim, k.measured] for k in found],
-        ),
+        checks_table(found),
         "",
     ]
     lines += _library_table(c)

@@ -34,7 +34,7 @@ from aptkt.actions import PAPER_ACTIONS
 from aptkt.errors import ConfigError
 from aptkt.experiments.aggregate import mean_band
 from aptkt.experiments.executors import LocalExecutor
-from aptkt.experiments.plots import figure, learning_curves, save_figure
+from aptkt.experiments.plots import figure, label_shares, learning_curves, save_figure
 from aptkt.experiments.relatedness_plot import plot_relatedness, relatedness
 from aptkt.experiments.runs import RunSpec, flatten, run_many
 from aptkt.experiments.tables import write_csv
@@ -497,17 +497,7 @@ def _plot_confusion(confusion: dict[str, np.ndarray], objects: tuple[str, ...], 
     for panel, (ax, (method, counts)) in enumerate(zip(axes[0], confusion.items())):
         share = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1)
         im = ax.imshow(share, vmin=0, vmax=1, cmap="Blues")
-        for i in range(len(objects)):
-            for k in range(len(objects)):
-                ax.text(
-                    k,
-                    i,
-                    f"{share[i, k]:.2f}",
-                    ha="center",
-                    va="center",
-                    fontsize=7,
-                    color="white" if share[i, k] > 0.6 else "black",
-                )
+        label_shares(ax, share)
         ax.set_xticks(range(len(objects)), names, rotation=45, ha="right", fontsize=8)
         ax.set_yticks(range(len(objects)), names if panel == 0 else [], fontsize=8)
         ax.set_xlabel("predicted object")

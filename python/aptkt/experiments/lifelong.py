@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 
 from aptkt.errors import FeatureTableError, InvalidInputError
-from aptkt.experiments.benchmark import _subset, split_trials
+from aptkt.experiments.benchmark import _subset, each_result, parallel_map_of, split_trials
+from aptkt.experiments.benchmark_report import announce_checks
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
 from aptkt.learning.library import merge_priors
@@ -230,12 +231,7 @@ def run_lifelong(
     tasks = [(i, order, learn, test, s) for i, order in enumerate(orders)]
     rows: list[dict[str, Any]] = []
     try:
-        results = (
-            ((i, _task(t)) for i, t in enumerate(tasks))
-            if scheduler is None and jobs <= 1
-            else executor.imap_unordered(_task, tasks)
-        )
-        for _, r in results:
+        for _, r in each_result(_task, tasks, parallel_map_of(executor, jobs, scheduler)):
             rows += r
             bar.update(1)
     finally:
@@ -265,14 +261,13 @@ def run_lifelong(
         **head,
         "learner": s.config.to_dict(),
         "results": lr.summary(c),
-        "checks": [{"claim": k.claim, "measured": k.measured, "holds": k.holds} for k in found],
+        "checks": [k.as_dict() for k in found],
     }
     (output / "summary.json").write_text(json.dumps(summary, indent=1))
     (output / "report.md").write_text(lr.report_markdown(c, head, found))
-    for k in found:
-        say(f"  {'holds' if k.holds else 'FAILS'}: {k.claim} — {k.measured}")
+    held = announce_checks(found, say)
     say(
-        f"{sum(k.holds for k in found)} of {len(found)} checks hold; done in {seconds:.0f} s: "
+        f"{held} of {len(found)} checks hold; done in {seconds:.0f} s: "
         f"{output / 'report.md'}, {output / 'lifelong.png'}, {output / 'results.csv'}"
     )
     return summary

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.experiments.aggregate import Estimate, estimate, mean_band
-from aptkt.experiments.benchmark_report import Check
+from aptkt.experiments.benchmark_report import ROUNDING, Check, checks_table, curve_matrix
 from aptkt.experiments.plots import figure
 from aptkt.experiments.report import ci, markdown_table, pp
 
@@ -19,7 +19,6 @@ __all__ = ["tables", "checks", "summary", "plot", "report_markdown"]
 
 #: batch -> method -> (orders × steps) accuracies; "library" and "NCM" have one column.
 Tables = Mapping[int, Mapping[str, np.ndarray]]
-_ROUNDING = 1e-9
 
 
 def tables(rows: Sequence[Mapping[str, Any]]) -> dict[int, dict[str, np.ndarray]]:
@@ -36,15 +35,7 @@ def tables(rows: Sequence[Mapping[str, Any]]) -> dict[int, dict[str, np.ndarray]
             sizes.setdefault(b, {})[o] = float(r["library"])
     result: dict[int, dict[str, np.ndarray]] = {}
     for b in sorted(out):
-        result[b] = {}
-        for method, per_order in out[b].items():
-            order = sorted(per_order)
-            width = max(max(v) for v in per_order.values()) + 1
-            values = np.full((len(order), width), np.nan)
-            for i, o in enumerate(order):
-                for step, v in per_order[o].items():
-                    values[i, step] = v
-            result[b][method] = values
+        result[b] = {method: curve_matrix(per_order) for method, per_order in out[b].items()}
         if b in sizes:
             result[b]["size"] = np.array([[sizes[b][o]] for o in sorted(sizes[b])])
     return result
@@ -75,7 +66,7 @@ def checks(c: Tables) -> list[Check]:
             Check(
                 "the third batch's one-shot gain over the baseline is at least the first's",
                 f"{pp(third.mean)} against {pp(first.mean)} (difference {ci(diff)})",
-                third.mean >= first.mean - _ROUNDING,
+                third.mean >= first.mean - ROUNDING,
             )
         )
     if batches:
@@ -88,7 +79,7 @@ def checks(c: Tables) -> list[Check]:
                 f"after the last batch the library ({size} objects) is at least as accurate as "
                 "the nearest class mean in its metric on the same observations",
                 f"{np.nanmean(m['library']):.3f} against {np.nanmean(m['NCM']):.3f} ({ci(d)})",
-                d.mean >= -_ROUNDING,
+                d.mean >= -ROUNDING,
             )
         )
     return out
@@ -191,10 +182,7 @@ def report_markdown(c: Tables, head: Mapping[str, Any], found: Sequence[Check]) 
         "",
         "## Checks",
         "",
-        markdown_table(
-            ["", "claim", "measured"],
-            [["holds" if k.holds else "**fails**", k.claim, k.measured] for k in found],
-        ),
+        checks_table(found),
         "",
         "## Per batch",
         "",

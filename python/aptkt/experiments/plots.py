@@ -154,6 +154,21 @@ def save_figure(fig, path_stem: str | Path, formats: Sequence[str] = ("png", "sv
     return out
 
 
+def label_shares(ax: Any, shares: np.ndarray, shown: np.ndarray | None = None) -> None:
+    """Write each cell's share (0..1) on a confusion heat-map, white on dark cells; only the
+    cells where ``shown`` is true (default: all)."""
+    for i, j in zip(*np.nonzero(np.ones_like(shares, dtype=bool) if shown is None else shown)):
+        ax.text(
+            j,
+            i,
+            f"{shares[i, j]:.2f}",
+            ha="center",
+            va="center",
+            fontsize=7,
+            color="white" if shares[i, j] > 0.6 else "black",
+        )
+
+
 def figure(nrows: int = 1, ncols: int = 1, **kw):
     return _pyplot().subplots(nrows, ncols, **kw)
 

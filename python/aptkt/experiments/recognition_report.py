@@ -77,7 +77,7 @@ def plot_confusion(result: Recognition) -> Any:
     for t, p, k in zip(result.object, result.predicted, result.known):
         counts[truths.index(t), columns.index(p if k else NEW)] += 1
     shares = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1)
-    from aptkt.experiments.plots import figure
+    from aptkt.experiments.plots import figure, label_shares
 
     fig, ax = figure(1, 1, figsize=(0.45 * len(columns) + 3, 0.4 * len(truths) + 2.2))
     image = ax.imshow(shares, cmap="Blues", vmin=0, vmax=1, aspect="auto")
@@ -85,18 +85,7 @@ def plot_confusion(result: Recognition) -> Any:
     ax.set_yticks(range(len(truths)), truths)
     ax.set_xlabel("recognised as")
     ax.set_ylabel("touched object")
-    for i in range(len(truths)):
-        for j in range(len(columns)):
-            if counts[i, j]:
-                ax.text(
-                    j,
-                    i,
-                    f"{shares[i, j]:.2f}",
-                    ha="center",
-                    va="center",
-                    fontsize=7,
-                    color="white" if shares[i, j] > 0.6 else "black",
-                )
+    label_shares(ax, shares, shown=counts > 0)
     fig.colorbar(image, ax=ax, label="share of the object's touches")
     ax.set_title("recognition: each touch's object, or new")
     fig.tight_layout()

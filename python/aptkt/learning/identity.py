@@ -103,6 +103,7 @@ class ObjectIdentity:
         # scaled W, so one triangular solve serves them all.
         self._white_means = np.linalg.solve(self._W_chol, means.T).T
         self._impostors: dict[int, float] = {}
+        self._left_out: dict[str, ObjectIdentity] = {}
         self._X, self._labels = X, labels
 
     @property
@@ -187,12 +188,19 @@ class ObjectIdentity:
                     continue
                 if others.size == len(set(others.tolist())):
                     continue  # no repeats left: no noise to judge by
-                model = ObjectIdentity(self._X[keep], others)
+                model = self._without(o, keep)
                 for start in range(0, rows.shape[0] - n + 1, n):
                     joint = model._log_joint(rows[start : start + n], NEW_OBJECT_PRIOR)
                     best = max(best, _log_odds(joint, 1 + int(np.argmax(joint[1:]))))
             self._impostors[n] = best
         return self._impostors[n]
+
+    def _without(self, o: str, keep: np.ndarray) -> ObjectIdentity:
+        """The library's model without object ``o`` (rows ``keep``), fitted once for every
+        number of observations the impostors are judged at."""
+        if o not in self._left_out:
+            self._left_out[o] = ObjectIdentity(self._X[keep], self._labels[keep])
+        return self._left_out[o]
 
 
 def _log_odds(joint: np.ndarray, k: int) -> float:

@@ -233,27 +233,7 @@ def noise_whitener(Z: np.ndarray, objects: np.ndarray) -> np.ndarray | None:
     towards the identity: the correlations of a few noise columns are estimated from tens of
     repeats, and an unshrunk inverse square root would amplify the noisiest of them. Columns
     without within-object variation pass through unchanged."""
-    R, dof = within_object_residuals(np.asarray(Z, dtype=np.float64), objects)
-    n_objects = R.shape[0] - dof
-    if dof < max(MIN_NOISE_DOF, n_objects) or R.shape[1] == 0:
-        return None
-    var = (R**2).sum(axis=0) / dof
-    noisy = var > 1e-24 * np.maximum(1.0, np.abs(Z).max(axis=0) ** 2)
-    if not noisy.any():
-        return None
-    sd = np.sqrt(var[noisy])
-    U = R[:, noisy] / sd
-    corr = U.T @ U / dof
-    # The residuals are centred per object: Ledoit-Wolf's intensity for centred data.
-    delta = ledoit_wolf_shrinkage(U, assume_centered=True) if U.shape[1] > 1 else 0.0
-    corr = (1.0 - delta) * corr + delta * np.eye(U.shape[1])
-    vals, vecs = np.linalg.eigh(corr)
-    floor = 1e-12 * vals.max()
-    inv_sqrt = vecs @ np.diag(1.0 / np.sqrt(np.maximum(vals, floor))) @ vecs.T
-    W = np.eye(Z.shape[1])
-    idx = np.flatnonzero(noisy)
-    W[np.ix_(idx, idx)] = inv_sqrt / sd[None, :]
-    return W
+    return _within_object_whitener(Z, objects, shrinkage=None, min_columns=1)
 
 
 def joint_noise_whitener(
@@ -271,24 +251,36 @@ def joint_noise_whitener(
     modalities. Columns without within-object variation pass through unchanged."""
     if not 0.0 <= shrinkage <= 1.0:
         raise InvalidInputError(f"shrinkage must lie in [0, 1], got {shrinkage}")
+    return _within_object_whitener(Z, objects, shrinkage=shrinkage, min_columns=2)
+
+
+def _within_object_whitener(
+    Z: np.ndarray, objects: np.ndarray, *, shrinkage: float | None, min_columns: int
+) -> np.ndarray | None:
+    """The inverse square root of the pooled within-object covariance of ``Z``'s noisy columns,
+    its correlations shrunk by ``shrinkage`` towards none (None: Ledoit and Wolf's intensity),
+    embedded in the identity; None with too few degrees of freedom or noisy columns."""
     R, dof = within_object_residuals(np.asarray(Z, dtype=np.float64), objects)
     n_objects = R.shape[0] - dof
-    if dof < max(MIN_NOISE_DOF, n_objects) or R.shape[1] < 2:
+    if dof < max(MIN_NOISE_DOF, n_objects) or R.shape[1] < min_columns:
         return None
     var = (R**2).sum(axis=0) / dof
     noisy = var > 1e-24 * np.maximum(1.0, np.abs(Z).max(axis=0) ** 2)
-    if noisy.sum() < 2:
+    if noisy.sum() < min_columns:
         return None
     sd = np.sqrt(var[noisy])
     U = R[:, noisy] / sd
+    if shrinkage is None:
+        # The residuals are centred per object: Ledoit-Wolf's intensity for centred data.
+        shrinkage = ledoit_wolf_shrinkage(U, assume_centered=True) if U.shape[1] > 1 else 0.0
     corr = (1.0 - shrinkage) * (U.T @ U / dof) + shrinkage * np.eye(U.shape[1])
     vals, vecs = np.linalg.eigh(corr)
     floor = 1e-12 * vals.max()
     inv_sqrt = vecs @ np.diag(1.0 / np.sqrt(np.maximum(vals, floor))) @ vecs.T
-    M = np.eye(Z.shape[1])
+    W = np.eye(Z.shape[1])
     idx = np.flatnonzero(noisy)
-    M[np.ix_(idx, idx)] = inv_sqrt / sd[None, :]
-    return M
+    W[np.ix_(idx, idx)] = inv_sqrt / sd[None, :]
+    return W
 
 
 #: The transforms of this skin's modalities, for features this package extracted from the
