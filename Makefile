@@ -78,9 +78,10 @@ sdist: release-tools
 	rm -f $(DIST)/aptkt-*.tar.gz
 	$(PY) -m maturin sdist --out $(DIST)
 
-# The wheel's manylinux tag (auditwheel), both archives' metadata (twine), then the wheel and
-# the sdist installed into a fresh environment of the oldest supported Python, each running the
-# README's example and a learning run from a table (tests/packaging/release_check.py).
+# The wheel's manylinux tag (auditwheel), both archives' metadata (twine), then the wheel
+# installed into a fresh environment of every Python the classifiers name and the sdist into the
+# oldest's, each running the README's example and a learning run from a table
+# (tests/packaging/release_check.py).
 # SDIST_INSTALL=no skips building the sdist: a full Rust build from scratch (docs/install.md).
 SDIST_INSTALL ?= yes
 release-check: wheel sdist

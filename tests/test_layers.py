@@ -7,8 +7,9 @@ on one layer do not import each other, e.g. ``sim`` and ``learning`` stand side 
     _core | errors | files, progress | skin, features, gp | robot, data | actions | sim, learning
     | runtime, importers | experiments | commands, cli | reference
 
-Imports under ``if TYPE_CHECKING:`` are for annotations only and are not counted for the layers;
-for cycles they are (two modules that name each other cannot be read apart). Imports inside
+Imports under ``if TYPE_CHECKING:`` are for annotations only and are not counted for the layers
+(except in a package whose names load on first use, ``aptkt._lazy``: there they are the package's
+real, deferred imports); for cycles they are (two modules that name each other cannot be read apart). Imports inside
 functions are counted for both: they are real dependencies, only deferred. The package root (``aptkt``,
 which re-exports the core's version) counts as the bottom layer.
 """
@@ -26,7 +27,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "python" / "aptkt"
 
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("_core",),  # the compiled core (it raises the classes of aptkt.errors, fetched when raised)
-    ("", "errors"),
+    ("", "errors", "_lazy"),
     ("files", "progress"),  # files from elsewhere (regular, bounded, checked); progress lines
     ("skin", "features", "gp"),
     ("robot", "data"),
@@ -64,6 +65,8 @@ def imports_of(path: Path, *, annotations: bool = False) -> list[tuple[str, int]
     name = module_name(path)
     package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
     found: list[tuple[str, int]] = []
+    # A lazy package's TYPE_CHECKING block lists what it imports on first use.
+    annotations = annotations or "lazy_exports(" in path.read_text(encoding="utf-8")
 
     def visit(node: ast.AST) -> None:
         if isinstance(node, ast.If) and _is_type_checking(node.test) and not annotations:

@@ -62,3 +62,74 @@ def test_export_errors_are_one_line(quick_data, tmp_path, capsys):
     )
     assert main(["dataset", "export-features", str(quick_data), "-o", str(tmp_path / "t.txt")]) == 1
     assert ".csv or an HDF5" in capsys.readouterr().err
+
+
+def _texture_transform(prior_file):
+    from aptkt.learning import PriorKnowledge
+
+    prior = PriorKnowledge.load(prior_file)
+    return {a: ap.pipeline.transforms.get("texture") for a, ap in prior.actions.items()}
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".h5"])
+def test_an_exported_table_says_it_holds_this_skins_features(quick_data, tmp_path, suffix):
+    from aptkt.learning.pipeline import SKIN_EXTRACTION
+
+    table = tmp_path / f"features{suffix}"
+    assert main(["dataset", "export-features", str(quick_data), "-o", str(table)]) == 0
+    assert read_feature_table(table).extraction == SKIN_EXTRACTION
+
+
+@pytest.mark.parametrize(
+    ("asked", "skin"), [(None, True), ("aptkt-skin", True), ("other", False), ("auto", True)]
+)
+def test_learning_from_an_exported_table_transforms_as_from_the_data_set(
+    quick_data, tmp_path, capsys, asked, skin
+):
+    """The exported table's marker gives it this skin's transforms (log of the texture's
+    activities), as the data set's own prior has; --extraction other z-scores every column."""
+    table = tmp_path / "features.csv"
+    assert main(["dataset", "export-features", str(quick_data), "-o", str(table)]) == 0
+    out = tmp_path / "learned"
+    args = ["learn", "--table", str(table), "--prior-objects", PRIORS, "--objects", NEW]
+    args += ["--test-trials", "3:6", "--budget", "0", "--runs", "1", "-o", str(out)]
+    args += [] if asked is None else ["--extraction", asked]
+    assert main(args) == 0
+    from_table = _texture_transform(out / "prior.npz")
+    built = tmp_path / "from-data-set.npz"
+    objects = ["--objects", PRIORS, "--actions", ",".join(from_table)]
+    assert main(["prior", "build", str(quick_data), "-o", str(built), *objects]) == 0
+    from_data_set = _texture_transform(built)
+    logs = {a: t.log_columns if t is not None else () for a, t in from_table.items()}
+    want = {a: t.log_columns if t is not None else () for a, t in from_data_set.items()}
+    assert (0, 1, 2) in want.values()  # the sliding actions' texture
+    assert logs == (want if skin else dict.fromkeys(want, ()))
+
+
+def test_an_unmarked_table_of_the_same_features_gets_no_skin_transform(quick_data, tmp_path):
+    """Another sensor's table with groups called texture and thermal: z-scored as they are,
+    unless asked for this skin's transforms."""
+    from aptkt.learning.feature_table import write_feature_table
+
+    unmarked = tmp_path / "unmarked.csv"
+    write_feature_table(unmarked, load_observations(quick_data))
+    assert read_feature_table(unmarked).extraction is None
+    for asked, logs in (("auto", ()), ("aptkt-skin", (0, 1, 2))):
+        out = tmp_path / f"prior-{asked}.npz"
+        args = ["prior", "build", str(unmarked), "-o", str(out), "--objects", PRIORS]
+        assert main([*args, "--extraction", asked]) == 0
+        got = {t.log_columns if t is not None else () for t in _texture_transform(out).values()}
+        assert logs in got and got <= {logs, ()}
+
+
+def test_extraction_mistakes_are_one_line(quick_data, tmp_path, capsys):
+    out = tmp_path / "p.npz"
+    assert main(["prior", "build", str(quick_data), "-o", str(out), "--extraction", "other"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("aptkt prior build: error: --extraction: only for a feature table")
+    assert "\n" not in err
+    args = ["learn", "--robot", "sim", "--prior", str(out), "--objects", NEW]
+    args += ["--extraction", "other", "-o", str(tmp_path / "x")]
+    assert main(args) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == "aptkt learn: error: --extraction: only with --table TABLE"

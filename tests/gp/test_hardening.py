@@ -252,7 +252,7 @@ THREADS_CHILD = textwrap.dedent(
 @pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="counts threads in /proc")
 def test_n_jobs_is_capped_at_the_cores():
     # Before the cap, n_jobs=10**6 kept starting threads (30,739 after 10 minutes).
-    from aptkt.gp.inputs import threads
+    from aptkt.gp.arguments import threads
 
     cores = os.cpu_count() or 1
     assert threads(10**6) == cores and threads(-1) == cores

@@ -14,7 +14,7 @@ from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from aptkt.errors import NotFittedError
 from aptkt.gp import DEFAULTS, LaplaceGPC
-from aptkt.gp.inputs import threads
+from aptkt.gp.arguments import threads
 
 from .conftest import make_blobs
 

@@ -280,3 +280,46 @@ def test_learning_from_a_table_says_what_each_new_object_learned_from(tmp_path, 
             assert text.startswith(f"{obj} <- {source} (lambda ") and text.endswith("2/2 runs")
         else:
             assert text.startswith(f"{obj}: no transfer")
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".h5"])
+def test_the_extraction_column_round_trips_and_is_not_a_feature(tmp_path, suffix):
+    path = write_feature_table(tmp_path / f"t{suffix}", _world_table(), extraction="aptkt-skin")
+    read = read_feature_table(path)
+    assert read.extraction == "aptkt-skin"
+    assert "extraction" not in read.columns
+    _equal(read.observations(), _world_table())
+    assert (
+        read_feature_table(write_feature_table(tmp_path / f"u{suffix}", _world_table())).extraction
+        is None
+    )
+
+
+@pytest.mark.parametrize(
+    "cell, message",
+    [
+        ("", "row 3, column extraction: empty name"),
+        ("biotac", "row 3, column extraction: 'biotac', but 'aptkt-skin' in row 1"),
+    ],
+)
+def test_one_extraction_per_table(tmp_path, capsys, cell, message):
+    rows = [[*r[:3], "aptkt-skin", *r[3:]] for r in _good_rows()]
+    rows[2][3] = cell
+    path = _write_csv(tmp_path / "t.csv", [*GOOD_HEADER[:3], "extraction", *GOOD_HEADER[3:]], rows)
+    code, err = _learn(path, capsys)
+    assert code == 1 and err == f"aptkt learn: error: {path}, {message}" + (
+        ": features computed in different ways cannot be learnt from together" if cell else ""
+    )
+
+
+def test_the_transforms_follow_the_extraction_not_the_modality_names():
+    from aptkt.errors import ConfigError
+    from aptkt.learning.pipeline import GENERIC_TRANSFORMS, SKIN_TRANSFORMS, transforms_of
+
+    assert transforms_of(None) is GENERIC_TRANSFORMS
+    assert transforms_of("biotac") is GENERIC_TRANSFORMS
+    assert transforms_of("aptkt-skin") is SKIN_TRANSFORMS
+    assert transforms_of(None, "aptkt-skin") is SKIN_TRANSFORMS
+    assert transforms_of("aptkt-skin", "other") is GENERIC_TRANSFORMS
+    with pytest.raises(ConfigError, match="extraction must be one of"):
+        transforms_of(None, "skin")

@@ -116,3 +116,29 @@ def test_prior_merge_on_the_command_line(tmp_path, capsys):
         ), err
         assert err.count("\n") == 0 and fragment in err, err
     assert not (tmp_path / "x.npz").exists()
+
+
+def test_this_skins_features_and_another_sensors_are_not_merged():
+    """A library of a table holding another sensor's features (z-scored) and one of this skin's
+    (log of the texture's activities) measure in different spaces."""
+    from aptkt.learning.pipeline import GENERIC_TRANSFORMS, SKIN_TRANSFORMS
+
+    def built(objects, seed, transforms):
+        obs = _obs(objects, seed=seed, dims=(3, 2))
+        obs.modalities = {
+            "texture": np.abs(obs.modalities["m0"]) + 1,
+            "force": obs.modalities["m1"],
+        }
+        return PriorKnowledge.build({"A": obs}, seed=0, transforms=transforms)
+
+    skin = built(["o1", "o2"], 1, SKIN_TRANSFORMS)
+    other = built(["n1", "n2"], 2, GENERIC_TRANSFORMS)
+    with pytest.raises(
+        IncompatiblePriorsError,
+        match=r"action A's features are transformed otherwise \(z-scored only against "
+        r"texture: log of columns 0,1,2\)",
+    ):
+        merge_priors([("skin.npz", skin), ("other.npz", other)])
+    # Modalities that neither transforms beyond z-scoring do not keep libraries apart.
+    merge_priors([("a.npz", _prior(["o1", "o2"], seed=1)), ("b.npz", _prior(["n1", "n2"], seed=2))])
+    merge_priors([("skin.npz", skin), ("skin2.npz", built(["n1", "n2"], 2, SKIN_TRANSFORMS))])

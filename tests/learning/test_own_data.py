@@ -158,3 +158,36 @@ def test_no_module_imports_pandas() -> None:
             if any(n == "pandas" or n.startswith("pandas.") for n in names):
                 found.append(f"{path.name}:{node.lineno}")
     assert not found, found
+
+
+def test_an_exported_tables_extraction_column_reaches_the_learner(tmp_path) -> None:
+    """A table marked as this skin's features, read back as columns (as pandas would), gives
+    the command's results on the file, with this skin's transforms; asked for "other", the
+    texture's activities are not log-scaled."""
+    from aptkt.learning import PriorKnowledge
+
+    priors, news, means = make_world(n_prior=3, n_new=3, related=True, seed=1)
+    table = draw(means, priors + news, 4, seed=2)
+    for obs in table.values():
+        obs.trials = np.tile(np.arange(4), len(priors + news))
+        if "texture" in obs.modalities:  # activities (variances) are positive
+            obs.modalities["texture"] = np.abs(obs.modalities["texture"]) + 0.5
+    path = write_feature_table(tmp_path / "t.csv", table, extraction="aptkt-skin")
+    expected = _cli_accuracy(path, tmp_path / "cli")
+    with path.open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    data = {c: [r[c] for r in rows] for c in rows[0]}
+    for c in data:
+        if c not in ("object", "action", "extraction"):
+            data[c] = [float(v) if v else np.nan for v in data[c]]
+    kw = {"prior_objects": PRIORS, "new_objects": NEW, "runs": 1, "budget": 2}
+    result = compare_on_data(data, output=tmp_path / "one-call", **kw)
+    for method, curve in expected.items():
+        np.testing.assert_allclose(result.accuracy[method][0], curve, rtol=1e-12)
+    texture = PriorKnowledge.load(tmp_path / "one-call" / "prior.npz")["S1"].pipeline.transforms
+    assert texture["texture"].log_columns == (0, 1, 2)
+    compare_on_data(data, output=tmp_path / "other", extraction="other", **kw)
+    other = PriorKnowledge.load(tmp_path / "other" / "prior.npz")["S1"].pipeline.transforms
+    assert "texture" not in other or other["texture"].log_columns == ()
+    with pytest.raises(ConfigError, match="extraction must be one of"):
+        compare_on_data(data, extraction="skin", **kw)

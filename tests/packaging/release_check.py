@@ -3,11 +3,13 @@
 1. ``auditwheel show``: the wheel must be manylinux2014 (glibc 2.17) or older, or whatever
    ``--manylinux`` names.
 2. ``twine check --strict`` on the wheel and the sdist: the metadata PyPI renders.
-3. A fresh virtual environment of the oldest Python that pyproject.toml's requires-python
-   allows: the wheel installed with its dependencies from the package index, then
-   ``aptkt --version`` against the workspace's version, the README's first example against the
-   output the README prints, and ``aptkt learn --table`` on a generated table.
-4. The sdist built from source into the same environment (``pip install --no-deps
+3. A fresh virtual environment of every Python version pyproject.toml's classifiers name (the
+   oldest of them must be requires-python's lower bound): the wheel installed with its
+   dependencies from the package index, then ``aptkt --version`` against the workspace's
+   version, the README's first example against the output the README prints, and ``aptkt
+   learn --table`` on a generated table. So the classifiers claim the versions the wheel is
+   checked on, and no other.
+4. The sdist built from source into the oldest Python's environment (``pip install --no-deps
    --force-reinstall``) and step 3's checks again. Cargo builds it in a new, temporary
    directory, every crate from scratch: path crates get the same file names wherever their
    sources lie, and the sdist's files carry a fixed old date, so in a directory holding an
@@ -87,6 +89,31 @@ def oldest_python(requires_python: str) -> str:
     return f"{match[1]}.{match[2]}"
 
 
+def _version_key(version: str) -> tuple[int, ...]:
+    return tuple(int(part) for part in version.split("."))
+
+
+def checked_pythons(project: dict) -> list[str]:
+    """The Python versions the classifiers name, oldest first; the oldest must be the lower
+    bound of requires-python (a version it allows but the release never checked, or the
+    reverse, would be a claim nobody tested)."""
+    versions = sorted(
+        {
+            match[1]
+            for classifier in project.get("classifiers", [])
+            if (match := re.fullmatch(r"Programming Language :: Python :: (3\.\d+)", classifier))
+        },
+        key=_version_key,
+    )
+    oldest = oldest_python(project["requires-python"])
+    if not versions or versions[0] != oldest:
+        raise CheckFailed(
+            f"the classifiers name Python {', '.join(versions) or 'no version'}, but "
+            f"requires-python allows {oldest} and newer: the oldest must be named and checked"
+        )
+    return versions
+
+
 def _python_version(executable: str) -> str | None:
     try:
         out = subprocess.run(
@@ -101,11 +128,18 @@ def _python_version(executable: str) -> str | None:
     return out.stdout.strip() if out.returncode == 0 else None
 
 
-def python_candidates(version: str) -> list[str]:
-    """Where an interpreter of ``version`` may live: $APTKT_OLDEST_PYTHON, the PATH, pyenv."""
+def python_variable(version: str) -> str:
+    """The environment variable that names an interpreter of ``version`` (APTKT_PYTHON_3_13)."""
+    return "APTKT_PYTHON_" + version.replace(".", "_")
+
+
+def python_candidates(version: str, *, oldest: bool = False) -> list[str]:
+    """Where an interpreter of ``version`` may live: $APTKT_PYTHON_3_X (for the oldest also
+    $APTKT_OLDEST_PYTHON), the PATH, pyenv."""
     found = []
-    if os.environ.get("APTKT_OLDEST_PYTHON"):
-        found.append(os.environ["APTKT_OLDEST_PYTHON"])
+    for variable in (python_variable(version), "APTKT_OLDEST_PYTHON" if oldest else None):
+        if variable and os.environ.get(variable):
+            found.append(os.environ[variable])
     on_path = shutil.which(f"python{version}")
     if on_path:
         found.append(on_path)
@@ -124,13 +158,15 @@ def python_candidates(version: str) -> list[str]:
     return found
 
 
-def find_python(version: str, candidates: list[str]) -> str:
+def find_python(version: str, candidates: list[str], *, oldest: bool = False) -> str:
     for candidate in candidates:
         if _python_version(candidate) == version:
             return candidate
+    why = "the oldest that requires-python allows" if oldest else "the classifiers name it"
+    variable = "APTKT_OLDEST_PYTHON" if oldest else python_variable(version)
     raise CheckFailed(
-        f"no Python {version} found (the oldest that requires-python allows); install it "
-        f"(e.g. `pyenv install {version}`) or set APTKT_OLDEST_PYTHON to its interpreter"
+        f"no Python {version} found ({why}); install it (e.g. `pyenv install {version}`) or set "
+        f"{variable} to its interpreter"
     )
 
 
@@ -220,20 +256,32 @@ def main(argv: list[str] | None = None) -> int:
         pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
         workspace = tomllib.loads((ROOT / "Cargo.toml").read_text())
         version = workspace["workspace"]["package"]["version"]
-        oldest = oldest_python(pyproject["project"]["requires-python"])
-        python = find_python(oldest, python_candidates(oldest))
-        print(f"    Python {oldest}: {python}")
+        versions = checked_pythons(pyproject["project"])
+        # Every interpreter found before the first long installation.
+        pythons = {
+            v: find_python(v, python_candidates(v, oldest=i == 0), oldest=i == 0)
+            for i, v in enumerate(versions)
+        }
+        for v, python in pythons.items():
+            print(f"    Python {v}: {python}")
 
         with tempfile.TemporaryDirectory(prefix="aptkt-release-") as tmp:
-            env, work = Path(tmp) / "venv", Path(tmp) / "work"
-            _run([python, "-m", "venv", str(env)], ROOT)
+            for v, python in pythons.items():
+                env, work = Path(tmp) / f"venv-{v}", Path(tmp) / f"work-{v}"
+                _run([python, "-m", "venv", str(env)], ROOT)
+                pip = [str(env / "bin" / "python"), "-m", "pip", "install", "--quiet"]
+                pip += ["--disable-pip-version-check"]
+                start = time.monotonic()
+                _run(pip + [str(args.wheel.resolve())], ROOT, _clean_env())
+                took = time.monotonic() - start
+                print(f"    Python {v}: wheel installed with its dependencies ({took:.0f} s)")
+                work.mkdir()
+                check_installed(env, version, work)
+            # The sdist goes into the oldest Python's environment.
+            oldest = versions[0]
+            env, work = Path(tmp) / f"venv-{oldest}", Path(tmp) / f"work-{oldest}"
             pip = [str(env / "bin" / "python"), "-m", "pip", "install", "--quiet"]
             pip += ["--disable-pip-version-check"]
-            start = time.monotonic()
-            _run(pip + [str(args.wheel.resolve())], ROOT, _clean_env())
-            print(f"    wheel installed with its dependencies ({time.monotonic() - start:.0f} s)")
-            work.mkdir()
-            check_installed(env, version, work)
 
             if args.no_sdist_install:
                 print("    sdist: not built (--no-sdist-install)")

@@ -20,8 +20,15 @@ from release_check import (  # noqa: E402
     main,
     manylinux_glibc,
     oldest_python,
+    python_candidates,
     readme_example,
+    checked_pythons,
 )
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:
+    import tomli as tomllib
 
 # auditwheel 6.8's report, wrapped as it prints it.
 SHOWN = """
@@ -94,7 +101,40 @@ def test_the_first_interpreter_of_the_right_version_is_used(tmp_path):
 def test_no_interpreter_of_the_oldest_version_is_one_clear_error(tmp_path):
     wrong = _fake_python(tmp_path / "python3.10", "3.11")  # e.g. a pyenv shim of another version
     with pytest.raises(CheckFailed, match=r"no Python 3\.10 found.*APTKT_OLDEST_PYTHON"):
-        find_python("3.10", [wrong])
+        find_python("3.10", [wrong], oldest=True)
+    with pytest.raises(
+        CheckFailed, match=r"no Python 3\.13 found \(the classifiers name it\).*APTKT_PYTHON_3_13"
+    ):
+        find_python("3.13", [wrong])
+
+
+def test_every_python_the_classifiers_name_is_checked_from_the_oldest_allowed():
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    versions = checked_pythons(project)
+    assert versions[0] == oldest_python(project["requires-python"])
+    assert versions == sorted(versions, key=lambda v: tuple(map(int, v.split("."))))
+    named = {"requires-python": ">=3.10", "classifiers": []}
+    for classifiers, ok in (
+        (
+            ["Programming Language :: Python :: 3.13", "Programming Language :: Python :: 3.10"],
+            True,
+        ),
+        (["Programming Language :: Python :: 3.11"], False),  # 3.10 allowed, never checked
+        (["Programming Language :: Python :: 3 :: Only"], False),
+    ):
+        named["classifiers"] = classifiers
+        if ok:
+            assert checked_pythons(named) == ["3.10", "3.13"]
+        else:
+            with pytest.raises(CheckFailed, match="the oldest must be named and checked"):
+                checked_pythons(named)
+
+
+def test_an_interpreter_can_be_named_per_version(tmp_path, monkeypatch):
+    chosen = _fake_python(tmp_path / "py", "3.13")
+    monkeypatch.setenv("APTKT_PYTHON_3_13", chosen)
+    assert python_candidates("3.13")[0] == chosen
+    assert find_python("3.13", python_candidates("3.13")) == chosen
 
 
 def test_readme_example_and_its_output_are_found():

@@ -110,8 +110,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     x = ds.add_parser(
         "export-features",
         help="write the feature observations as a feature table (CSV or HDF5) for aptkt learn --table",
-        description="One row per recording: object, action, trial and the feature columns "
-        "<modality>.<k> (see docs/feature-tables.md). Features not yet stored are extracted first.",
+        description="One row per recording: object, action, trial, extraction (aptkt-skin: this "
+        "skin's features, so that learning from the table transforms them as from the data set) "
+        "and the feature columns <modality>.<k> (see docs/feature-tables.md). Features not yet "
+        "stored are extracted first.",
     )
     x.add_argument("file", metavar="DATASET", help="data set (HDF5)")
     x.add_argument(
@@ -322,6 +324,7 @@ def run_export_features(args: argparse.Namespace) -> int:
     from aptkt.errors import DatasetError
     from aptkt.learning.dataset import load_observations
     from aptkt.learning.feature_table import write_feature_table
+    from aptkt.learning.pipeline import SKIN_EXTRACTION
 
     input_file(args.file, "DATASET")
     intact_data_set(args.file, "DATASET")
@@ -341,7 +344,9 @@ def run_export_features(args: argparse.Namespace) -> int:
     empty = [a for a, obs in table.items() if len(obs) == 0]
     if empty:
         raise ConfigError(f"{args.file}: no observations of {', '.join(empty)} for these objects")
-    write_feature_table(args.output, table)
+    # Marked as this skin's features: learning from the table transforms them as from the
+    # data set.
+    write_feature_table(args.output, table, extraction=SKIN_EXTRACTION)
     rows = sum(len(obs) for obs in table.values())
     print(f"{args.output}: {rows} rows ({', '.join(f'{a} {len(o)}' for a, o in table.items())})")
     return 0

@@ -13,8 +13,23 @@ from aptkt.commands._checks import MAX_BUDGET, MAX_RUNS, at_most, output_dir
 from aptkt.commands._method import learner_config
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
+from aptkt.learning.pipeline import EXTRACTIONS, SKIN_EXTRACTION
 
 DEFAULT_RUNS = 3
+
+
+def add_extraction_argument(p: argparse._ActionsContainer) -> None:
+    """``--extraction``: whose features a feature table holds (learn --table, prior build)."""
+    p.add_argument(
+        "--extraction",
+        choices=EXTRACTIONS,
+        default="auto",
+        help=f"whose features the table holds: {SKIN_EXTRACTION}, this skin's as aptkt extracts "
+        "them (the texture's activities log-scaled, the thermal curve reduced by PCA, as when "
+        "learning from a data set); other, any sensor's (each column z-scored as it is); auto, "
+        f"as the table's extraction column says (aptkt dataset export-features writes "
+        f"{SKIN_EXTRACTION}), other without one (default %(default)s)",
+    )
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -42,14 +57,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="N",
         help=f"learning runs per method (with --table; default {DEFAULT_RUNS})",
     )
+    add_extraction_argument(g)
 
 
 def table_only(args: argparse.Namespace) -> list[str]:
     """The options of this mode that were given (an error without --table)."""
-    given = (args.prior_objects, args.test_trials, args.runs)
-    return [
-        o for o, v in zip(("--prior-objects", "--test-trials", "--runs"), given) if v is not None
-    ]
+    given = {
+        "--prior-objects": args.prior_objects,
+        "--test-trials": args.test_trials,
+        "--runs": args.runs,
+        "--extraction": None if args.extraction == "auto" else args.extraction,
+    }
+    return [option for option, value in given.items() if value is not None]
 
 
 def _trials(text: str) -> tuple[int, ...]:
@@ -115,6 +134,7 @@ def run(args: argparse.Namespace) -> int:
         output=args.output,
         runs=runs,
         config=config,
+        extraction=args.extraction,
     )
     learn_from_table(settings, say=lambda line: print(line, flush=True))
     return 0

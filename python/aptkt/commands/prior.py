@@ -16,8 +16,9 @@ from aptkt.commands._checks import (
     output_file,
 )
 from aptkt.commands._session import split_names
+from aptkt.commands.learn_table import add_extraction_argument
 from aptkt.errors import ConfigError
-from aptkt.gp import MAX_RESTARTS
+from aptkt.gp.settings import MAX_RESTARTS
 from aptkt.learning.config import GPSettings
 from aptkt.learning.pipeline import FEATURE_SCALES
 from aptkt.progress import Progress
@@ -88,6 +89,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "column z-scored over the observations); default %(default)s; docs/method.md",
     )
     add_renamed_option(b, "--feature-scale")
+    add_extraction_argument(b)
     b.set_defaults(func=run_build)
 
     m = ps.add_parser(
@@ -147,7 +149,7 @@ def run_build(args: argparse.Namespace) -> int:
     from aptkt.learning import GPSettings, PriorKnowledge
     from aptkt.learning.dataset import load_observations, stored_actions
     from aptkt.learning.extract import ExtractionSettings
-    from aptkt.learning.pipeline import GENERIC_TRANSFORMS
+    from aptkt.learning.pipeline import transforms_of
 
     if not os.path.exists(args.data):  # (os.path: a name too long to exist is an answer too)
         raise ConfigError(f"{args.data}: no such data set or feature table")
@@ -157,6 +159,11 @@ def run_build(args: argparse.Namespace) -> int:
     from_table = is_feature_table(args.data)
     if not from_table:
         intact_data_set(args.data, "DATASET")
+        if args.extraction != "auto":
+            raise ConfigError(
+                f"--extraction: only for a feature table; {args.data} is a data set of this "
+                "skin, whose features this package extracts"
+            )
     at_least(args.seed, 0, "--seed")
     at_least(args.restarts, 0, "--restarts")
     at_most(args.restarts, MAX_RESTARTS, "--restarts", "restarts bound every model's fit")
@@ -169,7 +176,7 @@ def run_build(args: argparse.Namespace) -> int:
         raise ConfigError("--objects: prior knowledge needs at least two objects")
     trials = _trials(args.trials)
     if from_table:
-        table, columns = _from_table(
+        table, columns, extraction = _from_table(
             args.data, split_names(args.actions, "--actions"), objects, trials
         )
     else:
@@ -187,8 +194,9 @@ def run_build(args: argparse.Namespace) -> int:
         prior = PriorKnowledge.build(
             table,
             gp=GPSettings(n_restarts=args.restarts, prior_feature_scale=args.prior_feature_scale),
-            # A feature table is any sensor's: its groups get no transform of this skin's.
-            transforms=GENERIC_TRANSFORMS if from_table else None,
+            # A feature table's groups get this skin's transforms only if it holds this skin's
+            # features (its extraction column, or --extraction).
+            transforms=transforms_of(extraction, args.extraction) if from_table else None,
             seed=args.seed,
             progress=bar,
         )
@@ -218,8 +226,8 @@ def run_build(args: argparse.Namespace) -> int:
 def _from_table(
     path: Path, actions: list[str] | None, objects: list[str] | None, trials: range | None
 ):
-    """A feature table's observations of the chosen actions, objects and trials, and each
-    action's feature columns by modality."""
+    """A feature table's observations of the chosen actions, objects and trials, each
+    action's feature columns by modality, and what extracted them (its extraction column)."""
     import numpy as np
 
     from aptkt.experiments.table_limits import read_table_within_limits
@@ -244,7 +252,7 @@ def _from_table(
                 f"{path}: action {action} has {len(set(obs.objects.tolist()))} object(s) with "
                 "the chosen objects and trials; prior knowledge needs at least two"
             )
-    return observations, {a: table_columns(table, a) for a in names}
+    return observations, {a: table_columns(table, a) for a in names}, table.extraction
 
 
 def load_prior(path: Path, option: str):

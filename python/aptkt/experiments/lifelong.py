@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -32,7 +32,7 @@ from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
 from aptkt.learning.library import merge_priors
 from aptkt.learning.observations import ObservationTable
-from aptkt.learning.pipeline import GENERIC_TRANSFORMS
+from aptkt.learning.pipeline import GENERIC_TRANSFORMS, ModalityTransform, transforms_of
 
 __all__ = [
     "LifelongSettings",
@@ -118,16 +118,18 @@ def run_order(
     learn: ObservationTable,
     test: ObservationTable,
     s: LifelongSettings,
+    transforms: Mapping[str, ModalityTransform] = GENERIC_TRANSFORMS,
 ) -> list[dict[str, Any]]:
     """One order: the starting library, then batch after batch learned and merged. Rows: per
     batch, each method's curve (``method`` baseline/APTKT, ``step``, ``accuracy``) and the grown
-    library's accuracy (``method`` library / NCM, step 0)."""
+    library's accuracy (``method`` library / NCM, step 0). ``transforms``: the modalities'
+    (this skin's only for this skin's features, see
+    :func:`~aptkt.learning.pipeline.transforms_of`)."""
     actions = list(learn)
     seed = s.seed * 1_000_003 + index
     library_objects = list(order[: s.batch])
-    # A feature table is any sensor's: no transform of this skin's, whatever its groups' names.
     library = PriorKnowledge.build(
-        _subset(learn, library_objects), gp=s.config.gp, seed=seed, transforms=GENERIC_TRANSFORMS
+        _subset(learn, library_objects), gp=s.config.gp, seed=seed, transforms=transforms
     )
     rows: list[dict[str, Any]] = []
     n_batches = (len(order) - s.batch) // s.batch
@@ -143,9 +145,7 @@ def run_order(
         learned: dict[str, Any] = {}
         for method, transfer in (("baseline", "none"), ("APTKT", "paper")):
             cfg = replace(s.config, budget=s.budget, seed=seed + b, transfer=transfer)
-            learner = APTKT(
-                cfg, library if method == "APTKT" else None, transforms=GENERIC_TRANSFORMS
-            )
+            learner = APTKT(cfg, library if method == "APTKT" else None, transforms=transforms)
             run = learner.run(PoolEnvironment(pool, seed=seed + b), actions, new, test=held)
             rows += [
                 {**tags, "method": method, "step": k, "accuracy": step.mean_accuracy}
@@ -155,7 +155,7 @@ def run_order(
                 learned = {a: lrn.observations for a, lrn in learner.learners.items()}
         # What the robot observed of the new objects becomes a library of its own, then joins.
         new_library = PriorKnowledge.build(
-            learned, gp=library.gp_settings, seed=seed + b, transforms=GENERIC_TRANSFORMS
+            learned, gp=library.gp_settings, seed=seed + b, transforms=transforms
         )
         library = merge_priors(
             [(f"library {b - 1}", library), (f"batch {b}", new_library)], seed=seed + b
@@ -190,7 +190,16 @@ def run_order(
     return rows
 
 
-def _task(task: tuple[int, list[str], ObservationTable, ObservationTable, LifelongSettings]):
+def _task(
+    task: tuple[
+        int,
+        list[str],
+        ObservationTable,
+        ObservationTable,
+        LifelongSettings,
+        Mapping[str, ModalityTransform],
+    ],
+):
     return run_order(*task)
 
 
@@ -228,7 +237,9 @@ def run_lifelong(
     )
     t0 = time.perf_counter()
     bar = Progress(s.orders, "order", "lifelong", enabled=progress)
-    tasks = [(i, order, learn, test, s) for i, order in enumerate(orders)]
+    # This skin's transforms only if the table says it holds this skin's features.
+    transforms = transforms_of(table.extraction)
+    tasks = [(i, order, learn, test, s, transforms) for i, order in enumerate(orders)]
     rows: list[dict[str, Any]] = []
     try:
         for _, r in each_result(_task, tasks, parallel_map_of(executor, jobs, scheduler)):

@@ -29,7 +29,13 @@ from aptkt.experiments.table_learning import (
 )
 from aptkt.experiments.table_limits import check_size, check_table
 from aptkt.learning import LearnerConfig
-from aptkt.learning.feature_table import ID_COLUMNS, FeatureTable, table_from_columns
+from aptkt.learning.feature_table import (
+    EXTRACTION_COLUMN,
+    ID_COLUMNS,
+    FeatureTable,
+    table_from_columns,
+)
+from aptkt.learning.pipeline import EXTRACTIONS
 
 __all__ = ["Comparison", "compare_on_data", "feature_table_from"]
 
@@ -76,7 +82,9 @@ def feature_table_from(
     ``<modality>.1``, ...); other columns are left out. Without it the feature columns must be
     named ``<modality>.<k>`` already. ``action_column=None``: every row is one action named
     ``single_action``; ``trial_column=None``: rows are numbered per object and action in order.
-    NaN marks a feature an action does not have, as an empty cell in a file.
+    NaN marks a feature an action does not have, as an empty cell in a file. A column
+    ``extraction`` says what computed the features, as in a file (a table that
+    ``aptkt dataset export-features`` wrote, read with pandas, keeps it).
     """
     names = _column_names(data)
     for option, column in (
@@ -102,8 +110,10 @@ def feature_table_from(
     else:
         trials = list(_column(data, trial_column).ravel())
     columns: dict[str, Sequence] = {"object": objects, "action": actions, "trial": trials}
+    if EXTRACTION_COLUMN in names:  # what computed the features, as a table file says it
+        columns[EXTRACTION_COLUMN] = [str(v) for v in _column(data, EXTRACTION_COLUMN).ravel()]
     if modalities is None:
-        taken = {object_column, action_column, trial_column}
+        taken = {object_column, action_column, trial_column, EXTRACTION_COLUMN}
         features = {c: c for c in names if c not in taken}
     else:
         features = {}
@@ -219,6 +229,7 @@ def _arguments(
     output: Any,
     say: Any,
     force: Any,
+    extraction: Any,
     learner: Mapping[str, Any],
 ) -> LearnerConfig:
     """Every argument of :func:`compare_on_data` checked (a :class:`ConfigError`, or a
@@ -283,6 +294,8 @@ def _arguments(
         raise InvalidTypeError(f"say must be a function of one line, or None, got {say!r}")
     if not isinstance(force, bool):
         raise ConfigError(f"force must be True or False, got {force!r}")
+    if not isinstance(extraction, str) or extraction not in EXTRACTIONS:
+        raise ConfigError(f"extraction must be one of {EXTRACTIONS}, got {extraction!r}")
     cfg = config if config is not None else LearnerConfig()
     unknown = sorted(set(learner) - {f.name for f in fields(LearnerConfig)})
     if unknown:
@@ -347,6 +360,7 @@ def compare_on_data(
     output: str | Path | None = None,
     say: Callable[[str], None] | None = None,
     force: bool = False,
+    extraction: str = "auto",
     **learner: Any,
 ) -> Comparison:
     """APTKT (with and without auxiliary features) against the baseline on your own data.
@@ -355,8 +369,12 @@ def compare_on_data(
     split by trial into a pool to learn from and a held-out test set (``test_trials``, or the
     later ``test_fraction`` of each object's trials per action), as ``aptkt learn --table``
     does. ``config`` (or keyword arguments such as ``budget=6, seed=0``, applied on top of
-    it) sets the learner. With ``output``, the files of ``aptkt learn --table`` are written
-    there too (an earlier result there is replaced only with ``force=True``). ``say`` receives the progress lines (default: silent). See
+    it) sets the learner. ``extraction`` says whose features the data holds
+    (:data:`~aptkt.learning.pipeline.EXTRACTIONS`, as ``--extraction`` of ``aptkt learn
+    --table``): "aptkt-skin" transforms them as this skin's, "other" z-scores every column,
+    "auto" reads the data's ``extraction`` column (other without one). With ``output``, the
+    files of ``aptkt learn --table`` are written there too (an earlier result there is replaced
+    only with ``force=True``). ``say`` receives the progress lines (default: silent). See
     :func:`feature_table_from` for ``data`` and ``modalities``.
 
     Every argument is checked before any work: a mistake is a
@@ -379,6 +397,7 @@ def compare_on_data(
         output=output,
         say=say,
         force=force,
+        extraction=extraction,
         learner=learner,
     )
     table = feature_table_from(
@@ -399,6 +418,7 @@ def compare_on_data(
         output=Path(output) if output is not None else Path("."),
         runs=runs,
         config=cfg,
+        extraction=extraction,
     )
     quiet = say if say is not None else (lambda line: None)
     t_start = time.perf_counter()

@@ -22,7 +22,7 @@ from aptkt.experiments.benchmark import split_trials
 from aptkt.experiments.report import markdown_table
 from aptkt.learning import PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
-from aptkt.learning.pipeline import GENERIC_TRANSFORMS
+from aptkt.learning.pipeline import transforms_of
 
 __all__ = ["recognition_draw", "run_recognition_benchmark", "METRICS"]
 
@@ -44,7 +44,8 @@ def recognition_draw(
     prior = PriorKnowledge.build(
         {a: o.of_objects(library) for a, o in learn.items()},
         seed=seed,
-        transforms=GENERIC_TRANSFORMS,  # a feature table: any sensor's
+        # This skin's transforms only if the table says it holds this skin's features.
+        transforms=transforms_of(table.extraction),
     )
     touches = {a: o.of_objects(library + unseen) for a, o in test.items()}
     result = prior.recognise(touches)

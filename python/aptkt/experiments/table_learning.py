@@ -28,7 +28,7 @@ from aptkt.experiments.runs import step_rows
 from aptkt.experiments.table_limits import read_table_within_limits
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable, split_held_out
-from aptkt.learning.pipeline import GENERIC_TRANSFORMS
+from aptkt.learning.pipeline import transforms_of
 
 __all__ = [
     "TableSettings",
@@ -52,6 +52,9 @@ class TableSettings:
     #: APTKT's learner (its budget, seed and method choices); APTKT+aux adds the auxiliary
     #: features, the baseline uses no prior.
     config: LearnerConfig = field(default_factory=LearnerConfig)
+    #: Whose features the table holds (:data:`~aptkt.learning.pipeline.EXTRACTIONS`): "auto"
+    #: reads the table's ``extraction`` column.
+    extraction: str = "auto"
 
 
 def _check_objects(table, s: TableSettings, actions: list[str]) -> None:
@@ -120,12 +123,11 @@ def compare_on_table(
     to = f" -> {prior_path}" if prior_path is not None else ""
     say(f"[2/3] building prior knowledge on {', '.join(s.prior_objects)}{to}")
     cfg = s.config
-    # Any sensor's features: a group named "texture" is not this skin's texture.
+    # This skin's transforms only for this skin's features: a group named "texture" in
+    # another sensor's table is not this skin's texture.
+    transforms = transforms_of(table.extraction, s.extraction)
     prior = PriorKnowledge.build(
-        table.observations(actions, prior_rows),
-        gp=cfg.gp,
-        seed=cfg.seed,
-        transforms=GENERIC_TRANSFORMS,
+        table.observations(actions, prior_rows), gp=cfg.gp, seed=cfg.seed, transforms=transforms
     )
     if prior_path is not None:
         prior.save(prior_path)
@@ -143,9 +145,7 @@ def compare_on_table(
     rows: list[dict[str, Any]] = []
     for t in range(s.runs):
         for name, method in methods.items():
-            learner = APTKT(
-                replace(method, seed=cfg.seed + t), prior, transforms=GENERIC_TRANSFORMS
-            )
+            learner = APTKT(replace(method, seed=cfg.seed + t), prior, transforms=transforms)
             run = learner.run(
                 PoolEnvironment(pool, seed=cfg.seed + t), actions, s.new_objects, test
             )

@@ -18,21 +18,31 @@ by further labelled data sets, ``fit(..., kernel_tasks=...)``). The classifiers 
 parallel in Rust with the GIL released. Models are saved with :meth:`LaplaceGPC.save` to a NumPy ``.npz`` file (no pickle).
 """
 
-from aptkt.errors import KernelNotPositiveDefiniteError
-from aptkt.gp.estimator import LaplaceGPC, uniform_class_prior
-from aptkt.gp.kernel import kernel_matrix
-from aptkt.gp.settings import (
-    CLASS_PRIORS,
-    DEFAULTS,
-    KERNELS,
-    LATENT_MEANS,
-    MAX_ITERATIONS,
-    MAX_RESTARTS,
-    FitDefaults,
-    HyperPrior,
-    check_optimizer_tol,
-)
-from aptkt.gp.sources import TransferSource
+from typing import TYPE_CHECKING
+
+from aptkt._lazy import lazy_exports
+
+# Each name loads its module on first use (aptkt._lazy): the command line imports only the
+# settings of this package.
+if TYPE_CHECKING:
+    from aptkt.errors import KernelNotPositiveDefiniteError
+    from aptkt.gp.estimator import LaplaceGPC, uniform_class_prior
+    from aptkt.gp.kernel import kernel_matrix
+    from aptkt.gp.settings import (
+        CLASS_PRIORS,
+        DEFAULTS,
+        KERNELS,
+        LATENT_MEANS,
+        MAX_ITERATIONS,
+        MAX_RESTARTS,
+        FitDefaults,
+        HyperPrior,
+        check_optimizer_tol,
+    )
+    from aptkt.gp.sources import TransferSource
+else:
+    __getattr__, __dir__ = lazy_exports(__name__, __file__)
+
 
 __all__ = [
     "CLASS_PRIORS",

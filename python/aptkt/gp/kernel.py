@@ -9,7 +9,7 @@ import numpy as np
 
 from aptkt import _core
 from aptkt.errors import InvalidInputError
-from aptkt.gp.inputs import as_matrix, normalise_modalities
+from aptkt.gp.arguments import as_matrix, normalise_modalities
 
 __all__ = ["kernel_matrix"]
 

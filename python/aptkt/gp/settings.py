@@ -12,7 +12,7 @@ import numpy as np
 
 from aptkt import _core
 from aptkt.errors import InvalidInputError, InvalidTypeError
-from aptkt.gp.inputs import count, normalise_modalities, real, seed_of, threads
+from aptkt.gp.arguments import count, normalise_modalities, real, seed_of, threads
 
 __all__ = [
     "CLASS_PRIORS",

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.errors import InvalidInputError, InvalidTypeError
-from aptkt.gp.inputs import as_matrix
+from aptkt.gp.arguments import as_matrix
 
 __all__ = ["TransferSource", "normalise_sources", "start_lambda"]
 

@@ -18,16 +18,26 @@ evaluation             accuracy on held-out test observations, fused over action
 =====================  =====================================================================
 """
 
-from aptkt.learning.config import GPSettings, LearnerConfig
-from aptkt.learning.environment import Environment, PoolEnvironment, PoolExhaustedError
-from aptkt.learning.identity import ObjectIdentity
-from aptkt.learning.learner import APTKT, LearningRun, StepRecord
-from aptkt.learning.library import merge_priors
-from aptkt.learning.observations import Observations, ObservationTable
-from aptkt.learning.pipeline import FeaturePipeline, ModalityTransform
-from aptkt.learning.prior import ActionPrior, PriorKnowledge
-from aptkt.learning.recognition import Recognition
-from aptkt.learning.transfer import TransferDecision, decide_transfer
+from typing import TYPE_CHECKING
+
+from aptkt._lazy import lazy_exports
+
+# Each name loads its module on first use (aptkt._lazy): the command line imports only the
+# settings of this package.
+if TYPE_CHECKING:
+    from aptkt.learning.config import GPSettings, LearnerConfig
+    from aptkt.learning.environment import Environment, PoolEnvironment, PoolExhaustedError
+    from aptkt.learning.identity import ObjectIdentity
+    from aptkt.learning.learner import APTKT, LearningRun, StepRecord
+    from aptkt.learning.library import merge_priors
+    from aptkt.learning.observations import Observations, ObservationTable
+    from aptkt.learning.pipeline import FeaturePipeline, ModalityTransform
+    from aptkt.learning.prior import ActionPrior, PriorKnowledge
+    from aptkt.learning.recognition import Recognition
+    from aptkt.learning.transfer import TransferDecision, decide_transfer
+else:
+    __getattr__, __dir__ = lazy_exports(__name__, __file__)
+
 
 __all__ = [
     "APTKT",

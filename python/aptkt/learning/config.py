@@ -5,15 +5,18 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from aptkt.errors import InvalidInputError
-from aptkt.gp import DEFAULTS, HyperPrior, LaplaceGPC, check_optimizer_tol
-from aptkt.gp import KERNELS as ESTIMATOR_KERNELS
+from aptkt.gp.settings import DEFAULTS, HyperPrior, check_optimizer_tol
+from aptkt.gp.settings import KERNELS as ESTIMATOR_KERNELS
 from aptkt.learning.pipeline import FEATURE_SCALES
 from aptkt.learning.transfer import CUTOFFS, TRANSFER_MODES
+
+if TYPE_CHECKING:
+    from aptkt.gp.estimator import LaplaceGPC
 
 __all__ = [
     "GPSettings",
@@ -190,6 +193,9 @@ class GPSettings:
     ) -> LaplaceGPC:
         """An unfitted model; ``shared``: the shared kernel (equal weights, one length-scale),
         for its classifiers and its kernel tasks."""
+        # Here, not at the top: the command line reads these settings without scikit-learn.
+        from aptkt.gp.estimator import LaplaceGPC
+
         return LaplaceGPC(
             length_scale=self.length_scale,
             signal_variance=self.signal_variance,

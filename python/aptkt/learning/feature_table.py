@@ -7,6 +7,12 @@ empty on that action's rows (an empty CSV cell, NaN in HDF5), and the dimensions
 of a modality are ``.0`` up to some ``.d-1``. HDF5 files hold one 1-D data set per column at
 the file's root (strings for ``object`` and ``action``).
 
+An optional column ``extraction`` names what computed the features, the same on every row:
+``aptkt-skin`` (:data:`~aptkt.learning.pipeline.SKIN_EXTRACTION`), written by ``aptkt dataset
+export-features``, says they are this skin's features as this package extracts them, so that
+learning from the table transforms them as it would the data set's (log of the texture's
+activities, thermal PCA). Without it, or with another name, every column is z-scored as it is.
+
 Every problem is reported as a :class:`~aptkt.errors.FeatureTableError` naming the file, the row
 (numbered from 1, the header not counted) and the column — a table is usually written by another
 program, and its author needs to find the bad cell.
@@ -30,6 +36,7 @@ from aptkt.learning.observations import Observations, ObservationTable
 
 __all__ = [
     "ID_COLUMNS",
+    "EXTRACTION_COLUMN",
     "FeatureTable",
     "read_feature_table",
     "table_from_columns",
@@ -39,6 +46,8 @@ __all__ = [
 ]
 
 ID_COLUMNS = ("object", "action", "trial")
+#: The optional column naming what computed the features (one name for every row).
+EXTRACTION_COLUMN = "extraction"
 _FEATURE = re.compile(r"^([A-Za-z_][A-Za-z0-9_-]*)\.(0|[1-9][0-9]*)$")
 _CSV = (".csv",)
 _HDF5 = (".h5", ".hdf5")
@@ -54,6 +63,8 @@ class FeatureTable:
     trials: np.ndarray
     columns: list[str]
     values: np.ndarray
+    #: What computed the features (the ``extraction`` column), None if the table does not say.
+    extraction: str | None = None
 
     def _error(self, msg: str, row: int | None = None, column: str | None = None):
         return _error(self.path, msg, row, column)
@@ -192,13 +203,13 @@ def _validate(path: Path, header: list[str], cells: dict[str, list]) -> FeatureT
             f"missing column(s) {', '.join(missing)}; a feature table has the columns "
             "object, action, trial and <modality>.<k>",
         )
-    features = [h for h in header if h not in ID_COLUMNS]
+    features = [h for h in header if h not in (*ID_COLUMNS, EXTRACTION_COLUMN)]
     for h in features:
         if not _FEATURE.match(h):
             raise _error(
                 path,
-                "is neither object, action, trial nor a feature column <modality>.<k> "
-                "(e.g. force.0)",
+                "is neither object, action, trial, extraction nor a feature column "
+                "<modality>.<k> (e.g. force.0)",
                 None,
                 repr(h),
             )
@@ -232,9 +243,28 @@ def _validate(path: Path, header: list[str], cells: dict[str, list]) -> FeatureT
         for i, v in enumerate(cells[h]):
             values[i, c] = _number(path, v, i, h)
 
-    table = FeatureTable(path, objects.astype(str), actions.astype(str), trials, features, values)
+    extraction = _extraction(path, cells) if EXTRACTION_COLUMN in header else None
+    table = FeatureTable(
+        path, objects.astype(str), actions.astype(str), trials, features, values, extraction
+    )
     _check_rows(table)
     return table
+
+
+def _extraction(path: Path, cells: dict[str, list]) -> str:
+    names = [str(v).strip() for v in cells[EXTRACTION_COLUMN]]
+    for i, name in enumerate(names):
+        if name == "":
+            raise _error(path, "empty name", i, EXTRACTION_COLUMN)
+        if name != names[0]:
+            raise _error(
+                path,
+                f"{name!r}, but {names[0]!r} in row 1: features computed in different ways "
+                "cannot be learnt from together",
+                i,
+                EXTRACTION_COLUMN,
+            )
+    return names[0]
 
 
 def _integer(path: Path, v, row: int) -> int:
@@ -339,8 +369,13 @@ def check_table_name(path: str | Path) -> Path:
     return path
 
 
-def write_feature_table(path: str | Path, table: ObservationTable) -> Path:
-    """Write an observation table as a feature table (CSV or HDF5, by the file's suffix)."""
+def write_feature_table(
+    path: str | Path, table: ObservationTable, *, extraction: str | None = None
+) -> Path:
+    """Write an observation table as a feature table (CSV or HDF5, by the file's suffix);
+    ``extraction`` fills the ``extraction`` column (e.g.
+    :data:`~aptkt.learning.pipeline.SKIN_EXTRACTION` for this skin's features as this package
+    extracts them); None leaves it out."""
     path = check_table_name(path)
     suffix = path.suffix.lower()
     widths: dict[str, int] = {}
@@ -359,12 +394,15 @@ def write_feature_table(path: str | Path, table: ObservationTable) -> Path:
         trials += obs.trials.tolist()
         blocks.append(block)
     values = np.vstack(blocks) if blocks else np.zeros((0, len(columns)))
+    marker = [] if extraction is None else [EXTRACTION_COLUMN]
     if suffix in _CSV:
         with open_atomically(path, FeatureTableError, newline="") as fh:
             w = csv.writer(fh)
-            w.writerow([*ID_COLUMNS, *columns])
+            w.writerow([*ID_COLUMNS, *marker, *columns])
+            mark = [] if extraction is None else [extraction]
             for o, a, t, row in zip(objects, actions, trials, values):
-                w.writerow([o, a, t, *("" if math.isnan(x) else repr(float(x)) for x in row)])
+                cells = ("" if math.isnan(x) else repr(float(x)) for x in row)
+                w.writerow([o, a, t, *mark, *cells])
     else:
         with (
             replaced_atomically(path, FeatureTableError) as tmp,
@@ -377,6 +415,12 @@ def write_feature_table(path: str | Path, table: ObservationTable) -> Path:
                 "action", data=np.array(actions, dtype=object), dtype=h5py.string_dtype()
             )
             f.create_dataset("trial", data=np.asarray(trials, dtype=np.int64))
+            if extraction is not None:
+                f.create_dataset(
+                    EXTRACTION_COLUMN,
+                    data=np.array([extraction] * len(objects), dtype=object),
+                    dtype=h5py.string_dtype(),
+                )
             for c, name in enumerate(columns):
                 f.create_dataset(name, data=values[:, c])
     return path

@@ -64,6 +64,19 @@ def _columns(prior: PriorKnowledge) -> dict[str, dict[str, int]]:
     }
 
 
+def _transforms(prior: PriorKnowledge) -> dict[str, dict[str, tuple[tuple[int, ...], int | None]]]:
+    """Each action's transform settings (log columns, PCA components) of the modalities it
+    has and transforms beyond z-scoring."""
+    return {
+        a: {
+            m: (t.log_columns, t.pca_components)
+            for m, t in ap.pipeline.transforms.items()
+            if m in ap.observations.modalities and (t.log_columns or t.pca_components)
+        }
+        for a, ap in prior.actions.items()
+    }
+
+
 def _check_compatible(named: Sequence[tuple[str, PriorKnowledge]]) -> None:
     """One line naming the first difference that keeps the libraries apart."""
     first_name, first = named[0]
@@ -89,6 +102,15 @@ def _check_compatible(named: Sequence[tuple[str, PriorKnowledge]]) -> None:
                 raise IncompatiblePriorsError(
                     f"{name} and {first_name}: action {action} has other feature columns "
                     f"({_describe(theirs[action])} against {_describe(ours[action])})"
+                )
+        ours_t, theirs_t = _transforms(first), _transforms(other)
+        for action in first.actions:
+            if ours_t[action] != theirs_t[action]:
+                raise IncompatiblePriorsError(
+                    f"{name} and {first_name}: action {action}'s features are transformed "
+                    f"otherwise ({_describe_transforms(theirs_t[action])} against "
+                    f"{_describe_transforms(ours_t[action])}): this skin's features and another "
+                    "sensor's? A feature table's library takes --extraction as its features are"
                 )
         for key, what in (
             ("extraction", "features extracted with other settings"),
@@ -120,6 +142,17 @@ def _check_compatible(named: Sequence[tuple[str, PriorKnowledge]]) -> None:
                     "is its identity in a library — rename one (or leave one out)"
                 )
             owner[o] = name
+
+
+def _describe_transforms(transforms: Mapping[str, tuple[tuple[int, ...], int | None]]) -> str:
+    parts = []
+    for m, (logs, pca) in transforms.items():
+        steps = ([f"log of columns {','.join(map(str, logs))}"] if logs else []) + (
+            [f"PCA to {pca}"] if pca else []
+        )
+        if steps:
+            parts.append(f"{m}: {', '.join(steps)}")
+    return "; ".join(parts) or "z-scored only"
 
 
 def _describe(columns: Mapping[str, int]) -> str:

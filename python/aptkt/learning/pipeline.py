@@ -15,7 +15,6 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from sklearn.covariance import ledoit_wolf_shrinkage
 
 from aptkt.errors import ConfigError, InvalidInputError, InvalidStateError
 from aptkt.learning.observations import Observations
@@ -26,6 +25,9 @@ __all__ = [
     "FeaturePipeline",
     "SKIN_TRANSFORMS",
     "GENERIC_TRANSFORMS",
+    "SKIN_EXTRACTION",
+    "EXTRACTIONS",
+    "transforms_of",
     "noise_whitener",
     "joint_noise_whitener",
     "within_object_residuals",
@@ -271,6 +273,9 @@ def _within_object_whitener(
     sd = np.sqrt(var[noisy])
     U = R[:, noisy] / sd
     if shrinkage is None:
+        # Imported here: the command line reads this module's settings without scikit-learn.
+        from sklearn.covariance import ledoit_wolf_shrinkage
+
         # The residuals are centred per object: Ledoit-Wolf's intensity for centred data.
         shrinkage = ledoit_wolf_shrinkage(U, assume_centered=True) if U.shape[1] > 1 else 0.0
     corr = (1.0 - shrinkage) * (U.T @ U / dof) + shrinkage * np.eye(U.shape[1])
@@ -296,6 +301,26 @@ SKIN_TRANSFORMS: Mapping[str, ModalityTransform] = {
 
 #: Every modality z-scored as it is: for feature tables (any sensor's features).
 GENERIC_TRANSFORMS: Mapping[str, ModalityTransform] = {}
+
+#: The name of this package's extraction of this skin's features: what ``aptkt dataset
+#: export-features`` writes in a feature table's ``extraction`` column.
+SKIN_EXTRACTION = "aptkt-skin"
+#: Whose features a table holds, as the command line asks: "auto" (the table's ``extraction``
+#: column says), this skin's as this package extracts them, or any other sensor's.
+EXTRACTIONS = ("auto", SKIN_EXTRACTION, "other")
+
+
+def transforms_of(
+    table_extraction: str | None, asked: str = "auto"
+) -> Mapping[str, ModalityTransform]:
+    """The transforms of a feature table's modalities: this skin's (:data:`SKIN_TRANSFORMS`)
+    for features of :data:`SKIN_EXTRACTION` — as the table's ``extraction`` column says when
+    ``asked`` is "auto", or as asked — and :data:`GENERIC_TRANSFORMS` for any other features,
+    whatever their modalities are called."""
+    if asked not in EXTRACTIONS:
+        raise ConfigError(f"extraction must be one of {EXTRACTIONS}, got {asked!r}")
+    extraction = table_extraction if asked == "auto" else asked
+    return SKIN_TRANSFORMS if extraction == SKIN_EXTRACTION else GENERIC_TRANSFORMS
 
 
 class FeaturePipeline:

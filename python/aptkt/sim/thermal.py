@@ -134,50 +134,36 @@ class ThermalNetwork:
         self, phi: float, speed: float
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Conductance matrix K (symmetric) and the source vectors per watt of heater, per kelvin
-        of room and per kelvin of object temperature."""
+        of room and per kelvin of object temperature. The network is a chain (sensor, PCB, the
+        cover's halves, the object's layers), so K is tridiagonal: the conductance between
+        neighbours, plus each node's conductances to the room and to the object's far side."""
         k, n, a = self.k, self.n, self.k.cell_area
-        K = np.zeros((n, n))
-        q_heat, q_amb, q_obj = np.zeros(n), np.zeros(n), np.zeros(n)
-
-        def link(i: int, j: int, g: float) -> None:
-            K[i, i] += g
-            K[j, j] += g
-            K[i, j] -= g
-            K[j, i] -= g
-
-        def ground(i: int, g: float, q: np.ndarray) -> None:
-            K[i, i] += g
-            q[i] += g
-
-        link(0, 1, self._g_sens)
-        q_heat[1] += 1.0
-        ground(1, k.back_conductance, q_amb)
-        link(1, 2, self._g_cov_half)
-        link(2, 3, self._g_cov_mid)
         top = _SKIN_NODES
-        # Exposed faces: cover and object surface see the air where they do not touch.
-        g_air = k.air_transfer * a * (1.0 - phi)
-        if g_air > 0:
-            ground(3, 1.0 / (1.0 / self._g_cov_half + 1.0 / g_air), q_amb)
-            ground(top, 1.0 / (1.0 / self._g_obj_half[0] + 1.0 / g_air), q_amb)
+        between = np.empty(n - 1)  # between node i and node i + 1
+        between[:3] = self._g_sens, self._g_cov_half, self._g_cov_mid
+        between[3] = 0.0
         if phi > 0:
-            g_c = 1.0 / (
+            between[3] = 1.0 / (
                 1.0 / self._g_cov_half
                 + 1.0 / (self.contact_conductance * a * phi)
                 + 1.0 / self._g_obj_half[0]
             )
-            link(3, top, g_c)
-        for i in range(len(self.d) - 1):
-            link(
-                top + i,
-                top + i + 1,
-                1.0 / (1.0 / self._g_obj_half[i] + 1.0 / self._g_obj_half[i + 1]),
-            )
-        ground(n - 1, self._g_obj_half[-1], q_obj)
+        between[top:] = 1.0 / (1.0 / self._g_obj_half[:-1] + 1.0 / self._g_obj_half[1:])
+        q_heat, q_amb, q_obj = np.zeros(n), np.zeros(n), np.zeros(n)
+        q_heat[1] = 1.0
+        q_amb[1] = k.back_conductance
+        # Exposed faces: cover and object surface see the air where they do not touch.
+        g_air = k.air_transfer * a * (1.0 - phi)
+        if g_air > 0:
+            q_amb[3] = 1.0 / (1.0 / self._g_cov_half + 1.0 / g_air)
+            q_amb[top] = 1.0 / (1.0 / self._g_obj_half[0] + 1.0 / g_air)
+        q_obj[n - 1] = self._g_obj_half[-1]
         if speed > 0:
-            rate = speed / k.pitch  # fresh material under the cell
-            for i in range(len(self.d)):
-                ground(top + i, self.cap[top + i] * rate, q_obj)
+            q_obj[top:] += self.cap[top:] * (speed / k.pitch)  # fresh material under the cell
+        diagonal = q_amb + q_obj
+        diagonal[:-1] += between
+        diagonal[1:] += between
+        K = np.diag(diagonal) - np.diag(between, 1) - np.diag(between, -1)
         return K, q_heat, q_amb, q_obj
 
     def system(self, phi_bin: int, speed_bin: int) -> _System:

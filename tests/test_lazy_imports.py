@@ -1,0 +1,56 @@
+"""The command line starts without the heavy libraries (scikit-learn and SciPy's statistics take
+about a second to import), and the packages that load their names on first use offer the same
+objects as their modules."""
+
+from __future__ import annotations
+
+import importlib
+import json
+import subprocess
+import sys
+
+import pytest
+
+from aptkt._lazy import _type_checking_imports
+
+HEAVY = ("sklearn", "scipy.stats", "matplotlib", "pandas", "aptkt.gp.estimator")
+
+_PROBE = """
+import json, sys
+from aptkt.cli import main
+for argv in {argvs!r}:
+    try:
+        main(argv)
+    except SystemExit:
+        pass
+print(json.dumps(sorted(m for m in {heavy!r} if m in sys.modules)))
+"""
+
+
+@pytest.mark.parametrize(
+    "argvs",
+    [
+        [["--help"]],
+        [["dataset", "generate", "--help"], ["learn", "--help"], ["benchmark", "--help"]],
+        [["prior", "build", "--help"], ["recognise", "--help"], ["demo", "--help"]],
+    ],
+    ids=["top", "dataset-learn-benchmark", "prior-recognise-demo"],
+)
+def test_the_command_line_parses_without_the_heavy_libraries(argvs) -> None:
+    probe = _PROBE.format(argvs=argvs, heavy=HEAVY)
+    out = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, check=True
+    ).stdout
+    assert json.loads(out.splitlines()[-1]) == []
+
+
+@pytest.mark.parametrize("package", ["aptkt.learning", "aptkt.gp"])
+def test_every_exported_name_is_its_modules_object(package) -> None:
+    pkg = importlib.import_module(package)
+    exports = _type_checking_imports(pkg.__file__)
+    assert sorted(exports) == sorted(pkg.__all__)
+    for name, module in exports.items():
+        assert getattr(pkg, name) is getattr(importlib.import_module(module), name)
+        assert name in dir(pkg)
+    with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
+        _ = pkg.no_such_name
