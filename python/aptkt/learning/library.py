@@ -96,22 +96,23 @@ def _check_compatible(named: Sequence[tuple[str, PriorKnowledge]]) -> None:
                     if part
                 )
             )
-        ours, theirs = _columns(first), _columns(other)
-        for action in first.actions:
-            if ours[action] != theirs[action]:
-                raise IncompatiblePriorsError(
-                    f"{name} and {first_name}: action {action} has other feature columns "
-                    f"({_describe(theirs[action])} against {_describe(ours[action])})"
-                )
-        ours_t, theirs_t = _transforms(first), _transforms(other)
-        for action in first.actions:
-            if ours_t[action] != theirs_t[action]:
-                raise IncompatiblePriorsError(
-                    f"{name} and {first_name}: action {action}'s features are transformed "
-                    f"otherwise ({_describe_transforms(theirs_t[action])} against "
-                    f"{_describe_transforms(ours_t[action])}): this skin's features and another "
-                    "sensor's? A feature table's library takes --extraction as its features are"
-                )
+        for of, describe, differs, hint in (
+            (_columns, _describe, "{action} has other feature columns", ""),
+            (
+                _transforms,
+                _describe_transforms,
+                "{action}'s features are transformed otherwise",
+                ": this skin's features and another sensor's? A feature table's library takes "
+                "--extraction as its features are",
+            ),
+        ):
+            ours, theirs = of(first), of(other)
+            for action in first.actions:
+                if ours[action] != theirs[action]:
+                    raise IncompatiblePriorsError(
+                        f"{name} and {first_name}: action {differs.format(action=action)} "
+                        f"({describe(theirs[action])} against {describe(ours[action])}){hint}"
+                    )
         for key, what in (
             ("extraction", "features extracted with other settings"),
             ("feature_table_columns", "other feature tables' columns"),
@@ -144,7 +145,7 @@ def _check_compatible(named: Sequence[tuple[str, PriorKnowledge]]) -> None:
             owner[o] = name
 
 
-def _describe_transforms(transforms: Mapping[str, tuple[tuple[int, ...], int | None]]) -> str:
+def _describe_transforms(transforms: Mapping[str, Any]) -> str:
     parts = []
     for m, (logs, pca) in transforms.items():
         steps = ([f"log of columns {','.join(map(str, logs))}"] if logs else []) + (
@@ -155,7 +156,7 @@ def _describe_transforms(transforms: Mapping[str, tuple[tuple[int, ...], int | N
     return "; ".join(parts) or "z-scored only"
 
 
-def _describe(columns: Mapping[str, int]) -> str:
+def _describe(columns: Mapping[str, Any]) -> str:
     return ", ".join(f"{m} ({d})" for m, d in columns.items())
 
 
