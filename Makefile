@@ -1,6 +1,7 @@
 # Two entry points do all set-up on a fresh machine (see README):
 #   make demo   -> virtual environment, Rust build, end-to-end demo on the simulated world
 #   make test   -> virtual environment, Rust build, cargo tests of the core crates, pytest
+#   make test-quick -> pytest without the tests marked slow: a developer's loop (CI runs make test)
 #   make lint   -> ruff (lint, format), mypy on the package, clippy and rustfmt
 #   make docs   -> the documentation site (mkdocs.yml) into site/, warnings as errors
 #   make release-check -> the manylinux wheel and the sdist, checked as a lab would install them
@@ -12,12 +13,15 @@
 VENV ?= .venv
 PY := $(VENV)/bin/python
 PYTEST_ARGS ?=
+# pytest's worker processes (pytest-xdist): one per core.
+PYTEST_WORKERS ?= auto
 SHELL := /bin/bash
 .SHELLFLAGS := -eo pipefail -c
 # pip -v shows the build backend's output; keep cargo's progress lines and errors.
 SHOW_BUILD := grep -E --line-buffered "^ *(Compiling|Finished|Built wheel|Successfully installed)|[Ee]rror" | sed -u -e 's/^ */    /'
 
 .PHONY: venv install install-test install-lint demo wheel lint docs test test-rust test-python clean
+.PHONY: test-quick
 .PHONY: release-tools wheel-aarch64 sdist release-check
 
 venv:
@@ -107,9 +111,16 @@ test-rust:
 # tests/packaging installs the wheel into a fresh virtual environment.
 test-python: install-test wheel
 	@echo "==> Python tests"
-	APTKT_WHEEL="$$(ls $(DIST)/aptkt-*_$(ARCH).whl)" $(PY) -m pytest $(PYTEST_ARGS)
+	APTKT_WHEEL="$$(ls $(DIST)/aptkt-*_$(ARCH).whl)" $(PY) -m pytest -n $(PYTEST_WORKERS) $(PYTEST_ARGS)
 
 test: test-rust test-python
+
+# A developer's loop: the Python tests but those marked slow (the long end-to-end runs: killed
+# processes, dropped links, the demo, the installed wheel), no Rust tests, no wheel. CI runs
+# `make test`, which runs everything.
+test-quick: install-test
+	@echo "==> Python tests without those marked slow"
+	$(PY) -m pytest -n $(PYTEST_WORKERS) -m "not slow" $(PYTEST_ARGS)
 
 # The site's tools alone: mkdocstrings reads the docstrings from python/ without importing aptkt,
 # so the docs need no Rust build. pip reads the pinned [docs] list from pyproject.toml's

@@ -62,6 +62,7 @@ def _leftovers(d: Path) -> list[str]:
     return mine + private
 
 
+@pytest.mark.slow
 def test_fifty_kills_at_random_moments(base, tmp_path):
     rng = random.Random(12)
     work = tmp_path / "work.h5"
@@ -191,6 +192,7 @@ def _early(tmp: Path) -> dict[str, tuple[list[str], list[str], Path]]:
 
 
 @pytest.mark.parametrize("name", ["generate", "collect", "reproduce"])
+@pytest.mark.slow
 def test_kills_in_the_first_milliseconds_of_a_file(tmp_path, name):
     """SIGKILL 0-3 ms after a data set file appears left, in 5 of 20 tries, a 48-byte file
     that nothing opened (not `dataset info`, `--resume`, `repair` or a rerun). A file now

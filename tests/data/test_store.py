@@ -355,6 +355,7 @@ with DatasetWriter(dst) as w:
 """
 
 
+@pytest.mark.slow
 def test_a_reader_polling_as_the_writer_starts_does_not_stop_it(tmp_path, recordings):
     # A reader opening the file takes its lock for a moment; the writer's switch to SWMR mode
     # used to fail then (errno 11) — in 3 of 60 starts with a reader polling like this one.

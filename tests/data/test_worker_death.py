@@ -11,6 +11,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from aptkt.data import DatasetReader
 
 # 180 trials: a few seconds of simulation on two workers, so the kill lands mid-generation.
@@ -41,6 +43,7 @@ def _keys(path: Path) -> list[tuple[str, str, int]]:
         return sorted(rd.keys())
 
 
+@pytest.mark.slow
 def test_a_killed_worker_is_one_error_line_and_resume_completes_the_file(tmp_path):
     out = tmp_path / "gen.h5"
     proc = subprocess.Popen(

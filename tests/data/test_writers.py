@@ -187,6 +187,7 @@ def stop(proc: subprocess.Popen) -> None:
     assert proc.returncode == 143, err
 
 
+@pytest.mark.slow
 def test_a_second_writer_is_refused_naming_the_first(tmp_path):
     # The report: a second `generate --resume` 6 s after the first "repaired a crashed file
     # first (31 recordings kept)": it renamed the live file away under the running writer.

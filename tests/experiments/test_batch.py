@@ -66,6 +66,7 @@ def uninterrupted(design, tmp_path_factory):
     )
 
 
+@pytest.mark.slow
 def test_resume_after_interruption_equals_one_uninterrupted_run(design, uninterrupted, tmp_path):
     specs, fp, _, _ = design
     store = RunStore(tmp_path / "runs")

@@ -4,10 +4,12 @@ import csv
 import json
 
 import numpy as np
+import pytest
 
 from aptkt.cli import main
 
 
+@pytest.mark.slow
 def test_quick_demo_writes_every_output(tmp_path, capsys):
     out = tmp_path / "demo"
     assert main(["demo", "--quick", "-o", str(out), "--no-progress", "-j", "2"]) == 0

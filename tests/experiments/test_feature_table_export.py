@@ -80,29 +80,40 @@ def test_an_exported_table_says_it_holds_this_skins_features(quick_data, tmp_pat
     assert read_feature_table(table).extraction == SKIN_EXTRACTION
 
 
+@pytest.fixture(scope="module")
+def exported(quick_data, tmp_path_factory):
+    table = tmp_path_factory.mktemp("exported") / "features.csv"
+    assert main(["dataset", "export-features", str(quick_data), "-o", str(table)]) == 0
+    return table
+
+
+@pytest.fixture(scope="module")
+def data_set_logs(quick_data, tmp_path_factory):
+    """The log columns of each action's texture in the data set's own prior of PRIORS."""
+    built = tmp_path_factory.mktemp("prior") / "from-data-set.npz"
+    assert main(["prior", "build", str(quick_data), "-o", str(built), "--objects", PRIORS]) == 0
+    return {a: t.log_columns if t is not None else () for a, t in _texture_transform(built).items()}
+
+
 @pytest.mark.parametrize(
     ("asked", "skin"), [(None, True), ("aptkt-skin", True), ("other", False), ("auto", True)]
 )
 def test_learning_from_an_exported_table_transforms_as_from_the_data_set(
-    quick_data, tmp_path, capsys, asked, skin
+    exported, data_set_logs, tmp_path, capsys, asked, skin
 ):
     """The exported table's marker gives it this skin's transforms (log of the texture's
     activities), as the data set's own prior has; --extraction other z-scores every column."""
-    table = tmp_path / "features.csv"
-    assert main(["dataset", "export-features", str(quick_data), "-o", str(table)]) == 0
     out = tmp_path / "learned"
-    args = ["learn", "--table", str(table), "--prior-objects", PRIORS, "--objects", NEW]
+    args = ["learn", "--table", str(exported), "--prior-objects", PRIORS, "--objects", NEW]
     args += ["--test-trials", "3:6", "--budget", "0", "--runs", "1", "-o", str(out)]
     args += [] if asked is None else ["--extraction", asked]
     assert main(args) == 0
-    from_table = _texture_transform(out / "prior.npz")
-    built = tmp_path / "from-data-set.npz"
-    objects = ["--objects", PRIORS, "--actions", ",".join(from_table)]
-    assert main(["prior", "build", str(quick_data), "-o", str(built), *objects]) == 0
-    from_data_set = _texture_transform(built)
-    logs = {a: t.log_columns if t is not None else () for a, t in from_table.items()}
-    want = {a: t.log_columns if t is not None else () for a, t in from_data_set.items()}
-    assert (0, 1, 2) in want.values()  # the sliding actions' texture
+    logs = {
+        a: t.log_columns if t is not None else ()
+        for a, t in _texture_transform(out / "prior.npz").items()
+    }
+    assert (0, 1, 2) in data_set_logs.values()  # the sliding actions' texture
+    want = {a: data_set_logs[a] for a in logs}
     assert logs == (want if skin else dict.fromkeys(want, ()))
 
 

@@ -352,6 +352,7 @@ def test_the_papers_reading_reaches_every_model_and_the_record(tmp_path, quick_d
     assert {c.cutoff for c in configs} == {"paper"}
 
 
+@pytest.mark.slow
 def test_the_prior_feature_scale_option_reaches_the_prior_files(tmp_path, quick_data):
     """--prior-feature-scale: the prior files' transforms whiten the within-object noise (the
     default: each modality, then across them) or divide by each column's spread (recorded in

@@ -16,13 +16,13 @@ from release_check import (  # noqa: E402
     ROOT,
     CheckFailed,
     check_manylinux,
+    checked_pythons,
     find_python,
     main,
     manylinux_glibc,
     oldest_python,
     python_candidates,
     readme_example,
-    checked_pythons,
 )
 
 if sys.version_info >= (3, 11):

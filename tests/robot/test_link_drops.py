@@ -19,6 +19,7 @@ DROPS = 20
 TIMEOUT = 600  # about 40 s on an idle machine
 
 
+@pytest.mark.slow
 def test_twenty_link_drops_do_not_crash():
     env = {
         **os.environ,

@@ -359,6 +359,7 @@ def test_recover_after_a_lost_link(make_robot, loopback, skin):
     assert at_rest(loopback)["pose"][2] == pytest.approx(0.01, abs=1e-6)
 
 
+@pytest.mark.slow
 def test_a_command_racing_a_program_stop_fails_fast(make_robot, loopback, skin):
     robot = make_robot()
     in_contact(robot, skin)

@@ -283,6 +283,7 @@ def contact_margin(stiffness: float, late: float) -> float:
     return 0.03 + stiffness * APPROACH_SPEED * 2 * late
 
 
+@pytest.mark.slow
 def test_collect_survives_faults_and_resumes_to_a_complete_data_set(cell, capsys):
     d, lb, timing = cell
     hold = timing.hold
@@ -416,6 +417,7 @@ def prior_npz(cell) -> Path:
     return d / "prior.npz"
 
 
+@pytest.mark.slow
 def test_learn_runs_live_through_the_loopback(cell, prior_npz, capsys):
     d, lb, timing = cell
     capsys.readouterr()
@@ -477,6 +479,7 @@ SIGNALS = pytest.mark.parametrize(
 
 
 @SIGNALS
+@pytest.mark.slow
 def test_a_signal_mid_press_retracts_and_keeps_the_data(cell, sig, code, word):
     """SIGTERM and Ctrl-C in the middle of a press: the arm stops and retracts (no force left on
     the object), the completed trial and the partial recording are kept, one message, 143/130."""
@@ -504,6 +507,7 @@ def test_a_signal_mid_press_retracts_and_keeps_the_data(cell, sig, code, word):
 
 
 @SIGNALS
+@pytest.mark.slow
 def test_a_signal_mid_press_during_learn_retracts_and_keeps_the_data(
     cell, prior_npz, sig, code, word
 ):
@@ -535,6 +539,7 @@ def test_a_signal_mid_press_during_learn_retracts_and_keeps_the_data(
     undisturbed(timing, lambda: in_a_process(cell, attempt, sig), kept, [out])
 
 
+@pytest.mark.slow
 def test_a_dropped_link_mid_press_is_a_fault_that_keeps_the_data(cell, capsys):
     d, lb, timing = cell
     data = d / "dropped.h5"
