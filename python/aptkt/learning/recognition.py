@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 from scipy.special import logsumexp
@@ -29,9 +29,33 @@ from scipy.special import logsumexp
 from aptkt.errors import InvalidInputError
 from aptkt.learning.identity import NEW_OBJECT_PRIOR, ObjectIdentity
 from aptkt.learning.observations import Observations
+from aptkt.learning.pipeline import FeaturePipeline
 
-if TYPE_CHECKING:  # the prior imports this module
-    from aptkt.learning.prior import PriorKnowledge
+
+class ActionKnowledge(Protocol):
+    """What recognition reads of a library's knowledge of one action
+    (:class:`~aptkt.learning.prior.ActionPrior` is one)."""
+
+    @property
+    def observations(self) -> Observations: ...
+    @property
+    def pipeline(self) -> FeaturePipeline: ...
+    @property
+    def identity(self) -> ObjectIdentity | None: ...
+    def training_features(self) -> np.ndarray: ...
+
+
+class Library(Protocol):
+    """What recognition reads of a library (:class:`~aptkt.learning.prior.PriorKnowledge` is
+    one). A protocol rather than the class: the library calls this module."""
+
+    @property
+    def actions(self) -> Mapping[str, ActionKnowledge]: ...
+    @property
+    def objects(self) -> list[str]: ...
+    def __contains__(self, action: object) -> bool: ...
+    def __getitem__(self, action: str) -> ActionKnowledge: ...
+
 
 __all__ = ["FALSE_ALARM_RATE", "Recognition", "recognise", "Calibration", "calibrate"]
 
@@ -102,7 +126,7 @@ def _likelihoods(identity: ObjectIdentity, X: np.ndarray) -> tuple[np.ndarray, n
     return np.array([r[0] for r in rows]), np.array([r[1] for r in rows])
 
 
-def calibrate(prior: PriorKnowledge, false_alarm_rate: float = FALSE_ALARM_RATE) -> Calibration:
+def calibrate(prior: Library, false_alarm_rate: float = FALSE_ALARM_RATE) -> Calibration:
     """The library's novelty threshold for ``false_alarm_rate`` (see :class:`Calibration`)."""
     if not 0.0 < false_alarm_rate < 1.0:
         raise InvalidInputError(f"false_alarm_rate must lie in (0, 1), got {false_alarm_rate}")
@@ -242,7 +266,7 @@ def auroc(positive: np.ndarray, negative: np.ndarray) -> float:
 
 
 def recognise(
-    prior: PriorKnowledge,
+    prior: Library,
     table: Mapping[str, Observations],
     *,
     calibration: Calibration | None = None,
