@@ -323,3 +323,36 @@ def test_the_transforms_follow_the_extraction_not_the_modality_names():
     assert transforms_of("aptkt-skin", "other") is GENERIC_TRANSFORMS
     with pytest.raises(ConfigError, match="extraction must be one of"):
         transforms_of(None, "skin")
+
+
+@pytest.mark.parametrize(
+    ("given", "reading", "gate"),
+    [
+        ([], "aptkt", 3.0),
+        ([], "paper", None),
+        (["--aux-gate-margin", "5"], "aptkt", 5.0),
+        (["--aux-gate-margin", "none"], "aptkt", None),
+        (["--aux-gate-margin", "2.5"], "paper", 2.5),
+    ],
+)
+def test_the_auxiliary_gate_has_its_own_option(given, reading, gate):
+    """--aux-gate-margin sets LearnerConfig.aux_gate_margin, independent of --evidence-margin."""
+    from aptkt.cli import build_parser
+    from aptkt.commands._method import learner_config
+
+    for command in (["learn", "--table", "t.csv", "--objects", "a,b"], ["benchmark", "t.csv"]):
+        args = build_parser().parse_args([*command, "--reading", reading, *given])
+        config = learner_config(args)
+        assert config.aux_gate_margin == gate
+        assert config.evidence_margin == LearnerConfig.evidence_margin
+
+
+def test_an_auxiliary_gate_that_is_no_number_is_one_usage_line(capsys):
+    with pytest.raises(SystemExit) as usage:
+        main(["learn", "--table", "t.csv", "--aux-gate-margin", "strong"])
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert usage.value.code == 2
+    assert err == (
+        "aptkt learn: error: argument --aux-gate-margin: a number (a log Bayes factor) or none, "
+        "got 'strong'"
+    )

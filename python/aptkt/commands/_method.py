@@ -16,6 +16,21 @@ from aptkt.learning.transfer import CUTOFFS
 __all__ = ["add_method_arguments", "gp_settings", "learner_config"]
 
 
+#: ``--aux-gate-margin none``: no gate (a margin given as a number otherwise).
+NO_GATE = "none"
+
+
+def _margin_or_none(text: str) -> float | str:
+    if text.strip().lower() == NO_GATE:
+        return NO_GATE
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"a number (a log Bayes factor) or {NO_GATE}, got {text!r}"
+        ) from None
+
+
 def _by_reading(value: Any) -> str:
     """The default of one choice, which the reading sets: "default: X (paper: Y)"."""
     aptkt, paper = value(LearnerConfig()), value(LearnerConfig.paper())
@@ -54,6 +69,15 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
         help=f"log odds (same-object) or log Bayes factor (evidence) a transfer must exceed "
         f"(default "
         f"{LearnerConfig.evidence_margin:g}: strong evidence)",
+    )
+    g.add_argument(
+        "--aux-gate-margin",
+        type=_margin_or_none,
+        metavar="M|none",
+        help="with the auxiliary features (APTKT+aux, --auxiliary): the log Bayes factor by which "
+        "the new labels' evidence must favour keeping them at an update; none: no gate, they "
+        "are always used; "
+        + _by_reading(lambda c: NO_GATE if c.aux_gate_margin is None else f"{c.aux_gate_margin:g}"),
     )
     g.add_argument(
         "--kernel",
@@ -98,4 +122,6 @@ def learner_config(args: argparse.Namespace, **fields: Any) -> LearnerConfig:
         for name, value in (("cutoff", args.cutoff), ("evidence_margin", args.evidence_margin))
         if value is not None
     }
+    if args.aux_gate_margin is not None:
+        given["aux_gate_margin"] = None if args.aux_gate_margin == NO_GATE else args.aux_gate_margin
     return replace(base, gp=gp_settings(args), **given, **fields)
