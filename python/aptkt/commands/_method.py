@@ -73,7 +73,7 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--aux-gate-margin",
         type=_margin_or_none,
-        metavar="M|none",
+        metavar="M",
         help="with the auxiliary features (APTKT+aux, --auxiliary): the log Bayes factor by which "
         "the new labels' evidence must favour keeping them at an update; none: no gate, they "
         "are always used; "
