@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from aptkt.learning import Observations
+from aptkt.learning.pipeline import SKIN_EXTRACTION
 
 ACTIONS = {"P1": {"force": 1, "thermal": 6}, "S1": {"texture": 5, "thermal": 6}}
 
@@ -44,6 +45,14 @@ def draw(means, objects, n_per, noise=1.0, seed=0):
             for m, d in mods.items()
         }
         table[a] = Observations(a, data, objs)
+    return table
+
+
+def as_skin(table):
+    """The table's observations marked as this skin's features (as a data set's are), so that
+    they get the skin's transforms: the regime of the tests that stand in for the skin."""
+    for obs in table.values():
+        obs.extraction = SKIN_EXTRACTION
     return table
 
 

@@ -18,7 +18,7 @@ from aptkt.learning.pipeline import (
     ModalityTransform,
 )
 
-from .synthetic import ACTIONS, draw, make_world
+from .synthetic import ACTIONS, as_skin, draw, make_world
 
 
 def _rows(seed=0):
@@ -61,8 +61,8 @@ def test_a_generic_group_called_texture_gets_no_transform(tmp_path):
 
 def test_the_skins_own_data_keeps_its_transforms():
     priors, news, means = make_world(n_prior=2, n_new=2, seed=1)
-    pool = draw(means, news, 3, seed=2)
-    prior = PriorKnowledge.build(draw(means, priors, 6, seed=1), seed=0)
+    pool = as_skin(draw(means, news, 3, seed=2))
+    prior = PriorKnowledge.build(as_skin(draw(means, priors, 6, seed=1)), seed=0)
     assert prior["S1"].pipeline.transforms["texture"].log_columns == (0, 1, 2)
     assert prior["P1"].pipeline.transforms["thermal"].components_ is not None
     for transforms, log_columns in ((None, (0, 1, 2)), (GENERIC_TRANSFORMS, ())):
@@ -76,14 +76,15 @@ def test_a_skin_transform_asked_for_on_a_narrower_modality_is_a_typed_error():
     X = np.arange(6.0).reshape(6, 1) + 1
     with pytest.raises(ConfigError, match="columns \\[0, 1, 2\\] of a modality of 1 column"):
         ModalityTransform(log_columns=(0, 1, 2)).fit(X)
-    assert FeaturePipeline().transforms.keys() == SKIN_TRANSFORMS.keys()
+    assert FeaturePipeline(SKIN_TRANSFORMS).transforms.keys() == SKIN_TRANSFORMS.keys()
+    assert FeaturePipeline().transforms == {}  # chosen when fitted, by what the data says
 
 
 def test_merging_keeps_each_librarys_transforms():
     """A library built from a table (no skin transforms) stays so when merged, and the skin's
     stays the skin's: the merge refits with the first library's transforms."""
     priors, _, means = make_world(n_prior=4, n_new=0, seed=1)
-    table = draw(means, priors, 6, seed=1)
+    table = as_skin(draw(means, priors, 6, seed=1))
     halves = [{a: o.of_objects(priors[:2]) for a, o in table.items()}]
     halves.append({a: o.of_objects(priors[2:]) for a, o in table.items()})
     for transforms, log_columns in ((GENERIC_TRANSFORMS, ()), (None, (0, 1, 2))):

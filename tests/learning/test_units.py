@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from aptkt.learning import FeaturePipeline, ModalityTransform, Observations, decide_transfer
 from aptkt.learning.active import entropy, select_next, uncertainty
 from aptkt.learning.evaluation import accuracy, fused_accuracy
-from aptkt.learning.pipeline import MIN_NOISE_DOF
+from aptkt.learning.pipeline import MIN_NOISE_DOF, SKIN_TRANSFORMS
 from aptkt.learning.transfer import mean_posteriors
 
 
@@ -96,7 +96,7 @@ def test_pca_keeps_at_most_rank_components():
     obs = Observations(
         "C1", {"thermal": np.random.default_rng(1).normal(size=(4, 40))}, ["a", "b", "c", "d"]
     )
-    pipe = FeaturePipeline().fit(obs)
+    pipe = FeaturePipeline(SKIN_TRANSFORMS).fit(obs)
     assert pipe.transform(obs)[0].shape == (4, 3)
 
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 import time
 import zlib
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -33,12 +33,7 @@ from aptkt.errors import FeatureTableError, InvalidInputError
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
 from aptkt.learning.observations import Observations, ObservationTable
-from aptkt.learning.pipeline import (
-    GENERIC_TRANSFORMS,
-    ModalityTransform,
-    transforms_of,
-    within_object_residuals,
-)
+from aptkt.learning.pipeline import within_object_residuals
 
 __all__ = [
     "PRIOR_CHOICES",
@@ -249,11 +244,11 @@ def run_group(
     test: ObservationTable,
     s: BenchmarkSettings,
     on_run: Callable[[], None] | None = None,
-    transforms: Mapping[str, ModalityTransform] = GENERIC_TRANSFORMS,
 ) -> list[dict[str, Any]]:
     """Every method's learning curve for one group: one row per (library size, prior choice,
     method, step). The baseline uses no prior, so it runs once and serves every library and
-    choice. ``transforms``: the modalities' (this skin's only for this skin's features, see
+    choice. The features are transformed as the table's observations were computed (this
+    skin's transforms only for this skin's features, see
     :func:`~aptkt.learning.pipeline.transforms_of`)."""
     actions = list(learn)
     new = list(group.new)
@@ -263,7 +258,7 @@ def run_group(
     rows: list[dict[str, Any]] = []
 
     def run(cfg: LearnerConfig, prior: PriorKnowledge | None) -> tuple[list[float], APTKT]:
-        learner = APTKT(replace(cfg, budget=s.budget, seed=seed), prior, transforms=transforms)
+        learner = APTKT(replace(cfg, budget=s.budget, seed=seed), prior)
         result = learner.run(PoolEnvironment(pool, seed=seed), actions, new, test=held)
         if on_run is not None:
             on_run()
@@ -284,7 +279,6 @@ def run_group(
                 prior_table,
                 gp=s.config.gp,
                 seed=seed + zlib.crc32(choice.encode()),
-                transforms=transforms,
             )
             curves = {"baseline": baseline}
             for name, overrides in METHODS.items():
@@ -327,9 +321,7 @@ def benchmark(
     test = table.observations(actions, test_rows)
     distances = object_distances(learn)
     groups = draw_groups(table.object_names, distances, s)
-    # This skin's transforms only if the table says it holds this skin's features.
-    transforms = transforms_of(table.extraction)
-    tasks = [(g, learn, test, s, transforms) for g in groups]
+    tasks = [(g, learn, test, s) for g in groups]
     rows: list[dict[str, Any]] = []
     for i, r in each_result(_task, tasks, parallel_map):
         rows += r
@@ -339,17 +331,8 @@ def benchmark(
     return rows, time.perf_counter() - t0
 
 
-def _task(
-    task: tuple[
-        Group,
-        ObservationTable,
-        ObservationTable,
-        BenchmarkSettings,
-        Mapping[str, ModalityTransform],
-    ],
-):
-    group, learn, test, s, transforms = task
-    return run_group(group, learn, test, s, transforms=transforms)
+def _task(task: tuple[Group, ObservationTable, ObservationTable, BenchmarkSettings]):
+    return run_group(*task)
 
 
 def each_result(

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -32,7 +32,6 @@ from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
 from aptkt.learning.library import merge_priors
 from aptkt.learning.observations import ObservationTable
-from aptkt.learning.pipeline import GENERIC_TRANSFORMS, ModalityTransform, transforms_of
 
 __all__ = [
     "LifelongSettings",
@@ -118,19 +117,15 @@ def run_order(
     learn: ObservationTable,
     test: ObservationTable,
     s: LifelongSettings,
-    transforms: Mapping[str, ModalityTransform] = GENERIC_TRANSFORMS,
 ) -> list[dict[str, Any]]:
     """One order: the starting library, then batch after batch learned and merged. Rows: per
     batch, each method's curve (``method`` baseline/APTKT, ``step``, ``accuracy``) and the grown
-    library's accuracy (``method`` library / NCM, step 0). ``transforms``: the modalities'
-    (this skin's only for this skin's features, see
-    :func:`~aptkt.learning.pipeline.transforms_of`)."""
+    library's accuracy (``method`` library / NCM, step 0). The features are transformed as the
+    table's observations were computed (:func:`~aptkt.learning.pipeline.transforms_of`)."""
     actions = list(learn)
     seed = s.seed * 1_000_003 + index
     library_objects = list(order[: s.batch])
-    library = PriorKnowledge.build(
-        _subset(learn, library_objects), gp=s.config.gp, seed=seed, transforms=transforms
-    )
+    library = PriorKnowledge.build(_subset(learn, library_objects), gp=s.config.gp, seed=seed)
     rows: list[dict[str, Any]] = []
     n_batches = (len(order) - s.batch) // s.batch
     for b in range(1, n_batches + 1):
@@ -145,7 +140,7 @@ def run_order(
         learned: dict[str, Any] = {}
         for method, transfer in (("baseline", "none"), ("APTKT", "paper")):
             cfg = replace(s.config, budget=s.budget, seed=seed + b, transfer=transfer)
-            learner = APTKT(cfg, library if method == "APTKT" else None, transforms=transforms)
+            learner = APTKT(cfg, library if method == "APTKT" else None)
             run = learner.run(PoolEnvironment(pool, seed=seed + b), actions, new, test=held)
             rows += [
                 {**tags, "method": method, "step": k, "accuracy": step.mean_accuracy}
@@ -154,9 +149,7 @@ def run_order(
             if method == "APTKT":
                 learned = {a: lrn.observations for a, lrn in learner.learners.items()}
         # What the robot observed of the new objects becomes a library of its own, then joins.
-        new_library = PriorKnowledge.build(
-            learned, gp=library.gp_settings, seed=seed + b, transforms=transforms
-        )
+        new_library = PriorKnowledge.build(learned, gp=library.gp_settings, seed=seed + b)
         library = merge_priors(
             [(f"library {b - 1}", library), (f"batch {b}", new_library)], seed=seed + b
         )
@@ -190,16 +183,7 @@ def run_order(
     return rows
 
 
-def _task(
-    task: tuple[
-        int,
-        list[str],
-        ObservationTable,
-        ObservationTable,
-        LifelongSettings,
-        Mapping[str, ModalityTransform],
-    ],
-):
+def _task(task: tuple[int, list[str], ObservationTable, ObservationTable, LifelongSettings]):
     return run_order(*task)
 
 
@@ -237,9 +221,7 @@ def run_lifelong(
     )
     t0 = time.perf_counter()
     bar = Progress(s.orders, "order", "lifelong", enabled=progress)
-    # This skin's transforms only if the table says it holds this skin's features.
-    transforms = transforms_of(table.extraction)
-    tasks = [(i, order, learn, test, s, transforms) for i, order in enumerate(orders)]
+    tasks = [(i, order, learn, test, s) for i, order in enumerate(orders)]
     rows: list[dict[str, Any]] = []
     try:
         for _, r in each_result(_task, tasks, parallel_map_of(executor, jobs, scheduler)):

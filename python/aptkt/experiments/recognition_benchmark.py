@@ -22,7 +22,6 @@ from aptkt.experiments.benchmark import split_trials
 from aptkt.experiments.report import markdown_table
 from aptkt.learning import PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
-from aptkt.learning.pipeline import transforms_of
 
 __all__ = ["recognition_draw", "run_recognition_benchmark", "METRICS"]
 
@@ -44,8 +43,6 @@ def recognition_draw(
     prior = PriorKnowledge.build(
         {a: o.of_objects(library) for a, o in learn.items()},
         seed=seed,
-        # This skin's transforms only if the table says it holds this skin's features.
-        transforms=transforms_of(table.extraction),
     )
     touches = {a: o.of_objects(library + unseen) for a, o in test.items()}
     result = prior.recognise(touches)

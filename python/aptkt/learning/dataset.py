@@ -20,6 +20,7 @@ from aptkt.data import DatasetError, DatasetReader, store_features
 from aptkt.errors import InvalidStateError
 from aptkt.learning.extract import ExtractionSettings, observe_recording
 from aptkt.learning.observations import Observations
+from aptkt.learning.pipeline import SKIN_EXTRACTION
 from aptkt.progress import Progress
 from aptkt.skin.samples import Recording
 
@@ -265,6 +266,6 @@ def load_observations(
             objs = np.array([keys[i][0] for i in recs])
             trs = np.array([keys[i][2] for i in recs], dtype=np.int64)
             table[name] = Observations(
-                name, {m: v[keep] for m, v in mods.items()}, objs[keep], trs[keep]
+                name, {m: v[keep] for m, v in mods.items()}, objs[keep], trs[keep], SKIN_EXTRACTION
             )
     return table

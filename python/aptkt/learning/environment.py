@@ -1,6 +1,11 @@
 """Where observations come from: the learner asks an environment for one observation of
 (action, object). A live robot (the simulated world, or the UR10) explores the object; a pool
-replays pre-recorded observations (the paper's offline protocol)."""
+replays pre-recorded observations (the paper's offline protocol).
+
+An environment may say what computes its observations (an ``extraction`` attribute, see
+:attr:`~aptkt.learning.observations.Observations.extraction`): a robot's are this package's
+extraction of this skin, a pool's are its observations'. One that does not say is any sensor's.
+"""
 
 from __future__ import annotations
 
@@ -12,6 +17,7 @@ import numpy as np
 from aptkt.errors import AptktError, UnknownNameError
 from aptkt.learning.extract import observe_recording
 from aptkt.learning.observations import ObservationTable
+from aptkt.learning.pipeline import SKIN_EXTRACTION
 
 __all__ = [
     "Environment",
@@ -42,6 +48,9 @@ class PoolEnvironment:
 
     def __init__(self, table: ObservationTable, seed: int = 0) -> None:
         self.table = dict(table)
+        said = {obs.extraction for obs in self.table.values()}
+        #: What computed the pool's observations (None if they do not say, or disagree).
+        self.extraction = said.pop() if len(said) == 1 else None
         rng = np.random.default_rng(seed)
         self._queues: dict[tuple[str, str], list[int]] = {}
         for action, obs in self.table.items():
@@ -75,6 +84,9 @@ class RecordingEnvironment:
     is handed to ``on_recording`` (e.g. a :class:`~aptkt.data.DatasetWriter`'s ``append``) so
     nothing observed is lost.
     """
+
+    #: Its observations are this package's extraction of this skin's recordings.
+    extraction = SKIN_EXTRACTION
 
     def __init__(
         self,
@@ -116,6 +128,7 @@ class PrefetchedEnvironment:
     ) -> None:
         self._env = env
         self._ready = dict(prefetched)
+        self.extraction = getattr(env, "extraction", None)
 
     def available(self, action: str, obj: str) -> bool:
         return (action, obj) in self._ready or self._env.available(action, obj)

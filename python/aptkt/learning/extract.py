@@ -25,6 +25,7 @@ from aptkt import features
 from aptkt.actions import ExploratoryAction
 from aptkt.errors import InvalidInputError
 from aptkt.learning.observations import Observations
+from aptkt.learning.pipeline import SKIN_EXTRACTION
 from aptkt.skin.protocol import PACKET_RATE_HZ
 from aptkt.skin.samples import Recording
 
@@ -112,4 +113,4 @@ def observations_from_recordings(
     if not rows:
         raise InvalidInputError(f"no recordings of action {action.name!r}")
     mods = {m: np.stack([r[m] for r in rows]) for m in rows[0]}
-    return Observations(action.name, mods, np.asarray(objects), np.asarray(trials))
+    return Observations(action.name, mods, np.asarray(objects), np.asarray(trials), SKIN_EXTRACTION)

@@ -100,7 +100,9 @@ class FeatureTable:
             mods = {
                 m: self.values[np.ix_(mask, cols)] for m, cols in self._modalities(action).items()
             }
-            table[action] = Observations(action, mods, self.objects[mask], self.trials[mask])
+            table[action] = Observations(
+                action, mods, self.objects[mask], self.trials[mask], self.extraction
+            )
         return table
 
     def _modalities(self, action: str) -> dict[str, list[int]]:
@@ -375,8 +377,11 @@ def write_feature_table(
     """Write an observation table as a feature table (CSV or HDF5, by the file's suffix);
     ``extraction`` fills the ``extraction`` column (e.g.
     :data:`~aptkt.learning.pipeline.SKIN_EXTRACTION` for this skin's features as this package
-    extracts them); None leaves it out."""
+    extracts them); None: what the observations say, if they say one thing, else no column."""
     path = check_table_name(path)
+    if extraction is None:
+        said = {obs.extraction for obs in table.values()} - {None}
+        extraction = said.pop() if len(said) == 1 else None
     suffix = path.suffix.lower()
     widths: dict[str, int] = {}
     for obs in table.values():

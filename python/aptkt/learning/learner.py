@@ -52,10 +52,14 @@ class ActionLearner:
         prior: ActionPrior | None,
         test: Observations | None = None,
         transforms: Mapping[str, ModalityTransform] | None = None,
+        extraction: str | None = None,
     ) -> None:
         self.action = action
-        #: The baseline's feature transforms (None: this skin's; see FeaturePipeline).
+        #: The baseline's feature transforms (None: as the observations' extraction says; see
+        #: FeaturePipeline).
         self.transforms = transforms
+        #: What computes the observations added (the environment's word).
+        self.extraction = extraction
         self.new_objects = [str(o) for o in new_objects]
         self.config = config
         self.prior = prior
@@ -87,7 +91,7 @@ class ActionLearner:
 
     # -- data --------------------------------------------------------------------------------
     def add(self, obj: str, observation: Mapping[str, np.ndarray], trial: int = 0) -> None:
-        one = Observations.single(self.action, obj, observation, trial)
+        one = Observations.single(self.action, obj, observation, trial, self.extraction)
         self.observations = (
             one if self.observations is None else Observations.concat([self.observations, one])
         )
@@ -473,9 +477,11 @@ class APTKT:
         *,
         transforms: Mapping[str, ModalityTransform] | None = None,
     ) -> None:
-        """``transforms``: the baseline's feature transforms (None: this skin's,
-        :data:`~aptkt.learning.pipeline.SKIN_TRANSFORMS`; a feature table's learners pass
-        :data:`~aptkt.learning.pipeline.GENERIC_TRANSFORMS`). A prior's space is the prior's."""
+        """``transforms``: the baseline's feature transforms (None: as the environment's
+        observations were computed — this skin's,
+        :data:`~aptkt.learning.pipeline.SKIN_TRANSFORMS`, for a robot's or a data set's
+        observations, none beyond z-scoring for any others; see
+        :func:`~aptkt.learning.pipeline.transforms_of`). A prior's space is the prior's."""
         self.transforms = transforms
         self.config = config or LearnerConfig()
         if self.config.uses_prior and prior is None:
@@ -517,6 +523,7 @@ class APTKT:
                 self.prior[a] if self.prior is not None and cfg.uses_prior else None,
                 None if test is None else test[a],
                 self.transforms,
+                getattr(env, "extraction", None),
             )
             for a in actions
         }

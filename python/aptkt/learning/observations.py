@@ -5,6 +5,11 @@ normal force, ``thermal``: the temperature curve). :class:`Observations` holds m
 of one action with the object each came from; an :data:`ObservationTable` maps action names to
 them. Users with another sensor build these from their own arrays (see
 :meth:`Observations.from_arrays`) — nothing here depends on the simulator or the skin.
+
+Observations remember what computed them (``extraction``): this package's extraction of this
+skin's recordings names itself (:data:`~aptkt.learning.pipeline.SKIN_EXTRACTION`), and only such
+features get this skin's transforms by default; observations built from other arrays say
+nothing (None) and are z-scored as they are, whatever their modalities are called.
 """
 
 from __future__ import annotations
@@ -22,14 +27,23 @@ __all__ = ["Observations", "ObservationTable", "validate_table"]
 
 @dataclass
 class Observations:
-    """Observations of one action: ``modalities[name]`` is ``(n, d_name)``; ``objects`` is ``(n,)``."""
+    """Observations of one action: ``modalities[name]`` is ``(n, d_name)``; ``objects`` is
+    ``(n,)``; ``extraction`` names what computed the features (None: not said)."""
 
     action: str
     modalities: dict[str, np.ndarray]
     objects: np.ndarray
     trials: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    extraction: str | None = None
 
     def __post_init__(self) -> None:
+        if self.extraction is not None and not (
+            isinstance(self.extraction, str) and self.extraction
+        ):
+            raise InvalidInputError(
+                f"action {self.action!r}: extraction must be a name or None, got "
+                f"{self.extraction!r}"
+            )
         self.objects = np.asarray(self.objects).astype(str)
         n = self.objects.shape[0]
         if self.objects.ndim != 1:
@@ -90,6 +104,7 @@ class Observations:
             {k: v[index] for k, v in self.modalities.items()},
             self.objects[index],
             self.trials[index],
+            self.extraction,
         )
 
     def of_objects(self, objects: Iterable[str]) -> Observations:
@@ -108,22 +123,37 @@ class Observations:
                 raise InvalidInputError(
                     "can only concatenate observations of the same action and modalities"
                 )
+        # Parts that do not say what computed them (e.g. read from an older file) take the
+        # others' word; two different extractions do not measure in one space.
+        said = sorted({p.extraction for p in parts if p.extraction is not None})
+        if len(said) > 1:
+            raise InvalidInputError(
+                f"action {parts[0].action!r}: observations of different extractions "
+                f"({', '.join(said)}) cannot be pooled"
+            )
         return cls(
             parts[0].action,
             {k: np.concatenate([p.modalities[k] for p in parts]) for k in names},
             np.concatenate([p.objects for p in parts]),
             np.concatenate([p.trials for p in parts]),
+            said[0] if said else None,
         )
 
     @classmethod
     def single(
-        cls, action: str, obj: str, observation: Mapping[str, np.ndarray], trial: int = 0
+        cls,
+        action: str,
+        obj: str,
+        observation: Mapping[str, np.ndarray],
+        trial: int = 0,
+        extraction: str | None = None,
     ) -> Observations:
         return cls(
             action,
             {k: np.asarray(v, dtype=np.float64)[None, :] for k, v in observation.items()},
             np.array([obj]),
             np.array([trial]),
+            extraction,
         )
 
     def to_npz(self, prefix: str) -> dict[str, np.ndarray]:

@@ -310,26 +310,29 @@ SKIN_EXTRACTION = "aptkt-skin"
 EXTRACTIONS = ("auto", SKIN_EXTRACTION, "other")
 
 
-def transforms_of(
-    table_extraction: str | None, asked: str = "auto"
-) -> Mapping[str, ModalityTransform]:
-    """The transforms of a feature table's modalities: this skin's (:data:`SKIN_TRANSFORMS`)
-    for features of :data:`SKIN_EXTRACTION` — as the table's ``extraction`` column says when
-    ``asked`` is "auto", or as asked — and :data:`GENERIC_TRANSFORMS` for any other features,
-    whatever their modalities are called."""
+def transforms_of(extraction: str | None, asked: str = "auto") -> Mapping[str, ModalityTransform]:
+    """The transforms of features computed by ``extraction`` (a table's ``extraction``
+    column, :attr:`Observations.extraction`): this skin's (:data:`SKIN_TRANSFORMS`) for
+    :data:`SKIN_EXTRACTION` — as ``extraction`` says when ``asked`` is "auto", or as asked —
+    and :data:`GENERIC_TRANSFORMS` for any other features, whatever their modalities are
+    called."""
     if asked not in EXTRACTIONS:
         raise ConfigError(f"extraction must be one of {EXTRACTIONS}, got {asked!r}")
-    extraction = table_extraction if asked == "auto" else asked
+    extraction = extraction if asked == "auto" else asked
     return SKIN_TRANSFORMS if extraction == SKIN_EXTRACTION else GENERIC_TRANSFORMS
 
 
 class FeaturePipeline:
     """Per-modality transforms for one action; modalities without a configured transform are
-    z-scored. ``transforms`` None: this skin's (:data:`SKIN_TRANSFORMS`)."""
+    z-scored. ``transforms`` None: as the observations it is fitted on were computed
+    (:func:`transforms_of` their ``extraction``): this skin's (:data:`SKIN_TRANSFORMS`) for
+    this package's extraction of the skin, none beyond z-scoring for any other features."""
 
     def __init__(self, transforms: Mapping[str, ModalityTransform] | None = None) -> None:
-        base = SKIN_TRANSFORMS if transforms is None else transforms
-        self.transforms: dict[str, ModalityTransform] = {k: replace(v) for k, v in base.items()}
+        self._given = transforms
+        self.transforms: dict[str, ModalityTransform] = {
+            k: replace(v) for k, v in (transforms or {}).items()
+        }
         self.modality_names_: tuple[str, ...] = ()
         #: With ``scale="whiten-joint"``: the map applied to the modalities' outputs side by
         #: side (:func:`joint_noise_whitener`); None otherwise.
@@ -344,9 +347,10 @@ class FeaturePipeline:
             raise InvalidInputError(f"scale must be one of {FEATURE_SCALES}, got {scale!r}")
         whiten = scale in ("whiten", "whiten-joint")
         objects = obs.objects if whiten else None
+        templates = self._given if self._given is not None else transforms_of(obs.extraction)
         fitted = {}
         for name in obs.modality_names:
-            template = self.transforms.get(name, ModalityTransform())
+            template = templates.get(name, ModalityTransform())
             fitted[name] = replace(template, mean_=None, scale_=None, components_=None).fit(
                 obs.modalities[name], objects, whiten=whiten
             )

@@ -298,6 +298,10 @@ class PriorKnowledge:
             for key, value in prior.model.state().items():
                 arrays[f"{p}/model/{key}"] = value
         meta = {"format": _FORMAT, "actions": list(self.actions), "metadata": self.metadata}
+        # What computed each action's observations (files without it: not said).
+        said = {a: p.observations.extraction for a, p in self.actions.items()}
+        if any(said.values()):
+            meta["extractions"] = {a: e for a, e in said.items() if e is not None}
         arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
         path.parent.mkdir(parents=True, exist_ok=True)
         with open_atomically(path, PriorFileError, "wb") as fh:
@@ -316,11 +320,13 @@ class PriorKnowledge:
         if extra:
             raise PriorFileError(f"{path}: member {extra[0]!r} belongs to no action of the file")
         actions = {}
+        extractions = meta.get("extractions", {})
         for i, name in enumerate(meta["actions"]):
             p = f"a{i}"
             check_action(path, arrays, p, name)
             try:
                 obs = Observations.from_npz(name, arrays, f"{p}/obs")
+                obs.extraction = extractions.get(name)
                 pipeline = FeaturePipeline.from_state(arrays, f"{p}/pipeline")
                 model_state = {
                     k[len(f"{p}/model/") :]: v

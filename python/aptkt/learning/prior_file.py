@@ -89,6 +89,16 @@ def _meta(raw: np.ndarray, path: Path) -> dict[str, Any]:
         raise PriorFileError(f"{path}: member 'meta': an action appears twice in {actions}")
     if not isinstance(meta.get("metadata", {}), dict):
         raise PriorFileError(f"{path}: member 'meta': 'metadata' must be a JSON object")
+    extractions = meta.get("extractions", {})
+    if (
+        not isinstance(extractions, dict)
+        or not set(extractions) <= set(actions)
+        or not all(isinstance(v, str) and v for v in extractions.values())
+    ):
+        raise PriorFileError(
+            f"{path}: member 'meta': 'extractions' must map actions of the file to names, "
+            f"got {extractions!r}"
+        )
     return meta
 
 
