@@ -128,3 +128,45 @@ def test_workers_end_when_their_parent_is_killed(tmp_path):
     for w in left:
         os.kill(w, signal.SIGKILL)
     assert not left, f"workers {left} outlived their killed parent"
+
+
+_KILLED_WHILE_STARTING = """
+import multiprocessing, os, signal, time
+
+def late_start():
+    time.sleep(1.5)  # the parent is gone before the watch begins
+    from aptkt.runtime.worker_start import exit_with_parent
+    exit_with_parent()
+
+if __name__ == "__main__":
+    # As aptkt's executors start their workers: their task queue stays open among them.
+    import concurrent.futures as cf
+
+    pool = cf.ProcessPoolExecutor(
+        2, mp_context=multiprocessing.get_context("spawn"), initializer=late_start
+    )
+    for _ in range(2):
+        pool.submit(time.sleep, 0)
+    time.sleep(0.5)  # the workers have their queues; their initializer has not run
+    print(" ".join(str(p) for p in pool._processes), flush=True)
+    os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+def test_workers_end_when_their_parent_dies_before_they_watch_it(tmp_path):
+    """The parent killed while its workers still start: they end all the same (they knew
+    their parent by what the process that adopted them is, and lived on)."""
+    script, out = tmp_path / "parent.py", tmp_path / "workers.txt"
+    script.write_text(_KILLED_WHILE_STARTING)
+    with out.open("w") as fh:  # (a pipe would stay open as long as a leaked worker lives)
+        code = subprocess.run([sys.executable, str(script)], stdout=fh, timeout=60).returncode
+    assert code == -signal.SIGKILL
+    workers = [int(p) for p in out.read_text().split()]
+    assert len(workers) == 2
+    deadline = time.monotonic() + 15
+    while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    left = [w for w in workers if _alive(w)]
+    for w in left:
+        os.kill(w, signal.SIGKILL)
+    assert not left, f"workers {left} outlived a parent killed while they started"

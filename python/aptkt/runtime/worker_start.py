@@ -12,6 +12,7 @@ the parent's main module had numpy imported already (a spawned worker imports it
 from __future__ import annotations
 
 import importlib
+import multiprocessing
 import os
 import threading
 import time
@@ -41,8 +42,16 @@ def limit_thread_pools(threads: int) -> None:
 def exit_with_parent() -> None:
     """End this worker when the process that started it dies. A pool's workers wait for work
     on a pipe that a SIGKILLed parent leaves open among them, so they would otherwise live on
-    (measured: a killed ``dataset generate -j 2`` left its workers running for an hour)."""
-    parent = os.getppid()
+    (measured: a killed ``dataset generate -j 2`` left its workers running for an hour).
+
+    The parent is the process that started this one, as multiprocessing recorded it: if it
+    died while this worker was still starting, ``os.getppid()`` already names whoever adopted
+    the orphan, and watching that one would never end (seen: workers of a generator killed
+    within its first second, left waiting for 25 minutes)."""
+    started_by = multiprocessing.parent_process()
+    parent = (
+        started_by.pid if started_by is not None and started_by.pid is not None else os.getppid()
+    )
 
     def watch() -> None:
         while os.getppid() == parent:
