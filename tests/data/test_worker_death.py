@@ -100,6 +100,18 @@ def _alive(pid: int) -> bool:
     return state != "Z"
 
 
+def _survivors(workers: list[int]) -> list[int]:
+    """The workers still alive 15 s after their parent died (killed, so that none is left
+    behind by the test)."""
+    deadline = time.monotonic() + 15
+    while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    left = [w for w in workers if _alive(w)]
+    for w in left:
+        os.kill(w, signal.SIGKILL)
+    return left
+
+
 def test_workers_end_when_their_parent_is_killed(tmp_path):
     """SIGKILL of the command itself (no chance to shut its pool down): its simulating workers
     end within seconds instead of waiting on their pipe for ever (they lived on for an hour)."""
@@ -121,12 +133,7 @@ def test_workers_end_when_their_parent_is_killed(tmp_path):
     time.sleep(1.0)  # (their initializer, which starts the watch, has run)
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
-    deadline = time.monotonic() + 15
-    while any(_alive(w) for w in workers) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    left = [w for w in workers if _alive(w)]
-    for w in left:
-        os.kill(w, signal.SIGKILL)
+    left = _survivors(workers)
     assert not left, f"workers {left} outlived their killed parent"
 
 
@@ -163,10 +170,5 @@ def test_workers_end_when_their_parent_dies_before_they_watch_it(tmp_path):
     assert code == -signal.SIGKILL
     workers = [int(p) for p in out.read_text().split()]
     assert len(workers) == 2
-    deadline = time.monotonic() + 15
-    while any(_alive(w) for w in workers) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    left = [w for w in workers if _alive(w)]
-    for w in left:
-        os.kill(w, signal.SIGKILL)
+    left = _survivors(workers)
     assert not left, f"workers {left} outlived a parent killed while they started"

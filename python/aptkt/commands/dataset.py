@@ -324,7 +324,6 @@ def run_export_features(args: argparse.Namespace) -> int:
     from aptkt.errors import DatasetError
     from aptkt.learning.dataset import load_observations
     from aptkt.learning.feature_table import write_feature_table
-    from aptkt.learning.pipeline import SKIN_EXTRACTION
 
     input_file(args.file, "DATASET")
     intact_data_set(args.file, "DATASET")
@@ -344,9 +343,9 @@ def run_export_features(args: argparse.Namespace) -> int:
     empty = [a for a, obs in table.items() if len(obs) == 0]
     if empty:
         raise ConfigError(f"{args.file}: no observations of {', '.join(empty)} for these objects")
-    # Marked as this skin's features: learning from the table transforms them as from the
-    # data set.
-    write_feature_table(args.output, table, extraction=SKIN_EXTRACTION)
+    # The observations say they are this skin's features, and so does the table: learning
+    # from it transforms them as from the data set.
+    write_feature_table(args.output, table)
     rows = sum(len(obs) for obs in table.values())
     print(f"{args.output}: {rows} rows ({', '.join(f'{a} {len(o)}' for a, o in table.items())})")
     return 0

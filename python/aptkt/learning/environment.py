@@ -16,7 +16,7 @@ import numpy as np
 
 from aptkt.errors import AptktError, UnknownNameError
 from aptkt.learning.extract import observe_recording
-from aptkt.learning.observations import ObservationTable
+from aptkt.learning.observations import ObservationTable, common_extraction
 from aptkt.learning.pipeline import SKIN_EXTRACTION
 
 __all__ = [
@@ -48,9 +48,8 @@ class PoolEnvironment:
 
     def __init__(self, table: ObservationTable, seed: int = 0) -> None:
         self.table = dict(table)
-        said = {obs.extraction for obs in self.table.values()}
-        #: What computed the pool's observations (None if they do not say, or disagree).
-        self.extraction = said.pop() if len(said) == 1 else None
+        #: What computed the pool's observations (None if they do not say).
+        self.extraction = common_extraction(self.table.values())
         rng = np.random.default_rng(seed)
         self._queues: dict[tuple[str, str], list[int]] = {}
         for action, obs in self.table.items():

@@ -32,7 +32,7 @@ import numpy as np
 
 from aptkt.errors import FeatureTableError
 from aptkt.files import open_atomically, replaced_atomically
-from aptkt.learning.observations import Observations, ObservationTable
+from aptkt.learning.observations import Observations, ObservationTable, common_extraction
 
 __all__ = [
     "ID_COLUMNS",
@@ -377,11 +377,10 @@ def write_feature_table(
     """Write an observation table as a feature table (CSV or HDF5, by the file's suffix);
     ``extraction`` fills the ``extraction`` column (e.g.
     :data:`~aptkt.learning.pipeline.SKIN_EXTRACTION` for this skin's features as this package
-    extracts them); None: what the observations say, if they say one thing, else no column."""
+    extracts them); None: what the observations say (no column if they say nothing)."""
     path = check_table_name(path)
     if extraction is None:
-        said = {obs.extraction for obs in table.values()} - {None}
-        extraction = said.pop() if len(said) == 1 else None
+        extraction = common_extraction(table.values())
     suffix = path.suffix.lower()
     widths: dict[str, int] = {}
     for obs in table.values():

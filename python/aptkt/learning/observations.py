@@ -22,7 +22,7 @@ import numpy as np
 
 from aptkt.errors import InvalidInputError
 
-__all__ = ["Observations", "ObservationTable", "validate_table"]
+__all__ = ["Observations", "ObservationTable", "common_extraction", "validate_table"]
 
 
 @dataclass
@@ -123,20 +123,12 @@ class Observations:
                 raise InvalidInputError(
                     "can only concatenate observations of the same action and modalities"
                 )
-        # Parts that do not say what computed them (e.g. read from an older file) take the
-        # others' word; two different extractions do not measure in one space.
-        said = sorted({p.extraction for p in parts if p.extraction is not None})
-        if len(said) > 1:
-            raise InvalidInputError(
-                f"action {parts[0].action!r}: observations of different extractions "
-                f"({', '.join(said)}) cannot be pooled"
-            )
         return cls(
             parts[0].action,
             {k: np.concatenate([p.modalities[k] for p in parts]) for k in names},
             np.concatenate([p.objects for p in parts]),
             np.concatenate([p.trials for p in parts]),
-            said[0] if said else None,
+            common_extraction(parts),
         )
 
     @classmethod
@@ -179,6 +171,18 @@ class Observations:
 
 #: Observations of several actions, by action name.
 ObservationTable = Mapping[str, Observations]
+
+
+def common_extraction(parts: Iterable[Observations]) -> str | None:
+    """What computed all of ``parts`` (None if none says). Parts that do not say (e.g. read
+    from an older file) take the others' word; two different extractions do not measure in
+    one space, so they are an error."""
+    said = sorted({p.extraction for p in parts if p.extraction is not None})
+    if len(said) > 1:
+        raise InvalidInputError(
+            f"observations of different extractions ({', '.join(said)}) cannot be pooled"
+        )
+    return said[0] if said else None
 
 
 def validate_table(table: ObservationTable) -> None:

@@ -299,9 +299,13 @@ class PriorKnowledge:
                 arrays[f"{p}/model/{key}"] = value
         meta = {"format": _FORMAT, "actions": list(self.actions), "metadata": self.metadata}
         # What computed each action's observations (files without it: not said).
-        said = {a: p.observations.extraction for a, p in self.actions.items()}
-        if any(said.values()):
-            meta["extractions"] = {a: e for a, e in said.items() if e is not None}
+        said = {
+            a: p.observations.extraction
+            for a, p in self.actions.items()
+            if p.observations.extraction is not None
+        }
+        if said:
+            meta["extractions"] = said
         arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
         path.parent.mkdir(parents=True, exist_ok=True)
         with open_atomically(path, PriorFileError, "wb") as fh:
