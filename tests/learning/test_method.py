@@ -81,7 +81,11 @@ def test_config_validates_round_trips_and_names_the_papers_reading():
     paper = LearnerConfig.paper(budget=5)
     assert paper.cutoff == "paper" and paper.budget == 5
     assert paper.gp == GPSettings(
-        n_restarts=1, hyper_prior=None, kernel="per-classifier", prior_feature_scale="spread"
+        n_restarts=1,
+        hyper_prior=None,
+        kernel="per-classifier",
+        prior_feature_scale="spread",
+        library_model="exact",
     )
     for field, bad in (("transfer", "multi"), ("cutoff", "fitted")):
         with pytest.raises(ValueError, match=field):

@@ -21,6 +21,7 @@ if TYPE_CHECKING:
 __all__ = [
     "GPSettings",
     "KERNELS",
+    "LIBRARY_MODELS",
     "LONE_OBSERVATION_POSTERIOR",
     "LearnerConfig",
     "READINGS",
@@ -41,6 +42,10 @@ KERNELS = ("library", *ESTIMATOR_KERNELS)
 LONE_OBSERVATION_POSTERIOR = 0.9
 #: The method as this package implements it by default, or the paper's exact reading.
 READINGS = ("aptkt", "paper")
+#: "local": the library's kernel learned on a sample of its objects, each old object's
+#: classifier on its neighbourhood (:mod:`aptkt.learning.locality`); "exact": every classifier
+#: on every old observation (the paper's one-vs-all model; GPSettings.library_model).
+LIBRARY_MODELS = ("local", "exact")
 
 
 def recognisable_signal_variance(probability: float = 0.95) -> float:
@@ -125,6 +130,15 @@ class GPSettings:
         new objects whether or not they resemble the old ones. "spread": each column z-scored
         over the old observations (the paper's reading: the features are normalised). The
         baseline's space is always the new objects' own spread: it uses nothing of the prior.
+    library_model : how the library's one-vs-all model of its old objects is fitted. "local"
+        (default): its kernel on a random sample of the old objects, and each old object's
+        classifier on its neighbourhood — itself and the objects nearest to it — within the
+        limits of :mod:`aptkt.learning.locality` (16 objects, 400 observations); a new object is
+        compared (Eq. 3) with the old objects most likely to have given its observations. Its
+        cost does not grow with the library, and a library within the limits is fitted exactly
+        as with "exact". "exact": every classifier on every old observation (the paper's one-
+        vs-all model; its cost grows as N⁴ with N old objects: a library of 100 objects takes
+        minutes and 5 GB).
     n_restarts : random starts of the hyper-parameter search besides the one at the hyper-prior's
         centre (0 by default: under MAP-II the random start found nothing better and cost a
         third of the CPU; with ``hyper_prior=None`` give n_restarts ≥ 1).
@@ -143,11 +157,16 @@ class GPSettings:
     hyper_prior: str | None = "weak"
     kernel: str = "library"
     prior_feature_scale: str = "whiten-joint"
+    library_model: str = "local"
 
     def __post_init__(self) -> None:
         if self.hyper_prior not in ("weak", None):
             raise InvalidInputError(f"hyper_prior must be 'weak' or None, got {self.hyper_prior!r}")
-        for name, allowed in (("kernel", KERNELS), ("prior_feature_scale", FEATURE_SCALES)):
+        for name, allowed in (
+            ("kernel", KERNELS),
+            ("prior_feature_scale", FEATURE_SCALES),
+            ("library_model", LIBRARY_MODELS),
+        ):
             if getattr(self, name) not in allowed:
                 raise InvalidInputError(
                     f"{name} must be one of {allowed}, got {getattr(self, name)!r}"
@@ -159,7 +178,11 @@ class GPSettings:
         """The paper's reading: per-classifier ML-II (one random restart against ML-II's flat
         optima) in a feature space z-scored by the old objects' spread."""
         base = cls(
-            n_restarts=1, hyper_prior=None, kernel="per-classifier", prior_feature_scale="spread"
+            n_restarts=1,
+            hyper_prior=None,
+            kernel="per-classifier",
+            prior_feature_scale="spread",
+            library_model="exact",
         )
         return replace(base, **changes)
 

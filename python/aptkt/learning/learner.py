@@ -82,9 +82,12 @@ class ActionLearner:
         # for: every step records them for every action, and only one action changed.
         self._accuracy: float | None = None
         self._hyperparameters: dict[str, dict[str, float]] | None = None
-        # Every old object's observations in the prior's space and their objects (the source
-        # tasks and the shared kernel's old task), computed once.
+        # Every old observation in the prior's space (all modalities) and its object; the old
+        # objects whose posteriors are the auxiliary features (Eq. 5), fixed at the first
+        # update; those old observations' own auxiliary features (leave-one-out).
         self._old: tuple[np.ndarray, np.ndarray] | None = None
+        self.auxiliary_objects: list[str] | None = None
+        self._old_auxiliary: np.ndarray | None = None
         # The "library" kernel's last log length-scale per model input (with or without the
         # auxiliary features).
         self._log_length_scales: dict[tuple[str, ...], float] = {}
@@ -135,32 +138,49 @@ class ActionLearner:
             out_groups[m] = list(range(start, start + len(groups[m])))
             start += len(groups[m])
         if self.config.auxiliary and self.prior is not None:
-            aux = self.prior.posteriors(X_full)
+            aux = self.prior.posteriors(X_full, self.auxiliary_objects)
             out_groups[AUXILIARY] = list(range(start, start + aux.shape[1]))
             X = np.hstack([X, aux])
         return X, out_groups
 
-    def _old_features(self) -> tuple[np.ndarray, np.ndarray]:
-        """Every old object's observations in the model's input space, and their objects.
-        Their auxiliary features (Eq. 5) are the prior model's leave-one-out posteriors: what
-        it says of an observation it has not seen, as it does of the new ones."""
+    def _old_features(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The old observations ``rows`` (of the prior's) in the model's input space, and
+        their objects. Their auxiliary features (Eq. 5) are what the model of the auxiliary
+        objects says of an observation it has not seen, as it does of the new ones: its
+        leave-one-out posterior for its own observations, its posterior for the others."""
         assert self.prior is not None  # sources and the shared kernel come from the prior
         if self._old is None:
             obs = self.prior.observations
-            X_full, groups = self.prior.pipeline.transform(obs)
-            X, _ = self._model_input(X_full, groups)
-            if self.config.auxiliary:
-                n_aux = len(self.prior.objects)
-                X[:, X.shape[1] - n_aux :] = self.prior.loo_posteriors()
-            self._old = (X, np.asarray(obs.objects))
-        return self._old
+            X_full, _ = self.prior.pipeline.transform(obs)
+            self._old = (X_full, np.asarray(obs.objects))
+        X_full, objects = self._old
+        groups = self.prior.groups
+        rows = np.asarray(rows, dtype=np.int64)
+        if not self.config.auxiliary:
+            return self._model_input(X_full[rows], groups)[0], objects[rows]
+        if self._old_auxiliary is None:
+            # NaN marks the rows not computed yet.
+            self._old_auxiliary = np.full((len(objects), len(self.auxiliary_objects or [])), np.nan)
+            mine = self.prior.rows_of(self.auxiliary_objects or [])
+            self._old_auxiliary[mine] = self.prior.loo_posteriors(self.auxiliary_objects)
+        missing = rows[np.isnan(self._old_auxiliary[rows, 0])]
+        if missing.size:
+            self._old_auxiliary[missing] = self.prior.posteriors(
+                X_full[missing], self.auxiliary_objects
+            )
+        X = self._model_input(X_full[rows], groups)[0]
+        n_aux = self._old_auxiliary.shape[1]
+        X[:, X.shape[1] - n_aux :] = self._old_auxiliary[rows]
+        return X, objects[rows]
 
     def _source(
         self, old_object: str, transfer_lambda: float, *, drop_columns: int = 0
     ) -> TransferSource:
         """The source task of one transferred old object: its one-vs-all task (its
-        observations +1, the other old objects' −1), without the last ``drop_columns``."""
-        X, objects = self._old_features()
+        observations +1, the other old objects' of its neighbourhood −1), without the last
+        ``drop_columns``."""
+        assert self.prior is not None  # only called when transferring
+        X, objects = self._old_features(self.prior.neighbourhood(old_object))
         X = X[:, : X.shape[1] - drop_columns]
         mine = objects == old_object
         return TransferSource(
@@ -184,9 +204,12 @@ class ActionLearner:
         if self._kernel_kind() == "library":
             # The old model's space (every modality, no auxiliary features) at the new objects'
             # amplitude and the length-scale the library favours there.
-            X_old, groups = prior.pipeline.transform(prior.observations)
+            rows = prior.sample_rows
+            X_old, groups = prior.pipeline.transform(prior.observations.take(rows))
             sv = lone_observation_signal_variance(len(self.new_objects))
-            curve = prior.library_evidence(X_old, groups, sv, self.config.gp.approximation)
+            curve = prior.library_evidence(
+                X_old, groups, sv, self.config.gp.approximation, rows=rows
+            )
             kernel = (sv, curve.best())
         return lambda old, lam: prior.transfer_evidence(X_prior, positive, old, lam, kernel)
 
@@ -214,10 +237,22 @@ class ActionLearner:
         observations' input without its last ``drop_columns`` columns) at the σ² the number of
         new objects sets (:mod:`aptkt.learning.kernel`; cached by the prior)."""
         assert self.prior is not None  # the library kernel lives in the prior's space
-        X_old, _ = self._old_features()
+        rows = self._library_rows(AUXILIARY in groups)
+        X_old, _ = self._old_features(rows)
         X_old = X_old[:, : X_old.shape[1] - drop_columns]
         sv = lone_observation_signal_variance(len(self.new_objects))
-        return self.prior.library_evidence(X_old, dict(groups), sv, self.config.gp.approximation)
+        return self.prior.library_evidence(
+            X_old, dict(groups), sv, self.config.gp.approximation, rows=rows
+        )
+
+    def _library_rows(self, auxiliary: bool) -> np.ndarray:
+        """The old observations whose labels weigh in on the new objects' kernel: those of the
+        auxiliary objects where the model uses their posteriors, else the library's kernel
+        sample (every old observation within the limits of :mod:`aptkt.learning.locality`)."""
+        assert self.prior is not None
+        if auxiliary:
+            return self.prior.rows_of(self.auxiliary_objects or [])
+        return self.prior.sample_rows
 
     # -- model -------------------------------------------------------------------------------
     def update(self, step: int) -> None:
@@ -230,17 +265,22 @@ class ActionLearner:
         cfg = self.config
         pipeline = self._pipeline()
         self.decisions = {}
-        if self.prior is not None and cfg.transfers:
+        if self.prior is not None and (cfg.transfers or cfg.auxiliary):
             # The old models judge the new observations in their own space.
             X_prior = self.prior.pipeline.transform(obs)[0]
-            related = self.prior.binary_probabilities(X_prior)
+        if self.prior is not None and cfg.auxiliary and self.auxiliary_objects is None:
+            self.auxiliary_objects = self.prior.auxiliary_objects(X_prior, obs.objects)
+        if self.prior is not None and cfg.transfers:
             choice, forced_lambda = cfg._transfer_pick()
             for obj in self.new_objects:
                 mine = obs.objects == obj
+                # Eq. 3 among the old objects most like the new one (every old object within
+                # the limits of aptkt.learning.locality).
+                candidates = self.prior.candidates(X_prior[mine])
                 self.decisions[obj] = decide_transfer(
                     obj,
-                    self.prior.objects,
-                    related[mine],
+                    candidates,
+                    self.prior.binary_probabilities(X_prior[mine], candidates),
                     cfg.eps_neg,
                     cfg.transfer,
                     choice=choice,
@@ -326,7 +366,8 @@ class ActionLearner:
         shared = kind == "shared"
         model = self.config.gp.make(groups, random_state=seed, shared=shared)
         if shared:
-            X_old, y_old = self._old_features()
+            assert self.prior is not None  # the shared kernel lives in the prior's space
+            X_old, y_old = self._old_features(self._library_rows(AUXILIARY in groups))
             old = (X_old[:, : X_old.shape[1] - n_aux], y_old)
             model.fit(X, obs.objects, sources=sources or None, kernel_tasks=[old])
         else:

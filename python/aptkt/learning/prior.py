@@ -9,6 +9,7 @@ Saved as one ``.npz`` file of plain arrays plus JSON metadata; loading executes 
 from __future__ import annotations
 
 import json
+import zlib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -25,6 +26,7 @@ from aptkt.learning.config import GPSettings
 from aptkt.learning.evidence import at_fitted_hyperparameters, uncoupled_evidence
 from aptkt.learning.identity import ObjectIdentity
 from aptkt.learning.kernel import LibraryEvidence, library_evidence
+from aptkt.learning.locality import CANDIDATES, LOCAL_OBJECTS, kernel_sample, take_objects
 
 if TYPE_CHECKING:
     from aptkt.learning.recognition import Calibration, Recognition
@@ -43,53 +45,184 @@ AUXILIARY = "auxiliary"
 
 @dataclass
 class ActionPrior:
-    """The prior experience of one exploratory action."""
+    """The prior experience of one exploratory action.
+
+    ``model`` is the library's one-vs-all observation model fitted on ``sample``, the rows of
+    ``observations`` its kernel is learned on (None: every row, as in every library within
+    :mod:`aptkt.learning.locality`'s limits). Where it covers the library, Eq. 3, the source
+    tasks and the auxiliary features use it directly; beyond, each old object has a classifier
+    of its own neighbourhood at the model's kernel (:mod:`aptkt.learning.locality`)."""
 
     action: str
     observations: Observations
     pipeline: FeaturePipeline
     model: LaplaceGPC
+    sample: np.ndarray | None = None
     #: log Z of each source task the evidence test has judged, by old object and kernel.
     _source_evidence: dict[tuple[str, Any], float] = field(
         default_factory=dict, init=False, repr=False, compare=False
     )
-    _loo: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
-    #: The library's evidence over the length-scale, by signal variance and model columns.
+    _loo: dict[tuple[str, ...], np.ndarray] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
+    #: The library's evidence over the length-scale, by signal variance, model columns and rows.
     _evidence_curves: dict[tuple[Any, ...], LibraryEvidence] = field(
         default_factory=dict, init=False, repr=False, compare=False
     )
+    #: Each old object's classifier of its neighbourhood (beyond the limits), by object.
+    _local: dict[str, LaplaceGPC] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
+    _neighbourhoods: dict[str, np.ndarray] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
+    #: The one-vs-all models of sets of old objects (the auxiliary features' objects).
+    _models_of: dict[tuple[str, ...], LaplaceGPC] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
+
+    @cached_property
+    def objects(self) -> list[str]:
+        """Every old object of the action, sorted (the model's classes where it covers them)."""
+        return [str(o) for o in np.unique(np.asarray(self.observations.objects).astype(str))]
 
     @property
-    def objects(self) -> list[str]:
-        return [str(c) for c in self.model.classes_]
+    def sample_rows(self) -> np.ndarray:
+        """The rows of ``observations`` the model is fitted on."""
+        return np.arange(len(self.observations)) if self.sample is None else self.sample
+
+    @property
+    def covers_library(self) -> bool:
+        """Whether ``model`` holds every old observation (then it is the exact model)."""
+        return self.sample is None or self.sample.size == len(self.observations)
 
     def features(self, obs: Observations) -> tuple[np.ndarray, dict[str, list[int]]]:
         """Observations in this prior's feature space."""
         return self.pipeline.transform(obs)
 
-    def posteriors(self, X: np.ndarray) -> np.ndarray:
-        """``p(c_i^old | v)`` for feature rows already in this prior's space, (n, n_old):
-        the class posterior (one-vs-all probabilities normalised to sum to 1)."""
-        return self.model.predict_proba(X)
+    @cached_property
+    def groups(self) -> dict[str, list[int]]:
+        """The feature space's columns by modality."""
+        return self.pipeline.transform(self.observations.take(np.arange(1)))[1]
 
-    def binary_probabilities(self, X: np.ndarray) -> np.ndarray:
-        """Each old object's own binary classifier's ``p(y=+1 | v)``, (n, n_old); rows need
-        not sum to 1 (paper §4.2). With two old objects there is one classifier, and these are
-        the class posterior."""
-        return binary_probabilities(self.model, X)
+    # -- which old objects a new one is compared with ----------------------------------------
+    def candidates(self, X: np.ndarray) -> list[str]:
+        """The old objects Eq. 3 compares observations ``X`` (rows in this prior's space, of one
+        object) with: every old object where the model covers the library, else the
+        :data:`~aptkt.learning.locality.CANDIDATES` most likely, under the identity model, to
+        have given them. In the library's order."""
+        if self.covers_library or self.identity is None:
+            return self.objects
+        near = self.identity.nearest(X, CANDIDATES)
+        return [self.identity.objects_[k] for k in np.sort(near)]
 
-    def loo_posteriors(self) -> np.ndarray:
-        """``p(c_i^old | v)`` of every old observation by the model fitted without it, (n,
-        n_old): its leave-one-out posterior, from each classifier's Laplace approximation
-        with that observation's own likelihood term removed (the cavity distribution, whose
-        predictive probability is taken as for a new observation). A model's posterior of
-        its own training observations is nearly one-hot, and as auxiliary features (Eq. 5) of
-        the old observations it would tell the shared kernel that the old model separates
-        everything; the new observations' auxiliary features are out of sample, so the old
-        ones must be too."""
-        if self._loo is None:
-            self._loo = leave_one_out_posteriors(self.model, self._training_X)
-        return self._loo
+    def neighbourhood(self, old_object: str) -> np.ndarray:
+        """The rows of ``old_object``'s one-vs-all task: every row where the model covers the
+        library, else the rows of the object and of the library's objects nearest to it under
+        the identity model, within :mod:`aptkt.learning.locality`'s limits."""
+        if self.covers_library or self.identity is None:
+            return np.arange(len(self.observations))
+        if old_object not in self._neighbourhoods:
+            identity = self.identity
+            k = identity.objects_.index(old_object)
+            old, _ = identity.log_likelihoods(self._training_X[identity.rows_of(k)])
+            old[k] = np.inf  # the object itself first, whatever its own noise
+            order = np.argsort(-old, kind="stable")
+            self._neighbourhoods[old_object] = take_objects(
+                order, [identity.rows_of(j) for j in range(len(identity.objects_))]
+            )
+        return self._neighbourhoods[old_object]
+
+    def auxiliary_objects(self, X: np.ndarray, objects: np.ndarray) -> list[str]:
+        """The old objects whose posteriors are the auxiliary features (Eq. 5) of a task whose
+        observations so far are ``X`` (this prior's space) of ``objects``: every old object
+        where the model covers the library, else the old objects nearest the new ones — each new
+        object's nearest in turn, under the identity model — within the limits. In the
+        library's order."""
+        if self.covers_library or self.identity is None:
+            return self.objects
+        identity = self.identity
+        labels = np.asarray(objects).astype(str)
+        ranked = [
+            identity.nearest(X[labels == o], LOCAL_OBJECTS) for o in dict.fromkeys(labels.tolist())
+        ]
+        order = list(dict.fromkeys(int(k) for row in zip(*ranked) for k in row))
+        rows = take_objects(order, [identity.rows_of(j) for j in range(len(identity.objects_))])
+        return sorted(set(np.asarray(self.observations.objects)[rows].astype(str).tolist()))
+
+    # -- the old models ----------------------------------------------------------------------
+    def binary_probabilities(
+        self, X: np.ndarray, objects: Sequence[str] | None = None
+    ) -> np.ndarray:
+        """Each old object's own binary classifier's ``p(y=+1 | v)``, (n, objects), for
+        ``objects`` (default: every old object); rows need not sum to 1 (paper §4.2). With two
+        old objects there is one classifier, and these are the class posterior. Beyond the
+        limits each object's classifier is the one of its neighbourhood."""
+        names = self.objects if objects is None else [str(o) for o in objects]
+        if self.covers_library:
+            p = binary_probabilities(self.model, X)
+            where = {str(c): k for k, c in enumerate(self.model.classes_)}
+            return p[:, [where[o] for o in names]]
+        out = np.empty((np.atleast_2d(X).shape[0], len(names)))
+        for k, o in enumerate(names):
+            out[:, k] = self._classifier(o).predict_proba_binary(X)[:, 1]
+        return out
+
+    def _classifier(self, old_object: str) -> LaplaceGPC:
+        """``old_object``'s classifier of its neighbourhood (+1 its rows, −1 its neighbours')."""
+        if old_object not in self._local:
+            rows = self.neighbourhood(old_object)
+            y = (np.asarray(self.observations.objects)[rows] == old_object).astype(np.int64)
+            self._local[old_object] = self._fitted_like_model(self._training_X[rows], y)
+        return self._local[old_object]
+
+    def _fitted_like_model(self, X: np.ndarray, y: np.ndarray) -> LaplaceGPC:
+        """A model of the rows ``X`` labelled ``y`` with the library model's kernel: at its
+        fitted hyper-parameters where one kernel serves every classifier, fitted as the model
+        was (each classifier its own kernel) otherwise."""
+        if self.model.kernel == "shared":
+            return at_fitted_hyperparameters(self.model, self.model.classes_[0]).fit(X, y)
+        from sklearn.base import clone
+
+        return clone(self.model).fit(X, y)
+
+    def model_of(self, objects: Sequence[str]) -> LaplaceGPC:
+        """The one-vs-all model of the old ``objects`` alone (their rows), at the library model's
+        kernel: the library model itself where it covers them all."""
+        key = tuple(sorted(str(o) for o in objects))
+        if self.covers_library and list(key) == self.objects:
+            return self.model
+        if key not in self._models_of:
+            rows = self.rows_of(key)
+            labels = np.asarray(self.observations.objects)[rows]
+            self._models_of[key] = self._fitted_like_model(self._training_X[rows], labels)
+        return self._models_of[key]
+
+    def rows_of(self, objects: Sequence[str]) -> np.ndarray:
+        """The rows of the given old objects, in the library's order."""
+        return np.flatnonzero(np.isin(np.asarray(self.observations.objects).astype(str), objects))
+
+    def posteriors(self, X: np.ndarray, objects: Sequence[str] | None = None) -> np.ndarray:
+        """``p(c_i^old | v)`` for feature rows already in this prior's space, (n, objects):
+        the class posterior (one-vs-all probabilities normalised to sum to 1) of the model of
+        ``objects`` (default: every old object)."""
+        return self.model_of(self.objects if objects is None else objects).predict_proba(X)
+
+    def loo_posteriors(self, objects: Sequence[str] | None = None) -> np.ndarray:
+        """``p(c_i^old | v)`` of every observation of ``objects`` (default: every old object;
+        their rows in the library's order) by the model of those objects fitted without it: its
+        leave-one-out posterior, from each classifier's Laplace approximation with that
+        observation's own likelihood term removed (the cavity distribution, whose predictive
+        probability is taken as for a new observation). A model's posterior of its own training
+        observations is nearly one-hot, and as auxiliary features (Eq. 5) of the old
+        observations it would tell the shared kernel that the old model separates everything;
+        the new observations' auxiliary features are out of sample, so the old ones must be
+        too."""
+        key = tuple(sorted(self.objects if objects is None else [str(o) for o in objects]))
+        if key not in self._loo:
+            model = self.model_of(key)
+            self._loo[key] = leave_one_out_posteriors(model, self._training_X[self.rows_of(key)])
+        return self._loo[key]
 
     def training_features(self) -> np.ndarray:
         return self.pipeline.transform(self.observations)[0]
@@ -116,16 +249,24 @@ class ActionPrior:
         groups: Mapping[str, list[int]],
         signal_variance: float,
         approximation: str = "erf",
+        rows: np.ndarray | None = None,
     ) -> LibraryEvidence:
         """The old objects' summed evidence as a function of the shared length-scale at a fixed
         ``signal_variance``, for the old observations ``X`` as a model sees them (its columns
-        ``groups``): the library's part of the "library" kernel
-        (:mod:`aptkt.learning.kernel`), computed once per signal variance and columns."""
-        key = (round(float(signal_variance), 12), tuple((m, tuple(c)) for m, c in groups.items()))
+        ``groups``) — the library's rows ``rows`` (default: every row): the library's part of
+        the "library" kernel (:mod:`aptkt.learning.kernel`), computed once per signal
+        variance, columns and rows."""
+        rows = np.arange(len(self.observations)) if rows is None else np.asarray(rows)
+        key = (
+            round(float(signal_variance), 12),
+            tuple((m, tuple(c)) for m, c in groups.items()),
+            rows.size,
+            zlib.crc32(np.ascontiguousarray(rows, dtype=np.int64).tobytes()),
+        )
         if key not in self._evidence_curves:
             self._evidence_curves[key] = library_evidence(
                 X,
-                np.asarray(self.observations.objects),
+                np.asarray(self.observations.objects)[rows],
                 groups,
                 signal_variance,
                 approximation=approximation,
@@ -148,28 +289,31 @@ class ActionPrior:
         ``X_new``: every new observation of this action so far, in this prior's feature space;
         ``positive``: which of them belong to the new object (its binary task's +1 labels).
         Model 1 couples the new object's latent function to the old object's one-vs-all task
-        (its observations +1, the other old objects' −1) by λ, as Eq. 2 does; model 0 is the
-        same with λ = 0 (the two tasks independent). Both use ``kernel`` — (σ², length-scale) of
-        the new objects' model, equal modality weights — or without it the old object's own
-        classifier's hyper-parameters, and no hyper-parameter is fitted, so the factor compares
-        the two hypotheses only. With λ = 0 the joint marginal likelihood is the source's times
-        the target's, so ``log Z(λ) − log Z(0) = log p(y_new | source, λ) − log p(y_new)``: how
-        much more probable the source makes the new labels (> 0: the transfer is supported).
-        Laplace approximations throughout.
+        (its observations +1, the other old objects' of its neighbourhood −1) by λ, as Eq. 2
+        does; model 0 is the same with λ = 0 (the two tasks independent). Both use ``kernel`` —
+        (σ², length-scale) of the new objects' model, equal modality weights — or without it
+        the old object's own classifier's hyper-parameters, and no hyper-parameter is fitted, so
+        the factor compares the two hypotheses only. With λ = 0 the joint marginal likelihood is
+        the source's times the target's, so ``log Z(λ) − log Z(0) = log p(y_new | source, λ) −
+        log p(y_new)``: how much more probable the source makes the new labels (> 0: the
+        transfer is supported). Laplace approximations throughout.
         """
-        X_old = self._training_X
-        mine = np.asarray(self.observations.objects) == old_object
+        rows = self.neighbourhood(old_object)
+        X_old = self._training_X[rows]
+        mine = np.asarray(self.observations.objects)[rows] == old_object
         task = TransferSource(X_old, np.where(mine, 1.0, -1.0), transfer_lambda=transfer_lambda)
         positive = np.asarray(positive, dtype=bool)
         if positive.shape != (X_new.shape[0],) or positive.all() or not positive.any():
             raise InvalidInputError("positive must mark some, not all, of the new observations")
         labels = np.where(positive, 1, 0)
+        reference = self.model if self.covers_library else self._classifier(old_object)
+        label: Any = old_object if self.covers_library else 1
 
         def classifier() -> LaplaceGPC:
             # Fresh classifiers rather than a clone: scikit-learn's clone inspects the
             # constructor's signature, a tenth of a decision's time.
             if kernel is None:
-                return at_fitted_hyperparameters(self.model, old_object)
+                return at_fitted_hyperparameters(reference, label)
             names = list(self.model.modality_names_)
             return LaplaceGPC(
                 length_scale=kernel[1],
@@ -278,10 +422,19 @@ class PriorKnowledge:
                 )
             pipeline = FeaturePipeline(transforms).fit(obs, scale=gp.prior_feature_scale)
             X, groups = pipeline.transform(obs)
-            # The old objects' own model: one kernel for their classifiers, learned on them.
+            # The old objects' own model: one kernel for their classifiers, learned on them —
+            # on a sample of them beyond the limits of :mod:`aptkt.learning.locality`.
+            sample = (
+                kernel_sample(obs.objects, seed + k)
+                if gp.library_model == "local"
+                else np.arange(len(obs))
+            )
             shared = gp.kernel in ("library", "shared")
-            model = gp.make(groups, random_state=seed + k, shared=shared).fit(X, obs.objects)
-            actions[name] = ActionPrior(name, obs, pipeline, model)
+            model = gp.make(groups, random_state=seed + k, shared=shared).fit(
+                X[sample], np.asarray(obs.objects)[sample]
+            )
+            kept = None if sample.size == len(obs) else sample
+            actions[name] = ActionPrior(name, obs, pipeline, model, kept)
             if progress is not None:
                 progress.update(1)
         meta = {"software_version": __version__, "seed": seed, "gp": gp.to_dict()}
@@ -297,6 +450,8 @@ class PriorKnowledge:
             arrays.update(prior.pipeline.state(f"{p}/pipeline"))
             for key, value in prior.model.state().items():
                 arrays[f"{p}/model/{key}"] = value
+            if prior.sample is not None:
+                arrays[f"{p}/sample"] = np.asarray(prior.sample, dtype=np.int64)
         meta = {"format": _FORMAT, "actions": list(self.actions), "metadata": self.metadata}
         # What computed each action's observations (files without it: not said).
         said = {
@@ -346,7 +501,8 @@ class PriorKnowledge:
                     f"{model.modality_names_} differ from the pipeline's "
                     f"{list(pipeline.modality_names_)}"
                 )
-            actions[name] = ActionPrior(name, obs, pipeline, model)
+            sample = arrays.get(f"{p}/sample")
+            actions[name] = ActionPrior(name, obs, pipeline, model, sample)
         return cls(actions, meta.get("metadata", {}))
 
     def recognise(
@@ -374,7 +530,8 @@ class PriorKnowledge:
         return recognise(self, table, calibration=self._calibrations[key])
 
     def summary(self) -> list[dict[str, Any]]:
-        """One row per action: objects, observations, modality weights and length-scales."""
+        """One row per action: objects, observations, modality weights and length-scales, the
+        objects and number of observations the kernel was learned on."""
         rows = []
         for name, prior in self.actions.items():
             m = prior.model
@@ -387,6 +544,10 @@ class PriorKnowledge:
                     "weights_mean": m.modality_weights_.mean(axis=0).round(3).tolist(),
                     "length_scales_mean": m.length_scales_.mean(axis=0).round(3).tolist(),
                     "log_marginal_likelihood": m.log_marginal_likelihood_.round(2).tolist(),
+                    # What the kernel was learned on (every object within the limits of
+                    # aptkt.learning.locality, a random sample of them beyond).
+                    "kernel_objects": [str(c) for c in m.classes_],
+                    "kernel_observations": int(prior.sample_rows.size),
                 }
             )
         return rows
