@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -139,7 +140,9 @@ def test_the_benchmark_refuses_a_table_beyond_its_limits_up_front(tmp_path, case
     make, fragment = {**CASES, **{f"benchmark: {k}": v for k, v in BENCHMARK_ONLY.items()}}[case]
     table = make(tmp_path)
     out = tmp_path / "out"
-    rc, err, _ = aptkt("benchmark", str(table), "-o", str(out), "-j", "1", "--no-progress")
+    # The Gaussian process over every prior row is the exact library model's.
+    exact = ["--library-model", "exact"] if case == "benchmark: prior rows" else []
+    rc, err, _ = aptkt("benchmark", str(table), "-o", str(out), "-j", "1", "--no-progress", *exact)
     _refused(rc, err, fragment, "benchmark")
     assert not out.exists()
 
@@ -150,9 +153,23 @@ def test_learn_table_refuses_a_table_beyond_its_limits_up_front(tmp_path, case):
     table = make(tmp_path)
     out = tmp_path / "out"
     argv = ["learn", "--table", str(table), "--prior-objects", "o0,o1", "--objects", "o2,o3"]
-    rc, err, _ = aptkt(*argv, "-o", str(out))
+    exact = ["--library-model", "exact"] if case == "learn: prior rows" else []
+    rc, err, _ = aptkt(*argv, "-o", str(out), *exact)
     _refused(rc, err, fragment, "learn")
     assert not out.exists()
+
+
+def test_a_local_library_takes_prior_rows_beyond_one_exact_fit():
+    """The row limit of one Gaussian process binds the exact library model only: the local
+    model's fits are bounded whatever the library holds."""
+    from aptkt.experiments.table_limits import check_table
+    from aptkt.learning.feature_table import read_feature_table
+
+    with tempfile.TemporaryDirectory() as d:
+        table = read_feature_table(write_csv(Path(d) / "gp.csv", 5, 1100, 2))
+        check_table(table, prior_objects=["o0", "o1"])
+        with pytest.raises(FeatureTableError, match="library-model exact"):
+            check_table(table, prior_objects=["o0", "o1"], exact=True)
 
 
 def test_a_table_within_the_limits_is_checked_in_a_moment(tmp_path):

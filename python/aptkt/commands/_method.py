@@ -9,11 +9,17 @@ import argparse
 from dataclasses import replace
 from typing import Any
 
-from aptkt.learning.config import KERNELS, READINGS, GPSettings, LearnerConfig
+from aptkt.learning.config import KERNELS, LIBRARY_MODELS, READINGS, GPSettings, LearnerConfig
+from aptkt.learning.locality import LOCAL_OBJECTS, LOCAL_ROWS
 from aptkt.learning.pipeline import FEATURE_SCALES
 from aptkt.learning.transfer import CUTOFFS
 
-__all__ = ["add_method_arguments", "gp_settings", "learner_config"]
+__all__ = [
+    "add_library_model_argument",
+    "add_method_arguments",
+    "gp_settings",
+    "learner_config",
+]
 
 
 #: ``--aux-gate-margin none``: no gate (a margin given as a number otherwise).
@@ -97,6 +103,27 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
         "whiten (the same, each modality on its own) or spread (each column z-scored over "
         "the old observations); " + _by_reading(lambda c: c.gp.prior_feature_scale),
     )
+    add_library_model_argument(g)
+
+
+def add_library_model_argument(g: argparse._ActionsContainer, default: str | None = None) -> None:
+    """``--library-model``: how the library's model of its old objects is fitted."""
+    g.add_argument(
+        "--library-model",
+        choices=LIBRARY_MODELS,
+        default=default,
+        help="local: the library's kernel learned on a sample of its objects, each old "
+        "object's classifier on the objects nearest to it, a new object compared with the old "
+        "ones most like it (its cost does not grow with the library; the same as exact within "
+        f"{LOCAL_OBJECTS} objects and {LOCAL_ROWS} observations); exact: every classifier on "
+        "every old observation "
+        "(its cost grows as the 4th power of the objects); "
+        + (
+            f"default {default}"
+            if default is not None
+            else _by_reading(lambda c: c.gp.library_model)
+        ),
+    )
 
 
 def gp_settings(args: argparse.Namespace, **fixed: Any) -> GPSettings:
@@ -107,6 +134,7 @@ def gp_settings(args: argparse.Namespace, **fixed: Any) -> GPSettings:
         for name, value in (
             ("kernel", args.kernel),
             ("prior_feature_scale", args.prior_feature_scale),
+            ("library_model", getattr(args, "library_model", None)),
         )
         if value is not None
     }

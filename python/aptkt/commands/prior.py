@@ -8,13 +8,18 @@ import os
 from pathlib import Path
 
 from aptkt.commands._checks import (
+    add_jobs_option,
     add_renamed_option,
+    add_scheduler_option,
     at_least,
     at_most,
     input_file,
     intact_data_set,
+    jobs,
     output_file,
+    scheduler_available,
 )
+from aptkt.commands._method import add_library_model_argument
 from aptkt.commands._session import split_names
 from aptkt.commands.learn_table import add_extraction_argument
 from aptkt.errors import ConfigError
@@ -89,7 +94,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "column z-scored over the observations); default %(default)s; docs/method.md",
     )
     add_renamed_option(b, "--feature-scale")
+    add_library_model_argument(b, GPSettings().library_model)
     add_extraction_argument(b)
+    add_spread_options(b)
     b.set_defaults(func=run_build)
 
     m = ps.add_parser(
@@ -124,12 +131,52 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="seed of the models' optimiser starts (default %(default)s)",
     )
+    add_spread_options(m)
     m.set_defaults(func=run_merge)
 
     i = ps.add_parser("inspect", help="summarise a prior-knowledge file")
     i.add_argument("file", type=Path, metavar="PRIOR", help="prior-knowledge file (.npz)")
     i.add_argument("--json", action="store_true", help="print the summary as JSON")
     i.set_defaults(func=run_inspect)
+
+
+#: A library of fewer objects is calibrated here, in a moment, whatever --jobs says: starting
+#: worker processes would take longer.
+SPREAD_FROM_OBJECTS = 200
+
+
+def add_spread_options(parser: argparse.ArgumentParser) -> None:
+    """-j and --scheduler: where a library's calibrations are computed."""
+    add_jobs_option(
+        parser,
+        "compute the library's calibrations (the same-object cut-off's threshold, "
+        f"recognition's: seconds per thousand objects; from {SPREAD_FROM_OBJECTS} objects on)",
+    )
+    add_scheduler_option(parser)
+
+
+def spread(args: argparse.Namespace, objects: int):
+    """The executor of --jobs / --scheduler for a library of ``objects`` objects, or None to
+    compute here."""
+    if args.scheduler is None and (args.jobs == 1 or objects < SPREAD_FROM_OBJECTS):
+        return None
+    from aptkt.experiments.executors import make_executor
+
+    return make_executor(args.jobs, args.scheduler)
+
+
+def save_library(prior, path: Path, executor) -> None:
+    """Compute what a library file carries (its calibrations), with a progress line, then
+    write it."""
+    objects = len(prior.objects)
+    with Progress(1, "library", f"calibrating ({objects} objects)") as bar:
+        try:
+            prior.precompute(None if executor is None else executor.imap_unordered)
+        finally:
+            if executor is not None:
+                executor.close()
+        bar.update(1)
+    prior.save(path)
 
 
 def _trials(text: str | None) -> range | None:
@@ -171,6 +218,8 @@ def run_build(args: argparse.Namespace) -> int:
     output_file(args.output)
     if args.output.exists() and not args.force:
         raise ConfigError(f"--output {args.output}: exists (give --force to replace it)")
+    jobs(args.jobs)
+    scheduler_available(args.scheduler)
     objects = split_names(args.objects, "--objects")
     if objects is not None and len(objects) < 2:
         raise ConfigError("--objects: prior knowledge needs at least two objects")
@@ -193,7 +242,11 @@ def run_build(args: argparse.Namespace) -> int:
     with Progress(len(table), "action", "fitting") as bar:
         prior = PriorKnowledge.build(
             table,
-            gp=GPSettings(n_restarts=args.restarts, prior_feature_scale=args.prior_feature_scale),
+            gp=GPSettings(
+                n_restarts=args.restarts,
+                prior_feature_scale=args.prior_feature_scale,
+                library_model=args.library_model,
+            ),
             # A feature table's groups get this skin's transforms only if it holds this skin's
             # features (its extraction column, or --extraction).
             transforms=transforms_of(extraction, args.extraction) if from_table else None,
@@ -215,7 +268,7 @@ def run_build(args: argparse.Namespace) -> int:
             action_definitions={a: recorded[a].to_dict() for a in prior.actions if a in recorded},
             extraction=ExtractionSettings().to_dict(),
         )
-    prior.save(args.output)
+    save_library(prior, args.output, spread(args, len(prior.objects)))
     print(
         f"{args.output}: prior knowledge of {len(prior.objects)} objects ({', '.join(prior.objects)}) "
         f"for {len(prior.actions)} actions"
@@ -233,7 +286,7 @@ def _from_table(
     from aptkt.experiments.table_limits import read_table_within_limits
     from aptkt.learning.feature_table import table_columns
 
-    table = read_table_within_limits(path)
+    table = read_table_within_limits(path, library=True)
     names = actions or table.action_names
     rows = np.ones(len(table.objects), dtype=bool)
     if objects is not None:
@@ -276,6 +329,8 @@ def run_merge(args: argparse.Namespace) -> int:
         raise ConfigError("PRIOR: merging needs at least two prior-knowledge files")
     no_duplicates([str(p.resolve()) for p in args.files], "PRIOR")
     at_least(args.seed, 0, "--seed")
+    jobs(args.jobs)
+    scheduler_available(args.scheduler)
     output_file(args.output)
     if args.output.exists() and not args.force:
         raise ConfigError(f"--output {args.output}: exists (give --force to replace it)")
@@ -284,7 +339,7 @@ def run_merge(args: argparse.Namespace) -> int:
     first = libraries[0][1]
     with Progress(len(first.actions), "action", "fitting") as bar:
         merged = merge_priors(libraries, seed=args.seed, digests=digests, progress=bar)
-    merged.save(args.output)
+    save_library(merged, args.output, spread(args, len(merged.objects)))
     counts = ", ".join(f"{name}: {len(p.objects)}" for name, p in libraries)
     print(
         f"{args.output}: a library of {len(merged.objects)} objects ({counts}) for "

@@ -99,7 +99,7 @@ def _from_table(path: Path, library: Any) -> dict:
     from aptkt.learning.feature_table import table_columns
 
     input_file(path, "--table")
-    table = read_table_within_limits(path)
+    table = read_table_within_limits(path, library=True)
     if len(table.objects) == 0:
         raise ConfigError(f"--table {path}: holds no rows")
     actions = [a for a in table.action_names if a in library]

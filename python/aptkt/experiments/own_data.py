@@ -407,7 +407,12 @@ def compare_on_data(
         action_column=action_column,
         trial_column=trial_column,
     )
-    check_table(table, actions=actions, prior_objects=prior_objects)
+    check_table(
+        table,
+        actions=actions,
+        prior_objects=prior_objects,
+        exact=config.gp.library_model == "exact" if config is not None else False,
+    )
     settings = TableSettings(
         table=table.path,
         prior_objects=tuple(prior_objects),

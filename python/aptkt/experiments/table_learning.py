@@ -158,7 +158,12 @@ def learn_from_table(s: TableSettings, *, say=print) -> dict[str, Any]:
     """The comparison on the table file ``s.table``, with every file of the demo's results
     written to ``s.output``; returns the summary."""
     t_start = time.perf_counter()
-    table = read_table_within_limits(s.table, prior_objects=s.prior_objects, actions=s.actions)
+    table = read_table_within_limits(
+        s.table,
+        prior_objects=s.prior_objects,
+        actions=s.actions,
+        exact=s.config.gp.library_model == "exact",
+    )
     out = Path(s.output)
     out.mkdir(parents=True, exist_ok=True)
     rows, methods, actions = compare_on_table(table, s, say=say, prior_path=out / "prior.npz")

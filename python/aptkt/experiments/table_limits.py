@@ -31,6 +31,8 @@ __all__ = [
     "MAX_FEATURE_COLUMNS",
     "MAX_CELLS",
     "MAX_OBJECTS",
+    "MAX_LIBRARY_OBJECTS",
+    "MAX_LIBRARY_ROWS",
     "MAX_GP_ROWS",
     "MAX_DISTANCE_CELLS",
     "check_size",
@@ -50,10 +52,17 @@ MAX_ROWS = 100_000
 MAX_FEATURE_COLUMNS = 1_000
 #: Most cells (rows × columns): the reader checks each one.
 MAX_CELLS = 10_000_000
-#: Most objects: every object is a class of its own.
+#: Most objects a learning task or a benchmark draws from: every object is a class of its own.
 MAX_OBJECTS = 1_000
+#: Most rows and objects of a library (``prior build``, ``recognise``): its model of its objects
+#: is fitted on a sample of them and on each one's neighbours (GPSettings.library_model
+#: "local"), and what grows with it are sums over its rows; :data:`MAX_CELLS` bounds the rows
+#: read as before.
+MAX_LIBRARY_ROWS = 1_000_000
+MAX_LIBRARY_OBJECTS = 100_000
 #: Most rows one Gaussian process is fitted on — prior knowledge's model of one action, fitted
-#: on all the prior objects' rows of it. Its cost grows with the cube of the rows: 2,000 rows
+#: on all the prior objects' rows of it with ``--library-model exact`` (the local model's fits
+#: are bounded by :mod:`aptkt.learning.locality`). Its cost grows with the cube of the rows: 2,000 rows
 #: take about half a minute per fit on one core (1,200: 5 s), and the benchmark fits one per
 #: group and way of choosing the priors.
 MAX_GP_ROWS = 2_000
@@ -70,7 +79,7 @@ def _fail(path: Path, message: str) -> FeatureTableError:
     return FeatureTableError(f"{path}: {message}")
 
 
-def check_table_file(path: str | Path) -> None:
+def check_table_file(path: str | Path, library: bool = False) -> None:
     """The file's size, columns and rows within the limits, from its header and its lines (a
     CSV file) or its data sets' shapes (HDF5), before it is parsed. What else is wrong with it
     is left to the reader, whose messages name the row and column."""
@@ -104,12 +113,14 @@ def check_table_file(path: str | Path) -> None:
                 return  # not HDF5: the reader says so
             columns = len(shapes)
             rows = max((s[0] if s else 0 for s in shapes), default=0)
-    check_size(path, rows, columns - len(ID_COLUMNS), "lines of rows")
+    check_size(path, rows, columns - len(ID_COLUMNS), "lines of rows", library=library)
 
 
-def check_size(path: str | Path, rows: int, features: int, what: str = "rows") -> None:
-    """``rows`` and ``features`` (feature columns) within the limits; ``path`` names the table
-    in the message, ``what`` the rows."""
+def check_size(
+    path: str | Path, rows: int, features: int, what: str = "rows", library: bool = False
+) -> None:
+    """``rows`` and ``features`` (feature columns) within the limits (a library's, with
+    ``library``); ``path`` names the table in the message, ``what`` the rows."""
     path = Path(path)
     if features > MAX_FEATURE_COLUMNS:
         raise _fail(
@@ -117,8 +128,10 @@ def check_size(path: str | Path, rows: int, features: int, what: str = "rows") -
             f"{features} feature columns, more than the {MAX_FEATURE_COLUMNS} aptkt learns from "
             "(each modality is whitened with a matrix of columns × columns)",
         )
-    if rows > MAX_ROWS:
-        raise _fail(path, f"{rows} {what}, more than the {MAX_ROWS} rows aptkt learns from")
+    most = MAX_LIBRARY_ROWS if library else MAX_ROWS
+    if rows > most:
+        whom = "a library holds" if library else "aptkt learns from"
+        raise _fail(path, f"{rows} {what}, more than the {most} rows {whom}")
     if rows * max(features, 1) > MAX_CELLS:
         raise _fail(
             path,
@@ -133,6 +146,8 @@ def check_table(
     actions: Sequence[str] | None = None,
     prior_objects: Sequence[str] | None = None,
     priors_per_group: int | None = None,
+    library: bool = False,
+    exact: bool = False,
 ) -> None:
     """The table read against the limits: rows, columns, objects, every value within
     ±:data:`aptkt.features.MAX_MAGNITUDE` (the first beyond named by row and column), and the
@@ -141,13 +156,16 @@ def check_table(
     ``priors_per_group`` objects with the most rows, together with its comparison of every
     two objects."""
     path = table.path
-    check_size(path, len(table.trials), len(table.columns))
+    check_size(path, len(table.trials), len(table.columns), library=library)
     objects = table.object_names
-    if len(objects) > MAX_OBJECTS:
+    most = MAX_LIBRARY_OBJECTS if library else MAX_OBJECTS
+    if len(objects) > most:
         raise _fail(
             path,
-            f"{len(objects)} objects, more than the {MAX_OBJECTS} aptkt learns "
-            "(each object is a class of its own)",
+            f"{len(objects)} objects, more than the {most} "
+            + (
+                "a library holds" if library else "aptkt learns (each object is a class of its own)"
+            ),
         )
     with np.errstate(invalid="ignore"):
         huge = np.abs(table.values) > MAX_MAGNITUDE
@@ -172,12 +190,13 @@ def check_table(
             who = f"the first half of {priors_per_group} prior objects"
         else:
             continue
-        if fitted > MAX_GP_ROWS:
+        if exact and fitted > MAX_GP_ROWS:
             raise _fail(
                 path,
                 f"action {action}: prior knowledge would be fitted on {fitted} rows of {who}, "
-                f"more than the {MAX_GP_ROWS} one Gaussian process takes (its cost grows with "
-                "the cube of the rows); use fewer rows or objects",
+                f"more than the {MAX_GP_ROWS} one Gaussian process takes with --library-model "
+                "exact (its cost grows with the cube of the rows); use fewer rows or objects, or "
+                "--library-model local",
             )
         if priors_per_group is not None:
             first = np.flatnonzero(table.actions == action)
@@ -196,17 +215,19 @@ def check_table(
 def read_table_within_limits(path: str | Path, settings: Any = None, **limits: Any) -> FeatureTable:
     """The feature table at ``path``, read once its file is within the limits and checked
     against them (:func:`check_table_file`, :func:`check_table`). ``settings``: a benchmark's
-    (its actions and its prior objects per group); ``limits``: :func:`check_table`'s
-    keywords."""
-    check_table_file(path)
+    (its actions, its prior objects per group, its library model); ``limits``:
+    :func:`check_table`'s keywords."""
+    check_table_file(path, library=bool(limits.get("library")))
     table = read_feature_table(path)
     if settings is not None:
         priors = getattr(settings, "prior_objects", None)
         if priors is not None and not isinstance(priors, int):  # (several sizes: the largest)
             priors = max(priors)
+        config = getattr(settings, "config", None)
         limits = {
             "actions": getattr(settings, "actions", None),
             "priors_per_group": priors,
+            "exact": config is not None and config.gp.library_model == "exact",
             **limits,
         }
     check_table(table, **limits)

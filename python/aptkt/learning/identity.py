@@ -38,13 +38,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 from scipy.special import logsumexp
 
 from aptkt.errors import InvalidInputError, UnknownNameError
 
-__all__ = ["ObjectIdentity", "NEW_OBJECT_PRIOR", "IMPOSTOR_COMPETITORS"]
+__all__ = ["ObjectIdentity", "NEW_OBJECT_PRIOR", "IMPOSTOR_COMPETITORS", "impostor_table"]
 
 #: Prior probability that an object presented to the robot is not one of the library's: as
 #: likely as not — neither the library nor the lab knows better before the first touch.
@@ -314,7 +315,7 @@ class ObjectIdentity:
         # The old objects' means in W's whitened coordinates: every "same object" density is a
         # scaled W, so one triangular solve serves them all.
         self._white_means = self._shape.whiten(means)
-        self._impostors: dict[int, float] = {}
+        self._impostors: np.ndarray | None = None
         self._X, self._labels = X, labels
 
     @property
@@ -437,21 +438,40 @@ class ObjectIdentity:
         leaves fewer than two."""
         if n < 1:
             raise InvalidInputError(f"n must be >= 1, got {n}")
-        if not self._impostors:
-            self._impostors = self._impostor_table()
-        return self._impostors.get(n, -np.inf)
+        if self._impostors is None:
+            self._impostors = self.impostor_table()
+        return float(self._impostors[n]) if n < self._impostors.size else -np.inf
 
-    def _impostor_table(self) -> dict[int, float]:
-        """:meth:`impostor_log_odds` for every n up to the largest object's count, in one pass
-        over the objects: each left-out library is fitted once, and every set of every size
-        of the object's observations is scored at once."""
+    @property
+    def impostors(self) -> np.ndarray | None:
+        """:meth:`impostor_log_odds` of n = 0, 1, ... (entry 0: -inf), once computed or given."""
+        return self._impostors
+
+    @impostors.setter
+    def impostors(self, table: np.ndarray) -> None:
+        table = np.asarray(table, dtype=np.float64)
+        if table.ndim != 1 or table.size != int(self.counts_.max()) + 1 or np.isnan(table).any():
+            raise InvalidInputError(
+                f"an impostor table of this library has {int(self.counts_.max()) + 1} values "
+                f"(not NaN), got shape {table.shape}"
+            )
+        self._impostors = table
+
+    def impostor_table(self, objects: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`impostor_log_odds` for n = 0 .. the largest object's count (entry 0: -inf),
+        in one pass over the left-out ``objects`` (indices into ``objects_``; default all):
+        each left-out library is fitted once, and every set of every size of the object's
+        observations is scored at once. Tables of parts of the objects combine by their
+        element-wise maximum."""
         most = int(self.counts_.max())
         best = np.full(most + 1, -np.inf)
         prior_new = np.log(NEW_OBJECT_PRIOR)
         prior_old = np.log((1 - NEW_OBJECT_PRIOR) / (len(self.objects_) - 1))
         neighbours = self._neighbours
         d = self.n_features
-        for o, rows in enumerate(self._rows):
+        chosen = range(len(self._rows)) if objects is None else [int(o) for o in objects]
+        for o in chosen:
+            rows = self._rows[o]
             shape = self._without_object(o)
             if shape is None:
                 continue
@@ -496,7 +516,7 @@ class ObjectIdentity:
             rest[at, top] = -np.inf
             odds = old[at, top] - _logsumexp_rows(np.column_stack([new, rest]))
             np.maximum.at(best, sizes, odds)
-        return {k: float(best[k]) for k in range(1, most + 1)}
+        return best
 
     def held_in_log_likelihoods(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For each of the given rows, its :meth:`log_likelihoods` under the library without
@@ -567,6 +587,33 @@ class ObjectIdentity:
     def rows_of(self, o: int) -> np.ndarray:
         """The row indices of object ``o`` (index into ``objects_``) in the fitted ``X``."""
         return self._rows[o]
+
+
+#: An impostor table is computed in at least this many parts of the objects, each process's.
+IMPOSTOR_PARTS = 16
+
+
+def impostor_table(
+    X: np.ndarray,
+    objects: np.ndarray,
+    parallel_map: Any = None,
+    identity: ObjectIdentity | None = None,
+) -> np.ndarray:
+    """:meth:`ObjectIdentity.impostor_table` of the library of observations ``X`` of
+    ``objects`` (its ``identity`` if at hand), its objects in parts: here, or as
+    ``parallel_map`` (an executor's ``imap_unordered``) runs them, each part sent the
+    observations, not the model."""
+    if parallel_map is None:
+        return (identity or ObjectIdentity(X, objects)).impostor_table()
+    n = len(np.unique(np.asarray(objects).astype(str)))
+    parts = [p for p in np.array_split(np.arange(n), min(IMPOSTOR_PARTS, n)) if p.size]
+    tables = [r for _, r in parallel_map(_impostor_part, [(X, objects, p) for p in parts])]
+    return np.maximum.reduce(tables)
+
+
+def _impostor_part(task: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+    X, objects, part = task
+    return ObjectIdentity(X, objects).impostor_table(part)
 
 
 def _windows(count: int) -> tuple[np.ndarray, np.ndarray]:

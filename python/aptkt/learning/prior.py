@@ -24,17 +24,17 @@ from aptkt.files import open_atomically
 from aptkt.gp import LaplaceGPC, TransferSource
 from aptkt.learning.config import GPSettings
 from aptkt.learning.evidence import at_fitted_hyperparameters, uncoupled_evidence
-from aptkt.learning.identity import ObjectIdentity
+from aptkt.learning.identity import ObjectIdentity, impostor_table
 from aptkt.learning.kernel import LibraryEvidence, library_evidence
 from aptkt.learning.locality import CANDIDATES, LOCAL_OBJECTS, kernel_sample, take_objects
 
 if TYPE_CHECKING:
-    from aptkt.learning.recognition import Calibration, Recognition
+    from aptkt.learning.recognition import CalibrationScores, Recognition
 from aptkt.errors import InvalidInputError, UnknownNameError
 from aptkt.learning.observations import Observations, ObservationTable
 from aptkt.learning.pipeline import FEATURE_SCALES, FeaturePipeline, ModalityTransform
 from aptkt.learning.prior_file import FORMAT as _FORMAT
-from aptkt.learning.prior_file import check_action, read_members
+from aptkt.learning.prior_file import check_action, check_calibration, read_members
 
 __all__ = ["ActionPrior", "PriorKnowledge", "AUXILIARY"]
 
@@ -382,7 +382,8 @@ class PriorKnowledge:
             raise InvalidInputError("prior knowledge needs at least one action")
         self.actions: dict[str, ActionPrior] = dict(actions)
         self.metadata: dict[str, Any] = dict(metadata or {})
-        self._calibrations: dict[float, Calibration] = {}
+        #: The library's calibration scores (recognition), computed once or read from its file.
+        self.calibration_scores: CalibrationScores | None = None
 
     def __getitem__(self, action: str) -> ActionPrior:
         try:
@@ -452,7 +453,19 @@ class PriorKnowledge:
                 arrays[f"{p}/model/{key}"] = value
             if prior.sample is not None:
                 arrays[f"{p}/sample"] = np.asarray(prior.sample, dtype=np.int64)
-        meta = {"format": _FORMAT, "actions": list(self.actions), "metadata": self.metadata}
+        self.precompute()
+        for i, prior in enumerate(self.actions.values()):
+            if prior.identity is not None and prior.identity.impostors is not None:
+                arrays[f"a{i}/impostors"] = prior.identity.impostors
+        scores = self.scores()
+        arrays["calibration/held_in"] = scores.held_in
+        arrays["calibration/held_out"] = scores.held_out
+        meta = {
+            "format": _FORMAT,
+            "actions": list(self.actions),
+            "metadata": self.metadata,
+            "calibration_touches": scores.touches,
+        }
         # What computed each action's observations (files without it: not said).
         said = {
             a: p.observations.extraction
@@ -475,9 +488,10 @@ class PriorKnowledge:
         path = Path(path)
         meta, arrays = read_members(path)
         prefixes = {f"a{i}" for i in range(len(meta["actions"]))}
-        extra = sorted(k for k in arrays if k.split("/")[0] not in prefixes)
+        extra = sorted(k for k in arrays if k.split("/")[0] not in prefixes | {"calibration"})
         if extra:
             raise PriorFileError(f"{path}: member {extra[0]!r} belongs to no action of the file")
+        check_calibration(path, arrays, meta)
         actions = {}
         extractions = meta.get("extractions", {})
         for i, name in enumerate(meta["actions"]):
@@ -503,7 +517,25 @@ class PriorKnowledge:
                 )
             sample = arrays.get(f"{p}/sample")
             actions[name] = ActionPrior(name, obs, pipeline, model, sample)
-        return cls(actions, meta.get("metadata", {}))
+            impostors = arrays.get(f"{p}/impostors")
+            identity = actions[name].identity
+            if impostors is not None and identity is not None:
+                try:
+                    identity.impostors = impostors
+                except InvalidInputError as exc:
+                    raise PriorFileError(
+                        f"{path}: member {p}/impostors (action {name}): {exc}"
+                    ) from None
+        library = cls(actions, meta.get("metadata", {}))
+        if "calibration/held_in" in arrays:
+            from aptkt.learning.recognition import CalibrationScores
+
+            library.calibration_scores = CalibrationScores(
+                held_in=arrays["calibration/held_in"],
+                held_out=arrays["calibration/held_out"],
+                touches=int(meta["calibration_touches"]),
+            )
+        return library
 
     def recognise(
         self,
@@ -517,17 +549,39 @@ class PriorKnowledge:
         touch, their evidence fused). The novelty threshold is chosen on the library itself for
         ``false_alarm_rate`` (computed once per rate). ``pandas.DataFrame(result.rows())`` is
         the table."""
-        from aptkt.learning.recognition import calibrate, recognise
+        from aptkt.learning.recognition import recognise
 
         table = (
             {observations.action: observations}
             if isinstance(observations, Observations)
             else dict(observations)
         )
-        key = round(float(false_alarm_rate), 12)
-        if key not in self._calibrations:
-            self._calibrations[key] = calibrate(self, false_alarm_rate)
-        return recognise(self, table, calibration=self._calibrations[key])
+        return recognise(self, table, calibration=self.scores().calibration(false_alarm_rate))
+
+    def scores(self, parallel_map: Any = None) -> CalibrationScores:
+        """The library's calibration scores for recognition
+        (:func:`~aptkt.learning.recognition.calibration_scores`), computed once (or read from
+        its file)."""
+        if self.calibration_scores is None:
+            from aptkt.learning.recognition import calibration_scores
+
+            self.calibration_scores = calibration_scores(self, parallel_map)
+        return self.calibration_scores
+
+    def precompute(self, parallel_map: Any = None) -> None:
+        """What a saved library carries besides its models, so that learning and recognising
+        with it start at once: each action's impostor table (the same-object cut-off's
+        threshold, :meth:`~aptkt.learning.identity.ObjectIdentity.impostor_log_odds`) and the
+        calibration scores of recognition. Their cost grows with the library (a few seconds
+        per thousand objects); ``parallel_map`` (an executor's ``imap_unordered``) spreads it
+        over processes or a cluster."""
+        for prior in self.actions.values():
+            identity = prior.identity
+            if identity is not None and identity.impostors is None:
+                identity.impostors = impostor_table(
+                    prior._training_X, prior.observations.objects, parallel_map, identity
+                )
+        self.scores(parallel_map)
 
     def summary(self) -> list[dict[str, Any]]:
         """One row per action: objects, observations, modality weights and length-scales, the

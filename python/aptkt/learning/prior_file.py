@@ -26,7 +26,7 @@ import numpy as np
 from aptkt.errors import PriorFileError
 from aptkt.files import NPZ_MAX_BYTES, json_member, read_npz
 
-__all__ = ["FORMAT", "PRIOR_FILE_MAX_BYTES", "check_action", "read_members"]
+__all__ = ["FORMAT", "PRIOR_FILE_MAX_BYTES", "check_action", "check_calibration", "read_members"]
 
 FORMAT = "aptkt.PriorKnowledge/1"
 
@@ -46,6 +46,8 @@ _MEMBER_PATTERNS = [
         rf"a\d+/pipeline/{_NAME}/(log_columns|pca_components|mean|scale|pca_scale|components)",
         r"a\d+/model/(meta|X|y|theta)",
         r"a\d+/model/source_(X|lambda)_\d+",
+        r"a\d+/(sample|impostors)",
+        r"calibration/(held_in|held_out)",
     )
 ]
 
@@ -87,6 +89,14 @@ def _meta(raw: np.ndarray, path: Path) -> dict[str, Any]:
         )
     if len(set(actions)) != len(actions):
         raise PriorFileError(f"{path}: member 'meta': an action appears twice in {actions}")
+    touches = meta.get("calibration_touches")
+    if touches is not None and (
+        not isinstance(touches, int) or isinstance(touches, bool) or touches < 1
+    ):
+        raise PriorFileError(
+            f"{path}: member 'meta': 'calibration_touches' must be a positive integer, "
+            f"got {touches!r}"
+        )
     if not isinstance(meta.get("metadata", {}), dict):
         raise PriorFileError(f"{path}: member 'meta': 'metadata' must be a JSON object")
     extractions = meta.get("extractions", {})
@@ -120,6 +130,7 @@ class _Checker:
         ndim: int,
         shape: Callable[[tuple[int, ...]], bool] | None = None,
         want: str = "",
+        allowed: tuple[float, ...] = (),
     ) -> np.ndarray:
         key = f"{self.prefix}/{member}"
         if key not in self.arrays:
@@ -131,7 +142,7 @@ class _Checker:
             raise self.fail(member, f"expected {expected} values, got {a.dtype}")
         if a.ndim != ndim or (shape is not None and not shape(a.shape)):
             raise self.fail(member, f"expected a {ndim}-D array{want}, got shape {a.shape}")
-        if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+        if a.dtype.kind == "f" and not np.all(np.isfinite(a) | np.isin(a, allowed)):
             raise self.fail(member, "non-finite values")
         return a
 
@@ -191,14 +202,34 @@ def check_action(path: Path, arrays: dict[str, np.ndarray], prefix: str, action:
         c.get(
             "pipeline/joint", "f", 2, lambda s: s == (width, width), f" of shape ({width}, {width})"
         )
-    X = c.get("model/X", "f", 2, lambda s: s == (n, width), f" of shape ({n}, {width})")
-    del X
-    y = c.get("model/y", "iu", 1, lambda s: s == (n,), f" of {n} class numbers")
-    classes = sorted(set(objects.tolist()))
-    if len(classes) < 2:
+    if len(set(objects.tolist())) < 2:
         raise c.fail("obs/objects", "prior knowledge needs at least two objects")
-    if y.min() < 0 or y.max() >= len(classes) or [classes[i] for i in y] != objects.tolist():
+    # The model's rows: every observation, or the sample its kernel was learned on.
+    fitted = objects
+    if f"{prefix}/sample" in arrays:
+        sample = c.get("sample", "iu", 1)
+        if sample.size < 2 or np.any(np.diff(sample) <= 0) or sample[0] < 0 or sample[-1] >= n:
+            raise c.fail("sample", f"expected increasing row numbers within 0..{n - 1}")
+        fitted = objects[sample]
+    m = fitted.shape[0]
+    X = c.get("model/X", "f", 2, lambda s: s == (m, width), f" of shape ({m}, {width})")
+    del X
+    y = c.get("model/y", "iu", 1, lambda s: s == (m,), f" of {m} class numbers")
+    classes = sorted(set(fitted.tolist()))
+    if len(classes) < 2:
+        raise c.fail("sample", "the model needs at least two objects")
+    if y.min() < 0 or y.max() >= len(classes) or [classes[i] for i in y] != fitted.tolist():
         raise c.fail("model/y", "the model's training labels differ from the observations' objects")
+    if f"{prefix}/impostors" in arrays:
+        most = int(np.unique(objects, return_counts=True)[1].max())
+        c.get(
+            "impostors",
+            "f",
+            1,
+            lambda s: s == (most + 1,),
+            f" of {most + 1} values (one per number of observations up to {most})",
+            allowed=(-np.inf,),
+        )
     meta_raw = c.get("model/meta", "u", 1)
     try:
         meta = json.loads(meta_raw.tobytes().decode("utf-8"))
@@ -211,6 +242,31 @@ def check_action(path: Path, arrays: dict[str, np.ndarray], prefix: str, action:
     rows = 1 if len(classes) == 2 else len(classes)  # two classes: a single binary classifier
     if theta.shape[0] != rows:
         raise c.fail("model/theta", f"expected {rows} row(s) of hyper-parameters")
+
+
+def check_calibration(path: Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
+    """The calibration scores of recognition, if the file has them: both members and the
+    number of touches, novelty values (+inf where no known object could have given a touch)."""
+    present = [k for k in ("calibration/held_in", "calibration/held_out") if k in arrays]
+    if not present and "calibration_touches" not in meta:
+        return
+    for key in ("calibration/held_in", "calibration/held_out"):
+        if key not in arrays:
+            raise PriorFileError(f"{path}: member {key}: missing (the calibration is incomplete)")
+        a = arrays[key]
+        if a.dtype.kind != "f" or a.ndim != 1:
+            raise PriorFileError(
+                f"{path}: member {key}: expected a 1-D float array, got {a.dtype} {a.shape}"
+            )
+        if np.any(np.isnan(a) | (a == -np.inf)):
+            raise PriorFileError(f"{path}: member {key}: NaN or -inf values")
+    touches = meta.get("calibration_touches")
+    held_in = arrays["calibration/held_in"]
+    if touches is None or held_in.size == 0 or held_in.size > touches:
+        raise PriorFileError(
+            f"{path}: member calibration/held_in: {held_in.size} scores of "
+            f"{touches!r} touches (meta 'calibration_touches')"
+        )
 
 
 def _vector_of(d: int) -> Callable[[tuple[int, ...]], bool]:

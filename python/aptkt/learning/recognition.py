@@ -64,7 +64,9 @@ __all__ = [
     "Recognition",
     "recognise",
     "Calibration",
+    "CalibrationScores",
     "calibrate",
+    "calibration_scores",
 ]
 
 #: The share of touches of known objects that the default threshold flags as new.
@@ -153,79 +155,171 @@ def _sample(n: int, most: int, seed: int) -> np.ndarray:
     return np.sort(np.random.default_rng(seed).choice(n, size=most, replace=False))
 
 
-def calibrate(prior: Library, false_alarm_rate: float = FALSE_ALARM_RATE) -> Calibration:
-    """The library's novelty threshold for ``false_alarm_rate`` (see :class:`Calibration`).
+@dataclass(frozen=True)
+class CalibrationScores:
+    """What a library's calibration is chosen from, for any false-alarm rate: the novelty of
+    its touches, each scored by the library without it (``held_in``: every touch, or
+    :data:`CALIBRATION_TOUCHES` drawn at random), and of its objects' touches, each object
+    scored by the library without it (``held_out``: every object's, or
+    :data:`CALIBRATION_OBJECTS` objects'); ``touches``: how many touches the library holds.
+    Computed once per library (saved with it) and reused by every recognition."""
 
-    Each touch is scored by the library without it, and each object's touches by the library
-    without that object: exact leave-one-out models, computed from the identity model's sums
-    (:mod:`aptkt.learning.identity`). A library of more than :data:`CALIBRATION_TOUCHES`
-    touches is judged on that many of them drawn at random, and the detection rate on
-    :data:`CALIBRATION_OBJECTS` of its objects: a quantile and a rate, estimated from a sample
-    (their sampling error is about ±0.5 pp at the default rate), at a cost that does not grow
-    with the library's size beyond the scoring of one touch."""
+    held_in: np.ndarray
+    held_out: np.ndarray
+    touches: int
+
+    def calibration(self, false_alarm_rate: float = FALSE_ALARM_RATE) -> Calibration:
+        if not 0.0 < false_alarm_rate < 1.0:
+            raise InvalidInputError(f"false_alarm_rate must lie in (0, 1), got {false_alarm_rate}")
+        threshold = float(np.quantile(self.held_in, 1.0 - false_alarm_rate))
+        out = self.held_out
+        return Calibration(
+            threshold=threshold,
+            false_alarm_rate=false_alarm_rate,
+            detection_rate=float(np.mean(out > threshold)) if out.size else 0.0,
+            touches=self.touches,
+        )
+
+
+def calibrate(
+    prior: Library,
+    false_alarm_rate: float = FALSE_ALARM_RATE,
+    scores: CalibrationScores | None = None,
+) -> Calibration:
+    """The library's novelty threshold for ``false_alarm_rate`` (see :class:`Calibration`),
+    from its :class:`CalibrationScores` (computed here unless given)."""
     if not 0.0 < false_alarm_rate < 1.0:
         raise InvalidInputError(f"false_alarm_rate must lie in (0, 1), got {false_alarm_rate}")
-    table = {a: ap.observations for a, ap in prior.actions.items()}
-    keys, index = _touches(table)
-    objects = prior.objects
-    chosen = _sample(len(keys), CALIBRATION_TOUCHES, seed=0)
-    position = np.full(len(keys), -1, dtype=np.int64)
-    position[chosen] = np.arange(chosen.size)
-    held_in: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    rows_in: dict[str, np.ndarray] = {}
-    for action, ap in prior.actions.items():
-        rows = np.flatnonzero(position[index[action]] >= 0)
-        identity = _identity_of(ap)
-        lo = np.full((rows.size, len(objects)), -np.inf)
-        ln = np.zeros(rows.size)
-        if identity is not None:
-            # Each touch scored by the library without it.
-            o, n = identity.held_in_log_likelihoods(rows)
-            lo[:, _columns(identity, objects)] = o
-            ln = n
-        held_in[action] = (lo, ln)
-        rows_in[action] = position[index[action][rows]]
-    old, new, _ = _fused(held_in, rows_in, chosen.size, len(objects))
-    _, novelty = _posterior(old, new)
-    threshold = float(np.quantile(novelty, 1.0 - false_alarm_rate))
-    # Each object's touches scored by the library without that object.
-    left_out = [objects[k] for k in _sample(len(objects), CALIBRATION_OBJECTS, seed=1)]
-    scores = []
-    for name in left_out:
+    return (scores or calibration_scores(prior)).calibration(false_alarm_rate)
+
+
+#: Each process's part of a calibration: at least this many parts, each of whole touches or
+#: objects.
+CALIBRATION_PARTS = 16
+
+
+def calibration_scores(prior: Library, parallel_map: Any = None) -> CalibrationScores:
+    """The library's :class:`CalibrationScores`. Each touch is scored by the library without it,
+    and each object's touches by the library without that object: exact leave-one-out models,
+    computed from the identity model's sums (:mod:`aptkt.learning.identity`). A library of more
+    than :data:`CALIBRATION_TOUCHES` touches is judged on that many of them drawn at random,
+    and the detection rate on :data:`CALIBRATION_OBJECTS` of its objects: a quantile and a
+    rate, estimated from a sample (their sampling error is about ±0.5 pp at the default rate),
+    at a cost that grows with the library only as the scoring of one touch does.
+
+    ``parallel_map``: an executor's ``imap_unordered`` (``(fn, items)`` → ``(index, result)``
+    pairs) to score the parts elsewhere — processes or a cluster, each sent the library's
+    observations in its feature space, not the library."""
+    data = _LibraryData.of(prior)
+    chosen = _sample(len(data.keys), CALIBRATION_TOUCHES, seed=0)
+    left_out = _sample(len(data.objects), CALIBRATION_OBJECTS, seed=1)
+    touch_parts = np.array_split(chosen, min(CALIBRATION_PARTS, max(chosen.size, 1)))
+    object_parts = np.array_split(left_out, min(CALIBRATION_PARTS, max(left_out.size, 1)))
+    tasks = [("in", data, part) for part in touch_parts if part.size] + [
+        ("out", data, part) for part in object_parts if part.size
+    ]
+    results: list[np.ndarray | None] = [None] * len(tasks)
+    if parallel_map is None:
+        identities = {a: ap.identity for a, ap in prior.actions.items()}
+        for i, task in enumerate(tasks):
+            results[i] = _score_part(task, identities)
+    else:
+        for i, result in parallel_map(_score_part, tasks):
+            results[i] = result
+    held_in = [r for t, r in zip(tasks, results) if t[0] == "in" and r is not None]
+    held_out = [r for t, r in zip(tasks, results) if t[0] == "out" and r is not None]
+    return CalibrationScores(
+        held_in=np.concatenate(held_in) if held_in else np.zeros(0),
+        held_out=np.concatenate(held_out) if held_out else np.zeros(0),
+        touches=len(data.keys),
+    )
+
+
+@dataclass(frozen=True)
+class _LibraryData:
+    """What a part of a calibration needs of a library, as plain arrays: its objects, its
+    touches, and per action the observations in its feature space, their objects and touches."""
+
+    objects: list[str]
+    keys: list[tuple[str, int]]
+    actions: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+    @classmethod
+    def of(cls, prior: Library) -> _LibraryData:
+        table = {a: ap.observations for a, ap in prior.actions.items()}
+        keys, index = _touches(table)
+        actions = {
+            a: (
+                ap.training_features(),
+                np.asarray(ap.observations.objects).astype(str),
+                index[a],
+            )
+            for a, ap in prior.actions.items()
+        }
+        return cls(list(prior.objects), keys, actions)
+
+    def identities(self) -> dict[str, ObjectIdentity | None]:
+        out: dict[str, ObjectIdentity | None] = {}
+        for a, (X, labels, _) in self.actions.items():
+            names = set(labels.tolist())
+            repeated = len(names) >= 2 and labels.size > len(names)
+            out[a] = ObjectIdentity(X, labels) if repeated else None
+        return out
+
+
+def _score_part(
+    task: tuple[str, _LibraryData, np.ndarray],
+    identities: Mapping[str, ObjectIdentity | None] | None = None,
+) -> np.ndarray:
+    """The novelty of one part of a calibration: the touches ``part`` (indices into the
+    library's touches), each scored without it ("in"), or the touches of the objects ``part``
+    (indices into its objects), each object left out ("out")."""
+    kind, data, part = task
+    if identities is None:  # in another process: rebuilt from the observations
+        identities = data.identities()
+    objects = data.objects
+    if kind == "in":
+        position = np.full(len(data.keys), -1, dtype=np.int64)
+        position[part] = np.arange(part.size)
         per_action: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-        touch_of: dict[str, np.ndarray] = {}
-        for action, ap in prior.actions.items():
-            identity = _identity_of(ap)
-            labels = np.asarray(ap.observations.objects).astype(str)
+        local: dict[str, np.ndarray] = {}
+        for action, (_, _, touch) in data.actions.items():
+            rows = np.flatnonzero(position[touch] >= 0)
+            identity = identities[action]
+            lo = np.full((rows.size, len(objects)), -np.inf)
+            ln = np.zeros(rows.size)
+            if identity is not None:
+                o, n = identity.held_in_log_likelihoods(rows)
+                lo[:, _columns(identity, objects)] = o
+                ln = n
+            per_action[action] = (lo, ln)
+            local[action] = position[touch[rows]]
+        old, new, _ = _fused(per_action, local, part.size, len(objects))
+        return _posterior(old, new)[1]
+    scores = []
+    for k in part:
+        name = objects[int(k)]
+        per_action, touch_of = {}, {}
+        for action, (_, labels, touch) in data.actions.items():
             mine = np.flatnonzero(labels == name)
             if mine.size == 0:
                 continue
+            identity = identities[action]
             lo = np.full((mine.size, len(objects)), -np.inf)
             ln = np.zeros(mine.size)
             if identity is not None:
-                k = identity.objects_.index(name)
-                scored = identity.held_out_log_likelihoods(k)
+                scored = identity.held_out_log_likelihoods(identity.objects_.index(name))
                 if scored is not None:
                     # The identity model's rows of an object are in the observations' order.
                     lo[:, _columns(identity, objects)] = scored[0]
                     ln = scored[1]
             per_action[action] = (lo, ln)
-            touch_of[action] = index[action][mine]
+            touch_of[action] = touch[mine]
         touches = np.unique(np.concatenate(list(touch_of.values())))
         local = {a: np.searchsorted(touches, t) for a, t in touch_of.items()}
-        old2, new2, _ = _fused(per_action, local, touches.size, len(objects))
-        scores.append(_posterior(old2, new2)[1])
-    novelty_out = np.concatenate(scores) if scores else np.zeros(0)
-    return Calibration(
-        threshold=threshold,
-        false_alarm_rate=false_alarm_rate,
-        detection_rate=float(np.mean(novelty_out > threshold)) if novelty_out.size else 0.0,
-        touches=len(keys),
-    )
-
-
-def _identity_of(ap: ActionKnowledge) -> ObjectIdentity | None:
-    return ap.identity
+        old, new, _ = _fused(per_action, local, touches.size, len(objects))
+        scores.append(_posterior(old, new)[1])
+    return np.concatenate(scores) if scores else np.zeros(0)
 
 
 @dataclass
