@@ -28,6 +28,7 @@ __all__ = [
     "fit_gpc",
     "fit_gpc_shared",
     "kernel_matrix",
+    "available_memory",
     "PatchCells",
     "SurfaceShape",
     "ContactLaw",
@@ -221,6 +222,7 @@ def fit_gpc_shared(
     target: int,
     settings: FitSettings,
 ) -> GpcModel: ...
+def available_memory() -> int | None: ...
 def kernel_matrix(
     x: NDArray[np.float64],
     theta: Sequence[float],

@@ -332,3 +332,61 @@ def test_calibration_in_parts_elsewhere_is_the_calibration():
     there = calibration_scores(lib, elsewhere)
     np.testing.assert_allclose(there.held_in, here.held_in, rtol=1e-12)
     np.testing.assert_allclose(there.held_out, here.held_out, rtol=1e-12)
+
+
+# -- what a library too large for this machine gets -------------------------------------------------
+def test_a_library_beyond_this_machines_memory_is_refused_before_its_models_are_fitted(
+    monkeypatch,
+):
+    from aptkt import _core
+    from aptkt.errors import ProblemTooLargeError
+
+    monkeypatch.setattr(_core, "available_memory", lambda: 1_000_000)
+    fitted = []
+    monkeypatch.setattr(GPSettings, "make", lambda *a, **k: fitted.append(a))
+    with pytest.raises(ProblemTooLargeError, match=r"40 objects and 480 observations of 6 columns"):
+        PriorKnowledge.build({"A": _observations(40, 12, seed=1)})
+    assert not fitted
+
+
+def test_the_exact_model_of_a_large_library_is_refused_naming_the_local_one():
+    from aptkt.errors import ProblemTooLargeError
+
+    large = _observations(1000, 12, seed=1)
+    with pytest.raises(ProblemTooLargeError, match="use library_model 'local'"):
+        PriorKnowledge.build({"A": large}, gp=GPSettings(library_model="exact"))
+
+
+def test_prior_build_on_a_dask_cluster_gives_the_local_library(tmp_path, capsys):
+    """--scheduler: the calibrations are computed on the cluster's workers, and the file is
+    the one built here."""
+    from dask.distributed import LocalCluster
+
+    from aptkt.cli import main
+    from aptkt.learning.feature_table import write_feature_table
+
+    table = write_feature_table(tmp_path / "t.csv", {"A": _observations(30, 8, seed=4)})
+    base = ["prior", "build", str(table)]
+    assert main([*base, "-j", "1", "-o", str(tmp_path / "here.npz")]) == 0
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
+    ) as cluster:
+        argv = [*base, "--scheduler", cluster.scheduler_address, "-o", str(tmp_path / "there.npz")]
+        assert main(argv) == 0
+    here, there = (PriorKnowledge.load(tmp_path / f) for f in ("here.npz", "there.npz"))
+    np.testing.assert_array_equal(here["A"].identity.impostors, there["A"].identity.impostors)
+    np.testing.assert_allclose(there.calibration_scores.held_in, here.calibration_scores.held_in)
+    assert "30 objects (o000, o001" in capsys.readouterr().out
+
+
+def test_prior_build_of_the_exact_model_too_large_is_one_line(tmp_path, capsys):
+    from aptkt.cli import main
+    from aptkt.learning.feature_table import write_feature_table
+
+    table = write_feature_table(tmp_path / "t.csv", {"A": _observations(1000, 12, seed=4)})
+    argv = ["prior", "build", str(table), "--library-model", "exact", "-o", str(tmp_path / "x.npz")]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("aptkt prior build: error: ")
+    assert "1000 objects and 12000 observations" in err[0] and "--library-model local" in err[0]
+    assert not (tmp_path / "x.npz").exists()

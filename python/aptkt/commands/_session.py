@@ -186,3 +186,9 @@ def make_session(args: argparse.Namespace, *, seed: int = 0) -> Any:
     return RobotSession(
         args.workspace, make_skin, host=args.host, settings=settings, skin_description=skin_desc
     )
+
+
+def object_list(objects: list[str], most: int = 10) -> str:
+    """Up to ``most`` object names, then how many more (a library may hold thousands)."""
+    shown = ", ".join(objects[:most])
+    return shown + (f", ... ({len(objects) - most} more)" if len(objects) > most else "")

@@ -24,6 +24,7 @@ from aptkt.commands._session import (
     add_session_arguments,
     available_actions,
     make_session,
+    object_list,
     pick_actions,
     split_names,
 )
@@ -243,7 +244,7 @@ def run(args: argparse.Namespace) -> int:
 
     report(
         f"learning {', '.join(objects)} with {', '.join(actions)} on {args.robot}; prior objects: "
-        f"{', '.join(prior.objects)}; transfer {args.transfer}"
+        f"{object_list(prior.objects)}; transfer {args.transfer}"
         + (" + auxiliary features" if args.auxiliary else "")
         + f"; budget {args.budget}, eps_neg {config.eps_neg}, eps_explor {args.eps_explor}, seed {args.seed}"
     )

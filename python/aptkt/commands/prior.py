@@ -20,7 +20,7 @@ from aptkt.commands._checks import (
     scheduler_available,
 )
 from aptkt.commands._method import add_library_model_argument
-from aptkt.commands._session import split_names
+from aptkt.commands._session import object_list, split_names
 from aptkt.commands.learn_table import add_extraction_argument
 from aptkt.errors import ConfigError
 from aptkt.gp.settings import MAX_RESTARTS
@@ -166,16 +166,13 @@ def spread(args: argparse.Namespace, objects: int):
 
 
 def save_library(prior, path: Path, executor) -> None:
-    """Compute what a library file carries (its calibrations), with a progress line, then
-    write it."""
-    objects = len(prior.objects)
-    with Progress(1, "library", f"calibrating ({objects} objects)") as bar:
+    """Compute what a library file carries (its calibrations), with progress, then write it."""
+    with Progress(prior.precompute_parts(), "part", "calibrating the library") as bar:
         try:
-            prior.precompute(None if executor is None else executor.imap_unordered)
+            prior.precompute(None if executor is None else executor.imap_unordered, bar)
         finally:
             if executor is not None:
                 executor.close()
-        bar.update(1)
     prior.save(path)
 
 
@@ -270,7 +267,7 @@ def run_build(args: argparse.Namespace) -> int:
         )
     save_library(prior, args.output, spread(args, len(prior.objects)))
     print(
-        f"{args.output}: prior knowledge of {len(prior.objects)} objects ({', '.join(prior.objects)}) "
+        f"{args.output}: prior knowledge of {len(prior.objects)} objects ({object_list(prior.objects)}) "
         f"for {len(prior.actions)} actions"
     )
     return 0
@@ -361,7 +358,7 @@ def run_inspect(args: argparse.Namespace) -> int:
             )
         )
         return 0
-    print(f"{args.file}: {len(prior.objects)} prior objects: {', '.join(prior.objects)}")
+    print(f"{args.file}: {len(prior.objects)} prior objects: {object_list(prior.objects)}")
     metric = {
         "whiten-joint": "the old objects' within-object noise, whitened across the modalities",
         "whiten": "the old objects' within-object noise, whitened per modality",
@@ -379,7 +376,7 @@ def run_inspect(args: argparse.Namespace) -> int:
     provenance = prior.metadata.get("provenance")
     if isinstance(provenance, list) and provenance:
         parts = [
-            f"{p.get('source')} ({', '.join(p.get('objects', []))})"
+            f"{p.get('source')} ({object_list(list(p.get('objects', [])))})"
             for p in provenance
             if isinstance(p, dict)
         ]
@@ -389,10 +386,17 @@ def run_inspect(args: argparse.Namespace) -> int:
             f"{m} (weight {w:.2f}, length-scale {ls:.3g})"
             for m, w, ls in zip(r["modalities"], r["weights_mean"], r["length_scales_mean"])
         )
-        print(
-            f"  {r['action']}: {r['observations']} observations; {mods}; "
-            f"log marginal likelihood per object {r['log_marginal_likelihood']}"
-        )
+        lml = r["log_marginal_likelihood"]
+        if len(r["kernel_objects"]) < len(r["objects"]):
+            # Beyond the limits of aptkt.learning.locality the kernel is learned on a sample.
+            learned = (
+                f"kernel learned on {len(r['kernel_objects'])} of its {len(r['objects'])} "
+                f"objects ({r['kernel_observations']} observations, drawn at random); "
+                f"log marginal likelihood per sampled object {lml}"
+            )
+        else:
+            learned = f"log marginal likelihood per object {lml}"
+        print(f"  {r['action']}: {r['observations']} observations; {mods}; {learned}")
         for m, info in r["uninformative"].items():
             print(
                 f"    {m}: UNINFORMATIVE for {', '.join(info['objects'])} — the length-scale "
@@ -408,7 +412,10 @@ def uninformative_modalities(action_prior) -> dict[str, dict]:
     ``d_max`` the largest distance between two observations in that modality's features."""
     import numpy as np
 
-    X, groups = action_prior.features(action_prior.observations)
+    # The observations the model's kernel was learned on (a sample beyond the limits of
+    # aptkt.learning.locality: the distances of every two observations of a large library
+    # would not fit in memory).
+    X, groups = action_prior.features(action_prior.observations.take(action_prior.sample_rows))
     model = action_prior.model
     scales = np.atleast_2d(model.length_scales_)
     out = {}

@@ -45,7 +45,13 @@ from scipy.special import logsumexp
 
 from aptkt.errors import InvalidInputError, UnknownNameError
 
-__all__ = ["ObjectIdentity", "NEW_OBJECT_PRIOR", "IMPOSTOR_COMPETITORS", "impostor_table"]
+__all__ = [
+    "ObjectIdentity",
+    "NEW_OBJECT_PRIOR",
+    "IMPOSTOR_COMPETITORS",
+    "impostor_parts",
+    "impostor_table",
+]
 
 #: Prior probability that an object presented to the robot is not one of the library's: as
 #: likely as not — neither the library nor the lab knows better before the first touch.
@@ -593,21 +599,35 @@ class ObjectIdentity:
 IMPOSTOR_PARTS = 16
 
 
+def impostor_parts(n_objects: int) -> list[np.ndarray]:
+    """The parts of a library's objects an impostor table is computed in."""
+    return [
+        p for p in np.array_split(np.arange(n_objects), min(IMPOSTOR_PARTS, n_objects)) if p.size
+    ]
+
+
 def impostor_table(
     X: np.ndarray,
     objects: np.ndarray,
     parallel_map: Any = None,
     identity: ObjectIdentity | None = None,
+    progress: Any = None,
 ) -> np.ndarray:
     """:meth:`ObjectIdentity.impostor_table` of the library of observations ``X`` of
-    ``objects`` (its ``identity`` if at hand), its objects in parts: here, or as
-    ``parallel_map`` (an executor's ``imap_unordered``) runs them, each part sent the
-    observations, not the model."""
+    ``objects`` (its ``identity`` if at hand), its objects in :func:`impostor_parts`: here, or
+    as ``parallel_map`` (an executor's ``imap_unordered``) runs them, each part sent the
+    observations, not the model; ``progress.update(1)`` after each part."""
+    parts = impostor_parts(len(np.unique(np.asarray(objects).astype(str))))
+    tables = []
     if parallel_map is None:
-        return (identity or ObjectIdentity(X, objects)).impostor_table()
-    n = len(np.unique(np.asarray(objects).astype(str)))
-    parts = [p for p in np.array_split(np.arange(n), min(IMPOSTOR_PARTS, n)) if p.size]
-    tables = [r for _, r in parallel_map(_impostor_part, [(X, objects, p) for p in parts])]
+        model = identity or ObjectIdentity(X, objects)
+        results: Any = ((i, model.impostor_table(p)) for i, p in enumerate(parts))
+    else:
+        results = parallel_map(_impostor_part, [(X, objects, p) for p in parts])
+    for _, table in results:
+        tables.append(table)
+        if progress is not None:
+            progress.update(1)
     return np.maximum.reduce(tables)
 
 
@@ -628,6 +648,15 @@ def _squared_distances(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """‖a − b‖² of every row of ``A`` with every row of ``B``."""
     sq = (A**2).sum(axis=1)[:, None] + (B**2).sum(axis=1)[None, :] - 2.0 * A @ B.T
     return np.maximum(sq, 0.0)
+
+
+def human_bytes(n: float) -> str:
+    """Bytes as people read them: "1.6 TB", "512 MB" (as the core's memory checks say)."""
+    for unit in ("bytes", "kB", "MB", "GB"):
+        if n < 1000:
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1000
+    return f"{n:.1f} TB"
 
 
 def _logsumexp_rows(a: np.ndarray) -> np.ndarray:

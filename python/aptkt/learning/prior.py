@@ -19,12 +19,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from aptkt import __version__
-from aptkt.errors import PriorFileError
+from aptkt.errors import PriorFileError, ProblemTooLargeError
 from aptkt.files import open_atomically
 from aptkt.gp import LaplaceGPC, TransferSource
 from aptkt.learning.config import GPSettings
 from aptkt.learning.evidence import at_fitted_hyperparameters, uncoupled_evidence
-from aptkt.learning.identity import ObjectIdentity, impostor_table
+from aptkt.learning.identity import ObjectIdentity, impostor_parts, impostor_table
 from aptkt.learning.kernel import LibraryEvidence, library_evidence
 from aptkt.learning.locality import CANDIDATES, LOCAL_OBJECTS, kernel_sample, take_objects
 
@@ -336,6 +336,43 @@ class ActionPrior:
         return float(coupled.log_marginal_likelihood_[row] - self._source_evidence[key] - target)
 
 
+#: Copies of a library's observations its build and calibration hold at once (the observations,
+#: their features, the identity model's and the calibration's), and the bytes of one block of
+#: the calibration's (touches × objects) matrices with their temporaries: measured at 10,000
+#: objects × 12 observations (peak 456 MB with 200 MB of libraries loaded).
+LIBRARY_COPIES = 16
+CALIBRATION_BYTES = 8 * 8 * 2_000_000
+
+
+def library_bytes(observations: int, columns: int, objects: int) -> int:
+    """About how much memory building a local library of that size needs beyond the program."""
+    from aptkt.learning.identity import IMPOSTOR_COMPETITORS
+
+    return (
+        LIBRARY_COPIES * observations * columns * 8
+        + objects * (IMPOSTOR_COMPETITORS + 4 * columns) * 8
+        + CALIBRATION_BYTES
+    )
+
+
+def check_library_memory(action: str, obs: Observations) -> None:
+    """A library too large for the memory this process may still allocate is refused before
+    its models are fitted, with its size (:class:`~aptkt.errors.ProblemTooLargeError`)."""
+    from aptkt import _core
+    from aptkt.learning.identity import human_bytes
+
+    columns = sum(v.shape[1] for v in obs.modalities.values())
+    needed = library_bytes(len(obs), columns, len(obs.object_names))
+    available = _core.available_memory()
+    if available is not None and needed > available:
+        raise ProblemTooLargeError(
+            f"action {action!r}: a library of {len(obs.object_names)} objects and {len(obs)} "
+            f"observations of {columns} columns needs about {human_bytes(needed)} of memory to "
+            f"build, and {human_bytes(available)} are available here; build it where more "
+            "memory is (its file holds every observation), or from fewer objects or trials"
+        )
+
+
 def leave_one_out_posteriors(model: LaplaceGPC, X: np.ndarray) -> np.ndarray:
     """The class posterior of each training row of ``model`` (fitted on ``X``, without
     sources) by the model without that row: per binary classifier, the Laplace posterior of
@@ -417,6 +454,7 @@ class PriorKnowledge:
         for k, (name, obs) in enumerate(table.items()):
             if objects is not None:
                 obs = obs.of_objects(objects)
+            check_library_memory(name, obs)
             if len(obs.object_names) < 2:
                 raise InvalidInputError(
                     f"action {name!r}: prior knowledge needs at least two old objects"
@@ -431,9 +469,18 @@ class PriorKnowledge:
                 else np.arange(len(obs))
             )
             shared = gp.kernel in ("library", "shared")
-            model = gp.make(groups, random_state=seed + k, shared=shared).fit(
-                X[sample], np.asarray(obs.objects)[sample]
-            )
+            try:
+                model = gp.make(groups, random_state=seed + k, shared=shared).fit(
+                    X[sample], np.asarray(obs.objects)[sample]
+                )
+            except ProblemTooLargeError as exc:
+                # Refused before anything was allocated: say what would fit.
+                raise ProblemTooLargeError(
+                    f"action {name!r}: a library of {len(obs.object_names)} objects and "
+                    f"{len(obs)} observations is too large for library_model={gp.library_model!r} "
+                    f"here ({exc}); use library_model 'local' (--library-model local, the "
+                    "default), whose cost does not grow with the library"
+                ) from None
             kept = None if sample.size == len(obs) else sample
             actions[name] = ActionPrior(name, obs, pipeline, model, kept)
             if progress is not None:
@@ -558,30 +605,46 @@ class PriorKnowledge:
         )
         return recognise(self, table, calibration=self.scores().calibration(false_alarm_rate))
 
-    def scores(self, parallel_map: Any = None) -> CalibrationScores:
+    def scores(self, parallel_map: Any = None, progress: Any = None) -> CalibrationScores:
         """The library's calibration scores for recognition
         (:func:`~aptkt.learning.recognition.calibration_scores`), computed once (or read from
         its file)."""
         if self.calibration_scores is None:
             from aptkt.learning.recognition import calibration_scores
 
-            self.calibration_scores = calibration_scores(self, parallel_map)
+            self.calibration_scores = calibration_scores(self, parallel_map, progress)
         return self.calibration_scores
 
-    def precompute(self, parallel_map: Any = None) -> None:
+    def precompute_parts(self) -> int:
+        """How many parts :meth:`precompute` has left to compute (its progress's total)."""
+        from aptkt.learning.recognition import calibration_parts
+
+        parts = sum(
+            len(impostor_parts(len(p.objects)))
+            for p in self.actions.values()
+            if p.identity is not None and p.identity.impostors is None
+        )
+        return parts + (calibration_parts(self) if self.calibration_scores is None else 0)
+
+    def precompute(self, parallel_map: Any = None, progress: Any = None) -> None:
         """What a saved library carries besides its models, so that learning and recognising
         with it start at once: each action's impostor table (the same-object cut-off's
         threshold, :meth:`~aptkt.learning.identity.ObjectIdentity.impostor_log_odds`) and the
         calibration scores of recognition. Their cost grows with the library (a few seconds
         per thousand objects); ``parallel_map`` (an executor's ``imap_unordered``) spreads it
-        over processes or a cluster."""
+        over processes or a cluster; ``progress.update(1)`` after each of
+        :meth:`precompute_parts` parts."""
         for prior in self.actions.values():
             identity = prior.identity
             if identity is not None and identity.impostors is None:
                 identity.impostors = impostor_table(
-                    prior._training_X, prior.observations.objects, parallel_map, identity
+                    prior._training_X,
+                    prior.observations.objects,
+                    parallel_map,
+                    identity,
+                    progress,
                 )
-        self.scores(parallel_map)
+        self.scores(parallel_map, progress)
 
     def summary(self) -> list[dict[str, Any]]:
         """One row per action: objects, observations, modality weights and length-scales, the

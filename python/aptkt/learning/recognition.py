@@ -19,6 +19,7 @@ independent evidence: their log-likelihoods add, as the paper's fused posteriors
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -66,6 +67,7 @@ __all__ = [
     "Calibration",
     "CalibrationScores",
     "calibrate",
+    "calibration_parts",
     "calibration_scores",
 ]
 
@@ -198,7 +200,24 @@ def calibrate(
 CALIBRATION_PARTS = 16
 
 
-def calibration_scores(prior: Library, parallel_map: Any = None) -> CalibrationScores:
+def _part_counts(touches: int, objects: int) -> tuple[int, int]:
+    """How many parts the sampled touches and left-out objects are scored in: at least
+    :data:`CALIBRATION_PARTS` each (fewer only if there are fewer), and small enough that a
+    part's (touches × objects) matrices stay within :data:`RECOGNITION_BLOCK` entries."""
+    t, o = min(touches, CALIBRATION_TOUCHES), min(objects, CALIBRATION_OBJECTS)
+    by_memory = math.ceil(t * objects / RECOGNITION_BLOCK)
+    return max(min(CALIBRATION_PARTS, t), by_memory, 1), max(min(CALIBRATION_PARTS, o), 1)
+
+
+def calibration_parts(prior: Library) -> int:
+    """How many parts :func:`calibration_scores` computes the library's scores in."""
+    keys, _ = _touches({a: ap.observations for a, ap in prior.actions.items()})
+    return sum(_part_counts(len(keys), len(prior.objects)))
+
+
+def calibration_scores(
+    prior: Library, parallel_map: Any = None, progress: Any = None
+) -> CalibrationScores:
     """The library's :class:`CalibrationScores`. Each touch is scored by the library without it,
     and each object's touches by the library without that object: exact leave-one-out models,
     computed from the identity model's sums (:mod:`aptkt.learning.identity`). A library of more
@@ -209,29 +228,31 @@ def calibration_scores(prior: Library, parallel_map: Any = None) -> CalibrationS
 
     ``parallel_map``: an executor's ``imap_unordered`` (``(fn, items)`` → ``(index, result)``
     pairs) to score the parts elsewhere — processes or a cluster, each sent the library's
-    observations in its feature space, not the library."""
+    observations in its feature space, not the library; ``progress.update(1)`` after each
+    part (:func:`calibration_parts`)."""
     data = _LibraryData.of(prior)
     chosen = _sample(len(data.keys), CALIBRATION_TOUCHES, seed=0)
     left_out = _sample(len(data.objects), CALIBRATION_OBJECTS, seed=1)
-    touch_parts = np.array_split(chosen, min(CALIBRATION_PARTS, max(chosen.size, 1)))
-    object_parts = np.array_split(left_out, min(CALIBRATION_PARTS, max(left_out.size, 1)))
-    tasks = [("in", data, part) for part in touch_parts if part.size] + [
-        ("out", data, part) for part in object_parts if part.size
+    n_touch_parts, n_object_parts = _part_counts(len(data.keys), len(data.objects))
+    touch_parts = np.array_split(chosen, n_touch_parts)
+    object_parts = np.array_split(left_out, n_object_parts)
+    tasks = [("in", data, part) for part in touch_parts] + [
+        ("out", data, part) for part in object_parts
     ]
-    results: list[np.ndarray | None] = [None] * len(tasks)
+    results: list[np.ndarray] = [np.zeros(0)] * len(tasks)
     if parallel_map is None:
         identities = {a: ap.identity for a, ap in prior.actions.items()}
-        for i, task in enumerate(tasks):
-            results[i] = _score_part(task, identities)
+        done: Any = ((i, _score_part(task, identities)) for i, task in enumerate(tasks))
     else:
-        for i, result in parallel_map(_score_part, tasks):
-            results[i] = result
-    held_in = [r for t, r in zip(tasks, results) if t[0] == "in" and r is not None]
-    held_out = [r for t, r in zip(tasks, results) if t[0] == "out" and r is not None]
+        done = parallel_map(_score_part, tasks)
+    for i, result in done:
+        results[i] = result
+        if progress is not None:
+            progress.update(1)
+    held_in = [r for t, r in zip(tasks, results) if t[0] == "in"]
+    held_out = [r for t, r in zip(tasks, results) if t[0] == "out"]
     return CalibrationScores(
-        held_in=np.concatenate(held_in) if held_in else np.zeros(0),
-        held_out=np.concatenate(held_out) if held_out else np.zeros(0),
-        touches=len(data.keys),
+        held_in=np.concatenate(held_in), held_out=np.concatenate(held_out), touches=len(data.keys)
     )
 
 
@@ -275,6 +296,8 @@ def _score_part(
     library's touches), each scored without it ("in"), or the touches of the objects ``part``
     (indices into its objects), each object left out ("out")."""
     kind, data, part = task
+    if part.size == 0:
+        return np.zeros(0)
     if identities is None:  # in another process: rebuilt from the observations
         identities = data.identities()
     objects = data.objects

@@ -501,8 +501,16 @@ fn kernel_matrix<'py>(
     matrix(py, k, n, n)
 }
 
+/// Bytes this process may still allocate (the system's available memory, or a control
+/// group's limit), as the fits' own checks read it; None where it cannot be read.
+#[pyfunction]
+fn available_memory() -> Option<u64> {
+    aptkt_gp::memory::available_bytes()
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     settings::register(m)?;
+    m.add_function(wrap_pyfunction!(available_memory, m)?)?;
     m.add_class::<GpcModel>()?;
     m.add_function(wrap_pyfunction!(fit_gpc, m)?)?;
     m.add_function(wrap_pyfunction!(fit_gpc_shared, m)?)?;
