@@ -9,8 +9,11 @@ from typing import Any
 
 from aptkt.commands._checks import add_jobs_option, add_scheduler_option
 from aptkt.commands._method import add_method_arguments
+from aptkt.experiments.population import LARGEST_BATCH
 
 DEFAULTS = {"groups": 60, "new": 5, "priors": "3", "budget": 20}
+#: Objects in a synthetic stream (--from): a library a lab would hold after a few years.
+DEFAULT_STREAM = 1000
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,7 +31,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "and summary.json. See docs/real-data.md.",
     )
     p.add_argument(
-        "table", metavar="TABLE", help="feature table (.csv, .h5; docs/feature-tables.md)"
+        "table",
+        metavar="TABLE",
+        nargs="?",
+        help="feature table (.csv, .h5; docs/feature-tables.md); with --lifelong --from, none",
     )
     p.add_argument(
         "-o",
@@ -80,6 +86,22 @@ def register(sub: argparse._SubParsersAction) -> None:
         "AUROC, false alarms (docs/recognition.md)",
     )
     p.add_argument(
+        "--from",
+        dest="population",
+        metavar="TABLE",
+        help="with --lifelong: instead of a table's own objects, a stream of --stream synthetic "
+        "objects drawn from the population fitted on TABLE (its objects' within-object noise "
+        "and between-object spread; docs/method.md), in batches growing with the library from "
+        f"--new to {LARGEST_BATCH} objects",
+    )
+    p.add_argument(
+        "--stream",
+        type=int,
+        default=DEFAULT_STREAM,
+        metavar="N",
+        help="with --from: objects in each order's stream (default %(default)s)",
+    )
+    p.add_argument(
         "--orders",
         type=int,
         default=20,
@@ -127,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
     from aptkt.commands._session import split_names
     from aptkt.errors import ConfigError
     from aptkt.experiments.benchmark import PRIOR_CHOICES, BenchmarkSettings, run_benchmark
-    from aptkt.experiments.table_limits import read_table_within_limits
+    from aptkt.experiments.table_limits import MAX_LIBRARY_OBJECTS, read_table_within_limits
 
     jobs(args.jobs)
     at_least(args.seed, 0, "--seed")
@@ -153,6 +175,21 @@ def run(args: argparse.Namespace) -> int:
             )
     if args.recognition and (args.lifelong or len(libraries) > 1):
         raise ConfigError("--recognition: one library size (--priors N), and not with --lifelong")
+    if args.population is not None:
+        if not args.lifelong:
+            raise ConfigError("--from: only with --lifelong (a synthetic stream of objects)")
+        if args.table is not None:
+            raise ConfigError(
+                f"--from {args.population} and TABLE {args.table}: give one (--from draws the "
+                "objects from a population fitted on its table; TABLE uses its own objects)"
+            )
+        at_least(args.stream, 2 * args.new, "--stream")
+        at_most(args.stream, MAX_LIBRARY_OBJECTS, "--stream", "the objects a library holds")
+        args.table = args.population
+    elif args.stream != DEFAULT_STREAM:
+        raise ConfigError("--stream: only with --from (the synthetic stream's length)")
+    if args.table is None:
+        raise ConfigError("TABLE: give a feature table (or, with --lifelong, --from TABLE)")
     at_least(args.orders, 1, "--orders")
     at_most(args.orders, MAX_RUNS, "--orders")
     at_most(args.budget, MAX_BUDGET, "--budget")
@@ -221,6 +258,7 @@ def run(args: argparse.Namespace) -> int:
                 seed=args.seed,
                 actions=settings.actions,
                 config=config,
+                stream=args.stream if args.population is not None else None,
             ),
             **run,
         )
@@ -261,7 +299,8 @@ def _library_sizes(text: str) -> tuple[int, ...]:
 
 
 def _command(args: argparse.Namespace) -> str:
-    parts = ["aptkt benchmark", str(args.table), f"-o {args.output}"]
+    source = f"--from {args.population}" if args.population else str(args.table)
+    parts = ["aptkt benchmark", source, f"-o {args.output}"]
     for option, default in DEFAULTS.items():
         if getattr(args, option) != default:
             parts.append(f"--{option} {getattr(args, option)}")
@@ -274,6 +313,8 @@ def _command(args: argparse.Namespace) -> str:
         parts.append("--lifelong")
         if args.orders != 20:
             parts.append(f"--orders {args.orders}")
+        if args.population:
+            parts.append(f"--stream {args.stream}")
     if args.strict:
         parts.append("--strict")
     if args.seed:
