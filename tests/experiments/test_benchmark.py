@@ -342,7 +342,7 @@ def test_the_lifelong_benchmark_grows_a_library_and_reports_it(tmp_path, capsys)
     sizes = sorted({(int(r["batch"]), int(r["library"])) for r in rows if r["method"] == "library"})
     assert sizes == [(1, 4), (2, 6), (3, 8)]
     summary = json.loads((out / "summary.json").read_text())
-    assert len(summary["checks"]) == 2 and (out / "lifelong.png").stat().st_size > 0
+    assert len(summary["checks"]) == 3 and (out / "lifelong.png").stat().st_size > 0
     # The rows are what one order's run gives, recomputed.
     table = read_feature_table(path)
     learn_rows, test_rows = split_trials(table, ["touch"])

@@ -22,8 +22,8 @@ Tables = Mapping[int, Mapping[str, np.ndarray]]
 
 
 #: What the library's row of a batch carries besides its accuracy (orders × 1 each): its size
-#: after the batch was merged, the batch's CPU seconds, the peak memory so far (MB).
-EXTRAS = {"size": "library", "seconds": "seconds", "peak_mb": "peak_mb"}
+#: after the batch was merged, the batch's CPU seconds, the process's memory after it (MB).
+EXTRAS = {"size": "library", "seconds": "seconds", "memory_mb": "memory_mb"}
 
 
 def tables(rows: Sequence[Mapping[str, Any]]) -> dict[int, dict[str, np.ndarray]]:
@@ -115,7 +115,7 @@ def summary(c: Tables) -> dict[str, Any]:
             "library_size": float(np.nanmean(m["size"])) if "size" in m else None,
             "learned_with": float(np.nanmean(m["learned_with"])) if "learned_with" in m else None,
             "cpu_seconds": float(np.nanmean(m["seconds"])) if "seconds" in m else None,
-            "peak_mb": float(np.nanmax(m["peak_mb"])) if "peak_mb" in m else None,
+            "memory_mb": float(np.nanmax(m["memory_mb"])) if "memory_mb" in m else None,
             "mean": {k: np.nanmean(v, axis=0).tolist() for k, v in m.items() if k not in extras},
             "gain_one_shot": _paired(m["APTKT"][:, 0], m["baseline"][:, 0]).as_dict(),
             "gain_last_step": _paired(m["APTKT"][:, last], m["baseline"][:, last]).as_dict(),
@@ -128,7 +128,7 @@ def plot(c: Tables) -> Any:
     """Against the size of the library each batch was learned with (a log scale for a long
     stream): APTKT's gain over the baseline at one observation per object and at the end of
     the budget (95 % intervals over orders); the grown library's accuracy on every object it
-    holds, and the nearest class mean's; and each batch's CPU seconds and the peak memory."""
+    holds, and the nearest class mean's; and each batch's CPU seconds and the memory after it."""
     batches = sorted(c)
     costs = all("seconds" in c[b] for b in batches)
     fig, axes = figure(1, 3 if costs else 2, figsize=(15.0 if costs else 10.0, 4.4), squeeze=False)
@@ -184,9 +184,9 @@ def plot(c: Tables) -> Any:
         cost_ax.plot(after, seconds, "o-", color="C1", label="CPU seconds per batch")
         cost_ax.set_ylabel("CPU seconds (learning and merging the batch)")
         memory = cost_ax.twinx()
-        peak = np.array([float(np.nanmax(c[b]["peak_mb"])) for b in batches])
-        memory.plot(after, peak, "s--", color="C4", label="peak memory (MB)")
-        memory.set_ylabel("peak memory of the process (MB)")
+        resident = np.array([float(np.nanmax(c[b]["memory_mb"])) for b in batches])
+        memory.plot(after, resident, "s--", color="C4", label="memory after the batch (MB)")
+        memory.set_ylabel("the process's memory after the batch (MB)")
         cost_ax.set_title("cost")
         cost_ax.set_xlabel("objects in the library after the batch")
         handles = cost_ax.get_legend_handles_labels()
@@ -251,6 +251,7 @@ def report_markdown(c: Tables, head: Mapping[str, Any], found: Sequence[Check]) 
     ]
     rows = []
     costs = all("seconds" in c[b] for b in batches)
+    n_orders = f"95 % CI over {head['orders']} orders"
     for b in batches:
         m = c[b]
         last = _last(m["APTKT"])
@@ -260,14 +261,14 @@ def report_markdown(c: Tables, head: Mapping[str, Any], found: Sequence[Check]) 
             str(_size(m, "learned_with") or ""),
             f"{mean['baseline'][0]:.3f} → {mean['baseline'][last]:.3f}",
             f"{mean['APTKT'][0]:.3f} → {mean['APTKT'][last]:.3f}",
-            ci(_paired(m["APTKT"][:, 0], m["baseline"][:, 0])),
-            ci(_paired(m["APTKT"][:, last], m["baseline"][:, last])),
+            ci(_paired(m["APTKT"][:, 0], m["baseline"][:, 0]), cell=True),
+            ci(_paired(m["APTKT"][:, last], m["baseline"][:, last]), cell=True),
             str(_size(m) or ""),
             f"{mean['library'][0]:.3f} / {mean['NCM'][0]:.3f}",
-            ci(_paired(m["library"][:, 0], m["NCM"][:, 0])),
+            ci(_paired(m["library"][:, 0], m["NCM"][:, 0]), cell=True),
         ]
         if costs:
-            row += [f"{mean['seconds'][0]:.1f}", f"{float(np.nanmax(m['peak_mb'])):.0f}"]
+            row += [f"{mean['seconds'][0]:.1f}", f"{float(np.nanmax(m['memory_mb'])):.0f}"]
         rows.append(row)
     last = _last(c[batches[0]]["APTKT"]) if batches else 0
     header = [
@@ -275,14 +276,14 @@ def report_markdown(c: Tables, head: Mapping[str, Any], found: Sequence[Check]) 
         "learned with (objects)",
         f"baseline step 0 → {last}",
         f"APTKT step 0 → {last}",
-        "APTKT − baseline, step 0",
-        f"APTKT − baseline, step {last}",
+        f"APTKT − baseline, step 0 ({n_orders})",
+        f"APTKT − baseline, step {last} ({n_orders})",
         "library size after",
         "library / nearest class mean",
-        "library − nearest class mean",
+        f"library − nearest class mean ({n_orders})",
     ]
     if costs:
-        header += ["CPU s per batch", "peak MB"]
+        header += ["CPU s per batch", "memory after (MB)"]
     lines += [
         markdown_table(header, rows),
         "",

@@ -64,13 +64,15 @@ def pp(x: float, sign: bool = True) -> str:
     return f"{100 * x:+.1f} pp" if sign else f"{100 * x:.1f} %"
 
 
-def ci(e: Estimate) -> str:
-    """``+10.3 pp [+4.1, +16.5] (95 % CI, 10 groups)``."""
+def ci(e: Estimate, *, cell: bool = False) -> str:
+    """``+10.3 pp [+4.1, +16.5] (95 % CI, 10 groups)``; in a table's cell (``cell``), whose
+    heading says what the interval is, ``+10.3 pp [+4.1, +16.5]``."""
     if not math.isfinite(e.mean):
         return "n/a (no runs)"
     if not math.isfinite(e.low):
         return f"{pp(e.mean)} (1 {e.unit.rstrip('s')}: no interval)"
-    return f"{pp(e.mean)} [{100 * e.low:+.1f}, {100 * e.high:+.1f}] (95 % CI, {e.n} {e.unit})"
+    interval = f"{pp(e.mean)} [{100 * e.low:+.1f}, {100 * e.high:+.1f}]"
+    return interval if cell else f"{interval} (95 % CI, {e.n} {e.unit})"
 
 
 def too_few(*estimates: Estimate) -> bool:
