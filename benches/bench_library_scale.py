@@ -257,7 +257,11 @@ def main() -> None:
     ]
     print(table(rows, columns))
     plot(rows, args.plot)
-    print(save("library-scale", {"table": args.table or "synthetic", "command": sys.argv, "rows": rows}))
+    print(
+        save(
+            "library-scale", {"table": args.table or "synthetic", "command": sys.argv, "rows": rows}
+        )
+    )
 
 
 if __name__ == "__main__":

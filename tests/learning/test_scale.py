@@ -390,3 +390,23 @@ def test_prior_build_of_the_exact_model_too_large_is_one_line(tmp_path, capsys):
     assert len(err) == 1 and err[0].startswith("aptkt prior build: error: ")
     assert "1000 objects and 12000 observations" in err[0] and "--library-model local" in err[0]
     assert not (tmp_path / "x.npz").exists()
+
+
+def test_the_method_page_states_the_limits_the_code_has():
+    """docs/method.md's "A library of thousands" quotes the limits; they are these constants."""
+    from pathlib import Path
+
+    from aptkt.experiments.population import LARGEST_BATCH
+    from aptkt.learning.identity import IMPOSTOR_COMPETITORS
+    from aptkt.learning.recognition import CALIBRATION_OBJECTS, CALIBRATION_TOUCHES
+
+    page = (Path(__file__).parents[2] / "docs" / "method.md").read_text()
+    section = " ".join(page.split("## A library of thousands")[1].split("\n## ")[0].split())
+    for phrase in (
+        f"{locality.LOCAL_OBJECTS} objects and {locality.LOCAL_ROWS} observations",
+        f"with its {locality.CANDIDATES} candidates",
+        f"its {IMPOSTOR_COMPETITORS} nearest objects",
+        f"at most {CALIBRATION_TOUCHES:,} touches and {CALIBRATION_OBJECTS} objects",
+        f"from 5 to {LARGEST_BATCH} objects",
+    ):
+        assert phrase in section, phrase

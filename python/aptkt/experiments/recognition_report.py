@@ -68,18 +68,44 @@ def summary_lines(result: Recognition) -> list[str]:
     return lines
 
 
+#: A confusion plot shows at most this many touched objects (and the objects they were taken
+#: for): a library of thousands would need a figure of metres.
+MAX_CONFUSION_ROWS = 30
+
+
 def plot_confusion(result: Recognition) -> Any:
     """Rows: the touches' true objects; columns: the library's objects and "new" (a touch not
-    judged known); cells: the share of each row's touches."""
+    judged known); cells: the share of each row's touches. With more than
+    :data:`MAX_CONFUSION_ROWS` touched objects, the rows are the ones recognised worst, and the
+    columns the objects they were taken for."""
     truths = list(dict.fromkeys(result.object))
-    columns = [*result.library, NEW]
+    index = {t: k for k, t in enumerate(truths)}
+    said = [p if k else NEW for p, k in zip(result.predicted, result.known)]
+    right = np.zeros(len(truths))
+    touches = np.zeros(len(truths))
+    for t, p in zip(result.object, said):
+        touches[index[t]] += 1
+        right[index[t]] += p == t
+    title = "recognition: each touch's object, or new"
+    if len(truths) > MAX_CONFUSION_ROWS:
+        worst = np.argsort(right / touches, kind="stable")[:MAX_CONFUSION_ROWS]
+        title += f" ({MAX_CONFUSION_ROWS} of {len(truths)} touched objects, the worst recognised)"
+        truths = [truths[k] for k in sorted(worst)]
+        index = {t: k for k, t in enumerate(truths)}
+        taken = {p for t, p in zip(result.object, said) if t in index}
+        columns = [o for o in result.library if o in taken] + [NEW]
+    else:
+        columns = [*result.library, NEW]
+    where = {c: k for k, c in enumerate(columns)}
     counts = np.zeros((len(truths), len(columns)))
-    for t, p, k in zip(result.object, result.predicted, result.known):
-        counts[truths.index(t), columns.index(p if k else NEW)] += 1
+    for t, p in zip(result.object, said):
+        if t in index:
+            counts[index[t], where[p]] += 1
     shares = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1)
     from aptkt.experiments.plots import figure, label_shares
 
-    fig, ax = figure(1, 1, figsize=(0.45 * len(columns) + 3, 0.4 * len(truths) + 2.2))
+    # At most about 2,400 pixels wide (the figures are saved at 150 dpi).
+    fig, ax = figure(1, 1, figsize=(min(0.45 * len(columns) + 3, 16.0), 0.4 * len(truths) + 2.2))
     image = ax.imshow(shares, cmap="Blues", vmin=0, vmax=1, aspect="auto")
     ax.set_xticks(range(len(columns)), columns, rotation=90)
     ax.set_yticks(range(len(truths)), truths)
@@ -87,7 +113,7 @@ def plot_confusion(result: Recognition) -> Any:
     ax.set_ylabel("touched object")
     label_shares(ax, shares, shown=counts > 0)
     fig.colorbar(image, ax=ax, label="share of the object's touches")
-    ax.set_title("recognition: each touch's object, or new")
+    ax.set_title(title)
     fig.tight_layout()
     return fig
 
