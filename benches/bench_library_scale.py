@@ -110,7 +110,7 @@ def measure(task: tuple[int, str, str | None, int | None]) -> dict:
         touches[a] = o.take(later[np.linspace(0, later.size - 1, min(500, later.size)).astype(int)])
     gp = GPSettings(library_model=model)
     row: dict = {"objects": n_objects, "model": model}
-    t = _cpu()
+    t, t_wall = _cpu(), time.perf_counter()
     try:
         prior = PriorKnowledge.build(library, gp=gp, seed=0)
     except MemoryError as exc:  # the exact model refuses what would not fit
@@ -128,7 +128,6 @@ def measure(task: tuple[int, str, str | None, int | None]) -> dict:
         from aptkt.experiments.executors import DaskExecutor
 
         executor = DaskExecutor(client)
-    t_wall = time.perf_counter()
     prior.precompute(None if executor is None else executor.imap_unordered)
     row["build CPU-s"] = round(_cpu() - t, 2)
     row["build wall-s"] = round(time.perf_counter() - t_wall, 2)

@@ -633,7 +633,26 @@ def impostor_table(
 
 def _impostor_part(task: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
     X, objects, part = task
-    return ObjectIdentity(X, objects).impostor_table(part)
+    return _fitted_once(X, objects).impostor_table(part)
+
+
+#: The identity model of the library whose impostor parts this process computes.
+_FITTED: dict[str, ObjectIdentity] = {}
+
+
+def _fitted_once(X: np.ndarray, objects: np.ndarray) -> ObjectIdentity:
+    """The identity model of these observations, fitted once per process (a process that
+    computes several parts of one library's table fits it once)."""
+    import hashlib
+
+    labels = np.asarray(objects).astype(str)
+    token = hashlib.sha256(
+        np.ascontiguousarray(X).tobytes() + "\0".join(labels.tolist()).encode()
+    ).hexdigest()
+    if token not in _FITTED:
+        _FITTED.clear()
+        _FITTED[token] = ObjectIdentity(X, labels)
+    return _FITTED[token]
 
 
 def _windows(count: int) -> tuple[np.ndarray, np.ndarray]:

@@ -19,9 +19,10 @@ independent evidence: their log-likelihoods add, as the paper's fused posteriors
 
 from __future__ import annotations
 
-import math
+import hashlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any, Protocol
 
 import numpy as np
@@ -201,12 +202,12 @@ CALIBRATION_PARTS = 16
 
 
 def _part_counts(touches: int, objects: int) -> tuple[int, int]:
-    """How many parts the sampled touches and left-out objects are scored in: at least
-    :data:`CALIBRATION_PARTS` each (fewer only if there are fewer), and small enough that a
-    part's (touches × objects) matrices stay within :data:`RECOGNITION_BLOCK` entries."""
+    """How many parts the sampled touches and left-out objects are scored in:
+    :data:`CALIBRATION_PARTS` each (fewer only if there are fewer). Each part scores its
+    touches in blocks whose (touches × objects) matrices stay within :data:`RECOGNITION_BLOCK`
+    entries."""
     t, o = min(touches, CALIBRATION_TOUCHES), min(objects, CALIBRATION_OBJECTS)
-    by_memory = math.ceil(t * objects / RECOGNITION_BLOCK)
-    return max(min(CALIBRATION_PARTS, t), by_memory, 1), max(min(CALIBRATION_PARTS, o), 1)
+    return max(min(CALIBRATION_PARTS, t), 1), max(min(CALIBRATION_PARTS, o), 1)
 
 
 def calibration_parts(prior: Library) -> int:
@@ -279,13 +280,62 @@ class _LibraryData:
         }
         return cls(list(prior.objects), keys, actions)
 
+    @cached_property
+    def token(self) -> str:
+        """What identifies these observations (a process that scores several parts of one
+        library fits its identity models once)."""
+        digest = hashlib.sha256()
+        for a, (X, labels, _) in self.actions.items():
+            digest.update(a.encode())
+            digest.update(np.ascontiguousarray(X).tobytes())
+            digest.update("\0".join(labels.tolist()).encode())
+        return digest.hexdigest()
+
     def identities(self) -> dict[str, ObjectIdentity | None]:
+        """The identity model of each action (None without a repeated observation), fitted
+        once per process and library."""
+        cached = _IDENTITIES.get(self.token)
+        if cached is not None:
+            return cached
         out: dict[str, ObjectIdentity | None] = {}
         for a, (X, labels, _) in self.actions.items():
             names = set(labels.tolist())
             repeated = len(names) >= 2 and labels.size > len(names)
             out[a] = ObjectIdentity(X, labels) if repeated else None
+        _IDENTITIES.clear()  # one library at a time: the last one
+        _IDENTITIES[self.token] = out
         return out
+
+
+#: The identity models of the library whose calibration parts this process scores.
+_IDENTITIES: dict[str, dict[str, ObjectIdentity | None]] = {}
+
+
+def _held_in(
+    data: _LibraryData,
+    identities: Mapping[str, ObjectIdentity | None],
+    touches: np.ndarray,
+) -> np.ndarray:
+    """The novelty of each of ``touches`` (indices into the library's touches) scored by the
+    library without it."""
+    objects = data.objects
+    position = np.full(len(data.keys), -1, dtype=np.int64)
+    position[touches] = np.arange(touches.size)
+    per_action: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    local: dict[str, np.ndarray] = {}
+    for action, (_, _, touch) in data.actions.items():
+        rows = np.flatnonzero(position[touch] >= 0)
+        identity = identities[action]
+        lo = np.full((rows.size, len(objects)), -np.inf)
+        ln = np.zeros(rows.size)
+        if identity is not None:
+            o, n = identity.held_in_log_likelihoods(rows)
+            lo[:, _columns(identity, objects)] = o
+            ln = n
+        per_action[action] = (lo, ln)
+        local[action] = position[touch[rows]]
+    old, new, _ = _fused(per_action, local, touches.size, len(objects))
+    return _posterior(old, new)[1]
 
 
 def _score_part(
@@ -302,23 +352,10 @@ def _score_part(
         identities = data.identities()
     objects = data.objects
     if kind == "in":
-        position = np.full(len(data.keys), -1, dtype=np.int64)
-        position[part] = np.arange(part.size)
-        per_action: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-        local: dict[str, np.ndarray] = {}
-        for action, (_, _, touch) in data.actions.items():
-            rows = np.flatnonzero(position[touch] >= 0)
-            identity = identities[action]
-            lo = np.full((rows.size, len(objects)), -np.inf)
-            ln = np.zeros(rows.size)
-            if identity is not None:
-                o, n = identity.held_in_log_likelihoods(rows)
-                lo[:, _columns(identity, objects)] = o
-                ln = n
-            per_action[action] = (lo, ln)
-            local[action] = position[touch[rows]]
-        old, new, _ = _fused(per_action, local, part.size, len(objects))
-        return _posterior(old, new)[1]
+        step = max(1, RECOGNITION_BLOCK // max(len(objects), 1))
+        return np.concatenate(
+            [_held_in(data, identities, part[k : k + step]) for k in range(0, part.size, step)]
+        )
     scores = []
     for k in part:
         name = objects[int(k)]
