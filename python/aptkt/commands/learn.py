@@ -301,7 +301,9 @@ def _merge_learned(
     merged = merge_priors(
         [(str(library_path), library), (str(learned_path), learned)], digests=digests
     )
-    merged.save(target)
+    from aptkt.commands.prior import save_library
+
+    save_library(merged, target, None)
     report(
         f"{target}: the library of {len(merged.objects)} objects ({len(library.objects)} from "
         f"{library_path}, {len(learned.objects)} learned now)"
