@@ -47,7 +47,8 @@ def _table(pop: ActionPopulation, objects: int, trials: int, seed: int = 0):
 def test_a_fitted_population_has_the_noise_and_the_difficulty_of_its_table():
     truth = _known()
     table = _table(truth, 60, 30)
-    pop = ObjectPopulation.fit(table).actions["A"]
+    fitted = ObjectPopulation.fit(table)
+    pop = fitted.actions["A"]
     # The noise in each column's units, and its correlations (W = L Lᵀ in those units).
     W_true = truth.within @ truth.within.T
     W = pop.within @ pop.within.T
@@ -62,7 +63,6 @@ def test_a_fitted_population_has_the_noise_and_the_difficulty_of_its_table():
     )
     assert pop.log_level_sd == pytest.approx(0.3, abs=0.12)
     # Drawn objects are told apart by one observation as often as the table's.
-    fitted = ObjectPopulation.fit(table)
     target = fitted.accuracies["A"]
     drawn = [fitted.draw(60, 30, seed=s)["A"] for s in range(3)]
     got = np.mean(

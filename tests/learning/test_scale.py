@@ -205,7 +205,19 @@ def test_within_the_limits_the_local_model_is_the_exact_one():
         assert [s.transfer for s in a.steps] == [s.transfer for s in b.steps]
 
 
-def test_beyond_the_limits_the_local_model_stays_close_to_the_exact_one():
+@pytest.fixture(scope="module")
+def forty_exact() -> PriorKnowledge:
+    """The exact model of 40 objects × 12 observations, as far apart as real materials are (one
+    observation of each tells them apart about as often as on the BioTac set): beyond the local
+    model's limits, within the exact model's reach (fitted once; the tests only read it)."""
+    return PriorKnowledge.build({"A": _forty()}, gp=GPSettings(library_model="exact"), seed=0)
+
+
+def _forty() -> Observations:
+    return _observations(40, 12, seed=3, spread=2.0)
+
+
+def test_beyond_the_limits_the_local_model_stays_close_to_the_exact_one(forty_exact):
     """40 objects × 12 observations, as far apart as real materials are (one observation of
     each tells them apart about as often as on the BioTac set): beyond the limits, within the
     exact model's reach. Each candidate's p̄ is within 0.15 of the exact model's (two old objects
@@ -213,11 +225,9 @@ def test_beyond_the_limits_the_local_model_stays_close_to_the_exact_one():
     (or none), and the learning curves are alike. (Where objects crowd within the noise — means 1.4 noise levels
     apart — p̄ of new objects like none of the old differs by up to 0.13, 0.19 against 0.11:
     farther objects' negatives are missing from a neighbourhood. It decides nothing there.)"""
-    old = _observations(40, 12, seed=3, spread=2.0)
     new = _observations(5, 40, seed=4, prefix="n", spread=2.0)
     names = sorted(set(new.objects.tolist()))
-    local = PriorKnowledge.build({"A": old}, seed=0)
-    exact = PriorKnowledge.build({"A": old}, gp=GPSettings(library_model="exact"), seed=0)
+    local, exact = PriorKnowledge.build({"A": _forty()}, seed=0), forty_exact
     assert not local["A"].covers_library and exact["A"].covers_library
     X = local["A"].features(new)[0]
     for o in names:
@@ -246,13 +256,13 @@ def test_beyond_the_limits_the_local_model_stays_close_to_the_exact_one():
     assert np.max(np.abs(curves[0] - curves[1])) < 0.01
 
 
-def test_near_its_own_observations_an_old_objects_neighbourhood_classifier_is_its_exact_one():
+def test_near_its_own_observations_an_old_objects_neighbourhood_classifier_is_its_exact_one(
+    forty_exact,
+):
     """What a neighbourhood leaves out is far from the object: for observations of the object
     itself (a new object that is an old one), its classifier of its neighbourhood gives what
     the classifier of every old observation gives, at the same kernel."""
-    old = _observations(40, 12, seed=3, spread=2.0)
-    local = PriorKnowledge.build({"A": old}, seed=0)
-    exact = PriorKnowledge.build({"A": old}, gp=GPSettings(library_model="exact"), seed=0)
+    local, exact = PriorKnowledge.build({"A": _forty()}, seed=0), forty_exact
     ap = local["A"]
     ap.model = exact["A"].model  # the same kernel: only the neighbourhood differs
     twins = _observations(40, 3, seed=3, spread=2.0)  # the same means, new noise

@@ -242,16 +242,18 @@ def run_order(
 
 def _memory_mb() -> float:
     """This process's resident memory now (MB; its peak so far where /proc is not there)."""
+    mebibyte = 2**20
     try:
         with open("/proc/self/statm") as fh:
             pages = int(fh.read().split()[1])
         import os
 
-        return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
+        return pages * os.sysconf("SC_PAGE_SIZE") / mebibyte
     except (OSError, ValueError, IndexError):
         import resource
 
-        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        # ru_maxrss counts kibibytes on Linux.
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 2**10 / mebibyte
 
 
 def run_stream(

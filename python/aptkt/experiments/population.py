@@ -203,8 +203,11 @@ def one_shot_accuracy(
     hits = []
     for _ in range(ACCURACY_DRAWS):
         shots = np.array([rng.choice(r) for r in rows])
-        rest = np.setdiff1d(np.arange(labels.size), shots)
-        d = ((W[rest][:, None, :] - W[shots][None, :, :]) ** 2).sum(axis=-1)
+        rest = np.ones(labels.size, dtype=bool)
+        rest[shots] = False
+        # ‖w − s‖² = ‖w‖² − 2 w·s + ‖s‖², and ‖w‖² is the same for every shot: one product.
+        S = W[shots]
+        d = (S**2).sum(axis=1)[None, :] - 2.0 * (W[rest] @ S.T)
         hits.append(np.mean(d.argmin(axis=1) == index[rest]))
     return float(np.mean(hits))
 
