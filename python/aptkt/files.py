@@ -13,6 +13,11 @@ checked before aptkt acts on them or allocates memory for them.
   :func:`replaced_atomically` (or :func:`open_atomically`): under a temporary name in the same
   directory, synced, then renamed onto its name and the directory synced. A failure or a kill
   leaves the previous file (or none) and no temporary file behind the failure.
+* **Nothing is written through a link.** A symbolic link where aptkt writes a file is replaced
+  by the file (the rename replaces the directory entry), never followed: the file it points at,
+  wherever it is, stays as it was, and a dangling link creates nothing at its target. A link,
+  dangling or not, counts as an earlier file where a command refuses to replace results
+  (:func:`present`).
 * **NumPy archives** (``.npz``: prior knowledge, saved models) are read member by member
   (:func:`read_npz`): only known members, each header first, the declared sizes of all members
   checked against a limit before any data is decompressed, no pickles.
@@ -25,6 +30,7 @@ import os
 import stat
 import uuid
 import zipfile
+import zlib
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
@@ -43,6 +49,8 @@ __all__ = [
     "json_member",
     "replaced_atomically",
     "open_atomically",
+    "write_text_atomically",
+    "present",
 ]
 
 #: Largest total (uncompressed) size of the arrays of a ``.npz`` file aptkt reads (prior
@@ -152,6 +160,20 @@ def open_atomically(
     with replaced_atomically(path, error) as tmp:
         with open(tmp, mode, encoding=encoding, newline=newline) as fh:
             yield fh
+
+
+def write_text_atomically(path: str | Path, text: str, error: type[AptktError]) -> Path:
+    """``text`` as the UTF-8 file ``path``, by :func:`open_atomically` (a link there is
+    replaced, not followed)."""
+    with open_atomically(path, error) as fh:
+        fh.write(text)
+    return Path(path)
+
+
+def present(path: str | Path) -> bool:
+    """Whether anything is at ``path``: a file, a directory, or a link (a dangling one too,
+    which :meth:`pathlib.Path.exists` does not see)."""
+    return os.path.lexists(path)
 
 
 def _sync_directory(directory: Path) -> None:
@@ -272,6 +294,7 @@ def read_npz(
             ValueError,
             NotImplementedError,  # a compression method zipfile does not know
             RuntimeError,  # an encrypted member
+            zlib.error,  # a compressed member's stream damaged before its CRC is checked
         ) as exc:
             if isinstance(exc, error):
                 raise

@@ -412,3 +412,23 @@ def test_the_recognition_benchmark_reports_accuracy_auroc_and_false_alarms(tmp_p
     assert len(rows) == 2 and all(len(r["library"].split(",")) == 5 for r in rows)
     assert main([*argv, "--priors", "3,5", "-o", str(tmp_path / "x")]) == 1
     assert "one library size" in capsys.readouterr().err
+
+
+def test_a_recognition_benchmark_whose_libraries_hold_no_repeat_is_one_line(tmp_path, capsys):
+    """3 trials per object: each library holds one touch of each object (the first half), so
+    it knows no noise to judge by. One error line, and no warning before it."""
+    import warnings
+
+    rng = np.random.default_rng(0)
+    objects = np.repeat([f"o{k}" for k in range(8)], 3)
+    shape = np.repeat(3.0 * np.arange(8), 3)[:, None] + rng.normal(size=(24, 2))
+    obs = Observations("touch", {"shape": shape}, objects, np.tile(np.arange(3), 8))
+    path = write_feature_table(tmp_path / "three.csv", {"touch": obs})
+    argv = ["benchmark", str(path), "--recognition", "--priors", "5", "--new", "3"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert main([*argv, "--groups", "2", "-j", "1", "-o", str(tmp_path / "r")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        "aptkt benchmark: error: action 'touch': no object of the library was observed twice"
+    ]

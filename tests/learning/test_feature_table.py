@@ -113,6 +113,11 @@ def _bad(tmp_path, edit):
         (lambda h, r: r[2].__setitem__(4, "1,5"), "row 3, column thermal.0: '1,5' is not a number"),
         (lambda h, r: r[1].__setitem__(2, "x"), "row 2, column trial: 'x' is not a whole"),
         (
+            lambda h, r: r[1].__setitem__(2, "100000000000000000000"),
+            "row 2, column trial: trial 100000000000000000000 is not within 0..2147483647",
+        ),
+        (lambda h, r: r[1].__setitem__(2, "-1"), "row 2, column trial: trial -1 is not within"),
+        (
             lambda h, r: r[8].__setitem__(4, ""),
             "row 9, column thermal.0: empty, but filled in row 1",
         ),
@@ -356,3 +361,18 @@ def test_an_auxiliary_gate_that_is_no_number_is_one_usage_line(capsys):
         "aptkt learn: error: argument --aux-gate-margin: a number (a log Bayes factor) or none, "
         "got 'strong'"
     )
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_random_bytes_named_csv_are_one_line_everywhere(tmp_path, capsys, seed):
+    """4,000 random bytes (stray carriage returns, NULs, bytes that are no UTF-8) named .csv."""
+    path = tmp_path / "noise.csv"
+    path.write_bytes(np.random.default_rng(seed).bytes(4000))
+    for argv in (
+        ["prior", "build", str(path), "-o", str(tmp_path / "p.npz")],
+        ["learn", "--table", str(path), "--prior-objects", "a,b", "--objects", "c,d"],
+        ["benchmark", str(path), "-o", str(tmp_path / "b")],
+    ):
+        assert main(argv) == 1, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and str(path) in err[0], (argv, err)

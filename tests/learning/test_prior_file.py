@@ -89,6 +89,13 @@ def _non_finite(m):
     return "a0/obs/modality/force"
 
 
+def _huge_feature(m):
+    # Finite, so it loaded; refitting it (a merge) squared it into infinity.
+    m["a0/obs/modality/force"] = m["a0/obs/modality/force"].copy()
+    m["a0/obs/modality/force"][1, 0] = 1e300
+    return "a0/obs/modality/force"
+
+
 def _modalities_differ(m):
     m["a0/pipeline/modalities"] = np.array(["force", "texture"])
     return "a0/pipeline/modalities"
@@ -121,6 +128,7 @@ def _member_of_no_action(m):
         _labels_differ,
         _model_features_wrong_width,
         _non_finite,
+        _huge_feature,
         _modalities_differ,
         _classes_differ,
         _unknown_member,
@@ -183,3 +191,68 @@ def test_an_unknown_member_is_never_opened(good, tmp_path, monkeypatch):
     with pytest.raises(PriorFileError, match="zeros"):
         PriorKnowledge.load(bad)
     assert "zeros.npy" not in opened
+
+
+def _flip_a_bit(data: bytearray, info: zipfile.ZipInfo, where: float) -> None:
+    """One bit flipped inside ``info``'s stored (compressed) bytes, at ``where`` of the way."""
+    start = info.header_offset
+    name_len, extra_len = (
+        int.from_bytes(data[start + 26 : start + 28], "little"),
+        int.from_bytes(data[start + 28 : start + 30], "little"),
+    )
+    body = start + 30 + name_len + extra_len
+    data[body + int(where * (info.compress_size - 1))] ^= 0x10
+
+
+def test_a_flipped_bit_in_any_compressed_member_is_one_line(good, tmp_path, capsys):
+    """A damaged deflate stream fails before its CRC is checked (zlib's own error): it is a
+    damaged prior-knowledge file all the same, in one line, wherever the bit is."""
+    original = good.read_bytes()
+    with zipfile.ZipFile(good) as zf:
+        infos = [i for i in zf.infolist() if i.compress_type == zipfile.ZIP_DEFLATED]
+    assert len(infos) >= 8
+    for info in infos:
+        for where in (0.0, 0.3, 0.6):  # (the last byte may be padding nothing decodes)
+            data = bytearray(original)
+            _flip_a_bit(data, info, where)
+            bad = tmp_path / "bad.npz"
+            bad.write_bytes(bytes(data))
+            for argv in (["prior", "inspect", str(bad)], ["recognise", "--prior", str(bad), "x"]):
+                assert main(argv) == 1, (info.filename, where)
+                err = capsys.readouterr().err.strip().splitlines()
+                assert len(err) == 1 and str(bad) in err[0], (info.filename, where, err)
+
+
+@pytest.mark.parametrize(
+    "key, value",
+    [
+        ("provenance", ["a.npz", "b.npz"]),
+        ("provenance", [1, 2]),
+        ("provenance", [{"source": "a.npz", "objects": "old0"}]),
+        ("provenance", [{"source": "a.npz", "objects": ["old0"], "trials": [1]}]),
+        ("merged_from", "a.npz"),
+        ("action_definitions", "P1"),
+        ("action_definitions", 7),
+        ("action_definitions", {"P1": "press"}),
+        ("feature_table_columns", {"P1": ["force.0"]}),
+    ],
+)
+def test_forged_metadata_is_refused_where_the_file_is_read(good, tmp_path, capsys, key, value):
+    """Metadata that other code reads (merge reads provenance and action definitions) is of the
+    shape it reads, or the file is refused by every command, in one line naming the entry."""
+    members = _members(good)
+    meta = _meta(members)
+    meta["metadata"][key] = value
+    _set_meta(members, meta)
+    bad = _write(tmp_path / "forged.npz", members)
+    with pytest.raises(PriorFileError, match=f"metadata '{key}' must be"):
+        PriorKnowledge.load(bad)
+    merged = tmp_path / "merged.npz"
+    for argv in (
+        ["prior", "inspect", str(bad)],
+        ["prior", "merge", str(good), str(bad), "-o", str(merged)],
+    ):
+        assert main(argv) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and key in err[0] and str(bad) in err[0], err
+    assert not merged.exists()

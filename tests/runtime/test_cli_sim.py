@@ -568,3 +568,31 @@ def test_learn_can_start_from_recognition_and_grow_the_library(workdir: Path, pr
     # --recognise and --merge-into are for live runs only.
     assert main(["learn", "--table", "x.csv", "--recognise", "--objects", "a,b"]) == 1
     assert "--recognise: only for a live run" in capsys.readouterr().err
+
+
+def test_a_live_run_replaces_links_in_its_output_and_keeps_their_targets(
+    workdir: Path, prior: Path, tmp_path: Path, capsys
+):
+    """run.json, steps.csv, transfer.csv and learned_prior.npz planted as links to files
+    elsewhere: with --force the run replaces the links, and the files they point at keep every
+    byte."""
+    out, outside = tmp_path / "out", tmp_path / "outside"
+    out.mkdir()
+    outside.mkdir()
+    names = ("run.json", "steps.csv", "transfer.csv", "learned_prior.npz")
+    for name in names:
+        (outside / name).write_text("precious")
+        (out / name).symlink_to(outside / name)
+    argv = ["--objects", NEW, "--actions", "Pq", "--budget", "1"]
+    assert learn(workdir, prior, out, *argv) == 1
+    assert "holds an earlier result" in capsys.readouterr().err
+    assert learn(workdir, prior, out, *argv, "--force") == 0
+    for name in names:
+        assert (outside / name).read_text() == "precious", name
+        assert (out / name).is_file() and not (out / name).is_symlink(), name
+    # The run's own learned objects are not a library to merge into.
+    capsys.readouterr()
+    own = ["--merge-into", str(out / "learned_prior.npz"), "--force"]
+    assert learn(workdir, prior, out, *argv, *own) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is the run's own learned_prior.npz" in err[0], err

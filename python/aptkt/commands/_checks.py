@@ -22,8 +22,6 @@ from aptkt.files import not_a_regular_file
 #: (2,100 trials). The plan is held in memory before the first trial runs, and a larger one
 #: would run for days; split bigger collections with --first-trial.
 MAX_TRIALS = 100_000
-#: Trial numbers are stored as 32-bit integers in a data set's index.
-MAX_TRIAL_NUMBER = 2**31 - 1
 #: Seconds aptkt waits for the temperature sensors after an action (--thermal-wait): an hour.
 MAX_THERMAL_WAIT = 3600.0
 #: aptkt writes side files next to a data set, named after it (``.features-tmp``,
@@ -124,7 +122,10 @@ def jobs(value: int, option: str = "--jobs") -> None:
 
 def trial_plan(objects: int, actions: int, repetitions: int, first_trial: int) -> None:
     """A plan of ``repetitions`` trials of every action on every object, numbered from
-    ``first_trial``, within :data:`MAX_TRIALS` and :data:`MAX_TRIAL_NUMBER`."""
+    ``first_trial``, within :data:`MAX_TRIALS` and
+    :data:`aptkt.data.schema.MAX_TRIAL_NUMBER`."""
+    from aptkt.data.schema import MAX_TRIAL_NUMBER  # (aptkt.data loads h5py: not at start-up)
+
     total = objects * actions * repetitions
     if total > MAX_TRIALS:
         raise ConfigError(

@@ -10,10 +10,14 @@ from typing import Any
 from aptkt.commands._checks import add_jobs_option, add_scheduler_option
 from aptkt.commands._method import add_method_arguments
 from aptkt.experiments.population import LARGEST_BATCH
+from aptkt.files import present
 
 DEFAULTS = {"groups": 60, "new": 5, "priors": "3", "budget": 20}
 #: Objects in a synthetic stream (--from): a library a lab would hold after a few years.
 DEFAULT_STREAM = 1000
+#: What a benchmark writes besides its plots: any of them in --output (a link to anywhere
+#: too) is an earlier benchmark.
+BENCHMARK_FILES = ("report.md", "summary.json", "results.csv")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -196,7 +200,7 @@ def run(args: argparse.Namespace) -> int:
     input_file(args.table, "TABLE")
     output_dir(args.output)
     scheduler_available(args.scheduler)
-    if (args.output / "report.md").exists() and not args.force:
+    if any(present(args.output / f) for f in BENCHMARK_FILES) and not args.force:
         raise ConfigError(
             f"--output {args.output}: holds a benchmark already (give --force to replace it)"
         )

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Callable
-from pathlib import Path
 
 from aptkt.commands._checks import (
     add_renamed_option,
@@ -24,6 +23,7 @@ from aptkt.commands._session import (
     split_names,
 )
 from aptkt.errors import ConfigError
+from aptkt.files import present
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     session = make_session(args, seed=args.seed)
     session.check_objects(plan.objects)
     session.check_actions(plan.actions, plan.objects)
-    if Path(args.output).exists() and not (args.resume or args.force):
+    if present(args.output) and not (args.resume or args.force):
         # Before the arm moves, not after.
         raise ConfigError(
             f"{args.output} exists: use --resume to complete it or --force to replace it"

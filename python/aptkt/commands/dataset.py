@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 from aptkt.commands._checks import (
     add_jobs_option,
@@ -20,6 +19,7 @@ from aptkt.commands._checks import (
 )
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
+from aptkt.files import present
 from aptkt.progress import Progress
 
 
@@ -328,7 +328,7 @@ def run_export_features(args: argparse.Namespace) -> int:
     input_file(args.file, "DATASET")
     intact_data_set(args.file, "DATASET")
     output_file(args.output)
-    if Path(args.output).exists() and not args.force:
+    if present(args.output) and not args.force:
         raise ConfigError(f"--output {args.output}: exists (give --force to replace it)")
     try:
         table = load_observations(
@@ -369,7 +369,7 @@ def run_import(args: argparse.Namespace) -> int:
 
     output = output_file(args.output)
     check_table_name(output)
-    if output.exists() and not args.force:
+    if present(output) and not args.force:
         raise ConfigError(f"--output {output}: exists (give --force to replace it)")
     materials = split_names(args.materials, "--materials")
     total = len(find_trials(args.directory))

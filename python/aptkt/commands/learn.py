@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -29,6 +30,7 @@ from aptkt.commands._session import (
     split_names,
 )
 from aptkt.errors import ConfigError
+from aptkt.files import present
 from aptkt.learning.config import LearnerConfig
 from aptkt.learning.transfer import TRANSFER_MODES
 
@@ -176,7 +178,13 @@ def run(args: argparse.Namespace) -> int:
     input_file(args.prior, "--prior")
     if args.merge_into is not None:
         output_file(args.merge_into, "--merge-into")
-        if args.merge_into.exists() and not args.force:
+        own = [n for n in RUN_FILES if _same_file(args.merge_into, args.output / n)]
+        if own:
+            raise ConfigError(
+                f"--merge-into {args.merge_into}: is the run's own {own[0]} in --output "
+                f"{args.output}; merge into a file of its own"
+            )
+        if present(args.merge_into) and not args.force:
             raise ConfigError(
                 f"--merge-into {args.merge_into}: exists (give --force to replace it)"
             )
@@ -314,8 +322,13 @@ def _merge_learned(
 RUN_FILES = ("run.json", "steps.csv", "transfer.csv", "learned_prior.npz")
 
 
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether two paths name one file, whether it exists yet or not (links followed)."""
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
 def _refuse_earlier_run(out: Path, force: bool) -> None:
-    found = [name for name in RUN_FILES if (out / name).exists()]
+    found = [name for name in RUN_FILES if present(out / name)]
     if found and not force:
         raise ConfigError(
             f"--output {out}: holds an earlier result ({', '.join(found)}); give --force to "

@@ -23,6 +23,7 @@ from aptkt.commands._method import add_library_model_argument
 from aptkt.commands._session import object_list, split_names
 from aptkt.commands.learn_table import add_extraction_argument
 from aptkt.errors import ConfigError
+from aptkt.files import present
 from aptkt.gp.settings import MAX_RESTARTS
 from aptkt.learning.config import GPSettings
 from aptkt.learning.pipeline import FEATURE_SCALES
@@ -213,7 +214,7 @@ def run_build(args: argparse.Namespace) -> int:
     at_most(args.restarts, MAX_RESTARTS, "--restarts", "restarts bound every model's fit")
     # Before the features are extracted and the models fitted: not after.
     output_file(args.output)
-    if args.output.exists() and not args.force:
+    if present(args.output) and not args.force:
         raise ConfigError(f"--output {args.output}: exists (give --force to replace it)")
     jobs(args.jobs)
     scheduler_available(args.scheduler)
@@ -329,7 +330,7 @@ def run_merge(args: argparse.Namespace) -> int:
     jobs(args.jobs)
     scheduler_available(args.scheduler)
     output_file(args.output)
-    if args.output.exists() and not args.force:
+    if present(args.output) and not args.force:
         raise ConfigError(f"--output {args.output}: exists (give --force to replace it)")
     libraries = [(str(p), load_prior(p, "PRIOR")) for p in args.files]
     digests = {str(p): hashlib.sha256(p.read_bytes()).hexdigest() for p in args.files}

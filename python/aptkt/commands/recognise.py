@@ -8,6 +8,7 @@ from typing import Any
 
 from aptkt.commands._checks import input_file, output_dir
 from aptkt.errors import ConfigError
+from aptkt.files import present
 
 RESULT_FILES = ("predictions.csv", "summary.json")
 
@@ -64,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
             f"--false-alarm-rate must lie between 0 and 1, got {args.false_alarm_rate}"
         )
     output_dir(args.output)
-    if any((args.output / f).exists() for f in RESULT_FILES) and not args.force:
+    if any(present(args.output / f) for f in RESULT_FILES) and not args.force:
         raise ConfigError(
             f"--output {args.output}: holds a recognition already (give --force to replace it)"
         )

@@ -40,6 +40,7 @@ __all__ = [
     "SCHEMA_VERSION",
     "READABLE_VERSIONS",
     "INDEX_DTYPE",
+    "MAX_TRIAL_NUMBER",
     "SAMPLE_FIELDS",
 ]
 
@@ -61,6 +62,9 @@ INDEX_DTYPE = np.dtype(
         ("meta_stop", "<i8"),
     ]
 )
+#: The largest trial number anywhere in aptkt: a data set's index stores it as a 32-bit integer,
+#: and a feature table's trials become a data set's when exported back.
+MAX_TRIAL_NUMBER = int(np.iinfo(INDEX_DTYPE["trial"]).max)
 
 #: Stored per-sample fields: trailing shape and dtype. The skin's raw fields as the wire carries
 #: them (:data:`aptkt.skin.protocol.RAW_FIELDS`, from the Rust crate), plus the host timestamp.

@@ -29,7 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.errors import FeatureTableError, InvalidInputError
+from aptkt.errors import ConfigError, FeatureTableError, InvalidInputError
+from aptkt.files import write_text_atomically
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
 from aptkt.learning.observations import Observations, ObservationTable
@@ -428,8 +429,10 @@ def run_benchmark(
     }
     profiles = noise_profile(table.observations(actions))
     summary["noise_profile"] = [p.as_dict() for p in profiles]
-    (output / "summary.json").write_text(json.dumps(summary, indent=1))
-    (output / "report.md").write_text(br.report_markdown(c, head, found, profiles))
+    write_text_atomically(output / "summary.json", json.dumps(summary, indent=1), ConfigError)
+    write_text_atomically(
+        output / "report.md", br.report_markdown(c, head, found, profiles), ConfigError
+    )
     held = br.announce_checks(found, say)
     say(
         f"{held} of {len(found)} checks hold; done in {seconds:.0f} s: "

@@ -38,6 +38,7 @@ from aptkt.experiments.plots import figure, label_shares, learning_curves, save_
 from aptkt.experiments.relatedness_plot import plot_relatedness, relatedness
 from aptkt.experiments.runs import RunSpec, flatten, run_many
 from aptkt.experiments.tables import write_csv
+from aptkt.files import write_text_atomically
 from aptkt.learning import GPSettings, LearnerConfig, PriorKnowledge
 from aptkt.learning.dataset import extract_features, load_observations, stale_features
 from aptkt.learning.transfer_summary import summary_lines
@@ -299,8 +300,12 @@ def report_results(
             "plots": [str(p) for p in plots],
         },
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    (out / "report.md").write_text(_report_markdown(title, table, transfer, out, plots, heat_maps))
+    write_text_atomically(out / "summary.json", json.dumps(summary, indent=2), ConfigError)
+    write_text_atomically(
+        out / "report.md",
+        _report_markdown(title, table, transfer, out, plots, heat_maps),
+        ConfigError,
+    )
     say(f"      report: {out / 'report.md'}; plots: {', '.join(str(p) for p in plots)}")
     say(
         f"      every step of every run: {out / 'results.csv'}; settings and table: {out / 'summary.json'}"

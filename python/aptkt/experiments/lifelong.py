@@ -25,10 +25,11 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.errors import FeatureTableError, InvalidInputError
+from aptkt.errors import ConfigError, FeatureTableError, InvalidInputError
 from aptkt.experiments.benchmark import _subset, each_result, parallel_map_of, split_trials
 from aptkt.experiments.benchmark_report import announce_checks
 from aptkt.experiments.population import ObjectPopulation, schedule
+from aptkt.files import write_text_atomically
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
 from aptkt.learning.library import merge_priors
@@ -374,8 +375,8 @@ def run_lifelong(
         "results": lr.summary(c),
         "checks": [k.as_dict() for k in found],
     }
-    (output / "summary.json").write_text(json.dumps(summary, indent=1))
-    (output / "report.md").write_text(lr.report_markdown(c, head, found))
+    write_text_atomically(output / "summary.json", json.dumps(summary, indent=1), ConfigError)
+    write_text_atomically(output / "report.md", lr.report_markdown(c, head, found), ConfigError)
     held = announce_checks(found, say)
     say(
         f"{held} of {len(found)} checks hold; done in {seconds:.0f} s: "

@@ -8,7 +8,9 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.errors import ConfigError
 from aptkt.experiments.aggregate import mean_band
+from aptkt.files import replaced_atomically
 
 __all__ = [
     "BAND_LABEL",
@@ -143,12 +145,16 @@ def learning_curves(
 
 
 def save_figure(fig, path_stem: str | Path, formats: Sequence[str] = ("png", "svg")) -> list[Path]:
+    """``fig`` as ``<path_stem>.<format>`` for each format, each written whole by a rename
+    (:func:`aptkt.files.replaced_atomically`: a link there is replaced, never followed)."""
     path_stem = Path(path_stem)
     path_stem.parent.mkdir(parents=True, exist_ok=True)
     out = []
     for fmt in formats:
         p = path_stem.with_suffix(f".{fmt}")
-        fig.savefig(p, dpi=150, bbox_inches="tight")
+        with replaced_atomically(p, ConfigError) as tmp:
+            # The temporary name's suffix says nothing of the format: name it.
+            fig.savefig(tmp, format=fmt, dpi=150, bbox_inches="tight")
         out.append(p)
     _pyplot().close(fig)
     return out

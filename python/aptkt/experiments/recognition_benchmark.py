@@ -16,10 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.errors import FeatureTableError
+from aptkt.errors import ConfigError, FeatureTableError
 from aptkt.experiments.aggregate import estimate
 from aptkt.experiments.benchmark import split_trials
 from aptkt.experiments.report import markdown_table
+from aptkt.files import write_text_atomically
 from aptkt.learning import PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
 
@@ -138,7 +139,7 @@ def run_recognition_benchmark(
         [r["accuracy"] - r["ncm"] for r in rows], units=list(range(groups)), unit_name="draw"
     )
     summary["results"]["accuracy - ncm"] = diff.as_dict()
-    (output / "summary.json").write_text(json.dumps(summary, indent=1))
+    write_text_atomically(output / "summary.json", json.dumps(summary, indent=1), ConfigError)
     report = [
         f"# Recognition benchmark: {table.path}",
         "",
@@ -155,7 +156,7 @@ def run_recognition_benchmark(
         f"[{100 * diff.low:+.1f}, {100 * diff.high:+.1f}].",
         "",
     ]
-    (output / "report.md").write_text("\n".join(report))
+    write_text_atomically(output / "report.md", "\n".join(report), ConfigError)
     for what, mean, interval, lowest in lines:
         say(f"  {what}: {mean} {interval} (lowest {lowest})")
     say(f"done: {output / 'report.md'}, {output / 'results.csv'}")

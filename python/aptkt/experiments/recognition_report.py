@@ -11,6 +11,8 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.errors import ConfigError
+from aptkt.files import write_text_atomically
 from aptkt.learning.recognition import Recognition
 
 __all__ = ["summary_lines", "write_recognition", "plot_confusion"]
@@ -127,7 +129,9 @@ def write_recognition(
 
     output.mkdir(parents=True, exist_ok=True)
     written = [write_csv(output / "predictions.csv", result.rows())]
-    (output / "summary.json").write_text(json.dumps({**head, **summary(result)}, indent=1))
+    write_text_atomically(
+        output / "summary.json", json.dumps({**head, **summary(result)}, indent=1), ConfigError
+    )
     written.append(output / "summary.json")
     written += save_figure(plot_confusion(result), output / "confusion")
     for line in summary_lines(result):

@@ -38,6 +38,7 @@ from aptkt.experiments.report import markdown_table, render_report
 from aptkt.experiments.run_store import RunStore, data_fingerprint, run_key
 from aptkt.experiments.runs import label
 from aptkt.experiments.scale import Scale
+from aptkt.files import open_atomically, write_text_atomically
 from aptkt.learning import LearnerConfig
 from aptkt.learning.dataset import extract_features, stale_features
 from aptkt.runtime.generation import GenerationPlan, generate
@@ -169,7 +170,7 @@ def analyse_figure(task: FigureTask) -> tuple[Section, float]:
     rows = [r for sp, key in zip(task.specs, keys) for r in label(sp, steps[key])]
     section = FIGURES[task.name].analyse(task.ctx, rows)
     del rows
-    with (task.ctx.figure_dir(task.name) / "specs.jsonl").open("w") as fh:
+    with open_atomically(task.ctx.figure_dir(task.name) / "specs.jsonl", ConfigError) as fh:
         for sp, key in zip(task.specs, keys):
             fh.write(json.dumps({"key": key, **sp.to_dict()}) + "\n")
     return section, time.perf_counter() - t0
@@ -272,7 +273,9 @@ def _write(
     """config.json, the report (whole and per figure) and summary.json."""
     ctx, sections, batch, out = done.ctx, done.sections, done.batch, Path(s.output)
     config = _config(s, scale, ctx, done.data_info, done.plans)
-    (out / "config.json").write_text(json.dumps(config, indent=2, default=str))
+    write_text_atomically(
+        out / "config.json", json.dumps(config, indent=2, default=str), ConfigError
+    )
     run_info: dict[str, Any] = {
         "command": s.command or f"aptkt reproduce {' '.join(s.figures)}",
         "software_version": __version__,
@@ -288,10 +291,14 @@ def _write(
     numbers = {sec.figure: sec.numbers for sec in sections}
     real = load_benchmark(s.real_data) if s.real_data is not None else None
     beside = "\n".join(beside_real(numbers, real))
-    (out / "report.md").write_text(render_report(sections, run_info) + "\n" + beside)
+    write_text_atomically(
+        out / "report.md", render_report(sections, run_info) + "\n" + beside, ConfigError
+    )
     for section in sections:
-        (ctx.figure_dir(section.figure) / "report.md").write_text(
-            render_report([section], run_info)
+        write_text_atomically(
+            ctx.figure_dir(section.figure) / "report.md",
+            render_report([section], run_info),
+            ConfigError,
         )
     summary = {
         "software_version": __version__,
@@ -309,7 +316,9 @@ def _write(
         "numbers": {sec.figure: sec.numbers for sec in sections},
         "files": {sec.figure: sec.files for sec in sections},
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
+    write_text_atomically(
+        out / "summary.json", json.dumps(summary, indent=2, default=_json_default), ConfigError
+    )
     _say(f"report: {out / 'report.md'}  ({seconds:.0f} s)")
     return summary
 

@@ -26,6 +26,7 @@ from aptkt.errors import ConfigError, FeatureTableError
 from aptkt.experiments.demo import report_results
 from aptkt.experiments.runs import step_rows
 from aptkt.experiments.table_limits import read_table_within_limits
+from aptkt.files import present
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable, split_held_out
 from aptkt.learning.pipeline import transforms_of
@@ -89,7 +90,7 @@ def refuse_overwrite(
 ) -> Path:
     """``out``, unless it holds a result already and ``force`` is not given. ``how``: the
     caller's way to give ``force``; ``where``: how messages name ``out``."""
-    found = [name for name in RESULT_FILES if (out / name).exists()]
+    found = [name for name in RESULT_FILES if present(out / name)]
     if found and not force:
         raise ConfigError(
             f"{where or out} holds an earlier result ({', '.join(found)}); give {how} to "

@@ -100,7 +100,10 @@ def check_table_file(path: str | Path, library: bool = False) -> None:
                     f"{MAX_FEATURE_COLUMNS} aptkt learns from (its header is "
                     f"{_HEADER_MAX_BYTES // 1024} kB and more)",
                 )
-            columns = len(next(csv.reader([header.decode("utf-8-sig", errors="replace")]), []))
+            try:
+                columns = len(next(csv.reader([header.decode("utf-8-sig", errors="replace")]), []))
+            except csv.Error:
+                return  # not a CSV header (a stray carriage return...): the reader says so
             rows = 0
             while chunk := fh.read(1 << 20):
                 rows += chunk.count(b"\n")

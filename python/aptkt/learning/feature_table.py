@@ -30,6 +30,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from aptkt.data.schema import MAX_TRIAL_NUMBER
 from aptkt.errors import FeatureTableError
 from aptkt.files import open_atomically, replaced_atomically
 from aptkt.learning.observations import Observations, ObservationTable, common_extraction
@@ -276,6 +277,8 @@ def _integer(path: Path, v, row: int) -> int:
         f = math.nan
     if not math.isfinite(f) or f != int(f):
         raise _error(path, f"{v!r} is not a whole trial number", row, "trial")
+    if not 0 <= f <= MAX_TRIAL_NUMBER:
+        raise _error(path, f"trial {str(v)[:30]} is not within 0..{MAX_TRIAL_NUMBER}", row, "trial")
     return int(f)
 
 

@@ -596,13 +596,14 @@ class PriorKnowledge:
         touch, their evidence fused). The novelty threshold is chosen on the library itself for
         ``false_alarm_rate`` (computed once per rate). ``pandas.DataFrame(result.rows())`` is
         the table."""
-        from aptkt.learning.recognition import recognise
+        from aptkt.learning.recognition import recognise, require_identities
 
         table = (
             {observations.action: observations}
             if isinstance(observations, Observations)
             else dict(observations)
         )
+        require_identities(self, [a for a in table if a in self])
         return recognise(self, table, calibration=self.scores().calibration(false_alarm_rate))
 
     def scores(self, parallel_map: Any = None, progress: Any = None) -> CalibrationScores:

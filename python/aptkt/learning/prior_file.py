@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.errors import PriorFileError
+from aptkt.features import MAX_MAGNITUDE
 from aptkt.files import NPZ_MAX_BYTES, json_member, read_npz
 
 __all__ = ["FORMAT", "PRIOR_FILE_MAX_BYTES", "check_action", "check_calibration", "read_members"]
@@ -99,6 +100,7 @@ def _meta(raw: np.ndarray, path: Path) -> dict[str, Any]:
         )
     if not isinstance(meta.get("metadata", {}), dict):
         raise PriorFileError(f"{path}: member 'meta': 'metadata' must be a JSON object")
+    _check_metadata(meta.get("metadata", {}), path)
     extractions = meta.get("extractions", {})
     if (
         not isinstance(extractions, dict)
@@ -110,6 +112,62 @@ def _meta(raw: np.ndarray, path: Path) -> dict[str, Any]:
             f"got {extractions!r}"
         )
     return meta
+
+
+def _is_names(value: Any) -> bool:
+    return isinstance(value, list) and all(isinstance(v, str) for v in value)
+
+
+def _is_map(value: Any, of: Callable[[Any], bool]) -> bool:
+    return isinstance(value, dict) and all(of(v) for v in value.values())
+
+
+def _is_provenance(value: Any) -> bool:
+    return isinstance(value, list) and all(
+        isinstance(p, dict)
+        and isinstance(p.get("source"), str)
+        and _is_names(p.get("objects"))
+        and (
+            "trials" not in p
+            or _is_map(p["trials"], lambda t: _is_map(t, lambda v: isinstance(v, list)))
+        )
+        for p in value
+    )
+
+
+#: What the metadata entries other code reads must be (the rest is shown, never used): the
+#: check each must pass and what it says when it does not.
+_METADATA_SHAPES: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "provenance": (
+        _is_provenance,
+        "a list of JSON objects, each with a 'source' name and a list of 'objects'",
+    ),
+    "merged_from": (_is_names, "a list of file names"),
+    "action_definitions": (
+        lambda v: _is_map(v, lambda d: isinstance(d, dict)),
+        "a JSON object of action names to JSON objects",
+    ),
+    "feature_table_columns": (
+        lambda v: _is_map(v, lambda m: _is_map(m, _is_names)),
+        "a JSON object of actions to modalities to lists of column names",
+    ),
+}
+
+
+def _check_metadata(metadata: dict[str, Any], path: Path) -> None:
+    """The metadata other code reads is of the shape it reads (a forged or damaged entry is
+    refused here, naming it, not met as a traceback in ``prior merge``)."""
+    for key, (fits, shape) in _METADATA_SHAPES.items():
+        if key in metadata and not fits(metadata[key]):
+            raise PriorFileError(
+                f"{path}: member 'meta': metadata {key!r} must be {shape}, got "
+                f"{_shortened(metadata[key])}"
+            )
+
+
+def _shortened(value: Any, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 class _Checker:
@@ -164,6 +222,13 @@ def check_action(path: Path, arrays: dict[str, np.ndarray], prefix: str, action:
     dims = {}
     for m in obs_mods:
         a = c.get(f"obs/modality/{m}", "f", 2, lambda s: s[0] == n, f" with {n} rows")
+        if a.size and float(np.max(np.abs(a))) > MAX_MAGNITUDE:
+            # As a table's: refitting the library (a merge) would square them into infinity.
+            raise c.fail(
+                f"obs/modality/{m}",
+                f"a value of {float(np.max(np.abs(a))):g} is beyond ±{MAX_MAGNITUDE:g}; no "
+                "sensor's feature is that large",
+            )
         dims[m] = a.shape[1]
     pipe_mods = c.get("pipeline/modalities", "U", 1).tolist()
     if sorted(pipe_mods) != obs_mods or len(set(pipe_mods)) != len(pipe_mods):

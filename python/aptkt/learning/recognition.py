@@ -20,7 +20,7 @@ independent evidence: their log-likelihoods add, as the paper's fused posteriors
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any, Protocol
@@ -182,6 +182,21 @@ class CalibrationScores:
             detection_rate=float(np.mean(out > threshold)) if out.size else 0.0,
             touches=self.touches,
         )
+
+
+def require_identities(prior: Library, actions: Iterable[str]) -> dict[str, ObjectIdentity]:
+    """Each action's identity model, or the error that the library cannot recognise with it
+    (no object observed twice: no noise to judge by, and nothing to calibrate on), before
+    anything is computed."""
+    identities = {}
+    for action in actions:
+        identity = prior[action].identity
+        if identity is None:
+            raise InvalidInputError(
+                f"action {action!r}: no object of the library was observed twice"
+            )
+        identities[action] = identity
+    return identities
 
 
 def calibrate(
@@ -485,18 +500,18 @@ def recognise(
                 f"action {action!r}: observations have modalities {list(obs.modality_names)}, "
                 f"the library's {list(prior[action].pipeline.modality_names_)}"
             )
+    identities = require_identities(prior, table)
     cal = calibration or calibrate(prior, false_alarm_rate)
     objects = prior.objects
     keys, index = _touches(table)
     features = {}
     for action, obs in table.items():
-        ap = prior[action]
-        identity = ap.identity
-        if identity is None:
-            raise InvalidInputError(
-                f"action {action!r}: no object of the library was observed twice"
-            )
-        features[action] = (identity, _columns(identity, objects), ap.pipeline.transform(obs)[0])
+        identity = identities[action]
+        features[action] = (
+            identity,
+            _columns(identity, objects),
+            prior[action].pipeline.transform(obs)[0],
+        )
     n = len(keys)
     best = np.zeros(n, dtype=np.int64)
     second = np.zeros(n, dtype=np.int64)

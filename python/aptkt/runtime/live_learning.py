@@ -32,7 +32,8 @@ import numpy as np
 from aptkt import __version__
 from aptkt.actions import ExploratoryAction
 from aptkt.data.store import DatasetReader, DatasetWriter
-from aptkt.errors import AptktError
+from aptkt.errors import AptktError, ConfigError
+from aptkt.files import open_atomically, write_text_atomically
 from aptkt.learning.config import LearnerConfig
 from aptkt.learning.environment import PrefetchedEnvironment, RecordingEnvironment
 from aptkt.learning.extract import ExtractionSettings
@@ -198,8 +199,10 @@ def learn_live(
                 )
                 summary["status"] = "recognised"
                 summary["seconds"] = time.perf_counter() - t0
-                (output / "run.json").write_text(
-                    json.dumps(_finite(summary), indent=2, default=_json)
+                write_text_atomically(
+                    output / "run.json",
+                    json.dumps(_finite(summary), indent=2, default=_json),
+                    ConfigError,
                 )
                 return summary
             env = PrefetchedEnvironment(env, touched["observations"])
@@ -324,7 +327,9 @@ def _finish(
         except ValueError as exc:  # e.g. an action observed on one object only (an early fault)
             summary["learned_prior_error"] = str(exc)
     summary["seconds"] = time.perf_counter() - t0
-    (output / "run.json").write_text(json.dumps(_finite(summary), indent=2, default=_json))
+    write_text_atomically(
+        output / "run.json", json.dumps(_finite(summary), indent=2, default=_json), ConfigError
+    )
     _write_steps(output / "steps.csv", steps)
     _write_transfer(output / "transfer.csv", steps)
     if config.transfers and steps:
@@ -371,14 +376,14 @@ def _write_steps(path: Path, steps: Sequence[StepRecord]) -> None:
     keys: list[str] = []
     for r in rows:
         keys.extend(k for k in r if k not in keys)
-    with path.open("w", newline="") as fh:
+    with open_atomically(path, ConfigError, newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=keys or ["step"])
         w.writeheader()
         w.writerows(rows)
 
 
 def _write_transfer(path: Path, steps: Sequence[StepRecord]) -> None:
-    with path.open("w", newline="") as fh:
+    with open_atomically(path, ConfigError, newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["step", "action", "new_object", "source", "lambda", "mean_posterior"])
         for s in steps:

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.errors import ConfigError
 from aptkt.experiments.figures.analysis import Analysis, hide_unused, panel_grid
 from aptkt.experiments.figures.base import Context, Headline, Plan
 from aptkt.experiments.plots import save_figure
@@ -27,6 +28,7 @@ from aptkt.experiments.similarity import (
     rescale,
 )
 from aptkt.experiments.tables import write_csv
+from aptkt.files import write_text_atomically
 from aptkt.learning import FeaturePipeline
 from aptkt.learning.dataset import load_observations
 
@@ -147,7 +149,8 @@ class _Fig10(Analysis):
             ],
         )
         chosen, index = self.chosen, self.ctx.index
-        (out / "dissimilar.json").write_text(
+        write_text_atomically(
+            out / "dissimilar.json",
             json.dumps(
                 {
                     "dissimilar": chosen,
@@ -156,7 +159,8 @@ class _Fig10(Analysis):
                     "em": self.sim["em"],
                 },
                 indent=2,
-            )
+            ),
+            ConfigError,
         )
 
     def headlines(self) -> list[Headline]:
