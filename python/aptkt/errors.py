@@ -202,10 +202,11 @@ class TrialFault(AptktError):
 
 class TrialInterrupted(KeyboardInterrupt):
     """Ctrl-C in the middle of a trial. Still a :class:`KeyboardInterrupt` (everything stops as
-    for any Ctrl-C), with what the skin had recorded, as on a :class:`TrialFault`."""
+    for any Ctrl-C), with what the skin had recorded, as on a :class:`TrialFault` (``complete``:
+    the action had finished, the signal came while lifting off or waiting)."""
 
-    def __init__(self, cause: KeyboardInterrupt, recording: Recording):
+    def __init__(self, cause: KeyboardInterrupt, recording: Recording, *, complete: bool = False):
         super().__init__(*cause.args)
         self.cause = cause
         self.recording = recording
-        self.complete = False
+        self.complete = complete

@@ -26,6 +26,7 @@ checked before aptkt acts on them or allocates memory for them.
 from __future__ import annotations
 
 import json
+import math
 import os
 import stat
 import uuid
@@ -50,6 +51,8 @@ __all__ = [
     "replaced_atomically",
     "open_atomically",
     "write_text_atomically",
+    "write_json_atomically",
+    "strict_json",
     "present",
 ]
 
@@ -168,6 +171,36 @@ def write_text_atomically(path: str | Path, text: str, error: type[AptktError]) 
     with open_atomically(path, error) as fh:
         fh.write(text)
     return Path(path)
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        value = value.item()
+    elif isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (set, frozenset)):
+        return [_plain(v) for v in sorted(value, key=str)]
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def strict_json(value: Any, *, indent: int | None = 1) -> str:
+    """``value`` as JSON every parser reads: NaN and infinities (an interval over one run, an
+    accuracy without a test set) as ``null`` — whoever wrote them says why beside them —,
+    NumPy numbers and arrays as plain ones, sets as sorted lists, anything else as its text."""
+    return json.dumps(_plain(value), indent=indent, allow_nan=False, default=str)
+
+
+def write_json_atomically(
+    path: str | Path, value: Any, error: type[AptktError], *, indent: int | None = 1
+) -> Path:
+    """:func:`strict_json` of ``value`` written as ``path`` by :func:`write_text_atomically`."""
+    return write_text_atomically(path, strict_json(value, indent=indent), error)
 
 
 def present(path: str | Path) -> bool:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 from collections import defaultdict
 
 import numpy as np
@@ -432,3 +433,45 @@ def test_a_recognition_benchmark_whose_libraries_hold_no_repeat_is_one_line(tmp_
     assert err == [
         "aptkt benchmark: error: action 'touch': no object of the library was observed twice"
     ]
+
+
+def _strict(text: str):
+    def refuse(constant: str):
+        raise AssertionError(f"{constant} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def _estimates(value):
+    if isinstance(value, dict):
+        if {"mean", "low", "high", "n"} <= set(value):
+            yield value
+        for v in value.values():
+            yield from _estimates(v)
+    elif isinstance(value, list):
+        for v in value:
+            yield from _estimates(v)
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        ["--groups", "1", "--new", "3", "--priors", "2", "--budget", "1"],
+        ["--lifelong", "--orders", "1", "--new", "2", "--budget", "1"],
+        ["--recognition", "--groups", "1", "--new", "3", "--priors", "5"],
+    ],
+    ids=["benchmark", "lifelong", "recognition"],
+)
+def test_one_group_gives_strict_json_and_says_why_there_is_no_interval(run, tmp_path, extra):
+    """An interval needs two groups (orders, draws): with one, summary.json holds null with the
+    reason beside it, never a bare NaN, and report.md says why rather than printing nan."""
+    out = tmp_path / "one"
+    assert (
+        main(["benchmark", str(run.parent / "table.csv"), *extra, "-j", "1", "-o", str(out)]) == 0
+    )
+    summary = _strict((out / "summary.json").read_text())
+    found = list(_estimates(summary))
+    assert found and all(e["low"] is None and e["high"] is None for e in found)
+    assert all(e["no_interval"].startswith("1 ") for e in found)
+    report = (out / "report.md").read_text()
+    assert not re.search(r"\bnan\b", report, re.I) and "interval" in report

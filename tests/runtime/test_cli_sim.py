@@ -596,3 +596,49 @@ def test_a_live_run_replaces_links_in_its_output_and_keeps_their_targets(
     assert learn(workdir, prior, out, *argv, *own) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "is the run's own learned_prior.npz" in err[0], err
+
+
+@pytest.mark.parametrize(
+    "when, phase",
+    [
+        ("recognised:", "the recognition touches"),
+        ("step   1", "learning after step 1"),
+    ],
+    ids=["recognising", "updating"],
+)
+def test_ctrl_c_between_trials_writes_the_run_so_far_and_names_where(
+    workdir: Path, prior: Path, tmp_path: Path, when: str, phase: str
+):
+    """Ctrl-C while no trial is under way (the library recognising the touched objects, the
+    models updating): every recording is kept, run.json says where the run stopped, and the
+    interruption's note names the last trial."""
+    actions = actions_from_toml(workdir / "actions.toml")
+    out, record = tmp_path / "out", tmp_path / "out" / "rec.h5"
+    recognising = when == "recognised:"
+    # Recognition's candidates include a known object; learning's are new ones only.
+    objects = ["rough_sponge", *NEW.split(",")] if recognising else NEW.split(",")
+
+    def report(line: str) -> None:
+        if when in line:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt) as err:
+        learn_live(
+            SimSession(),
+            PriorKnowledge.load(prior),
+            LearnerConfig(budget=3),
+            actions,
+            objects,
+            record=record,
+            output=out,
+            report=report,
+            recognise_first=recognising,
+        )
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "interrupted" and run["interrupted"]["during"] == phase
+    assert "/ trial " in run["interrupted"]["after"]
+    if sys.version_info >= (3, 11):
+        note = " ".join(err.value.__notes__)
+        assert f"interrupted at {phase}, after " in note and str(record) in note
+    with DatasetReader(record) as rd:
+        assert len(rd) >= 3

@@ -168,3 +168,24 @@ def test_force_limit_stops_the_slide_in_either_loop(native):
         with pytest.raises(TrialFault, match="SafetyLimitError: .*under force control"):
             explore(s.robot, s.skin, s.placement, act, settings=FAST)
         assert s.engine.wrench() == 0.0  # retracted
+
+
+def test_ctrl_c_in_the_thermal_wait_carries_the_whole_recording_out(monkeypatch):
+    """The action finished and the skin stopped recording; a Ctrl-C while lifting off or
+    waiting for the temperature sensors must not lose that recording: it leaves as a complete
+    TrialInterrupted, which the collectors store as a finished trial."""
+    from aptkt.errors import TrialInterrupted
+
+    world = SimWorld(seed=5)
+    act = PAPER_ACTIONS["P1"]
+    with world.session("towel", "P1", 0, action=act) as s:
+
+        def interrupted(seconds: float) -> None:
+            raise KeyboardInterrupt
+
+        monkeypatch.setattr(s.robot, "wait", interrupted)
+        with pytest.raises(TrialInterrupted) as err:
+            explore(s.robot, s.skin, s.placement, act, settings=FAST)
+    assert err.value.complete and isinstance(err.value.__cause__, KeyboardInterrupt)
+    rec = err.value.recording
+    assert len(rec.samples) > 0 and "aborted" not in rec.metadata

@@ -25,7 +25,7 @@ from typing import Any
 
 from aptkt import __version__
 from aptkt.actions.definition import ExploratoryAction, Movement
-from aptkt.errors import AptktError, InvalidInputError, TrialFault
+from aptkt.errors import AptktError, InvalidInputError, TrialFault, TrialInterrupted
 from aptkt.robot.base import Placement, Robot
 from aptkt.skin.base import SkinSource
 from aptkt.skin.config import ForceCalibration
@@ -156,4 +156,8 @@ def explore(
     except AptktError as exc:
         # The action itself completed: its recording is whole and must not be lost.
         raise TrialFault(exc, out, complete=True) from exc
+    except KeyboardInterrupt as exc:
+        # Ctrl-C while lifting off or in the thermal wait: the same, the skin has stopped
+        # recording and only this carries the whole recording out.
+        raise TrialInterrupted(exc, out, complete=True) from exc
     return out

@@ -103,8 +103,8 @@ def add_scheduler_option(parser: argparse._ActionsContainer) -> None:
 
 
 def scheduler_available(address: str | None) -> None:
-    """With ``--scheduler``, Dask's distributed scheduler must be installed (checked before any
-    work; the address itself is checked when it is reached)."""
+    """With ``--scheduler``, Dask's distributed scheduler must be installed, and the address
+    must answer as a Dask scheduler does (both checked before any work)."""
     if not address:
         return
     try:
@@ -113,6 +113,9 @@ def scheduler_available(address: str | None) -> None:
         raise ConfigError(
             "--scheduler needs dask[distributed]: pip install 'aptkt[dask]'"
         ) from None
+    from aptkt.experiments.executors import check_scheduler
+
+    check_scheduler(address)
 
 
 def jobs(value: int, option: str = "--jobs") -> None:

@@ -260,14 +260,30 @@ class Estimate:
     def significant_negative(self) -> bool:
         return self.high < 0
 
+    @property
+    def why_no_interval(self) -> str | None:
+        """Why there is no interval (too few units), or None when there is one."""
+        if math.isfinite(self.low) and math.isfinite(self.high):
+            return None
+        if self.n == 0:
+            return f"no {self.unit}"
+        one = self.unit.removesuffix("s") if self.n == 1 else self.unit
+        return f"{self.n} {one}: a 95 % interval needs at least 2"
+
     def as_dict(self) -> dict[str, Any]:
-        return {
+        """The estimate for a JSON file; without an interval, ``low`` and ``high`` are null
+        and ``no_interval`` says why."""
+        out: dict[str, Any] = {
             "mean": self.mean,
             "low": self.low,
             "high": self.high,
             "n": self.n,
             "unit": self.unit,
         }
+        why = self.why_no_interval
+        if why is not None:
+            out["no_interval"] = why
+        return out
 
 
 def estimate(

@@ -19,7 +19,6 @@ order, the same first observations, whatever the library size.
 
 from __future__ import annotations
 
-import json
 import time
 import zlib
 from collections.abc import Callable, Iterator, Sequence
@@ -30,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.errors import ConfigError, FeatureTableError, InvalidInputError
-from aptkt.files import write_text_atomically
+from aptkt.files import write_json_atomically, write_text_atomically
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
 from aptkt.learning.observations import Observations, ObservationTable
@@ -429,7 +428,7 @@ def run_benchmark(
     }
     profiles = noise_profile(table.observations(actions))
     summary["noise_profile"] = [p.as_dict() for p in profiles]
-    write_text_atomically(output / "summary.json", json.dumps(summary, indent=1), ConfigError)
+    write_json_atomically(output / "summary.json", summary, ConfigError)
     write_text_atomically(
         output / "report.md", br.report_markdown(c, head, found, profiles), ConfigError
     )

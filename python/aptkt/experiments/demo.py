@@ -38,7 +38,7 @@ from aptkt.experiments.plots import figure, label_shares, learning_curves, save_
 from aptkt.experiments.relatedness_plot import plot_relatedness, relatedness
 from aptkt.experiments.runs import RunSpec, flatten, run_many
 from aptkt.experiments.tables import write_csv
-from aptkt.files import write_text_atomically
+from aptkt.files import write_json_atomically, write_text_atomically
 from aptkt.learning import GPSettings, LearnerConfig, PriorKnowledge
 from aptkt.learning.dataset import extract_features, load_observations, stale_features
 from aptkt.learning.transfer_summary import summary_lines
@@ -300,7 +300,7 @@ def report_results(
             "plots": [str(p) for p in plots],
         },
     }
-    write_text_atomically(out / "summary.json", json.dumps(summary, indent=2), ConfigError)
+    write_json_atomically(out / "summary.json", summary, ConfigError, indent=2)
     write_text_atomically(
         out / "report.md",
         _report_markdown(title, table, transfer, out, plots, heat_maps),

@@ -11,13 +11,21 @@ from __future__ import annotations
 import concurrent.futures as cf
 import multiprocessing
 import os
+import socket
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, Protocol
 
 from aptkt.errors import ConfigError, WorkerDiedError
 from aptkt.runtime.worker_start import exit_with_parent, limit_thread_pools
 
-__all__ = ["Executor", "LocalExecutor", "DaskExecutor", "make_executor"]
+__all__ = ["Executor", "LocalExecutor", "DaskExecutor", "make_executor", "check_scheduler"]
+
+#: Seconds a scheduler has to greet a new connection. Dask's scheduler sends its handshake the
+#: moment it accepts one (milliseconds); something else at the address (a web server, a proxy)
+#: waits for a request, and Dask's client would wait, retry and misread its answer.
+SCHEDULER_GREETING_SECONDS = 10.0
+#: A Dask handshake is a few dozen bytes (its compression, Python version, pickle protocol).
+_GREETING_MAX_BYTES = 1 << 16
 
 # Spawned, never forked: a fork copies the compiled core's thread pool without its threads.
 _SPAWN = multiprocessing.get_context("spawn")
@@ -105,6 +113,58 @@ class LocalExecutor:
             self._pool = None
 
 
+def _receive(sock: socket.socket, n: int, address: str) -> bytes:
+    data = b""
+    while len(data) < n:
+        chunk = sock.recv(n - len(data))
+        if not chunk:
+            raise ConfigError(
+                f"--scheduler {address}: closed the connection without the greeting a Dask "
+                "scheduler sends (is it another service?)"
+            )
+        data += chunk
+    return data
+
+
+def check_scheduler(address: str, seconds: float | None = None) -> None:
+    """That a ``tcp://`` (or bare ``host:port``) address answers as a Dask scheduler does: it
+    greets a new connection at once with a small handshake (a length, then a frame naming its
+    compression, Python and pickle protocol). A web server, a proxy or a silent service is a
+    :class:`ConfigError` within ``seconds``, before Dask's client reads its bytes as lengths
+    to allocate. Other transports (``tls://``, ``inproc://``...) are left to Dask."""
+    scheme, sep, rest = address.partition("://")
+    if not sep:
+        scheme, rest = "tcp", address
+    host, colon, port = rest.rstrip("/").rpartition(":")
+    if scheme != "tcp" or not colon or not port.isdigit():
+        return  # Dask's own parse names what is wrong with the address
+    wait = SCHEDULER_GREETING_SECONDS if seconds is None else seconds
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=wait) as sock:
+            sock.settimeout(wait)
+            length = int.from_bytes(_receive(sock, 8, address), "little")
+            if not 0 < length <= _GREETING_MAX_BYTES:
+                raise ConfigError(
+                    f"--scheduler {address}: answers, but not as a Dask scheduler does (its "
+                    "first bytes are not a Dask handshake; is it another service?)"
+                )
+            greeting = _receive(sock, length, address)
+    except TimeoutError:
+        raise ConfigError(
+            f"--scheduler {address}: answered nothing within {wait:g} s; a Dask scheduler "
+            "greets at once (is it another service?)"
+        ) from None
+    except OSError as exc:
+        raise ConfigError(
+            f"cannot reach the Dask scheduler at {address!r}: {exc.strerror or exc}"
+        ) from None
+    if b"pickle-protocol" not in greeting:
+        raise ConfigError(
+            f"--scheduler {address}: answers, but not with a Dask scheduler's handshake (is it "
+            "another service?)"
+        )
+
+
 class DaskExecutor:
     """Tasks on a Dask distributed cluster reached at ``address`` (``tcp://host:8786``, or an
     existing :class:`dask.distributed.Client` for tests and notebooks)."""
@@ -119,6 +179,8 @@ class DaskExecutor:
         if isinstance(address, Client):
             self.client, self._own = address, False
         else:
+            if isinstance(address, str):
+                check_scheduler(address)
             try:
                 self.client, self._own = Client(address, timeout="20s"), True
             except ValueError as exc:  # dask's parse of the address

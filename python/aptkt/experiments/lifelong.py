@@ -16,7 +16,6 @@ nearest-class-mean rule on the same observations in the same metric (the library
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -29,7 +28,7 @@ from aptkt.errors import ConfigError, FeatureTableError, InvalidInputError
 from aptkt.experiments.benchmark import _subset, each_result, parallel_map_of, split_trials
 from aptkt.experiments.benchmark_report import announce_checks
 from aptkt.experiments.population import ObjectPopulation, schedule
-from aptkt.files import write_text_atomically
+from aptkt.files import write_json_atomically, write_text_atomically
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
 from aptkt.learning.library import merge_priors
@@ -375,7 +374,7 @@ def run_lifelong(
         "results": lr.summary(c),
         "checks": [k.as_dict() for k in found],
     }
-    write_text_atomically(output / "summary.json", json.dumps(summary, indent=1), ConfigError)
+    write_json_atomically(output / "summary.json", summary, ConfigError)
     write_text_atomically(output / "report.md", lr.report_markdown(c, head, found), ConfigError)
     held = announce_checks(found, say)
     say(

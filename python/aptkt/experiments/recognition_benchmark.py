@@ -8,7 +8,6 @@ threshold chosen on the library."""
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -19,8 +18,8 @@ import numpy as np
 from aptkt.errors import ConfigError, FeatureTableError
 from aptkt.experiments.aggregate import estimate
 from aptkt.experiments.benchmark import split_trials
-from aptkt.experiments.report import markdown_table
-from aptkt.files import write_text_atomically
+from aptkt.experiments.report import ci, markdown_table
+from aptkt.files import write_json_atomically, write_text_atomically
 from aptkt.learning import PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
 
@@ -131,7 +130,9 @@ def run_recognition_benchmark(
             [
                 what,
                 f"{e.mean:.3f}",
-                f"[{e.low:.3f}, {e.high:.3f}]",
+                f"[{e.low:.3f}, {e.high:.3f}]"
+                if e.why_no_interval is None
+                else f"no interval ({e.why_no_interval})",
                 f"{min(r[key] for r in rows):.3f}",
             ]
         )
@@ -139,7 +140,7 @@ def run_recognition_benchmark(
         [r["accuracy"] - r["ncm"] for r in rows], units=list(range(groups)), unit_name="draw"
     )
     summary["results"]["accuracy - ncm"] = diff.as_dict()
-    write_text_atomically(output / "summary.json", json.dumps(summary, indent=1), ConfigError)
+    write_json_atomically(output / "summary.json", summary, ConfigError)
     report = [
         f"# Recognition benchmark: {table.path}",
         "",
@@ -152,8 +153,7 @@ def run_recognition_benchmark(
         "",
         markdown_table(["", "mean", "95 % interval", "lowest draw"], lines),
         "",
-        f"Accuracy − nearest class mean, paired by draw: {100 * diff.mean:+.1f} pp "
-        f"[{100 * diff.low:+.1f}, {100 * diff.high:+.1f}].",
+        f"Accuracy − nearest class mean, paired by draw: {ci(diff)}.",
         "",
     ]
     write_text_atomically(output / "report.md", "\n".join(report), ConfigError)

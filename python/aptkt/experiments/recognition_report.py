@@ -4,7 +4,6 @@ it prints."""
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -12,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.errors import ConfigError
-from aptkt.files import write_text_atomically
+from aptkt.files import write_json_atomically
 from aptkt.learning.recognition import Recognition
 
 __all__ = ["summary_lines", "write_recognition", "plot_confusion"]
@@ -129,9 +128,7 @@ def write_recognition(
 
     output.mkdir(parents=True, exist_ok=True)
     written = [write_csv(output / "predictions.csv", result.rows())]
-    write_text_atomically(
-        output / "summary.json", json.dumps({**head, **summary(result)}, indent=1), ConfigError
-    )
+    write_json_atomically(output / "summary.json", {**head, **summary(result)}, ConfigError)
     written.append(output / "summary.json")
     written += save_figure(plot_confusion(result), output / "confusion")
     for line in summary_lines(result):

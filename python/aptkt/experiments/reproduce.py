@@ -38,7 +38,7 @@ from aptkt.experiments.report import markdown_table, render_report
 from aptkt.experiments.run_store import RunStore, data_fingerprint, run_key
 from aptkt.experiments.runs import label
 from aptkt.experiments.scale import Scale
-from aptkt.files import open_atomically, write_text_atomically
+from aptkt.files import open_atomically, write_json_atomically, write_text_atomically
 from aptkt.learning import LearnerConfig
 from aptkt.learning.dataset import extract_features, stale_features
 from aptkt.runtime.generation import GenerationPlan, generate
@@ -316,19 +316,9 @@ def _write(
         "numbers": {sec.figure: sec.numbers for sec in sections},
         "files": {sec.figure: sec.files for sec in sections},
     }
-    write_text_atomically(
-        out / "summary.json", json.dumps(summary, indent=2, default=_json_default), ConfigError
-    )
+    write_json_atomically(out / "summary.json", summary, ConfigError, indent=2)
     _say(f"report: {out / 'report.md'}  ({seconds:.0f} s)")
     return summary
-
-
-def _json_default(v: Any) -> Any:
-    if isinstance(v, np.generic):
-        return v.item()
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    return str(v)
 
 
 def _flat_settings(

@@ -33,7 +33,7 @@ from aptkt import __version__
 from aptkt.actions import ExploratoryAction
 from aptkt.data.store import DatasetReader, DatasetWriter
 from aptkt.errors import AptktError, ConfigError
-from aptkt.files import open_atomically, write_text_atomically
+from aptkt.files import open_atomically, write_json_atomically
 from aptkt.learning.config import LearnerConfig
 from aptkt.learning.environment import PrefetchedEnvironment, RecordingEnvironment
 from aptkt.learning.extract import ExtractionSettings
@@ -41,7 +41,7 @@ from aptkt.learning.learner import APTKT, StepRecord
 from aptkt.learning.observations import ObservationTable
 from aptkt.learning.prior import PriorKnowledge
 from aptkt.learning.transfer_summary import describe, final_decisions, summary_lines
-from aptkt.runtime.salvage import note_interruption, salvage
+from aptkt.runtime.salvage import Salvaged, note_interruption, salvage
 
 __all__ = ["LiveLearningAborted", "learn_live", "describe_step", "NO_TEST_NOTE"]
 
@@ -156,11 +156,15 @@ def learn_live(
         },
     )
     failure: dict[str, Any] = {}
+    # Where the run is between trials, for an interruption there (no trial to name).
+    progress = {"phase": "the first round of touches", "last": "no trial yet"}
 
     def explore(obj: str, action: ExploratoryAction, trial: int) -> Any:
         report(f"  exploring {obj} with {action.name} (trial {trial})")
         try:
-            return session.explore(obj, action, trial)
+            recording = session.explore(obj, action, trial)
+            progress["last"] = f"{obj} / {action.name} / trial {trial}"
+            return recording
         except (AptktError, KeyboardInterrupt) as exc:
             kept = salvage(exc, writer, record)
             failure.update(
@@ -176,6 +180,7 @@ def learn_live(
 
     def on_step(rec: StepRecord) -> None:
         steps.append(rec)
+        progress["phase"] = f"learning after step {rec.step}"
         report(describe_step(rec, config, n_pairs))
 
     env: Any = RecordingEnvironment(
@@ -188,6 +193,7 @@ def learn_live(
     try:
         if recognise_first:
             assert prior is not None  # recognition needs a library
+            progress["phase"] = "the recognition touches"
             touched = _recognise(env, prior, list(actions), list(new_objects), report)
             summary["recognition"] = touched["rows"]
             new_objects = touched["new"]
@@ -199,16 +205,26 @@ def learn_live(
                 )
                 summary["status"] = "recognised"
                 summary["seconds"] = time.perf_counter() - t0
-                write_text_atomically(
-                    output / "run.json",
-                    json.dumps(_finite(summary), indent=2, default=_json),
-                    ConfigError,
-                )
+                write_json_atomically(output / "run.json", summary, ConfigError, indent=2)
                 return summary
             env = PrefetchedEnvironment(env, touched["observations"])
         run = learner.run(env, list(actions), list(new_objects), test=test, on_step=on_step)
         summary["stopped_early"] = run.stopped_early
     except (AptktError, KeyboardInterrupt) as exc:
+        if not failure and isinstance(exc, KeyboardInterrupt):
+            # Ctrl-C between trials (recognising, updating the models): no recording was under
+            # way; the run so far is written as after an interruption mid-trial.
+            summary["stopped_early"] = True
+            summary["interrupted"] = {"during": progress["phase"], "after": progress["last"]}
+            _finish(summary, steps, learner, config, output, "interrupted", t0, report)
+            note_interruption(
+                exc,
+                f"{progress['phase']}, after {progress['last']}",
+                Salvaged(exc, None, "no trial was under way"),
+                f"every completed recording is in {record}",
+                f"the run so far ({len(steps)} steps) is in {output}",
+            )
+            raise
         if not failure:
             raise  # not a fault of the robot or skin (e.g. a learning error): nothing to add
         cause = failure["cause"]
@@ -327,9 +343,7 @@ def _finish(
         except ValueError as exc:  # e.g. an action observed on one object only (an early fault)
             summary["learned_prior_error"] = str(exc)
     summary["seconds"] = time.perf_counter() - t0
-    write_text_atomically(
-        output / "run.json", json.dumps(_finite(summary), indent=2, default=_json), ConfigError
-    )
+    write_json_atomically(output / "run.json", summary, ConfigError, indent=2)
     _write_steps(output / "steps.csv", steps)
     _write_transfer(output / "transfer.csv", steps)
     if config.transfers and steps:
@@ -345,30 +359,6 @@ def _finish(
             else ""
         )
     )
-
-
-def _finite(obj: Any) -> Any:
-    """NaN (accuracy without a test set) and infinities become null: strict JSON."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    return obj
-
-
-def _json(obj: Any) -> Any:
-    try:
-        if isinstance(obj, np.generic):
-            return obj.item()
-        if isinstance(obj, np.ndarray):
-            return obj.tolist()
-    except ImportError:  # pragma: no cover
-        pass
-    if isinstance(obj, (set, tuple)):
-        return list(obj)
-    return str(obj)
 
 
 def _write_steps(path: Path, steps: Sequence[StepRecord]) -> None:
