@@ -16,6 +16,7 @@ from loopback_helpers import (
     free_loopback_host,
     in_contact,
 )  # noqa: E402
+from timing import LatenessProbe
 
 from aptkt.robot import UR10, Robot, SafetyLimits  # noqa: E402
 from aptkt.sim.loopback import Loopback  # noqa: E402
@@ -68,26 +69,44 @@ def test_approach_stops_at_light_contact(robot, loopback, skin):
     assert 0.05 < state["normal_force"] < 0.15
 
 
+class _Lateness:
+    """How late this process ran work that asks for a fifth of a core on time, while a test's
+    motion ran (tests/helpers/timing.py): the margin a duration measured on the host needs
+    beyond the test's own, since a sample read late is stamped late."""
+
+    def __enter__(self) -> _Lateness:
+        self._probe = LatenessProbe(period=0.005, work=0.001, catch_up=2.0).start()
+        self._since = time.monotonic()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.seconds = self._probe.worst(self._since)
+        self._probe.stop()
+
+
 def test_press_indents_to_the_depth_and_holds_still(robot, loopback, skin):
     z = in_contact(robot, skin)
-    start = time.monotonic_ns()
-    robot.press(0.002, 0.4)
-    end = time.monotonic_ns()
+    with _Lateness() as late:
+        start = time.monotonic_ns()
+        robot.press(0.002, 0.4)
+        end = time.monotonic_ns()
     state = at_rest(loopback)
     assert state["pose"][2] == pytest.approx(z - 0.002, abs=1e-6)
     assert state["normal_force"] == pytest.approx(STIFFNESS * (SURFACE_Z - (z - 0.002)), rel=1e-6)
     trace = robot.trace(start, end)
     still = np.abs(trace["tcp_pose"][:, 2] - (z - 0.002)) < 1e-9
     held = (trace["host_t_ns"][still][-1] - trace["host_t_ns"][still][0]) * 1e-9
-    assert held >= 0.4 - 0.02
+    margin = 0.02 + late.seconds
+    assert held >= 0.4 - margin
     start_ns, stop_ns = robot.action_window_ns
-    assert (stop_ns - start_ns) * 1e-9 == pytest.approx(0.4, abs=0.02)
+    assert (stop_ns - start_ns) * 1e-9 == pytest.approx(0.4, abs=margin)
     in_window = (trace["host_t_ns"] >= start_ns) & (trace["host_t_ns"] < stop_ns)
     assert np.all(still[in_window])  # the window is the hold
-    # From the control cycle after landing on, the arm does not move at all.
+    # From the control cycle after landing on, the arm does not move at all (read at 125 Hz:
+    # a stall of the reader costs one sample per control period it lasts).
     landed = trace["robot_timestamp"][still][0]
     after = trace["robot_timestamp"] > landed + 1e-6
-    assert after.sum() > 30
+    assert after.sum() >= max(1, 30 - int(late.seconds * 125))
     assert np.all(np.linalg.norm(trace["tcp_speed"][after, :3], axis=1) == 0.0)
 
 
@@ -156,18 +175,20 @@ def test_a_whole_exploratory_action_keeps_the_controller_running(robot, loopback
 
 def test_recording_metadata_relates_host_and_robot_clocks(robot, loopback, skin):
     in_contact(robot, skin)
-    start = robot.now_ns()
-    robot.press(0.001, 0.3)
-    stop = robot.now_ns()
+    with _Lateness() as late:
+        start = robot.now_ns()
+        robot.press(0.001, 0.3)
+        stop = robot.now_ns()
     meta = robot.recording_metadata(start, stop)
     trace = meta["robot_trace"]
     host = np.array(trace["host_t_ns"])
     robot_t = np.array(trace["robot_timestamp"])
-    assert len(host) > 20 and np.all((host >= start) & (host < stop))
+    assert len(host) > 20 * (1 - late.seconds / 0.3) and np.all((host >= start) & (host < stop))
     assert np.all(np.diff(robot_t) >= 0) and robot_t[-1] > robot_t[0]
-    # host - robot clock is one offset, up to the read latency of a few control periods.
+    # host - robot clock is one offset, up to the read latency of a few control periods and
+    # however late this process read.
     spread = (host - robot_t * 1e9) - meta["robot_clock_offset_ns"]
-    assert np.max(np.abs(spread)) < 30e6
+    assert np.max(np.abs(spread)) < 30e6 + late.seconds * 1e9
     assert meta["robot_frequency_hz"] == 125.0
     assert np.array(trace["skin_force"]).max() > 0.1
 
