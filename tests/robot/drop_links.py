@@ -47,7 +47,8 @@ def main(n: int) -> None:
                 robot.press(0.001, 3.0)
                 raise AssertionError("the press ended although the link was dropped")
             except RobotError as exc:
-                reason = type(exc).__name__
+                # The type decides; the message says why when a drop is reported otherwise.
+                reason = f"{type(exc).__name__} ({' '.join(str(exc).split())[:200]})"
             finally:
                 robot.close()  # the path of a live session's __exit__
             del robot
