@@ -273,9 +273,7 @@ def _write(
     """config.json, the report (whole and per figure) and summary.json."""
     ctx, sections, batch, out = done.ctx, done.sections, done.batch, Path(s.output)
     config = _config(s, scale, ctx, done.data_info, done.plans)
-    write_text_atomically(
-        out / "config.json", json.dumps(config, indent=2, default=str), ConfigError
-    )
+    write_json_atomically(out / "config.json", config, ConfigError, indent=2)
     run_info: dict[str, Any] = {
         "command": s.command or f"aptkt reproduce {' '.join(s.figures)}",
         "software_version": __version__,

@@ -222,12 +222,13 @@ def check_action(path: Path, arrays: dict[str, np.ndarray], prefix: str, action:
     dims = {}
     for m in obs_mods:
         a = c.get(f"obs/modality/{m}", "f", 2, lambda s: s[0] == n, f" with {n} rows")
-        if a.size and float(np.max(np.abs(a))) > MAX_MAGNITUDE:
+        largest = float(np.max(np.abs(a))) if a.size else 0.0
+        if largest > MAX_MAGNITUDE:
             # As a table's: refitting the library (a merge) would square them into infinity.
             raise c.fail(
                 f"obs/modality/{m}",
-                f"a value of {float(np.max(np.abs(a))):g} is beyond ±{MAX_MAGNITUDE:g}; no "
-                "sensor's feature is that large",
+                f"a value of {largest:g} is beyond ±{MAX_MAGNITUDE:g}; no sensor's feature is "
+                "that large",
             )
         dims[m] = a.shape[1]
     pipe_mods = c.get("pipeline/modalities", "U", 1).tolist()

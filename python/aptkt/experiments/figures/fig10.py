@@ -9,7 +9,6 @@ confusion matrices, rescaled.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +27,7 @@ from aptkt.experiments.similarity import (
     rescale,
 )
 from aptkt.experiments.tables import write_csv
-from aptkt.files import write_text_atomically
+from aptkt.files import write_json_atomically
 from aptkt.learning import FeaturePipeline
 from aptkt.learning.dataset import load_observations
 
@@ -149,18 +148,16 @@ class _Fig10(Analysis):
             ],
         )
         chosen, index = self.chosen, self.ctx.index
-        write_text_atomically(
+        write_json_atomically(
             out / "dissimilar.json",
-            json.dumps(
-                {
-                    "dissimilar": chosen,
-                    "dissimilar_numbers": {k: [index[o] for o in v] for k, v in chosen.items()},
-                    "scores": self.sim["scores"],
-                    "em": self.sim["em"],
-                },
-                indent=2,
-            ),
+            {
+                "dissimilar": chosen,
+                "dissimilar_numbers": {k: [index[o] for o in v] for k, v in chosen.items()},
+                "scores": self.sim["scores"],
+                "em": self.sim["em"],
+            },
             ConfigError,
+            indent=2,
         )
 
     def headlines(self) -> list[Headline]:
