@@ -1,10 +1,12 @@
 # Two entry points do all set-up on a fresh machine (see README):
 #   make demo   -> virtual environment, Rust build, end-to-end demo on the simulated world
 #   make test   -> virtual environment, Rust build, cargo tests of the core crates, pytest
+#                  (all but the tests of the installed wheel, which make release-check runs)
 #   make test-quick -> pytest without the tests marked slow: a developer's loop (CI runs make test)
 #   make lint   -> ruff (lint, format), mypy on the package, clippy and rustfmt
 #   make docs   -> the documentation site (mkdocs.yml) into site/, warnings as errors
-#   make release-check -> the manylinux wheel and the sdist, checked as a lab would install them
+#   make release-check -> the manylinux wheel and the sdist, checked as a lab would install them,
+#                  and the tests marked release (the wheel installed in a fresh environment)
 #
 # Every build shares target/ and compiles each shared crate with the same profile (release) and
 # the same features (cargo resolves the whole workspace for the tests, the extension's crate
@@ -88,11 +90,13 @@ sdist: release-tools
 # (tests/packaging/release_check.py).
 # SDIST_INSTALL=no skips building the sdist: a full Rust build from scratch (docs/install.md).
 SDIST_INSTALL ?= yes
-release-check: wheel sdist
+release-check: install-test wheel sdist
 	@echo "==> release check"
 	$(PY) tests/packaging/release_check.py --wheel "$$(ls $(DIST)/aptkt-*_$(ARCH).whl)" \
 		--sdist "$$(ls $(DIST)/aptkt-*.tar.gz)" --manylinux $(MANYLINUX) \
 		$(if $(filter no,$(SDIST_INSTALL)),--no-sdist-install)
+	@echo "==> the tests of the installed wheel (marked release)"
+	APTKT_WHEEL="$$(ls $(DIST)/aptkt-*_$(ARCH).whl)" $(PY) -m pytest -m release tests/packaging $(PYTEST_ARGS)
 
 # Static gates. mypy reads python/aptkt with the core's stub (_core.pyi), so it needs the
 # package's dependencies (numpy's types) but not the compiled extension. Clippy's lints are
@@ -108,19 +112,20 @@ test-rust:
 	@echo "==> Rust tests of the core crates (release profile, reusing the extension's build)"
 	cargo test --release --workspace
 
-# tests/packaging installs the wheel into a fresh virtual environment.
-test-python: install-test wheel
-	@echo "==> Python tests"
-	APTKT_WHEEL="$$(ls $(DIST)/aptkt-*_$(ARCH).whl)" $(PY) -m pytest -n $(PYTEST_WORKERS) $(PYTEST_ARGS)
+# The tests marked release install the manylinux wheel, a second full Rust build (zig): they
+# belong to make release-check, which CI runs after this.
+test-python: install-test
+	@echo "==> Python tests (those marked release: make release-check)"
+	$(PY) -m pytest -n $(PYTEST_WORKERS) -m "not release" $(PYTEST_ARGS)
 
 test: test-rust test-python
 
 # A developer's loop: the Python tests but those marked slow (the long end-to-end runs: killed
 # processes, dropped links, the demo, the installed wheel), no Rust tests, no wheel. CI runs
-# `make test`, which runs everything.
+# `make test` and `make release-check`, which together run everything.
 test-quick: install-test
 	@echo "==> Python tests without those marked slow"
-	$(PY) -m pytest -n $(PYTEST_WORKERS) -m "not slow" $(PYTEST_ARGS)
+	$(PY) -m pytest -n $(PYTEST_WORKERS) -m "not slow and not release" $(PYTEST_ARGS)
 
 # The site's tools alone: mkdocstrings reads the docstrings from python/ without importing aptkt,
 # so the docs need no Rust build. pip reads the pinned [docs] list from pyproject.toml's

@@ -31,13 +31,20 @@ def write_csv(path: Path, objects: int, rows_per_object: int, columns: int, valu
     """``objects`` objects of one action ``a``, each ``rows_per_object`` trials, ``columns``
     feature columns ``f.<k>``; ``value``: put into row 2, column f.1."""
     rng = np.random.default_rng(0)
+    # Rows drawn from a few dozen bodies per object centre: the limits are on sizes, and writing
+    # millions of distinct cells would cost the test most of its time.
+    bodies = [
+        [
+            ",".join(f"{centre}.{int(x)}" for x in rng.integers(0, 9, size=columns))
+            for _ in range(31)
+        ]
+        for centre in range(7)
+    ]
     with path.open("w") as fh:
         fh.write("object,action,trial," + ",".join(f"f.{k}" for k in range(columns)) + "\n")
         for o in range(objects):
-            centre = f"{o % 7}"
-            for t in range(rows_per_object):
-                cells = [f"{centre}.{int(x)}" for x in rng.integers(0, 9, size=columns)]
-                fh.write(f"o{o},a,{t}," + ",".join(cells) + "\n")
+            own = bodies[o % 7]
+            fh.writelines(f"o{o},a,{t},{own[(o + t) % len(own)]}\n" for t in range(rows_per_object))
     if value is not None:
         lines = path.read_text().splitlines()
         cells = lines[2].split(",")

@@ -1,8 +1,9 @@
 """The package as users install it: the abi3 wheel in a fresh virtual environment, with no
 source tree on the path.
 
-The wheel is the one ``make wheel`` built (``APTKT_WHEEL``, as ``make test`` passes it); without
-it the test runs ``make wheel`` (the pinned maturin and zig, into dist/).
+Marked ``release``: ``make release-check`` runs these on the wheel it built (``APTKT_WHEEL``);
+``make test`` leaves them out, since the wheel is a second full Rust build (zig). Run alone
+without ``APTKT_WHEEL``, the test runs ``make wheel`` (the pinned maturin and zig, into dist/).
 
 The fresh environment gets the wheel without dependencies; numpy, h5py, ... come from the
 environment running the tests through a path entry (not its ``.pth`` files, so an editable
@@ -41,7 +42,7 @@ from release_check import manylinux_glibc  # noqa: E402
 # The one place the version is written.
 VERSION = tomllib.loads((ROOT / "Cargo.toml").read_text())["workspace"]["package"]["version"]
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.release]
 
 
 @pytest.fixture(scope="module")
