@@ -207,41 +207,68 @@ def _curves(base, aptkt, aux=None, nn=0.5, falls=False, control=None, flat=False
     return {3: {"random": c, "farthest": {k: v.copy() for k, v in c.items()}}}
 
 
+#: A failing claim's fragment and its kind: an invariant must hold on any data; a reference
+#: figure (the paper's, the BioTac set's) is reported as reached or not.
+INV, REF = br.INVARIANT, br.REFERENCE
+
+
 @pytest.mark.parametrize(
     "curves, failing",
     [
         (_curves(0.6, 0.75), []),
-        (_curves(0.6, 0.65), ["baseline + 10 pp"]),
-        (_curves(0.6, 0.75, nn=0.8), ["its own feature space", "shrunk covariance"]),
+        (_curves(0.6, 0.65), [("baseline + 10 pp", REF)]),
+        (
+            _curves(0.6, 0.75, nn=0.8),
+            [("its own feature space", REF), ("shrunk covariance", REF)],
+        ),
         (
             _curves(0.6, 0.55),
             [
-                "baseline + 10 pp",
-                "least similar",
-                "random priors: APTKT never below the baseline",
-                "keeps learning",
+                ("baseline + 10 pp", REF),
+                ("least similar", INV),
+                ("random priors: APTKT never below the baseline", INV),
+                ("end of the budget", INV),
             ],
         ),
-        (_curves(0.6, 0.75, aux=-0.01), ["auxiliary"]),
+        (_curves(0.6, 0.75, aux=-0.01), [("auxiliary", INV)]),
         (_curves(0.6, 0.75, aux=-0.003), []),  # within the tolerance of an addition
-        (_curves(0.6, 0.75, falls=True), ["unlearns"]),
-        (_curves(0.6, 0.75, control=0.76), ["never costs"]),
-        (_curves(0.6, 0.75, flat=True), ["keeps learning"]),
+        (_curves(0.6, 0.75, falls=True), [("unlearns", INV)]),
+        (_curves(0.6, 0.75, control=0.76), [("never costs", INV)]),
+        (_curves(0.6, 0.75, flat=True), [("keeps learning", REF)]),
     ],
 )
 def test_each_check_fails_exactly_when_its_claim_does(curves, failing):
     found = br.checks(curves)
-    assert len(found) == 9
-    failed = [k.claim for k in found if not k.holds]
-    assert len(failed) == len(failing), failed
-    for fragment in failing:
-        assert any(fragment in claim for claim in failed), (fragment, failed)
+    assert len(found) == 10
+    failed = [k for k in found if not k.holds]
+    assert len(failed) == len(failing), [k.claim for k in failed]
+    for fragment, kind in failing:
+        (check,) = [k for k in failed if fragment in k.claim]
+        assert check.kind == kind, check
+        assert check.verdict == ("not reached" if kind == REF else "fails")
 
 
-@pytest.mark.parametrize("large, holds", [(0.72, True), (0.69, False), (0.80, True)])
+def test_the_report_and_the_console_keep_invariants_apart_from_reference_figures():
+    """A healthy run on a sensor unlike the paper's: every invariant holds, the one-shot
+    reference is not reached. The report says so in two tables; the console line counts the
+    invariants as checks and the references as figures reached."""
+    found = br.checks(_curves(0.6, 0.65))
+    table = br.checks_table(found, unit="6 groups")
+    must, ref = table.split("### Reference figures")
+    assert "### What must hold on any data" in must and "over 6 groups" in must
+    assert "fails" not in must and "not reached" not in must
+    assert "| not reached |" in ref and "baseline + 10 pp" in ref and "holds" not in ref
+    said: list[str] = []
+    assert br.announce_checks(found, said.append) == 6
+    assert not any("FAILS" in line for line in said)
+    assert any(line.startswith("  not reached: random priors: APTKT ≥ baseline") for line in said)
+    assert br.checks_line(found) == "6 of 6 checks hold; 3 of 4 reference figures reached"
+
+
+@pytest.mark.parametrize("large, holds", [(0.72, True), (0.69, False), (0.80, True), (0.70, True)])
 def test_the_gain_must_not_shrink_as_the_library_grows(large, holds):
     """With several library sizes: the largest library's one-shot gain at least the smallest's
-    − 1 pp and at least +10 pp."""
+    − 1 pp (an invariant; +10 pp is each size's own reference figure)."""
     small = _curves(0.6, 0.71)[3]
     grown = _curves(0.6, large)[3]
     found = br.checks({3: small, 15: grown})
@@ -282,19 +309,46 @@ def test_the_command_refuses_to_overwrite_and_reports_mistakes_in_one_line(run, 
     assert BenchmarkSettings().groups == 60
 
 
-def test_strict_exits_1_when_a_check_fails_and_writes_the_results(run, tmp_path, capsys):
-    """One group of 3 new objects: the +10 pp interval check cannot hold (no interval), so
-    --strict fails the command; without --strict it succeeds; the results exist either way."""
+def test_strict_gates_on_invariants_and_strict_reference_also_on_reference_figures(
+    run, tmp_path, capsys
+):
+    """One group of 3 new objects: the one-shot reference figure needs an interval above +5 pp
+    and one group gives none, so it is not reached: --strict-reference fails the command,
+    --strict fails it exactly when an invariant failed, and without either it succeeds; the
+    results exist either way."""
     table = run.parent / "table.csv"
     base = ["benchmark", str(table), "--groups", "1", "--new", "3", "--priors", "2"]
     base += ["--budget", "1", "--choices", "random", "-j", "1", "--no-progress"]
     assert main([*base, "-o", str(tmp_path / "lax")]) == 0
-    assert main([*base, "-o", str(tmp_path / "strict"), "--strict"]) == 1
+    assert main([*base, "-o", str(tmp_path / "ref"), "--strict-reference"]) == 1
     err = capsys.readouterr().err
-    assert "check(s) failed (--strict)" in err
-    summary = json.loads((tmp_path / "strict" / "summary.json").read_text())
-    assert any(not c["holds"] for c in summary["checks"])
-    assert (tmp_path / "strict" / "report.md").exists()
+    assert "check(s) failed or not reached (--strict-reference)" in err
+    summary = json.loads((tmp_path / "ref" / "summary.json").read_text())
+    one_shot = [c for c in summary["checks"] if "baseline + 10 pp" in c["claim"]]
+    assert [(c["kind"], c["verdict"]) for c in one_shot] == [("reference", "not reached")]
+    assert (tmp_path / "ref" / "report.md").exists()
+    invariant_failed = any(not c["holds"] for c in summary["checks"] if c["kind"] == "invariant")
+    assert main([*base, "-o", str(tmp_path / "strict"), "--strict"]) == int(invariant_failed)
+
+
+@pytest.mark.parametrize(
+    "checks, strict, reference, code",
+    [
+        ([("invariant", True), ("reference", False)], True, False, 0),
+        ([("invariant", True), ("reference", False)], True, True, 1),
+        ([("invariant", False), ("reference", True)], True, False, 1),
+        ([("invariant", False)], False, False, 0),
+        ([("reference", True), ("invariant", True)], True, True, 0),
+    ],
+)
+def test_strict_counts_only_the_kinds_it_is_asked_for(tmp_path, checks, strict, reference, code):
+    from argparse import Namespace
+
+    from aptkt.commands.benchmark import _strict_exit
+
+    summary = {"checks": [{"claim": "c", "holds": h, "kind": k} for k, h in checks]}
+    args = Namespace(strict=strict, strict_reference=reference, output=tmp_path)
+    assert _strict_exit(args, summary) == code
 
 
 def test_progress_goes_to_a_log_as_lines(run, tmp_path, capfd, monkeypatch):

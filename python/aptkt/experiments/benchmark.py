@@ -432,9 +432,9 @@ def run_benchmark(
     write_text_atomically(
         output / "report.md", br.report_markdown(c, head, found, profiles), ConfigError
     )
-    held = br.announce_checks(found, say)
+    br.announce_checks(found, say)
     say(
-        f"{held} of {len(found)} checks hold; done in {seconds:.0f} s: "
+        f"{br.checks_line(found)}; done in {seconds:.0f} s: "
         f"{', '.join(str(p) for p in written)}, {output / 'results.csv'}"
     )
     return summary

@@ -94,31 +94,107 @@ def _paired(a: np.ndarray, b: np.ndarray) -> Estimate:
     return estimate(a - b, units=list(range(len(a))), unit_name="group")
 
 
+#: What a check is. An invariant must hold on any sensor's data: a failure means the method or
+#: the software misbehaved. A reference figure is what the paper and the BioTac set showed; on
+#: another sensor's data it may or may not be reached, and neither is a fault.
+INVARIANT, REFERENCE = "invariant", "reference"
+CHECK_KINDS = (INVARIANT, REFERENCE)
+
+
 @dataclass(frozen=True)
 class Check:
-    """One property the method must have on real data, judged from the runs."""
+    """One property judged from the runs: an invariant (``holds``/``fails``) or a reference
+    figure (``reached``/``not reached``)."""
 
     claim: str
     measured: str
     holds: bool
+    kind: str = INVARIANT
+
+    def __post_init__(self) -> None:
+        if self.kind not in CHECK_KINDS:
+            raise ValueError(f"a check is one of {CHECK_KINDS}, not {self.kind!r}")
+
+    @property
+    def verdict(self) -> str:
+        if self.kind == REFERENCE:
+            return "reached" if self.holds else "not reached"
+        return "holds" if self.holds else "fails"
 
     def as_dict(self) -> dict[str, Any]:
-        return {"claim": self.claim, "measured": self.measured, "holds": self.holds}
+        return {
+            "claim": self.claim,
+            "measured": self.measured,
+            "holds": self.holds,
+            "kind": self.kind,
+            "verdict": self.verdict,
+        }
 
 
-def checks_table(found: Sequence[Check]) -> str:
-    """The report's table of checks."""
-    return markdown_table(
-        ["", "claim", "measured"],
-        [["holds" if k.holds else "**fails**", k.claim, k.measured] for k in found],
-    )
+def failed_checks(checks: Sequence[Mapping[str, Any]], kinds: Sequence[str]) -> list[Mapping]:
+    """The checks of a summary (``as_dict``) of the given kinds that do not hold; a summary
+    written before checks had kinds counts every check as an invariant."""
+    return [c for c in checks if not c["holds"] and c.get("kind", INVARIANT) in kinds]
+
+
+def checks_table(found: Sequence[Check], unit: str = "") -> str:
+    """The report's checks: first what must hold on any data, then the reference figures."""
+    parts = []
+    note = f" Intervals: 95 %, over {unit}." if unit else ""
+    for kind, title, intro in (
+        (
+            INVARIANT,
+            "### What must hold on any data",
+            "A failure here means the method misbehaved on this data." + note,
+        ),
+        (
+            REFERENCE,
+            "### Reference figures",
+            "What the paper and the public BioTac set showed. Another sensor's data may or may "
+            "not reach them; not reaching one is no fault.",
+        ),
+    ):
+        rows = [k for k in found if k.kind == kind]
+        if not rows:
+            continue
+        verdict = (
+            (lambda k: k.verdict)
+            if kind == REFERENCE
+            else (lambda k: "holds" if k.holds else "**fails**")
+        )
+        parts += [
+            title,
+            "",
+            intro,
+            "",
+            markdown_table(
+                ["", "claim", "measured"], [[verdict(k), k.claim, k.measured] for k in rows]
+            ),
+            "",
+        ]
+    return "\n".join(parts).rstrip("\n")
 
 
 def announce_checks(found: Sequence[Check], say: Callable[[str], None]) -> int:
-    """One line per check on the console; returns how many hold."""
-    for k in found:
-        say(f"  {'holds' if k.holds else 'FAILS'}: {k.claim} — {k.measured}")
-    return sum(k.holds for k in found)
+    """One line per check on the console, the invariants first; returns how many invariants
+    hold (the reference figures are reported, not counted)."""
+    for kind in CHECK_KINDS:
+        for k in found:
+            if k.kind == kind:
+                say(
+                    f"  {k.verdict.upper() if k.verdict == 'fails' else k.verdict}: {k.claim} — {k.measured}"
+                )
+    return sum(k.holds for k in found if k.kind == INVARIANT)
+
+
+def checks_line(found: Sequence[Check]) -> str:
+    """``5 of 5 checks hold; 2 of 4 reference figures reached``."""
+    inv = [k for k in found if k.kind == INVARIANT]
+    ref = [k for k in found if k.kind == REFERENCE]
+    text = f"{sum(k.holds for k in inv)} of {len(inv)} checks hold"
+    if ref:
+        text += f"; {sum(k.holds for k in ref)} of {len(ref)} reference figures reached"
+    return text
 
 
 def _largest_fall(values: np.ndarray) -> tuple[float, int]:
@@ -155,8 +231,9 @@ def _library_checks(size: int, choice: str, m: Mapping[str, np.ndarray], sizes: 
             Check(
                 f"{who}: APTKT ≥ baseline + {100 * PAPER_ONE_SHOT_GAIN:.0f} pp at one "
                 "observation per object, its interval above +5 pp",
-                ci(gain),
+                ci(gain, cell=True),
                 gain.mean >= PAPER_ONE_SHOT_GAIN - ROUNDING and gain.low > 0.05,
+                REFERENCE,
             )
         )
         for ref, what in (
@@ -166,7 +243,12 @@ def _library_checks(size: int, choice: str, m: Mapping[str, np.ndarray], sizes: 
             if ref in m:
                 nn = _paired(m["APTKT"][:, 0], m[ref][:, 0])
                 out.append(
-                    Check(f"{who}: APTKT at one shot at least {what}", ci(nn), nn.mean >= -ROUNDING)
+                    Check(
+                        f"{who}: APTKT at one shot at least {what}",
+                        ci(nn, cell=True),
+                        nn.mean >= -ROUNDING,
+                        REFERENCE,
+                    )
                 )
     if choice in ("random", "farthest"):
         low, k, at = _never_below(m["APTKT"], m["baseline"])
@@ -174,7 +256,7 @@ def _library_checks(size: int, choice: str, m: Mapping[str, np.ndarray], sizes: 
             Check(
                 f"{who}: APTKT never below the baseline by more than "
                 f"{100 * NO_HARM_TOLERANCE:.0f} pp at any step",
-                f"lowest {pp(low)} at step {k} ({ci(at)})",
+                f"lowest {pp(low)} at step {k} ({ci(at, cell=True)})",
                 low >= -NO_HARM_TOLERANCE - ROUNDING,
             )
         )
@@ -185,7 +267,7 @@ def _library_checks(size: int, choice: str, m: Mapping[str, np.ndarray], sizes: 
                 Check(
                     f"{who}: a transfer never costs — APTKT never below the control by more "
                     f"than {100 * TRANSFER_COST_TOLERANCE:.1f} pp at any step",
-                    f"lowest {pp(low)} at step {k} ({ci(at)})",
+                    f"lowest {pp(low)} at step {k} ({ci(at, cell=True)})",
                     low >= -TRANSFER_COST_TOLERANCE - ROUNDING,
                 )
             )
@@ -195,10 +277,18 @@ def _library_checks(size: int, choice: str, m: Mapping[str, np.ndarray], sizes: 
             rise = a[last] - a[0]
             out.append(
                 Check(
-                    f"{who}: APTKT keeps learning — at step {last} at least the baseline and "
+                    f"{who}: APTKT at the end of the budget (step {last}) at least the baseline",
+                    f"{pp(a[last] - b[last])} against the baseline",
+                    bool(a[last] >= b[last] - ROUNDING),
+                )
+            )
+            out.append(
+                Check(
+                    f"{who}: APTKT keeps learning — at step {last} "
                     f"{100 * KEEPS_LEARNING:.0f} pp above its own step 0",
-                    f"{pp(a[last] - b[last])} against the baseline, {pp(rise)} since step 0",
-                    bool(a[last] >= b[last] - ROUNDING and rise >= KEEPS_LEARNING - ROUNDING),
+                    f"{pp(rise)} since step 0",
+                    bool(rise >= KEEPS_LEARNING - ROUNDING),
+                    REFERENCE,
                 )
             )
     return out
@@ -225,11 +315,9 @@ def checks(c: Curves) -> list[Check]:
         out.append(
             Check(
                 f"the one-shot gain does not shrink as the library grows: with {large} random "
-                f"priors at least the gain with {small} − {100 * GROWTH_TOLERANCE:.0f} pp, and "
-                f"at least +{100 * PAPER_ONE_SHOT_GAIN:.0f} pp",
+                f"priors at least the gain with {small} − {100 * GROWTH_TOLERANCE:.0f} pp",
                 f"{pp(g_large.mean)} with {large}, {pp(g_small.mean)} with {small}",
-                g_large.mean >= g_small.mean - GROWTH_TOLERANCE - ROUNDING
-                and g_large.mean >= PAPER_ONE_SHOT_GAIN - ROUNDING,
+                g_large.mean >= g_small.mean - GROWTH_TOLERANCE - ROUNDING,
             )
         )
     worst = None
@@ -245,7 +333,7 @@ def checks(c: Curves) -> list[Check]:
                 "APTKT with auxiliary features never below plain APTKT by more than "
                 f"{100 * TRANSFER_COST_TOLERANCE:.1f} pp (mean, any step, any library and prior "
                 "choice)",
-                f"lowest {pp(worst[0])} at step {worst[1]}, {worst[2]} ({ci(worst[3])})",
+                f"lowest {pp(worst[0])} at step {worst[1]}, {worst[2]} ({ci(worst[3], cell=True)})",
                 worst[0] >= -TRANSFER_COST_TOLERANCE - ROUNDING,
             )
         )
@@ -434,9 +522,11 @@ def _library_table(c: Curves) -> list[str]:
                 f"{mean['baseline'][0]:.3f} → {mean['baseline'][last]:.3f}",
                 f"{mean['control'][0]:.3f} → {mean['control'][last]:.3f}" if "control" in m else "",
                 f"{mean['APTKT'][0]:.3f} → {mean['APTKT'][last]:.3f}",
-                ci(_paired(m["APTKT"][:, 0], m["baseline"][:, 0])),
-                ci(_paired(m["APTKT"][:, last], m["baseline"][:, last])),
-                ci(_paired(m["APTKT"][:, 0], m["control"][:, 0])) if "control" in m else "",
+                ci(_paired(m["APTKT"][:, 0], m["baseline"][:, 0]), cell=True),
+                ci(_paired(m["APTKT"][:, last], m["baseline"][:, last]), cell=True),
+                ci(_paired(m["APTKT"][:, 0], m["control"][:, 0]), cell=True)
+                if "control" in m
+                else "",
             ]
         )
     return [
@@ -490,7 +580,7 @@ def report_markdown(
         "",
         "## Checks",
         "",
-        checks_table(found),
+        checks_table(found, unit=f"{head['groups']} groups"),
         "",
     ]
     lines += _library_table(c)
@@ -511,13 +601,19 @@ def report_markdown(
             if method in methods:
                 rows.append(
                     [f"{method} − baseline"]
-                    + [ci(_paired(methods[method][:, s], methods["baseline"][:, s])) for s in steps]
+                    + [
+                        ci(_paired(methods[method][:, s], methods["baseline"][:, s]), cell=True)
+                        for s in steps
+                    ]
                 )
         for method, other in (("APTKT", "control"), ("APTKT+aux", "APTKT")):
             if method in methods and other in methods:
                 rows.append(
                     [f"{method} − {other}"]
-                    + [ci(_paired(methods[method][:, s], methods[other][:, s])) for s in steps]
+                    + [
+                        ci(_paired(methods[method][:, s], methods[other][:, s]), cell=True)
+                        for s in steps
+                    ]
                 )
         lines += [markdown_table(["paired gain", *(f"step {s}" for s in steps)], rows), ""]
     if profiles:

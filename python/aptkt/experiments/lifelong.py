@@ -26,7 +26,7 @@ import numpy as np
 
 from aptkt.errors import ConfigError, FeatureTableError, InvalidInputError
 from aptkt.experiments.benchmark import _subset, each_result, parallel_map_of, split_trials
-from aptkt.experiments.benchmark_report import announce_checks
+from aptkt.experiments.benchmark_report import announce_checks, checks_line
 from aptkt.experiments.population import ObjectPopulation, schedule
 from aptkt.files import write_json_atomically, write_text_atomically
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
@@ -376,9 +376,9 @@ def run_lifelong(
     }
     write_json_atomically(output / "summary.json", summary, ConfigError)
     write_text_atomically(output / "report.md", lr.report_markdown(c, head, found), ConfigError)
-    held = announce_checks(found, say)
+    announce_checks(found, say)
     say(
-        f"{held} of {len(found)} checks hold; done in {seconds:.0f} s: "
+        f"{checks_line(found)}; done in {seconds:.0f} s: "
         f"{output / 'report.md'}, {output / 'lifelong.png'}, {output / 'results.csv'}"
     )
     return summary

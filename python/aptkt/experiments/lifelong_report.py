@@ -11,7 +11,13 @@ from typing import Any
 import numpy as np
 
 from aptkt.experiments.aggregate import Estimate, estimate, mean_band
-from aptkt.experiments.benchmark_report import ROUNDING, Check, checks_table, curve_matrix
+from aptkt.experiments.benchmark_report import (
+    REFERENCE,
+    ROUNDING,
+    Check,
+    checks_table,
+    curve_matrix,
+)
 from aptkt.experiments.plots import figure
 from aptkt.experiments.report import ci, markdown_table, pp
 
@@ -87,7 +93,7 @@ def checks(c: Tables) -> list[Check]:
                     f"the {when} gain over the baseline does not shrink as the library grows: "
                     f"batch {batches[-1]} (learned with {_size(final, 'learned_with')} objects) "
                     f"at least batch {batches[0]} ({_size(first, 'learned_with')})",
-                    f"{pp(late.mean)} against {pp(early.mean)} (difference {ci(diff)})",
+                    f"{pp(late.mean)} against {pp(early.mean)} (difference {ci(diff, cell=True)})",
                     late.mean >= early.mean - ROUNDING,
                 )
             )
@@ -99,8 +105,10 @@ def checks(c: Tables) -> list[Check]:
             Check(
                 f"after the last batch the library ({_size(m)} objects) is at least as accurate as "
                 "the nearest class mean in its metric on the same observations",
-                f"{np.nanmean(m['library']):.3f} against {np.nanmean(m['NCM']):.3f} ({ci(d)})",
+                f"{np.nanmean(m['library']):.3f} against {np.nanmean(m['NCM']):.3f} "
+                f"({ci(d, cell=True)})",
                 d.mean >= -ROUNDING,
+                REFERENCE,
             )
         )
     return out
@@ -244,7 +252,7 @@ def report_markdown(c: Tables, head: Mapping[str, Any], found: Sequence[Check]) 
         "",
         "## Checks",
         "",
-        checks_table(found),
+        checks_table(found, unit=f"{head['orders']} orders"),
         "",
         "## Per batch",
         "",
