@@ -265,6 +265,47 @@ def test_the_report_and_the_console_keep_invariants_apart_from_reference_figures
     assert br.checks_line(found) == "6 of 6 checks hold; 3 of 4 reference figures reached"
 
 
+def test_the_figure_of_two_library_sizes_is_a_grid_no_wider_than_a_screen(tmp_path):
+    """Two library sizes with three prior choices each: six panels in two rows of three, the
+    saved image at most about 2,400 px wide (one row of six was 4,484 px)."""
+    from matplotlib.image import imread
+
+    from aptkt.experiments.plots import save_figure
+
+    c = {3: _curves(0.6, 0.75)[3], 5: _curves(0.6, 0.78)[3]}
+    c[3]["nearest"] = {k: v.copy() for k, v in c[3]["random"].items()}
+    c[5]["nearest"] = {k: v.copy() for k, v in c[5]["random"].items()}
+    fig = br.plot(c, chance=0.2)
+    visible = [ax for ax in fig.axes if ax.get_visible()]
+    assert len(visible) == 12  # six panels, an accuracy and a gain axis each
+    titles = [ax.get_title() for ax in visible if ax.get_title()]
+    assert len(titles) == 6 and titles[0].startswith("3 random priors")
+    (png, _svg) = save_figure(fig, tmp_path / "benchmark")
+    height, width = imread(png).shape[:2]
+    assert width <= 2400 and height > width / 2, (width, height)
+
+
+def test_aptkt_aux_is_shown_only_where_it_learned_otherwise_than_aptkt():
+    """On real data the auxiliary features' gate often stays shut and APTKT+aux repeats APTKT
+    in every run: it is then left out of the plot and the tables, and the report says so."""
+    same = _curves(0.6, 0.75)  # APTKT+aux is a copy of APTKT
+    differs = _curves(0.6, 0.75, aux=0.01)
+
+    def labels(c):
+        fig = br.plot(c, chance=0.2)
+        return {t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().texts}
+
+    assert not any("APTKT+aux" in t for t in labels(same))
+    assert {"APTKT+aux", "APTKT+aux − baseline"} <= labels(differs)
+    note = "\n".join(br._aux_note(same))
+    assert "learned exactly as plain APTKT" in note and "every library and prior choice" in note
+    assert br._aux_note(differs) == []
+    # One choice alike, the other not: named.
+    mixed = {3: {"random": same[3]["random"], "farthest": differs[3]["farthest"]}}
+    assert "with random priors:" in "\n".join(br._aux_note(mixed))
+    assert [("APTKT+aux" in m) for _, _, m in br._panels(mixed)] == [False, True]
+
+
 @pytest.mark.parametrize("large, holds", [(0.72, True), (0.69, False), (0.80, True), (0.70, True)])
 def test_the_gain_must_not_shrink_as_the_library_grows(large, holds):
     """With several library sizes: the largest library's one-shot gain at least the smallest's
