@@ -83,3 +83,26 @@ def test_a_terminal_gets_a_bar_not_lines(clock):
     with Progress(10, "run", "learning", stream=out) as bar:
         bar.update(10)
     assert "learning" in out.getvalue() and "about" not in out.getvalue()
+
+
+def test_generation_lines_name_the_recording_just_counted(tmp_path, monkeypatch, capsys):
+    """Each progress line of a simulated data set names the recording it has just counted
+    (the note came one recording late, and a bar could show one object for most of a run)."""
+    import itertools
+    import re
+
+    from aptkt.actions import PAPER_ACTIONS
+    from aptkt.data.store import DatasetReader
+    from aptkt.runtime.generation import GenerationPlan, generate
+
+    ticks = itertools.count(0.0, 40.0)  # every update at least LINE_EVERY_SECONDS later
+    monkeypatch.setattr(progress_module.time, "monotonic", lambda: next(ticks))
+    plan = GenerationPlan(("towel", "metal_toolbox"), (PAPER_ACTIONS["P1"],), repetitions=2, seed=2)
+    path = tmp_path / "d.h5"
+    generate(path, plan, jobs=1, progress=True)
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("d.h5:")]
+    assert len(lines) == 4
+    with DatasetReader(path) as rd:
+        for line in lines:
+            done, note = re.fullmatch(r"d\.h5: (\d+)/4 trials .*\(done: (.+)\)", line).groups()
+            assert note == "{} {} trial {}".format(*rd.key(int(done) - 1)), line

@@ -130,8 +130,9 @@ def generate(
         for rec in _run(plan, out.todo, jobs, lambda: len(writer), out.path):
             writer.append_packed(rec)
             if bar is not None:
+                # (Before the count: the line or bar the count brings shows this recording.)
+                bar.note("done: {} {} trial {}".format(*rec.key))
                 bar.update(1)
-                bar.note(f"{rec.key[0]} {rec.key[1]}")
             elif callable(progress):
                 progress(len(writer), len(plan))
     return out.summary(wall_seconds=time.perf_counter() - t0, simulated=len(out.todo))
