@@ -85,12 +85,17 @@ def relatedness(
 
 
 def _cell_text(m: Relatedness, i: int, k: int) -> str:
-    text = f"{m.p[i, k]:.2f}"
+    """p̄, then λ or the cut-off's number, then in how many runs, a short line each: a cell is
+    about an inch wide, and "log odds -120.3 3/3" on one line ran into the next cell (the
+    outline's legend says which number it is)."""
+    lines = [f"{m.p[i, k]:.2f}"]
     if m.transferred[i, k]:
-        text += f"\nλ {m.lam[i, k]:.2f}{_share(m, m.transferred[i, k])}"
+        lines += [f"λ {m.lam[i, k]:.2f}", _share(m, m.transferred[i, k]).strip()]
     elif m.stopped[i, k]:
-        text += f"\n{m.stat} {m.log_bf[i, k]:.1f}{_share(m, m.stopped[i, k])}"
-    return text
+        value = m.log_bf[i, k]
+        lines += [f"{value:.0f}" if abs(value) >= 10 else f"{value:.1f}"]
+        lines += [_share(m, m.stopped[i, k]).strip()]
+    return "\n".join(line for line in lines if line)
 
 
 def _share(m: Relatedness, n: int) -> str:
@@ -109,7 +114,7 @@ def plot_relatedness(
     cols = min(n, 4)
     rows = math.ceil(n / cols)
     first = next(iter(matrices.values()))
-    cell_w = 1.1 * max(len(first.old), 2)
+    cell_w = 1.2 * max(len(first.old), 2)
     fig, axes = figure(
         rows,
         cols,
@@ -167,10 +172,17 @@ def plot_relatedness(
     ]
     if config.cutoff != "paper":
         stat, cutoff = cutoff_words(config)
+        # The same-object cut-off's bar is the margin or, where higher, what the library's own
+        # distinct objects reach: "<= 3" beside a printed "<= 3.34" read as a contradiction.
+        bar = (
+            f"at most the bar: {config.evidence_margin:g} or what the library's own objects reach"
+            if config.cutoff == "same-object"
+            else f"at most {config.evidence_margin:g}"
+        )
         handles.append(
             Patch(
                 fill=False,
-                label=f"stopped by the {cutoff} ({stat} <= {config.evidence_margin:g})",
+                label=f"stopped by the {cutoff} (its {stat} in the cell, {bar})",
                 ec=STOPPED_EDGE[0],
                 ls=STOPPED_EDGE[1],
                 lw=STOPPED_EDGE[2],
