@@ -336,16 +336,21 @@ def test_the_command_refuses_to_overwrite_and_reports_mistakes_in_one_line(run, 
         (["--priors", "3,1"], "--priors must be >= 2"),
         (["--lifelong", "--groups", "5"], "--groups: not with --lifelong"),
         (["--orders", "0"], "--orders must be >= 1"),
+        (["--actions", "touch,nope"], "--actions: unknown nope; the table has touch"),
     ):
         assert main(["benchmark", str(table), "-o", str(tmp_path / "x"), *extra]) == 1
-        err = capsys.readouterr().err.strip()
+        said = capsys.readouterr()
+        err = said.err.strip()
+        assert said.out == "", said.out  # nothing before the mistake's line
         assert err.count("\n") == 0 and err.startswith("aptkt benchmark: error:"), err
         assert fragment in err
     assert (
         main(["benchmark", str(table), "-o", str(tmp_path / "y"), "--new", "6", "--priors", "3"])
         == 1
     )
-    assert "need at least 9 objects" in capsys.readouterr().err
+    said = capsys.readouterr()
+    assert "need at least 9 objects" in said.err
+    assert said.out == ""  # (the heading came first, then the mistake)
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
     assert BenchmarkSettings().groups == 60
 
@@ -415,6 +420,18 @@ def test_progress_goes_to_a_log_as_lines(run, tmp_path, capfd, monkeypatch):
     assert "benchmark: 2/2 groups (100 %)" in err
 
 
+def test_the_lifelong_benchmark_says_which_objects_no_batch_takes(tmp_path, capsys):
+    """8 objects, batches of 3: a library of 3 and one batch of 3; the other 2 objects of each
+    order are never learned, and the command says so before it starts."""
+    path = _table(tmp_path)
+    argv = ["benchmark", str(path), "--lifelong", "--orders", "1", "--new", "3", "--budget", "1"]
+    assert main([*argv, "-j", "1", "--no-progress", "-o", str(tmp_path / "life")]) == 0
+    said = capsys.readouterr().out
+    assert "8 objects (each order leaves its last 2 out: 8 is not 3 plus whole batches of 3)" in (
+        said
+    )
+
+
 def test_the_lifelong_benchmark_grows_a_library_and_reports_it(tmp_path, capsys):
     """8 objects in batches of 2: a library of 2, then three batches learned and merged; the
     library's accuracy is its identity model's on every object it holds, the reference the
@@ -433,6 +450,7 @@ def test_the_lifelong_benchmark_grows_a_library_and_reports_it(tmp_path, capsys)
     assert main([*argv, "-j", "1", "--no-progress", "-o", str(out)]) == 0
     said = capsys.readouterr().out
     assert "2 orders: a library of 2, then 3 batch(es) of 2" in said
+    assert "leaves" not in said
     rows = _rows(out)
     assert {r["method"] for r in rows} == {"baseline", "APTKT", "library", "library GP", "NCM"}
     sizes = sorted({(int(r["batch"]), int(r["library"])) for r in rows if r["method"] == "library"})

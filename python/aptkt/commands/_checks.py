@@ -149,6 +149,16 @@ def no_duplicates(names: Iterable[str], option: str) -> None:
         raise ConfigError(f"{option}: {', '.join(twice)} given more than once")
 
 
+def known_names(names: Iterable[str] | None, available: Iterable[str], option: str) -> None:
+    """Every name given to ``option`` is one of ``available`` (the table's actions, say)."""
+    known = list(available)
+    unknown = [n for n in names or () if n not in known]
+    if unknown:
+        raise ConfigError(
+            f"{option}: unknown {', '.join(unknown)}; the table has {', '.join(known)}"
+        )
+
+
 def _existing_ancestor(path: Path, option: str) -> Path:
     """The deepest existing directory above ``path``; an error if a file lies on the way."""
     for parent in path.absolute().parents:

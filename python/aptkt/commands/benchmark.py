@@ -152,6 +152,7 @@ def run(args: argparse.Namespace) -> int:
         at_most,
         input_file,
         jobs,
+        known_names,
         output_dir,
         scheduler_available,
     )
@@ -231,6 +232,7 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     table = read_table_within_limits(args.table, settings)
+    known_names(settings.actions, table.action_names, "--actions")
     if args.recognition:
         from aptkt.experiments.recognition_benchmark import run_recognition_benchmark
 

@@ -305,7 +305,8 @@ def estimate(
     v = v[keep]
     if v.size == 0:
         return Estimate(float("nan"), float("nan"), float("nan"), 0, "runs")
-    name = "runs"
+    # One value of one unit is that unit's ("1 order: no interval", not "1 run").
+    name = unit_name + "s" if units is not None and v.size == 1 else "runs"
     if units is not None and len(set(u)) >= 2:
         order = list(dict.fromkeys(u))
         v = np.array([v[[i for i, x in enumerate(u) if x == g]].mean() for g in order])

@@ -172,14 +172,19 @@ def prior_choices(
     }
 
 
-def draw_groups(
-    objects: Sequence[str], distances: tuple[list[str], np.ndarray], s: BenchmarkSettings
-) -> list[Group]:
+def check_enough_objects(objects: Sequence[str], s: BenchmarkSettings) -> None:
+    """A group needs its new objects and its largest library, all distinct."""
     if len(objects) < s.new_objects + s.prior_objects:
         raise FeatureTableError(
             f"{s.new_objects} new and {s.prior_objects} prior objects need at least "
             f"{s.new_objects + s.prior_objects} objects; the table has {len(objects)}"
         )
+
+
+def draw_groups(
+    objects: Sequence[str], distances: tuple[list[str], np.ndarray], s: BenchmarkSettings
+) -> list[Group]:
+    check_enough_objects(objects, s)
     rng = np.random.default_rng(s.seed)
     groups = []
     for g in range(s.groups):
@@ -377,6 +382,8 @@ def run_benchmark(
     from aptkt.progress import Progress
 
     actions = list(s.actions) if s.actions else table.action_names
+    # Before the heading: a mistake is one line, with nothing printed before it.
+    check_enough_objects(table.object_names, s)
     executor = make_executor(jobs, scheduler)
     sizes = ", ".join(str(k) for k in s.libraries)
     say(

@@ -191,7 +191,7 @@ def checks_line(found: Sequence[Check]) -> str:
     """``5 of 5 checks hold; 2 of 4 reference figures reached``."""
     inv = [k for k in found if k.kind == INVARIANT]
     ref = [k for k in found if k.kind == REFERENCE]
-    text = f"{sum(k.holds for k in inv)} of {len(inv)} checks hold"
+    text = f"{sum(k.holds for k in inv)} of {len(inv)} checks hold" if inv else "no check applies"
     if ref:
         text += f"; {sum(k.holds for k in ref)} of {len(ref)} reference figures reached"
     return text

@@ -316,6 +316,14 @@ def run_lifelong(
         sizes = [s.batch] * ((len(table.object_names) - s.batch) // s.batch)
         tasks, fn = [(i, order, learn, test, s) for i, order in enumerate(orders)], _task
         what = f"{len(table.object_names)} objects"
+        left = len(table.object_names) - s.batch * (1 + len(sizes))
+        if left:
+            # Batches are whole: the objects beyond them would never be learned. Say so, as a
+            # table of 12 objects with --new 5 otherwise loses 2 of them without a word.
+            what += (
+                f" (each order leaves its last {left} out: {len(table.object_names)} is not "
+                f"{s.batch} plus whole batches of {s.batch})"
+            )
     else:
         population = ObjectPopulation.fit(table.observations(actions))
         trials = stream_trials(table, actions)
