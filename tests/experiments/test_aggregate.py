@@ -39,7 +39,7 @@ def rows_from(matrix, method="m", start_group=0, trials_per_group=2, **tags):
                 {
                     "method": method,
                     "group": start_group + r // trials_per_group,
-                    "trial": r % trials_per_group,
+                    "run": r % trials_per_group,
                     "step": step,
                     "mean_accuracy": v,
                     **tags,
@@ -66,7 +66,7 @@ def test_filtering_and_bookkeeping_errors():
         [[0.9, 0.8]], method="b", panel="P1"
     )
     assert collect(rows, {"method": "b"}).values.tolist() == [[0.9, 0.8]]
-    assert collect(rows, {"method": ("a", "b")}, run_by=("method", "group", "trial")).n_runs == 2
+    assert collect(rows, {"method": ("a", "b")}, run_by=("method", "group", "run")).n_runs == 2
     with pytest.raises(ValueError, match="two rows at step"):
         collect(rows)  # two methods under one run identity: a bookkeeping error, never averaged
     with pytest.raises(LookupError):

@@ -85,7 +85,7 @@ def test_per_trial_bookkeeping_in_the_results(quick_run):
     rows = read(quick_run / "fig7" / "results.csv")
     runs = defaultdict(list)
     for r in rows:
-        runs[(r["method"], r["group"], r["trial"])].append(int(r["step"]))
+        runs[(r["method"], r["group"], r["run"])].append(int(r["step"]))
     methods = {"baseline", "control", "APTKT"}
     assert len(runs) == len(methods) * s.groups * s.trials
     assert {m for m, _, _ in runs} == methods
@@ -104,14 +104,14 @@ def test_per_trial_bookkeeping_in_the_results(quick_run):
     # A trial's baseline and APTKT runs share the pool order and the exploration seed.
     by_trial = defaultdict(set)
     for sp in specs:
-        by_trial[(sp["tags"]["group"], sp["tags"]["trial"])].add(sp["pool_seed"])
+        by_trial[(sp["tags"]["group"], sp["tags"]["run"])].add(sp["pool_seed"])
     assert all(len(v) == 1 for v in by_trial.values()) and len(by_trial) == s.groups * s.trials
     # Fig. 6: every model of a trial saw the same observations (random order, same seed).
     rows6 = read(quick_run / "fig6" / "results.csv")
     seen = defaultdict(set)
     for r in rows6:
         if r["step"] != "0":
-            seen[(r["panel"], r["group"], r["trial"], r["step"])].add((r["action"], r["object"]))
+            seen[(r["panel"], r["group"], r["run"], r["step"])].add((r["action"], r["object"]))
     assert seen and all(len(v) == 1 for v in seen.values())
 
 
@@ -119,7 +119,7 @@ def test_report_gain_is_computed_from_the_results_file(quick_run):
     """Recompute Fig. 7's headline gain from results.csv independently and find it in the report."""
     rows = read(quick_run / "fig7" / "results.csv")
     acc = {
-        (r["method"], int(r["group"]), int(r["trial"]), int(r["step"])): float(r["mean_accuracy"])
+        (r["method"], int(r["group"]), int(r["run"]), int(r["step"])): float(r["mean_accuracy"])
         for r in rows
     }
     per_group = defaultdict(list)
@@ -142,7 +142,7 @@ def test_fig11_control_and_fig8_room_are_computed_from_the_results_file(quick_ru
     acc = defaultdict(dict)
     for r in rows:
         if r["panel"] != "stress":
-            acc[(r["panel"], r["method"], r["trial"])][int(r["step"])] = float(r["mean_accuracy"])
+            acc[(r["panel"], r["method"], r["run"])][int(r["step"])] = float(r["mean_accuracy"])
     panels = {p for p, _, _ in acc}
     assert panels == set(Scale.quick().actions) | {"all"}
     for panel in panels:
@@ -224,7 +224,7 @@ def hand_made_rows(gain: float, noise: float = 0.0, control: float | None = None
                             "method": m,
                             "panel": "all",
                             "group": g,
-                            "trial": t,
+                            "run": t,
                             "step": step,
                             "mean_accuracy": v,
                             "fused_accuracy": v,
@@ -280,7 +280,7 @@ def test_fig9_explains_the_fade_and_the_auxiliary_features(tmp_path):
                                 "method": m,
                                 "n_priors": n,
                                 "group": g,
-                                "trial": t,
+                                "run": t,
                                 "step": step,
                                 "mean_accuracy": v,
                                 "fused_accuracy": v,

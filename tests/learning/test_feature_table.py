@@ -237,7 +237,7 @@ def test_learn_from_a_table_writes_the_demo_outputs(tmp_path, capsys):
             rows = list(csv.DictReader(fh))
         assert {r["method"] for r in rows} == {"APTKT", "APTKT+aux", "baseline"}
         assert len(rows) == 3 * 2 * (3 + 1)
-        results[suffix] = [(r["method"], r["trial"], r["step"], r["mean_accuracy"]) for r in rows]
+        results[suffix] = [(r["method"], r["run"], r["step"], r["mean_accuracy"]) for r in rows]
         assert set(summary["final_mean_accuracy"]) == {"APTKT", "APTKT+aux", "baseline"}
         for acc in summary["final_mean_accuracy"].values():
             assert 0.5 < acc <= 1.0  # 3 well separated new objects: far above chance (1/3)
@@ -266,7 +266,7 @@ def test_learning_from_a_table_says_what_each_new_object_learned_from(tmp_path, 
     # What each run's final APTKT model carries: a λ column of exactly one prior object.
     with (out / "results.csv").open() as fh:
         rows = [r for r in csv.DictReader(fh) if r["method"] == "APTKT"]
-    last = [max((r for r in rows if r["trial"] == t), key=lambda r: int(r["step"])) for t in "01"]
+    last = [max((r for r in rows if r["run"] == t), key=lambda r: int(r["step"])) for t in "01"]
     told, action = {}, ""
     for line in lines:
         if not line.startswith(" "):

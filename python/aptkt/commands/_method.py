@@ -80,7 +80,7 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
         "--aux-gate-margin",
         type=_margin_or_none,
         metavar="M",
-        help="with the auxiliary features (APTKT+aux, --auxiliary): the log Bayes factor by which "
+        help="with the auxiliary features (APTKT+aux): the log Bayes factor by which "
         "the new labels' evidence must favour keeping them at an update; none: no gate, they "
         "are always used; "
         + _by_reading(lambda c: NO_GATE if c.aux_gate_margin is None else f"{c.aux_gate_margin:g}"),
@@ -98,7 +98,7 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--prior-feature-scale",
         choices=FEATURE_SCALES,
-        help="the metric of a prior built here (a loaded --prior keeps its own): "
+        help="the metric of a prior built here (a prior loaded from a file keeps its own): "
         "whiten-joint (the old objects' within-object noise, whitened across modalities), "
         "whiten (the same, each modality on its own) or spread (each column z-scored over "
         "the old observations); " + _by_reading(lambda c: c.gp.prior_feature_scale),

@@ -36,7 +36,9 @@ CONSTANT_KERNEL_VARIATION = 0.01
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("prior", help="build or inspect prior tactile knowledge")
+    p = sub.add_parser(
+        "prior", help="build, merge or inspect prior tactile knowledge (a library of objects)"
+    )
     ps = p.add_subparsers(dest="prior_command", required=True, metavar="PRIOR_COMMAND")
 
     b = ps.add_parser(

@@ -176,7 +176,7 @@ def collect(
     rows: Iterable[Mapping[str, Any]],
     where: Mapping[str, Any] | None = None,
     *,
-    run_by: Sequence[str] = ("group", "trial"),
+    run_by: Sequence[str] = ("group", "run"),
     x: str = "step",
     value: str = "mean_accuracy",
 ) -> Curves:

@@ -214,7 +214,7 @@ def _specs(
             test_trials=trials[1],
             prior=str(prior_path),
             pool_seed=s.seed + t,
-            tags={"trial": t},
+            tags={"run": t},
         )
         for t in range(s.trials)
         for name, cfg in methods.items()
@@ -417,13 +417,13 @@ def _curves(
 ) -> dict[str, np.ndarray]:
     curves = {}
     for name in methods:
-        per_trial: dict[int, list[tuple[int, float]]] = {}
+        per_run: dict[int, list[tuple[int, float]]] = {}
         for r in rows:
             if r["method"] == name:
-                per_trial.setdefault(r["trial"], []).append((r["step"], r[key]))
-        length = max(len(v) for v in per_trial.values())
-        arr = np.full((len(per_trial), length), np.nan)
-        for i, (_, steps) in enumerate(sorted(per_trial.items())):
+                per_run.setdefault(r["run"], []).append((r["step"], r[key]))
+        length = max(len(v) for v in per_run.values())
+        arr = np.full((len(per_run), length), np.nan)
+        for i, (_, steps) in enumerate(sorted(per_run.items())):
             for step, value in steps:
                 arr[i, step] = value
         curves[name] = arr

@@ -189,12 +189,12 @@ class Comparison:
 
 
 def _curves(rows: list[dict[str, Any]], method: str, key: str) -> np.ndarray:
-    runs = sorted({r["trial"] for r in rows if r["method"] == method})
+    runs = sorted({r["run"] for r in rows if r["method"] == method})
     steps = max(r["step"] for r in rows if r["method"] == method) + 1
     out = np.full((len(runs), steps), np.nan)
     for r in rows:
         if r["method"] == method:
-            out[runs.index(r["trial"]), r["step"]] = r[key]
+            out[runs.index(r["run"]), r["step"]] = r[key]
     return out
 
 

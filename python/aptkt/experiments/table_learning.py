@@ -151,7 +151,7 @@ def compare_on_table(
                 PoolEnvironment(pool, seed=cfg.seed + t), actions, s.new_objects, test
             )
             steps = step_rows(run, learner, s.new_objects)
-            rows += [{"method": name, "trial": t, **r} for r in steps]
+            rows += [{"method": name, "run": t, **r} for r in steps]
     return rows, methods, actions
 
 

@@ -204,7 +204,7 @@ def prior_group_plan(
                     "panel": panel,
                     "n_priors": n_priors,
                     "group": g,
-                    "trial": t,
+                    "run": t,
                     "priors": ",".join(group),
                 }
                 add_runs(ctx, plan, methods, actions, task, seed, tags)

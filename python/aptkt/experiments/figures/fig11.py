@@ -85,7 +85,7 @@ def plan(ctx: Context) -> Plan:
                 "figure": NAME,
                 "panel": panel,
                 "group": 0,
-                "trial": t,
+                "run": t,
                 "priors": ",".join(task.objects),
             }
             add_runs(ctx, plan, methods, actions, task, seed, tags)

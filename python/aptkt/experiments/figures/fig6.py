@@ -64,7 +64,7 @@ def plan(ctx: Context) -> Plan:
                         "figure": NAME,
                         "panel": a,
                         "group": g,
-                        "trial": t,
+                        "run": t,
                         "objects": ",".join(group),
                     }
                     plan.specs.append(ctx.spec(k, cfg, (a,), group, None, seed, tags))
@@ -85,7 +85,7 @@ class _Fig6(Analysis):
         self.per_action = {a: self._action(a) for a in self.actions}
         for a in self.actions:
             self.keep_curves({"panel": a}, self.per_action[a]["curves"])
-        # The averaged panel: per run (group, trial), each model's mean over the actions it
+        # The averaged panel: per run (group, run), each model's mean over the actions it
         # applies to.
         self.average = {}
         for k in KINDS:
