@@ -446,6 +446,17 @@ class StepRecord:
     #: "new")}, for the actions updated at this step (every action at step 0), as ``transfer``.
     feature_space: dict[str, dict[str, Any]] = field(default_factory=dict)
 
+    def __repr__(self) -> str:
+        if self.action is None:
+            what = "initial round"
+        else:
+            what = f"{self.action} on {self.object}" + (" (explored)" if self.explored else "")
+        return (
+            f"StepRecord(step {self.step}: {what}; {self.n_observations} observations, mean "
+            f"accuracy {self.mean_accuracy:.3f}, fused {self.fused_accuracy:.3f}, "
+            f"{self.seconds:.2f} s)"
+        )
+
     def as_row(self) -> dict[str, Any]:
         """Flat: the step's fields, ``accuracy[a]`` per action, the medians of the fitted
         signal variances and length-scales over every classifier, each classifier's
@@ -489,6 +500,22 @@ class LearningRun:
     prior_objects: list[str]
     steps: list[StepRecord] = field(default_factory=list)
     stopped_early: bool = False
+
+    def __repr__(self) -> str:
+        last = self.steps[-1] if self.steps else None
+        parts = [
+            f"transfer {self.config.transfer!r}",
+            f"{len(self.new_objects)} new objects",
+            f"{len(self.prior_objects)} prior objects",
+            f"actions {', '.join(self.actions)}",
+            f"{len(self.steps)} steps" + (", stopped early" if self.stopped_early else ""),
+        ]
+        if last is not None:
+            parts.append(
+                f"final mean accuracy {last.mean_accuracy:.3f} after {last.n_observations} "
+                "observations"
+            )
+        return f"LearningRun({'; '.join(parts)})"
 
     def curve(self) -> dict[str, np.ndarray]:
         return {
