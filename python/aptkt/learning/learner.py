@@ -65,6 +65,8 @@ class ActionLearner:
         self.prior = prior
         self.observations: Observations | None = None
         self.model: LaplaceGPC | None = None
+        #: The feature pipeline of the current model's space (set by ``update``).
+        self.pipeline: FeaturePipeline | None = None
         self.decisions: dict[str, TransferDecision] = {}
         self.train_entropy: np.ndarray = np.zeros(0)
         #: The feature space of the current model: "prior" (the prior's transforms) or "new"
@@ -289,6 +291,7 @@ class ActionLearner:
                     evidence_margin=self._cutoff_threshold(int(mine.sum())),
                 )
         self.model, X = self._fit(pipeline, step)
+        self.pipeline = pipeline
         self.space = "prior" if self.prior is not None else "new"
         # The training observations were drawn with the training frequencies: their own
         # posterior keeps them.
@@ -373,6 +376,16 @@ class ActionLearner:
         else:
             model.fit(X, obs.objects, sources=sources or None)
         return model
+
+    def predict_proba(self, obs: Observations) -> np.ndarray:
+        """The current model's class posteriors of ``obs`` (columns in ``model.classes_``
+        order), seen as the training observations were: in the model's feature space, with the
+        auxiliary features where the model kept them."""
+        if self.model is None or self.pipeline is None:
+            raise InvalidStateError(f"action {self.action!r}: no model yet; call update first")
+        X = self._features(obs, self.pipeline)[0]
+        # The auxiliary features are the last columns; a gate that refused them dropped them.
+        return self.model.predict_proba(X[:, : self.model.n_features_in_])
 
     def hyperparameters(self) -> dict[str, dict[str, float]]:
         """The fitted hyper-parameters of each new object's classifier (see
