@@ -46,6 +46,9 @@ class StoredSteps(Mapping[str, list[dict[str, Any]]]):
     def __len__(self) -> int:
         return len(self._keys)
 
+    def __repr__(self) -> str:
+        return f"StoredSteps({len(self)} runs)"
+
     def __contains__(self, key: object) -> bool:
         return key in self._keys
 

@@ -161,6 +161,20 @@ class Comparison:
     def chance(self) -> float:
         return 1.0 / len(self.new_objects)
 
+    def __repr__(self) -> str:
+        curves = next(iter(self.accuracy.values()), np.zeros((0, 0)))
+        final = ", ".join(f"{m} {self.mean(m)[-1]:.3f}" for m in self.accuracy if curves.size)
+        parts = [
+            f"{len(self.new_objects)} new objects, {len(self.prior_objects)} prior objects",
+            f"actions {', '.join(self.actions)}",
+            f"{curves.shape[0]} runs of {curves.shape[1]} steps",
+        ]
+        if final:
+            parts.append(f"final accuracy {final}")
+        if self.output is not None:
+            parts.append(f"files in {self.output}")
+        return f"Comparison({'; '.join(parts)})"
+
     def mean(self, method: str, fused: bool = False) -> np.ndarray:
         """The mean over runs at each step."""
         curves = self.fused_accuracy if fused else self.accuracy

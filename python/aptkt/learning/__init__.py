@@ -13,6 +13,7 @@ library                a library that grows: prior knowledge merged from several
 recognition            recognise touches with a library, and flag objects it does not hold
 active                 uncertainty and next (action, object) selection (Eq. 4)
 learner                the APTKT process and the baseline
+estimator              APTKTClassifier: a scikit-learn classifier that learns with a library
 environment            where observations come from (pools; robots through aptkt.actions.executor)
 evaluation             accuracy on held-out test observations, fused over actions
 =====================  =====================================================================
@@ -27,6 +28,7 @@ from aptkt._lazy import lazy_exports
 if TYPE_CHECKING:
     from aptkt.learning.config import GPSettings, LearnerConfig
     from aptkt.learning.environment import Environment, PoolEnvironment, PoolExhaustedError
+    from aptkt.learning.estimator import APTKTClassifier
     from aptkt.learning.identity import ObjectIdentity
     from aptkt.learning.learner import APTKT, LearningRun, StepRecord
     from aptkt.learning.library import merge_priors
@@ -41,6 +43,7 @@ else:
 
 __all__ = [
     "APTKT",
+    "APTKTClassifier",
     "ActionPrior",
     "Environment",
     "FeaturePipeline",

@@ -65,6 +65,8 @@ class ActionLearner:
         self.prior = prior
         self.observations: Observations | None = None
         self.model: LaplaceGPC | None = None
+        #: The feature pipeline of the current model's space (set by ``update``).
+        self.pipeline: FeaturePipeline | None = None
         self.decisions: dict[str, TransferDecision] = {}
         self.train_entropy: np.ndarray = np.zeros(0)
         #: The feature space of the current model: "prior" (the prior's transforms) or "new"
@@ -289,6 +291,7 @@ class ActionLearner:
                     evidence_margin=self._cutoff_threshold(int(mine.sum())),
                 )
         self.model, X = self._fit(pipeline, step)
+        self.pipeline = pipeline
         self.space = "prior" if self.prior is not None else "new"
         # The training observations were drawn with the training frequencies: their own
         # posterior keeps them.
@@ -374,6 +377,16 @@ class ActionLearner:
             model.fit(X, obs.objects, sources=sources or None)
         return model
 
+    def predict_proba(self, obs: Observations) -> np.ndarray:
+        """The current model's class posteriors of ``obs`` (columns in ``model.classes_``
+        order), seen as the training observations were: in the model's feature space, with the
+        auxiliary features where the model kept them."""
+        if self.model is None or self.pipeline is None:
+            raise InvalidStateError(f"action {self.action!r}: no model yet; call update first")
+        X = self._features(obs, self.pipeline)[0]
+        # The auxiliary features are the last columns; a gate that refused them dropped them.
+        return self.model.predict_proba(X[:, : self.model.n_features_in_])
+
     def hyperparameters(self) -> dict[str, dict[str, float]]:
         """The fitted hyper-parameters of each new object's classifier (see
         :func:`hyperparameters`)."""
@@ -446,6 +459,17 @@ class StepRecord:
     #: "new")}, for the actions updated at this step (every action at step 0), as ``transfer``.
     feature_space: dict[str, dict[str, Any]] = field(default_factory=dict)
 
+    def __repr__(self) -> str:
+        if self.action is None:
+            what = "initial round"
+        else:
+            what = f"{self.action} on {self.object}" + (" (explored)" if self.explored else "")
+        return (
+            f"StepRecord(step {self.step}: {what}; {self.n_observations} observations, mean "
+            f"accuracy {self.mean_accuracy:.3f}, fused {self.fused_accuracy:.3f}, "
+            f"{self.seconds:.2f} s)"
+        )
+
     def as_row(self) -> dict[str, Any]:
         """Flat: the step's fields, ``accuracy[a]`` per action, the medians of the fitted
         signal variances and length-scales over every classifier, each classifier's
@@ -489,6 +513,22 @@ class LearningRun:
     prior_objects: list[str]
     steps: list[StepRecord] = field(default_factory=list)
     stopped_early: bool = False
+
+    def __repr__(self) -> str:
+        last = self.steps[-1] if self.steps else None
+        parts = [
+            f"transfer {self.config.transfer!r}",
+            f"{len(self.new_objects)} new objects",
+            f"{len(self.prior_objects)} prior objects",
+            f"actions {', '.join(self.actions)}",
+            f"{len(self.steps)} steps" + (", stopped early" if self.stopped_early else ""),
+        ]
+        if last is not None:
+            parts.append(
+                f"final mean accuracy {last.mean_accuracy:.3f} after {last.n_observations} "
+                "observations"
+            )
+        return f"LearningRun({'; '.join(parts)})"
 
     def curve(self) -> dict[str, np.ndarray]:
         return {

@@ -87,6 +87,14 @@ class Observations:
             np.asarray(trials if trials is not None else []),
         )
 
+    def __repr__(self) -> str:
+        columns = ", ".join(f"{m} {v.shape[1]}" for m, v in self.modalities.items())
+        said = f", extraction {self.extraction!r}" if self.extraction is not None else ""
+        return (
+            f"Observations({self.action!r}: {len(self)} observations of "
+            f"{len(self.object_names)} objects; columns {columns}{said})"
+        )
+
     def __len__(self) -> int:
         return int(self.objects.shape[0])
 

@@ -81,6 +81,13 @@ class ActionPrior:
         default_factory=dict, init=False, repr=False, compare=False
     )
 
+    def __repr__(self) -> str:
+        obs = self.observations
+        return (
+            f"ActionPrior({self.action!r}: {len(self.objects)} objects, {len(obs)} observations, "
+            f"columns {_columns(obs)})"
+        )
+
     @cached_property
     def objects(self) -> list[str]:
         """Every old object of the action, sorted (the model's classes where it covers them)."""
@@ -404,6 +411,11 @@ def leave_one_out_posteriors(model: LaplaceGPC, X: np.ndarray) -> np.ndarray:
     return np.where(total > 0, p / np.where(total > 0, total, 1.0), 1.0 / p.shape[1])
 
 
+def _columns(obs: Observations) -> str:
+    """A modality's columns in a repr: ``force 1, thermal 6``."""
+    return ", ".join(f"{m} {v.shape[1]}" for m, v in obs.modalities.items())
+
+
 def binary_probabilities(model: LaplaceGPC, X: np.ndarray) -> np.ndarray:
     """Each one-vs-all classifier's own ``p(y=+1 | x)`` of a fitted :class:`LaplaceGPC`."""
     return model.predict_proba_binary(X)
@@ -421,6 +433,21 @@ class PriorKnowledge:
         self.metadata: dict[str, Any] = dict(metadata or {})
         #: The library's calibration scores (recognition), computed once or read from its file.
         self.calibration_scores: CalibrationScores | None = None
+
+    def __repr__(self) -> str:
+        actions = [
+            f"{name} ({len(p.observations)} observations; {_columns(p.observations)})"
+            for name, p in self.actions.items()
+        ]
+        if len(actions) > 4:
+            actions = [*actions[:3], f"... {len(actions) - 3} more"]
+        gp = self.metadata.get("gp")
+        model = gp.get("library_model") if isinstance(gp, dict) else None
+        said = f", library model {model}" if model else ""
+        return (
+            f"PriorKnowledge({len(self.objects)} objects, {len(self.actions)} "
+            f"action{'s' if len(self.actions) != 1 else ''}: {', '.join(actions)}{said})"
+        )
 
     def __getitem__(self, action: str) -> ActionPrior:
         try:

@@ -417,6 +417,18 @@ class Recognition:
     def __len__(self) -> int:
         return len(self.object)
 
+    def __repr__(self) -> str:
+        acc = self.accuracy()
+        parts = [
+            f"{len(self)} touches of {len(set(self.object))} objects",
+            f"library of {len(self.library)} objects",
+            f"{int(np.sum(~np.asarray(self.known, dtype=bool)))} flagged new",
+        ]
+        if acc is not None:
+            parts.append(f"accuracy {acc:.3f} on the library's objects")
+        parts.append(f"false-alarm rate {self.calibration.false_alarm_rate:g}")
+        return f"Recognition({'; '.join(parts)})"
+
     def rows(self) -> list[dict[str, Any]]:
         """One dict per touch: object, action(s) (joined by "+"), trial, predicted,
         probability, runner_up, novelty, known."""
