@@ -38,6 +38,47 @@ def median_of(fn: Callable[[], Any], repeat: int = 3) -> float:
     return statistics.median(times)
 
 
+#: The reference workload's version: its figures compare only with those of the same version.
+REFERENCE_VERSION = 1
+
+
+def reference_workload() -> float:
+    """A fixed CPU workload, independent of aptkt, to express a CPU time as a ratio to: CPU-ms
+    differ between machines by 1.3-1.7x, and by 10-20 % on one machine with its load, a ratio to
+    work run beside it in the same process much less. Half compiled numerics (eigen-decompositions
+    of a 24x24 matrix, elementwise float64 over 4,096 values), half the interpreter (a dict loop,
+    numpy calls on 16-value slices): the mix of a simulated trial, whose cost is the compiled
+    core's time steps and the Python and numpy glue around them, so that both answer alike to
+    what differs between machines (clock, caches, vector units, the interpreter's build). Run it
+    under one BLAS thread, as trials are: idle BLAS threads spin and count as CPU time.
+    About 40 CPU-ms on the 2-core VM of benches/README.md. Never change it without raising
+    REFERENCE_VERSION."""
+    import numpy as np
+
+    rng = np.random.default_rng(20261128)
+    a = rng.standard_normal((24, 24))
+    sym = a @ a.T
+    x = rng.standard_normal(4096)
+    acc = 0.0
+    for _ in range(80):
+        acc += float(np.linalg.eigh(sym)[0][0])
+    y = x
+    for _ in range(400):
+        y = np.tanh(y * 0.9 + 0.1)
+    counts: dict[int, int] = {}
+    for i in range(80_000):
+        k = i & 255
+        counts[k] = counts.get(k, 0) + i
+    for i in range(4000):
+        acc += float(x[i : i + 16].sum())
+    return acc + float(y[0]) + len(counts)
+
+
+def spread(values: list[float]) -> dict[str, float]:
+    """Median and range."""
+    return {"median": statistics.median(values), "min": min(values), "max": max(values)}
+
+
 def machine() -> dict[str, Any]:
     return {
         "cpus": os.cpu_count(),

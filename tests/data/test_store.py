@@ -16,7 +16,7 @@ import pytest
 
 from aptkt.actions import PAPER_ACTIONS
 from aptkt.data import DatasetError, DatasetReader, DatasetWriter, repair, write_features
-from aptkt.data.store import raw_to_samples, samples_to_raw
+from aptkt.data.codec import raw_to_samples, samples_to_raw
 from aptkt.runtime.generation import GenerationPlan, generate
 from aptkt.sim import SimWorld
 from aptkt.skin.protocol import RAW_FIELDS
@@ -124,7 +124,7 @@ def write_version_1(path: Path, recordings) -> None:
     strings, an index without metadata ranges (built by hand, as no writer makes it now)."""
     import json
 
-    from aptkt.data.store import samples_to_raw
+    from aptkt.data.codec import samples_to_raw
 
     index_v1 = np.dtype(
         [

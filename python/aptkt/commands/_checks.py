@@ -298,7 +298,7 @@ def intact_data_set(path: str | Path, option: str) -> None:
     damaged nothing: bytes past the end of a file read as zeros, and a command must not learn
     from those. (Damage in the middle of a file is found when the damaged recording or feature
     is read.)"""
-    from aptkt.data.store import DatasetReader
+    from aptkt.data import DatasetReader
 
     with DatasetReader(path) as rd:
         problem = rd.damage() if rd.cut_short else None

@@ -223,7 +223,7 @@ def run_generate(args: argparse.Namespace) -> int:
 
 
 def run_info(args: argparse.Namespace) -> int:
-    from aptkt.data.store import DatasetReader
+    from aptkt.data import DatasetReader
 
     input_file(args.file, "DATASET")
     with DatasetReader(args.file) as rd:
@@ -352,7 +352,7 @@ def run_export_features(args: argparse.Namespace) -> int:
 
 
 def run_repair(args: argparse.Namespace) -> int:
-    from aptkt.data.store import repair
+    from aptkt.data import repair
 
     rewritable_file(args.file)
     kept = repair(args.file, backup=not args.no_backup)

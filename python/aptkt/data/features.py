@@ -15,7 +15,7 @@ import numpy as np
 
 from aptkt.data.hdf5 import cut_short, writer_mark
 from aptkt.data.lock import WriterLock
-from aptkt.data.store import check_schema
+from aptkt.data.schema import check_schema
 from aptkt.errors import DatasetError, InvalidInputError
 from aptkt.files import replaced_atomically
 

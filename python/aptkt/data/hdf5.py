@@ -30,7 +30,7 @@ store writes them, writers ended by ``os._exit`` or SIGKILL), and read in HDF5's
   HDF5 does not check on open; ``"v110"`` up to ``"latest"`` give superblock 3. But SWMR
   writing needs superblock 3 ("superblock version for SWMR is less than 3", src/H5Fsuper.c;
   measured: ``swmr_mode = True`` fails on superblocks 0 and 2), and SWMR is what keeps every
-  completed recording readable after a kill (:mod:`aptkt.data.store`). Clearing the flags is
+  completed recording readable after a kill (:mod:`aptkt.data.writer`). Clearing the flags is
   what HDF5's ``h5clear`` does, through a private property h5py does not reach: hence the
   rewrite of the superblock, on a private copy, never on the file.
 """

@@ -26,14 +26,22 @@ fresh chunk, so appending never rewrites a chunk that holds an earlier recording
 Version 1 stored the metadata as variable-length strings, one per recording. Those live in
 HDF5's global heap, which single-writer/multiple-reader mode does not protect: a writer killed
 mid-append could leave the heap extending past the end of the file. Version 1 files are still
-read; ``aptkt dataset repair`` rewrites one in version 2 before anything is appended to it.
+read; ``aptkt dataset repair`` rewrites one in version 2 before anything is appended to it
+(:func:`check_schema` refuses to append to it).
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import TYPE_CHECKING
+
 import numpy as np
 
+from aptkt.errors import DatasetError
 from aptkt.skin.protocol import RAW_FIELDS
+
+if TYPE_CHECKING:
+    import h5py
 
 __all__ = [
     "SCHEMA",
@@ -42,6 +50,7 @@ __all__ = [
     "INDEX_DTYPE",
     "MAX_TRIAL_NUMBER",
     "SAMPLE_FIELDS",
+    "check_schema",
 ]
 
 SCHEMA = "aptkt.dataset"
@@ -73,3 +82,24 @@ SAMPLE_FIELDS: dict[str, tuple[tuple[int, ...], np.dtype]] = {
     "t_ns": ((), np.dtype("<i8")),
     **{name: field for name, field in RAW_FIELDS.items() if name != "cell_id"},
 }
+
+
+def check_schema(f: h5py.File, path: Path, *, for_writing: bool = False) -> int:
+    """The file's schema version; a DatasetError if this aptkt cannot read (or append to) it."""
+    schema = f.attrs.get("schema")
+    version = f.attrs.get("schema_version")
+    if isinstance(schema, bytes):
+        schema = schema.decode()
+    if schema != SCHEMA:
+        raise DatasetError(f"{path}: not an aptkt data set (schema attribute {schema!r})")
+    if version not in READABLE_VERSIONS:
+        readable = ", ".join(map(str, READABLE_VERSIONS))
+        raise DatasetError(
+            f"{path}: schema version {version}, this aptkt reads versions {readable}"
+        )
+    if for_writing and version != SCHEMA_VERSION:
+        raise DatasetError(
+            f"{path}: schema version {version} is read-only for this aptkt; run "
+            f"'aptkt dataset repair {path}' to rewrite it in version {SCHEMA_VERSION} first"
+        )
+    return int(version)

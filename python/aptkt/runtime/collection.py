@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from aptkt.actions import ExploratoryAction
-from aptkt.data.store import DatasetWriter
+from aptkt.data import DatasetWriter
 from aptkt.errors import AptktError, ConfigError
 from aptkt.runtime.grid import TrialGrid
 from aptkt.runtime.salvage import aborted_path, note_interruption, salvage, save_aborted

@@ -31,7 +31,7 @@ import numpy as np
 
 from aptkt import __version__
 from aptkt.actions import ExploratoryAction
-from aptkt.data.store import DatasetReader, DatasetWriter
+from aptkt.data import DatasetReader, DatasetWriter
 from aptkt.errors import AptktError, ConfigError
 from aptkt.files import open_atomically, write_json_atomically
 from aptkt.learning.config import LearnerConfig

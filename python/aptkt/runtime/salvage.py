@@ -15,8 +15,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from aptkt.data import DatasetWriter
 from aptkt.data.codec import recording_key
-from aptkt.data.store import DatasetWriter
 from aptkt.errors import AptktError, DatasetError, TrialFault, TrialInterrupted
 from aptkt.skin.samples import Recording
 

@@ -9,8 +9,8 @@ from pathlib import Path
 from typing import Any
 
 from aptkt.actions import ExploratoryAction
+from aptkt.data import DatasetReader, DatasetWriter, repair
 from aptkt.data.lock import WriterLock
-from aptkt.data.store import DatasetReader, DatasetWriter, repair
 from aptkt.errors import DatasetError
 from aptkt.progress import Progress
 from aptkt.runtime.grid import TrialGrid

@@ -1,28 +1,17 @@
-"""Recordings (and optionally features) in HDF5: a versioned, compact, crash-safe store.
+"""Reading a data set — also while its writer runs, or after it died — with every error naming
+the file and the recording.
 
-Layout: :mod:`aptkt.data.schema`. Samples are stored as the raw integers the skin sends (the
-force before calibration, with the calibration kept in each recording's metadata), which is
-exact, about a fifth of float64 and compresses well.
-
-Crash safety: the writer runs in HDF5's single-writer/multiple-reader (SWMR) mode, in which
-the library keeps each dataset's structure consistent on disk at every moment: every dataset
-is created before the first recording, a recording is appended as samples → metadata → index
-row, each on fresh chunks (no chunk holding an earlier recording is ever rewritten), and the
-file is flushed after each one. Every recording whose append returned is therefore intact
-whatever happens later. SWMR does not order the writes of *different* datasets during a
-flush, so a writer killed mid-append can leave the new index row on disk before its samples or
-metadata; the reader checks the last row against the other datasets and drops it if it is
-incomplete (at most one append is ever in flight). :class:`DatasetReader` opens files in
-SWMR-read mode, which also works while a writer is running or after it died. To *append* to a
-file whose writer died, :func:`repair` first copies its complete recordings into a fresh file
-(the HDF5 library refuses to reopen a crashed SWMR file for writing until that is done). A new
-file is created whole, its structure built under another name first (:mod:`aptkt.data.atomic`).
+Files are opened in HDF5's SWMR-read mode, which also works while a writer appends
+(:mod:`aptkt.data.writer`) or after one died in SWMR mode; a file whose writer died outside it
+is read through a private copy without the writer's mark (:mod:`aptkt.data.hdf5`). At most one
+append is ever in flight, and a writer killed mid-append can leave its index row on disk before
+its samples or metadata, so the last row is checked against the other datasets and dropped if it
+is incomplete.
 
 Damage: HDF5 reads the bytes past the end of a file cut short as zeros, without an error, so the
 reader checks the position of what it reads in such a file (:mod:`aptkt.data.integrity`);
 compressed data (samples, metadata) carry zlib's checksum and stored features Fletcher-32, so
-bytes changed on disk are an error when read. Every such error names the file and the
-recording.
+bytes changed on disk are an error when read.
 """
 
 from __future__ import annotations
@@ -31,7 +20,7 @@ import json
 import os
 import tempfile
 from collections import Counter
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -39,18 +28,7 @@ import h5py
 import numpy as np
 
 from aptkt.data import atomic, integrity
-from aptkt.data.codec import (
-    CHUNK_ROWS,
-    META_CHUNK_BYTES,
-    PackedRecording,
-    json_default,
-    next_chunk_start,
-    pack_raw,
-    pack_recording,
-    raw_to_samples,
-    recording_key,
-    samples_to_raw,
-)
+from aptkt.data.codec import raw_to_samples
 from aptkt.data.hdf5 import (
     copy_without_writer_mark,
     cut_short,
@@ -59,214 +37,13 @@ from aptkt.data.hdf5 import (
     refused_for_writer_mark,
     while_locked,
 )
-from aptkt.data.lock import WriterLock, holder
-from aptkt.data.schema import INDEX_DTYPE, READABLE_VERSIONS, SAMPLE_FIELDS, SCHEMA, SCHEMA_VERSION
-from aptkt.errors import DatasetError, IndexOutOfRangeError, InvalidInputError, UnknownNameError
-from aptkt.files import refuse_unless_regular, replaced_atomically
+from aptkt.data.lock import holder
+from aptkt.data.schema import SAMPLE_FIELDS, check_schema
+from aptkt.errors import DatasetError, IndexOutOfRangeError, UnknownNameError
+from aptkt.files import refuse_unless_regular
 from aptkt.skin.samples import Recording
 
-# DatasetError lives with the other errors; the codec's names are importable from here too.
-__all__ = [
-    "DatasetError",
-    "DatasetWriter",
-    "DatasetReader",
-    "PackedRecording",
-    "pack_recording",
-    "repair",
-    "recording_key",
-    "samples_to_raw",
-    "raw_to_samples",
-]
-
-
-class DatasetWriter:
-    """Append recordings to a data set file, crash-safe (see the module docstring).
-
-    ``mode="w"`` creates a new file (an existing one is an error unless ``overwrite``);
-    ``mode="a"`` appends to an existing data set (create it if missing).
-
-    The writer holds the data set's lock (:mod:`aptkt.data.lock`) until :meth:`close`: a
-    second writer is refused, naming this one. ``lock``: the lock, taken already by the caller
-    (who releases it), e.g. for a repair's copy of the file it holds.
-    """
-
-    def __init__(
-        self,
-        path: str | Path,
-        mode: str = "w",
-        *,
-        description: Mapping[str, Any] | None = None,
-        overwrite: bool = False,
-        lock: WriterLock | None = None,
-    ):
-
-        self.path = Path(path)
-        if mode not in ("w", "a"):
-            raise InvalidInputError("mode must be 'w' or 'a'")
-        self._own_lock = lock is None
-        self.lock = WriterLock.acquire(self.path) if lock is None else lock
-        try:
-            self._open(mode, description, overwrite)
-        except BaseException:
-            self._release()
-            raise
-
-    def _open(self, mode: str, description: Mapping[str, Any] | None, overwrite: bool) -> None:
-        if mode == "a" and atomic.holds_nothing(self.path):
-            # Left by a writer killed as it created the file: nothing to append to.
-            mode, overwrite = "w", True
-        if mode == "a" and self.path.exists():
-            self._f = self._open_for_appending()
-        else:
-            if self.path.exists() and not overwrite:
-                raise DatasetError(f"{self.path} exists (use overwrite=True / --force, or append)")
-            self._f = self._create(description)
-        try:
-            while_locked(self._start_swmr)
-        except RuntimeError as exc:
-            self._f.close()
-            raise DatasetError(
-                f"{self.path}: cannot start writing: another process keeps the file locked ({exc})"
-            ) from exc
-        # Handles are taken only now: a failed attempt to start SWMR writing invalidates the
-        # handles open at the time, so a retry would leave the writer with dead ones.
-        self._index = self._f["recordings/index"]
-        self._meta = self._f["recordings/metadata"]
-        self._samples = {name: self._f[f"recordings/samples/{name}"] for name in SAMPLE_FIELDS}
-        self._keys = {
-            (r["object"].decode(), r["action"].decode(), int(r["trial"])) for r in self._index[...]
-        }
-
-    def _open_for_appending(self) -> h5py.File:
-        try:
-            f = while_locked(lambda: h5py.File(self.path, "a", libver="latest"))
-        except OSError as exc:
-            if "already open" in str(exc) or "consistency flags" in str(exc):
-                raise DatasetError(
-                    f"{self.path}: a writer of this file did not close it (crashed or "
-                    f"still running); run 'aptkt dataset repair {self.path}' first"
-                ) from exc
-            raise DatasetError(f"{self.path}: cannot open for appending: {exc}") from exc
-        check_schema(f, self.path, for_writing=True)
-        return f
-
-    def _create(self, description: Mapping[str, Any] | None) -> h5py.File:
-        """A new file with every dataset of the layout, empty; whole or not at all (a kill while
-        HDF5 creates a file in place left 48 bytes nothing reads)."""
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        atomic.create_data_set(self.path, description)
-        return while_locked(lambda: h5py.File(self.path, "a", libver="latest"))
-
-    def _start_swmr(self) -> None:
-        self._f.swmr_mode = True
-
-    def __enter__(self) -> DatasetWriter:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def __len__(self) -> int:
-        return int(self._index.shape[0])
-
-    def keys(self) -> set[tuple[str, str, int]]:
-        """``(object, action, trial)`` of every stored recording."""
-        return set(self._keys)
-
-    def append(self, rec: Recording) -> int:
-        """Store one recording (flushed before returning); returns its number in the file."""
-        return self.append_packed(pack_recording(rec))
-
-    def _append_raw(
-        self,
-        key: tuple[str, str, int],
-        start_ns: int,
-        stop_ns: int,
-        raw: Mapping[str, np.ndarray],
-        meta_json: str,
-    ) -> int:
-        return self.append_packed(pack_raw(key, start_ns, stop_ns, raw, meta_json))
-
-    def append_packed(self, rec: PackedRecording) -> int:
-        """Store a packed recording (see :func:`pack_recording`); flushed before returning."""
-        key = rec.key
-        obj, action, trial = key
-        if key in self._keys:
-            raise DatasetError(f"{self.path}: {obj}/{action}/trial {trial} is already stored")
-        n = rec.rows
-        want = next_chunk_start(n, CHUNK_ROWS) // CHUNK_ROWS
-        if any(len(rec.chunks.get(name, ())) != want for name in self._samples):
-            raise InvalidInputError(f"packed recording {key}: expected {want} chunks per field")
-        # Each recording starts on a fresh chunk of every dataset: chunks are then written once,
-        # never rewritten by a later append — a rewritten compressed chunk moves, and a writer
-        # killed before the move is on disk must not take an earlier recording with it. The
-        # zero padding between recordings compresses to almost nothing; no index row points at it.
-        row0 = next_chunk_start(self._samples["cell_id"].shape[0], CHUNK_ROWS)
-        # Samples first, then the metadata, the index row last: the index defines what exists.
-        for name, ds in self._samples.items():
-            ds.resize(row0 + n, axis=0)
-            for j, data in enumerate(rec.chunks[name]):
-                offset = (row0 + j * CHUNK_ROWS,) + (0,) * (ds.ndim - 1)
-                ds.id.write_direct_chunk(offset, data)
-        meta_bytes = np.frombuffer(rec.meta_json.encode("utf-8"), dtype=np.uint8)
-        meta0 = next_chunk_start(self._meta.shape[0], META_CHUNK_BYTES)
-        self._meta.resize(meta0 + meta_bytes.size, axis=0)
-        self._meta[meta0 : meta0 + meta_bytes.size] = meta_bytes
-        i = len(self)
-        row = np.array(
-            [
-                (
-                    obj.encode(),
-                    action.encode(),
-                    trial,
-                    rec.start_ns,
-                    rec.stop_ns,
-                    row0,
-                    row0 + n,
-                    meta0,
-                    meta0 + meta_bytes.size,
-                )
-            ],
-            dtype=INDEX_DTYPE,
-        )
-        self._index.resize(i + 1, axis=0)
-        self._index[i : i + 1] = row
-        self._f.flush()
-        self._keys.add(key)
-        return i
-
-    def close(self) -> None:
-        try:
-            if getattr(self, "_f", None) is not None and self._f.id.valid:
-                self._f.flush()
-                self._f.close()
-        finally:
-            self._release()
-
-    def _release(self) -> None:
-        if self._own_lock:
-            self.lock.release()
-
-
-def check_schema(f: h5py.File, path: Path, *, for_writing: bool = False) -> int:
-    """The file's schema version; a DatasetError if this aptkt cannot read (or append to) it."""
-    schema = f.attrs.get("schema")
-    version = f.attrs.get("schema_version")
-    if isinstance(schema, bytes):
-        schema = schema.decode()
-    if schema != SCHEMA:
-        raise DatasetError(f"{path}: not an aptkt data set (schema attribute {schema!r})")
-    if version not in READABLE_VERSIONS:
-        readable = ", ".join(map(str, READABLE_VERSIONS))
-        raise DatasetError(
-            f"{path}: schema version {version}, this aptkt reads versions {readable}"
-        )
-    if for_writing and version != SCHEMA_VERSION:
-        raise DatasetError(
-            f"{path}: schema version {version} is read-only for this aptkt; run "
-            f"'aptkt dataset repair {path}' to rewrite it in version {SCHEMA_VERSION} first"
-        )
-    return int(version)
+__all__ = ["DatasetReader"]
 
 
 class DatasetReader:
@@ -573,52 +350,3 @@ class DatasetReader:
             "features": self.feature_names(),
             "description": self.description,
         }
-
-
-def repair(path: str | Path, *, backup: bool = True, lock: WriterLock | None = None) -> int:
-    """Make a file whose writer died appendable again: copy every readable recording into a
-    fresh file and put that in its place (the original is kept as ``<name>.crashed`` when
-    ``backup``). Returns the number of recordings kept (:attr:`DatasetReader.damaged` tells
-    which were not). Also rewrites a file of an older schema version in the current one. On
-    any failure the file is left as it was and no temporary file remains.
-
-    The data set's lock is held throughout (``lock``: the caller holds it already), so a file
-    a live writer is writing is refused, naming that writer. Only regular files are renamed: a
-    device, a FIFO or a directory at the file's name or at the backup's is refused."""
-    path = Path(path)
-    held = WriterLock.acquire(path) if lock is None else lock
-    try:
-        return _repair(path, backup, held)
-    finally:
-        if lock is None:
-            held.release()
-
-
-def _repair(path: Path, backup: bool, lock: WriterLock) -> int:
-    crashed = path.with_name(path.name + ".crashed")
-    if backup:
-        refuse_unless_regular(crashed, DatasetError)
-    with replaced_atomically(path, DatasetError, temp_suffix=".repairing") as tmp:
-        with DatasetReader(path) as src:
-            desc = src.description
-            skip = set(src._implausible())
-            # (The copy is under the original's lock: it is the original's next version.)
-            with DatasetWriter(tmp, "w", description=desc, overwrite=True, lock=lock) as dst:
-                n = 0
-                for i in range(len(src)):
-                    if i in skip:
-                        continue
-                    try:
-                        meta = src.metadata(i)
-                        raw = src.raw(i)
-                    except (OSError, ValueError, DatasetError):  # damaged (past a truncation)
-                        continue
-                    r = src.index[i]
-                    meta_json = json.dumps(meta, sort_keys=True, default=json_default)
-                    dst._append_raw(
-                        src.key(i), int(r["start_ns"]), int(r["stop_ns"]), raw, meta_json
-                    )
-                    n += 1
-        if backup:  # (the copy is complete: the original steps aside just before it replaces it)
-            os.replace(path, crashed)
-    return n
