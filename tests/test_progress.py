@@ -92,7 +92,7 @@ def test_generation_lines_name_the_recording_just_counted(tmp_path, monkeypatch,
     import re
 
     from aptkt.actions import PAPER_ACTIONS
-    from aptkt.data.store import DatasetReader
+    from aptkt.data import DatasetReader
     from aptkt.runtime.generation import GenerationPlan, generate
 
     ticks = itertools.count(0.0, 40.0)  # every update at least LINE_EVERY_SECONDS later

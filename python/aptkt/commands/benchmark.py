@@ -284,6 +284,7 @@ def _strict_exit(args: argparse.Namespace, summary: dict) -> int:
     either way."""
     from aptkt.experiments.benchmark_report import CHECK_KINDS, INVARIANT, failed_checks
 
+    kinds: tuple[str, ...]
     if args.strict_reference:
         kinds, option, what = CHECK_KINDS, "--strict-reference", "check(s) failed or not reached"
     elif args.strict:
