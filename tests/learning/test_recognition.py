@@ -125,7 +125,7 @@ def test_recognise_on_the_command_line(library, tmp_path, capsys):
         == 0
     )
     said = capsys.readouterr().out
-    assert "recognised" in said and "novelty AUROC 1.000" in said
+    assert "novelty AUROC 1.000" in said
     with open(out / "predictions.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == 4 * 7 and set(rows[0]) >= {
@@ -140,6 +140,20 @@ def test_recognise_on_the_command_line(library, tmp_path, capsys):
     }
     summary = json.loads((out / "summary.json").read_text())
     assert summary["novelty_auroc"] == 1.0 and (out / "confusion.png").stat().st_size > 0
+    # What became of each touch, recounted from predictions.csv: shares that add up to one.
+    known = [r for r in rows if r["object"] in summary["library"]]
+    accepted = [r for r in known if r["known"] == "True"]
+    mine = summary["library_objects"]
+    assert mine["touches"] == len(known)
+    assert mine["accepted_and_right"] == pytest.approx(
+        sum(r["predicted"] == r["object"] for r in accepted) / len(known)
+    )
+    assert mine["flagged_new"] == pytest.approx(1 - len(accepted) / len(known))
+    assert sum(v for k, v in mine.items() if k != "touches") == pytest.approx(1.0)
+    other = summary["other_objects"]
+    assert other["flagged_new"] + other["accepted_as_a_library_object"] == pytest.approx(1.0)
+    assert f"{mine['touches']} touch(es) of objects in the library: " in said
+    assert "accepted and right" in said and "accepted as a library object" in said
     assert main(["recognise", "--prior", str(lib), "--table", str(test), "-o", str(out)]) == 1
     assert "--force" in capsys.readouterr().err
 

@@ -38,7 +38,33 @@ def summary(result: Recognition) -> dict[str, Any]:
         if (~mine).any()
         else None,
         "novelty_auroc": auroc,
+        **_outcomes(result),
     }
+
+
+def _outcomes(result: Recognition) -> dict[str, Any]:
+    """What became of the touches, as shares that add up to one: of the library's objects,
+    accepted and right, flagged as new, or accepted as another object; of other objects,
+    flagged as new or accepted as a library object. (The top guess alone, 'recognised', counts
+    a touch that was flagged as new as right.)"""
+    mine = result.in_library()
+    known = np.asarray(result.known, dtype=bool)
+    right = np.asarray(result.predicted) == np.asarray(result.object)
+    out: dict[str, Any] = {"library_objects": None, "other_objects": None}
+    if mine.any():
+        out["library_objects"] = {
+            "touches": int(mine.sum()),
+            "accepted_and_right": float(np.mean(known[mine] & right[mine])),
+            "flagged_new": float(np.mean(~known[mine])),
+            "accepted_as_another_object": float(np.mean(known[mine] & ~right[mine])),
+        }
+    if (~mine).any():
+        out["other_objects"] = {
+            "touches": int((~mine).sum()),
+            "flagged_new": float(np.mean(~known[~mine])),
+            "accepted_as_a_library_object": float(np.mean(known[~mine])),
+        }
+    return out
 
 
 def summary_lines(result: Recognition) -> list[str]:
@@ -51,15 +77,20 @@ def summary_lines(result: Recognition) -> list[str]:
         f"rate of {100 * s['false_alarm_rate']:.0f} %; it catches "
         f"{100 * s['detection_rate_on_the_library']:.0f} % of its own objects left out)"
     ]
-    if s["accuracy_on_library_objects"] is not None:
+    mine, other = s["library_objects"], s["other_objects"]
+    if mine is not None:
         lines.append(
-            f"objects in the library: {100 * s['accuracy_on_library_objects']:.1f} % recognised, "
-            f"{100 * s['flagged_new_among_library_objects']:.1f} % flagged as new"
+            f"{mine['touches']} touch(es) of objects in the library: "
+            f"{100 * mine['accepted_and_right']:.1f} % accepted and right, "
+            f"{100 * mine['flagged_new']:.1f} % flagged as new, "
+            f"{100 * mine['accepted_as_another_object']:.1f} % accepted as another object "
+            f"(top guess right: {100 * s['accuracy_on_library_objects']:.1f} %)"
         )
-    if s["flagged_new_among_other_objects"] is not None:
+    if other is not None:
         lines.append(
-            f"objects not in the library: {100 * s['flagged_new_among_other_objects']:.1f} % "
-            "flagged as new"
+            f"{other['touches']} touch(es) of objects not in the library: "
+            f"{100 * other['flagged_new']:.1f} % flagged as new, "
+            f"{100 * other['accepted_as_a_library_object']:.1f} % accepted as a library object"
             + (
                 f"; novelty AUROC {s['novelty_auroc']:.3f}"
                 if s["novelty_auroc"] is not None
