@@ -154,6 +154,23 @@ def test_hdf5_tables_are_checked_too(tmp_path, capsys):
     assert code == 1 and "row 8, column thermal.2: empty, but filled in row 1" in err
 
 
+@pytest.mark.parametrize("kind", ["external", "soft"])
+def test_a_column_that_is_a_link_is_one_line(tmp_path, capsys, kind):
+    """An HDF5 column may be a link to another file (missing, or anywhere): a table holds its
+    own columns, so a link is refused where the table is read, never followed."""
+    path = write_feature_table(tmp_path / "t.h5", _world_table())
+    with h5py.File(path, "a") as f:
+        del f["thermal.2"]
+        f["thermal.2"] = (
+            h5py.ExternalLink(str(tmp_path / "gone.h5"), "/x")
+            if kind == "external"
+            else h5py.SoftLink("/thermal.1")
+        )
+    code, err = _learn(path, capsys)
+    assert code == 1 and "\n" not in err and "Traceback" not in err, err
+    assert "column thermal.2: is a link; a feature table holds its columns itself" in err
+
+
 @pytest.mark.parametrize(
     "args,message",
     [

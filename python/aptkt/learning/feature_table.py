@@ -175,6 +175,13 @@ def _read_csv(path: Path) -> tuple[list[str], dict[str, list]]:
 def _read_hdf5(path: Path) -> tuple[list[str], dict[str, list]]:
     try:
         with h5py.File(path, "r") as f:
+            for k in f:
+                # A link would read another file (or fail inside h5py): a table holds its own
+                # columns.
+                if isinstance(f.get(k, getlink=True), (h5py.ExternalLink, h5py.SoftLink)):
+                    raise _error(
+                        path, "is a link; a feature table holds its columns itself", None, k
+                    )
             header = [k for k in f if isinstance(f[k], h5py.Dataset)]
             cells: dict[str, list] = {}
             for k in header:
@@ -183,7 +190,9 @@ def _read_hdf5(path: Path) -> tuple[list[str], dict[str, list]]:
                     raise _error(path, f"expected a 1-D data set, got shape {d.shape}", None, k)
                 values = d.asstr()[()] if d.dtype.kind in "OS" else d[()]
                 cells[k] = list(values)
-    except OSError as exc:
+    except FeatureTableError:
+        raise
+    except (OSError, KeyError, ValueError) as exc:
         raise _error(path, f"cannot read the HDF5 file: {exc}") from None
     lengths = {len(v) for v in cells.values()}
     if len(lengths) > 1:
