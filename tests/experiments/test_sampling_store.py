@@ -148,6 +148,15 @@ def test_store_round_trip_and_damaged_files(tmp_path):
     store.save("k1", spec(), rows)
     back = store.load("k1")
     assert back[0]["step"] == 0 and math.isnan(back[0]["uncertainty"]) and back[0]["action"] is None
+    # The file is strict JSON (a NaN is null there, named apart), which any reader takes.
+
+    def refuse(word: str) -> None:
+        raise ValueError(f"not strict JSON: {word}")
+
+    doc = json.loads(store.path("k1").read_text(), parse_constant=refuse)
+    assert doc["steps"][0]["uncertainty"] is None and doc["non_finite"] == [
+        [0, "uncertainty", "nan"]
+    ]
     assert "k1" in store and store.keys() == ["k1"]
     assert not list(
         (tmp_path / "runs").glob("*.tmp")

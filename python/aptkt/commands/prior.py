@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import os
 from pathlib import Path
 
@@ -23,7 +22,7 @@ from aptkt.commands._method import add_library_model_argument
 from aptkt.commands._session import object_list, split_names
 from aptkt.commands.learn_table import add_extraction_argument
 from aptkt.errors import ConfigError
-from aptkt.files import present
+from aptkt.files import present, strict_json
 from aptkt.gp.settings import MAX_RESTARTS
 from aptkt.learning.config import GPSettings
 from aptkt.learning.pipeline import FEATURE_SCALES
@@ -356,7 +355,7 @@ def run_inspect(args: argparse.Namespace) -> int:
         r["uninformative"] = uninformative_modalities(prior[r["action"]])
     if args.json:
         print(
-            json.dumps(
+            strict_json(
                 {"objects": prior.objects, "metadata": prior.metadata, "actions": rows}, indent=2
             )
         )

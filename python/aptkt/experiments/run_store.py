@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 from collections.abc import Iterable
 from functools import lru_cache
@@ -25,7 +26,7 @@ from aptkt import __version__
 from aptkt.data import DatasetReader
 from aptkt.errors import ConfigError
 from aptkt.experiments.runs import RunSpec
-from aptkt.files import open_atomically
+from aptkt.files import open_atomically, strict_json
 
 __all__ = ["RunStore", "data_fingerprint", "run_key", "canonical_json"]
 
@@ -79,6 +80,9 @@ def run_key(spec: RunSpec, fingerprint: str) -> str:
     return _digest(content)[:24]
 
 
+_NON_FINITE = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
+
+
 class RunStore:
     """A directory of finished runs, one JSON file per run key."""
 
@@ -105,19 +109,39 @@ class RunStore:
         if not isinstance(doc, dict) or doc.get("format") != _FORMAT or doc.get("key") != key:
             return None
         steps = doc.get("steps")
-        return steps if isinstance(steps, list) else None
+        if not isinstance(steps, list):
+            return None
+        # The cells strict JSON holds as null, back as the non-finite numbers they were.
+        for cell in doc.get("non_finite", []):
+            try:
+                i, name, text = cell
+                # (One object per constant, as json's own NaN: two loads of a run compare equal.)
+                steps[i][name] = _NON_FINITE[text]
+            except (TypeError, ValueError, IndexError, KeyError):
+                return None
+        return steps
 
     def save(self, key: str, spec: RunSpec, steps: Iterable[dict[str, Any]]) -> Path:
+        rows = list(steps)
+        # Strict JSON, which every reader takes, has no NaN (an uncertainty where nothing was
+        # chosen, a mean λ without a transfer): such a cell is null, and named here so that a
+        # resumed run gets back exactly the number it stored.
+        non_finite = [
+            [i, name, repr(float(v))]
+            for i, row in enumerate(rows)
+            for name, v in row.items()
+            if isinstance(v, (float, np.floating)) and not math.isfinite(v)
+        ]
         doc = {
             "format": _FORMAT,
             "key": key,
             "software_version": __version__,
             "spec": spec.to_dict(),
-            "steps": list(steps),
+            "steps": rows,
+            "non_finite": non_finite,
         }
         final = self.path(key)
-        # One C-encoded string: json.dump's streaming encoder is the pure-Python one (2× slower).
-        text = json.dumps(doc)
+        text = strict_json(doc, indent=None)
         # (The temporary name is unique per write: workers on several hosts, or a retried task,
         # may save the same run at once; each renames its own complete file.)
         with open_atomically(final, ConfigError) as fh:
