@@ -456,3 +456,22 @@ def test_usage_errors_exit_2_with_the_usage(capsys, argv):
     assert lines[0].startswith(f"usage: {label}"), err
     assert re.match(rf"^{re.escape(label)}: error: ", lines[-1]), lines[-1]
     assert sum(": error: " in line for line in lines) == 1
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["dataset", "generate", "-o", "{d}/x.h5", "--objects-file", "/dev/zero", "-n", "1"],
+        ["collect", "--robot", "sim", "--objects-file", "/dev/zero", "--objects", "hard_box"]
+        + ["-n", "1", "-o", "{d}/c.h5"],
+    ],
+    ids=["dataset generate", "collect --robot sim"],
+)
+def test_an_objects_file_that_is_a_device_is_one_line_not_a_hang(tmp_path, capsys, argv):
+    """/dev/zero never ends: read as an object library it held the command for ever."""
+    from aptkt.cli import main
+
+    code = main([a.format(d=tmp_path) for a in argv])
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and "\n" not in err, err
+    assert "--objects-file /dev/zero: is a character device, not a regular file" in err

@@ -149,6 +149,8 @@ def make_session(args: argparse.Namespace, *, seed: int = 0) -> Any:
                 f"{', '.join(ignored)}: only for --robot ur10 (the simulated world has its own "
                 "placements and skin)"
             )
+        for path in args.objects_file or ():
+            input_file(path, "--objects-file")  # (a device or FIFO would be read for ever)
         return SimSession(seed=seed, settings=settings, object_files=args.objects_file)
 
     from aptkt.runtime.sessions import RobotSession

@@ -175,6 +175,8 @@ def build_plan(args: argparse.Namespace):  # -> GenerationPlan
     jobs(args.jobs)
     resume_or_force(args.resume, args.force)
     output_file(args.output)
+    for path in args.objects_file or ():
+        input_file(path, "--objects-file")  # (a device or FIFO would be read for ever)
     library = load_library(*args.objects_file)
     objects = split_names(args.objects, "--objects") or list(library)
     unknown = [o for o in objects if o not in library]
