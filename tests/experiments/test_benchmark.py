@@ -588,3 +588,24 @@ def test_one_group_gives_strict_json_and_says_why_there_is_no_interval(run, tmp_
     assert all(e["no_interval"].startswith("1 ") for e in found)
     report = (out / "report.md").read_text()
     assert not re.search(r"\bnan\b", report, re.I) and "interval" in report
+
+
+def test_trials_are_chosen_before_each_objects_trials_are_halved(tmp_path, monkeypatch, capsys):
+    import aptkt.experiments.benchmark as benchmark
+
+    given = {}
+
+    def record(table, settings, **run):
+        given.update(table=table, command=run["command"])
+        return {"checks": []}
+
+    monkeypatch.setattr(benchmark, "run_benchmark", record)
+    table = _table(tmp_path)
+    assert main(["benchmark", str(table), "--trials", "2-7", "-o", str(tmp_path / "b")]) == 0
+    assert set(given["table"].trials.tolist()) == set(range(2, 8))
+    assert len(given["table"].trials) == N_OBJECTS * 6
+    assert given["command"].endswith("--trials 2-7")
+    assert main(["benchmark", str(table), "--trials", "6-9", "-o", str(tmp_path / "c")]) == 1
+    assert capsys.readouterr().err == (
+        f"aptkt benchmark: error: --trials 6-9: trial(s) 8-9 not in {table} (it has trials 0-7)\n"
+    )

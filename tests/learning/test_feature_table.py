@@ -177,8 +177,9 @@ def test_a_column_that_is_a_link_is_one_line(tmp_path, capsys, kind):
         (["--prior-objects", "a,zz"], "no rows of prior object(s) zz"),
         (["--objects", "c,a"], "a are both prior and new"),
         (["--actions", "P9"], "no rows of action(s) P9"),
-        (["--test-trials", "2:1"], "--test-trials: need 0 <= FIRST < STOP"),
-        (["--transfer", "none"], "--transfer: not with --table"),
+        (["--test-trials", "2:1"], "--test-trials 2:1: 2:1 holds no trial"),
+        (["--test-trials", "2-1"], "--test-trials 2-1: the range 2-1 runs backwards"),
+        (["--transfer", "none"], "--transfer: not with a table"),
         (["--eps-neg", "2"], "eps_neg must lie in [0, 1]"),
         (["--evidence-margin", "nan"], "evidence_margin must be finite"),
     ],
@@ -192,7 +193,7 @@ def test_bad_options_give_one_line(tmp_path, capsys, args, message):
 def test_live_options_are_not_mixed_up(capsys):
     assert main(["learn", "--objects", "a,b", "--prior", "p.npz", "--runs", "2"]) == 1
     err = capsys.readouterr().err
-    assert "--robot is required (or learn offline with --table TABLE)" in err
+    assert "--robot is required (or learn offline: aptkt learn TABLE ...)" in err
 
 
 def test_method_choices_reach_every_method_and_the_prior(tmp_path, capsys):
@@ -393,3 +394,22 @@ def test_random_bytes_named_csv_are_one_line_everywhere(tmp_path, capsys, seed):
         assert main(argv) == 1, argv
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and str(path) in err[0], (argv, err)
+
+
+def test_the_table_is_given_as_learns_input_and_trials_choose_its_rows(tmp_path, capsys):
+    """TABLE is the table mode (--table, the earlier spelling, alike); --trials keeps the rows of
+    those trials before the new objects' rows are split, and summary.json records them."""
+    path = _write_csv(tmp_path / "t.csv", GOOD_HEADER, _good_rows())
+    common = ["--prior-objects", "a,b", "--objects", "c,d", "--budget", "1", "--runs", "1"]
+    out = tmp_path / "positional"
+    assert main(["learn", str(path), *common, "--trials", "0-1", "-o", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert f"{path}: 8 rows" in said and "2 rows to learn from and 2 held out" in said, said
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["settings"]["trials"] == "0-1"
+    code, err = _learn(path, capsys, "--trials", "1-5")
+    assert code == 1 and err == (
+        f"aptkt learn: error: --trials 1-5: trial(s) 3-5 not in {path} (it has trials 0-2)"
+    )
+    code, err = _learn(path, capsys, "--trials", "0,2", "--test-trials", "2")
+    assert code == 0, err

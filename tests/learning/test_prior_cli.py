@@ -38,7 +38,11 @@ def test_build_then_inspect(data, tmp_path, capsys):
 
 def test_errors_are_clear(data, tmp_path, capsys):
     assert main(["prior", "build", str(data), "-o", str(tmp_path / "p.npz"), "--trials", "5"]) == 1
-    assert "--trials must look like FIRST:STOP" in capsys.readouterr().err
+    assert "--trials 5: not in" in capsys.readouterr().err
+    assert (
+        main(["prior", "build", str(data), "-o", str(tmp_path / "p.npz"), "--trials", "3-1"]) == 1
+    )
+    assert "runs backwards (write 1-3)" in capsys.readouterr().err
     bad = tmp_path / "bad.npz"
     bad.write_text("not a prior")
     assert main(["prior", "inspect", str(bad)]) == 1

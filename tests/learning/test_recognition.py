@@ -195,3 +195,149 @@ def test_recognise_mistakes_are_one_line(library, tmp_path, capsys):
     )
     assert "not a prior-knowledge file" in capsys.readouterr().err
     assert not (tmp_path / "x" / "predictions.csv").exists()
+
+
+@pytest.fixture(scope="module")
+def touches(tmp_path_factory):
+    """A library built from a table, the touches of its objects (trials 0-7) as CSV and as an
+    HDF5 table, and a small data set of this skin."""
+    from aptkt.actions import PAPER_ACTIONS
+    from aptkt.runtime.generation import GenerationPlan, generate
+
+    d = tmp_path_factory.mktemp("touches")
+    train = _write(d / "train.csv", {"A": _obs(MEANS, 12, 0)})
+    assert main(["prior", "build", str(train), "-o", str(d / "lib.npz")]) == 0
+    _write(d / "touches.csv", {"A": _obs(MEANS, 8, 3), "C": _obs(MEANS, 2, 4, "C", 20)})
+    _write(d / "touches.h5", {"A": _obs(MEANS, 8, 3)})
+    plan = GenerationPlan(("rough_sponge", "metal_toolbox"), (PAPER_ACTIONS["P1"],), 3, seed=3)
+    generate(d / "d.h5", plan, progress=False)
+    return d
+
+
+def _predictions(out):
+    with open(out / "predictions.csv") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_the_touches_are_given_as_dataset_or_table_whatever_the_file(touches, tmp_path, capsys):
+    """One input, DATASET|TABLE, told apart by what the file is; --table, the earlier spelling,
+    gives the same predictions."""
+    lib = str(touches / "lib.npz")
+    runs = {
+        "csv": [str(touches / "touches.csv")],
+        "h5": [str(touches / "touches.h5")],
+        "--table": ["--table", str(touches / "touches.csv")],
+    }
+    for name, given in runs.items():
+        assert main(["recognise", "--prior", lib, *given, "-o", str(tmp_path / name)]) == 0
+    capsys.readouterr()
+    rows = {name: _predictions(tmp_path / name) for name in runs}
+    assert len(rows["csv"]) == 5 * 8
+    assert rows["csv"] == rows["--table"] == rows["h5"]
+    summary = json.loads((tmp_path / "csv" / "summary.json").read_text())
+    assert summary["input"] == runs["csv"][0] and summary["trials"] is None
+
+
+def test_trials_chooses_exactly_those_touches(touches, tmp_path, capsys):
+    lib = str(touches / "lib.npz")
+    table = str(touches / "touches.csv")
+    assert (
+        main(["recognise", "--prior", lib, table, "--trials", "3-4", "-o", str(tmp_path / "t")])
+        == 0
+    )
+    rows = _predictions(tmp_path / "t")
+    assert len(rows) == 5 * 2 and {r["trial"] for r in rows} == {"3", "4"}
+    assert json.loads((tmp_path / "t" / "summary.json").read_text())["trials"] == "3-4"
+    # The same selection on a data set of this skin, recognised with a library built from it.
+    data = str(touches / "d.h5")
+    assert main(["prior", "build", data, "-o", str(tmp_path / "d.npz")]) == 0
+    out = tmp_path / "d"
+    assert (
+        main(
+            [
+                "recognise",
+                "--prior",
+                str(tmp_path / "d.npz"),
+                data,
+                "--trials",
+                "0,2",
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    capsys.readouterr()
+    rows = _predictions(out)
+    assert len(rows) == 2 * 2 and {r["trial"] for r in rows} == {"0", "2"}
+
+
+def _one_error_line(argv, capsys, label="aptkt recognise"):
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 1 and "Traceback" not in err, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"{label}: error: "), err
+    return lines[0]
+
+
+def test_a_file_of_the_wrong_kind_is_one_line_saying_what_to_write(touches, tmp_path, capsys):
+    lib, table, data = (str(touches / n) for n in ("lib.npz", "touches.csv", "d.h5"))
+    out = ["-o", str(tmp_path / "x")]
+    learn = ["--prior-objects", "o0,o1", "--objects", "o2,o3", *out]
+    cases = [
+        # a data set where only a feature table is read: the command that writes its table
+        (
+            ["learn", data, *learn],
+            "aptkt learn",
+            f"aptkt dataset export-features {data} -o {data[:-3]}.csv",
+        ),
+        (["learn", "--table", data, *learn], "aptkt learn", "aptkt dataset export-features"),
+        (["benchmark", data, *out], "aptkt benchmark", "aptkt dataset export-features"),
+        # a feature table where only a data set is read
+        (
+            ["dataset", "features", table],
+            "aptkt dataset features",
+            "is a feature table, not a data set",
+        ),
+        # the library as the touches
+        (["recognise", "--prior", lib, lib, *out], "aptkt recognise", "give it with --prior"),
+        (
+            ["recognise", "--prior", lib, str(touches / "none.csv"), *out],
+            "aptkt recognise",
+            "no such data set or feature table",
+        ),
+        (["recognise", "--prior", lib, *out], "aptkt recognise", "--prior PRIOR DATASET|TABLE"),
+        (
+            ["recognise", "--prior", lib, table, "--table", table, *out],
+            "aptkt recognise",
+            "give the touches once",
+        ),
+    ]
+    for argv, label, fragment in cases:
+        assert fragment in _one_error_line(argv, capsys, label)
+    assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize(
+    ("trials", "fragment"),
+    [
+        ("x", "--trials x: 'x' is not a trial number or a range"),
+        ("-3", "'-3' is not a trial number or a range"),
+        ("1,,2", "an empty item is not a trial number"),
+        ("", "--trials: give trial numbers and ranges"),
+        ("4-3", "the range 4-3 runs backwards (write 3-4)"),
+        ("5:5", "5:5 holds no trial"),
+        ("3-40", "--trials 3-40: trial(s) 8-19,22-40 not in"),
+        ("40-50", "--trials 40-50: not in"),
+        ("20-21", "no touches of the library's actions in these trials"),
+    ],
+)
+def test_bad_trials_are_one_line(touches, tmp_path, capsys, trials, fragment):
+    lib, table = str(touches / "lib.npz"), str(touches / "touches.csv")
+    line = _one_error_line(
+        ["recognise", "--prior", lib, table, "--trials", trials, "-o", str(tmp_path / "x")], capsys
+    )
+    assert fragment in line, line
+    if "not in" in fragment:
+        assert line.endswith("(it has trials 0-7,20-21)"), line

@@ -299,12 +299,19 @@ def intact_data_set(path: str | Path, option: str) -> None:
     from those. (Damage in the middle of a file is found when the damaged recording or feature
     is read.)"""
     from aptkt.data import DatasetReader
+    from aptkt.learning.feature_table import is_feature_table
 
+    where = f"{option} {path}" if option.startswith("-") else str(path)
+    if is_feature_table(path):
+        # (The data set reader would say "not a readable HDF5 data set", of a CSV file.)
+        raise ConfigError(
+            f"{where}: is a feature table, not a data set (HDF5) of this skin; a table is read "
+            "as the DATASET|TABLE of prior build and recognise, or the TABLE of learn and benchmark"
+        )
     with DatasetReader(path) as rd:
         problem = rd.damage() if rd.cut_short else None
         empty = len(rd) == 0 and not rd.lost
         left_empty = rd.holds_nothing
-    where = f"{option} {path}" if option.startswith("-") else str(path)
     if empty and not problem:
         raise ConfigError(
             f"{where}: holds no recordings"

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from aptkt.commands._checks import add_jobs_option, add_scheduler_option
+from aptkt.commands._inputs import add_trials_option
 from aptkt.commands._method import add_method_arguments
 from aptkt.experiments.population import LARGEST_BATCH
 from aptkt.files import present
@@ -73,6 +74,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="how the priors are chosen: random, nearest, farthest (default: all three)",
     )
     p.add_argument("--actions", metavar="A,B,...", help="only these actions (default: all)")
+    add_trials_option(p, "rows (chosen before each object's trials are halved)")
     p.add_argument(
         "--lifelong",
         action="store_true",
@@ -150,12 +152,12 @@ def run(args: argparse.Namespace) -> int:
         MAX_RUNS,
         at_least,
         at_most,
-        input_file,
         jobs,
         known_names,
         output_dir,
         scheduler_available,
     )
+    from aptkt.commands._inputs import check_trials, parse_trials, refuse_data_set
     from aptkt.commands._method import learner_config
     from aptkt.commands._session import split_names
     from aptkt.errors import ConfigError
@@ -163,6 +165,7 @@ def run(args: argparse.Namespace) -> int:
     from aptkt.experiments.table_limits import MAX_LIBRARY_OBJECTS, read_table_within_limits
 
     jobs(args.jobs)
+    trials = parse_trials(args.trials)
     at_least(args.seed, 0, "--seed")
     at_least(args.groups, 1, "--groups")
     at_most(args.groups, MAX_RUNS, "--groups")
@@ -204,7 +207,7 @@ def run(args: argparse.Namespace) -> int:
     at_least(args.orders, 1, "--orders")
     at_most(args.orders, MAX_RUNS, "--orders")
     at_most(args.budget, MAX_BUDGET, "--budget")
-    input_file(args.table, "TABLE")
+    refuse_data_set(args.table, "aptkt benchmark", "--from" if args.population else "TABLE")
     output_dir(args.output)
     scheduler_available(args.scheduler)
     if any(present(args.output / f) for f in BENCHMARK_FILES) and not args.force:
@@ -232,6 +235,10 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     table = read_table_within_limits(args.table, settings)
+    if trials is not None:
+        # Before the benchmark halves each object's trials into priors/pool and held-out rows.
+        check_trials(trials, table.trials.tolist(), args.table)
+        table = table.take(trials.mask(table.trials))
     known_names(settings.actions, table.action_names, "--actions")
     if args.recognition:
         from aptkt.experiments.recognition_benchmark import run_recognition_benchmark
@@ -341,7 +348,7 @@ def _command(args: argparse.Namespace) -> str:
     for option, default in DEFAULTS.items():
         if getattr(args, option) != default:
             parts.append(f"--{option} {getattr(args, option)}")
-    for option in ("choices", "actions", "scheduler"):
+    for option in ("choices", "actions", "trials", "scheduler"):
         if getattr(args, option):
             parts.append(f"--{option} {getattr(args, option)}")
     if args.recognition:

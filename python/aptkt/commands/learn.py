@@ -39,19 +39,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "learn",
         help="learn new objects with APTKT (active exploration, prior knowledge transfer): live "
-        "on the UR10 or the simulated world, or offline from a feature table (--table)",
+        "on the UR10 or the simulated world, or offline from a feature table (learn TABLE, or --table TABLE)",
         description="Explore new objects with the robot, choosing each next action and object by the "
         "models' uncertainty and transferring prior tactile knowledge (paper §4). Every recording is kept "
         "(--record); the run (steps, transfer decisions, settings) goes to --output as JSON and CSV, and the "
         "new objects' observations and models to OUTPUT/learned_prior.npz, usable later as --prior. A live "
-        "run has no test set: accuracy is reported only with --test DATASET. With --table TABLE "
-        "it learns offline from a feature table instead (below).",
+        "run has no test set: accuracy is reported only with --test DATASET. Given a feature table "
+        "(aptkt learn TABLE ...), it learns offline from the table instead (below).",
     )
-    add_session_arguments(p, robot_required=False)  # required unless --table
+    p.add_argument(
+        "input",
+        nargs="?",
+        metavar="TABLE",
+        help="a feature table (.csv, .h5) to learn from offline; none: learn live (--robot)",
+    )
+    add_session_arguments(p, robot_required=False)  # required unless a table is given
     p.add_argument(
         "--prior",
         metavar="PRIOR",
-        help="prior-knowledge file (.npz, of aptkt prior build; required unless --table)",
+        help="prior-knowledge file (.npz, of aptkt prior build; required unless TABLE)",
     )
     p.add_argument(
         "--objects",
@@ -155,6 +161,8 @@ def run(args: argparse.Namespace) -> int:
     from aptkt.learning import PriorKnowledge
     from aptkt.runtime.live_learning import LiveLearningAborted, learn_live
 
+    option = "--table" if args.table is not None else "TABLE"
+    args.table = _table(args)
     if args.table:
         if args.recognise:
             raise ConfigError(
@@ -165,13 +173,16 @@ def run(args: argparse.Namespace) -> int:
                 "--merge-into: only for a live run (--robot); a table's objects become a library "
                 "with aptkt prior merge"
             )
+        from aptkt.commands._inputs import refuse_data_set
+
+        refuse_data_set(args.table, "aptkt learn", option)
         return learn_table.run(args)
     for option, value in (("--robot", args.robot), ("--prior", args.prior)):
         if not value:
-            raise ConfigError(f"{option} is required (or learn offline with --table TABLE)")
+            raise ConfigError(f"{option} is required (or learn offline: aptkt learn TABLE ...)")
     offline = learn_table.table_only(args)
     if offline:
-        raise ConfigError(f"{', '.join(offline)}: only with --table TABLE")
+        raise ConfigError(f"{', '.join(offline)}: only when learning from a table (learn TABLE)")
     args.transfer = args.transfer or "paper"
 
     _refuse_earlier_run(args.output, args.force)  # before anything is loaded or checked
@@ -316,6 +327,13 @@ def _merge_learned(
         f"{target}: the library of {len(merged.objects)} objects ({len(library.objects)} from "
         f"{library_path}, {len(learned.objects)} learned now)"
     )
+
+
+def _table(args: argparse.Namespace) -> str | None:
+    """The feature table of an offline run: TABLE, or --table as it was written before."""
+    if args.input is not None and args.table is not None:
+        raise ConfigError(f"{args.input} and --table {args.table}: give the table once, as TABLE")
+    return args.input if args.input is not None else args.table
 
 
 #: What a live run writes to its output directory (its recordings are appended to).

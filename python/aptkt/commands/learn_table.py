@@ -1,7 +1,7 @@
-"""``aptkt learn --table TABLE``: learn new objects from a feature table of any sensor, offline.
+"""``aptkt learn TABLE``: learn new objects from a feature table of any sensor, offline.
 
-The options of this mode; :mod:`aptkt.commands.learn` dispatches to :func:`run` when ``--table``
-is given.
+The options of this mode; :mod:`aptkt.commands.learn` dispatches to :func:`run` when a table
+is given (TABLE, or ``--table TABLE`` as it was written before).
 """
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 
 from aptkt.commands._checks import MAX_BUDGET, MAX_RUNS, at_most, output_dir
+from aptkt.commands._inputs import add_trials_option, check_trials, parse_trials
 from aptkt.commands._method import learner_config
 from aptkt.commands._session import split_names
 from aptkt.errors import ConfigError
@@ -35,34 +36,40 @@ def add_extraction_argument(p: argparse._ActionsContainer) -> None:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group(
         "from a feature table (no robot)",
-        "--table TABLE learns from recorded feature observations (CSV or HDF5: columns object, "
-        "action, trial, <modality>.<k>; see docs/feature-tables.md) and compares APTKT, APTKT "
-        "with auxiliary features and the baseline, as the demo does.",
+        "aptkt learn TABLE learns from recorded feature observations (CSV or HDF5: columns "
+        "object, action, trial, <modality>.<k>; see docs/feature-tables.md) and compares APTKT, "
+        "APTKT with auxiliary features and the baseline, as the demo does.",
     )
-    g.add_argument("--table", metavar="TABLE", help="feature table (.csv, .h5)")
+    g.add_argument(
+        "--table",
+        metavar="TABLE",
+        help="the same as giving TABLE (the earlier spelling)",
+    )
+    add_trials_option(g, "rows")
     g.add_argument(
         "--prior-objects",
         metavar="A,B,...",
-        help="the objects whose rows build the prior knowledge (with --table)",
+        help="the objects whose rows build the prior knowledge (with TABLE)",
     )
     g.add_argument(
         "--test-trials",
-        metavar="FIRST:STOP",
-        help="hold out the new objects' rows with these trial numbers (default: the later half "
-        "of each object's trials per action)",
+        metavar="TRIALS",
+        help="hold out the new objects' rows of these trials, written as for --trials (default: "
+        "the later half of each object's trials per action)",
     )
     g.add_argument(
         "--runs",
         type=int,
         metavar="N",
-        help=f"learning runs per method (with --table; default {DEFAULT_RUNS})",
+        help=f"learning runs per method (with TABLE; default {DEFAULT_RUNS})",
     )
     add_extraction_argument(g)
 
 
 def table_only(args: argparse.Namespace) -> list[str]:
-    """The options of this mode that were given (an error without --table)."""
+    """The options of this mode that were given (an error without a table)."""
     given = {
+        "--trials": args.trials,
         "--prior-objects": args.prior_objects,
         "--test-trials": args.test_trials,
         "--runs": args.runs,
@@ -71,20 +78,16 @@ def table_only(args: argparse.Namespace) -> list[str]:
     return [option for option, value in given.items() if value is not None]
 
 
-def _trials(text: str) -> tuple[int, ...]:
-    try:
-        first, stop = (int(v) for v in text.split(":"))
-    except ValueError:
-        raise ConfigError(
-            f"--test-trials must look like FIRST:STOP (e.g. 10:20), got {text!r}"
-        ) from None
-    if not 0 <= first < stop:
-        raise ConfigError(f"--test-trials: need 0 <= FIRST < STOP, got {text!r}")
-    return tuple(range(first, stop))
-
-
 def run(args: argparse.Namespace) -> int:
-    from aptkt.experiments.table_learning import TableSettings, learn_from_table, refuse_overwrite
+    from aptkt.experiments.table_learning import (
+        TableSettings,
+        learn_from_table,
+        read_settings_table,
+        refuse_overwrite,
+    )
+
+    trials = parse_trials(args.trials)
+    test_trials = parse_trials(args.test_trials, "--test-trials")
 
     live_only = [
         option
@@ -100,12 +103,14 @@ def run(args: argparse.Namespace) -> int:
     ]
     if live_only:
         raise ConfigError(
-            f"{', '.join(live_only)}: not with --table, which builds its prior knowledge from "
+            f"{', '.join(live_only)}: not with a table, which builds its prior knowledge from "
             "--prior-objects and compares APTKT, APTKT+aux and the baseline on held-out rows"
         )
     priors = split_names(args.prior_objects, "--prior-objects")
     if not priors:
-        raise ConfigError("--table needs --prior-objects A,B,... (the objects of prior knowledge)")
+        raise ConfigError(
+            "learning from a table needs --prior-objects A,B,... (the objects of prior knowledge)"
+        )
     runs = DEFAULT_RUNS if args.runs is None else args.runs
     if runs < 1:
         raise ConfigError("--runs must be >= 1")
@@ -130,11 +135,21 @@ def run(args: argparse.Namespace) -> int:
         prior_objects=tuple(priors),
         new_objects=tuple(split_names(args.objects, "--objects") or ()),  # a required option
         actions=tuple(split_names(args.actions, "--actions") or ()) or None,
-        test_trials=_trials(args.test_trials) if args.test_trials else None,
+        test_trials=None,
         output=args.output,
         runs=runs,
         config=config,
         extraction=args.extraction,
+        trials=None if trials is None else str(trials),
     )
-    learn_from_table(settings, say=lambda line: print(line, flush=True))
+    table = None
+    if trials is not None or test_trials is not None:
+        table = read_settings_table(settings)
+        have = table.trials.tolist()
+        check_trials(trials, have, settings.table)
+        if trials is not None:
+            table = table.take(trials.mask(table.trials))
+        if test_trials is not None:
+            settings.test_trials = tuple(t for t in sorted(set(have)) if t in test_trials)
+    learn_from_table(settings, say=lambda line: print(line, flush=True), table=table)
     return 0

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 
 from aptkt.commands._checks import (
@@ -17,6 +16,15 @@ from aptkt.commands._checks import (
     jobs,
     output_file,
     scheduler_available,
+)
+from aptkt.commands._inputs import (
+    TABLE,
+    Trials,
+    add_trials_option,
+    check_trials,
+    dataset_trials,
+    input_kind,
+    parse_trials,
 )
 from aptkt.commands._method import add_library_model_argument
 from aptkt.commands._session import object_list, split_names
@@ -72,7 +80,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument(
         "--actions", metavar="P1,S1,...", help="actions (default: every recorded action)"
     )
-    b.add_argument("--trials", metavar="FIRST:STOP", help="only these trial numbers, e.g. 0:20")
+    add_trials_option(b)
     b.add_argument(
         "--seed",
         type=int,
@@ -178,18 +186,6 @@ def save_library(prior, path: Path, executor) -> None:
     prior.save(path)
 
 
-def _trials(text: str | None) -> range | None:
-    if text is None:
-        return None
-    try:
-        first, stop = (int(v) for v in text.split(":"))
-    except ValueError:
-        raise ConfigError(f"--trials must look like FIRST:STOP (e.g. 0:20), got {text!r}") from None
-    if not 0 <= first < stop:
-        raise ConfigError(f"--trials: need 0 <= FIRST < STOP, got {text!r}")
-    return range(first, stop)
-
-
 def run_build(args: argparse.Namespace) -> int:
 
     from aptkt.learning import GPSettings, PriorKnowledge
@@ -197,12 +193,8 @@ def run_build(args: argparse.Namespace) -> int:
     from aptkt.learning.extract import ExtractionSettings
     from aptkt.learning.pipeline import transforms_of
 
-    if not os.path.exists(args.data):  # (os.path: a name too long to exist is an answer too)
-        raise ConfigError(f"{args.data}: no such data set or feature table")
-    input_file(args.data, "DATASET|TABLE")
-    from aptkt.learning.feature_table import is_feature_table
-
-    from_table = is_feature_table(args.data)
+    trials = parse_trials(args.trials)
+    from_table = input_kind(args.data) == TABLE
     if not from_table:
         intact_data_set(args.data, "DATASET")
         if args.extraction != "auto":
@@ -222,17 +214,18 @@ def run_build(args: argparse.Namespace) -> int:
     objects = split_names(args.objects, "--objects")
     if objects is not None and len(objects) < 2:
         raise ConfigError("--objects: prior knowledge needs at least two objects")
-    trials = _trials(args.trials)
     if from_table:
         table, columns, extraction = _from_table(
             args.data, split_names(args.actions, "--actions"), objects, trials
         )
     else:
+        recorded_trials = dataset_trials(args.data)
+        check_trials(trials, recorded_trials, args.data)
         table = load_observations(
             args.data,
             actions=split_names(args.actions, "--actions"),
             objects=objects,
-            trials=trials,
+            trials=None if trials is None else [t for t in recorded_trials if t in trials],
             progress=True,
         )
     empty = [a for a, obs in table.items() if len(obs) == 0]
@@ -255,7 +248,9 @@ def run_build(args: argparse.Namespace) -> int:
     if from_table:
         # Which columns the features are, so that libraries of other tables do not merge.
         prior.metadata.update(
-            table=str(args.data), trials=args.trials, feature_table_columns=columns
+            table=str(args.data),
+            trials=None if trials is None else str(trials),
+            feature_table_columns=columns,
         )
     else:
         # What each action was, so that `learn` refuses an actions file that gives one of these
@@ -263,7 +258,7 @@ def run_build(args: argparse.Namespace) -> int:
         recorded = stored_actions(args.data)
         prior.metadata.update(
             data=str(args.data),
-            trials=args.trials,
+            trials=None if trials is None else str(trials),
             action_definitions={a: recorded[a].to_dict() for a in prior.actions if a in recorded},
             extraction=ExtractionSettings().to_dict(),
         )
@@ -276,7 +271,7 @@ def run_build(args: argparse.Namespace) -> int:
 
 
 def _from_table(
-    path: Path, actions: list[str] | None, objects: list[str] | None, trials: range | None
+    path: Path, actions: list[str] | None, objects: list[str] | None, trials: Trials | None
 ):
     """A feature table's observations of the chosen actions, objects and trials, each
     action's feature columns by modality, and what extracted them (its extraction column)."""
@@ -286,6 +281,7 @@ def _from_table(
     from aptkt.learning.feature_table import table_columns
 
     table = read_table_within_limits(path, library=True)
+    check_trials(trials, table.trials.tolist(), path)
     names = actions or table.action_names
     rows = np.ones(len(table.objects), dtype=bool)
     if objects is not None:
@@ -296,7 +292,7 @@ def _from_table(
             )
         rows &= np.isin(table.objects, objects)
     if trials is not None:
-        rows &= (table.trials >= trials.start) & (table.trials < trials.stop)
+        rows &= trials.mask(table.trials)
     observations = table.observations(names, rows)
     for action, obs in observations.items():
         if len(set(obs.objects.tolist())) < 2:

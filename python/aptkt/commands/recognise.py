@@ -6,7 +6,16 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from aptkt.commands._checks import input_file, output_dir
+from aptkt.commands._checks import output_dir
+from aptkt.commands._inputs import (
+    DATASET,
+    Trials,
+    add_trials_option,
+    check_trials,
+    dataset_trials,
+    input_kind,
+    parse_trials,
+)
 from aptkt.errors import ConfigError
 from aptkt.files import present
 
@@ -31,11 +40,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="PRIOR",
         help="the library (.npz of aptkt prior build or merge)",
     )
-    src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--table", type=Path, metavar="TABLE", help="feature table (.csv, .h5)")
-    src.add_argument(
-        "data", type=Path, nargs="?", metavar="DATASET", help="data set (HDF5) of this skin"
+    p.add_argument(
+        "input",
+        type=Path,
+        nargs="?",
+        metavar="DATASET|TABLE",
+        help="the touches: a feature table (.csv, .h5) or a data set (HDF5) of this skin, told "
+        "apart by what the file holds",
     )
+    p.add_argument(
+        "--table",
+        type=Path,
+        metavar="TABLE",
+        help="the same as giving TABLE as DATASET|TABLE (the earlier spelling)",
+    )
+    add_trials_option(p, "touches")
     p.add_argument(
         "-o",
         "--output",
@@ -60,6 +79,8 @@ def run(args: argparse.Namespace) -> int:
     from aptkt.commands.prior import load_prior
     from aptkt.experiments.recognition_report import write_recognition
 
+    source = _source(args)
+    trials = parse_trials(args.trials)
     if not 0.0 < args.false_alarm_rate < 1.0:
         raise ConfigError(
             f"--false-alarm-rate must lie between 0 and 1, got {args.false_alarm_rate}"
@@ -69,20 +90,24 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(
             f"--output {args.output}: holds a recognition already (give --force to replace it)"
         )
+    kind = input_kind(source, "--table" if args.table is not None else "DATASET|TABLE")
     library = load_prior(args.prior, "--prior")
-    if args.table is not None:
-        observations = _from_table(args.table, library)
-        source = str(args.table)
+    if kind == DATASET:
+        observations = _from_data_set(source, library, trials)
     else:
-        observations = _from_data_set(args.data, library)
-        source = str(args.data)
+        observations = _from_table(source, library, trials)
     try:
         result = library.recognise(observations, false_alarm_rate=args.false_alarm_rate)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     from aptkt import __version__
 
-    head = {"library": str(args.prior), "input": source, "software_version": __version__}
+    head = {
+        "library": str(args.prior),
+        "input": str(source),
+        "trials": None if trials is None else str(trials),
+        "software_version": __version__,
+    }
     written = write_recognition(
         result, args.output, head=head, say=lambda line: print(line, flush=True)
     )
@@ -90,7 +115,30 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _from_table(path: Path, library: Any) -> dict:
+def _source(args: argparse.Namespace) -> Path:
+    """The touches' file: DATASET|TABLE, or --table as it was written before."""
+    if args.input is not None and args.table is not None:
+        raise ConfigError(
+            f"{args.input} and --table {args.table}: give the touches once, as DATASET|TABLE"
+        )
+    source = args.input if args.input is not None else args.table
+    if source is None:
+        raise ConfigError(
+            "give the touches: aptkt recognise --prior PRIOR DATASET|TABLE (a feature table "
+            ".csv/.h5, or a data set of this skin)"
+        )
+    return source
+
+
+def _chosen(observations: dict, trials: Trials | None, path: Path) -> dict:
+    if trials is not None and not any(len(obs) for obs in observations.values()):
+        raise ConfigError(
+            f"--trials {trials}: {path} has no touches of the library's actions in these trials"
+        )
+    return observations
+
+
+def _from_table(path: Path, library: Any, trials: Trials | None) -> dict:
     """The table's observations of the library's actions, checked against the library's
     features: the same modalities, and where the library was built from a table, the same
     columns — missing and extra ones named."""
@@ -99,14 +147,14 @@ def _from_table(path: Path, library: Any) -> dict:
     from aptkt.experiments.table_limits import read_table_within_limits
     from aptkt.learning.feature_table import table_columns
 
-    input_file(path, "--table")
     table = read_table_within_limits(path, library=True)
     if len(table.objects) == 0:
-        raise ConfigError(f"--table {path}: holds no rows")
+        raise ConfigError(f"{path}: holds no rows")
+    check_trials(trials, table.trials.tolist(), path)
     actions = [a for a in table.action_names if a in library]
     if not actions:
         raise ConfigError(
-            f"--table {path}: none of its actions ({', '.join(table.action_names)}) is in the "
+            f"{path}: none of its actions ({', '.join(table.action_names)}) is in the "
             f"library ({', '.join(library.actions)})"
         )
     recorded = library.metadata.get("feature_table_columns") or {}
@@ -118,7 +166,7 @@ def _from_table(path: Path, library: Any) -> dict:
             have_dims = {m: len(c) for m, c in have.items()}
             if have_dims != want_dims:
                 raise ConfigError(
-                    f"--table {path}: action {action} has modalities {have_dims}, the library's "
+                    f"{path}: action {action} has modalities {have_dims}, the library's "
                     f"{want_dims} (another sensor or extraction?)"
                 )
             continue
@@ -128,7 +176,7 @@ def _from_table(path: Path, library: Any) -> dict:
         extra = [c for c in flat_have if c not in flat_want]
         if missing or extra:
             raise ConfigError(
-                f"--table {path}: action {action}'s columns differ from the library's: "
+                f"{path}: action {action}'s columns differ from the library's: "
                 + "; ".join(
                     part
                     for part in (
@@ -142,18 +190,21 @@ def _from_table(path: Path, library: Any) -> dict:
                     if part
                 )
             )
-    return table.observations(actions, np.ones(len(table.objects), dtype=bool))
+    rows = np.ones(len(table.objects), dtype=bool) if trials is None else trials.mask(table.trials)
+    return _chosen(table.observations(actions, rows), trials, path)
 
 
-def _from_data_set(path: Path, library: Any) -> dict:
+def _from_data_set(path: Path, library: Any, trials: Trials | None) -> dict:
     from aptkt.commands._checks import intact_data_set
     from aptkt.learning.dataset import load_observations, stored_actions
 
-    input_file(path, "DATASET")
     intact_data_set(path, "DATASET")
+    recorded = dataset_trials(path)
+    check_trials(trials, recorded, path)
     actions = [a for a in stored_actions(path) if a in library]
     if not actions:
         raise ConfigError(
             f"{path}: none of its actions is in the library ({', '.join(library.actions)})"
         )
-    return load_observations(path, actions=actions)
+    chosen = None if trials is None else [t for t in recorded if t in trials]
+    return _chosen(load_observations(path, actions=actions, trials=chosen), trials, path)

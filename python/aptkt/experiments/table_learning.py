@@ -35,6 +35,7 @@ __all__ = [
     "TableSettings",
     "compare_on_table",
     "learn_from_table",
+    "read_settings_table",
     "refuse_overwrite",
     "write_table_results",
 ]
@@ -56,6 +57,9 @@ class TableSettings:
     #: Whose features the table holds (:data:`~aptkt.learning.pipeline.EXTRACTIONS`): "auto"
     #: reads the table's ``extraction`` column.
     extraction: str = "auto"
+    #: The trials the table was restricted to (as ``--trials`` reads them), for the record:
+    #: the rows are chosen by whoever passes the table to :func:`learn_from_table`.
+    trials: str | None = None
 
 
 def _check_objects(table, s: TableSettings, actions: list[str]) -> None:
@@ -155,20 +159,29 @@ def compare_on_table(
     return rows, methods, actions
 
 
-def learn_from_table(s: TableSettings, *, say=print) -> dict[str, Any]:
-    """The comparison on the table file ``s.table``, with every file of the demo's results
-    written to ``s.output``; returns the summary."""
+def learn_from_table(
+    s: TableSettings, *, say=print, table: FeatureTable | None = None
+) -> dict[str, Any]:
+    """The comparison on the table file ``s.table`` (or on ``table``, some of its rows, read
+    already with :func:`read_settings_table`), with every file of the demo's results written
+    to ``s.output``; returns the summary."""
     t_start = time.perf_counter()
-    table = read_table_within_limits(
+    if table is None:
+        table = read_settings_table(s)
+    out = Path(s.output)
+    out.mkdir(parents=True, exist_ok=True)
+    rows, methods, actions = compare_on_table(table, s, say=say, prior_path=out / "prior.npz")
+    return write_table_results(s, table, rows, methods, actions, t_start=t_start, say=say)
+
+
+def read_settings_table(s: TableSettings) -> FeatureTable:
+    """The table ``s.table``, read within the limits of learning from it with ``s``."""
+    return read_table_within_limits(
         s.table,
         prior_objects=s.prior_objects,
         actions=s.actions,
         exact=s.config.gp.library_model == "exact",
     )
-    out = Path(s.output)
-    out.mkdir(parents=True, exist_ok=True)
-    rows, methods, actions = compare_on_table(table, s, say=say, prior_path=out / "prior.npz")
-    return write_table_results(s, table, rows, methods, actions, t_start=t_start, say=say)
 
 
 def write_table_results(

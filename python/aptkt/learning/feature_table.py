@@ -78,6 +78,19 @@ class FeatureTable:
     def object_names(self) -> list[str]:
         return list(dict.fromkeys(self.objects.tolist()))
 
+    def take(self, rows: np.ndarray) -> FeatureTable:
+        """The table of the rows of a boolean mask (or of indices), in their order: a choice of
+        trials, say. (Rows are validated per action, so any choice of them is a valid table.)"""
+        return FeatureTable(
+            self.path,
+            self.objects[rows],
+            self.actions[rows],
+            self.trials[rows],
+            list(self.columns),
+            self.values[rows],
+            self.extraction,
+        )
+
     def rows_of(self, obj: str, action: str) -> np.ndarray:
         """0-based indices of the rows of one object and action."""
         return np.flatnonzero((self.objects == obj) & (self.actions == action))
