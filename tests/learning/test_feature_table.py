@@ -413,3 +413,23 @@ def test_the_table_is_given_as_learns_input_and_trials_choose_its_rows(tmp_path,
     )
     code, err = _learn(path, capsys, "--trials", "0,2", "--test-trials", "2")
     assert code == 0, err
+
+
+def test_a_table_that_never_varies_within_an_object_is_one_line_without_warnings(
+    tmp_path, capsys
+):
+    """Every repeat of every touch reading the same: the library has no noise to measure
+    nearness by. It said so with three RuntimeWarnings and a self-contradictory internal
+    error; now one line, and no warning on the way."""
+    import warnings
+
+    lines = ["object,action,trial,force.0,thermal.0"]
+    lines += [f"obj{o},P1,{t},{float(o)},2.0" for o in range(6) for t in range(4)]
+    table = tmp_path / "const.csv"
+    table.write_text("\n".join(lines) + "\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        code = main(["prior", "build", str(table), "-o", str(tmp_path / "c.npz"), "-j", "1"])
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and "\n" not in err, err
+    assert "do not vary within any object" in err

@@ -201,6 +201,14 @@ def _shape(p: _Pooled) -> _Shape:
         raise InvalidInputError("an identity model needs at least one repeated observation")
     W = p.scatter / dof
     scale = float(np.trace(W)) / d
+    if not scale > 0:
+        # Nothing to measure "how far apart two touches of one object lie" by: every odds of
+        # being the same object would be 0/0.
+        raise InvalidInputError(
+            "the observations do not vary within any object (every repeat of a touch reads "
+            "the same in every column): the library cannot tell how near a touch must be to "
+            "be the same object"
+        )
     # Few repeats in many columns leave the noise's covariance singular in some directions,
     # which would make "the same object" infinitely unlikely there: shrink it towards its
     # average variance by Ledoit and Wolf's intensity (as the metric's whitening does).
