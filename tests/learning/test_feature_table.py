@@ -415,9 +415,7 @@ def test_the_table_is_given_as_learns_input_and_trials_choose_its_rows(tmp_path,
     assert code == 0, err
 
 
-def test_a_table_that_never_varies_within_an_object_is_one_line_without_warnings(
-    tmp_path, capsys
-):
+def test_a_table_that_never_varies_within_an_object_is_one_line_without_warnings(tmp_path, capsys):
     """Every repeat of every touch reading the same: the library has no noise to measure
     nearness by. It said so with three RuntimeWarnings and a self-contradictory internal
     error; now one line, and no warning on the way."""
