@@ -475,3 +475,21 @@ def test_an_objects_file_that_is_a_device_is_one_line_not_a_hang(tmp_path, capsy
     err = capsys.readouterr().err.strip()
     assert code == 1 and "\n" not in err, err
     assert "--objects-file /dev/zero: is a character device, not a regular file" in err
+
+
+def test_a_live_run_refuses_a_library_of_another_sensors_features(tmp_path, capsys):
+    """A library built from a feature table of other columns, given to a live run: one line
+    naming the table (it failed in a transform with a shape mismatch, a traceback)."""
+    from aptkt.cli import main
+
+    lines = ["object,action,trial,force.0,thermal.0"]
+    lines += [f"o{o},P1,{t},{o + 0.1 * t},{-o + 0.2 * t}" for o in range(3) for t in range(4)]
+    (tmp_path / "t.csv").write_text("\n".join(lines) + "\n")
+    lib = tmp_path / "lib.npz"
+    assert main(["prior", "build", str(tmp_path / "t.csv"), "-o", str(lib), "-j", "1"]) == 0
+    capsys.readouterr()
+    argv = ["learn", "--robot", "sim", "--prior", str(lib), "--objects", "hard_box,towel"]
+    assert main([*argv, "--budget", "1", "-o", str(tmp_path / "run")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "hold features of another sensor or extraction" in err, err
+    assert "t.csv)" in err and not (tmp_path / "run").exists()

@@ -226,6 +226,7 @@ def run(args: argparse.Namespace) -> int:
             f"--actions: the prior knowledge has no experience of {', '.join(missing)}; "
             f"it has {', '.join(prior.actions)}"
         )
+    _skin_features(prior, names, args.prior)
     actions = {a.name: a for a in pick_actions(names, available_actions(args))}
     _same_as_the_prior(actions, prior.metadata.get("action_definitions"), args.prior)
     unlearned = [a for a in prior.actions if a not in actions]
@@ -351,6 +352,24 @@ def _refuse_earlier_run(out: Path, force: bool) -> None:
         raise ConfigError(
             f"--output {out}: holds an earlier result ({', '.join(found)}); give --force to "
             "replace it, or choose another output directory"
+        )
+
+
+def _skin_features(prior: Any, actions: list[str], path: Any) -> None:
+    """A live run observes with this skin's feature extraction: a library of another sensor's
+    or another extraction's features (a feature table's columns) cannot be compared with them,
+    and failed deep inside a transform with a shape mismatch."""
+    from aptkt.learning.pipeline import SKIN_EXTRACTION
+
+    foreign = [a for a in actions if prior[a].observations.extraction != SKIN_EXTRACTION]
+    if foreign:
+        table = prior.metadata.get("table")
+        source = f" (built from {table})" if table else ""
+        raise ConfigError(
+            f"--prior {path}: its action(s) {', '.join(foreign)} hold features of another "
+            f"sensor or extraction{source}, not this skin's; a live run needs a library of "
+            "this skin's recordings (aptkt prior build DATASET, or a table exported with "
+            "aptkt dataset export-features)"
         )
 
 
