@@ -493,3 +493,37 @@ def test_a_live_run_refuses_a_library_of_another_sensors_features(tmp_path, caps
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "hold features of another sensor or extraction" in err, err
     assert "t.csv)" in err and not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize(
+    "command, stray",
+    [("learn", "report.md"), ("learn", "learning_curves.png"), ("recognise", "confusion.svg")]
+    + [("benchmark", "benchmark.png"), ("benchmark", "lifelong.svg")],
+)
+def test_any_file_a_command_writes_is_an_earlier_result(tmp_path, capsys, command, stray):
+    """Only the main results were checked: a report or plot already in -o (a user's own
+    report.md, say) was replaced without --force."""
+    from aptkt.cli import main
+
+    lines = ["object,action,trial,force.0,thermal.0"]
+    lines += [
+        f"o{o},P1,{t},{o + 0.1 * (t % 3)},{-o + 0.2 * (t % 2)}" for o in range(9) for t in range(4)
+    ]
+    table = tmp_path / "t.csv"
+    table.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / stray).write_text("mine")
+    if command == "learn":
+        argv = ["learn", str(table), "--prior-objects", "o0,o1", "--objects", "o2,o3"]
+    elif command == "recognise":
+        lib = tmp_path / "lib.npz"
+        assert main(["prior", "build", str(table), "-o", str(lib), "-j", "1"]) == 0
+        argv = ["recognise", "--prior", str(lib), str(table)]
+    else:
+        argv = ["benchmark", str(table), "--groups", "2", "-j", "1"]
+    capsys.readouterr()
+    assert main([*argv, "-o", str(out)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--force" in err, err
+    assert (out / stray).read_text() == "mine"

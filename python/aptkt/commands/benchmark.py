@@ -16,9 +16,14 @@ from aptkt.files import present
 DEFAULTS = {"groups": 60, "new": 5, "priors": "3", "budget": 20}
 #: Objects in a synthetic stream (--from): a library a lab would hold after a few years.
 DEFAULT_STREAM = 1000
-#: What a benchmark writes besides its plots: any of them in --output (a link to anywhere
-#: too) is an earlier benchmark.
-BENCHMARK_FILES = ("report.md", "summary.json", "results.csv")
+#: What a benchmark writes, its plots too: any of them in --output (a link to anywhere too)
+#: would be replaced.
+BENCHMARK_FILES = (
+    "report.md",
+    "summary.json",
+    "results.csv",
+    *(f"{plot}.{ext}" for plot in ("benchmark", "library", "lifelong") for ext in ("png", "svg")),
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -19,7 +19,8 @@ from aptkt.commands._inputs import (
 from aptkt.errors import ConfigError
 from aptkt.files import present
 
-RESULT_FILES = ("predictions.csv", "summary.json")
+#: Everything recognise writes: any of it in --output would be replaced.
+RESULT_FILES = ("predictions.csv", "summary.json", "confusion.png", "confusion.svg")
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -84,9 +84,19 @@ def _check_objects(table, s: TableSettings, actions: list[str]) -> None:
                 )
 
 
-#: The files of a comparison's result (besides the plots): one of them in the output
-#: directory means a result would be replaced.
-RESULT_FILES = ("summary.json", "results.csv", "prior.npz")
+#: The files of a comparison's result, its report and plots too: one of them in the output
+#: directory means a file would be replaced (a user's own report.md as much as ours).
+RESULT_FILES = (
+    "summary.json",
+    "results.csv",
+    "prior.npz",
+    "report.md",
+    "learning_curves.png",
+    "learning_curves.svg",
+    "confusion.png",
+    "confusion.svg",
+    "confusion.csv",
+)
 
 
 def refuse_overwrite(
