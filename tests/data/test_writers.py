@@ -146,7 +146,10 @@ def test_an_output_directory_holding_a_fifo_named_as_a_result_is_refused(tmp_pat
     out.mkdir()
     make("fifo", out / "summary.json")
     (out / "unrelated").mkdir()
-    argv = ["learn", "--table", str(tmp_path / "t.csv"), "--objects", "a,b"]
+    table = tmp_path / "t.csv"
+    rows = [f"{o},p,{t},{k + 0.1 * t}" for k, o in enumerate("abcd") for t in range(3)]
+    table.write_text("object,action,trial,force.0\n" + "\n".join(rows) + "\n")
+    argv = ["learn", "--table", str(table), "--objects", "a,b"]
     assert main([*argv, "--prior-objects", "c,d", "-o", str(out)]) == 1
     assert "summary.json, a FIFO" in one_error_line(capsys)
 

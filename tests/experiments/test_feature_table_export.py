@@ -146,4 +146,4 @@ def test_extraction_mistakes_are_one_line(quick_data, tmp_path, capsys):
     args += ["--extraction", "other", "-o", str(tmp_path / "x")]
     assert main(args) == 1
     err = capsys.readouterr().err.strip()
-    assert err == "aptkt learn: error: --extraction: only with --table TABLE"
+    assert err == "aptkt learn: error: --extraction: only when learning from a table (learn TABLE)"

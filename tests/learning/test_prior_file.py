@@ -208,6 +208,8 @@ def test_a_flipped_bit_in_any_compressed_member_is_one_line(good, tmp_path, caps
     """A damaged deflate stream fails before its CRC is checked (zlib's own error): it is a
     damaged prior-knowledge file all the same, in one line, wherever the bit is."""
     original = good.read_bytes()
+    touches = tmp_path / "touches.csv"  # (recognise checks its input exists before the library)
+    touches.write_text("object,action,trial,force.0\no,a,0,1.0\n")
     with zipfile.ZipFile(good) as zf:
         infos = [i for i in zf.infolist() if i.compress_type == zipfile.ZIP_DEFLATED]
     assert len(infos) >= 8
@@ -217,7 +219,10 @@ def test_a_flipped_bit_in_any_compressed_member_is_one_line(good, tmp_path, caps
             _flip_a_bit(data, info, where)
             bad = tmp_path / "bad.npz"
             bad.write_bytes(bytes(data))
-            for argv in (["prior", "inspect", str(bad)], ["recognise", "--prior", str(bad), "x"]):
+            for argv in (
+                ["prior", "inspect", str(bad)],
+                ["recognise", "--prior", str(bad), str(touches)],
+            ):
                 assert main(argv) == 1, (info.filename, where)
                 err = capsys.readouterr().err.strip().splitlines()
                 assert len(err) == 1 and str(bad) in err[0], (info.filename, where, err)

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from aptkt.errors import InvalidInputError
 from aptkt.experiments.aggregate import Estimate, estimate, mean_band
 from aptkt.experiments.noise_profile import NoiseProfile
 from aptkt.experiments.plots import curve_styles, figure
@@ -113,7 +114,7 @@ class Check:
 
     def __post_init__(self) -> None:
         if self.kind not in CHECK_KINDS:
-            raise ValueError(f"a check is one of {CHECK_KINDS}, not {self.kind!r}")
+            raise InvalidInputError(f"a check is one of {CHECK_KINDS}, not {self.kind!r}")
 
     @property
     def verdict(self) -> str:
