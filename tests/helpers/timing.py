@@ -15,19 +15,15 @@ from __future__ import annotations
 
 import bisect
 import math
-import os
 import subprocess
 import sys
-import tempfile
 import threading
 import time
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Callable
 
 __all__ = [
     "LatenessProbe",
     "MachineProbe",
-    "ProbedProcess",
     "repeat_if_disturbed",
     "timeout_for",
     "wait_for",
@@ -81,12 +77,6 @@ class LatenessProbe:
             elif -delay > self.catch_up:
                 due = time.monotonic()  # late: counted once, not again for every missed period
 
-    def report(self, above: float) -> str:
-        """``time lateness`` of every run later than ``above`` s, one a line."""
-        with self._lock:
-            runs = [(t, late) for t, late in zip(self._times, self._late) if late > above]
-        return "".join(f"{t!r} {late!r}\n" for t, late in runs)
-
     def worst(self, since: float, until: float | None = None) -> float:
         """The largest lateness between ``since`` and ``until`` (``time.monotonic()`` values;
         until now by default), and at least the lateness of a run that is overdue now."""
@@ -138,61 +128,6 @@ class MachineProbe:
         if self._proc.stdin is not None:
             self._proc.stdin.close()
         self._proc.wait(timeout=10)
-
-
-_PROBED = """
-import runpy, sys
-sys.path.insert(0, sys.argv[1])
-from timing import LatenessProbe
-report, module = sys.argv[2], sys.argv[3]
-probe = LatenessProbe().start()
-sys.argv = [module, *sys.argv[4:]]
-try:
-    runpy.run_module(module, run_name="__main__", alter_sys=True)
-finally:
-    with open(report, "w") as f:
-        f.write(probe.report(0.005))
-"""
-
-
-class ProbedProcess:
-    """``python -m module args...`` in a process of its own (``popen`` passed to
-    :class:`subprocess.Popen`), with a :class:`LatenessProbe` running in that process: how
-    late that process ran (:meth:`lateness`, once it has ended), as the probe of a test's own
-    process tells for what runs in the test's process.
-
-    The probes of the test's process, of :class:`MachineProbe` and of the loopback measure
-    other processes: a process started in a session of its own is a scheduling group of its
-    own (Linux autogroups), and no measure taken elsewhere says how long the machine kept *it*
-    waiting."""
-
-    def __init__(self, module: str, args: Sequence[str], **popen: Any):
-        fd, self._report = tempfile.mkstemp(prefix="aptkt-lateness-", suffix=".txt")
-        os.close(fd)
-        self._runs: list[tuple[float, float]] | None = None
-        here = str(__file__).rsplit("/", 1)[0]
-        try:
-            self.proc = subprocess.Popen(
-                [sys.executable, "-c", _PROBED, here, self._report, module, *args], **popen
-            )
-        except BaseException:
-            os.unlink(self._report)
-            raise
-
-    def lateness(self, until: float | None = None) -> float:
-        """The worst lateness of the process over its run, of the waits that began by
-        ``until`` (a ``time.monotonic()`` value: the clock is the machine's, the same in every
-        process). 0 if it ended without a word: it was killed, and said nothing about its run."""
-        if self._runs is None:
-            try:
-                with open(self._report) as f:
-                    words = f.read().split()
-            finally:
-                os.unlink(self._report)
-            self._runs = list(zip(map(float, words[::2]), map(float, words[1::2])))
-        return max(
-            (late for t, late in self._runs if until is None or t - late <= until), default=0.0
-        )
 
 
 def wait_for(condition: Callable[[], bool], timeout: float, poll: float = 0.01) -> bool:

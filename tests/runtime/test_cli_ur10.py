@@ -17,6 +17,7 @@ import os
 import shutil
 import signal
 import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterable
@@ -30,7 +31,6 @@ from loopback_helpers import free_loopback_host  # noqa: E402
 from timing import (  # noqa: E402
     LatenessProbe,
     MachineProbe,
-    ProbedProcess,
     repeat_if_disturbed,
     timeout_for,
     wait_for,
@@ -80,13 +80,11 @@ class Timing:
     run_started: float = 0.0
     loop_lag: float = 0.0
     machine_late: float = field(default=0.0)
-    #: The signal tests' aptkt process, measured in it (:func:`in_a_process`).
-    process_late: float = 0.0
 
     def start_run(self) -> None:
         self.lb.clock_lag()
         self.machine.worst()
-        self.loop_lag = self.machine_late = self.process_late = 0.0
+        self.loop_lag = self.machine_late = 0.0
         self.run_started = time.monotonic()
 
     def _measure(self) -> None:
@@ -105,9 +103,9 @@ class Timing:
 
     def stall(self) -> float:
         """The longest the machine kept a process waiting during the run (a process of its
-        own, the loopback's control cycle, and an aptkt run in a process of its own)."""
+        own, and the loopback's control cycle)."""
         self._measure()
-        return max(self.loop_lag, self.machine_late, self.process_late)
+        return max(self.loop_lag, self.machine_late)
 
 
 def undisturbed(
@@ -276,34 +274,6 @@ class PressWatcher:
 
 def on_press(lb: Loopback, nth: int, action: Callable[[], object]) -> PressWatcher:
     return PressWatcher(lb, nth, action)
-
-
-class ControlClosed:
-    """When the control client's RTDE connection (the second of a run: ur_rtde's receive
-    client connects first) closed, on ``time.monotonic()``; :meth:`stop` returns it (or the
-    time of the call, if it did not close before)."""
-
-    def __init__(self, lb: Loopback):
-        self._stop = threading.Event()
-        self.at: float | None = None
-
-        def watch() -> None:
-            opened = False
-            while not self._stop.wait(0.01):
-                rtde = lb.state()["connections"].get("rtde", 0)
-                if rtde >= 2:
-                    opened = True
-                elif opened:
-                    self.at = time.monotonic()
-                    return
-
-        self._thread = threading.Thread(target=watch, daemon=True)
-        self._thread.start()
-
-    def stop(self) -> float:
-        self._stop.set()
-        self._thread.join(timeout=5.0)
-        return time.monotonic() if self.at is None else self.at
 
 
 def contact_margin(stiffness: float, late: float) -> float:
@@ -483,32 +453,21 @@ def retracted(state: dict) -> bool:
 def in_a_process(cell, argv: list[str], sig: signal.Signals) -> tuple[int, str]:
     """``aptkt argv`` in a process (in a process group) of its own, signalled as a
     terminal's Ctrl-C or a job's end is — the whole group (the control client's process must
-    not take the signal and leave the arm) — in the middle of the second press.
-
-    A session of its own is a scheduling group of its own: the machine may keep that process
-    (its supervision, its control client) waiting while the probes of this process, of the
-    machine and of the loopback run on time. So its lateness is measured in it, and counts
-    in :meth:`Timing.stall` up to the moment its control client's connection closed (after
-    that, nothing it does reaches the controller; and destroying ur_rtde's receive client
-    holds its GIL for 0.5 s)."""
+    not take the signal and leave the arm) — in the middle of the second press."""
     d, lb, timing = cell
     lb.reset(pose=START)
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2] / "python")}
-    probed = ProbedProcess(
-        "aptkt.cli",
-        argv,
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "aptkt.cli", *argv],
         env=env,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
     )
-    proc = probed.proc
     watcher = on_press(lb, 2, lambda: os.killpg(proc.pid, sig))
-    closed = ControlClosed(lb)
     _, err = proc.communicate(timeout=300)
     watcher.stop()
-    timing.process_late = max(timing.process_late, probed.lateness(until=closed.stop()))
     return proc.returncode, err
 
 
@@ -609,27 +568,3 @@ def test_a_dropped_link_mid_press_is_a_fault_that_keeps_the_data(cell, capsys):
             assert sorted(rd.keys()) == [("block_a", "Pq", 0), ("block_b", "Pq", 0)]
 
     undisturbed(timing, lambda: run_cli(cell, "collect", *args, "--resume"), complete, [data])
-
-
-def test_a_process_of_its_own_kept_waiting_is_a_disturbance():
-    """The rule behind the signal tests' repeats: aptkt runs there in a session of its own,
-    which the machine may keep waiting while this process, the machine probe and the loopback
-    run on time. A stall of that process (here: stopped for a while) is measured in it."""
-    stop = 0.6
-    probed = ProbedProcess(
-        "timeit",
-        ["-n", "1", "-r", "1", "print('running', flush=True); import time; time.sleep(1.5)"],
-        stdout=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
-    proc = probed.proc
-    assert proc.stdout is not None and proc.stdout.readline() == "running\n"
-    os.kill(proc.pid, signal.SIGSTOP)
-    try:
-        time.sleep(stop)
-    finally:
-        os.kill(proc.pid, signal.SIGCONT)
-    proc.communicate(timeout=60)
-    assert proc.returncode == 0
-    assert probed.lateness() >= stop - 0.01
