@@ -14,6 +14,7 @@ import pytest
 
 from aptkt.cli import main
 from aptkt.experiments import benchmark_report as br
+from aptkt.experiments import selection_report as sr
 from aptkt.experiments.benchmark import (
     BenchmarkSettings,
     object_distances,
@@ -90,8 +91,12 @@ def test_every_method_runs_for_every_group_library_and_prior_choice(run):
     assert {k[1] for k in runs} == {"2", "3"}
     assert {k[2] for k in runs} == {"random", "nearest", "farthest"}
     methods = {"baseline", "APTKT", "APTKT+aux", "control", "1-NN", "1-NN shrunk"}
-    assert {k[3] for k in runs} == methods
-    assert len(runs) == 3 * 2 * 3 * len(methods)
+    # With random priors every learner also picks at random: its own choice's reference.
+    picks = {f"{m} random" for m in ("baseline", "APTKT", "APTKT+aux", "control")}
+    for choice in ("random", "nearest", "farthest"):
+        got = {k[3] for k in runs if k[2] == choice}
+        assert got == (methods | picks if choice == "random" else methods)
+    assert len(runs) == 3 * 2 * (3 * len(methods) + len(picks))
     for (_, _, _, method), steps in runs.items():
         assert sorted(steps) == ([0] if method.startswith("1-NN") else [0, 1, 2])
     # The baseline uses no prior: one run serves every library and choice of a group.
@@ -134,6 +139,59 @@ def test_the_reported_gains_are_the_paired_means_of_the_results(run):
     assert summary["libraries"] == [2, 3]
     assert "## Gain against library size (random priors)" in report
     assert (run / "library.png").stat().st_size > 0
+
+
+def test_each_learner_is_compared_with_its_own_random_picks(run):
+    """The random-picks arms start where the active ones do (the same first observations) and
+    the reported gains and touches are recomputed from results.csv."""
+    rows = _rows(run)
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["selection"] == "error-reduction"
+    acc = defaultdict(lambda: defaultdict(dict))
+    for r in rows:
+        if r["priors"] == "random" and r["library"] == "2":
+            acc[r["method"]][int(r["group"])][int(r["step"])] = float(r["accuracy"])
+
+    def matrix(method):
+        return np.array([[acc[method][g][k] for k in range(3)] for g in sorted(acc[method])])
+
+    found = {(e["learner"], e["library"]): e for e in summary["active_against_random"]}
+    # APTKT+aux is left out where it learned exactly as APTKT.
+    assert {"baseline", "APTKT", "control"} <= {k[0] for k in found}
+    for learner in ("baseline", "APTKT", "control"):
+        active, random = matrix(learner), matrix(f"{learner} random")
+        np.testing.assert_array_equal(active[:, 0], random[:, 0])
+        e = found[(learner, 2)]
+        assert e["mean_gain"]["mean"] == pytest.approx(np.mean((active - random)[:, 1:]))
+        assert e["budget"] == 2 and e["groups"] == 3
+        touches = sr.touches_to_reach(active, random)
+        assert e["touches"] == (None if np.isnan(touches) else pytest.approx(touches))
+    report = (run / "report.md").read_text()
+    assert "## Active choice against random picks" in report
+    assert (run / "selection.png").stat().st_size > 0 and (run / "selection.svg").exists()
+
+
+def test_the_touches_needed_are_where_the_active_curve_crosses_randoms_end():
+    random = np.array([[0.5, 0.6, 0.7, 0.8], [0.5, 0.6, 0.7, 0.8]])
+    # The active mean reaches 0.8 halfway between steps 1 (0.7) and 2 (0.9).
+    active = np.array([[0.5, 0.7, 0.9, 0.9], [0.5, 0.7, 0.9, 0.95]])
+    assert sr.touches_to_reach(active, random) == pytest.approx(1.5)
+    assert sr.touches_to_reach(random, random) == pytest.approx(3.0)
+    assert np.isnan(sr.touches_to_reach(random - 0.1, random))
+    assert sr.touches_to_reach(random + 0.5, random) == 0.0
+    c = {3: {"random": {"APTKT": active, "APTKT random": random}}}
+    (r,) = sr.compare(c)
+    assert r.touches == pytest.approx(1.5) and r.saved == pytest.approx(0.5)
+    assert r.lowest == pytest.approx(0.1) and r.lowest_step == 1 and r.largest_fall == 0.0
+    assert r.touches_low <= r.touches <= r.touches_high
+    (check,) = sr.checks([r])
+    assert check.holds and check.kind == "reference"
+    (dip,) = sr.checks(
+        sr.compare(
+            {3: {"random": {"APTKT": random - 0.006 * (np.arange(4) > 0), "APTKT random": random}}}
+        )
+    )
+    assert not dip.holds
 
 
 def test_the_nearest_neighbour_reference_is_the_plain_rule(run):

@@ -6,7 +6,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from aptkt.learning import FeaturePipeline, ModalityTransform, Observations, decide_transfer
-from aptkt.learning.active import entropy, select_next, uncertainty
+from aptkt.learning.active import (
+    SELECTIONS,
+    entropy,
+    expected_error_reduction,
+    own_error,
+    select_next,
+    uncertainty,
+)
+from aptkt.learning.config import EXPLORATION, LearnerConfig
 from aptkt.learning.evaluation import accuracy, fused_accuracy
 from aptkt.learning.pipeline import MIN_NOISE_DOF, SKIN_TRANSFORMS
 from aptkt.learning.transfer import mean_posteriors
@@ -50,6 +58,44 @@ def test_selection_argmax_and_ties():
         unc, ["P1", "S1"], ["x", "y"], eps_explor=0.0, rng=rng, available=[("S1", "x"), ("S1", "y")]
     )
     assert (sel.action, sel.object) == ("S1", "x")
+
+
+def test_own_error_is_the_posterior_mass_on_the_other_objects():
+    p = np.array([[0.7, 0.2, 0.1], [0.5, 0.5, 0.0]])
+    assert own_error(p, 0) == pytest.approx(1 - 0.6)
+    assert own_error(p, 1) == pytest.approx(1 - 0.35)
+    with pytest.raises(ValueError):
+        own_error(p, 3)
+    with pytest.raises(ValueError):
+        own_error(np.zeros((0, 3)), 0)
+
+
+@given(
+    st.floats(0.0, 1.0),
+    st.integers(1, 10_000),
+)
+def test_the_error_one_touch_removes_follows_an_error_falling_as_one_over_n(error, count):
+    """With error e after n touches and error ∝ 1/n, one more touch leaves e·n/(n + 1): it
+    removes e − e·n/(n + 1); a pair's score falls with every touch of it, so none starves."""
+    removed = expected_error_reduction(error, count)
+    assert removed == pytest.approx(error - error * count / (count + 1), abs=1e-12)
+    assert expected_error_reduction(error, count + 1) <= removed
+    with pytest.raises(ValueError):
+        expected_error_reduction(error, 0)
+
+
+def test_each_rule_has_its_own_exploration_unless_one_is_given():
+    assert set(EXPLORATION) == set(SELECTIONS)
+    assert LearnerConfig().selection == "error-reduction" and LearnerConfig().exploration == 0.0
+    assert LearnerConfig.paper().selection == "paper" and LearnerConfig.paper().exploration == 0.1
+    assert LearnerConfig(selection="random", eps_explor=0.0).exploration == 1.0
+    assert LearnerConfig(eps_explor=0.25).exploration == 0.25
+    with pytest.raises(ValueError, match="selection"):
+        LearnerConfig(selection="greedy")
+    # A configuration written before the rule existed reads back with today's default.
+    old = LearnerConfig.paper().to_dict()
+    del old["selection"]
+    assert LearnerConfig.from_dict(old).selection == "error-reduction"
 
 
 def test_exploration_is_uniform_over_pairs():

@@ -309,6 +309,21 @@ MISTAKES = [
         ],
         "--budget must be at most",
     ),  # fmt: skip
+    (
+        [
+            "learn",
+            *SIM,
+            "--prior",
+            "{d}/p.npz",
+            "--objects",
+            "towel,cork_board",
+            "--target-accuracy",
+            "1.5",
+            "-o",
+            "{d}/new/l",
+        ],
+        "--target-accuracy must be an accuracy in (0, 1], got 1.5",
+    ),  # fmt: skip
     # the method's alternatives: a value the learner refuses
     (
         [

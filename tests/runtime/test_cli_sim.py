@@ -228,6 +228,25 @@ def test_collect_refuses_what_would_mix_or_lose_data(workdir: Path, capsys):
         assert len(rd) == 1
 
 
+def test_learn_prints_its_own_estimate_and_stops_at_the_target_accuracy(
+    workdir: Path, prior: Path, capsys
+):
+    """Without a test set the learner's own estimate is all there is; with --target-accuracy
+    the run stops on the first step whose estimate reaches it, and says so."""
+    out = workdir / "target"
+    argv = ("--objects", NEW, "--budget", "8", "--seed", "1", "--target-accuracy", "0.01")
+    assert learn(workdir, prior, out, *argv) == 0
+    text = capsys.readouterr().out
+    run = json.loads((out / "run.json").read_text())
+    estimates = [s["estimated_accuracy"] for s in run["steps"]]
+    # The estimate exists once every action has a judged touch; 0.01 is reached there.
+    assert estimates[0] is None and estimates[-1] is not None
+    assert all(e is None for e in estimates[:-1]) and len(estimates) <= 9
+    assert f"estimated accuracy {estimates[-1]:.3f} (its own, no test data)" in text
+    assert run["stop_reason"] == "target accuracy"
+    assert f"completed (stopped early: target accuracy): {len(estimates)} steps" in text
+
+
 def test_learn_without_a_test_set_reports_choices_and_transfer_but_no_accuracy(
     workdir: Path, prior: Path, capsys
 ):

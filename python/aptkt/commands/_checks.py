@@ -36,6 +36,12 @@ def at_least(value: float | None, minimum: float, option: str) -> None:
         raise ConfigError(f"{option} must be >= {minimum}, got {value}")
 
 
+def check_target_accuracy(value: float | None) -> None:
+    """``--target-accuracy``: an accuracy in (0, 1] (``None``: not given)."""
+    if value is not None and not (math.isfinite(value) and 0.0 < value <= 1.0):
+        raise ConfigError(f"--target-accuracy must be an accuracy in (0, 1], got {value}")
+
+
 def at_most(value: float | None, maximum: float, option: str, why: str = "") -> None:
     """``value <= maximum`` and finite (``None``: the option was not given); ``why`` says
     where the bound comes from."""

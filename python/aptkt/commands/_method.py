@@ -9,6 +9,7 @@ import argparse
 from dataclasses import replace
 from typing import Any
 
+from aptkt.learning.active import SELECTIONS
 from aptkt.learning.config import KERNELS, LIBRARY_MODELS, READINGS, GPSettings, LearnerConfig
 from aptkt.learning.locality import LOCAL_OBJECTS, LOCAL_ROWS
 from aptkt.learning.pipeline import FEATURE_SCALES
@@ -58,6 +59,14 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
         "only to an object the library recognises as the same (default); paper: the paper's "
         "exact reading (spread-scaled features, each classifier its own ML-II kernel with "
         "fitted weights, Eq. 3's cut-off alone, auxiliary features without an evidence gate)",
+    )
+    g.add_argument(
+        "--selection",
+        choices=SELECTIONS,
+        help="how the next touch is chosen: error-reduction (the (action, object) pair whose "
+        "next touch is expected to remove the most error: the model's error on the pair's "
+        "touches so far over their number plus one), paper (AT-LPP, Eq. 4: the pair whose "
+        "touches so far are most uncertain) or random; " + _by_reading(lambda c: c.selection),
     )
     g.add_argument(
         "--cutoff",
@@ -147,7 +156,11 @@ def learner_config(args: argparse.Namespace, **fields: Any) -> LearnerConfig:
     base = LearnerConfig.paper() if args.reading == "paper" else LearnerConfig()
     given = {
         name: value
-        for name, value in (("cutoff", args.cutoff), ("evidence_margin", args.evidence_margin))
+        for name, value in (
+            ("cutoff", args.cutoff),
+            ("evidence_margin", args.evidence_margin),
+            ("selection", getattr(args, "selection", None)),
+        )
         if value is not None
     }
     if args.aux_gate_margin is not None:

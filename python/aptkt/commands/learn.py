@@ -13,6 +13,7 @@ from aptkt.commands._checks import (
     MAX_BUDGET,
     at_least,
     at_most,
+    check_target_accuracy,
     input_file,
     intact_data_set,
     output_dir,
@@ -31,7 +32,7 @@ from aptkt.commands._session import (
 )
 from aptkt.errors import ConfigError
 from aptkt.files import present
-from aptkt.learning.config import LearnerConfig
+from aptkt.learning.config import EXPLORATION, LearnerConfig
 from aptkt.learning.transfer import TRANSFER_MODES
 
 
@@ -83,9 +84,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--eps-explor",
         type=float,
-        default=LearnerConfig.eps_explor,
+        default=None,
         metavar="E",
-        help="probability of a random (action, object) pick, ε_explor (default %(default)s)",
+        help="probability of a random (action, object) pick, ε_explor (default: the rule's "
+        f"own, {', '.join(f'{v:g} for {k}' for k, v in EXPLORATION.items() if k != 'random')})",
     )
     p.add_argument(
         "--transfer",
@@ -106,6 +108,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         metavar="N",
         help="stop early after N observations without lower mean uncertainty (default: spend the budget)",
+    )
+    p.add_argument(
+        "--target-accuracy",
+        type=float,
+        default=None,
+        metavar="A",
+        help="stop early once the learner's own estimate of its mean accuracy reaches A (every "
+        "touch is judged before it is learned; default: spend the budget)",
     )
     p.add_argument(
         "--record",
@@ -204,6 +214,7 @@ def run(args: argparse.Namespace) -> int:
     at_most(args.budget, MAX_BUDGET, "--budget")
     at_least(args.patience, 1, "--patience")
     at_most(args.patience, MAX_BUDGET, "--patience")
+    check_target_accuracy(args.target_accuracy)
     output_dir(args.output)
     if args.record:
         output_file(args.record, "--record")
@@ -245,6 +256,7 @@ def run(args: argparse.Namespace) -> int:
             transfer=args.transfer,
             auxiliary=args.auxiliary,
             patience=args.patience,
+            target_accuracy=args.target_accuracy,
             seed=args.seed,
         )
     except ValueError as exc:
@@ -266,7 +278,8 @@ def run(args: argparse.Namespace) -> int:
         f"learning {', '.join(objects)} with {', '.join(actions)} on {args.robot}; prior objects: "
         f"{object_list(prior.objects)}; transfer {args.transfer}"
         + (" + auxiliary features" if args.auxiliary else "")
-        + f"; budget {args.budget}, eps_neg {config.eps_neg}, eps_explor {args.eps_explor}, seed {args.seed}"
+        + f"; budget {args.budget}, eps_neg {config.eps_neg}, selection {config.selection} "
+        f"(eps_explor {config.exploration:g}), seed {args.seed}"
     )
     try:
         with session:

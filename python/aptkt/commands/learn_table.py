@@ -9,7 +9,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from aptkt.commands._checks import MAX_BUDGET, MAX_RUNS, at_most, output_dir
+from aptkt.commands._checks import (
+    MAX_BUDGET,
+    MAX_RUNS,
+    at_most,
+    check_target_accuracy,
+    output_dir,
+)
 from aptkt.commands._inputs import add_trials_option, check_trials, parse_trials
 from aptkt.commands._method import learner_config
 from aptkt.commands._session import split_names
@@ -117,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
     at_most(runs, MAX_RUNS, "--runs")
     at_most(args.budget, MAX_BUDGET, "--budget")
     at_most(args.patience, MAX_BUDGET, "--patience")
+    check_target_accuracy(args.target_accuracy)
     try:  # the learner's own checks of the options, as a one-line error
         config = learner_config(
             args,
@@ -124,6 +131,7 @@ def run(args: argparse.Namespace) -> int:
             eps_explor=args.eps_explor,
             budget=args.budget,
             patience=args.patience,
+            target_accuracy=args.target_accuracy,
             seed=args.seed,
         )
     except ValueError as exc:

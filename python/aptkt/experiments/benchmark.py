@@ -14,7 +14,9 @@ observations: in the prior's feature space ("1-NN"), the plainest use of that me
 prior objects' within-object covariance of the table's own columns, shrunk towards its diagonal
 and whitened ("1-NN shrunk", :data:`SHRUNK_COVARIANCE`) — the strongest simple rule the fitted
 model should at least match. Methods are paired by group: the same new objects, the same pool
-order, the same first observations, whatever the library size.
+order, the same first observations, whatever the library size. With random priors every learner
+also runs with uniformly random picks (``"APTKT random"``, ...), so that its own choice of the
+next touch is measured against picking at random (:mod:`aptkt.experiments.selection_report`).
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ from typing import Any
 import numpy as np
 
 from aptkt.errors import ConfigError, FeatureTableError, InvalidInputError
+from aptkt.experiments.selection_report import CHOICE as RANDOM_PICKS_CHOICE
+from aptkt.experiments.selection_report import random_arm
 from aptkt.files import write_json_atomically, write_text_atomically
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
@@ -262,15 +266,20 @@ def run_group(
     seed = s.seed * 1_000_003 + group.index
     rows: list[dict[str, Any]] = []
 
-    def run(cfg: LearnerConfig, prior: PriorKnowledge | None) -> tuple[list[float], APTKT]:
+    def run(cfg: LearnerConfig, prior: PriorKnowledge | None) -> tuple[list[Any], APTKT]:
+        """The run's curve: (held-out accuracy, the learner's own estimate) per step."""
         learner = APTKT(replace(cfg, budget=s.budget, seed=seed), prior)
         result = learner.run(PoolEnvironment(pool, seed=seed), actions, new, test=held)
         if on_run is not None:
             on_run()
-        return [step.mean_accuracy for step in result.steps], learner
+        return [(st.mean_accuracy, st.estimated_accuracy) for st in result.steps], learner
 
     base_cfg = replace(s.config, **METHODS["baseline"])
     baseline, base_learner = run(base_cfg, None)
+    # Each learner's random-picks arm, where the learners choose otherwise (the baseline's
+    # serves every library).
+    with_random_picks = s.config.selection != "random" and s.budget > 0
+    base_random: list[Any] | None = None
     # The initial round's observations: the first row of each new object in every action.
     first = {
         a: lrn.observations.take(np.arange(len(new)))
@@ -289,6 +298,14 @@ def run_group(
             for name, overrides in METHODS.items():
                 if name != "baseline":
                     curves[name] = run(replace(s.config, **overrides), prior)[0]
+            if with_random_picks and choice == RANDOM_PICKS_CHOICE:
+                if base_random is None:
+                    base_random = run(replace(base_cfg, selection="random"), None)[0]
+                curves[random_arm("baseline")] = base_random
+                for name, overrides in METHODS.items():
+                    if name != "baseline":
+                        cfg = replace(s.config, **overrides, selection="random")
+                        curves[random_arm(name)] = run(cfg, prior)[0]
             tags = {
                 "group": group.index,
                 "library": size,
@@ -298,7 +315,8 @@ def run_group(
             }
             for name, curve in curves.items():
                 rows += [
-                    {**tags, "method": name, "step": k, "accuracy": v} for k, v in enumerate(curve)
+                    {**tags, "method": name, "step": k, "accuracy": v, "estimated": e}
+                    for k, (v, e) in enumerate(curve)
                 ]
             for name, accuracy in (
                 (NEAREST_NEIGHBOUR, nearest_neighbour_accuracy(prior, first, held)),
@@ -375,6 +393,7 @@ def run_benchmark(
     held)."""
     from aptkt import __version__
     from aptkt.experiments import benchmark_report as br
+    from aptkt.experiments import selection_report as sr
     from aptkt.experiments.executors import make_executor
     from aptkt.experiments.noise_profile import noise_profile
     from aptkt.experiments.plots import save_figure
@@ -405,7 +424,9 @@ def run_benchmark(
     output.mkdir(parents=True, exist_ok=True)
     write_csv(output / "results.csv", rows)
     c = br.curves(rows)
-    found = br.checks(c)
+    against_random = sr.compare(c)
+    calibration = sr.calibrate(c, br.curves(rows, "estimated"))
+    found = br.checks(c) + sr.checks(against_random) + sr.calibration_checks(calibration)
     head = {
         "table": str(table.path),
         "command": command,
@@ -419,10 +440,14 @@ def run_benchmark(
         "new": s.new_objects,
         "libraries": list(s.libraries),
         "budget": s.budget,
+        "selection": s.config.selection,
     }
     chance = 1.0 / s.new_objects
     save_figure(br.plot(c, chance), output / "benchmark")
     written = [output / "report.md", output / "benchmark.png"]
+    if against_random:
+        save_figure(sr.plot(c, against_random[0].library), output / "selection")
+        written.append(output / "selection.png")
     if len(s.libraries) > 1 and "random" in s.choices:
         save_figure(br.plot_library(c), output / "library")
         written.append(output / "library.png")
@@ -431,14 +456,19 @@ def run_benchmark(
         "learner": s.config.to_dict(),
         "choices": list(s.choices),
         "results": br.summary(c),
+        "active_against_random": [r.as_dict() for r in against_random],
+        "own_estimate": [k.as_dict() for k in calibration],
         "checks": [k.as_dict() for k in found],
     }
     profiles = noise_profile(table.observations(actions))
     summary["noise_profile"] = [p.as_dict() for p in profiles]
     write_json_atomically(output / "summary.json", summary, ConfigError)
-    write_text_atomically(
-        output / "report.md", br.report_markdown(c, head, found, profiles), ConfigError
+    report = br.report_markdown(c, head, found, profiles)
+    report += "\n" + "\n".join(
+        sr.report_lines(against_random, len(s.libraries))
+        + sr.calibration_lines(calibration, len(s.libraries))
     )
+    write_text_atomically(output / "report.md", report, ConfigError)
     br.announce_checks(found, say)
     say(
         f"{br.checks_line(found)}; done in {seconds:.0f} s: "

@@ -59,15 +59,21 @@ ROUNDING = 1e-9
 Curves = Mapping[int, Mapping[str, Mapping[str, np.ndarray]]]
 
 
-def curves(rows: Sequence[Mapping[str, Any]]) -> dict[int, dict[str, dict[str, np.ndarray]]]:
-    """Library size -> prior choice -> method -> (groups × steps) accuracies, groups in order.
-    Rows without a library size (results written before it existed) count as one library."""
+def curves(
+    rows: Sequence[Mapping[str, Any]], value: str = "accuracy"
+) -> dict[int, dict[str, dict[str, np.ndarray]]]:
+    """Library size -> prior choice -> method -> (groups × steps) accuracies (or another
+    ``value`` of the rows: "estimated", the learners' own estimates; rows without it are left
+    out), groups in order. Rows without a library size (results written before it existed)
+    count as one library."""
     out: dict[int, dict[str, dict[str, dict[int, dict[int, float]]]]] = {}
     for r in rows:
+        if r.get(value) in (None, ""):
+            continue
         size = int(r.get("library") or 0)
         per = out.setdefault(size, {}).setdefault(str(r["priors"]), {})
         per.setdefault(str(r["method"]), {}).setdefault(int(r["group"]), {})[int(r["step"])] = (
-            float(r["accuracy"])
+            float(r[value])
         )
     return {
         size: {

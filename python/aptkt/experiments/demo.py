@@ -66,7 +66,7 @@ class DemoSettings:
     priors: tuple[str, ...] = DEMO_PRIORS
     new_objects: tuple[str, ...] = DEMO_NEW
     eps_neg: float = LearnerConfig.eps_neg
-    eps_explor: float = LearnerConfig.eps_explor
+    eps_explor: float | None = LearnerConfig.eps_explor
     size: str = "full"  # "quick" for the reduced size; results of two sizes never mix
 
     @classmethod

@@ -47,7 +47,7 @@ class Scale:
     fig11_trials: int = 10
     dissimilar_count: int = 3
     eps_neg: float = LearnerConfig.eps_neg
-    eps_explor: float = LearnerConfig.eps_explor
+    eps_explor: float | None = LearnerConfig.eps_explor
 
     def __post_init__(self) -> None:
         if self.repetitions < 2:

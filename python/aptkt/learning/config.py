@@ -12,6 +12,7 @@ import numpy as np
 from aptkt.errors import InvalidInputError
 from aptkt.gp.settings import DEFAULTS, HyperPrior, check_optimizer_tol
 from aptkt.gp.settings import KERNELS as ESTIMATOR_KERNELS
+from aptkt.learning.active import SELECTIONS
 from aptkt.learning.pipeline import FEATURE_SCALES
 from aptkt.learning.transfer import CUTOFFS, TRANSFER_MODES
 
@@ -236,6 +237,10 @@ class GPSettings:
         )
 
 
+#: Each selection rule's own ε_explor (:attr:`LearnerConfig.exploration`).
+EXPLORATION = {"paper": 0.1, "error-reduction": 0.0, "random": 1.0}
+
+
 @dataclass(frozen=True)
 class LearnerConfig:
     """Parameters of APTKT (and of the baseline, which is ``transfer="none"``).
@@ -260,7 +265,16 @@ class LearnerConfig:
         wrong transfer costs more than a missed one: on real materials, which are all distinct,
         the transfers a weaker test let through lowered accuracy against the control
         (docs/method.md).
-    eps_explor : probability of a uniformly random (action, object) pick (Eq. 4).
+    selection : how the next (action, object) pair is chosen
+        (:data:`~aptkt.learning.active.SELECTIONS`): "error-reduction" (default, beyond the
+        paper: the pair whose next touch is expected to remove the most error), "paper"
+        (AT-LPP, Eq. 4: the pair whose observations so far are most uncertain) or "random"
+        (uniformly random picks, the reference).
+    eps_explor : probability of a uniformly random (action, object) pick instead of the
+        rule's (Eq. 4). None: the rule's own (:data:`EXPLORATION`) — the paper's 0.1 for
+        AT-LPP, whose most uncertain pair can stay the most uncertain however often it is
+        touched; none for error reduction, whose score of a pair falls with every touch of it,
+        so that no pair is starved.
     budget : observations chosen actively after the initial round (every action once on every
         new object).
     auxiliary : append the prior models' posteriors as an extra modality (Eq. 5).
@@ -273,6 +287,9 @@ class LearnerConfig:
         reading, :meth:`paper`: Eq. 5 has no such test). Independent of ``evidence_margin``.
     patience : stop early when the mean uncertainty over all pairs has not fallen for this many
         consecutive observations (None: always spend the budget).
+    target_accuracy : stop early once the learner's own estimate of its mean accuracy
+        (:class:`~aptkt.learning.estimate.AccuracyEstimate`: every touch judged before it is
+        learned) reaches it (None: no such stop).
     seed : seeds the pool order's use, the exploration and the GP optimiser's starts.
     modalities : only these modalities in the new objects' models (Fig. 6's single-modality
         models); None: every modality of each action. The prior models see all of theirs.
@@ -282,17 +299,23 @@ class LearnerConfig:
     eps_neg: float = 0.5
     cutoff: str = "same-object"
     evidence_margin: float = 3.0
-    eps_explor: float = 0.1
+    selection: str = "error-reduction"
+    eps_explor: float | None = None
     budget: int = 40
     auxiliary: bool = False
     aux_gate_margin: float | None = 3.0
     patience: int | None = None
+    target_accuracy: float | None = None
     seed: int = 0
     modalities: tuple[str, ...] | None = None
     gp: GPSettings = field(default_factory=GPSettings)
 
     def __post_init__(self) -> None:
-        for name, allowed in (("transfer", TRANSFER_MODES), ("cutoff", CUTOFFS)):
+        for name, allowed in (
+            ("transfer", TRANSFER_MODES),
+            ("cutoff", CUTOFFS),
+            ("selection", SELECTIONS),
+        ):
             if getattr(self, name) not in allowed:
                 raise InvalidInputError(
                     f"{name} must be one of {allowed}, got {getattr(self, name)!r}"
@@ -305,6 +328,8 @@ class LearnerConfig:
             )
         for name in ("eps_neg", "eps_explor"):
             v = getattr(self, name)
+            if v is None and name == "eps_explor":
+                continue
             if not 0.0 <= v <= 1.0:
                 raise InvalidInputError(f"{name} must lie in [0, 1], got {v}")
         if self.budget < 0:
@@ -315,12 +340,16 @@ class LearnerConfig:
                 raise InvalidInputError("modalities must name at least one modality (or be None)")
         if self.patience is not None and self.patience < 1:
             raise InvalidInputError(f"patience must be None or >= 1, got {self.patience}")
+        if self.target_accuracy is not None and not 0.0 < self.target_accuracy <= 1.0:
+            raise InvalidInputError(
+                f"target_accuracy must lie in (0, 1], got {self.target_accuracy}"
+            )
 
     @classmethod
     def paper(cls, **changes: Any) -> LearnerConfig:
         """The paper's exact reading: Eq. 3's cut-off alone, auxiliary features (when asked
-        for) without a gate, and :meth:`GPSettings.paper`."""
-        base = cls(cutoff="paper", aux_gate_margin=None, gp=GPSettings.paper())
+        for) without a gate, AT-LPP's selection (Eq. 4), and :meth:`GPSettings.paper`."""
+        base = cls(cutoff="paper", aux_gate_margin=None, selection="paper", gp=GPSettings.paper())
         return replace(base, **changes)
 
     def _transfer_pick(self) -> tuple[str, float | None]:
@@ -328,6 +357,13 @@ class LearnerConfig:
         Only the reproduction's stress test of the cut-off picks otherwise
         (:mod:`aptkt.experiments.stress`)."""
         return "most", None
+
+    @property
+    def exploration(self) -> float:
+        """The probability of a uniformly random pick: ``eps_explor``, or the rule's own."""
+        if self.selection == "random":
+            return 1.0
+        return EXPLORATION[self.selection] if self.eps_explor is None else float(self.eps_explor)
 
     @property
     def uses_prior(self) -> bool:

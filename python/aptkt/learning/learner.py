@@ -28,9 +28,16 @@ import numpy as np
 
 from aptkt.errors import InvalidInputError, InvalidStateError
 from aptkt.gp import LaplaceGPC, TransferSource
-from aptkt.learning.active import entropy, select_next
+from aptkt.learning.active import (
+    SELECTIONS,
+    entropy,
+    expected_error_reduction,
+    own_error,
+    select_next,
+)
 from aptkt.learning.config import LearnerConfig, lone_observation_signal_variance
 from aptkt.learning.environment import Environment
+from aptkt.learning.estimate import AccuracyEstimate
 from aptkt.learning.evaluation import accuracy, fused_accuracy
 from aptkt.learning.kernel import LibraryEvidence, fit_new_objects
 from aptkt.learning.observations import Observations, ObservationTable
@@ -69,6 +76,8 @@ class ActionLearner:
         self.pipeline: FeaturePipeline | None = None
         self.decisions: dict[str, TransferDecision] = {}
         self.train_entropy: np.ndarray = np.zeros(0)
+        #: The current model's posteriors of its own training observations.
+        self.train_posteriors: np.ndarray = np.zeros((0, 0))
         #: The feature space of the current model: "prior" (the prior's transforms) or "new"
         #: (fitted on the new objects' training observations, the baseline's).
         self.space: str | None = None
@@ -295,7 +304,8 @@ class ActionLearner:
         self.space = "prior" if self.prior is not None else "new"
         # The training observations were drawn with the training frequencies: their own
         # posterior keeps them.
-        self.train_entropy = entropy(self.model.predict_proba(X))
+        self.train_posteriors = self.model.predict_proba(X)
+        self.train_entropy = entropy(self.train_posteriors)
         self.n_updates += 1
         if self._test is not None:
             if self._test_cache is None or self._test_cache[0] is not pipeline:
@@ -397,6 +407,28 @@ class ActionLearner:
         # Copies: each step's record owns its values.
         return {c: dict(hp) for c, hp in self._hyperparameters.items()}
 
+    def judge(
+        self, obj: str, observation: Mapping[str, np.ndarray], trial: int = 0
+    ) -> tuple[float, bool]:
+        """What the current model makes of one observation of ``obj`` it has not learned: the
+        posterior it gives ``obj``, and whether ``obj`` is its most probable object."""
+        one = Observations.single(self.action, obj, observation, trial, self.extraction)
+        classes = [str(c) for c in self.model.classes_] if self.model is not None else []
+        if obj not in classes:
+            raise InvalidStateError(f"action {self.action!r}: no model of {obj!r} yet")
+        row = self.predict_proba(one)[0]
+        k = classes.index(obj)
+        return float(row[k]), bool(row[k] >= row.max())
+
+    def own_error(self, obj: str) -> float:
+        """The current model's error on this action's observations of ``obj``: the posterior
+        mass it gives the other objects (:func:`~aptkt.learning.active.own_error`)."""
+        if self.observations is None or self.model is None:
+            raise InvalidStateError(f"action {self.action!r}: no model yet; call update first")
+        classes = [str(c) for c in self.model.classes_]
+        mask = self.observations.objects == obj
+        return own_error(self.train_posteriors[mask], classes.index(obj))
+
     def uncertainty(self, obj: str) -> float:
         """UNC(α, c_j): mean entropy of the posterior over this pair's observations."""
         if self.observations is None:
@@ -447,6 +479,7 @@ class StepRecord:
     action: str | None
     object: str | None
     explored: bool
+    #: AT-LPP's UNC of the pair chosen (whatever rule chose it).
     uncertainty: float
     accuracy: dict[str, float]
     mean_accuracy: float
@@ -458,6 +491,15 @@ class StepRecord:
     #: action -> {"space": the feature space its model was fitted in at this step ("prior" or
     #: "new")}, for the actions updated at this step (every action at step 0), as ``transfer``.
     feature_space: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: The error the chosen touch was expected to remove (``selection="error-reduction"``).
+    expected_gain: float = math.nan
+    #: The posterior the model gave the touched object on the touch before learning it.
+    touch_posterior: float = math.nan
+    #: Whether the model, before learning the touch, held the touched object most probable.
+    touch_recognised: bool | None = None
+    #: The learner's own estimate of its mean accuracy (NaN until every action has a touch
+    #: judged before it was learned; :class:`~aptkt.learning.estimate.AccuracyEstimate`).
+    estimated_accuracy: float = math.nan
 
     def __repr__(self) -> str:
         if self.action is None:
@@ -484,6 +526,10 @@ class StepRecord:
                 "object",
                 "explored",
                 "uncertainty",
+                "expected_gain",
+                "touch_posterior",
+                "touch_recognised",
+                "estimated_accuracy",
                 "mean_accuracy",
                 "fused_accuracy",
                 "seconds",
@@ -513,6 +559,9 @@ class LearningRun:
     prior_objects: list[str]
     steps: list[StepRecord] = field(default_factory=list)
     stopped_early: bool = False
+    #: Why the run stopped before its budget: "pool" (nothing left to observe), "patience" or
+    #: "target accuracy"; None where it spent the budget.
+    stop_reason: str | None = None
 
     def __repr__(self) -> str:
         last = self.steps[-1] if self.steps else None
@@ -620,19 +669,40 @@ class APTKT:
         self._record(run, 0, n_obs, None, time.perf_counter() - t0, on_step)
 
         best_unc, stale = np.inf, 0
+        estimate = AccuracyEstimate(actions, new_objects)
         for step in range(1, cfg.budget + 1):
             t0 = time.perf_counter()
             unc = {(a, o): self.learners[a].uncertainty(o) for a in actions for o in new_objects}
             available = [(a, o) for a in actions for o in new_objects if env.available(a, o)]
             if not available:
-                run.stopped_early = True
+                run.stopped_early, run.stop_reason = True, "pool"
                 break
-            sel = select_next(unc, actions, new_objects, cfg.eps_explor, rng, available)
+            scores = unc if cfg.selection != "error-reduction" else self.pair_scores(cfg.selection)
+            sel = select_next(scores, actions, new_objects, cfg.exploration, rng, available)
             learner = self.learners[sel.action]
-            learner.add(sel.object, env.observe(sel.action, sel.object), trial=step)
+            touch = env.observe(sel.action, sel.object)
+            # What the model made of the touch before learning it: a held-out judgement.
+            posterior, recognised = learner.judge(sel.object, touch, trial=step)
+            estimate.judge(sel.action, sel.object, learner.count(sel.object), recognised)
+            learner.add(sel.object, touch, trial=step)
             learner.update(step=step)
             n_obs += 1
-            self._record(run, step, n_obs, sel, time.perf_counter() - t0, on_step)
+            chosen = (sel.action, sel.object)
+            self._record(
+                run,
+                step,
+                n_obs,
+                sel,
+                time.perf_counter() - t0,
+                on_step,
+                uncertainty=unc[chosen],
+                touch_posterior=posterior,
+                touch_recognised=recognised,
+                estimated_accuracy=estimate.value(
+                    {(a, o): self.learners[a].count(o) for a in actions for o in new_objects}
+                ),
+                expected_gain=scores[chosen] if cfg.selection == "error-reduction" else math.nan,
+            )
             if cfg.patience is not None:
                 mean_unc = float(np.mean(list(unc.values())))
                 if mean_unc < best_unc - 1e-6:
@@ -640,9 +710,32 @@ class APTKT:
                 else:
                     stale += 1
                 if stale >= cfg.patience:
-                    run.stopped_early = True
+                    run.stopped_early, run.stop_reason = True, "patience"
                     break
+            if (
+                cfg.target_accuracy is not None
+                and run.steps[-1].estimated_accuracy >= cfg.target_accuracy
+            ):
+                run.stopped_early, run.stop_reason = True, "target accuracy"
+                break
         return run
+
+    def pair_scores(self, selection: str) -> dict[tuple[str, str], float]:
+        """Every (action, object) pair's score under a selection rule, from the current models:
+        AT-LPP's uncertainty ("paper") or the error one more touch is expected to remove
+        ("error-reduction"; :mod:`aptkt.learning.active`). "random" scores nothing (NaN)."""
+        if selection not in SELECTIONS:
+            raise InvalidInputError(f"selection must be one of {SELECTIONS}, got {selection!r}")
+        out = {}
+        for a, lrn in self.learners.items():
+            for o in lrn.new_objects:
+                if selection == "paper":
+                    out[(a, o)] = lrn.uncertainty(o)
+                elif selection == "error-reduction":
+                    out[(a, o)] = expected_error_reduction(lrn.own_error(o), lrn.count(o))
+                else:
+                    out[(a, o)] = math.nan
+        return out
 
     def _record(
         self,
@@ -652,6 +745,12 @@ class APTKT:
         sel: Any,
         seconds: float,
         on_step: Callable[[StepRecord], None] | None,
+        *,
+        uncertainty: float = math.nan,
+        expected_gain: float = math.nan,
+        touch_posterior: float = math.nan,
+        touch_recognised: bool | None = None,
+        estimated_accuracy: float = math.nan,
     ) -> None:
         has_test = all(lrn.test_posteriors is not None for lrn in self.learners.values())
         acc = {a: lrn.test_accuracy() for a, lrn in self.learners.items()} if has_test else {}
@@ -681,7 +780,11 @@ class APTKT:
             action=None if sel is None else sel.action,
             object=None if sel is None else sel.object,
             explored=False if sel is None else sel.explored,
-            uncertainty=float("nan") if sel is None else sel.uncertainty,
+            uncertainty=uncertainty,
+            expected_gain=expected_gain,
+            touch_posterior=touch_posterior,
+            touch_recognised=touch_recognised,
+            estimated_accuracy=estimated_accuracy,
             accuracy=acc,
             mean_accuracy=float(np.mean(list(acc.values()))) if acc else float("nan"),
             fused_accuracy=fused,

@@ -65,11 +65,12 @@ def describe_step(rec: StepRecord, config: LearnerConfig, n_pairs: int) -> str:
     if rec.action is None:
         head = f"step   0: initial round done ({rec.n_observations} observations, every action on every object)"
     else:
-        why = (
-            "random pick, eps-exploration"
-            if rec.explored
-            else f"highest uncertainty of {n_pairs} pairs"
-        )
+        if rec.explored or config.selection == "random":
+            why = "random pick" + (", eps-exploration" if config.selection != "random" else "")
+        elif config.selection == "error-reduction":
+            why = f"most error expected removed of {n_pairs} pairs: {rec.expected_gain:.3f}"
+        else:
+            why = f"highest uncertainty of {n_pairs} pairs"
         head = (
             f"step {rec.step:3d}/{config.budget}: {rec.action} on {rec.object}, uncertainty "
             f"{rec.uncertainty:.3f} ({why})"
@@ -80,6 +81,8 @@ def describe_step(rec: StepRecord, config: LearnerConfig, n_pairs: int) -> str:
             continue
         text = "; ".join(describe(d, config) for d in decisions.values())
         parts.append(f"    transfer {action}: {text}")
+    if not math.isnan(rec.estimated_accuracy):
+        parts.append(f"    estimated accuracy {rec.estimated_accuracy:.3f} (its own, no test data)")
     if not math.isnan(rec.mean_accuracy):
         parts.append(f"    test accuracy {rec.mean_accuracy:.3f} (fused {rec.fused_accuracy:.3f})")
     return "\n".join(parts)
@@ -210,6 +213,9 @@ def learn_live(
             env = PrefetchedEnvironment(env, touched["observations"])
         run = learner.run(env, list(actions), list(new_objects), test=test, on_step=on_step)
         summary["stopped_early"] = run.stopped_early
+        summary["stop_reason"] = run.stop_reason
+        if run.stop_reason is not None:
+            status = f"completed (stopped early: {run.stop_reason})"
     except (AptktError, KeyboardInterrupt) as exc:
         if not failure and isinstance(exc, KeyboardInterrupt):
             # Ctrl-C between trials (recognising, updating the models): no recording was under
