@@ -302,3 +302,25 @@ def test_racing_processes_never_hold_the_lock_together(tmp_path):
         _, err = racer.communicate(timeout=300)
         assert racer.returncode == 0, err
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("command", ["generate", "collect"])
+def test_a_data_set_in_a_directory_not_made_yet_gets_its_directory(command, tmp_path, capsys):
+    """As every output of aptkt (a prior, a report): the directories are made, and the
+    refusal to write under a file stays one line."""
+    out = tmp_path / "not" / "yet" / "d.h5"
+    if command == "generate":
+        argv = ["dataset", "generate", "-o", str(out), "--objects", "towel", "--actions", "P1"]
+        argv += ["-n", "1", "-j", "1", "--no-progress"]
+    else:
+        argv = ["collect", "--robot", "sim", "--objects", "towel", "--actions", "P1", "-n", "1"]
+        argv += ["-o", str(out)]
+    assert main(argv) == 0
+    with DatasetReader(out) as rd:
+        assert len(rd) == 1
+    (tmp_path / "afile").write_text("x")
+    argv[argv.index(str(out))] = str(tmp_path / "afile" / "d.h5")
+    capsys.readouterr()
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is a file" in err[0]

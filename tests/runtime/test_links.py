@@ -111,3 +111,33 @@ def test_prior_build_replaces_a_link_not_its_target(work, tmp_path, capsys):
     dangling.symlink_to(tmp_path / "nowhere.npz")
     assert main(["prior", "build", str(work / "t.csv"), "-o", str(dangling)]) == 1
     assert not (tmp_path / "nowhere.npz").exists()
+
+
+def test_a_data_set_is_never_created_nor_appended_to_through_a_link(tmp_path, capsys):
+    """A dangling link where a data set is written counts as an earlier file (--force replaces
+    the link by the file, never creating its target); appending — `--resume`, `learn
+    --record` — would write through a link in place, so it is refused in one line."""
+    target, link = tmp_path / "elsewhere.h5", tmp_path / "d.h5"
+    link.symlink_to(target)
+    argv = ["dataset", "generate", "-o", str(link), "--objects", "towel", "--actions", "P1"]
+    argv += ["-n", "1", "-j", "1", "--no-progress"]
+    for extra, fragment in (([], "exists"), (["--resume"], "")):
+        assert main([*argv, *extra]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and fragment in err[0], err
+    assert link.is_symlink() and not target.exists()
+    assert main([*argv, "--force"]) == 0
+    assert not link.is_symlink() and link.is_file() and not target.exists()
+    # learn --record appends: a link there is refused before anything moves.
+    record = tmp_path / "record.h5"
+    record.symlink_to(tmp_path / "elsewhere-record.h5")
+    capsys.readouterr()
+    data, lib = tmp_path / "prior.h5", tmp_path / "prior.npz"
+    gen = ["dataset", "generate", "-o", str(data), "--objects", "rough_sponge,paper_box"]
+    assert main([*gen, "--actions", "P1", "-n", "2", "-j", "1", "--no-progress"]) == 0
+    assert main(["prior", "build", str(data), "-o", str(lib)]) == 0
+    learn = ["learn", "--robot", "sim", "--prior", str(lib), "--objects", "towel,cork_board"]
+    assert main([*learn, "--record", str(record), "-o", str(tmp_path / "run")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "symbolic link" in err[0], err
+    assert not (tmp_path / "run").exists() and not (tmp_path / "elsewhere-record.h5").exists()

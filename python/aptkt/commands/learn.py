@@ -218,6 +218,11 @@ def run(args: argparse.Namespace) -> int:
     output_dir(args.output)
     if args.record:
         output_file(args.record, "--record")
+        if Path(args.record).is_symlink():  # the record file is appended to, in place
+            raise ConfigError(
+                f"--record {args.record}: is a symbolic link; aptkt appends to no file through "
+                "a link (give the file itself, or another name)"
+            )
     try:
         prior = PriorKnowledge.load(args.prior)
     except (OSError, ValueError, KeyError) as exc:

@@ -124,6 +124,13 @@ class WriterLock:
         path = Path(path)
         refuse_unless_regular(path, DatasetError)
         file = lock_path(path)
+        try:
+            # A data set's directory is made as every output's is (a prior, a report).
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise DatasetError(
+                f"{path}: cannot create its directory {path.parent}: {exc.strerror or exc}"
+            ) from None
         while True:
             kind = not_a_regular_file(file)
             if kind is not None:

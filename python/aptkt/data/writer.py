@@ -39,6 +39,7 @@ from aptkt.data.hdf5 import while_locked
 from aptkt.data.lock import WriterLock
 from aptkt.data.schema import INDEX_DTYPE, SAMPLE_FIELDS, check_schema
 from aptkt.errors import DatasetError, InvalidInputError
+from aptkt.files import present
 from aptkt.skin.samples import Recording
 
 __all__ = ["DatasetWriter"]
@@ -77,13 +78,19 @@ class DatasetWriter:
             raise
 
     def _open(self, mode: str, description: Mapping[str, Any] | None, overwrite: bool) -> None:
+        if mode == "a" and self.path.is_symlink():
+            # Appending opens the file in place: through a link it would write elsewhere.
+            raise DatasetError(
+                f"{self.path}: is a symbolic link; aptkt appends to no file through a link "
+                "(give the file itself, or another name)"
+            )
         if mode == "a" and atomic.holds_nothing(self.path):
             # Left by a writer killed as it created the file: nothing to append to.
             mode, overwrite = "w", True
         if mode == "a" and self.path.exists():
             self._f = self._open_for_appending()
         else:
-            if self.path.exists() and not overwrite:
+            if present(self.path) and not overwrite:  # a dangling link too
                 raise DatasetError(f"{self.path} exists (use overwrite=True / --force, or append)")
             self._f = self._create(description)
         try:
