@@ -239,6 +239,9 @@ def test_a_flipped_bit_in_any_compressed_member_is_one_line(good, tmp_path, caps
         ("action_definitions", "P1"),
         ("action_definitions", 7),
         ("action_definitions", {"P1": "press"}),
+        ("action_definitions", {"P1": {"force": "x", "speed": [1]}}),
+        ("action_definitions", {"P1": {"name": "P1", "movement": "press", "depth": "x"}}),
+        ("action_definitions", {"P1": {"name": "S1", "movement": "press"}}),
         ("feature_table_columns", {"P1": ["force.0"]}),
     ],
 )
@@ -261,3 +264,28 @@ def test_forged_metadata_is_refused_where_the_file_is_read(good, tmp_path, capsy
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and key in err[0] and str(bad) in err[0], err
     assert not merged.exists()
+
+
+def test_a_file_that_lost_its_cross_modal_whitening_is_refused(tmp_path, capsys):
+    """The metric whitened across modalities is one member per action; a file whose metadata
+    says it has one and lacks it (or the reverse) is damaged, not a metric of another kind."""
+    priors, _, means = make_world(n_prior=3)
+    path = tmp_path / "joint.npz"
+    prior = PriorKnowledge.build(draw(means, priors, 8, seed=1), seed=0)
+    prior.save(path)
+    members = _members(path)
+    joint = [k for k in members if k.endswith("/pipeline/joint")]
+    assert joint and _meta(members)["joint"], "the world's metric must whiten across modalities"
+    del members[joint[0]]
+    bad = _write(tmp_path / "lost.npz", members)
+    with pytest.raises(PriorFileError, match="pipeline/joint .*missing"):
+        PriorKnowledge.load(bad)
+    assert main(["prior", "inspect", str(bad)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "pipeline/joint" in err[0], err
+    # A file written before the list existed says nothing: it is read as it is.
+    members = _members(path)
+    meta = _meta(members)
+    del meta["joint"]
+    _set_meta(members, meta)
+    PriorKnowledge.load(_write(tmp_path / "older.npz", members))

@@ -548,6 +548,9 @@ class PriorKnowledge:
         }
         if said:
             meta["extractions"] = said
+        # Which actions' metric whitens across modalities: a file that lost that member is
+        # damaged, not a metric of another kind (files without the list: not said).
+        meta["joint"] = [a for a, p in self.actions.items() if p.pipeline.joint_ is not None]
         arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
         path.parent.mkdir(parents=True, exist_ok=True)
         with open_atomically(path, PriorFileError, "wb") as fh:
@@ -568,9 +571,17 @@ class PriorKnowledge:
         check_calibration(path, arrays, meta)
         actions = {}
         extractions = meta.get("extractions", {})
+        joint = meta.get("joint")
         for i, name in enumerate(meta["actions"]):
             p = f"a{i}"
             check_action(path, arrays, p, name)
+            if joint is not None and (name in joint) != (f"{p}/pipeline/joint" in arrays):
+                raise PriorFileError(
+                    f"{path}: member {p}/pipeline/joint (action {name}): "
+                    + ("missing" if name in joint else "present")
+                    + " where member 'meta' says "
+                    + ("the metric whitens across modalities" if name in joint else "it does not")
+                )
             try:
                 obs = Observations.from_npz(name, arrays, f"{p}/obs")
                 obs.extraction = extractions.get(name)

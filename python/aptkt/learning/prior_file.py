@@ -101,6 +101,11 @@ def _meta(raw: np.ndarray, path: Path) -> dict[str, Any]:
     if not isinstance(meta.get("metadata", {}), dict):
         raise PriorFileError(f"{path}: member 'meta': 'metadata' must be a JSON object")
     _check_metadata(meta.get("metadata", {}), path)
+    joint = meta.get("joint")
+    if joint is not None and (not _is_names(joint) or not set(joint) <= set(actions)):
+        raise PriorFileError(
+            f"{path}: member 'meta': 'joint' must list actions of the file, got {joint!r}"
+        )
     extractions = meta.get("extractions", {})
     if (
         not isinstance(extractions, dict)
@@ -135,6 +140,20 @@ def _is_provenance(value: Any) -> bool:
     )
 
 
+def _is_definition(name: str, value: Any) -> bool:
+    """An exploratory action's definition, as ``ExploratoryAction.to_dict`` writes it, under
+    its own name: a live run compares its actions with these before the robot moves."""
+    from aptkt.actions import ExploratoryAction
+
+    if not isinstance(value, dict) or value.get("name", name) != name:
+        return False
+    try:
+        ExploratoryAction.from_dict(value)
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
 #: What the metadata entries other code reads must be (the rest is shown, never used): the
 #: check each must pass and what it says when it does not.
 _METADATA_SHAPES: dict[str, tuple[Callable[[Any], bool], str]] = {
@@ -144,8 +163,8 @@ _METADATA_SHAPES: dict[str, tuple[Callable[[Any], bool], str]] = {
     ),
     "merged_from": (_is_names, "a list of file names"),
     "action_definitions": (
-        lambda v: _is_map(v, lambda d: isinstance(d, dict)),
-        "a JSON object of action names to JSON objects",
+        lambda v: isinstance(v, dict) and all(_is_definition(k, d) for k, d in v.items()),
+        "a JSON object of action names to their definitions (aptkt.actions)",
     ),
     "feature_table_columns": (
         lambda v: _is_map(v, lambda m: _is_map(m, _is_names)),
