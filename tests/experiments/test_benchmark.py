@@ -91,12 +91,14 @@ def test_every_method_runs_for_every_group_library_and_prior_choice(run):
     assert {k[1] for k in runs} == {"2", "3"}
     assert {k[2] for k in runs} == {"random", "nearest", "farthest"}
     methods = {"baseline", "APTKT", "APTKT+aux", "control", "1-NN", "1-NN shrunk"}
-    # With random priors every learner also picks at random: its own choice's reference.
+    # With random priors at the smallest library every learner also picks at random: its own
+    # choice's reference.
     picks = {f"{m} random" for m in ("baseline", "APTKT", "APTKT+aux", "control")}
     for choice in ("random", "nearest", "farthest"):
-        got = {k[3] for k in runs if k[2] == choice}
-        assert got == (methods | picks if choice == "random" else methods)
-    assert len(runs) == 3 * 2 * (3 * len(methods) + len(picks))
+        for size in ("2", "3"):
+            got = {k[3] for k in runs if k[2] == choice and k[1] == size}
+            assert got == (methods | picks if (choice, size) == ("random", "2") else methods)
+    assert len(runs) == 3 * (2 * 3 * len(methods) + len(picks))
     for (_, _, _, method), steps in runs.items():
         assert sorted(steps) == ([0] if method.startswith("1-NN") else [0, 1, 2])
     # The baseline uses no prior: one run serves every library and choice of a group.

@@ -123,6 +123,22 @@ def _bad(tmp_path, edit):
         ),
         (lambda h, r: r[3].__setitem__(0, ""), "row 4, column object: empty name"),
         (
+            lambda h, r: r[3].__setitem__(0, "b\x00c"),
+            "row 4, column object: a name with the control character '\\x00': 'b\\x00c'",
+        ),
+        (
+            lambda h, r: r[3].__setitem__(0, "b\nc"),
+            "row 4, column object: a name with the control character '\\n'",
+        ),
+        (
+            lambda h, r: r[3].__setitem__(1, "P\x1b[2J"),
+            "row 4, column action: a name with the control character '\\x1b'",
+        ),
+        (
+            lambda h, r: r[3].__setitem__(0, "x" * 10_000),
+            "row 4, column object: a name of 10,000 characters (at most 200)",
+        ),
+        (
             lambda h, r: r[4].__setitem__(2, "0"),
             "row 5: object b, action P1, trial 0 also in row 4",
         ),

@@ -324,6 +324,23 @@ MISTAKES = [
         ],
         "--target-accuracy must be an accuracy in (0, 1], got 1.5",
     ),  # fmt: skip
+    (
+        [
+            "learn",
+            *SIM,
+            "--prior",
+            "{d}/p.npz",
+            "--objects",
+            "towel,cork\x1b[2J",
+            "-o",
+            "{d}/new/l",
+        ],
+        "--objects: a name with the control character '\\x1b'",
+    ),  # fmt: skip
+    (
+        ["collect", *SIM, "--objects", "t" * 201, "-n", "1", "-o", "{d}/new/x.h5"],
+        "--objects: a name of 201 characters (at most 200)",
+    ),
     # the method's alternatives: a value the learner refuses
     (
         [

@@ -9,6 +9,7 @@ from typing import Any
 from aptkt.actions.executor import ExplorationSettings
 from aptkt.commands._checks import MAX_THERMAL_WAIT, at_least, at_most, input_file
 from aptkt.errors import ConfigError
+from aptkt.names import name_problem
 
 #: Exit code of `aptkt collect` and `aptkt learn` when a robot or skin fault stopped the
 #: session mid-trial (1: bad input).
@@ -91,6 +92,10 @@ def split_names(text: str | None, option: str) -> list[str] | None:
         raise ConfigError(f"{option}: expected a comma-separated list of names")
     if len(set(items)) != len(items):
         raise ConfigError(f"{option}: a name appears twice in {text!r}")
+    for item in items:
+        why = name_problem(item)
+        if why is not None:
+            raise ConfigError(f"{option}: {why}")
     return items
 
 

@@ -34,6 +34,7 @@ from aptkt.data.schema import MAX_TRIAL_NUMBER
 from aptkt.errors import FeatureTableError
 from aptkt.files import open_atomically, replaced_atomically
 from aptkt.learning.observations import Observations, ObservationTable, common_extraction
+from aptkt.names import name_problem
 
 __all__ = [
     "ID_COLUMNS",
@@ -260,6 +261,7 @@ def _validate(path: Path, header: list[str], cells: dict[str, list]) -> FeatureT
         empty = np.flatnonzero(col == "")
         if empty.size:
             raise _error(path, "empty name", int(empty[0]), name)
+        _check_names(path, col, name)
     trials = np.empty(n, dtype=np.int64)
     for i, v in enumerate(cells["trial"]):
         trials[i] = _integer(path, v, i)
@@ -276,8 +278,20 @@ def _validate(path: Path, header: list[str], cells: dict[str, list]) -> FeatureT
     return table
 
 
+def _check_names(path: Path, names: np.ndarray, column: str) -> None:
+    """Every distinct name of a column is a name (:func:`aptkt.names.name_problem`)."""
+    first = {}
+    for i, name in enumerate(names.tolist()):
+        first.setdefault(name, i)
+    for name, i in first.items():
+        why = name_problem(name)
+        if why is not None:
+            raise _error(path, why, i, column)
+
+
 def _extraction(path: Path, cells: dict[str, list]) -> str:
     names = [str(v).strip() for v in cells[EXTRACTION_COLUMN]]
+    _check_names(path, np.array(names, dtype=object), EXTRACTION_COLUMN)
     for i, name in enumerate(names):
         if name == "":
             raise _error(path, "empty name", i, EXTRACTION_COLUMN)

@@ -26,6 +26,7 @@ import numpy as np
 from aptkt.errors import PriorFileError
 from aptkt.features import MAX_MAGNITUDE
 from aptkt.files import NPZ_MAX_BYTES, json_member, read_npz
+from aptkt.names import name_problem
 
 __all__ = ["FORMAT", "PRIOR_FILE_MAX_BYTES", "check_action", "check_calibration", "read_members"]
 
@@ -233,6 +234,10 @@ def check_action(path: Path, arrays: dict[str, np.ndarray], prefix: str, action:
         raise c.fail("obs/objects", "no observations")
     if any(not str(o) for o in objects):
         raise c.fail("obs/objects", "an empty object name")
+    for name in dict.fromkeys(objects.tolist()):
+        why = name_problem(str(name))
+        if why is not None:
+            raise c.fail("obs/objects", why)
     c.get("obs/trials", "iu", 1, lambda s: s == (n,), f" of {n} trial numbers")
     mod_prefix = f"{prefix}/obs/modality/"
     obs_mods = sorted(k[len(mod_prefix) :] for k in arrays if k.startswith(mod_prefix))
