@@ -280,7 +280,7 @@ def _validate(path: Path, header: list[str], cells: dict[str, list]) -> FeatureT
 
 def _check_names(path: Path, names: np.ndarray, column: str) -> None:
     """Every distinct name of a column is a name (:func:`aptkt.names.name_problem`)."""
-    first = {}
+    first: dict[str, int] = {}
     for i, name in enumerate(names.tolist()):
         first.setdefault(name, i)
     for name, i in first.items():
