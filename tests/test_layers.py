@@ -4,8 +4,8 @@ imports itself back through others (no cycles).
 Layers, low to high (a room may import from its own room and from lower layers only; rooms
 on one layer do not import each other, e.g. ``sim`` and ``learning`` stand side by side)::
 
-    _core | errors | files, progress | skin, features, gp | robot, data | actions | sim, learning
-    | runtime, importers | experiments | commands, cli | reference
+    _core | errors | files, progress, names | skin, features, gp | robot, data | actions
+    | sim, learning | runtime, importers | experiments | commands, cli | reference
 
 Imports under ``if TYPE_CHECKING:`` are for annotations only and are not counted for the layers
 (except in a package whose names load on first use, ``aptkt._lazy``: there they are the package's
@@ -28,7 +28,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "python" / "aptkt"
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("_core",),  # the compiled core (it raises the classes of aptkt.errors, fetched when raised)
     ("", "errors", "_lazy"),
-    ("files", "progress"),  # files from elsewhere (regular, bounded, checked); progress lines
+    # files from elsewhere (regular, bounded, checked); progress lines; what a name may be
+    ("files", "progress", "names"),
     ("skin", "features", "gp"),
     ("robot", "data"),
     ("actions",),
