@@ -110,17 +110,11 @@ class ActiveAgainstRandom:
             "lowest": self.lowest,
             "lowest_step": self.lowest_step,
             "largest_fall": self.largest_fall,
-            "touches": _finite_or_none(self.touches),
-            "touches_interval": [
-                _finite_or_none(self.touches_low),
-                _finite_or_none(self.touches_high),
-            ],
-            "saved": _finite_or_none(self.saved),
+            # NaN and infinities are written as null (aptkt.files.strict_json).
+            "touches": self.touches,
+            "touches_interval": [self.touches_low, self.touches_high],
+            "saved": self.saved,
         }
-
-
-def _finite_or_none(v: float) -> float | None:
-    return float(v) if np.isfinite(v) else None
 
 
 def compare(c: Mapping[int, Mapping[str, Mapping[str, np.ndarray]]]) -> list[ActiveAgainstRandom]:
@@ -227,8 +221,8 @@ class Calibration:
             "estimated": self.estimated,
             "held_out": self.held_out,
             "groups": self.groups,
-            "mean_absolute_error": _finite_or_none(self.error),
-            "run_mean_absolute_error": _finite_or_none(self.run_error),
+            "mean_absolute_error": self.error,
+            "run_mean_absolute_error": self.run_error,
         }
 
 

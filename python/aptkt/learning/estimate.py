@@ -37,13 +37,14 @@ class AccuracyEstimate:
         self.objects = [str(o) for o in objects]
         if not self.actions or len(self.objects) < 2:
             raise InvalidInputError("an accuracy estimate needs an action and two objects")
+        self._pairs = {(a, o) for a in self.actions for o in self.objects}
         #: (action, object) -> [(touches before the judged one, 1 if it was misjudged else 0)]
         self.judgements: dict[Pair, list[tuple[int, float]]] = {}
 
     def judge(self, action: str, obj: str, touches_before: int, recognised: bool) -> None:
         """One touch judged before it was learned, when ``touches_before`` touches of the pair
         had been learned."""
-        if (action, obj) not in {(a, o) for a in self.actions for o in self.objects}:
+        if (action, obj) not in self._pairs:
             raise InvalidInputError(f"unknown pair ({action!r}, {obj!r})")
         if touches_before < 1:
             raise InvalidInputError("a judged touch follows at least one learned touch")

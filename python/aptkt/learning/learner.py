@@ -672,12 +672,12 @@ class APTKT:
         estimate = AccuracyEstimate(actions, new_objects)
         for step in range(1, cfg.budget + 1):
             t0 = time.perf_counter()
-            unc = {(a, o): self.learners[a].uncertainty(o) for a in actions for o in new_objects}
+            unc = self.pair_scores("paper")  # for the record and --patience, whatever the rule
             available = [(a, o) for a in actions for o in new_objects if env.available(a, o)]
             if not available:
                 run.stopped_early, run.stop_reason = True, "pool"
                 break
-            scores = unc if cfg.selection != "error-reduction" else self.pair_scores(cfg.selection)
+            scores = self.pair_scores(cfg.selection) if cfg.selection == "error-reduction" else unc
             sel = select_next(scores, actions, new_objects, cfg.exploration, rng, available)
             learner = self.learners[sel.action]
             touch = env.observe(sel.action, sel.object)
