@@ -5,7 +5,7 @@ Layers, low to high (a room may import from its own room and from lower layers o
 on one layer do not import each other, e.g. ``sim`` and ``learning`` stand side by side)::
 
     _core | errors | files, progress, names | skin, features, gp | robot, data | actions
-    | sim, learning | runtime, importers | experiments | commands, cli | reference
+    | sim, learning | runtime, importers | experiments | commands, cli | _entry, reference
 
 Imports under ``if TYPE_CHECKING:`` are for annotations only and are not counted for the layers
 (except in a package whose names load on first use, ``aptkt._lazy``: there they are the package's
@@ -37,7 +37,9 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("runtime", "importers"),
     ("experiments",),
     ("commands", "cli"),
-    ("reference",),  # the command-line reference page, generated from the parsers
+    # the console script (signals while it starts, then the cli); the command-line reference
+    # page, generated from the parsers
+    ("_entry", "reference"),
 )
 LAYER_OF = {room: i for i, rooms in enumerate(LAYERS) for room in rooms}
 

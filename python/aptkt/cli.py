@@ -150,15 +150,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     label = _label(args)
     created = _missing_dirs(args)
     code = 1
-    # SIGTERM takes the path of Ctrl-C: every command stops cleanly (a robot command stops
-    # and retracts the arm and keeps the partial recording) instead of dying on the spot.
-    previous = None
-    if threading.current_thread() is threading.main_thread():
-        previous = signal.signal(signal.SIGTERM, _terminate)
+    previous: dict[int, Any] = {}
     stdout = sys.stdout
     guard = _ClosedPipeGuard(stdout)
     sys.stdout = guard
     try:
+        if threading.current_thread() is threading.main_thread():
+            # SIGTERM takes the path of Ctrl-C: every command stops cleanly (a robot command
+            # stops and retracts the arm and keeps the partial recording) instead of dying on
+            # the spot. Ctrl-C raises KeyboardInterrupt again, whatever start-up set
+            # (aptkt._entry). Set inside the try: a signal right after is handled below.
+            previous[signal.SIGINT] = signal.signal(signal.SIGINT, signal.default_int_handler)
+            previous[signal.SIGTERM] = signal.signal(signal.SIGTERM, _terminate)
         code = int(args.func(args) or 0)
         if guard.closed and code == 0:
             code = EXIT_CLOSED_PIPE
@@ -188,8 +191,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if guard.closed and code == 0:
             code = EXIT_CLOSED_PIPE
         sys.stdout = stdout
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            if handler is not None:  # (None: not set from Python; nothing to put back)
+                signal.signal(signum, handler)
         if code != 0:
             _remove_empty(created)
 

@@ -99,6 +99,8 @@ class FakeSkin:
         self._last_value = 0.0
         self._last_ns = clock()
         self.calls = 0
+        #: ``(controller time, force)`` of every reading of the loopback's contact.
+        self.readings: list[tuple[float, float]] = []
 
     def arm(self) -> None:
         """Start the fault clocks now."""
@@ -116,7 +118,12 @@ class FakeSkin:
             return math.nan
         if self.stale_after is not None and t >= self.stale_after:
             return self._last_value
-        self._last_value = 0.0 if self.dead else self.scale * self.loopback.normal_force()
+        if self.dead:
+            self._last_value = 0.0
+        else:
+            felt_at, force = self.loopback.contact()
+            self.readings.append((felt_at, force))
+            self._last_value = self.scale * force
         self._last_ns = self.clock()
         return self._last_value
 

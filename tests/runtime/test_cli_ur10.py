@@ -494,7 +494,7 @@ def test_a_signal_mid_press_retracts_and_keeps_the_data(cell, sig, code, word):
         assert word in err and "Traceback" not in err, err
         # (The second press: block_b's trial, after block_a's completed.)
         assert "block_b / Pq / trial 0" in err, err
-        assert wait_for(lambda: retracted(lb.state()), timeout=10.0), lb.state()
+        assert wait_for(lambda: retracted(lb.state()), timeout=10.0), (err, lb.state())
         with DatasetReader(data) as rd:
             assert rd.keys() == [("block_a", "Pq", 0)]
         with DatasetReader(aborted) as rd:
@@ -523,7 +523,7 @@ def test_a_signal_mid_press_during_learn_retracts_and_keeps_the_data(
         lines = [line for line in err.splitlines() if line.startswith("aptkt learn:")]
         assert len(lines) == 1 and word in lines[0] and "Traceback" not in err, err
         assert "/ Pq / trial 0" in lines[0] and "aborted" in lines[0], err
-        assert wait_for(lambda: retracted(lb.state()), timeout=10.0), lb.state()
+        assert wait_for(lambda: retracted(lb.state()), timeout=10.0), (err, lb.state())
         with DatasetReader(out / "recordings.h5") as rd:
             assert len(rd) == 1
             (done,) = rd.keys()

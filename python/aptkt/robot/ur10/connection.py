@@ -44,6 +44,10 @@ _RECEIVE_VARIABLES = [
 ]
 # Longest a single rtde_control call may take on a healthy link (s).
 COMMAND_TIMEOUT = 10.0
+#: Reads of a packet's values before taking them as they are: a retry needs a new packet to
+#: arrive (every 8 ms) during the microseconds the reads take, so a third in a row only
+#: happens to a host that keeps stalling, and it must not keep the supervision waiting.
+_CONSISTENT_READ_TRIES = 3
 # Commands ur_rtde's control script executes every cycle without a done-handshake.
 _REALTIME_COMMANDS = frozenset({"speedL", "forceMode"})
 
@@ -242,7 +246,7 @@ class Connection:
                 raise self.lose("the RTDE connection closed")
             if not self._control_up():
                 raise self.lose("the RTDE control connection closed")
-            ts = float(self.receive.getTimestamp())
+            ts, pose, speed, force = self._consistent_state()
             fresh = ts != self.last_ts
             if fresh:
                 self.last_ts, self.last_fresh = ts, now
@@ -256,12 +260,25 @@ class Connection:
                 raise ProgramStoppedError(
                     "the control program on the controller stopped; the arm is stopped"
                 )
-            pose = np.asarray(self.receive.getActualTCPPose(), dtype=float)
-            speed = np.asarray(self.receive.getActualTCPSpeed(), dtype=float)
-            force = np.asarray(self.receive.getActualTCPForce(), dtype=float)
         except RuntimeError as exc:
             raise self.lose(str(exc)) from None
         return RobotState(ts, fresh, pose, speed, force)
+
+    def _consistent_state(self) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """Timestamp, pose, speed and force of one packet. ur_rtde's receiving thread replaces
+        its state between two getter calls whenever a packet arrives (every 8 ms), so values
+        read one by one may come from two packets: a pose one control period ahead of its
+        timestamp. Read again while the timestamp changed under the reads."""
+        ts = float(self.receive.getTimestamp())
+        for _ in range(_CONSISTENT_READ_TRIES):
+            pose = np.asarray(self.receive.getActualTCPPose(), dtype=float)
+            speed = np.asarray(self.receive.getActualTCPSpeed(), dtype=float)
+            force = np.asarray(self.receive.getActualTCPForce(), dtype=float)
+            after = float(self.receive.getTimestamp())
+            if after == ts:
+                break
+            ts = after
+        return ts, pose, speed, force
 
     def peek_pose(self) -> np.ndarray:
         """The TCP pose for planning, without limit checks (nothing moves yet)."""

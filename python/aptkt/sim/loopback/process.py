@@ -65,6 +65,9 @@ def serve_stdio(
         if op == "normal_force":
             with controller.lock:
                 return controller.normal_force()
+        if op == "contact":
+            with controller.lock:
+                return {"time": controller.time, "normal_force": controller.normal_force()}
         if op == "reset":
             controller.reset(
                 pose=args.get("pose"), keep_program=bool(args.get("keep_program", False))
@@ -304,6 +307,12 @@ class Loopback:
     def normal_force(self) -> float:
         """Normal force of the contact model at the current TCP pose (what a skin would feel)."""
         return float(self.call("normal_force"))
+
+    def contact(self) -> tuple[float, float]:
+        """``(controller time, normal force)`` read together: when the force was felt, on the
+        clock the RTDE samples carry."""
+        reply = self.call("contact")
+        return float(reply["time"]), float(reply["normal_force"])
 
     def reset(self, pose: Sequence[float] | None = None, keep_program: bool = False) -> None:
         self.call("reset", pose=None if pose is None else list(pose), keep_program=keep_program)

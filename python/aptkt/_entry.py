@@ -1,0 +1,46 @@
+"""The ``aptkt`` console script.
+
+Until a command has parsed its arguments it has done nothing: no file is open, no robot
+connected. A Ctrl-C or SIGTERM in that time (Python's imports take a second or two on a busy
+machine) ends the program at once with one line and the signal's exit code, 130 or 143, rather
+than an import's traceback or a silent death. :func:`aptkt.cli.main` then takes over the
+signals, so that every command stops cleanly.
+
+These handlers are set when this module is imported, which only the console script does:
+importing :mod:`aptkt` or :mod:`aptkt.cli` in a program leaves its signals alone.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+
+try:
+    # CPython's C module under `signal`: `signal` first imports enum, which on a busy machine
+    # doubles the time before these handlers are set.
+    signal = importlib.import_module("_signal")
+except ImportError:
+    signal = importlib.import_module("signal")
+
+_LINES: dict[int, bytes] = {
+    signal.SIGINT: b"aptkt: interrupted\n",
+    signal.SIGTERM: b"aptkt: terminated (SIGTERM)\n",
+}
+
+
+def _end_at_once(signum: int, frame: object) -> None:
+    # os.write and os._exit: nothing to clean up yet, and nothing Python would run on its way
+    # out (a flush, an atexit hook) may raise in its place.
+    os.write(2, _LINES.get(signum, b"aptkt: stopped by a signal\n"))
+    os._exit(128 + signum)
+
+
+for _signum in _LINES:
+    signal.signal(_signum, _end_at_once)
+
+
+def run() -> None:
+    from aptkt.cli import main
+
+    sys.exit(main())

@@ -1,0 +1,69 @@
+"""A Ctrl-C or SIGTERM while the ``aptkt`` console script is still starting (its imports take a
+second or two on a busy machine) ends it with one line and the signal's exit code, never an
+import's traceback or a silent death."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+PYTHON_DIR = str(Path(__file__).resolve().parents[2] / "python")
+ENV = {**os.environ, "PYTHONPATH": PYTHON_DIR}
+LINES = {signal.SIGINT: "aptkt: interrupted", signal.SIGTERM: "aptkt: terminated (SIGTERM)"}
+SIGNALS = pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=lambda s: s.name)
+
+
+@SIGNALS
+def test_a_signal_once_the_entry_point_is_loaded_ends_with_one_line(sig):
+    # Deterministic: the signal arrives while the (here endless) imports go on.
+    code = f"import aptkt._entry, os, time; os.kill(os.getpid(), {int(sig)}); time.sleep(30)"
+    proc = subprocess.run(
+        [sys.executable, "-c", code], env=ENV, capture_output=True, text=True, timeout=60
+    )
+    assert proc.returncode == 128 + sig
+    assert proc.stderr == LINES[sig] + "\n"
+
+
+def _loaded(pid: int, library: str) -> bool:
+    try:
+        return library in Path(f"/proc/{pid}/maps").read_text()
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/maps").exists(), reason="needs /proc (Linux)")
+@SIGNALS
+@pytest.mark.parametrize("after", [0.0, 0.05, 0.2])
+def test_a_signal_while_the_command_starts_is_one_line_and_leaves_nothing(tmp_path, sig, after):
+    """Signalled ``after`` seconds after the compiled core was loaded: the command's modules
+    are being imported, or its arguments parsed, or it has just begun."""
+    out = tmp_path / "demo"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "from aptkt._entry import run; run()", "demo", "-o", str(out)],
+        env=ENV,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        while proc.poll() is None and not _loaded(proc.pid, "_core.abi3.so"):
+            time.sleep(0.002)
+        time.sleep(after)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    lines = err.strip().splitlines()
+    assert proc.returncode == 128 + sig, err
+    assert len(lines) == 1 and "Traceback" not in err, err
+    # Still starting, or the demo's own handling (which may say where it stopped).
+    said = LINES[sig].removeprefix("aptkt: ")
+    assert lines[0] == LINES[sig] or lines[0].startswith(f"aptkt demo: {said}"), err
+    # Whatever the demo had begun, an interrupted start leaves no empty output directory.
+    assert not out.exists() or any(out.iterdir())
