@@ -102,10 +102,13 @@ class Timing:
         return max(in_process, self.loop_lag, self.machine_late)
 
     def stall(self) -> float:
-        """The longest the machine kept a process waiting during the run (a process of its
-        own, and the loopback's control cycle)."""
+        """How long the machine may have kept the watchdog's feed waiting during the run. A
+        kick crosses three processes — aptkt's supervision, its control client's and the
+        controller's — and each can be kept waiting in turn: the loopback's control cycle
+        says how late the controller ran, a process of its own how late any other did, and
+        the delays along the way add up."""
         self._measure()
-        return max(self.loop_lag, self.machine_late)
+        return self.loop_lag + 2 * self.machine_late
 
 
 def undisturbed(
