@@ -48,6 +48,10 @@ COMMAND_TIMEOUT = 10.0
 #: arrive (every 8 ms) during the microseconds the reads take, so a third in a row only
 #: happens to a host that keeps stalling, and it must not keep the supervision waiting.
 _CONSISTENT_READ_TRIES = 3
+#: Gaps between RTDE timestamps, all multiples of 8 ms, that make a controller a 125 Hz one: a
+#: 500 Hz controller shows a shorter one among 8 unless each gap happens to span 4k packets
+#: (about 1 in 4 each on a host missing packets at random: (1/4)^8 = 1.5e-5).
+_FREQUENCY_GAPS = 8
 # Commands ur_rtde's control script executes every cycle without a done-handshake.
 _REALTIME_COMMANDS = frozenset({"speedL", "forceMode"})
 
@@ -139,20 +143,30 @@ class Connection:
         self._keepalive.start()
 
     def _detect_frequency(self) -> float:
-        """The controller's RTDE rate, from the spacing of its own timestamps (8 ms or 2 ms)."""
+        """The controller's RTDE rate from its own timestamps: 500 Hz (e-series) or 125 Hz
+        (CB3). A slow host misses packets, so two stamps read in a row may be several periods
+        apart; but every gap is a whole number of periods, and a gap of 2, 4 or 6 ms — any that
+        is not a multiple of 8 ms — can only come from 500 Hz. Stamps are read until one shows
+        up, or for a second (a CB3 shows none)."""
         if self._requested_frequency:
             return float(self._requested_frequency)
-        stamps: list[float] = []
+        last: float | None = None
+        gaps = 0
         deadline = time.monotonic() + 1.0
-        while len(stamps) < 4 and time.monotonic() < deadline:
+        while time.monotonic() < deadline:
             ts = float(self.receive.getTimestamp())
-            if not stamps or ts != stamps[-1]:
-                stamps.append(ts)
+            if last is not None and ts > last:
+                gaps += 1
+                if round((ts - last) / 0.002) % 4:
+                    return 500.0
+                if gaps >= _FREQUENCY_GAPS:
+                    break
+            if last is None or ts > last:
+                last = ts
             time.sleep(0.0005)
-        steps = [b - a for a, b in zip(stamps, stamps[1:]) if b > a]
-        if not steps:
+        if not gaps:
             raise self.lose("the controller sends no data")
-        return 500.0 if min(steps) < 0.005 else 125.0
+        return 125.0
 
     def stop_keepalive(self) -> None:
         """Stop the keep-alive thread; returns once it can make no further call."""

@@ -1,10 +1,14 @@
-"""One read of the controller's state takes every value from one RTDE packet, although ur_rtde's
-receiving thread may replace its packet between two getter calls."""
+"""Reading the controller through ur_rtde's receive client: one read of its state takes every
+value from one RTDE packet, although ur_rtde's receiving thread may replace its packet between
+two getter calls; its rate is told from its timestamps however many packets a slow host
+misses."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from aptkt.errors import RobotConnectionError
 from aptkt.robot.ur10.connection import Connection
 
 
@@ -66,3 +70,41 @@ def test_a_packet_between_every_two_reads_ends_the_tries_all_the_same():
     link.receive = _Receive(set(range(1, 1000)))
     link._consistent_state()
     assert link.receive.calls <= 1 + 4 * 3  # a bounded number of tries, never a hang
+
+
+class _Stamps:
+    """A receive client whose timestamps are read in the given order (the last one repeats)."""
+
+    def __init__(self, stamps: list[float]):
+        self.stamps = stamps
+        self.calls = 0
+
+    def getTimestamp(self) -> float:  # noqa: N802
+        self.calls += 1
+        return self.stamps[min(self.calls, len(self.stamps)) - 1]
+
+
+def _rate(stamps: list[float]) -> float:
+    link = Connection("127.0.0.1", watchdog_timeout=0.5)
+    link.receive = _Stamps(stamps)
+    return link._detect_frequency()
+
+
+def test_a_cb3_is_125_hz():
+    assert _rate([0.008 * k for k in range(40)]) == 125.0
+
+
+def test_an_e_series_read_on_time_is_500_hz():
+    assert _rate([0.002 * k for k in range(40)]) == 500.0
+
+
+def test_an_e_series_read_by_a_slow_host_is_500_hz():
+    # Every read misses packets: 4 of them (8 ms, as a CB3's) at a time, once 3 (6 ms).
+    stamps = [0.008 * k for k in range(6)]
+    stamps += [stamps[-1] + 0.006 + 0.008 * k for k in range(6)]
+    assert _rate(stamps) == 500.0
+
+
+def test_a_controller_sending_nothing_is_a_lost_link():
+    with pytest.raises(RobotConnectionError, match="sends no data"):
+        _rate([1.0])
