@@ -6,8 +6,8 @@ machine) ends the program at once with one line and the signal's exit code, 130 
 than an import's traceback or a silent death. :func:`aptkt.cli.main` then takes over the
 signals, so that every command stops cleanly.
 
-These handlers are set when this module is imported, which only the console script does:
-importing :mod:`aptkt` or :mod:`aptkt.cli` in a program leaves its signals alone.
+These handlers are set by :func:`run`, which only the console script calls: importing
+:mod:`aptkt`, :mod:`aptkt.cli` or this module in a program leaves its signals alone.
 """
 
 from __future__ import annotations
@@ -36,11 +36,12 @@ def _end_at_once(signum: int, frame: object) -> None:
     os._exit(128 + signum)
 
 
-for _signum in _LINES:
-    signal.signal(_signum, _end_at_once)
-
-
 def run() -> None:
+    # Set here, not when this module is imported: importing it (a test importing every
+    # module, say) must not change a program's signals. The console script calls this right
+    # after its import.
+    for signum in _LINES:
+        signal.signal(signum, _end_at_once)
     from aptkt.cli import main
 
     sys.exit(main())

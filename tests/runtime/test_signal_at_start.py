@@ -20,9 +20,16 @@ SIGNALS = pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=la
 
 
 @SIGNALS
-def test_a_signal_once_the_entry_point_is_loaded_ends_with_one_line(sig):
-    # Deterministic: the signal arrives while the (here endless) imports go on.
-    code = f"import aptkt._entry, os, time; os.kill(os.getpid(), {int(sig)}); time.sleep(30)"
+def test_a_signal_before_the_command_takes_over_ends_with_one_line(sig):
+    # Deterministic: a stand-in for the command line that is signalled while it (endlessly)
+    # starts, before it sets its own handlers.
+    stand_in = f"lambda: (os.kill(os.getpid(), {int(sig)}), time.sleep(30))"
+    code = (
+        "import os, sys, time, types; "
+        "cli = sys.modules['aptkt.cli'] = types.ModuleType('aptkt.cli'); "
+        f"cli.main = {stand_in}; "
+        "import aptkt._entry; aptkt._entry.run()"
+    )
     proc = subprocess.run(
         [sys.executable, "-c", code], env=ENV, capture_output=True, text=True, timeout=60
     )
@@ -67,3 +74,12 @@ def test_a_signal_while_the_command_starts_is_one_line_and_leaves_nothing(tmp_pa
     assert lines[0] == LINES[sig] or lines[0].startswith(f"aptkt demo: {said}"), err
     # Whatever the demo had begun, an interrupted start leaves no empty output directory.
     assert not out.exists() or any(out.iterdir())
+
+
+def test_importing_the_entry_point_leaves_a_programs_signals_alone():
+    code = (
+        "import signal, aptkt._entry; "
+        "assert signal.getsignal(signal.SIGINT) is signal.default_int_handler; "
+        "assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL"
+    )
+    subprocess.run([sys.executable, "-c", code], env=ENV, check=True, timeout=60)
