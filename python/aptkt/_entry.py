@@ -41,7 +41,9 @@ def run() -> None:
     # module, say) must not change a program's signals. The console script calls this right
     # after its import.
     for signum in _LINES:
-        signal.signal(signum, _end_at_once)
+        # A signal the caller ignores stays ignored (a shell's background job ignores Ctrl-C).
+        if signal.getsignal(signum) != signal.SIG_IGN:
+            signal.signal(signum, _end_at_once)
     from aptkt.cli import main
 
     sys.exit(main())

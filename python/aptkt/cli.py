@@ -159,9 +159,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             # SIGTERM takes the path of Ctrl-C: every command stops cleanly (a robot command
             # stops and retracts the arm and keeps the partial recording) instead of dying on
             # the spot. Ctrl-C raises KeyboardInterrupt again, whatever start-up set
-            # (aptkt._entry). Set inside the try: a signal right after is handled below.
-            previous[signal.SIGINT] = signal.signal(signal.SIGINT, signal.default_int_handler)
-            previous[signal.SIGTERM] = signal.signal(signal.SIGTERM, _terminate)
+            # (aptkt._entry). A signal the caller ignores stays ignored (a shell's background
+            # job ignores Ctrl-C). Set inside the try: a signal right after is handled below.
+            for signum, handler in (
+                (signal.SIGINT, signal.default_int_handler),
+                (signal.SIGTERM, _terminate),
+            ):
+                if signal.getsignal(signum) != signal.SIG_IGN:
+                    previous[signum] = signal.signal(signum, handler)
         code = int(args.func(args) or 0)
         if guard.closed and code == 0:
             code = EXIT_CLOSED_PIPE
@@ -191,9 +196,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if guard.closed and code == 0:
             code = EXIT_CLOSED_PIPE
         sys.stdout = stdout
-        for signum, handler in previous.items():
-            if handler is not None:  # (None: not set from Python; nothing to put back)
-                signal.signal(signum, handler)
+        for number, before in previous.items():
+            if before is not None:  # (None: not set from Python; nothing to put back)
+                signal.signal(number, before)
         if code != 0:
             _remove_empty(created)
 

@@ -28,6 +28,7 @@ import numpy as np
 import pytest
 import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a missing one must fail, not skip
 from loopback_helpers import free_loopback_host  # noqa: E402
+from processes import default_signals  # noqa: E402
 from timing import (  # noqa: E402
     LatenessProbe,
     MachineProbe,
@@ -467,6 +468,7 @@ def in_a_process(cell, argv: list[str], sig: signal.Signals) -> tuple[int, str]:
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        preexec_fn=default_signals,
     )
     watcher = on_press(lb, 2, lambda: os.killpg(proc.pid, sig))
     _, err = proc.communicate(timeout=300)

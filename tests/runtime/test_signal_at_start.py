@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from processes import default_signals
 
 PYTHON_DIR = str(Path(__file__).resolve().parents[2] / "python")
 ENV = {**os.environ, "PYTHONPATH": PYTHON_DIR}
@@ -31,7 +32,12 @@ def test_a_signal_before_the_command_takes_over_ends_with_one_line(sig):
         "import aptkt._entry; aptkt._entry.run()"
     )
     proc = subprocess.run(
-        [sys.executable, "-c", code], env=ENV, capture_output=True, text=True, timeout=60
+        [sys.executable, "-c", code],
+        env=ENV,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        preexec_fn=default_signals,
     )
     assert proc.returncode == 128 + sig
     assert proc.stderr == LINES[sig] + "\n"
@@ -57,6 +63,7 @@ def test_a_signal_while_the_command_starts_is_one_line_and_leaves_nothing(tmp_pa
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=default_signals,
     )
     try:
         while proc.poll() is None and not _loaded(proc.pid, "_core.abi3.so"):
@@ -78,8 +85,34 @@ def test_a_signal_while_the_command_starts_is_one_line_and_leaves_nothing(tmp_pa
 
 def test_importing_the_entry_point_leaves_a_programs_signals_alone():
     code = (
-        "import signal, aptkt._entry; "
-        "assert signal.getsignal(signal.SIGINT) is signal.default_int_handler; "
-        "assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL"
+        "import signal; "
+        "before = [signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)]; "
+        "import aptkt._entry; "
+        "assert [signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)] == before"
     )
     subprocess.run([sys.executable, "-c", code], env=ENV, check=True, timeout=60)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=lambda s: s.name)
+def test_a_signal_the_caller_ignores_stays_ignored(sig):
+    """A shell's background job ignores Ctrl-C: aptkt keeps it so, start-up and command."""
+
+    def ignore() -> None:
+        default_signals()
+        signal.signal(sig, signal.SIG_IGN)
+
+    code = (
+        "import os, signal, sys, types; "
+        "cli = sys.modules['aptkt.cli'] = types.ModuleType('aptkt.cli'); "
+        f"cli.main = lambda: (os.kill(os.getpid(), {int(sig)}), print('still here') or 0)[1]; "
+        "import aptkt._entry; aptkt._entry.run()"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        env=ENV,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        preexec_fn=ignore,
+    )
+    assert proc.returncode == 0 and proc.stdout == "still here\n", proc.stderr
