@@ -173,6 +173,28 @@ def test_each_learner_is_compared_with_its_own_random_picks(run):
     assert (run / "selection.png").stat().st_size > 0 and (run / "selection.svg").exists()
 
 
+def test_the_estimate_is_set_against_held_out_and_same_period_touches(run):
+    """summary.json's calibration, recomputed from results.csv: the learner's own estimate
+    against its held-out accuracy and against its accuracy on the pool's unused touches."""
+    rows = _rows(run)
+    summary = json.loads((run / "summary.json").read_text())
+    found = {(e["learner"], e["library"]): e for e in summary["own_estimate"]}
+    assert ("APTKT", 2) in found and ("baseline", 2) in found
+    for (learner, size), e in found.items():
+        per = defaultdict(dict)
+        for r in rows:
+            if (r["method"], r["library"], r["priors"]) == (learner, str(size), "random"):
+                per[int(r["step"])][int(r["group"])] = r
+        for k, est, held, same in zip(e["steps"], e["estimated"], e["held_out"], e["same_period"]):
+            judged = [r for r in per[k].values() if r["estimated"] not in ("", "nan")]
+            assert est == pytest.approx(np.mean([float(r["estimated"]) for r in judged]))
+            assert held == pytest.approx(np.mean([float(r["accuracy"]) for r in judged]))
+            assert same == pytest.approx(np.mean([float(r["same_period"]) for r in judged]))
+        error = np.mean(np.abs(np.subtract(e["estimated"], e["same_period"])))
+        assert e["same_period_mean_absolute_error"] == pytest.approx(error)
+    assert "accuracy on the pool's touches not drawn" in (run / "report.md").read_text()
+
+
 def test_the_touches_needed_are_where_the_active_curve_crosses_randoms_end():
     random = np.array([[0.5, 0.6, 0.7, 0.8], [0.5, 0.6, 0.7, 0.8]])
     # The active mean reaches 0.8 halfway between steps 1 (0.7) and 2 (0.9).
@@ -669,3 +691,30 @@ def test_trials_are_chosen_before_each_objects_trials_are_halved(tmp_path, monke
     assert capsys.readouterr().err == (
         f"aptkt benchmark: error: --trials 6-9: trial(s) 8-9 not in {table} (it has trials 0-7)\n"
     )
+
+
+def test_the_same_period_accuracy_weighs_every_object_once():
+    """Against scikit-learn's balanced accuracy on the pool's unused touches (each object's
+    recall, averaged), for each action, averaged over the actions."""
+    from sklearn.metrics import balanced_accuracy_score
+
+    from aptkt.experiments.benchmark import same_period_accuracy
+    from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment
+
+    rng = np.random.default_rng(5)
+    table = {}
+    for action, spread in (("P", 1.0), ("S", 2.5)):
+        objects = np.repeat(["a", "b", "c", "d"], 6)
+        centre = np.repeat(np.arange(4.0), 6)[:, None] * np.array([[1.0, 0.5]])
+        X = centre + spread * rng.normal(size=(24, 2))
+        table[action] = Observations(action, {"m": X}, objects, np.tile(np.arange(6), 4))
+    env = PoolEnvironment(table, seed=2)
+    learner = APTKT(LearnerConfig(transfer="none", budget=3, seed=0))
+    learner.run(env, ["P", "S"], ["a", "b", "c", "d"])
+    want = []
+    for action, lrn in learner.learners.items():
+        unused = env.unused(action)
+        classes = np.array([str(c) for c in lrn.model.classes_])
+        predicted = classes[lrn.predict_proba(unused).argmax(axis=1)]
+        want.append(balanced_accuracy_score(unused.objects.astype(str), predicted))
+    assert same_period_accuracy(learner, env) == pytest.approx(np.mean(want))

@@ -73,3 +73,17 @@ def test_the_rules_start_from_the_same_first_round_and_share_the_pool_order():
     }
     first = {sel: r.steps[0].mean_accuracy for sel, r in runs.items()}
     assert first["error-reduction"] == first["random"]
+
+
+def test_the_pools_unused_touches_are_those_not_drawn_yet():
+    rng = np.random.default_rng(3)
+    objects = np.repeat(["a", "b", "c"], 5)
+    obs = Observations("P", {"m": rng.normal(size=(15, 2))}, objects, np.tile(np.arange(5), 3))
+    env = PoolEnvironment({"P": obs}, seed=1)
+    drawn = [env.observe("P", o)["m"] for o in ("a", "a", "c")]
+    unused = env.unused("P")
+    assert len(unused) == 12
+    assert sorted(unused.objects.tolist()) == sorted(["a"] * 3 + ["b"] * 5 + ["c"] * 4)
+    rows = {tuple(r) for r in unused.modalities["m"]}
+    assert not rows & {tuple(d) for d in drawn}
+    assert rows | {tuple(d) for d in drawn} == {tuple(r) for r in obs.modalities["m"]}

@@ -11,8 +11,9 @@ by step (its calibration)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -212,6 +213,12 @@ class Calibration:
     #: every group's own estimate (each run's).
     error: float
     run_error: float
+    #: The accuracy on the pool's touches the learner did not draw, recorded in the same
+    #: period as those it learned from (NaN where unknown), and the estimate's mean absolute
+    #: error against it: the held-out touches were recorded later, and the difference between
+    #: the two accuracies is the data's drift.
+    same_period: list[float] = field(default_factory=list)
+    same_period_error: float = math.nan
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -220,18 +227,23 @@ class Calibration:
             "steps": self.steps,
             "estimated": self.estimated,
             "held_out": self.held_out,
+            "same_period": self.same_period,
             "groups": self.groups,
             "mean_absolute_error": self.error,
             "run_mean_absolute_error": self.run_error,
+            "same_period_mean_absolute_error": self.same_period_error,
         }
 
 
 def calibrate(
     accuracy: Mapping[int, Mapping[str, Mapping[str, np.ndarray]]],
     estimated: Mapping[int, Mapping[str, Mapping[str, np.ndarray]]],
+    same_period: Mapping[int, Mapping[str, Mapping[str, np.ndarray]]] | None = None,
 ) -> list[Calibration]:
     """The calibration of the checked learners' own estimates (their active arms), at every
-    library size with random priors (the baseline's once: it uses no library)."""
+    library size with random priors (the baseline's once: it uses no library); against the
+    held-out accuracy and, where given, against the accuracy on the pool's unused touches of
+    the same period."""
     out = []
     for size in accuracy:
         for learner in CHECKED:
@@ -247,6 +259,16 @@ def calibrate(
                 continue
             e = [float(est[has[:, k], k].mean()) for k in steps]
             a = [float(acc[has[:, k], k].mean()) for k in steps]
+            same = (same_period or {}).get(size, {}).get(CHOICE, {}).get(learner)
+            u: list[float] = []
+            if same is not None and same.shape == acc.shape:
+                u = [
+                    float(same[has[:, k], k].mean())
+                    if np.isfinite(same[has[:, k], k]).all()
+                    else math.nan
+                    for k in steps
+                ]
+            known = [abs(x - y) for x, y in zip(e, u) if np.isfinite(y)]
             out.append(
                 Calibration(
                     learner,
@@ -257,6 +279,8 @@ def calibrate(
                     [int(has[:, k].sum()) for k in steps],
                     float(np.mean(np.abs(np.subtract(e, a)))),
                     float(np.mean(np.abs(est[has] - acc[has]))),
+                    u,
+                    float(np.mean(known)) if known else math.nan,
                 )
             )
     return out
@@ -285,13 +309,20 @@ def calibration_lines(found: list[Calibration], libraries: int) -> list[str]:
     if not found:
         return []
     shown = [k for k in (1, 2, 3, 5, 10, 20, 40) if k in found[0].steps]
+    with_same = any(np.isfinite(c.same_period_error) for c in found)
     rows = []
     for c in found:
-        at = dict(zip(c.steps, zip(c.estimated, c.held_out)))
+        same = dict(zip(c.steps, c.same_period))
+        at = {
+            k: f"{e:.3f} / {h:.3f}"
+            + (f" / {same[k]:.3f}" if np.isfinite(same.get(k, math.nan)) else "")
+            for k, e, h in zip(c.steps, c.estimated, c.held_out)
+        }
         rows.append(
             [c.learner + (f" ({c.library} priors)" if libraries > 1 else "")]
-            + [f"{at[k][0]:.3f} / {at[k][1]:.3f}" if k in at else "—" for k in shown]
+            + [at.get(k, "—") for k in shown]
             + [f"{100 * c.error:.1f} pp", f"{100 * c.run_error:.1f} pp"]
+            + ([_pp_or_dash(c.same_period_error)] if with_same else [])
         )
     return [
         "## The learner's own estimate of its accuracy",
@@ -299,16 +330,31 @@ def calibration_lines(found: list[Calibration], libraries: int) -> list[str]:
         "Every touch after the first round is judged before it is learned; each judgement is "
         "carried to the pair's current number of touches by the 1/n learning curve the "
         "selection rule assumes (`aptkt.learning.estimate`). `--target-accuracy` stops on "
-        "this estimate. Estimated / held-out accuracy, each averaged over the groups whose "
-        "estimate exists (random priors); the mean absolute error of those averages over the "
-        "steps, and of each run's own estimate.",
+        "this estimate. Estimated / held-out accuracy"
+        + (" / accuracy on the pool's touches not drawn" if with_same else "")
+        + ", each averaged over the groups whose estimate exists (random priors); the mean "
+        "absolute error of those averages over the steps, and of each run's own estimate"
+        + (
+            ". The held-out touches are each object's later trials; the pool's are of the "
+            "same period as the touches learned. The estimate can only know the touches it "
+            "judged: where the two accuracies differ, the data drifted between the periods "
+            "(the sensor, the objects, the room), and the estimate is off by as much on "
+            "touches recorded later."
+            if with_same
+            else "."
+        ),
         "",
         markdown_table(
-            ["learner", *(f"step {k}" for k in shown), "error of the mean", "each run's error"],
+            ["learner", *(f"step {k}" for k in shown), "error of the mean", "each run's error"]
+            + (["error against the same period"] if with_same else []),
             rows,
         ),
         "",
     ]
+
+
+def _pp_or_dash(x: float) -> str:
+    return f"{100 * x:.1f} pp" if np.isfinite(x) else "—"
 
 
 def _touches_cell(r: ActiveAgainstRandom) -> str:

@@ -16,7 +16,7 @@ import numpy as np
 
 from aptkt.errors import AptktError, UnknownNameError
 from aptkt.learning.extract import observe_recording
-from aptkt.learning.observations import ObservationTable, common_extraction
+from aptkt.learning.observations import Observations, ObservationTable, common_extraction
 from aptkt.learning.pipeline import SKIN_EXTRACTION
 
 __all__ = [
@@ -62,6 +62,14 @@ class PoolEnvironment:
 
     def remaining(self, action: str, obj: str) -> int:
         return len(self._queues.get((action, obj), []))
+
+    def unused(self, action: str) -> Observations:
+        """The pool's observations of ``action`` not drawn yet: touches of the new objects
+        from the same recordings as those learned, that no learner has seen."""
+        if action not in self.table:
+            raise UnknownNameError(f"the pool has no observations of action {action!r}")
+        rows = [i for (a, _), queue in self._queues.items() if a == action for i in queue]
+        return self.table[action].take(np.array(sorted(rows), dtype=np.int64))
 
     def observe(self, action: str, obj: str) -> Mapping[str, np.ndarray]:
         if (action, obj) not in self._queues:
