@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from aptkt.errors import ConfigError, FeatureTableError, InvalidInputError
+from aptkt.experiments.selection_report import CHECKED as CALIBRATED_LEARNERS
 from aptkt.experiments.selection_report import CHOICE as RANDOM_PICKS_CHOICE
 from aptkt.experiments.selection_report import random_arm
 from aptkt.files import write_json_atomically, write_text_atomically
@@ -289,9 +290,12 @@ def run_group(
     seed = s.seed * 1_000_003 + group.index
     rows: list[dict[str, Any]] = []
 
-    def run(cfg: LearnerConfig, prior: PriorKnowledge | None) -> tuple[list[Any], APTKT]:
+    def run(
+        cfg: LearnerConfig, prior: PriorKnowledge | None, *, calibrated: bool = False
+    ) -> tuple[list[Any], APTKT]:
         """The run's curve: (held-out accuracy, the learner's own estimate, its accuracy on the
-        pool's touches it did not draw) per step."""
+        pool's touches it did not draw) per step. The last costs a prediction per step, so it is
+        measured only for the runs whose estimate is calibrated (NaN elsewhere)."""
         learner = APTKT(replace(cfg, budget=s.budget, seed=seed), prior)
         env = PoolEnvironment(pool, seed=seed)
         unused: list[float] = []
@@ -300,7 +304,9 @@ def run_group(
             actions,
             new,
             test=held,
-            on_step=lambda _: unused.append(same_period_accuracy(learner, env)),
+            on_step=lambda _: unused.append(
+                same_period_accuracy(learner, env) if calibrated else math.nan
+            ),
         )
         if on_run is not None:
             on_run()
@@ -308,7 +314,7 @@ def run_group(
         return [(a, e, u) for (a, e), u in zip(curve, unused)], learner
 
     base_cfg = replace(s.config, **METHODS["baseline"])
-    baseline, base_learner = run(base_cfg, None)
+    baseline, base_learner = run(base_cfg, None, calibrated="baseline" in CALIBRATED_LEARNERS)
     # Each learner's random-picks arm, where the learners choose otherwise: with random priors
     # at the smallest library (the checks' size; at every size a sweep would take twice as
     # long).
@@ -331,7 +337,10 @@ def run_group(
             curves = {"baseline": baseline}
             for name, overrides in METHODS.items():
                 if name != "baseline":
-                    curves[name] = run(replace(s.config, **overrides), prior)[0]
+                    calibrated = choice == RANDOM_PICKS_CHOICE and name in CALIBRATED_LEARNERS
+                    curves[name] = run(
+                        replace(s.config, **overrides), prior, calibrated=calibrated
+                    )[0]
             if with_random_picks and choice == RANDOM_PICKS_CHOICE and size == s.libraries[0]:
                 if base_random is None:
                     base_random = run(replace(base_cfg, selection="random"), None)[0]
