@@ -20,25 +20,30 @@ LINES = {signal.SIGINT: "aptkt: interrupted", signal.SIGTERM: "aptkt: terminated
 SIGNALS = pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=lambda s: s.name)
 
 
-@SIGNALS
-def test_a_signal_before_the_command_takes_over_ends_with_one_line(sig):
-    # Deterministic: a stand-in for the command line that is signalled while it (endlessly)
-    # starts, before it sets its own handlers.
-    stand_in = f"lambda: (os.kill(os.getpid(), {int(sig)}), time.sleep(30))"
+def _run_with_stand_in_command(main: str, preexec_fn=default_signals):
+    """``aptkt._entry.run()`` in a child whose ``aptkt.cli`` is a stand-in with the given
+    ``main`` (a lambda's source, with os, sys and time imported)."""
     code = (
         "import os, sys, time, types; "
         "cli = sys.modules['aptkt.cli'] = types.ModuleType('aptkt.cli'); "
-        f"cli.main = {stand_in}; "
+        f"cli.main = {main}; "
         "import aptkt._entry; aptkt._entry.run()"
     )
-    proc = subprocess.run(
+    return subprocess.run(
         [sys.executable, "-c", code],
         env=ENV,
         capture_output=True,
         text=True,
         timeout=60,
-        preexec_fn=default_signals,
+        preexec_fn=preexec_fn,
     )
+
+
+@SIGNALS
+def test_a_signal_before_the_command_takes_over_ends_with_one_line(sig):
+    # Deterministic: a stand-in for the command line that is signalled while it (endlessly)
+    # starts, before it sets its own handlers.
+    proc = _run_with_stand_in_command(f"lambda: (os.kill(os.getpid(), {int(sig)}), time.sleep(30))")
     assert proc.returncode == 128 + sig
     assert proc.stderr == LINES[sig] + "\n"
 
@@ -93,7 +98,7 @@ def test_importing_the_entry_point_leaves_a_programs_signals_alone():
     subprocess.run([sys.executable, "-c", code], env=ENV, check=True, timeout=60)
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=lambda s: s.name)
+@SIGNALS
 def test_a_signal_the_caller_ignores_stays_ignored(sig):
     """A shell's background job ignores Ctrl-C: aptkt keeps it so, start-up and command."""
 
@@ -101,18 +106,8 @@ def test_a_signal_the_caller_ignores_stays_ignored(sig):
         default_signals()
         signal.signal(sig, signal.SIG_IGN)
 
-    code = (
-        "import os, signal, sys, types; "
-        "cli = sys.modules['aptkt.cli'] = types.ModuleType('aptkt.cli'); "
-        f"cli.main = lambda: (os.kill(os.getpid(), {int(sig)}), print('still here') or 0)[1]; "
-        "import aptkt._entry; aptkt._entry.run()"
-    )
-    proc = subprocess.run(
-        [sys.executable, "-c", code],
-        env=ENV,
-        capture_output=True,
-        text=True,
-        timeout=60,
+    proc = _run_with_stand_in_command(
+        f"lambda: (os.kill(os.getpid(), {int(sig)}), print('still here') or 0)[1]",
         preexec_fn=ignore,
     )
     assert proc.returncode == 0 and proc.stdout == "still here\n", proc.stderr
