@@ -409,3 +409,39 @@ def test_the_prior_feature_scale_option_reaches_the_prior_files(tmp_path, quick_
 
             before = Z @ np.linalg.inv(joint).T
             assert largest_correlation(Z) < largest_correlation(before), (path.name, a)
+
+
+def test_the_simulated_gains_are_set_beside_a_real_benchmarks(quick_run):
+    """The comparison with a real-data benchmark (``--real-data``), from hand-made summaries:
+    the ratios are the simulated gains over the real ones, and the report shows the rows that
+    summary.json keeps."""
+    from aptkt.experiments.beside_real import COLUMNS, beside_real, comparison
+    from aptkt.experiments.report import markdown_table
+
+    numbers = {"fig7": {"gain": {"at_step": {"0": {"mean": 0.22}}, "overall": {"mean": 0.09}}}}
+
+    def gains(values):
+        return {"APTKT": [{"mean": v} for v in values]}
+
+    real = {
+        "table": "mine.csv",
+        "command": "aptkt benchmark mine.csv",
+        "objects": 20,
+        "results": {
+            "random": {
+                "groups": 60,
+                "gain": gains([0.11, 0.05, 0.02]),
+                "mean": {"APTKT": [0.80, 0.85, 0.84], "baseline": [0.70, 0.71, 0.75]},
+            },
+            "farthest": {"gain": gains([0.09, -0.01, 0.0]), "mean": {"APTKT": [0.8, 0.9]}},
+        },
+    }
+    rows = comparison(numbers, real)
+    assert rows[0][1:] == ["+22.0 pp", "+11.0 pp", "2.0×"]
+    assert rows[1][1:] == ["+9.0 pp", "+6.0 pp", "1.5×"]  # over the curve: mean of 11, 5, 2
+    assert rows[2][2] == "-1.0 pp"  # least similar priors' lowest step
+    assert rows[3][2] == "1.0 pp"  # APTKT's 0.85 -> 0.84, the largest fall
+    assert markdown_table(list(COLUMNS), rows) in "\n".join(beside_real(numbers, real))
+    # Without real data the summary says so, and the report says how to get it.
+    assert json.loads((quick_run / "summary.json").read_text())["beside_real"] is None
+    assert "--real-data DIR" in (quick_run / "report.md").read_text()

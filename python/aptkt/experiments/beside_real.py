@@ -11,7 +11,10 @@ from typing import Any
 from aptkt.errors import ConfigError
 from aptkt.experiments.report import markdown_table, pp
 
-__all__ = ["load_benchmark", "beside_real"]
+__all__ = ["load_benchmark", "beside_real", "comparison"]
+
+#: The comparison's columns, in the report's table and in summary.json.
+COLUMNS = ("", "this run (simulated)", "real data", "simulated / real")
 
 
 def load_benchmark(directory: str | Path) -> dict[str, Any]:
@@ -45,20 +48,12 @@ def _largest_fall(entry: Mapping[str, Any]) -> float:
     return max(falls, default=0.0)
 
 
-def beside_real(numbers: Mapping[str, Any], real: Mapping[str, Any] | None) -> list[str]:
-    """The report's section: Fig. 7's gains (related priors) beside the benchmark's random
-    priors, and Fig. 11's question (dissimilar priors) beside its least similar ones."""
-    lines = ["## The simulated world beside real data", ""]
-    fig7 = numbers.get("fig7")
-    if real is None:
-        return lines + [
-            "No real-data benchmark was given. `aptkt benchmark TABLE -o DIR` on a real sensor's "
-            "feature table (docs/real-data.md), then `aptkt reproduce ... --real-data DIR`, "
-            "puts its gains here beside this run's.",
-            "",
-        ]
+def comparison(numbers: Mapping[str, Any], real: Mapping[str, Any]) -> list[list[str]]:
+    """The rows (see :data:`COLUMNS`): Fig. 7's gains (related priors) beside the benchmark's
+    random priors, and Fig. 11's question (dissimilar priors) beside its least similar ones."""
     results = real["results"]
     rows = []
+    fig7 = numbers.get("fig7")
     if fig7:
         at = fig7["gain"]["at_step"]
         sim0 = float((at[0] if 0 in at else at["0"])["mean"])
@@ -89,13 +84,27 @@ def beside_real(numbers: Mapping[str, Any], real: Mapping[str, Any] | None) -> l
     rows.append(
         ["largest fall of a mean curve in one step (real data)", "", f"{100 * fall:.1f} pp", ""]
     )
+    return rows
+
+
+def beside_real(numbers: Mapping[str, Any], real: Mapping[str, Any] | None) -> list[str]:
+    """The report's section: :func:`comparison`'s table with where the real data came from."""
+    lines = ["## The simulated world beside real data", ""]
+    if real is None:
+        return lines + [
+            "No real-data benchmark was given. `aptkt benchmark TABLE -o DIR` on a real sensor's "
+            "feature table (docs/real-data.md), then `aptkt reproduce ... --real-data DIR`, "
+            "puts its gains here beside this run's.",
+            "",
+        ]
+    results = real["results"]
     lines += [
         f"Real data: `{real.get('table', '?')}` ({real.get('objects', '?')} objects, "
         f"{results['random'].get('groups', '?')} groups; `{real.get('command', '')}`). The "
         "simulated Fig. 7 uses priors related to the new objects by design; the real benchmark's "
         "random priors are its closest counterpart.",
         "",
-        markdown_table(["", "this run (simulated)", "real data", "simulated / real"], rows),
+        markdown_table(list(COLUMNS), comparison(numbers, real)),
         "",
     ]
     return lines

@@ -30,7 +30,7 @@ from aptkt.actions import PAPER_ACTIONS
 from aptkt.data import DatasetReader
 from aptkt.errors import ConfigError
 from aptkt.experiments.batch import StoredSteps, build_priors, run_batch
-from aptkt.experiments.beside_real import beside_real, load_benchmark
+from aptkt.experiments.beside_real import COLUMNS, beside_real, comparison, load_benchmark
 from aptkt.experiments.executors import Executor, make_executor
 from aptkt.experiments.figures import FIGURES
 from aptkt.experiments.figures.base import METHODS, Context, Section
@@ -313,6 +313,14 @@ def _write(
         "headlines": [h.__dict__ for sec in sections for h in sec.headlines],
         "numbers": {sec.figure: sec.numbers for sec in sections},
         "files": {sec.figure: sec.files for sec in sections},
+        # What docs/results.md quotes of a run beside real data (``--real-data``).
+        "beside_real": None
+        if real is None
+        else {
+            "benchmark": {k: real.get(k) for k in ("table", "command", "software_version")},
+            "columns": list(COLUMNS),
+            "rows": comparison(numbers, real),
+        },
     }
     write_json_atomically(out / "summary.json", summary, ConfigError, indent=2)
     _say(f"report: {out / 'report.md'}  ({seconds:.0f} s)")
