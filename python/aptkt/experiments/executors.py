@@ -8,6 +8,7 @@ share (their paths travel inside the tasks).
 
 from __future__ import annotations
 
+import base64
 import concurrent.futures as cf
 import multiprocessing
 import os
@@ -126,43 +127,77 @@ def _receive(sock: socket.socket, n: int, address: str) -> bytes:
     return data
 
 
+def _tcp_greeting(sock: socket.socket, address: str) -> None:
+    """A Dask tcp listener speaks first: a length, then a frame naming its compression, Python
+    and pickle protocol."""
+    length = int.from_bytes(_receive(sock, 8, address), "little")
+    if not 0 < length <= _GREETING_MAX_BYTES:
+        raise ConfigError(
+            f"--scheduler {address}: answers, but not as a Dask scheduler does (its "
+            "first bytes are not a Dask handshake; is it another service?)"
+        )
+    if b"pickle-protocol" not in _receive(sock, length, address):
+        raise ConfigError(
+            f"--scheduler {address}: answers, but not with a Dask scheduler's handshake (is it "
+            "another service?)"
+        )
+
+
+def _websocket_upgrade(sock: socket.socket, host: str, port: str, address: str) -> None:
+    """A Dask ws listener is a WebSocket server at ``/``: asked to upgrade, it answers 101
+    (Switching Protocols); a web server answers with a page or an error, which Dask's client
+    would report as a traceback of its web library."""
+    key = base64.b64encode(os.urandom(16)).decode()
+    sock.sendall(
+        (
+            f"GET / HTTP/1.1\r\nHost: {host}:{port}\r\nUpgrade: websocket\r\n"
+            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n"
+        ).encode()
+    )
+    status = b""
+    while b"\r\n" not in status and len(status) < 1024:
+        chunk = sock.recv(1024)
+        if not chunk:
+            break
+        status += chunk
+    words = status.split(b"\r\n", 1)[0].split()
+    if len(words) < 2 or not words[0].startswith(b"HTTP/") or words[1] != b"101":
+        raise ConfigError(
+            f"--scheduler {address}: answers, but not as a Dask scheduler does (no WebSocket "
+            "upgrade; is it another service?)"
+        )
+
+
 def check_scheduler(address: str, seconds: float | None = None) -> None:
-    """That a ``tcp://`` (or bare ``host:port``) address answers as a Dask scheduler does: it
-    greets a new connection at once with a small handshake (a length, then a frame naming its
-    compression, Python and pickle protocol). A web server, a proxy or a silent service is a
-    :class:`ConfigError` within ``seconds``, before Dask's client reads its bytes as lengths
-    to allocate. Other transports (``tls://``, ``inproc://``...) are left to Dask."""
+    """That a ``tcp://`` (or bare ``host:port``) or ``ws://`` address answers as a Dask
+    scheduler does: over tcp it greets a new connection at once with a small handshake, over
+    ws it accepts a WebSocket upgrade. A web server, a proxy or a silent service is a
+    :class:`ConfigError` within ``seconds``, before Dask's client reads its bytes as lengths to
+    allocate or raises from its web library; so is an address where nothing listens, at once.
+    Other transports (``tls://``, ``wss://``, ``inproc://``...) are left to Dask."""
     scheme, sep, rest = address.partition("://")
     if not sep:
         scheme, rest = "tcp", address
     host, colon, port = rest.rstrip("/").rpartition(":")
-    if scheme != "tcp" or not colon or not port.isdigit():
+    if scheme not in ("tcp", "ws") or not colon or not port.isdigit():
         return  # Dask's own parse names what is wrong with the address
     wait = SCHEDULER_GREETING_SECONDS if seconds is None else seconds
     try:
         with socket.create_connection((host.strip("[]"), int(port)), timeout=wait) as sock:
             sock.settimeout(wait)
-            length = int.from_bytes(_receive(sock, 8, address), "little")
-            if not 0 < length <= _GREETING_MAX_BYTES:
-                raise ConfigError(
-                    f"--scheduler {address}: answers, but not as a Dask scheduler does (its "
-                    "first bytes are not a Dask handshake; is it another service?)"
-                )
-            greeting = _receive(sock, length, address)
+            if scheme == "tcp":
+                _tcp_greeting(sock, address)
+            else:
+                _websocket_upgrade(sock, host, port, address)
     except TimeoutError:
         raise ConfigError(
             f"--scheduler {address}: answered nothing within {wait:g} s; a Dask scheduler "
-            "greets at once (is it another service?)"
+            "answers at once (is it another service?)"
         ) from None
     except OSError as exc:
         raise ConfigError(
             f"cannot reach the Dask scheduler at {address!r}: {exc.strerror or exc}"
         ) from None
-    if b"pickle-protocol" not in greeting:
-        raise ConfigError(
-            f"--scheduler {address}: answers, but not with a Dask scheduler's handshake (is it "
-            "another service?)"
-        )
 
 
 class DaskExecutor:
@@ -190,6 +225,10 @@ class DaskExecutor:
                 ) from None
             except (OSError, TimeoutError) as exc:
                 raise ConfigError(f"cannot reach the Dask scheduler at {address!r}: {exc}") from exc
+            except Exception as exc:  # noqa: BLE001 - whatever Dask's transports raise: unusable
+                raise ConfigError(
+                    f"cannot use the Dask scheduler at {address!r}: {type(exc).__name__}: {exc}"
+                ) from exc
         workers = len(self.client.scheduler_info().get("workers", {}))
         where = getattr(self.client.scheduler, "address", address)
         self.description = f"Dask cluster at {where} ({workers} worker(s))"

@@ -299,7 +299,9 @@ def _write(
             ConfigError,
         )
     summary = {
+        "command": run_info["command"],
         "software_version": __version__,
+        "date": run_info["date"],
         "figures": list(s.figures),
         "seconds": seconds,
         "timings": done.timings,
