@@ -411,11 +411,11 @@ def test_the_prior_feature_scale_option_reaches_the_prior_files(tmp_path, quick_
             assert largest_correlation(Z) < largest_correlation(before), (path.name, a)
 
 
-def test_the_simulated_gains_are_set_beside_a_real_benchmarks(quick_run):
+def test_the_simulated_gains_are_set_beside_a_real_benchmarks(quick_run, tmp_path):
     """The comparison with a real-data benchmark (``--real-data``), from hand-made summaries:
     the ratios are the simulated gains over the real ones, and the report shows the rows that
     summary.json keeps."""
-    from aptkt.experiments.beside_real import COLUMNS, beside_real, comparison
+    from aptkt.experiments.beside_real import COLUMNS, beside_real, comparison, load_benchmark
     from aptkt.experiments.report import markdown_table
 
     numbers = {"fig7": {"gain": {"at_step": {"0": {"mean": 0.22}}, "overall": {"mean": 0.09}}}}
@@ -442,6 +442,12 @@ def test_the_simulated_gains_are_set_beside_a_real_benchmarks(quick_run):
     assert rows[2][2] == "-1.0 pp"  # least similar priors' lowest step
     assert rows[3][2] == "1.0 pp"  # APTKT's 0.85 -> 0.84, the largest fall
     assert markdown_table(list(COLUMNS), rows) in "\n".join(beside_real(numbers, real))
+    # As the benchmark writes it, per library size: the smallest library is compared.
+    per_size = {**real, "results": {"10": {"random": {}}, "3": real["results"]}}
+    (tmp_path / "summary.json").write_text(json.dumps(per_size))
+    read = load_benchmark(tmp_path)
+    assert read["library"] == 3 and comparison(numbers, read) == rows
+    assert "3 prior objects" in "\n".join(beside_real(numbers, read))
     # Without real data the summary says so, and the report says how to get it.
     assert json.loads((quick_run / "summary.json").read_text())["beside_real"] is None
     assert "--real-data DIR" in (quick_run / "report.md").read_text()

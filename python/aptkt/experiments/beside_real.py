@@ -18,13 +18,24 @@ COLUMNS = ("", "this run (simulated)", "real data", "simulated / real")
 
 
 def load_benchmark(directory: str | Path) -> dict[str, Any]:
-    """The summary of an ``aptkt benchmark`` output directory, checked."""
+    """The summary of an ``aptkt benchmark`` output directory, checked. Its results are given
+    per library size; the smallest library's are the ones compared (``library`` says its
+    size): the benchmark's checks are made there, and Fig. 7's libraries are as small."""
     path = Path(directory) / "summary.json"
     try:
         summary = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ConfigError(f"--real-data {directory}: no benchmark summary ({exc})") from None
     results = summary.get("results") if isinstance(summary, dict) else None
+    if isinstance(results, dict) and "random" not in results:
+        sizes = sorted(
+            (int(size), entry)
+            for size, entry in results.items()
+            if str(size).isdigit() and isinstance(entry, dict) and "random" in entry
+        )
+        if sizes:
+            summary = {**summary, "library": sizes[0][0], "results": sizes[0][1]}
+            results = summary["results"]
     if not isinstance(results, dict) or "random" not in results:
         raise ConfigError(
             f"--real-data {directory}: {path} is not the summary of an aptkt benchmark with "
@@ -100,7 +111,9 @@ def beside_real(numbers: Mapping[str, Any], real: Mapping[str, Any] | None) -> l
     results = real["results"]
     lines += [
         f"Real data: `{real.get('table', '?')}` ({real.get('objects', '?')} objects, "
-        f"{results['random'].get('groups', '?')} groups; `{real.get('command', '')}`). The "
+        f"{results['random'].get('groups', '?')} groups"
+        + (f", {real['library']} prior objects" if "library" in real else "")
+        + f"; `{real.get('command', '')}`). The "
         "simulated Fig. 7 uses priors related to the new objects by design; the real benchmark's "
         "random priors are its closest counterpart.",
         "",

@@ -319,7 +319,9 @@ def _write(
         "beside_real": None
         if real is None
         else {
-            "benchmark": {k: real.get(k) for k in ("table", "command", "software_version")},
+            "benchmark": {
+                k: real.get(k) for k in ("table", "command", "software_version", "library")
+            },
             "columns": list(COLUMNS),
             "rows": comparison(numbers, real),
         },
