@@ -135,9 +135,11 @@ def test_press_indents_to_the_depth_and_holds_still(robot, loopback, skin):
 def test_slide_keeps_the_normal_force_at_constant_tangential_speed(robot, loopback, skin):
     in_contact(robot, skin)
     x0 = loopback.state()["pose"][0]
+    loopback.clock_lag()  # from here on
     with _Lateness() as late:
         start = time.monotonic_ns()
         robot.slide(0.2, 0.02, 0.6, (1.0, 0.0), skin)
+    lag = loopback.clock_lag()
     trace = robot.trace(start)
     state = at_rest(loopback)
     vx = trace["tcp_speed"][:, 0]
@@ -161,8 +163,14 @@ def test_slide_keeps_the_normal_force_at_constant_tangential_speed(robot, loopba
     # Force control keeps working during the slide: the end is closer to 0.2 N than the start.
     assert abs(trace["skin_force"][cruising][-1] - 0.2) < 0.005
     travelled = state["pose"][0] - x0
-    # 0.6 s at full speed plus the two ramps (v^2/a = 0.8 mm).
-    assert travelled == pytest.approx(0.02 * 0.6 + 0.02**2 / 0.5, abs=0.0005)
+    # 0.6 s at full speed plus the two ramps (v^2/a = 0.8 mm), and on for as long as this
+    # process or the controller ran late to stop it (2.1 mm more was seen at a load of 7).
+    planned = 0.02 * 0.6 + 0.02**2 / 0.5
+    assert planned - 0.0005 <= travelled <= planned + 0.0005 + 0.02 * (late.seconds + lag), (
+        travelled,
+        late.seconds,
+        lag,
+    )
     assert not state["force_mode"] and not state["moving"]
 
 

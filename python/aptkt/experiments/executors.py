@@ -27,6 +27,8 @@ __all__ = ["Executor", "LocalExecutor", "DaskExecutor", "make_executor", "check_
 SCHEDULER_GREETING_SECONDS = 10.0
 #: A Dask handshake is a few dozen bytes (its compression, Python version, pickle protocol).
 _GREETING_MAX_BYTES = 1 << 16
+#: An HTTP status line ("HTTP/1.1 101 Switching Protocols") is read within this many bytes.
+_STATUS_LINE_MAX_BYTES = 1 << 12
 
 # Spawned, never forked: a fork copies the compiled core's thread pool without its threads.
 _SPAWN = multiprocessing.get_context("spawn")
@@ -155,8 +157,8 @@ def _websocket_upgrade(sock: socket.socket, host: str, port: str, address: str) 
         ).encode()
     )
     status = b""
-    while b"\r\n" not in status and len(status) < 1024:
-        chunk = sock.recv(1024)
+    while b"\r\n" not in status and len(status) < _STATUS_LINE_MAX_BYTES:
+        chunk = sock.recv(_STATUS_LINE_MAX_BYTES)
         if not chunk:
             break
         status += chunk
