@@ -150,11 +150,16 @@ def test_slide_keeps_the_normal_force_at_constant_tangential_speed(robot, loopba
     window = (trace["host_t_ns"] >= start_ns + 20_000_000) & (trace["host_t_ns"] < stop_ns)
     assert np.all(cruising[window])
     # Seen throughout the window: a busy host reads fewer samples (44 of the controller's 72
-    # were seen once), but no stretch went unseen for longer than this process was kept
-    # waiting, on the controller's clock, which a late read does not shift.
+    # were seen once), but no stretch went unseen for longer than this process or the
+    # controller was kept waiting (a late controller sends its packets in bursts), on the
+    # controller's clock, which a late read does not shift.
     seen = trace["robot_timestamp"][window]
-    margin = 0.02 + late.seconds
-    assert seen.size >= 2 and np.diff(seen).max() <= margin, (np.diff(seen).max(), late.seconds)
+    margin = 0.02 + late.seconds + lag
+    assert seen.size >= 2 and np.diff(seen).max() <= margin, (
+        np.diff(seen).max(),
+        late.seconds,
+        lag,
+    )
     assert seen[-1] - seen[0] >= 0.58 - 2 * margin
     np.testing.assert_allclose(
         trace["tcp_speed"][cruising, 1], 0.0, atol=1e-12
