@@ -190,6 +190,61 @@ def test_program_stopped_mid_press(robot, loopback, skin):
     assert not state["program_running"] and not state["moving"]
 
 
+# ----------------------------------------------------------------------------- the watchdog
+def _hold_the_gil(seconds: float) -> float:
+    """One C call that never returns to the interpreter's loop for at least ``seconds`` (as an
+    HDF5 write or a module being loaded can): no other thread of this process runs meanwhile.
+    Returns how long it held; a call that fell short (a machine that sped up after the
+    calibration) is repeated longer."""
+    n = 1_000_000
+    start = time.perf_counter()
+    sum(range(n))
+    n = int(n * seconds / max(time.perf_counter() - start, 1e-6))
+    while True:
+        start = time.perf_counter()
+        sum(range(n))
+        held = time.perf_counter() - start
+        if held >= seconds:
+            return held
+        n *= 2
+
+
+def test_an_idle_arm_outlasts_its_process_holding_the_gil(robot, loopback):
+    """While the arm is idle the control process feeds the controller's watchdog: this
+    process holding its GIL for twice the watchdog's period (say, writing a large recording)
+    must not let the controller stop the program of an arm at rest."""
+    period = robot.limits.watchdog_timeout
+    assert loopback.state()["program_running"]
+    assert _hold_the_gil(2.0 * period) >= 2.0 * period
+    time.sleep(period)  # (a stop would have come by now)
+    state = loopback.state()
+    assert state["program_running"], state["text_log"][-5:]
+    robot.move_above(PLACEMENT, 0.01)
+    assert at_rest(loopback)["program_running"]
+
+
+def test_a_stalled_supervision_loop_lets_the_controller_stop_the_arm(robot, loopback, skin):
+    """During a movement only the supervision loop feeds the watchdog (the control process's
+    keep-alive is off): a loop stalled for twice the watchdog's period — here a skin reading
+    that blocks — lets the controller stop the program, and with it the arm."""
+    period = robot.limits.watchdog_timeout
+    robot.move_above(PLACEMENT, 0.004)
+    calls = 0
+
+    def blocking_skin() -> float:
+        nonlocal calls
+        calls += 1
+        if calls == 3:
+            time.sleep(2.0 * period)
+        return skin()
+
+    with pytest.raises(RobotError):
+        robot.approach_contact(blocking_skin, 0.05)
+    state = at_rest(loopback)
+    assert not state["program_running"] and not state["moving"], state
+    assert state["text_log"][-1].startswith("program stopped: RTDE input watchdog"), state
+
+
 # ----------------------------------------------------------------------------- lost link
 def test_dropped_connection_mid_slide(make_robot, loopback, skin):
     robot = make_robot()

@@ -296,7 +296,7 @@ def test_collect_survives_faults_and_resumes_to_a_complete_data_set(cell, capsys
     common = ("--objects", "block_a,block_b", "-o", str(data), "--no-progress")
 
     def first(rc: object) -> None:
-        assert rc == 0, capsys.readouterr().err
+        assert rc == 0, (capsys.readouterr().err, lb.state()["text_log"][-8:])
         with DatasetReader(data) as rd:
             late = timing.lateness(max(rec.stop_ns for rec in rd))
             assert sorted(rd.keys()) == [("block_a", "Pq", 0), ("block_b", "Pq", 0)]
@@ -337,8 +337,12 @@ def test_collect_survives_faults_and_resumes_to_a_complete_data_set(cell, capsys
 
     def after_the_stop(rc: object) -> None:
         err = capsys.readouterr().err
-        assert rc == 3, err
-        assert "block_b / Pq / trial 1: ProtectiveStopError" in err and "--resume" in err, err
+        controller = lb.state()["text_log"][-8:]  # (why the controller stopped, if it did)
+        assert rc == 3, (err, controller)
+        assert "block_b / Pq / trial 1: ProtectiveStopError" in err and "--resume" in err, (
+            err,
+            controller,
+        )
         assert not lb.state()["moving"]
         with DatasetReader(data) as rd:  # every completed trial is readable
             assert sorted(rd.keys()) == [
@@ -363,8 +367,8 @@ def test_collect_survives_faults_and_resumes_to_a_complete_data_set(cell, capsys
 
     def after_the_silence(rc: object) -> None:
         err = capsys.readouterr().err
-        assert rc == 3, err
-        assert "block_b / Pq / trial 1: SilentCellError" in err, err
+        assert rc == 3, (err, lb.state()["text_log"][-8:])
+        assert "block_b / Pq / trial 1: SilentCellError" in err, (err, lb.state()["text_log"][-8:])
         assert (d / "data.aborted-2.h5").exists(), err  # the trial's second partial recording
         with DatasetReader(d / "data.aborted-2.h5") as rd:
             assert rd.keys() == [("block_b", "Pq", 1)]

@@ -15,13 +15,14 @@ Why supervise instead of blocking calls: a blocking ``moveL`` cannot be interrup
 skin reading, and after a lost connection ur_rtde waits for its (now stale) state for up to
 300 s. So once the link is found lost, this class sends nothing more to the controller; the
 controller's own RTDE watchdog (armed at connect, ``1 / limits.watchdog_timeout`` Hz) stops
-the program on its side. While the arm is idle a keep-alive thread feeds that watchdog;
-during a movement only the supervision loop does, so a stalled loop stops the arm too.
+the program on its side. While the arm is idle the control client's process feeds that
+watchdog (no work of this process can delay it); during a movement only the supervision loop
+does, so a stalled loop stops the arm too.
 
 One module per concern, composed by :class:`UR10` (:mod:`~aptkt.robot.ur10.arm`):
 
 - :mod:`~aptkt.robot.ur10.connection`: ur_rtde's receive client, link freshness, the
-  controller's watchdog and its keep-alive, the one lock of every control call;
+  controller's watchdog, the one lock of every control call;
 - :mod:`~aptkt.robot.ur10.control`: ur_rtde's control client in a process of its own, killed
   the moment the link is suspect (ur_rtde's own reconnect is not safe in-process);
 - :mod:`~aptkt.robot.ur10.supervisor`: the limit checks of every supervision cycle;

@@ -14,16 +14,26 @@ pipe; the reply ``{"id", "ok" | "error", "type", "connected"}`` comes on the rep
 (``connected``: the control connection's state after the call). The first reply, id 0, says
 whether the client could be created. Usage: ``_control_child.py HOST FREQUENCY REQUEST_FD
 REPLY_FD RTDE_DIR PARENT_PID``.
+
+The op ``idle`` with ``[interval]`` turns this process's keep-alive on (``interval`` > 0) or
+off (0): while it is on, the controller's RTDE watchdog is kicked every ``interval`` s between
+requests. The parent turns it on while no movement is supervised. Here, and not on a thread of
+the parent, because this process runs nothing else: a parent that holds its GIL for longer
+than the watchdog's period (an HDF5 write, a module loaded while the arm waits) must not let
+the controller stop the program of an arm at rest. During a movement the parent's supervision
+loop alone feeds the watchdog, so a stalled loop still stops the arm.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import select
 import signal
 import sys
 import threading
 import time
+from collections.abc import Callable, Iterator
 from typing import Any
 
 
@@ -45,6 +55,26 @@ def _send(fd: int, message: dict[str, Any]) -> None:
         data = data[os.write(fd, data) :]
 
 
+def _requests(fd: int, wait: Callable[[], float | None]) -> Iterator[dict[str, Any] | None]:
+    """The parent's requests, one per line, until it closes the pipe; None whenever ``wait()``
+    s pass without one (``wait()`` None: no limit)."""
+    buffer = b""
+    while True:
+        line, newline, rest = buffer.partition(b"\n")
+        if newline:
+            buffer = rest
+            yield json.loads(line)
+            continue
+        ready, _, _ = select.select([fd], [], [], wait())
+        if not ready:
+            yield None
+            continue
+        chunk = os.read(fd, 65536)
+        if not chunk:
+            return
+        buffer += chunk
+
+
 def main(argv: list[str]) -> None:
     host, frequency, request_fd, reply_fd, rtde_dir, parent = argv
     # Ctrl-C and SIGTERM (a terminal's, or a job's, sent to the whole process group) are the
@@ -62,14 +92,31 @@ def main(argv: list[str]) -> None:
         _send(w_fd, {"id": 0, "error": str(exc), "type": type(exc).__name__, "connected": False})
         os._exit(1)
     _send(w_fd, {"id": 0, "ok": "ready", "connected": True})
-    requests = os.fdopen(r_fd, "rb")
-    for line in requests:
-        request = json.loads(line)
+    idle_interval = 0.0  # the keep-alive's period while the arm is idle (0: off)
+    next_kick = 0.0
+
+    def until_kick() -> float | None:
+        return max(0.0, next_kick - time.monotonic()) if idle_interval > 0 else None
+
+    for request in _requests(r_fd, until_kick):
+        if idle_interval > 0 and time.monotonic() >= next_kick:
+            next_kick = time.monotonic() + idle_interval
+            try:
+                if control.isConnected() and control.isProgramRunning():
+                    control.kickWatchdog()
+            except Exception:  # a link going down shows in the next request's reply
+                pass
+        if request is None:  # (only the keep-alive's moment)
+            continue
         op, args = request["op"], request["args"]
         reply: dict[str, Any] = {"id": request["id"]}
         try:
             if op == "close":
                 control.disconnect()
+                reply["ok"] = None
+            elif op == "idle":
+                idle_interval = max(0.0, float(args[0]))
+                next_kick = time.monotonic() + idle_interval
                 reply["ok"] = None
             elif not control.isConnected():
                 # Calling into a client that is reconnecting is exactly the race: refuse.

@@ -7,9 +7,10 @@ to 300 s for a "done" that never shows. So every control call is sent to the con
 while the caller watches the link, and once the link is suspect (stale data, a closed
 connection, a call that does not return) the control process is killed and nothing more is
 sent: the controller's own RTDE watchdog (armed at connect) stops the program on its side.
-While the arm is idle a keep-alive thread feeds that watchdog; during a movement the
-supervision loop does (:meth:`Connection.kick`), so a stalled loop stops the arm too. One lock
-makes every control call exclusive, so the two never interleave.
+While the arm is idle the control process feeds that watchdog itself (a keep-alive that no
+work of this process can delay); during a movement only the supervision loop does
+(:meth:`Connection.kick`), so a stalled loop stops the arm too. One lock makes every control
+call exclusive.
 """
 
 from __future__ import annotations
@@ -99,13 +100,9 @@ class Connection:
         self.mode: str | None = None
         #: The real-time command repeated every supervision cycle (see :meth:`command`).
         self.hold: tuple[str, tuple[Any, ...]] | None = None
-        #: Set while a movement is supervised: the keep-alive thread stays out of the way.
-        self.in_motion = False
-        # Held for every exchange with the control process (the keep-alive thread and the
-        # supervision share it).
+        self._in_motion = False
+        # Held for every exchange with the control process.
         self._calls = threading.Lock()
-        self._keepalive: threading.Thread | None = None
-        self._keepalive_stop = threading.Event()
         self.reset_freshness()
 
     # ------------------------------------------------------------------ open / close
@@ -134,13 +131,37 @@ class Connection:
         self.frequency = self._detect_frequency()
 
     def arm_watchdog(self) -> None:
-        """Arm the controller's RTDE watchdog and start feeding it while the arm is idle."""
+        """Arm the controller's RTDE watchdog, and have the control process feed it while the
+        arm is idle."""
         self.command("setWatchdog", 1.0 / self.watchdog_timeout)
-        self._keepalive_stop.clear()
-        self._keepalive = threading.Thread(
-            target=self._keep_alive, name=f"ur10-keepalive-{self.host}", daemon=True
-        )
-        self._keepalive.start()
+        self._in_motion = False
+        self.call("idle", self.keepalive_interval)
+
+    @property
+    def keepalive_interval(self) -> float:
+        """How often the control process kicks the watchdog while the arm is idle (s): five
+        kicks per watchdog period."""
+        return self.watchdog_timeout / 5.0
+
+    @property
+    def in_motion(self) -> bool:
+        """Whether a movement is supervised: then the supervision loop alone feeds the
+        controller's watchdog, and the control process's keep-alive is off."""
+        return self._in_motion
+
+    @in_motion.setter
+    def in_motion(self, moving: bool) -> None:
+        if moving == self._in_motion:
+            return
+        self._in_motion = moving
+        if moving:
+            self.call("idle", 0.0)  # before the movement's first command
+            return
+        if self.control is not None and self.lost is None and not self.control.ended:
+            try:
+                self.call("idle", self.keepalive_interval)
+            except RobotError:
+                pass  # (the link's fault is reported by the next command)
 
     def _detect_frequency(self) -> float:
         """The controller's RTDE rate from its own timestamps: 500 Hz (e-series) or 125 Hz
@@ -169,13 +190,12 @@ class Connection:
         return 125.0
 
     def stop_keepalive(self) -> None:
-        """Stop the keep-alive thread; returns once it can make no further call."""
-        self._keepalive_stop.set()
-        thread, self._keepalive = self._keepalive, None
-        if thread is not None:
-            # Its one call at a time ends within a few control periods, or on the link check
-            # (the watchdog timeout), or it is cut short by the link being lost.
-            thread.join(timeout=COMMAND_TIMEOUT + 1.0)
+        """The control process stops feeding the watchdog (before the program is stopped)."""
+        if self.control is not None and self.lost is None and not self.control.ended:
+            try:
+                self.call("idle", 0.0)
+            except RobotError:
+                pass
 
     def disconnect(self) -> None:
         """End the control process and destroy the receive client (the arm must be stopped
@@ -432,24 +452,3 @@ class Connection:
                     )
                 raise RobotError(f"the controller refused {name}")
             time.sleep(0.002)
-
-    def _keep_alive(self) -> None:
-        # Feeds the controller's watchdog while no movement is supervised. During movements the
-        # supervision loop feeds it, so a stalled loop lets the controller stop the arm.
-        interval = self.watchdog_timeout / 5.0
-        while not self._keepalive_stop.wait(interval):
-            if self.in_motion or self.lost is not None or self.control is None:
-                continue
-            try:
-                if self.receive.getRuntimeState() != _PLAYING:
-                    continue
-                # Never waits behind a command: the supervision's call feeds the watchdog too.
-                if not self._calls.acquire(blocking=False):
-                    continue
-                try:
-                    if not self._keepalive_stop.is_set() and not self.in_motion:
-                        self._call("kickWatchdog", ())
-                finally:
-                    self._calls.release()
-            except (RobotError, RuntimeError, AttributeError):  # AttributeError: closed meanwhile
-                pass  # a lost link is marked by the call itself; the next command reports it
