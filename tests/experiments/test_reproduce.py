@@ -441,13 +441,13 @@ def test_the_simulated_gains_are_set_beside_a_real_benchmarks(quick_run, tmp_pat
     assert rows[1][1:] == ["+9.0 pp", "+6.0 pp", "1.5×"]  # over the curve: mean of 11, 5, 2
     assert rows[2][2] == "-1.0 pp"  # least similar priors' lowest step
     assert rows[3][2] == "1.0 pp"  # APTKT's 0.85 -> 0.84, the largest fall
-    assert markdown_table(list(COLUMNS), rows) in "\n".join(beside_real(numbers, real))
+    assert markdown_table(list(COLUMNS), rows) in "\n".join(beside_real(real, rows))
     # As the benchmark writes it, per library size: the smallest library is compared.
     per_size = {**real, "results": {"10": {"random": {}}, "3": real["results"]}}
     (tmp_path / "summary.json").write_text(json.dumps(per_size))
     read = load_benchmark(tmp_path)
     assert read["library"] == 3 and comparison(numbers, read) == rows
-    assert "3 prior objects" in "\n".join(beside_real(numbers, read))
+    assert "3 prior objects" in "\n".join(beside_real(read, rows))
     # Without real data the summary says so, and the report says how to get it.
     assert json.loads((quick_run / "summary.json").read_text())["beside_real"] is None
     assert "--real-data DIR" in (quick_run / "report.md").read_text()

@@ -98,8 +98,9 @@ def comparison(numbers: Mapping[str, Any], real: Mapping[str, Any]) -> list[list
     return rows
 
 
-def beside_real(numbers: Mapping[str, Any], real: Mapping[str, Any] | None) -> list[str]:
-    """The report's section: :func:`comparison`'s table with where the real data came from."""
+def beside_real(real: Mapping[str, Any] | None, rows: list[list[str]]) -> list[str]:
+    """The report's section: the rows of :func:`comparison` with where the real data came
+    from."""
     lines = ["## The simulated world beside real data", ""]
     if real is None:
         return lines + [
@@ -117,7 +118,7 @@ def beside_real(numbers: Mapping[str, Any], real: Mapping[str, Any] | None) -> l
         "simulated Fig. 7 uses priors related to the new objects by design; the real benchmark's "
         "random priors are its closest counterpart.",
         "",
-        markdown_table(list(COLUMNS), comparison(numbers, real)),
+        markdown_table(list(COLUMNS), rows),
         "",
     ]
     return lines

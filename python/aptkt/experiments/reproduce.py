@@ -288,7 +288,8 @@ def _write(
     }
     numbers = {sec.figure: sec.numbers for sec in sections}
     real = load_benchmark(s.real_data) if s.real_data is not None else None
-    beside = "\n".join(beside_real(numbers, real))
+    rows = comparison(numbers, real) if real is not None else []
+    beside = "\n".join(beside_real(real, rows))
     write_text_atomically(
         out / "report.md", render_report(sections, run_info) + "\n" + beside, ConfigError
     )
@@ -313,7 +314,7 @@ def _write(
             "run_seconds_summed": run_info["settings"]["run seconds, summed over runs"],
         },
         "headlines": [h.__dict__ for sec in sections for h in sec.headlines],
-        "numbers": {sec.figure: sec.numbers for sec in sections},
+        "numbers": numbers,
         "files": {sec.figure: sec.files for sec in sections},
         # What docs/results.md quotes of a run beside real data (``--real-data``).
         "beside_real": None
@@ -323,7 +324,7 @@ def _write(
                 k: real.get(k) for k in ("table", "command", "software_version", "library")
             },
             "columns": list(COLUMNS),
-            "rows": comparison(numbers, real),
+            "rows": rows,
         },
     }
     write_json_atomically(out / "summary.json", summary, ConfigError, indent=2)
