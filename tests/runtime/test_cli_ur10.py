@@ -296,7 +296,7 @@ def test_collect_survives_faults_and_resumes_to_a_complete_data_set(cell, capsys
     common = ("--objects", "block_a,block_b", "-o", str(data), "--no-progress")
 
     def first(rc: object) -> None:
-        assert rc == 0, (capsys.readouterr().err, lb.state()["text_log"][-8:])
+        assert rc == 0, why(capsys.readouterr().err, lb)
         with DatasetReader(data) as rd:
             late = timing.lateness(max(rec.stop_ns for rec in rd))
             assert sorted(rd.keys()) == [("block_a", "Pq", 0), ("block_b", "Pq", 0)]
@@ -337,11 +337,9 @@ def test_collect_survives_faults_and_resumes_to_a_complete_data_set(cell, capsys
 
     def after_the_stop(rc: object) -> None:
         err = capsys.readouterr().err
-        controller = lb.state()["text_log"][-8:]  # (why the controller stopped, if it did)
-        assert rc == 3, (err, controller)
-        assert "block_b / Pq / trial 1: ProtectiveStopError" in err and "--resume" in err, (
-            err,
-            controller,
+        assert rc == 3, why(err, lb)
+        assert "block_b / Pq / trial 1: ProtectiveStopError" in err and "--resume" in err, why(
+            err, lb
         )
         assert not lb.state()["moving"]
         with DatasetReader(data) as rd:  # every completed trial is readable
@@ -367,8 +365,8 @@ def test_collect_survives_faults_and_resumes_to_a_complete_data_set(cell, capsys
 
     def after_the_silence(rc: object) -> None:
         err = capsys.readouterr().err
-        assert rc == 3, (err, lb.state()["text_log"][-8:])
-        assert "block_b / Pq / trial 1: SilentCellError" in err, (err, lb.state()["text_log"][-8:])
+        assert rc == 3, why(err, lb)
+        assert "block_b / Pq / trial 1: SilentCellError" in err, why(err, lb)
         assert (d / "data.aborted-2.h5").exists(), err  # the trial's second partial recording
         with DatasetReader(d / "data.aborted-2.h5") as rd:
             assert rd.keys() == [("block_b", "Pq", 1)]
@@ -453,6 +451,14 @@ def test_learn_runs_live_through_the_loopback(cell, prior_npz, capsys):
     undisturbed(timing, lambda: run_cli(cell, "learn", *argv, "-o", str(out)), learnt, [out])
 
 
+def why(err: str, lb: Loopback) -> str:
+    """A failed check's message: aptkt's whole stderr (with its exceptions' notes) and the
+    controller's last log lines (why it stopped a program, if it did). A string, which pytest
+    shows whole, where it cuts the repr of anything else short."""
+    log = "\n".join(f"  {line}" for line in lb.state()["text_log"][-15:])
+    return f"aptkt's stderr:\n{err}\nthe controller's log:\n{log}"
+
+
 def retracted(state: dict) -> bool:
     """The arm at rest and lifted off the object (3 mm up), nothing pressing on it."""
     return not state["moving"] and state["normal_force"] == 0.0 and state["pose"][2] > 0.003
@@ -499,7 +505,7 @@ def test_a_signal_mid_press_retracts_and_keeps_the_data(cell, sig, code, word):
 
     def kept(result: object) -> None:
         rc, err = result  # type: ignore[misc]
-        assert rc == code, (err, lb.state()["text_log"][-15:])
+        assert rc == code, why(err, lb)
         assert word in err and "Traceback" not in err, err
         # (The second press: block_b's trial, after block_a's completed.)
         assert "block_b / Pq / trial 0" in err, err
@@ -528,7 +534,7 @@ def test_a_signal_mid_press_during_learn_retracts_and_keeps_the_data(
 
     def kept(result: object) -> None:
         rc, err = result  # type: ignore[misc]
-        assert rc == code, (err, lb.state()["text_log"][-15:])
+        assert rc == code, why(err, lb)
         lines = [line for line in err.splitlines() if line.startswith("aptkt learn:")]
         assert len(lines) == 1 and word in lines[0] and "Traceback" not in err, err
         assert "/ Pq / trial 0" in lines[0] and "aborted" in lines[0], err
