@@ -1,6 +1,6 @@
-"""The command line starts without the heavy libraries (scikit-learn and SciPy's statistics take
-about a second to import), and the packages that load their names on first use offer the same
-objects as their modules."""
+"""The command line starts without the heavy libraries (scikit-learn and SciPy take from half a
+second to two to import, the more so on a busy machine), and the packages that load their names
+on first use offer the same objects as their modules."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import pytest
 
 from aptkt._lazy import _type_checking_imports
 
-HEAVY = ("sklearn", "scipy.stats", "matplotlib", "pandas", "aptkt.gp.estimator")
+HEAVY = ("sklearn", "scipy", "matplotlib", "pandas", "aptkt.gp.estimator")
 
 _PROBE = """
 import json, sys

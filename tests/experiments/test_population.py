@@ -12,13 +12,8 @@ import pytest
 
 from aptkt.cli import main
 from aptkt.errors import InvalidInputError
-from aptkt.experiments.population import (
-    LARGEST_BATCH,
-    ActionPopulation,
-    ObjectPopulation,
-    one_shot_accuracy,
-    schedule,
-)
+from aptkt.experiments.population import ActionPopulation, ObjectPopulation, one_shot_accuracy
+from aptkt.experiments.schedule import LARGEST_BATCH, schedule
 from aptkt.learning.feature_table import write_feature_table
 from aptkt.learning.observations import Observations
 from aptkt.learning.pipeline import SKIN_EXTRACTION

@@ -406,7 +406,7 @@ def test_the_method_page_states_the_limits_the_code_has():
     """docs/method.md's "A library of thousands" quotes the limits; they are these constants."""
     from pathlib import Path
 
-    from aptkt.experiments.population import LARGEST_BATCH
+    from aptkt.experiments.schedule import LARGEST_BATCH
     from aptkt.learning.identity import IMPOSTOR_COMPETITORS
     from aptkt.learning.recognition import CALIBRATION_OBJECTS, CALIBRATION_TOUCHES
 

@@ -5,6 +5,8 @@ misses."""
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -108,3 +110,69 @@ def test_an_e_series_read_by_a_slow_host_is_500_hz():
 def test_a_controller_sending_nothing_is_a_lost_link():
     with pytest.raises(RobotConnectionError, match="sends no data"):
         _rate([1.0])
+
+
+class _Behind(_Receive):
+    """A receive client whose packet stays the one read before this process was kept away,
+    for the first ``behind`` timestamp reads after it, as a receiving thread that has not yet
+    run since; then it is the controller's newest (``behind=None``: never: a lost link)."""
+
+    def __init__(self, behind: int | None):
+        super().__init__(set())
+        self.behind = behind
+        self.stamp_reads = 0
+
+    def getTimestamp(self) -> float:  # noqa: N802
+        self.stamp_reads += 1
+        if self.behind is not None and self.stamp_reads > self.behind:
+            self.packet = 100
+        return super().getTimestamp()
+
+    def isConnected(self) -> bool:  # noqa: N802
+        return True
+
+    def isProtectiveStopped(self) -> bool:  # noqa: N802
+        return False
+
+    def isEmergencyStopped(self) -> bool:  # noqa: N802
+        return False
+
+    def getRuntimeState(self) -> int:  # noqa: N802
+        return 2  # playing
+
+
+class _Control:
+    connected, ended = True, False
+
+    def kill(self) -> None:
+        self.ended = True
+
+
+def _away(behind: int | None) -> Connection:
+    """A link that last saw fresh data (packet 0) a second ago, twice its watchdog: this process
+    did not run, or did not look, meanwhile."""
+    link = Connection("127.0.0.1", watchdog_timeout=0.5)
+    link.receive, link.control = _Behind(behind), _Control()
+    link.last_ts, link.last_fresh = 0.0, time.monotonic() - 1.0
+    return link
+
+
+@pytest.mark.parametrize("behind", [1, 3, 10])
+def test_data_that_only_looks_old_after_this_process_was_away_is_no_lost_link(behind):
+    """After a stall of this process, ur_rtde's receiving thread (in this process too) may not
+    yet have read the packets that arrived meanwhile: the first look shows the packet from
+    before. It catches up as soon as it runs; the link is lost only if a second look, for a few
+    of the controller's periods, shows nothing newer."""
+    link = _away(behind)
+    state = link.read()
+    assert state.fresh and state.timestamp == 0.8 and link.lost is None
+    assert _away(behind).link_ok()
+
+
+def test_data_that_stays_old_is_a_lost_link_after_the_second_look():
+    link = _away(None)
+    with pytest.raises(RobotConnectionError, match="no fresh robot data for 1.0"):
+        link.read()
+    assert link.lost is not None
+    assert link.receive.stamp_reads > 2  # it looked again (until its deadline) before saying so
+    assert not _away(None).link_ok()

@@ -10,7 +10,7 @@ from typing import Any
 from aptkt.commands._checks import add_jobs_option, add_scheduler_option
 from aptkt.commands._inputs import add_trials_option
 from aptkt.commands._method import add_method_arguments
-from aptkt.experiments.population import LARGEST_BATCH
+from aptkt.experiments.schedule import LARGEST_BATCH
 from aptkt.files import present
 
 DEFAULTS = {"groups": 60, "new": 5, "priors": "3", "budget": 20}

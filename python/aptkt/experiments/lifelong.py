@@ -27,7 +27,8 @@ import numpy as np
 from aptkt.errors import ConfigError, FeatureTableError, InvalidInputError
 from aptkt.experiments.benchmark import _subset, each_result, parallel_map_of, split_trials
 from aptkt.experiments.benchmark_report import announce_checks, checks_line
-from aptkt.experiments.population import ObjectPopulation, schedule
+from aptkt.experiments.population import ObjectPopulation
+from aptkt.experiments.schedule import schedule
 from aptkt.files import write_json_atomically, write_text_atomically
 from aptkt.learning import APTKT, LearnerConfig, PoolEnvironment, PriorKnowledge
 from aptkt.learning.feature_table import FeatureTable
@@ -51,7 +52,7 @@ class LifelongSettings:
     ``stream``: instead of the table's objects, a stream of that many synthetic objects drawn
     from the population fitted on the table (:mod:`aptkt.experiments.population`), one stream
     per order, in batches that grow with the library from ``batch`` to
-    :data:`LARGEST_BATCH` objects (the objects of a batch beyond the ``batch`` learned join the
+    :data:`~aptkt.experiments.schedule.LARGEST_BATCH` objects (the objects of a batch beyond the ``batch`` learned join the
     library with the first half of their trials)."""
 
     orders: int = 20

@@ -38,11 +38,7 @@ from aptkt.learning.identity import ObjectIdentity
 from aptkt.learning.observations import Observations, ObservationTable
 from aptkt.learning.pipeline import transforms_of
 
-__all__ = ["ActionPopulation", "LARGEST_BATCH", "ObjectPopulation", "schedule"]
-
-#: A stream's batches grow with the library (each as large as the library) up to this many
-#: objects.
-LARGEST_BATCH = 50
+__all__ = ["ActionPopulation", "ObjectPopulation"]
 
 
 @dataclass(frozen=True)
@@ -252,15 +248,3 @@ def _generated_space(obs: Observations) -> np.ndarray:
             X[:, logs] = np.log10(np.maximum(X[:, logs], 1e-12))
         blocks.append(X)
     return np.hstack(blocks)
-
-
-def schedule(total: int, first: int, largest: int = LARGEST_BATCH) -> list[int]:
-    """The sizes of the batches that take a library of ``first`` objects to ``total``: each as
-    large as the library (at least ``first``, at most ``largest``); a last batch smaller than
-    ``first`` is left out."""
-    sizes, held = [], first
-    while total - held >= first:
-        size = min(max(held, first), largest, total - held)
-        sizes.append(size)
-        held += size
-    return sizes

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -53,6 +54,11 @@ _CONSISTENT_READ_TRIES = 3
 #: 500 Hz controller shows a shorter one among 8 unless each gap happens to span 4k packets
 #: (about 1 in 4 each on a host missing packets at random: (1/4)^8 = 1.5e-5).
 _FREQUENCY_GAPS = 8
+#: How long data that has looked unchanged for longer than the watchdog is looked at again
+#: before the link counts as lost (s; at least three of the controller's periods): ur_rtde's
+#: receiving thread runs in this process, so after a stall of the process it may not yet have
+#: read what arrived meanwhile. A lost link stays unchanged; a late thread catches up at once.
+_SECOND_LOOK = 0.05
 # Commands ur_rtde's control script executes every cycle without a done-handshake.
 _REALTIME_COMMANDS = frozenset({"speedL", "forceMode"})
 
@@ -248,13 +254,27 @@ class Connection:
             if not (self._control_up() and self.receive.isConnected()):
                 return False
             ts = float(self.receive.getTimestamp())
+            now = time.monotonic()
+            if ts == self.last_ts and now - self.last_fresh > self.watchdog_timeout:
+                (ts,), now = self._second_look(lambda: (float(self.receive.getTimestamp()),))
         except (RuntimeError, AttributeError):  # AttributeError: closed meanwhile
             return False
-        now = time.monotonic()
         if ts != self.last_ts:
             self.last_ts, self.last_fresh = ts, now
             return True
         return now - self.last_fresh <= self.watchdog_timeout
+
+    def _second_look(self, read: Callable[[], tuple[Any, ...]]) -> tuple[tuple[Any, ...], float]:
+        """``read()`` (its first value the packet's timestamp) again until the timestamp
+        changes, for :data:`_SECOND_LOOK` s at most (three periods, if the controller's are
+        longer); returns the last values read and when."""
+        deadline = time.monotonic() + max(_SECOND_LOOK, 3.0 / self.frequency)
+        while True:
+            values = read()
+            now = time.monotonic()
+            if values[0] != self.last_ts or now >= deadline:
+                return values, now
+            time.sleep(0.001)
 
     def lose(self, why: str) -> RobotConnectionError:
         """Mark the link lost, end the control process (nothing more is sent) and return the
@@ -281,6 +301,8 @@ class Connection:
             if not self._control_up():
                 raise self.lose("the RTDE control connection closed")
             ts, pose, speed, force = self._consistent_state()
+            if ts == self.last_ts and now - self.last_fresh > self.watchdog_timeout:
+                (ts, pose, speed, force), now = self._second_look(self._consistent_state)
             fresh = ts != self.last_ts
             if fresh:
                 self.last_ts, self.last_fresh = ts, now
