@@ -20,14 +20,20 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from typing import Protocol
 
 __all__ = [
+    "FeedStall",
     "LatenessProbe",
     "MachineProbe",
     "repeat_if_disturbed",
     "timeout_for",
     "wait_for",
 ]
+
+
+class _Lagging(Protocol):
+    def clock_lag(self) -> float: ...
 
 
 def timeout_for(lateness: float) -> float:
@@ -128,6 +134,32 @@ class MachineProbe:
         if self._proc.stdin is not None:
             self._proc.stdin.close()
         self._proc.wait(timeout=10)
+
+
+class FeedStall:
+    """How long this machine may have kept a controller's watchdog waiting for its feed since
+    :meth:`begin`. A kick crosses three processes — aptkt's supervision, its control client and
+    the controller — and each can be kept waiting in turn: the loopback's control cycle says
+    how late the controller ran (``clock_lag()``), a :class:`MachineProbe` how late any other
+    process did, and the delays along the way add up."""
+
+    def __init__(self, loopback: _Lagging, machine: MachineProbe):
+        self.loopback, self.machine = loopback, machine
+        self.loop_lag = self.machine_late = 0.0
+
+    def begin(self) -> None:
+        self.loopback.clock_lag()
+        self.machine.worst()
+        self.loop_lag = self.machine_late = 0.0
+
+    def measure(self) -> None:
+        """Take in the lateness since the last measurement (the probes forget on reading)."""
+        self.loop_lag = max(self.loop_lag, self.loopback.clock_lag())
+        self.machine_late = max(self.machine_late, self.machine.worst())
+
+    def stall(self) -> float:
+        self.measure()
+        return self.loop_lag + 2 * self.machine_late
 
 
 def wait_for(condition: Callable[[], bool], timeout: float, poll: float = 0.01) -> bool:

@@ -55,6 +55,8 @@ def make_robot(loopback: Loopback, _shared_robot: dict) -> Iterator[Callable[...
     def make(
         pose: tuple[float, ...] = START_POSE, contact: dict | None = None, **limits: float
     ) -> UR10:
+        while robots:  # (one client at a time: a test's next attempt replaces its robot)
+            robots.pop().close()
         loopback.reset(pose=pose)
         loopback.set_contact(contact or DEFAULT_CONTACT)
         robot = UR10(loopback.host, [PLACEMENT], SafetyLimits(**{**FAST, **limits}))
@@ -62,21 +64,32 @@ def make_robot(loopback: Loopback, _shared_robot: dict) -> Iterator[Callable[...
         return robot
 
     yield make
-    for robot in robots:
-        robot.close()
+    while robots:
+        robots.pop().close()
 
 
 @pytest.fixture
-def robot(loopback: Loopback, _shared_robot: dict) -> UR10:
-    """A connected UR10 at the start pose, reused between tests while it stays healthy
-    (connecting is cheap, but ur_rtde's disconnect sleeps 0.5 s per client)."""
-    current = _shared_robot["robot"]
-    healthy = current is not None and current.connected and loopback.state()["program_running"]
-    loopback.reset(pose=START_POSE, keep_program=healthy)
-    loopback.set_contact(DEFAULT_CONTACT)
-    if not healthy:
-        if current is not None:
-            current.close()
-        loopback.reset(pose=START_POSE)
-        current = _shared_robot["robot"] = UR10(loopback.host, [PLACEMENT], SafetyLimits(**FAST))
-    return current
+def healthy_robot(loopback: Loopback, _shared_robot: dict) -> Callable[[], UR10]:
+    """A connected UR10 at the start pose, reused while it stays healthy (connecting is cheap,
+    but ur_rtde's disconnect sleeps 0.5 s per client); a new one after a fault."""
+
+    def get() -> UR10:
+        current = _shared_robot["robot"]
+        healthy = current is not None and current.connected and loopback.state()["program_running"]
+        loopback.reset(pose=START_POSE, keep_program=healthy)
+        loopback.set_contact(DEFAULT_CONTACT)
+        if not healthy:
+            if current is not None:
+                current.close()
+            loopback.reset(pose=START_POSE)
+            current = UR10(loopback.host, [PLACEMENT], SafetyLimits(**FAST))
+            _shared_robot["robot"] = current
+        return current
+
+    return get
+
+
+@pytest.fixture
+def robot(healthy_robot: Callable[[], UR10]) -> UR10:
+    """The shared UR10 at the start pose (:func:`healthy_robot`)."""
+    return healthy_robot()

@@ -21,7 +21,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +30,7 @@ import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a miss
 from loopback_helpers import free_loopback_host  # noqa: E402
 from processes import default_signals  # noqa: E402
 from timing import (  # noqa: E402
+    FeedStall,
     LatenessProbe,
     MachineProbe,
     repeat_if_disturbed,
@@ -74,23 +75,14 @@ class Timing:
     and however late the silence came)."""
 
     probe: LatenessProbe  # in this process, where aptkt runs (but for the signal tests)
-    machine: MachineProbe  # in a process of its own
-    lb: Loopback
+    feed: FeedStall  # the loopback's control cycle and a process of its own
     timeout: float
     hold: float
     run_started: float = 0.0
-    loop_lag: float = 0.0
-    machine_late: float = field(default=0.0)
 
     def start_run(self) -> None:
-        self.lb.clock_lag()
-        self.machine.worst()
-        self.loop_lag = self.machine_late = 0.0
+        self.feed.begin()
         self.run_started = time.monotonic()
-
-    def _measure(self) -> None:
-        self.loop_lag = max(self.loop_lag, self.lb.clock_lag())
-        self.machine_late = max(self.machine_late, self.machine.worst())
 
     def lateness(self, until_ns: int) -> float:
         """The worst lateness from the start of the run to ``until_ns`` (the end of its last
@@ -98,18 +90,13 @@ class Timing:
         holding the GIL when it is destroyed) of this process's threads (aptkt runs in it),
         and over the run of the loopback's control cycle and of the machine: the margin of
         an assertion on a duration, a sample count or a contact found while moving."""
-        self._measure()
+        self.feed.measure()
         in_process = self.probe.worst(self.run_started, until_ns * 1e-9)
-        return max(in_process, self.loop_lag, self.machine_late)
+        return max(in_process, self.feed.loop_lag, self.feed.machine_late)
 
     def stall(self) -> float:
-        """How long the machine may have kept the watchdog's feed waiting during the run. A
-        kick crosses three processes — aptkt's supervision, its control client's and the
-        controller's — and each can be kept waiting in turn: the loopback's control cycle
-        says how late the controller ran, a process of its own how late any other did, and
-        the delays along the way add up."""
-        self._measure()
-        return self.loop_lag + 2 * self.machine_late
+        """How long the machine may have kept the watchdog's feed waiting during the run."""
+        return self.feed.stall()
 
 
 def undisturbed(
@@ -208,7 +195,7 @@ def cell(tmp_path_factory: pytest.TempPathFactory):
             assert patch != src
             (d / "patch.toml").write_text(patch)
             (d / "actions.toml").write_text(actions_toml(2 * timeout))
-            yield d, lb, Timing(probe, machine, lb, timeout, 2 * timeout)
+            yield d, lb, Timing(probe, FeedStall(lb, machine), timeout, 2 * timeout)
     finally:
         probe.stop()
         machine.close()

@@ -162,12 +162,17 @@ class Connection:
         self._in_motion = moving
         if moving:
             self.call("idle", 0.0)  # before the movement's first command
-            return
+        else:
+            self._set_keepalive(self.keepalive_interval)
+
+    def _set_keepalive(self, interval: float) -> None:
+        """Have the control process kick the watchdog every ``interval`` s while idle (0: not
+        at all), if the link is up; a fault of the link is reported by the next command."""
         if self.control is not None and self.lost is None and not self.control.ended:
             try:
-                self.call("idle", self.keepalive_interval)
+                self.call("idle", interval)
             except RobotError:
-                pass  # (the link's fault is reported by the next command)
+                pass
 
     def _detect_frequency(self) -> float:
         """The controller's RTDE rate from its own timestamps: 500 Hz (e-series) or 125 Hz
@@ -197,11 +202,7 @@ class Connection:
 
     def stop_keepalive(self) -> None:
         """The control process stops feeding the watchdog (before the program is stopped)."""
-        if self.control is not None and self.lost is None and not self.control.ended:
-            try:
-                self.call("idle", 0.0)
-            except RobotError:
-                pass
+        self._set_keepalive(0.0)
 
     def disconnect(self) -> None:
         """End the control process and destroy the receive client (the arm must be stopped
