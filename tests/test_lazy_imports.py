@@ -54,3 +54,26 @@ def test_every_exported_name_is_its_modules_object(package) -> None:
         assert name in dir(pkg)
     with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
         _ = pkg.no_such_name
+
+
+def test_a_bad_table_or_a_missing_library_is_refused_before_the_heavy_libraries(tmp_path) -> None:
+    """A mistake in the input is one line in a fraction of a second: the learner's modules
+    (scikit-learn, SciPy) load only once the arguments and the files have been checked."""
+    bad = tmp_path / "touches.csv"
+    bad.write_text("object,action,trial,force.0\na,P,1,x\n")
+    good = tmp_path / "good.csv"
+    good.write_text("object,action,trial,force.0\na,P,1,0.5\n")
+    out = tmp_path / "out"
+    argvs = [
+        ["benchmark", str(bad), "-o", str(out)],
+        ["benchmark", "--recognition", str(bad), "-o", str(out)],
+        ["prior", "build", str(bad), "-o", str(tmp_path / "lib.npz")],
+        ["recognise", "--prior", str(tmp_path / "lib.npz"), str(bad), "-o", str(out)],
+        ["recognise", "--prior", str(tmp_path / "missing.npz"), str(good), "-o", str(out)],
+    ]
+    for argv in argvs:
+        probe = _PROBE.format(argvs=[argv], heavy=HEAVY)
+        done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+        assert done.stderr.count("\n") == 1 and ": error: " in done.stderr, (argv, done.stderr)
+        assert json.loads(done.stdout.splitlines()[-1]) == [], argv

@@ -152,6 +152,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # The arguments and the table are checked before the learner (and scikit-learn) loads.
     from aptkt.commands._checks import (
         MAX_BUDGET,
         MAX_RUNS,
@@ -166,7 +167,7 @@ def run(args: argparse.Namespace) -> int:
     from aptkt.commands._method import learner_config
     from aptkt.commands._session import split_names
     from aptkt.errors import ConfigError
-    from aptkt.experiments.benchmark import PRIOR_CHOICES, BenchmarkSettings, run_benchmark
+    from aptkt.experiments.benchmark_settings import PRIOR_CHOICES, BenchmarkSettings
     from aptkt.experiments.table_limits import MAX_LIBRARY_OBJECTS, read_table_within_limits
 
     jobs(args.jobs)
@@ -287,6 +288,8 @@ def run(args: argparse.Namespace) -> int:
             **run,
         )
         return _strict_exit(args, summary)
+    from aptkt.experiments.benchmark import run_benchmark
+
     return _strict_exit(args, run_benchmark(table, settings, **run))
 
 

@@ -187,8 +187,6 @@ def save_library(prior, path: Path, executor) -> None:
 
 
 def run_build(args: argparse.Namespace) -> int:
-
-    from aptkt.learning import GPSettings, PriorKnowledge
     from aptkt.learning.dataset import load_observations, stored_actions
     from aptkt.learning.extract import ExtractionSettings
     from aptkt.learning.pipeline import transforms_of
@@ -231,6 +229,9 @@ def run_build(args: argparse.Namespace) -> int:
     empty = [a for a, obs in table.items() if len(obs) == 0]
     if empty:
         raise ConfigError(f"no observations of {empty} for the chosen objects/trials")
+    # Only now, with the input read and checked: the library's module loads scikit-learn.
+    from aptkt.learning import GPSettings, PriorKnowledge
+
     with Progress(len(table), "action", "fitting") as bar:
         prior = PriorKnowledge.build(
             table,
@@ -305,9 +306,9 @@ def _from_table(
 
 def load_prior(path: Path, option: str):
     """A prior-knowledge file, checked as it is read (one line naming the file otherwise)."""
+    input_file(path, option)  # (before scikit-learn loads with the library's module)
     from aptkt.learning import PriorKnowledge
 
-    input_file(path, option)
     try:
         return PriorKnowledge.load(path)
     except (ValueError, KeyError, OSError) as exc:

@@ -78,7 +78,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from aptkt.commands.prior import load_prior
-    from aptkt.experiments.recognition_report import write_recognition
 
     source = _source(args)
     trials = parse_trials(args.trials)
@@ -92,16 +91,22 @@ def run(args: argparse.Namespace) -> int:
             f"--output {args.output}: holds a recognition already (give --force to replace it)"
         )
     kind = input_kind(source, "--table" if args.table is not None else "DATASET|TABLE")
-    library = load_prior(args.prior, "--prior")
+    # The touches are checked before the library is loaded (with scikit-learn): a mistake in
+    # them is refused at once.
     if kind == DATASET:
-        observations = _from_data_set(source, library, trials)
+        recorded = _data_set_trials(source, trials)
+        library = load_prior(args.prior, "--prior")
+        observations = _from_data_set(source, library, trials, recorded)
     else:
-        observations = _from_table(source, library, trials)
+        table = _read_table(source, trials)
+        library = load_prior(args.prior, "--prior")
+        observations = _from_table(table, library, trials)
     try:
         result = library.recognise(observations, false_alarm_rate=args.false_alarm_rate)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     from aptkt import __version__
+    from aptkt.experiments.recognition_report import write_recognition
 
     head = {
         "library": str(args.prior),
@@ -139,19 +144,26 @@ def _chosen(observations: dict, trials: Trials | None, path: Path) -> dict:
     return observations
 
 
-def _from_table(path: Path, library: Any, trials: Trials | None) -> dict:
-    """The table's observations of the library's actions, checked against the library's
-    features: the same modalities, and where the library was built from a table, the same
-    columns — missing and extra ones named."""
-    import numpy as np
-
+def _read_table(path: Path, trials: Trials | None) -> Any:
+    """The feature table, checked against the limits and for the chosen trials."""
     from aptkt.experiments.table_limits import read_table_within_limits
-    from aptkt.learning.feature_table import table_columns
 
     table = read_table_within_limits(path, library=True)
     if len(table.objects) == 0:
         raise ConfigError(f"{path}: holds no rows")
     check_trials(trials, table.trials.tolist(), path)
+    return table
+
+
+def _from_table(table: Any, library: Any, trials: Trials | None) -> dict:
+    """The table's observations of the library's actions, checked against the library's
+    features: the same modalities, and where the library was built from a table, the same
+    columns — missing and extra ones named."""
+    import numpy as np
+
+    from aptkt.learning.feature_table import table_columns
+
+    path = table.path
     actions = [a for a in table.action_names if a in library]
     if not actions:
         raise ConfigError(
@@ -195,13 +207,19 @@ def _from_table(path: Path, library: Any, trials: Trials | None) -> dict:
     return _chosen(table.observations(actions, rows), trials, path)
 
 
-def _from_data_set(path: Path, library: Any, trials: Trials | None) -> dict:
+def _data_set_trials(path: Path, trials: Trials | None) -> list[int]:
+    """The data set's recorded trials, once the file is checked and holds the chosen ones."""
     from aptkt.commands._checks import intact_data_set
-    from aptkt.learning.dataset import load_observations, stored_actions
 
     intact_data_set(path, "DATASET")
     recorded = dataset_trials(path)
     check_trials(trials, recorded, path)
+    return recorded
+
+
+def _from_data_set(path: Path, library: Any, trials: Trials | None, recorded: list[int]) -> dict:
+    from aptkt.learning.dataset import load_observations, stored_actions
+
     actions = [a for a in stored_actions(path) if a in library]
     if not actions:
         raise ConfigError(

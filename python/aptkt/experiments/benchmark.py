@@ -32,7 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.errors import ConfigError, FeatureTableError, InvalidInputError
+from aptkt.errors import ConfigError, FeatureTableError
+from aptkt.experiments.benchmark_settings import PRIOR_CHOICES, BenchmarkSettings
 from aptkt.experiments.selection_report import CHECKED as CALIBRATED_LEARNERS
 from aptkt.experiments.selection_report import CHOICE as RANDOM_PICKS_CHOICE
 from aptkt.experiments.selection_report import random_arm
@@ -57,8 +58,6 @@ __all__ = [
     "run_benchmark",
 ]
 
-#: How the prior objects of a group are chosen.
-PRIOR_CHOICES = ("random", "nearest", "farthest")
 #: The learners compared, by the name the results use.
 METHODS: dict[str, dict[str, Any]] = {
     "baseline": {"transfer": "none", "auxiliary": False},
@@ -72,42 +71,6 @@ SHRUNK_NEAREST_NEIGHBOUR = "1-NN shrunk"
 #: The "1-NN shrunk" rule's metric: the prior objects' pooled within-object covariance C of the
 #: table's columns, as ``(1 − s) C + s diag C``, whitened.
 SHRUNK_COVARIANCE = 0.2
-
-
-@dataclass(frozen=True)
-class BenchmarkSettings:
-    """``libraries``: the library sizes (prior objects per group) to compare, in increasing
-    order; one size is the paper's Fig. 7, several are its Fig. 9 question."""
-
-    groups: int = 60
-    new_objects: int = 5
-    libraries: tuple[int, ...] = (3,)
-    budget: int = 20
-    seed: int = 0
-    choices: tuple[str, ...] = PRIOR_CHOICES
-    actions: tuple[str, ...] | None = None
-    config: LearnerConfig = LearnerConfig()
-
-    def __post_init__(self) -> None:
-        for name in ("groups", "new_objects"):
-            if getattr(self, name) < (2 if name != "groups" else 1):
-                raise InvalidInputError(f"{name} must be >= {2 if name != 'groups' else 1}")
-        sizes = tuple(int(k) for k in self.libraries)
-        object.__setattr__(self, "libraries", sizes)
-        if not sizes or min(sizes) < 2 or list(sizes) != sorted(set(sizes)):
-            raise InvalidInputError(
-                f"library sizes must be distinct, increasing and >= 2, got {list(sizes)}"
-            )
-        if self.budget < 0:
-            raise InvalidInputError(f"budget must be >= 0, got {self.budget}")
-        unknown = [c for c in self.choices if c not in PRIOR_CHOICES]
-        if unknown or not self.choices:
-            raise InvalidInputError(f"choices must be among {PRIOR_CHOICES}, got {self.choices}")
-
-    @property
-    def prior_objects(self) -> int:
-        """The largest library's size."""
-        return self.libraries[-1]
 
 
 @dataclass(frozen=True)
