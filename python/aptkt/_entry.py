@@ -4,7 +4,8 @@ Until a command has parsed its arguments it has done nothing: no file is open, n
 connected. A Ctrl-C or SIGTERM in that time (Python's imports take a second or two on a busy
 machine) ends the program at once with one line and the signal's exit code, 130 or 143, rather
 than an import's traceback or a silent death. :func:`aptkt.cli.main` then takes over the
-signals, so that every command stops cleanly.
+signals, so that every command stops cleanly. Once it has returned, a signal is ignored: the
+work is done, and Python's shutdown would otherwise let it kill the process silently.
 
 These handlers are set by :func:`run`, which only the console script calls: importing
 :mod:`aptkt`, :mod:`aptkt.cli` or this module in a program leaves its signals alone.
@@ -46,4 +47,13 @@ def run() -> None:
             signal.signal(signum, _end_at_once)
     from aptkt.cli import main
 
-    sys.exit(main())
+    try:
+        code = main()
+    finally:
+        # The command is over and its output written. Python restores the default handlers
+        # as it shuts down, so a signal in these last milliseconds killed the process without a
+        # word (exit -2) or, a little earlier, reported a finished command as interrupted.
+        # Now it changes nothing.
+        for signum in _LINES:
+            signal.signal(signum, signal.SIG_IGN)
+    sys.exit(code)

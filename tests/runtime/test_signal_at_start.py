@@ -111,3 +111,14 @@ def test_a_signal_the_caller_ignores_stays_ignored(sig):
         preexec_fn=ignore,
     )
     assert proc.returncode == 0 and proc.stdout == "still here\n", proc.stderr
+
+
+@SIGNALS
+def test_a_signal_as_the_finished_command_exits_changes_nothing(sig):
+    """The command has returned and written its output: a signal while Python shuts down (here
+    from an exit hook) neither kills the process silently nor calls it interrupted."""
+    proc = _run_with_stand_in_command(
+        "lambda: (__import__('atexit').register(os.kill, os.getpid(), "
+        f"{int(sig)}), print('done') or 3)[1]"
+    )
+    assert (proc.returncode, proc.stdout, proc.stderr) == (3, "done\n", "")
