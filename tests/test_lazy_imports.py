@@ -58,7 +58,8 @@ def test_every_exported_name_is_its_modules_object(package) -> None:
 
 def test_a_bad_table_or_a_missing_library_is_refused_before_the_heavy_libraries(tmp_path) -> None:
     """A mistake in the input is one line in a fraction of a second: the learner's modules
-    (scikit-learn, SciPy) load only once the arguments and the files have been checked."""
+    (scikit-learn, SciPy) load only once the arguments and the files have been checked, and
+    the table holds enough objects for what was asked."""
     bad = tmp_path / "touches.csv"
     bad.write_text("object,action,trial,force.0\na,P,1,x\n")
     good = tmp_path / "good.csv"
@@ -70,6 +71,10 @@ def test_a_bad_table_or_a_missing_library_is_refused_before_the_heavy_libraries(
         ["prior", "build", str(bad), "-o", str(tmp_path / "lib.npz")],
         ["recognise", "--prior", str(tmp_path / "lib.npz"), str(bad), "-o", str(out)],
         ["recognise", "--prior", str(tmp_path / "missing.npz"), str(good), "-o", str(out)],
+        # too few objects for the groups, the draws or the batches asked for
+        ["benchmark", str(good), "-o", str(out)],
+        ["benchmark", "--recognition", str(good), "-o", str(out)],
+        ["benchmark", "--lifelong", str(good), "-o", str(out)],
     ]
     for argv in argvs:
         probe = _PROBE.format(argvs=[argv], heavy=HEAVY)

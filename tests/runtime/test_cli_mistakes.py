@@ -56,6 +56,34 @@ MISTAKES = [
     ),
     (["prior", "build", "{d}/d.h5", "-o", "{d}/afile/x.npz"], "is a file"),
     (["collect", *SIM, "--objects", "towel", "-n", "1", "-o", "{d}/afile/x.h5"], "is a file"),
+    # an output that is an input: replacing it would destroy what is read, --force or not
+    (["prior", "build", "{d}/d.h5", "-o", "{d}/d.h5", "--force"], "is the input DATASET|TABLE"),
+    (
+        ["dataset", "export-features", "{d}/d.h5", "-o", "{d}/d.h5", "--force"],
+        "is the input DATASET",
+    ),
+    (
+        ["dataset", "generate", "-o", "{d}/afile", "--actions-file", "{d}/afile", "--force"]
+        + DATA_GEN,
+        "is the input --actions-file",
+    ),
+    (
+        [*"collect --robot sim --objects towel -n 1 --force".split(), "-o", "{d}/afile"]
+        + ["--objects-file", "{d}/afile"],
+        "is the input --objects-file",
+    ),
+    (
+        ["learn", *SIM, "--prior", "{d}/p.npz", "--objects", "towel,cork_board"]
+        + ["-o", "{d}/new/L", "--record", "{d}/p.npz"],
+        "is the input --prior",
+    ),
+    # an input of the wrong kind, said as what it is
+    (["benchmark", "{d}/trunc.h5", "-o", "{d}/new/b"], "is not a readable HDF5 file"),
+    (["benchmark", "{d}/p.npz", "-o", "{d}/new/b"], "(.npz); as TABLE give a feature table"),
+    (
+        ["prior", "build", "{d}/p.npz", "-o", "{d}/new/x.npz"],
+        "(.npz); as DATASET|TABLE give a data set",
+    ),
     # an output path that is a directory
     (["dataset", "generate", "-o", "{d}/dir", "--force", *DATA_GEN], "is a directory"),
     (["prior", "build", "{d}/d.h5", "-o", "{d}/dir"], "is a directory"),

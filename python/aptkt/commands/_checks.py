@@ -9,7 +9,7 @@ import argparse
 import math
 import os
 from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 from aptkt.errors import ConfigError
@@ -236,6 +236,23 @@ def output_file(path: str | Path, option: str = "--output") -> Path:
     _regular(path, option)
     _writable(_existing_ancestor(path, option), path, option)
     return path
+
+
+def not_an_input(
+    output: str | Path, option: str, inputs: Mapping[str, str | Path | Iterable | None]
+) -> None:
+    """Writing ``output`` must not destroy what the command reads: refused, with or without
+    --force, when it names one of ``inputs`` (``{option or argument: path or paths}``; links
+    followed), which a command would read and then replace with something else."""
+    target = os.path.realpath(output)
+    for name, given in inputs.items():
+        paths = [given] if isinstance(given, (str, Path)) else list(given or ())
+        for path in paths:
+            if os.path.realpath(path) == target:
+                raise ConfigError(
+                    f"{option} {output}: is the input {name} {path}; writing there would "
+                    "destroy what this command reads (give another name)"
+                )
 
 
 def _regular(path: Path, option: str) -> None:

@@ -148,10 +148,13 @@ def check_trials(chosen: Trials | None, available: Iterable[int], source: str | 
         )
 
 
-def input_kind(path: str | Path, option: str = "DATASET|TABLE") -> str:
+def input_kind(
+    path: str | Path, option: str = "DATASET|TABLE", prior_option: str | None = None
+) -> str:
     """:data:`TABLE` or :data:`DATASET`, by what the file is: a feature table is a .csv file, or
     an HDF5 file of columns (1-D data sets at its root); a data set of this skin is an HDF5 file
-    of groups. Anything else is one line saying what to give."""
+    of groups. Anything else is one line saying what to give (a library file: where it goes,
+    ``prior_option``, if the command takes one)."""
     import h5py
 
     from aptkt.learning.feature_table import is_feature_table
@@ -160,9 +163,14 @@ def input_kind(path: str | Path, option: str = "DATASET|TABLE") -> str:
         raise ConfigError(f"{path}: no such data set or feature table")
     path = input_file(path, option)
     if path.suffix.lower() == ".npz":
+        where = f"give it with {prior_option}, and " if prior_option else ""
         raise ConfigError(
-            f"{path}: is a prior-knowledge file (.npz); give it with --prior, and as {option} a "
-            "data set (HDF5) or a feature table (.csv, .h5)"
+            f"{path}: is a prior-knowledge file (.npz); {where}as {option} give "
+            + (
+                "a feature table (.csv, .h5)"
+                if option in ("TABLE", "--from", "--table")
+                else "a data set (HDF5) or a feature table (.csv, .h5)"
+            )
         )
     if is_feature_table(path):
         return TABLE
@@ -181,11 +189,23 @@ def input_kind(path: str | Path, option: str = "DATASET|TABLE") -> str:
     return DATASET
 
 
-def refuse_data_set(path: str | Path, command: str, option: str = "TABLE") -> None:
+def refuse_data_set(
+    path: str | Path, command: str, option: str = "TABLE", prior_option: str | None = None
+) -> None:
     """A command that reads only feature tables, given a data set: one line saying how to
     write its table (the features of this skin, as this package extracts them)."""
-    if input_kind(path, option) == DATASET:
+    if input_kind(path, option, prior_option) == DATASET:
+        import h5py
+
         name = Path(path)
+        try:
+            with h5py.File(name, "r"):
+                pass
+        except (OSError, ValueError):
+            raise ConfigError(
+                f"{path}: is not a readable HDF5 file (damaged or cut short?); {command} reads "
+                "a feature table (.csv, .h5)"
+            ) from None
         raise ConfigError(
             f"{path}: is a data set of this skin; {command} reads a feature table: write one with "
             f"'aptkt dataset export-features {name} -o {name.with_suffix('.csv')}'"

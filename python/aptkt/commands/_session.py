@@ -75,6 +75,14 @@ def add_session_arguments(p: argparse.ArgumentParser, *, robot_required: bool = 
     )
 
 
+def session_inputs(args: argparse.Namespace) -> dict[str, Any]:
+    """The files a robot session reads, by option: an output must not name one."""
+    return {
+        option: getattr(args, option[2:].replace("-", "_"), None)
+        for option in ("--workspace", "--patch", "--objects-file", "--actions-file")
+    }
+
+
 def add_action_arguments(p: argparse.ArgumentParser, *, default_help: str) -> None:
     p.add_argument("--actions", metavar="P1,S1,...", help=f"action names ({default_help})")
     p.add_argument(

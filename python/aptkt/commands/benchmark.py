@@ -167,7 +167,13 @@ def run(args: argparse.Namespace) -> int:
     from aptkt.commands._method import learner_config
     from aptkt.commands._session import split_names
     from aptkt.errors import ConfigError
-    from aptkt.experiments.benchmark_settings import PRIOR_CHOICES, BenchmarkSettings
+    from aptkt.experiments.benchmark_settings import (
+        PRIOR_CHOICES,
+        BenchmarkSettings,
+        check_enough_objects,
+        check_lifelong_objects,
+        check_recognition_objects,
+    )
     from aptkt.experiments.table_limits import MAX_LIBRARY_OBJECTS, read_table_within_limits
 
     jobs(args.jobs)
@@ -246,6 +252,14 @@ def run(args: argparse.Namespace) -> int:
         check_trials(trials, table.trials.tolist(), args.table)
         table = table.take(trials.mask(table.trials))
     known_names(settings.actions, table.action_names, "--actions")
+    # Enough objects for what was asked, before the learner loads.
+    if args.recognition:
+        check_recognition_objects(table.object_names, libraries[0], args.new)
+    elif args.lifelong:
+        if args.population is None:  # (--from: the stream's objects, checked above)
+            check_lifelong_objects(table.object_names, args.new)
+    else:
+        check_enough_objects(table.object_names, settings)
     if args.recognition:
         from aptkt.experiments.recognition_benchmark import run_recognition_benchmark
 

@@ -9,6 +9,7 @@ from collections.abc import Callable
 from aptkt.commands._checks import (
     add_renamed_option,
     at_least,
+    not_an_input,
     output_file,
     resume_or_force,
     trial_plan,
@@ -20,6 +21,7 @@ from aptkt.commands._session import (
     available_actions,
     make_session,
     pick_actions,
+    session_inputs,
     split_names,
 )
 from aptkt.errors import ConfigError
@@ -102,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
     at_least(args.seed, 0, "--seed")
     resume_or_force(args.resume, args.force)
     output_file(args.output)
+    not_an_input(args.output, "--output", session_inputs(args))
     objects = split_names(args.objects, "--objects") or []  # a required option
     available = available_actions(args)
     names = split_names(args.actions, "--actions") or list(available)

@@ -12,6 +12,7 @@ from aptkt.commands._checks import (
     input_file,
     intact_data_set,
     jobs,
+    not_an_input,
     output_file,
     resume_or_force,
     rewritable_file,
@@ -175,6 +176,11 @@ def build_plan(args: argparse.Namespace):  # -> GenerationPlan
     jobs(args.jobs)
     resume_or_force(args.resume, args.force)
     output_file(args.output)
+    not_an_input(
+        args.output,
+        "--output",
+        {"--objects-file": args.objects_file, "--actions-file": args.actions_file},
+    )
     for path in args.objects_file or ():
         input_file(path, "--objects-file")  # (a device or FIFO would be read for ever)
     library = load_library(*args.objects_file)
@@ -330,6 +336,7 @@ def run_export_features(args: argparse.Namespace) -> int:
     input_file(args.file, "DATASET")
     intact_data_set(args.file, "DATASET")
     output_file(args.output)
+    not_an_input(args.output, "--output", {"DATASET": args.file})
     if present(args.output) and not args.force:
         raise ConfigError(f"--output {args.output}: exists (give --force to replace it)")
     try:

@@ -16,6 +16,7 @@ from aptkt.commands._checks import (
     check_target_accuracy,
     input_file,
     intact_data_set,
+    not_an_input,
     output_dir,
     output_file,
 )
@@ -28,6 +29,7 @@ from aptkt.commands._session import (
     make_session,
     object_list,
     pick_actions,
+    session_inputs,
     split_names,
 )
 from aptkt.errors import ConfigError
@@ -185,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
             )
         from aptkt.commands._inputs import refuse_data_set
 
-        refuse_data_set(args.table, "aptkt learn", option)
+        refuse_data_set(args.table, "aptkt learn", option, prior_option="--prior")
         return learn_table.run(args)
     for option, value in (("--robot", args.robot), ("--prior", args.prior)):
         if not value:
@@ -218,6 +220,7 @@ def run(args: argparse.Namespace) -> int:
     output_dir(args.output)
     if args.record:
         output_file(args.record, "--record")
+        not_an_input(args.record, "--record", {**session_inputs(args), "--prior": args.prior})
         if Path(args.record).is_symlink():  # the record file is appended to, in place
             raise ConfigError(
                 f"--record {args.record}: is a symbolic link; aptkt appends to no file through "

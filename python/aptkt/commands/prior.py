@@ -14,6 +14,7 @@ from aptkt.commands._checks import (
     input_file,
     intact_data_set,
     jobs,
+    not_an_input,
     output_file,
     scheduler_available,
 )
@@ -205,6 +206,7 @@ def run_build(args: argparse.Namespace) -> int:
     at_most(args.restarts, MAX_RESTARTS, "--restarts", "restarts bound every model's fit")
     # Before the features are extracted and the models fitted: not after.
     output_file(args.output)
+    not_an_input(args.output, "--output", {"DATASET|TABLE": args.data})
     if present(args.output) and not args.force:
         raise ConfigError(f"--output {args.output}: exists (give --force to replace it)")
     jobs(args.jobs)

@@ -90,7 +90,9 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(
             f"--output {args.output}: holds a recognition already (give --force to replace it)"
         )
-    kind = input_kind(source, "--table" if args.table is not None else "DATASET|TABLE")
+    kind = input_kind(
+        source, "--table" if args.table is not None else "DATASET|TABLE", prior_option="--prior"
+    )
     # The touches are checked before the library is loaded (with scikit-learn): a mistake in
     # them is refused at once.
     if kind == DATASET:

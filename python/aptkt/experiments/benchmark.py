@@ -33,7 +33,11 @@ from typing import Any
 import numpy as np
 
 from aptkt.errors import ConfigError, FeatureTableError
-from aptkt.experiments.benchmark_settings import PRIOR_CHOICES, BenchmarkSettings
+from aptkt.experiments.benchmark_settings import (
+    PRIOR_CHOICES,
+    BenchmarkSettings,
+    check_enough_objects,
+)
 from aptkt.experiments.selection_report import CHECKED as CALIBRATED_LEARNERS
 from aptkt.experiments.selection_report import CHOICE as RANDOM_PICKS_CHOICE
 from aptkt.experiments.selection_report import random_arm
@@ -140,15 +144,6 @@ def prior_choices(
         }
         for k in sizes
     }
-
-
-def check_enough_objects(objects: Sequence[str], s: BenchmarkSettings) -> None:
-    """A group needs its new objects and its largest library, all distinct."""
-    if len(objects) < s.new_objects + s.prior_objects:
-        raise FeatureTableError(
-            f"{s.new_objects} new and {s.prior_objects} prior objects need at least "
-            f"{s.new_objects + s.prior_objects} objects; the table has {len(objects)}"
-        )
 
 
 def draw_groups(

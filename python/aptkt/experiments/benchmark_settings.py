@@ -4,12 +4,19 @@ numerical libraries are loaded, so a mistake is refused in a fraction of a secon
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
-from aptkt.errors import InvalidInputError
+from aptkt.errors import FeatureTableError, InvalidInputError
 from aptkt.learning.config import LearnerConfig
 
-__all__ = ["PRIOR_CHOICES", "BenchmarkSettings"]
+__all__ = [
+    "PRIOR_CHOICES",
+    "BenchmarkSettings",
+    "check_enough_objects",
+    "check_lifelong_objects",
+    "check_recognition_objects",
+]
 
 #: How the prior objects of a group are chosen.
 PRIOR_CHOICES = ("random", "nearest", "farthest")
@@ -49,3 +56,30 @@ class BenchmarkSettings:
     def prior_objects(self) -> int:
         """The largest library's size."""
         return self.libraries[-1]
+
+
+def check_enough_objects(objects: Sequence[str], s: BenchmarkSettings) -> None:
+    """A group needs its new objects and its largest library, all distinct."""
+    if len(objects) < s.new_objects + s.prior_objects:
+        raise FeatureTableError(
+            f"{s.new_objects} new and {s.prior_objects} prior objects need at least "
+            f"{s.new_objects + s.prior_objects} objects; the table has {len(objects)}"
+        )
+
+
+def check_recognition_objects(objects: Sequence[str], library: int, unseen: int) -> None:
+    """A recognition draw needs its library and its unseen objects, all distinct."""
+    if len(objects) < library + unseen:
+        raise FeatureTableError(
+            f"a library of {library} and {unseen} unseen objects need {library + unseen} objects; "
+            f"the table has {len(objects)}"
+        )
+
+
+def check_lifelong_objects(objects: Sequence[str], batch: int) -> None:
+    """A lifelong order needs a starting library and one batch."""
+    if len(objects) < 2 * batch:
+        raise FeatureTableError(
+            f"a lifelong benchmark in batches of {batch} needs at least {2 * batch} objects "
+            f"(a starting library and one batch); the table has {len(objects)}"
+        )

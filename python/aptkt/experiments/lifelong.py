@@ -24,9 +24,10 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.errors import ConfigError, FeatureTableError, InvalidInputError
+from aptkt.errors import ConfigError, InvalidInputError
 from aptkt.experiments.benchmark import _subset, each_result, parallel_map_of, split_trials
 from aptkt.experiments.benchmark_report import announce_checks, checks_line
+from aptkt.experiments.benchmark_settings import check_lifelong_objects
 from aptkt.experiments.population import ObjectPopulation
 from aptkt.experiments.schedule import schedule
 from aptkt.files import write_json_atomically, write_text_atomically
@@ -141,11 +142,7 @@ def _blocks(n: int, objects: int) -> list[slice]:
 
 
 def _orders(objects: Sequence[str], s: LifelongSettings) -> list[list[str]]:
-    if len(objects) < 2 * s.batch:
-        raise FeatureTableError(
-            f"a lifelong benchmark in batches of {s.batch} needs at least {2 * s.batch} objects "
-            f"(a starting library and one batch); the table has {len(objects)}"
-        )
+    check_lifelong_objects(objects, s.batch)
     rng = np.random.default_rng(s.seed)
     return [[str(o) for o in rng.permutation(list(objects))] for _ in range(s.orders)]
 

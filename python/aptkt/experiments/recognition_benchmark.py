@@ -15,9 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from aptkt.errors import ConfigError, FeatureTableError
+from aptkt.errors import ConfigError
 from aptkt.experiments.aggregate import estimate
 from aptkt.experiments.benchmark import split_trials
+from aptkt.experiments.benchmark_settings import check_recognition_objects
 from aptkt.experiments.report import ci, markdown_table
 from aptkt.files import write_json_atomically, write_text_atomically
 from aptkt.learning import PriorKnowledge
@@ -83,11 +84,7 @@ def run_recognition_benchmark(
 
     names = actions or table.action_names
     objects = table.object_names
-    if len(objects) < library + unseen:
-        raise FeatureTableError(
-            f"a library of {library} and {unseen} unseen objects need {library + unseen} objects; "
-            f"the table has {len(objects)}"
-        )
+    check_recognition_objects(objects, library, unseen)
     rng = np.random.default_rng(seed)
     draws = []
     for _ in range(groups):
