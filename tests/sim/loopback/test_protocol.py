@@ -221,3 +221,39 @@ def test_a_busy_port_is_a_clear_start_error():
         blocker.listen()
         with pytest.raises(LoopbackError, match=f"loopback on {host} failed to start: OSError"):
             Loopback(host).start()
+
+
+def test_a_program_starts_after_the_inputs_sent_before_it(rtde, server, monkeypatch):
+    """ur_rtde stops a running program with command 255 in input_int_register_0, clears the
+    register and uploads its script. A reader thread kept waiting (a loaded machine) handled
+    the clear only after the new program had started, which read the stale 255 and stopped:
+    now a program that arrives on a script port starts after the inputs sent before it."""
+    ctl = server.controller
+    rtde.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # (as ur_rtde's client)
+    recipe, _ = rtde.setup_inputs(["input_int_register_0"])
+    rtde.send("S")
+    rtde.recv_kind("S")
+    rtde.send("U", struct.pack(">Bi", recipe, 255))
+    deadline = time.monotonic() + 1.0
+    while ctl.input_int[0] != 255 and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert ctl.input_int[0] == 255
+    applied = ctl.apply_inputs
+
+    def kept_waiting(values):  # the reader thread runs 0.3 s late
+        time.sleep(0.3)
+        applied(values)
+
+    monkeypatch.setattr(ctl, "apply_inputs", kept_waiting)
+    rtde.send("U", struct.pack(">Bi", recipe, 0))  # the clear, then at once the script
+    script = "def rtde_control():\n# HEADER_BEGIN\n  x = 1\nend\n"  # (offset 0)
+    with socket.create_connection((server.host, 30003), timeout=2.0) as s:
+        s.sendall(script.encode())
+        deadline = time.monotonic() + 2.0
+        while not ctl.program_running and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(0.1)  # (a few control cycles: a stale 255 would have stopped it)
+    log = [message for _, message in list(ctl.text_log)[-5:]]
+    assert ctl.program_running and ctl.input_int[0] == 0, log
+    assert "Received stop script!" not in log
+    ctl.stop_program("test over")

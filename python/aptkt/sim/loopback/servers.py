@@ -9,6 +9,7 @@ loopback network works, which lets two loopbacks run side by side on 127.0.0.1 a
 from __future__ import annotations
 
 import itertools
+import select
 import socket
 import struct
 import threading
@@ -26,14 +27,8 @@ DEFAULT_PORTS = {"rtde": 30004, "dashboard": 29999, "script": (30001, 30002, 300
 _ids = itertools.count(1)
 
 
-def _recv_exact(sock: socket.socket, n: int) -> bytes:
-    buf = bytearray()
-    while len(buf) < n:
-        chunk = sock.recv(n - len(buf))
-        if not chunk:
-            raise ConnectionError("peer closed")
-        buf += chunk
-    return bytes(buf)
+#: How long an RTDE reader waits for data before looking at its connection again (s).
+_IDLE_WAIT = 0.5
 
 
 class _Client:
@@ -90,6 +85,11 @@ class _RtdeClient(_Client):
         self.outputs: list[rtde.Recipe] = []
         self.inputs: dict[int, rtde.Recipe] = {}
         self.started = False
+        # Bytes are taken off the socket and their packages handled only under this lock, by
+        # the reader thread or by a program's start (:meth:`take_input`): whatever has left
+        # the kernel's buffer is then handled before the lock is let go.
+        self._input_lock = threading.Lock()
+        self._pending = b""
 
     def close(self) -> None:
         self.started = False
@@ -98,63 +98,85 @@ class _RtdeClient(_Client):
         super().close()
 
     def serve(self) -> None:
-        ctl = self.server.controller
         while not self.closed:
-            size, kind = rtde.HEADER.unpack(_recv_exact(self.sock, rtde.HEADER.size))
-            if size < rtde.HEADER.size:
-                raise InvalidInputError("bad RTDE package size")
-            payload = _recv_exact(self.sock, size - rtde.HEADER.size)
-            if self.server.frozen:
-                continue  # a pulled cable: nothing arrives at the controller
-            if kind == rtde.REQUEST_PROTOCOL_VERSION:
-                (version,) = struct.unpack(">H", payload[:2])
-                accepted = version == 2
-                if accepted:
-                    self.protocol_version = 2
-                self.send(rtde.pack(kind, struct.pack(">B", 1 if accepted else 0)))
-            elif kind == rtde.GET_URCONTROL_VERSION:
-                self.send(rtde.pack(kind, struct.pack(">IIII", *ctl.config.version)))
-            elif kind == rtde.SETUP_OUTPUTS:
-                (frequency,) = struct.unpack(">d", payload[:8])
-                names = [n for n in payload[8:].decode("ascii").split(",") if n]
-                types = [rtde.output_type(n) or "NOT_FOUND" for n in names]
-                ok = names and "NOT_FOUND" not in types and 0 < frequency <= ctl.config.frequency
-                recipe_id = len(self.outputs) + 1 if ok else 0
-                if ok:
-                    recipe = rtde.Recipe(recipe_id, names, types, frequency)
-                    recipe.divisor = max(1, round(ctl.config.frequency / frequency))  # type: ignore[attr-defined]
-                    self.outputs.append(recipe)
-                self.send(
-                    rtde.pack(kind, struct.pack(">B", recipe_id) + ",".join(types).encode("ascii"))
+            select.select([self.sock], [], [], _IDLE_WAIT)  # (data stays in the kernel's buffer)
+            self.take_input()
+
+    def take_input(self) -> None:
+        """Take every byte that has arrived and handle each complete package."""
+        with self._input_lock:
+            while True:
+                try:
+                    chunk = self.sock.recv(65536, socket.MSG_DONTWAIT)
+                except BlockingIOError:
+                    break
+                if not chunk:
+                    raise ConnectionError("peer closed")
+                self._pending += chunk
+            while len(self._pending) >= rtde.HEADER.size:
+                size, kind = rtde.HEADER.unpack(self._pending[: rtde.HEADER.size])
+                if size < rtde.HEADER.size:
+                    raise InvalidInputError("bad RTDE package size")
+                if len(self._pending) < size:
+                    break
+                payload, self._pending = (
+                    self._pending[rtde.HEADER.size : size],
+                    self._pending[size:],
                 )
-            elif kind == rtde.SETUP_INPUTS:
-                names = [n for n in payload.decode("ascii").split(",") if n]
-                types = ctl.claim_inputs(self.id, names)
-                ok = names and all(t not in ("NOT_FOUND", "IN_USE") for t in types)
-                recipe_id = len(self.inputs) + 1 if ok else 0
-                if ok:
-                    self.inputs[recipe_id] = rtde.Recipe(recipe_id, names, types)
-                self.send(
-                    rtde.pack(kind, struct.pack(">B", recipe_id) + ",".join(types).encode("ascii"))
-                )
-            elif kind == rtde.START:
-                self.started = bool(self.outputs) or bool(self.inputs)
-                self.send(rtde.pack(kind, struct.pack(">B", 1 if self.started else 0)))
-            elif kind == rtde.PAUSE:
-                self.started = False
-                self.send(rtde.pack(kind, struct.pack(">B", 1)))
-            elif kind == rtde.DATA_PACKAGE:
-                in_recipe = self.inputs.get(payload[0]) if payload else None
-                if in_recipe is not None and len(payload) >= in_recipe.struct.size:
-                    ctl.apply_inputs(in_recipe.decode(payload))
-                else:
-                    ctl.log(f"RTDE: data package for unknown input recipe {payload[:1]!r}")
-            elif kind == rtde.TEXT_MESSAGE:
-                ctl.log(
-                    f"RTDE text from client: {payload[1 : 1 + payload[0]].decode('latin-1', 'replace')}"
-                )
+                if not self.server.frozen:  # (a pulled cable: nothing arrives)
+                    self._handle(kind, payload)
+
+    def _handle(self, kind: int, payload: bytes) -> None:
+        ctl = self.server.controller
+        if kind == rtde.REQUEST_PROTOCOL_VERSION:
+            (version,) = struct.unpack(">H", payload[:2])
+            accepted = version == 2
+            if accepted:
+                self.protocol_version = 2
+            self.send(rtde.pack(kind, struct.pack(">B", 1 if accepted else 0)))
+        elif kind == rtde.GET_URCONTROL_VERSION:
+            self.send(rtde.pack(kind, struct.pack(">IIII", *ctl.config.version)))
+        elif kind == rtde.SETUP_OUTPUTS:
+            (frequency,) = struct.unpack(">d", payload[:8])
+            names = [n for n in payload[8:].decode("ascii").split(",") if n]
+            types = [rtde.output_type(n) or "NOT_FOUND" for n in names]
+            ok = names and "NOT_FOUND" not in types and 0 < frequency <= ctl.config.frequency
+            recipe_id = len(self.outputs) + 1 if ok else 0
+            if ok:
+                recipe = rtde.Recipe(recipe_id, names, types, frequency)
+                recipe.divisor = max(1, round(ctl.config.frequency / frequency))  # type: ignore[attr-defined]
+                self.outputs.append(recipe)
+            self.send(
+                rtde.pack(kind, struct.pack(">B", recipe_id) + ",".join(types).encode("ascii"))
+            )
+        elif kind == rtde.SETUP_INPUTS:
+            names = [n for n in payload.decode("ascii").split(",") if n]
+            types = ctl.claim_inputs(self.id, names)
+            ok = names and all(t not in ("NOT_FOUND", "IN_USE") for t in types)
+            recipe_id = len(self.inputs) + 1 if ok else 0
+            if ok:
+                self.inputs[recipe_id] = rtde.Recipe(recipe_id, names, types)
+            self.send(
+                rtde.pack(kind, struct.pack(">B", recipe_id) + ",".join(types).encode("ascii"))
+            )
+        elif kind == rtde.START:
+            self.started = bool(self.outputs) or bool(self.inputs)
+            self.send(rtde.pack(kind, struct.pack(">B", 1 if self.started else 0)))
+        elif kind == rtde.PAUSE:
+            self.started = False
+            self.send(rtde.pack(kind, struct.pack(">B", 1)))
+        elif kind == rtde.DATA_PACKAGE:
+            in_recipe = self.inputs.get(payload[0]) if payload else None
+            if in_recipe is not None and len(payload) >= in_recipe.struct.size:
+                ctl.apply_inputs(in_recipe.decode(payload))
             else:
-                ctl.log(f"RTDE: unknown package type {kind}")
+                ctl.log(f"RTDE: data package for unknown input recipe {payload[:1]!r}")
+        elif kind == rtde.TEXT_MESSAGE:
+            ctl.log(
+                f"RTDE text from client: {payload[1 : 1 + payload[0]].decode('latin-1', 'replace')}"
+            )
+        else:
+            ctl.log(f"RTDE: unknown package type {kind}")
 
 
 class _DashboardClient(_Client):
@@ -193,6 +215,7 @@ class _ScriptClient(_Client):
                 program, text = _split_program(text)
                 if program is None:
                     break
+                self.server.catch_up_inputs()
                 self.server.controller.load_script(program, self.port)
 
 
@@ -375,6 +398,21 @@ class LoopbackServer:
                     client.send(recipe.encode(self.controller.output_values(recipe.names)))
 
     # ------------------------------------------------------------ faults
+    def catch_up_inputs(self) -> None:
+        """Handle every RTDE input package that has arrived, now. A real controller applies an
+        input package in the control cycle it arrives in; here a reader thread kept waiting (a
+        loaded machine) handled it only after a program that arrived later on a script port had
+        started: ur_rtde stops a running program (stop command 255 in input_int_register_0),
+        clears the register and uploads its script, and the new program read the stale 255
+        and stopped at once."""
+        with self._lock:
+            readers = [c for c in self._clients if isinstance(c, _RtdeClient)]
+        for reader in readers:
+            try:
+                reader.take_input()
+            except (OSError, ConnectionError, struct.error, ValueError):
+                pass  # (the connection's own reader ends it)
+
     def drop_connections(self, refuse_for: float | None = 0.0) -> int:
         """Close every client connection (the controller went away from the network).
 
