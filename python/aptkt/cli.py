@@ -8,6 +8,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -137,8 +138,59 @@ class _ClosedPipeGuard:
         return getattr(self._stream, name)
 
 
-def _terminate(signum: int, frame: object) -> None:
-    raise Terminated(f"signal {signal.Signals(signum).name}")
+# How many calls of the command's unraisable hook are running (see _keep_swallowed_signals).
+_hook_depth = 0
+
+
+def _stop_the_command(signum: int, frame: object) -> None:
+    if _hook_depth:
+        # Raised inside the hook, the exception would be swallowed as well: signal again once
+        # the hook has returned.
+        _signal_again_soon(signum)
+        return
+    if signum == signal.SIGTERM:
+        raise Terminated(f"signal {signal.Signals(signum).name}")
+    raise KeyboardInterrupt
+
+
+def _signal_again_soon(signum: int) -> None:
+    # Sent by another thread once the main thread has left the hook (starting that thread
+    # alone gives the main thread's handler a chance to run, still inside it); sent to the
+    # main thread, so that a blocking call it makes meanwhile is interrupted.
+    main_thread = threading.main_thread().ident
+
+    def send() -> None:
+        while _hook_depth:
+            time.sleep(0.001)
+        if main_thread is not None:
+            signal.pthread_kill(main_thread, signum)
+
+    try:
+        threading.Thread(target=send, name="aptkt-signal-again", daemon=True).start()
+    except RuntimeError:  # (the interpreter is shutting down: the command is over)
+        pass
+
+
+def _keep_swallowed_signals(fallback: Any) -> Any:
+    """A ``sys.unraisablehook`` for the time a command runs. Python runs a signal's handler
+    wherever the main thread is; in a garbage collector's callback or a ``__del__`` the
+    handler's exception cannot propagate, and Python prints "Exception ignored" and goes on:
+    the command would not stop (seen under load: a SIGTERM during a weakref callback, and the
+    process ran on). Such a signal is sent again, to be handled in the command's own code."""
+
+    def hook(unraisable: Any) -> None:
+        global _hook_depth
+        _hook_depth += 1
+        try:
+            exc = unraisable.exc_value
+            if isinstance(exc, KeyboardInterrupt):
+                _signal_again_soon(signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)
+            else:
+                fallback(unraisable)
+        finally:
+            _hook_depth -= 1
+
+    return hook
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -151,6 +203,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     created = _missing_dirs(args)
     code = 1
     previous: dict[int, Any] = {}
+    unraisablehook = sys.unraisablehook
     stdout = sys.stdout
     guard = _ClosedPipeGuard(stdout)
     sys.stdout = guard
@@ -161,12 +214,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             # the spot. Ctrl-C raises KeyboardInterrupt again, whatever start-up set
             # (aptkt._entry). A signal the caller ignores stays ignored (a shell's background
             # job ignores Ctrl-C). Set inside the try: a signal right after is handled below.
-            for signum, handler in (
-                (signal.SIGINT, signal.default_int_handler),
-                (signal.SIGTERM, _terminate),
-            ):
+            sys.unraisablehook = _keep_swallowed_signals(unraisablehook)
+            for signum in (signal.SIGINT, signal.SIGTERM):
                 if signal.getsignal(signum) != signal.SIG_IGN:
-                    previous[signum] = signal.signal(signum, handler)
+                    previous[signum] = signal.signal(signum, _stop_the_command)
         code = int(args.func(args) or 0)
         if guard.closed and code == 0:
             code = EXIT_CLOSED_PIPE
@@ -196,6 +247,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if guard.closed and code == 0:
             code = EXIT_CLOSED_PIPE
         sys.stdout = stdout
+        sys.unraisablehook = unraisablehook
         for number, before in previous.items():
             if before is not None:  # (None: not set from Python; nothing to put back)
                 signal.signal(number, before)
