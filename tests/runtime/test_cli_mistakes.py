@@ -84,6 +84,18 @@ MISTAKES = [
         ["prior", "build", "{d}/p.npz", "-o", "{d}/new/x.npz"],
         "(.npz); as DATASET|TABLE give a data set",
     ),
+    (
+        ["recognise", "--prior", "{d}/p.npz", "{d}/p.npz", "-o", "{d}/new/r"],
+        "give it with --prior, and as DATASET|TABLE give a data set (HDF5) or a feature table",
+    ),
+    (
+        ["recognise", "--prior", "{d}/p.npz", "--table", "{d}/p.npz", "-o", "{d}/new/r"],
+        "give it with --prior, and as --table give a feature table (.csv, .h5)",
+    ),
+    (
+        ["learn", "--table", "{d}/trunc.h5", "--objects", "towel,cork_board", "-o", "{d}/new/l"],
+        "is not a readable HDF5 file (damaged or cut short?); aptkt learn reads a feature table",
+    ),
     # an output path that is a directory
     (["dataset", "generate", "-o", "{d}/dir", "--force", *DATA_GEN], "is a directory"),
     (["prior", "build", "{d}/d.h5", "-o", "{d}/dir"], "is a directory"),

@@ -149,12 +149,26 @@ def check_trials(chosen: Trials | None, available: Iterable[int], source: str | 
 
 
 def input_kind(
-    path: str | Path, option: str = "DATASET|TABLE", prior_option: str | None = None
+    path: str | Path,
+    option: str = "DATASET|TABLE",
+    prior_option: str | None = None,
+    *,
+    data_sets: bool = True,
 ) -> str:
     """:data:`TABLE` or :data:`DATASET`, by what the file is: a feature table is a .csv file, or
     an HDF5 file of columns (1-D data sets at its root); a data set of this skin is an HDF5 file
     of groups. Anything else is one line saying what to give (a library file: where it goes,
-    ``prior_option``, if the command takes one)."""
+    ``prior_option``, if the command takes one; a data set only where ``data_sets``). An
+    unreadable .h5 file counts as a data set: the data set reader says what is wrong with it."""
+    kind = _kind(path, option, prior_option, data_sets)
+    return DATASET if kind == _UNREADABLE_HDF5 else kind
+
+
+# What _kind calls a .h5 file that HDF5 cannot open (empty, cut short, damaged).
+_UNREADABLE_HDF5 = "unreadable HDF5"
+
+
+def _kind(path: str | Path, option: str, prior_option: str | None, data_sets: bool) -> str:
     import h5py
 
     from aptkt.learning.feature_table import is_feature_table
@@ -167,9 +181,9 @@ def input_kind(
         raise ConfigError(
             f"{path}: is a prior-knowledge file (.npz); {where}as {option} give "
             + (
-                "a feature table (.csv, .h5)"
-                if option in ("TABLE", "--from", "--table")
-                else "a data set (HDF5) or a feature table (.csv, .h5)"
+                "a data set (HDF5) or a feature table (.csv, .h5)"
+                if data_sets
+                else "a feature table (.csv, .h5)"
             )
         )
     if is_feature_table(path):
@@ -179,7 +193,7 @@ def input_kind(
             members = list(f.values())
     except (OSError, ValueError):
         if path.suffix.lower() in (".h5", ".hdf5"):
-            return DATASET  # empty, cut short, damaged: the data set reader says which
+            return _UNREADABLE_HDF5
         raise ConfigError(
             f"{path}: is neither a feature table (.csv, or HDF5 columns object, action, trial, "
             "<modality>.<k>) nor a data set (HDF5) of aptkt"
@@ -194,18 +208,14 @@ def refuse_data_set(
 ) -> None:
     """A command that reads only feature tables, given a data set: one line saying how to
     write its table (the features of this skin, as this package extracts them)."""
-    if input_kind(path, option, prior_option) == DATASET:
-        import h5py
-
+    kind = _kind(path, option, prior_option, data_sets=False)
+    if kind == _UNREADABLE_HDF5:
+        raise ConfigError(
+            f"{path}: is not a readable HDF5 file (damaged or cut short?); {command} reads "
+            "a feature table (.csv, .h5)"
+        )
+    if kind == DATASET:
         name = Path(path)
-        try:
-            with h5py.File(name, "r"):
-                pass
-        except (OSError, ValueError):
-            raise ConfigError(
-                f"{path}: is not a readable HDF5 file (damaged or cut short?); {command} reads "
-                "a feature table (.csv, .h5)"
-            ) from None
         raise ConfigError(
             f"{path}: is a data set of this skin; {command} reads a feature table: write one with "
             f"'aptkt dataset export-features {name} -o {name.with_suffix('.csv')}'"

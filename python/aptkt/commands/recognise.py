@@ -90,8 +90,12 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(
             f"--output {args.output}: holds a recognition already (give --force to replace it)"
         )
+    by_option = args.table is not None
     kind = input_kind(
-        source, "--table" if args.table is not None else "DATASET|TABLE", prior_option="--prior"
+        source,
+        "--table" if by_option else "DATASET|TABLE",
+        prior_option="--prior",
+        data_sets=not by_option,
     )
     # The touches are checked before the library is loaded (with scikit-learn): a mistake in
     # them is refused at once.
