@@ -142,7 +142,7 @@ class _ClosedPipeGuard:
 _hook_depth = 0
 
 
-def _stop_the_command(signum: int, frame: object) -> None:
+def _stop_the_command(signum: int, frame: Any) -> None:
     if _hook_depth:
         # Raised inside the hook, the exception would be swallowed as well: signal again once
         # the hook has returned.
@@ -150,7 +150,7 @@ def _stop_the_command(signum: int, frame: object) -> None:
         return
     if signum == signal.SIGTERM:
         raise Terminated(f"signal {signal.Signals(signum).name}")
-    raise KeyboardInterrupt
+    signal.default_int_handler(signum, frame)  # (Ctrl-C: KeyboardInterrupt, as Python raises it)
 
 
 def _signal_again_soon(signum: int) -> None:
