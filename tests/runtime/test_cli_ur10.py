@@ -11,6 +11,7 @@ the machine loaded (docs/reliability.md, "Tests that depend on timing")."""
 
 from __future__ import annotations
 
+import gc
 import json
 import math
 import os
@@ -436,6 +437,37 @@ def test_learn_runs_live_through_the_loopback(cell, prior_npz, capsys):
             assert f * 21 == pytest.approx(k * DEPTH + CONTACT_THRESHOLD, abs=margin), late
 
     undisturbed(timing, lambda: run_cli(cell, "learn", *argv, "-o", str(out)), learnt, [out])
+
+
+def test_no_garbage_collection_pauses_a_live_trial(cell, capsys):
+    """Python's cyclic collector stops every thread while it scans the heap, 0.1-0.4 s here:
+    inside a recording that silences every cell of the skin for as long. A live run collects
+    only between trials (aptkt.runtime.collector_pauses). The robot's trace grows through
+    every movement, so without that the collector runs inside the trials."""
+    d, lb, _ = cell
+    out = d / "gc.h5"
+    started: list[int] = []
+
+    def note(phase: str, info: dict) -> None:
+        if phase == "start":
+            started.append(time.monotonic_ns())  # (the skin's clock)
+
+    before = (gc.isenabled(), gc.get_freeze_count())
+    gc.callbacks.append(note)
+    try:
+        rc = run_cli(cell, "collect", "--objects", "block_a,block_b", "-o", str(out), "-n", "2")
+    finally:
+        gc.callbacks.remove(note)
+    assert rc == 0, why(capsys.readouterr().err, lb)
+    with DatasetReader(out) as rd:
+        windows = [
+            (rec.metadata["movement_start_ns"], rec.metadata["movement_stop_ns"]) for rec in rd
+        ]
+    assert len(windows) == 4
+    inside = [t for t in started for a, b in windows if a <= t <= b]
+    assert inside == [], f"{len(inside)} collections inside a recording"
+    assert len(started) >= len(windows)  # (one after each trial at least)
+    assert (gc.isenabled(), gc.get_freeze_count()) == before
 
 
 def why(err: str, lb: Loopback) -> str:

@@ -2,6 +2,7 @@
 
 =====================  =====================================================================
 sessions               live sessions: a robot and a skin that explore objects on request
+collector_pauses       no garbage collection inside a live trial (it would silence the skin)
 grid                   the grid of trials that generation and collection share
 generation             data sets simulated on the simulated world (``aptkt dataset generate``)
 collection             data sets recorded on a live session, crash-safe (``aptkt collect``)

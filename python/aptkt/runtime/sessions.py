@@ -30,6 +30,7 @@ from aptkt.errors import (
 )
 from aptkt.robot import UR10
 from aptkt.robot.workspace import load_workspace
+from aptkt.runtime.collector_pauses import heap_frozen, no_collector_pauses
 from aptkt.sim.objects import default_library, load_library
 from aptkt.sim.world import SimWorld
 from aptkt.skin.samples import Recording
@@ -149,6 +150,7 @@ class RobotSession:
         self.robot_options = robot_options
         self.robot: Any = None
         self.skin: Any = None
+        self._frozen: Any = None
 
     def check_objects(self, names: Iterable[str]) -> None:
         unknown = [n for n in names if n not in self.workspace.placements]
@@ -177,24 +179,34 @@ class RobotSession:
             skin.close()
             raise
         self.skin = skin
+        # Everything is loaded and connected: what exists now, no collection needs to scan.
+        self._frozen = heap_frozen()
+        self._frozen.__enter__()
         return self
 
     def __exit__(self, *exc: object) -> None:
         robot, self.robot = self.robot, None
         skin, self.skin = self.skin, None
+        frozen, self._frozen = self._frozen, None
         try:
             if robot is not None:
                 robot.close()
         finally:
-            if skin is not None:
-                skin.close()
+            try:
+                if skin is not None:
+                    skin.close()
+            finally:
+                if frozen is not None:
+                    frozen.__exit__(None, None, None)
 
     def explore(self, obj: str, action: ExploratoryAction, trial: int) -> Recording:
         if self.robot is None:
             raise InvalidStateError("RobotSession.explore outside 'with session:'")
         try:
-            return _require_complete(
-                explore(
+            # A collection inside a recording would silence every cell for its length
+            # (aptkt.runtime.collector_pauses).
+            with no_collector_pauses():
+                recording = explore(
                     self.robot,
                     self.skin,
                     self.robot.placement(obj),
@@ -202,7 +214,7 @@ class RobotSession:
                     trial=trial,
                     settings=self.settings,
                 )
-            )
+            return _require_complete(recording)
         except KeyboardInterrupt as exc:
             # Ctrl-C mid-action: the backend stopped the arm; keep what the skin recorded.
             if getattr(self.skin, "recording", False):
