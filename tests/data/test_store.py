@@ -4,6 +4,7 @@ real SIGKILL, and bit-for-bit reproducible generation."""
 from __future__ import annotations
 
 import dataclasses
+import select
 import signal
 import subprocess
 import sys
@@ -347,11 +348,15 @@ def test_same_seed_same_dataset_bit_for_bit(tmp_path):
 STARTER = """
 import sys
 from aptkt.data import DatasetWriter, DatasetReader
-src, dst = sys.argv[1], sys.argv[2]
-with DatasetReader(src) as rd:
+with DatasetReader(sys.argv[1]) as rd:
     rec = rd.recording(0)
-with DatasetWriter(dst) as w:
-    w.append(rec)
+for line in sys.stdin:  # a new file per line, written whole, then 'done' (or what went wrong)
+    try:
+        with DatasetWriter(line.strip()) as w:
+            w.append(rec)
+        print("done", flush=True)
+    except Exception as exc:
+        print(f"{type(exc).__name__}: {exc}".replace(chr(10), " "), flush=True)
 """
 
 
@@ -359,23 +364,36 @@ with DatasetWriter(dst) as w:
 def test_a_reader_polling_as_the_writer_starts_does_not_stop_it(tmp_path, recordings):
     # A reader opening the file takes its lock for a moment; the writer's switch to SWMR mode
     # used to fail then (errno 11) — in 3 of 60 starts with a reader polling like this one.
+    # One writer process starts the 60 files in turn (its imports are no part of the race),
+    # while this process opens the next file as fast as it can until it is written.
     src = tmp_path / "src.h5"
     with DatasetWriter(src) as w:
         w.append(recordings[0])
-    for attempt in range(40):
-        dst = tmp_path / f"started{attempt}.h5"
-        proc = subprocess.Popen(
-            [sys.executable, "-c", STARTER, str(src), str(dst)], stderr=subprocess.PIPE
-        )
-        while proc.poll() is None:
-            try:
-                with DatasetReader(dst) as rd:
-                    len(rd)
-            except DatasetError:  # not created yet
-                pass
-        assert proc.returncode == 0, proc.stderr.read().decode()[-800:]
-        with DatasetReader(dst) as rd:
-            assert len(rd) == 1
+    proc = subprocess.Popen(
+        [sys.executable, "-c", STARTER, str(src)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdin is not None and proc.stdout is not None
+    try:
+        for attempt in range(60):
+            dst = tmp_path / f"started{attempt}.h5"
+            proc.stdin.write(f"{dst}\n")
+            proc.stdin.flush()
+            while not select.select([proc.stdout], [], [], 0)[0]:
+                try:
+                    with DatasetReader(dst) as rd:
+                        len(rd)
+                except DatasetError:  # not created yet
+                    pass
+            answer = proc.stdout.readline().strip()
+            assert answer == "done", f"start {attempt}: {answer or 'the writer process ended'}"
+            with DatasetReader(dst) as rd:
+                assert len(rd) == 1
+    finally:
+        proc.stdin.close()
+        proc.wait(timeout=60)
 
 
 def test_a_recording_off_the_wire_is_stored_from_its_own_integers(recordings):
