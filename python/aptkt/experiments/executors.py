@@ -10,14 +10,13 @@ from __future__ import annotations
 
 import base64
 import concurrent.futures as cf
-import multiprocessing
 import os
 import socket
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, Protocol
 
 from aptkt.errors import ConfigError, WorkerDiedError
-from aptkt.runtime.worker_start import exit_with_parent, limit_thread_pools
+from aptkt.runtime.worker_start import WorkerPool, exit_with_parent, limit_thread_pools
 
 __all__ = ["Executor", "LocalExecutor", "DaskExecutor", "make_executor", "check_scheduler"]
 
@@ -29,9 +28,6 @@ SCHEDULER_GREETING_SECONDS = 10.0
 _GREETING_MAX_BYTES = 1 << 16
 #: An HTTP status line ("HTTP/1.1 101 Switching Protocols") is read within this many bytes.
 _STATUS_LINE_MAX_BYTES = 1 << 12
-
-# Spawned, never forked: a fork copies the compiled core's thread pool without its threads.
-_SPAWN = multiprocessing.get_context("spawn")
 
 
 def _share_cores(threads: int) -> None:
@@ -68,7 +64,7 @@ class LocalExecutor:
         if self.jobs < 1:
             raise ConfigError(f"jobs must be >= 1, got {jobs}")
         self.description = f"{self.jobs} local process(es)"
-        self._pool: cf.ProcessPoolExecutor | None = None
+        self._workers: WorkerPool | None = None
 
     def imap_unordered(
         self, fn: Callable[[Any], Any], items: Sequence[Any]
@@ -83,37 +79,34 @@ class LocalExecutor:
                 for i, item in enumerate(items):
                     yield i, fn(item)
             return
-        if self._pool is None:
+        if self._workers is None:
             threads = max(1, (os.cpu_count() or 1) // self.jobs)
-            self._pool = cf.ProcessPoolExecutor(
-                max_workers=self.jobs,
-                mp_context=_SPAWN,
-                initializer=_share_cores,
-                initargs=(threads,),
-            )
-        futures = {self._pool.submit(fn, item): i for i, item in enumerate(items)}
+            self._workers = WorkerPool(self.jobs, initializer=_share_cores, initargs=(threads,))
+        workers = self._workers
+        finished = False
         try:
+            futures = {workers.pool.submit(fn, item): i for i, item in enumerate(items)}
             for fut in cf.as_completed(futures):
                 try:
                     result = fut.result()
                 except cf.process.BrokenProcessPool as exc:
-                    # Broken for good: the next batch starts a new pool.
-                    self._pool.shutdown(wait=False, cancel_futures=True)
-                    self._pool = None
                     raise WorkerDiedError(
                         "a worker process died abruptly (killed, out of memory or crashed); "
                         "finished runs are kept: run the same command again to resume"
                     ) from exc
                 yield futures[fut], result
+            finished = True
         finally:
-            # On an interruption or a failed task: drop what has not started.
-            for fut in futures:
-                fut.cancel()
+            if not finished:
+                # Interrupted, a task failed or a worker died: the tasks still held would give
+                # results nobody keeps. The next batch, if any, starts a new pool.
+                workers.end_now()
+                self._workers = None
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
+        if self._workers is not None:
+            self._workers.close()
+            self._workers = None
 
 
 def _receive(sock: socket.socket, n: int, address: str) -> bytes:

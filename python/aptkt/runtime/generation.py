@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import json
-import multiprocessing
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -23,13 +22,9 @@ from aptkt.data.codec import PackedRecording, pack_recording
 from aptkt.errors import DatasetError, InvalidInputError, WorkerDiedError
 from aptkt.runtime.grid import TrialGrid
 from aptkt.runtime.trial_file import TrialFile
-from aptkt.runtime.worker_start import start_worker
+from aptkt.runtime.worker_start import WorkerPool, start_worker
 from aptkt.sim.objects import default_library, load_library
 from aptkt.sim.world import SimWorld
-
-# Workers are spawned, never forked: a fork copies the parent's thread pools (rayon in the
-# compiled core) without their threads, and the first parallel call in the child then hangs.
-_SPAWN = multiprocessing.get_context("spawn")
 
 __all__ = ["GenerationPlan", "generate", "paper_plan"]
 
@@ -155,21 +150,26 @@ def _run(
             for job in work:
                 yield _simulate(job)
         return
-    # Results come back in plan order, whichever process computed them.
-    with cf.ProcessPoolExecutor(
-        max_workers=jobs,
-        mp_context=_SPAWN,
-        initializer=start_worker,
-        initargs=("aptkt.runtime.generation:_init_world", *args),
-    ) as pool:
-        try:
-            yield from pool.map(_simulate, work, chunksize=4)
-        except cf.process.BrokenProcessPool as exc:
-            raise WorkerDiedError(
-                f"a simulation worker process died abruptly (killed, out of memory or crashed); "
-                f"{path} keeps the {written()} recordings written so far: run the same command "
-                "with --resume to complete it"
-            ) from exc
+    workers = WorkerPool(
+        jobs, initializer=start_worker, initargs=("aptkt.runtime.generation:_init_world", *args)
+    )
+    finished = False
+    try:
+        # Results come back in plan order, whichever process computed them.
+        yield from workers.pool.map(_simulate, work, chunksize=4)
+        finished = True
+    except cf.process.BrokenProcessPool as exc:
+        raise WorkerDiedError(
+            f"a simulation worker process died abruptly (killed, out of memory or crashed); "
+            f"{path} keeps the {written()} recordings written so far: run the same command "
+            "with --resume to complete it"
+        ) from exc
+    finally:
+        # Interrupted (or failed): what the workers hold would not be written anyway.
+        if finished:
+            workers.close()
+        else:
+            workers.end_now()
 
 
 def describe_summary(info: dict[str, Any]) -> str:

@@ -1,4 +1,5 @@
-"""The start of a spawned worker process, in a module that imports no numpy.
+"""The start of a spawned worker process, in a module that imports no numpy, and the pool that
+an interruption ends at once (:class:`WorkerPool`).
 
 OpenBLAS starts its thread pool when numpy is imported, and its threads spin for a while after
 every call. A simulating worker calls BLAS only for small eigen-decompositions (the thermal
@@ -11,14 +12,30 @@ the parent's main module had numpy imported already (a spawned worker imports it
 
 from __future__ import annotations
 
+import concurrent.futures as cf
 import importlib
 import multiprocessing
 import os
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
-__all__ = ["THREAD_POOL_VARIABLES", "exit_with_parent", "limit_thread_pools", "start_worker"]
+__all__ = [
+    "SPAWN",
+    "THREAD_POOL_VARIABLES",
+    "WorkerPool",
+    "exit_with_parent",
+    "limit_thread_pools",
+    "start_worker",
+]
+
+# Workers are spawned, never forked: a fork copies the parent's thread pools (rayon in the
+# compiled core) without their threads, and the first parallel call in the child then hangs.
+SPAWN = multiprocessing.get_context("spawn")
+
+#: Seconds a terminated worker has to end before it is killed.
+TERMINATE_WAIT_S = 5.0
 
 #: Seconds between two looks at whether the process that started this worker still lives.
 PARENT_CHECK_S = 0.5
@@ -73,3 +90,43 @@ def start_worker(target: str, *args: Any) -> None:
     init = getattr(importlib.import_module(module), name)
     threadpool_limits(1, user_api="blas")  # for the rest of this worker's life
     init(*args)
+
+
+class WorkerPool:
+    """A pool of ``jobs`` spawned worker processes (``pool``, a ``ProcessPoolExecutor``) that
+    :meth:`end_now` ends at once: on an interruption its tasks are not waited for.
+
+    A SIGTERM (``kill``, a scheduler's stop) reaches only aptkt's own process: the workers run
+    on, and leaving the pool the usual way waits for every task they hold, minutes at full
+    scale, for results nobody keeps (a benchmark's run, a chunk of simulated trials). And a
+    signal that lands while the pool starts a worker can leave one it never registered (its
+    start interrupted half-way), which no shutdown ends: a ``dataset generate`` signalled in
+    its first second once took 40 s to say it was terminated, and longer to exit. So
+    :meth:`end_now` cancels what has not started and terminates every child process started
+    since the pool was made, registered or not."""
+
+    def __init__(
+        self,
+        jobs: int,
+        initializer: Callable[..., object] | None = None,
+        initargs: tuple[Any, ...] = (),
+    ) -> None:
+        self._before = set(multiprocessing.active_children())
+        self.pool = cf.ProcessPoolExecutor(
+            max_workers=jobs, mp_context=SPAWN, initializer=initializer, initargs=initargs
+        )
+
+    def close(self) -> None:
+        """Wait for the tasks submitted, then end the workers."""
+        self.pool.shutdown(wait=True)
+
+    def end_now(self) -> None:
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        mine = [c for c in multiprocessing.active_children() if c not in self._before]
+        for child in mine:
+            child.terminate()
+        for child in mine:
+            child.join(TERMINATE_WAIT_S)
+            if child.is_alive():
+                child.kill()
+                child.join()
