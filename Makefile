@@ -19,8 +19,16 @@ PYTEST_ARGS ?=
 PYTEST_WORKERS ?= auto
 SHELL := /bin/bash
 .SHELLFLAGS := -eo pipefail -c
-# pip -v shows the build backend's output; keep cargo's progress lines and errors.
-SHOW_BUILD := grep -E --line-buffered "^ *(Compiling|Finished|Built wheel|Successfully installed)|[Ee]rror" | sed -u -e 's/^ */    /'
+# uv installs the Python dependencies in parallel: seconds where pip took a minute or more.
+# It lives in the environment, put there by pip (pinned here and nowhere else).
+UV := "uv>=0.9,<1"
+# `uv pip install -v` prints the build backend's output among its own debug lines; keep cargo's
+# progress and what was installed, and show the end of the whole log if the install fails.
+SHOW_BUILD := sed -u -n -E -e 's/^DEBUG +//' -e '/^ *(Compiling|Finished|Built |Installed)/ s/^ */    /p'
+define uv_install
+	@log=$$(mktemp); $(PY) -m uv pip install --python $(PY) -v $(1) 2>&1 | tee "$$log" | $(SHOW_BUILD) \
+		|| { tail -n 40 "$$log" | sed -e 's/^DEBUG //'; rm -f "$$log"; exit 1; }; rm -f "$$log"
+endef
 
 .PHONY: venv install install-test install-lint demo wheel lint docs test test-rust test-python clean
 .PHONY: test-quick
@@ -28,20 +36,20 @@ SHOW_BUILD := grep -E --line-buffered "^ *(Compiling|Finished|Built wheel|Succes
 
 venv:
 	@test -x $(PY) || { echo "==> creating the virtual environment $(VENV)"; python3 -m venv $(VENV); }
-	@$(PY) -m pip install --quiet --upgrade pip
+	@$(PY) -m pip install --quiet --upgrade pip $(UV)
 
 # The package and its runtime dependencies: all the demo needs.
 install: venv
 	@echo "==> installing aptkt: Python dependencies, then the Rust core (release build: a few"
 	@echo "    minutes on 2 cores the first time, seconds once target/ holds it)"
-	@$(PY) -m pip install -v -e . 2>&1 | $(SHOW_BUILD)
+	$(call uv_install,-e .)
 
 install-test: venv
 	@echo "==> installing aptkt with the test dependencies (Rust core: see above)"
-	@$(PY) -m pip install -v -e ".[test]" 2>&1 | $(SHOW_BUILD)
+	$(call uv_install,-e ".[test]")
 
 install-lint: venv
-	$(PY) -m pip install --quiet -e ".[lint]"
+	$(call uv_install,-e ".[lint]")
 
 demo: install
 	@echo "==> aptkt demo (simulated world: 8 objects, 7 actions, 20 trials; 3 runs per method)"
@@ -58,7 +66,7 @@ ARCH := $(shell uname -m)
 ZIG_PATH := PATH="$(abspath $(VENV))/bin:$$PATH"
 
 release-tools: venv
-	@$(PY) -m pip install --quiet $(RELEASE_TOOLS)
+	@$(PY) -m uv pip install --python $(PY) --quiet $(RELEASE_TOOLS)
 
 # dist/aptkt-<version>-cp310-abi3-manylinux2014_<arch>.manylinux_2_17_<arch>.whl. The zig
 # linker is part of every crate's build settings, so this build does not reuse the editable
