@@ -43,6 +43,7 @@ from aptkt.cli import main  # noqa: E402
 from aptkt.data import DatasetReader  # noqa: E402
 from aptkt.learning import PriorKnowledge  # noqa: E402
 from aptkt.learning.dataset import load_observations  # noqa: E402
+from aptkt.robot.ur10.connection import Connection  # noqa: E402
 from aptkt.sim.loopback import Loopback  # noqa: E402
 
 DOWN = (math.pi, 0.0, 0.0)
@@ -80,10 +81,18 @@ class Timing:
     timeout: float
     hold: float
     run_started: float = 0.0
+    # When the run in this process began to drop its robot connection (None: it did not, or
+    # aptkt ran in a process of its own): ur_rtde's receive client then holds the GIL 0.5 s.
+    teardown_started: float | None = None
 
     def start_run(self) -> None:
         self.feed.begin()
         self.run_started = time.monotonic()
+        self.teardown_started = None
+
+    def note_teardown(self) -> None:
+        if self.teardown_started is None:
+            self.teardown_started = time.monotonic()
 
     def lateness(self, until_ns: int) -> float:
         """The worst lateness from the start of the run to ``until_ns`` (the end of its last
@@ -96,8 +105,17 @@ class Timing:
         return max(in_process, self.feed.loop_lag, self.feed.machine_late)
 
     def stall(self) -> float:
-        """How long the machine may have kept the watchdog's feed waiting during the run."""
-        return self.feed.stall()
+        """How long the machine may have kept the watchdog's feed or the skin's stream waiting
+        during the run. The watchdog's path: :class:`FeedStall`. The skin's: the loopback's
+        control cycle, which writes the stream, then the reader, a thread of aptkt's process:
+        this one when aptkt runs in it (up to the run's teardown), where a late reader finds
+        the cells silent (seen: all but one cell "silent for more than 0.4 s" with the
+        loopback and a probe process on time)."""
+        feed = self.feed.stall()
+        if self.teardown_started is None:
+            return feed
+        reader = self.probe.worst(self.run_started, self.teardown_started)
+        return max(feed, self.feed.loop_lag + reader)
 
 
 def undisturbed(
@@ -196,7 +214,18 @@ def cell(tmp_path_factory: pytest.TempPathFactory):
             assert patch != src
             (d / "patch.toml").write_text(patch)
             (d / "actions.toml").write_text(actions_toml(2 * timeout))
-            yield d, lb, Timing(probe, FeedStall(lb, machine), timeout, 2 * timeout)
+            timing = Timing(probe, FeedStall(lb, machine), timeout, 2 * timeout)
+            drop_clients = Connection.drop_clients
+
+            def noted(connection: Connection) -> None:
+                timing.note_teardown()
+                drop_clients(connection)
+
+            Connection.drop_clients = noted  # type: ignore[method-assign]
+            try:
+                yield d, lb, timing
+            finally:
+                Connection.drop_clients = drop_clients  # type: ignore[method-assign]
     finally:
         probe.stop()
         machine.close()
@@ -444,7 +473,7 @@ def test_no_garbage_collection_pauses_a_live_trial(cell, capsys):
     inside a recording that silences every cell of the skin for as long. A live run collects
     only between trials (aptkt.runtime.collector_pauses). The robot's trace grows through
     every movement, so without that the collector runs inside the trials."""
-    d, lb, _ = cell
+    d, lb, timing = cell
     out = d / "gc.h5"
     started: list[int] = []
 
@@ -453,6 +482,7 @@ def test_no_garbage_collection_pauses_a_live_trial(cell, capsys):
             started.append(time.monotonic_ns())  # (the skin's clock)
 
     before = (gc.isenabled(), gc.get_freeze_count())
+    timing.start_run()
     gc.callbacks.append(note)
     try:
         rc = run_cli(cell, "collect", "--objects", "block_a,block_b", "-o", str(out), "-n", "2")
@@ -468,6 +498,8 @@ def test_no_garbage_collection_pauses_a_live_trial(cell, capsys):
     assert inside == [], f"{len(inside)} collections inside a recording"
     assert len(started) >= len(windows)  # (one after each trial at least)
     assert (gc.isenabled(), gc.get_freeze_count()) == before
+    # (The end of a run in this process is seen: the skin's path in Timing.stall needs it.)
+    assert timing.teardown_started is not None
 
 
 def why(err: str, lb: Loopback) -> str:
