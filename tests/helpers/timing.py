@@ -202,3 +202,16 @@ def repeat_if_disturbed(
                 f"attempt {k} disturbed: kept waiting {late:.2f} s, more than {budget:.2f} s; again"
             )
         restore()
+
+
+def unless_the_feed_stalled(feed: FeedStall, check: Callable[[], None], watchdog: float) -> None:
+    """``check()`` (a movement under the controller's watchdog of period ``watchdog``, and what
+    it must do), repeated if it failed while ``feed`` says the watchdog was kept waiting for
+    more than half the period (:func:`repeat_if_disturbed`)."""
+    repeat_if_disturbed(
+        lambda: None,
+        lambda _: check(),
+        begin=feed.begin,
+        stall=feed.stall,
+        budget=watchdog / 2,
+    )

@@ -13,6 +13,7 @@ from loopback_helpers import (  # tests/helpers (see tests/conftest.py)
     FakeSkin,
     free_loopback_host,
 )
+from timing import FeedStall, MachineProbe
 
 from aptkt.robot import UR10, SafetyLimits
 from aptkt.sim.loopback import Loopback
@@ -93,3 +94,16 @@ def healthy_robot(loopback: Loopback, _shared_robot: dict) -> Callable[[], UR10]
 def robot(healthy_robot: Callable[[], UR10]) -> UR10:
     """The shared UR10 at the start pose (:func:`healthy_robot`)."""
     return healthy_robot()
+
+
+@pytest.fixture(scope="module")
+def feed(loopback: Loopback) -> Iterator[FeedStall]:
+    """How long the machine kept the controller's watchdog waiting for its feed (a movement's
+    supervision, the control client, the controller): a test whose arm the watchdog stopped
+    while this exceeded half its period is no evidence, and is repeated
+    (:func:`timing.repeat_if_disturbed`)."""
+    machine = MachineProbe()
+    try:
+        yield FeedStall(loopback, machine)
+    finally:
+        machine.close()

@@ -1,4 +1,9 @@
-"""The shared exploratory-action executor drives the UR10 like any robot (paper §5.2 sequence)."""
+"""The shared exploratory-action executor drives the UR10 like any robot (paper §5.2 sequence).
+
+Each action runs under the controller's RTDE watchdog (0.5 s), fed by the supervision loop
+alone: an attempt that failed while the machine kept that feed waiting for more than half the
+period is no evidence either way and is repeated on a healthy robot (a loaded ``make test``
+once saw the watchdog stop a slide here); a failure without such a stall fails at once."""
 
 from __future__ import annotations
 
@@ -8,10 +13,11 @@ import numpy as np
 import pytest
 import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a missing one must fail, not skip
 from loopback_helpers import PLACEMENT, STIFFNESS, LoopbackSkin, at_rest  # noqa: E402
-from timing import MachineProbe, timeout_for  # noqa: E402
+from timing import FeedStall, MachineProbe, timeout_for, unless_the_feed_stalled  # noqa: E402
 
 from aptkt.actions import ExplorationSettings, ExploratoryAction, Movement, explore  # noqa: E402
 from aptkt.errors import ProtectiveStopError, TrialFault  # noqa: E402
+from aptkt.robot import SafetyLimits  # noqa: E402
 
 SETTINGS = ExplorationSettings(
     clearance=0.003, lift_height=0.005, thermal_wait=0.2, stamp_wall_clock=False
@@ -31,6 +37,10 @@ def silence_timeout():
         machine.close()
 
 
+def undisturbed(feed: FeedStall, check) -> None:
+    unless_the_feed_stalled(feed, check, SafetyLimits().watchdog_timeout)
+
+
 @pytest.fixture
 def skin(loopback, silence_timeout):
     source = LoopbackSkin(loopback, silence_timeout_s=silence_timeout)
@@ -39,7 +49,11 @@ def skin(loopback, silence_timeout):
     source.close()
 
 
-def test_a_press_action_records_the_hold_with_robot_timestamps(robot, loopback, skin):
+def test_a_press_action_records_the_hold_with_robot_timestamps(healthy_robot, loopback, skin, feed):
+    undisturbed(feed, lambda: _press_records_the_hold(healthy_robot(), loopback, skin))
+
+
+def _press_records_the_hold(robot, loopback, skin) -> None:
     action = ExploratoryAction("P2-short", Movement.PRESS, depth=0.002, hold_time=0.5)
     rec = explore(robot, skin, PLACEMENT, action, settings=SETTINGS)
     assert rec.duration == pytest.approx(0.5, abs=0.02)
@@ -64,7 +78,11 @@ def test_a_press_action_records_the_hold_with_robot_timestamps(robot, loopback, 
     assert state["normal_force"] == 0.0 and not state["moving"]
 
 
-def test_a_slide_action_is_cropped_to_its_constant_speed_part(robot, loopback, skin):
+def test_a_slide_action_is_cropped_to_its_constant_speed_part(healthy_robot, skin, feed):
+    undisturbed(feed, lambda: _slide_is_cropped(healthy_robot(), skin))
+
+
+def _slide_is_cropped(robot, skin) -> None:
     action = ExploratoryAction(
         "S-short", Movement.SLIDE, normal_force=0.2, speed=0.02, slide_time=0.5
     )
@@ -80,7 +98,11 @@ def test_a_slide_action_is_cropped_to_its_constant_speed_part(robot, loopback, s
     assert per_cell_mean.sum() == pytest.approx(0.2, rel=0.15)
 
 
-def test_a_fault_mid_action_keeps_the_data_recorded_so_far(robot, loopback, skin):
+def test_a_fault_mid_action_keeps_the_data_recorded_so_far(healthy_robot, loopback, skin, feed):
+    undisturbed(feed, lambda: _fault_keeps_the_data(healthy_robot(), loopback, skin))
+
+
+def _fault_keeps_the_data(robot, loopback, skin) -> None:
     import threading
 
     action = ExploratoryAction("C1-short", Movement.STATIC_CONTACT, depth=0.002, hold_time=2.0)

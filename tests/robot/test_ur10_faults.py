@@ -26,7 +26,7 @@ from loopback_helpers import (  # noqa: E402
     fire_after,
     in_contact,
 )
-from timing import FeedStall, MachineProbe, repeat_if_disturbed  # noqa: E402
+from timing import FeedStall, unless_the_feed_stalled  # noqa: E402
 
 from aptkt.errors import (  # noqa: E402
     ProgramStoppedError,
@@ -54,15 +54,6 @@ def assert_stopped_and_retracted(
     return state
 
 
-@pytest.fixture(scope="module")
-def feed(loopback: Loopback):
-    machine = MachineProbe()
-    try:
-        yield FeedStall(loopback, machine)
-    finally:
-        machine.close()
-
-
 def stops_and_retracts(
     loopback: Loopback,
     feed: FeedStall,
@@ -76,17 +67,11 @@ def stops_and_retracts(
     watchdog's period is no evidence and is repeated."""
     state: dict = {}
 
-    def check(_: object) -> None:
+    def check() -> None:
         z_before, raised = fault(new_robot(), FakeSkin(loopback))
         state.update(assert_stopped_and_retracted(loopback, z_before, raised))
 
-    repeat_if_disturbed(
-        lambda: None,
-        check,
-        begin=feed.begin,
-        stall=feed.stall,
-        budget=SafetyLimits().watchdog_timeout / 2,
-    )
+    unless_the_feed_stalled(feed, check, SafetyLimits().watchdog_timeout)
     return state
 
 

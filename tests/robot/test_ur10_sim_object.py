@@ -1,5 +1,7 @@
 """The UR10 backend on a simulated-world object: the loopback controller with the world's
-contact physics (:class:`aptkt.sim.loopback.object_surface.SimObjectSurface`), through ur_rtde."""
+contact physics (:class:`aptkt.sim.loopback.object_surface.SimObjectSurface`), through ur_rtde.
+An attempt that failed while the watchdog's feed was kept waiting is repeated
+(``tests/robot/test_ur10_exploration.py``)."""
 
 from __future__ import annotations
 
@@ -8,12 +10,19 @@ import math
 import pytest
 import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a missing one must fail, not skip
 from loopback_helpers import FakeSkin  # noqa: E402
+from timing import unless_the_feed_stalled  # noqa: E402
 
-from aptkt.robot import Placement  # noqa: E402
+from aptkt.robot import Placement, SafetyLimits  # noqa: E402
 from aptkt.sim.loopback import contact as contact_models  # noqa: E402
 
 
-def test_the_ur10_presses_a_simulated_world_object_through_ur_rtde(robot, loopback):
+def test_the_ur10_presses_a_simulated_world_object_through_ur_rtde(healthy_robot, loopback, feed):
+    unless_the_feed_stalled(
+        feed, lambda: _presses(healthy_robot(), loopback), SafetyLimits().watchdog_timeout
+    )
+
+
+def _presses(robot, loopback) -> None:
     spec = {"type": "sim_object", "object": "rough_sponge", "x": 0.0, "y": -0.5}
     model = contact_models.build(spec)
     top = model.shape.surface_z
