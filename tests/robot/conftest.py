@@ -13,7 +13,7 @@ from loopback_helpers import (  # tests/helpers (see tests/conftest.py)
     FakeSkin,
     free_loopback_host,
 )
-from timing import FeedStall, MachineProbe
+from timing import FeedStall, MachineProbe, unless_the_feed_stalled
 
 from aptkt.robot import UR10, SafetyLimits
 from aptkt.sim.loopback import Loopback
@@ -107,3 +107,22 @@ def feed(loopback: Loopback) -> Iterator[FeedStall]:
         yield FeedStall(loopback, machine)
     finally:
         machine.close()
+
+
+@pytest.fixture
+def on_a_healthy_arm(
+    loopback: Loopback, healthy_robot: Callable[[], UR10], feed: FeedStall
+) -> Callable[..., None]:
+    """``on_a_healthy_arm(body)``: ``body(robot, skin)`` — movements under the controller's
+    watchdog, and what they must do — on a healthy robot (or ``robot()``, if given) and a new
+    skin. During a movement only aptkt's supervision feeds the watchdog; an attempt that failed
+    while the machine kept that feed waiting for more than half the watchdog's period is no
+    evidence either way and is repeated (:func:`timing.unless_the_feed_stalled`); a failure
+    without such a stall fails at once."""
+
+    def run(body: Callable[[UR10, FakeSkin], object], robot: Callable[[], UR10] = healthy_robot):
+        unless_the_feed_stalled(
+            feed, lambda: body(robot(), FakeSkin(loopback)), SafetyLimits().watchdog_timeout
+        )
+
+    return run

@@ -26,7 +26,6 @@ from loopback_helpers import (  # noqa: E402
     fire_after,
     in_contact,
 )
-from timing import FeedStall, unless_the_feed_stalled  # noqa: E402
 
 from aptkt.errors import (  # noqa: E402
     ProgramStoppedError,
@@ -36,7 +35,7 @@ from aptkt.errors import (  # noqa: E402
     SafetyLimitError,
     SkinDisconnectedError,
 )
-from aptkt.robot import UR10, Placement, SafetyLimits  # noqa: E402
+from aptkt.robot import UR10, Placement  # noqa: E402
 from aptkt.sim.loopback import Loopback  # noqa: E402
 
 
@@ -56,27 +55,26 @@ def assert_stopped_and_retracted(
 
 def stops_and_retracts(
     loopback: Loopback,
-    feed: FeedStall,
-    new_robot: Callable[[], UR10],
+    on_a_healthy_arm: Callable[..., None],
     fault: Callable[[UR10, FakeSkin], tuple[float, pytest.ExceptionInfo | None]],
+    robot: Callable[[], UR10] | None = None,
 ) -> dict:
     """``fault(robot, skin)`` raises the expected error mid-movement and returns how high the
     arm was when caught (and the error); the arm must then be stopped and retracted
-    (:func:`assert_stopped_and_retracted`). Each attempt gets a healthy robot and a new skin;
-    one that fails while the machine kept the watchdog's feed waiting for more than half the
-    watchdog's period is no evidence and is repeated."""
+    (:func:`assert_stopped_and_retracted`). Each attempt gets a healthy robot (or ``robot()``)
+    and a new skin, and one that the machine disturbed is repeated (``on_a_healthy_arm``)."""
     state: dict = {}
 
-    def check() -> None:
-        z_before, raised = fault(new_robot(), FakeSkin(loopback))
+    def check(arm: UR10, skin: FakeSkin) -> None:
+        z_before, raised = fault(arm, skin)
         state.update(assert_stopped_and_retracted(loopback, z_before, raised))
 
-    unless_the_feed_stalled(feed, check, SafetyLimits().watchdog_timeout)
+    on_a_healthy_arm(check, **({"robot": robot} if robot else {}))
     return state
 
 
 # ----------------------------------------------------------------------------- force limits
-def test_skin_force_above_the_limit_mid_press(healthy_robot, loopback, feed):
+def test_skin_force_above_the_limit_mid_press(on_a_healthy_arm, loopback):
     def fault(robot: UR10, skin: FakeSkin):
         z = in_contact(robot, skin)
         skin.scale = 40.0  # the skin now reads 40x the contact force: 0.2 N looks like 8 N
@@ -86,10 +84,12 @@ def test_skin_force_above_the_limit_mid_press(healthy_robot, loopback, feed):
             robot.press(0.002, 1.0)
         return z - 0.002, raised
 
-    stops_and_retracts(loopback, feed, healthy_robot, fault)
+    stops_and_retracts(loopback, on_a_healthy_arm, fault)
 
 
-def test_tcp_wrench_above_the_limit_when_the_skin_feels_nothing(make_robot, loopback, feed):
+def test_tcp_wrench_above_the_limit_when_the_skin_feels_nothing(
+    make_robot, on_a_healthy_arm, loopback
+):
     # A dead skin (fresh readings of 0 N) lets the approach run into a stiff object; the TCP
     # wrench catches it at 5 N = 1 mm into a 5000 N/m surface.
     def fault(robot: UR10, skin: FakeSkin):
@@ -102,11 +102,11 @@ def test_tcp_wrench_above_the_limit_when_the_skin_feels_nothing(make_robot, loop
         return -0.001, raised
 
     stiff = {"type": "spring", "surface_z": 0.0, "stiffness": 5000.0}
-    state = stops_and_retracts(loopback, feed, lambda: make_robot(contact=stiff), fault)
+    state = stops_and_retracts(loopback, on_a_healthy_arm, fault, lambda: make_robot(contact=stiff))
     assert state["pose"][2] < 0.04  # a retract, not a flight
 
 
-def test_no_contact_within_the_approach_travel(make_robot, loopback, feed):
+def test_no_contact_within_the_approach_travel(make_robot, on_a_healthy_arm, loopback):
     def fault(robot: UR10, skin: FakeSkin):
         robot.move_above(PLACEMENT, 0.004)
         with pytest.raises(SafetyLimitError, match="no contact .* approach travel limit") as raised:
@@ -115,10 +115,10 @@ def test_no_contact_within_the_approach_travel(make_robot, loopback, feed):
 
     lower = {"type": "spring", "surface_z": -0.02}  # the object is lower than configured
     new_robot = lambda: make_robot(contact=lower, max_approach_travel=0.006)  # noqa: E731
-    stops_and_retracts(loopback, feed, new_robot, fault)
+    stops_and_retracts(loopback, on_a_healthy_arm, fault, new_robot)
 
 
-def test_nan_from_the_skin_is_a_fault(healthy_robot, loopback, feed):
+def test_nan_from_the_skin_is_a_fault(on_a_healthy_arm, loopback):
     def fault(robot: UR10, skin: FakeSkin):
         z = in_contact(robot, skin)
         skin.nan_after = 0.1
@@ -127,11 +127,11 @@ def test_nan_from_the_skin_is_a_fault(healthy_robot, loopback, feed):
             robot.press(0.001, 1.0)
         return z - 0.001, raised
 
-    stops_and_retracts(loopback, feed, healthy_robot, fault)
+    stops_and_retracts(loopback, on_a_healthy_arm, fault)
 
 
 # ----------------------------------------------------------------------------- speed / acceleration
-def test_measured_speed_above_the_limit(make_robot, loopback, feed):
+def test_measured_speed_above_the_limit(make_robot, on_a_healthy_arm, loopback):
     def fault(robot: UR10, skin: FakeSkin):
         in_contact(robot, skin)
         robot.lift(0.004)
@@ -145,10 +145,10 @@ def test_measured_speed_above_the_limit(make_robot, loopback, feed):
             robot.wait(2.0)
         return z - 0.006, raised
 
-    stops_and_retracts(loopback, feed, lambda: make_robot(max_speed=0.02), fault)
+    stops_and_retracts(loopback, on_a_healthy_arm, fault, lambda: make_robot(max_speed=0.02))
 
 
-def test_measured_acceleration_above_the_limit(healthy_robot, loopback, feed):
+def test_measured_acceleration_above_the_limit(on_a_healthy_arm, loopback):
     def fault(robot: UR10, skin: FakeSkin):
         in_contact(robot, skin)
         robot.lift(0.004)
@@ -162,10 +162,18 @@ def test_measured_acceleration_above_the_limit(healthy_robot, loopback, feed):
             robot.wait(2.0)
         return z - 0.006, raised
 
-    stops_and_retracts(loopback, feed, healthy_robot, fault)
+    stops_and_retracts(loopback, on_a_healthy_arm, fault)
 
 
-def test_commands_beyond_the_limits_are_refused_before_moving(robot, loopback, skin):
+def test_commands_beyond_the_limits_are_refused_before_moving(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(
+        lambda robot, skin: _commands_beyond_the_limits_are_refused_before_moving(
+            robot, loopback, skin
+        )
+    )
+
+
+def _commands_beyond_the_limits_are_refused_before_moving(robot, loopback, skin):
     in_contact(robot, skin)
     before = at_rest(loopback)["pose"]
     with pytest.raises(SafetyLimitError, match="slide speed 0.2 m/s exceeds max_speed 0.1"):
@@ -181,7 +189,13 @@ def test_commands_beyond_the_limits_are_refused_before_moving(robot, loopback, s
 
 
 # ----------------------------------------------------------------------------- workspace
-def test_a_slide_that_would_leave_the_box_is_refused(robot, loopback, skin):
+def test_a_slide_that_would_leave_the_box_is_refused(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(
+        lambda robot, skin: _a_slide_that_would_leave_the_box_is_refused(robot, loopback, skin)
+    )
+
+
+def _a_slide_that_would_leave_the_box_is_refused(robot, loopback, skin):
     in_contact(robot, skin)
     before = at_rest(loopback)["pose"]
     with pytest.raises(SafetyLimitError, match="slide would leave the workspace box of 'sponge'"):
@@ -195,7 +209,7 @@ def test_a_target_outside_the_box_is_refused(robot, loopback):
     assert not loopback.state()["moving"]
 
 
-def test_leaving_the_box_mid_action(healthy_robot, loopback, feed):
+def test_leaving_the_box_mid_action(on_a_healthy_arm, loopback):
     narrow = Placement("coin", 0.0, -0.5, 0.0, (-0.003, -0.503, -0.01), (0.003, -0.497, 0.02))
 
     def fault(robot: UR10, skin: FakeSkin):
@@ -208,12 +222,16 @@ def test_leaving_the_box_mid_action(healthy_robot, loopback, feed):
             robot.press(0.001, 3.0)
         return z - 0.001, raised
 
-    state = stops_and_retracts(loopback, feed, healthy_robot, fault)
+    state = stops_and_retracts(loopback, on_a_healthy_arm, fault)
     assert 0.003 < state["pose"][0] < 0.0045
 
 
 # ----------------------------------------------------------------------------- controller faults
-def test_protective_stop_mid_slide(robot, loopback, skin):
+def test_protective_stop_mid_slide(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(lambda robot, skin: _protective_stop_mid_slide(robot, loopback, skin))
+
+
+def _protective_stop_mid_slide(robot, loopback, skin):
     in_contact(robot, skin)
     fire_after(0.8, loopback.protective_stop)
     with pytest.raises(ProtectiveStopError):
@@ -226,7 +244,11 @@ def test_protective_stop_mid_slide(robot, loopback, skin):
     assert not at_rest(loopback)["moving"]
 
 
-def test_recover_after_a_protective_stop(robot, loopback, skin):
+def test_recover_after_a_protective_stop(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(lambda robot, skin: _recover_after_a_protective_stop(robot, loopback, skin))
+
+
+def _recover_after_a_protective_stop(robot, loopback, skin):
     in_contact(robot, skin)
     loopback.protective_stop()
     with pytest.raises(ProtectiveStopError):
@@ -238,7 +260,11 @@ def test_recover_after_a_protective_stop(robot, loopback, skin):
     assert at_rest(loopback)["pose"][2] == pytest.approx(0.01, abs=1e-6)
 
 
-def test_program_stopped_mid_press(robot, loopback, skin):
+def test_program_stopped_mid_press(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(lambda robot, skin: _program_stopped_mid_press(robot, loopback, skin))
+
+
+def _program_stopped_mid_press(robot, loopback, skin):
     in_contact(robot, skin)
     fire_after(0.3, lambda: loopback.stop_program("operator pressed stop"))
     with pytest.raises(ProgramStoppedError):
@@ -266,7 +292,13 @@ def _hold_the_gil(seconds: float) -> float:
         n *= 2
 
 
-def test_an_idle_arm_outlasts_its_process_holding_the_gil(robot, loopback):
+def test_an_idle_arm_outlasts_its_process_holding_the_gil(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(
+        lambda robot, skin: _an_idle_arm_outlasts_its_process_holding_the_gil(robot, loopback)
+    )
+
+
+def _an_idle_arm_outlasts_its_process_holding_the_gil(robot, loopback):
     """While the arm is idle the control process feeds the controller's watchdog: this
     process holding its GIL for twice the watchdog's period (say, writing a large recording)
     must not let the controller stop the program of an arm at rest."""
@@ -280,7 +312,15 @@ def test_an_idle_arm_outlasts_its_process_holding_the_gil(robot, loopback):
     assert at_rest(loopback)["program_running"]
 
 
-def test_a_stalled_supervision_loop_lets_the_controller_stop_the_arm(robot, loopback, skin):
+def test_a_stalled_supervision_loop_lets_the_controller_stop_the_arm(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(
+        lambda robot, skin: _a_stalled_supervision_loop_lets_the_controller_stop_the_arm(
+            robot, loopback, skin
+        )
+    )
+
+
+def _a_stalled_supervision_loop_lets_the_controller_stop_the_arm(robot, loopback, skin):
     """During a movement only the supervision loop feeds the watchdog (the control process's
     keep-alive is off): a loop stalled for twice the watchdog's period — here a skin reading
     that blocks — lets the controller stop the program, and with it the arm."""
@@ -377,7 +417,7 @@ def test_lost_link_is_reported_when_connecting_fails(loopback, make_robot):
 
 
 # ----------------------------------------------------------------------------- stale or broken skin
-def test_stale_skin_mid_press(healthy_robot, loopback, feed):
+def test_stale_skin_mid_press(on_a_healthy_arm, loopback):
     def fault(robot: UR10, skin: FakeSkin):
         z = in_contact(robot, skin)
         skin.stale_after = 0.2
@@ -389,10 +429,10 @@ def test_stale_skin_mid_press(healthy_robot, loopback, feed):
         assert time.monotonic() - t0 < 0.2 + 0.5 + 0.35 + 0.3
         return z - 0.001, raised
 
-    stops_and_retracts(loopback, feed, healthy_robot, fault)
+    stops_and_retracts(loopback, on_a_healthy_arm, fault)
 
 
-def test_skin_failure_mid_slide_is_reraised_after_retracting(healthy_robot, loopback, feed):
+def test_skin_failure_mid_slide_is_reraised_after_retracting(on_a_healthy_arm, loopback):
     def fault(robot: UR10, skin: FakeSkin):
         z = in_contact(robot, skin)
         skin.raise_after = (0.7, SkinDisconnectedError("/dev/ttyUSB0 unplugged"))
@@ -401,7 +441,7 @@ def test_skin_failure_mid_slide_is_reraised_after_retracting(healthy_robot, loop
             robot.slide(0.2, 0.01, 2.0, (1.0, 0.0), skin)
         return z - 0.002, raised
 
-    stops_and_retracts(loopback, feed, healthy_robot, fault)
+    stops_and_retracts(loopback, on_a_healthy_arm, fault)
 
 
 def test_force_that_cannot_be_established_is_an_error(make_robot, loopback, skin):
@@ -415,7 +455,11 @@ def test_force_that_cannot_be_established_is_an_error(make_robot, loopback, skin
     assert not state["moving"] and not state["force_mode"] and state["program_running"]
 
 
-def test_misuse_is_a_clear_error(robot, skin):
+def test_misuse_is_a_clear_error(on_a_healthy_arm):
+    on_a_healthy_arm(lambda robot, skin: _misuse_is_a_clear_error(robot, skin))
+
+
+def _misuse_is_a_clear_error(robot, skin):
     with pytest.raises(RobotError, match="needs move_above"):
         robot.approach_contact(skin, 0.05)
     robot.move_above(PLACEMENT, 0.004)
@@ -446,7 +490,11 @@ def test_close_destroys_the_clients_even_while_a_fault_is_kept(make_robot, skin)
     assert [c() for c in clients] == [None, None]
 
 
-def test_recover_after_a_stopped_program(robot, loopback, skin):
+def test_recover_after_a_stopped_program(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(lambda robot, skin: _recover_after_a_stopped_program(robot, loopback, skin))
+
+
+def _recover_after_a_stopped_program(robot, loopback, skin):
     in_contact(robot, skin)
     loopback.stop_program("operator pressed stop")
     time.sleep(0.05)  # see test_a_command_racing_a_program_stop_fails_fast for the race

@@ -1,4 +1,9 @@
-"""Every motion primitive of the UR10 backend, through the real ur_rtde client and the loopback."""
+"""Every motion primitive of the UR10 backend, through the real ur_rtde client and the loopback.
+
+During a movement only aptkt's supervision feeds the controller's watchdog (0.5 s). A test
+whose movement failed while the machine kept that feed waiting for more than half the period
+is repeated on a healthy robot and a new skin (``on_a_healthy_arm``); a failure without such a
+stall fails at once."""
 
 from __future__ import annotations
 
@@ -17,7 +22,7 @@ from loopback_helpers import (
     free_loopback_host,
     in_contact,
 )  # noqa: E402
-from timing import LatenessProbe
+from timing import FeedStall, LatenessProbe, MachineProbe, unless_the_feed_stalled
 
 from aptkt.robot import UR10, Robot, SafetyLimits  # noqa: E402
 from aptkt.sim.loopback import Loopback  # noqa: E402
@@ -36,7 +41,13 @@ def test_connects_uploads_the_control_script_and_arms_the_controller_watchdog(ro
     assert "def rtde_control():" in loopback.scripts()[-1]
 
 
-def test_move_above_reaches_the_point_above_the_object(robot, loopback):
+def test_move_above_reaches_the_point_above_the_object(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(
+        lambda robot, skin: _move_above_reaches_the_point_above_the_object(robot, loopback)
+    )
+
+
+def _move_above_reaches_the_point_above_the_object(robot, loopback):
     robot.move_above(PLACEMENT, 0.01)
     state = at_rest(loopback)
     np.testing.assert_allclose(
@@ -45,8 +56,14 @@ def test_move_above_reaches_the_point_above_the_object(robot, loopback):
     assert not state["moving"]
 
 
-def test_move_above_leaves_an_object_vertically_first(make_robot, loopback):
-    robot = make_robot(pose=(0.02, -0.5, 0.002, np.pi, 0.0, 0.0))  # low, beside the target
+def test_move_above_leaves_an_object_vertically_first(make_robot, on_a_healthy_arm, loopback):
+    on_a_healthy_arm(
+        lambda robot, skin: _move_above_leaves_an_object_vertically_first(robot, loopback),
+        robot=lambda: make_robot(pose=(0.02, -0.5, 0.002, np.pi, 0.0, 0.0)),  # low, beside it
+    )
+
+
+def _move_above_leaves_an_object_vertically_first(robot, loopback):
     start = time.monotonic_ns()
     robot.move_above(PLACEMENT, 0.01)
     poses = robot.trace(start)["tcp_pose"]
@@ -56,7 +73,11 @@ def test_move_above_leaves_an_object_vertically_first(make_robot, loopback):
     np.testing.assert_allclose(loopback.state()["pose"][:3], [0.0, -0.5, 0.01], atol=1e-6)
 
 
-def test_approach_stops_at_light_contact(robot, loopback, skin):
+def test_approach_stops_at_light_contact(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(lambda robot, skin: _approach_stops_at_light_contact(robot, loopback, skin))
+
+
+def _approach_stops_at_light_contact(robot, loopback, skin):
     robot.move_above(PLACEMENT, 0.004)
     loopback.clock_lag()  # from here on
     with _Lateness() as late:
@@ -106,7 +127,13 @@ class _Lateness:
         self._probe.stop()
 
 
-def test_press_indents_to_the_depth_and_holds_still(robot, loopback, skin):
+def test_press_indents_to_the_depth_and_holds_still(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(
+        lambda robot, skin: _press_indents_to_the_depth_and_holds_still(robot, loopback, skin)
+    )
+
+
+def _press_indents_to_the_depth_and_holds_still(robot, loopback, skin):
     z = in_contact(robot, skin)
     with _Lateness() as late:
         start = time.monotonic_ns()
@@ -132,7 +159,15 @@ def test_press_indents_to_the_depth_and_holds_still(robot, loopback, skin):
     assert np.all(np.linalg.norm(trace["tcp_speed"][after, :3], axis=1) == 0.0)
 
 
-def test_slide_keeps_the_normal_force_at_constant_tangential_speed(robot, loopback, skin):
+def test_slide_keeps_the_normal_force_at_constant_tangential_speed(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(
+        lambda robot, skin: _slide_keeps_the_normal_force_at_constant_tangential_speed(
+            robot, loopback, skin
+        )
+    )
+
+
+def _slide_keeps_the_normal_force_at_constant_tangential_speed(robot, loopback, skin):
     in_contact(robot, skin)
     x0 = loopback.state()["pose"][0]
     loopback.clock_lag()  # from here on
@@ -179,7 +214,11 @@ def test_slide_keeps_the_normal_force_at_constant_tangential_speed(robot, loopba
     assert not state["force_mode"] and not state["moving"]
 
 
-def test_slide_follows_the_given_direction(robot, loopback, skin):
+def test_slide_follows_the_given_direction(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(lambda robot, skin: _slide_follows_the_given_direction(robot, loopback, skin))
+
+
+def _slide_follows_the_given_direction(robot, loopback, skin):
     in_contact(robot, skin)
     p0 = np.array(loopback.state()["pose"][:2])
     robot.slide(0.1, 0.01, 0.5, (0.0, -2.0), skin)
@@ -187,7 +226,11 @@ def test_slide_follows_the_given_direction(robot, loopback, skin):
     assert moved[1] < -0.004 and abs(moved[0]) < 1e-6
 
 
-def test_lift_then_wait_out_of_contact(robot, loopback, skin):
+def test_lift_then_wait_out_of_contact(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(lambda robot, skin: _lift_then_wait_out_of_contact(robot, loopback, skin))
+
+
+def _lift_then_wait_out_of_contact(robot, loopback, skin):
     z = in_contact(robot, skin)
     robot.press(0.001, 0.0)
     robot.lift(0.01)
@@ -200,13 +243,27 @@ def test_lift_then_wait_out_of_contact(robot, loopback, skin):
     assert loopback.state()["pose"][2] == pytest.approx(z - 0.001 + 0.01, abs=1e-9)
 
 
-def test_lift_is_capped_at_the_top_of_the_workspace_box(robot, loopback, skin):
+def test_lift_is_capped_at_the_top_of_the_workspace_box(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(
+        lambda robot, skin: _lift_is_capped_at_the_top_of_the_workspace_box(robot, loopback, skin)
+    )
+
+
+def _lift_is_capped_at_the_top_of_the_workspace_box(robot, loopback, skin):
     in_contact(robot, skin)
     robot.lift(1.0)
     assert at_rest(loopback)["pose"][2] == pytest.approx(PLACEMENT.workspace_max[2], abs=1e-5)
 
 
-def test_a_whole_exploratory_action_keeps_the_controller_running(robot, loopback, skin):
+def test_a_whole_exploratory_action_keeps_the_controller_running(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(
+        lambda robot, skin: _a_whole_exploratory_action_keeps_the_controller_running(
+            robot, loopback, skin
+        )
+    )
+
+
+def _a_whole_exploratory_action_keeps_the_controller_running(robot, loopback, skin):
     for _ in range(2):
         in_contact(robot, skin)
         robot.press(0.001, 0.1)
@@ -216,7 +273,13 @@ def test_a_whole_exploratory_action_keeps_the_controller_running(robot, loopback
     assert state["program_running"] and not state["protective_stopped"]
 
 
-def test_recording_metadata_relates_host_and_robot_clocks(robot, loopback, skin):
+def test_recording_metadata_relates_host_and_robot_clocks(on_a_healthy_arm, loopback):
+    on_a_healthy_arm(
+        lambda robot, skin: _recording_metadata_relates_host_and_robot_clocks(robot, loopback, skin)
+    )
+
+
+def _recording_metadata_relates_host_and_robot_clocks(robot, loopback, skin):
     in_contact(robot, skin)
     loopback.clock_lag()  # from here on
     with _Lateness() as late:
@@ -253,12 +316,25 @@ def test_e_series_controller_runs_at_500_hz():
         contact={"type": "spring", "surface_z": SURFACE_Z, "stiffness": STIFFNESS},
         start_pose=(0.0, -0.5, 0.006, np.pi, 0.0, 0.0),
     ) as lb:
-        robot = UR10(lb.host, [PLACEMENT], SafetyLimits(approach_speed=0.01))
+        machine = MachineProbe()
         try:
-            assert robot.frequency == 500.0
-            z = in_contact(robot, FakeSkin(lb))
-            robot.press(0.001, 0.1)
-            assert lb.state()["pose"][2] == pytest.approx(z - 0.001, abs=1e-6)
-            robot.lift(0.005)
+            unless_the_feed_stalled(
+                FeedStall(lb, machine),
+                lambda: _an_e_series_runs_at_500_hz(lb),
+                SafetyLimits().watchdog_timeout,
+            )
         finally:
-            robot.close()
+            machine.close()
+
+
+def _an_e_series_runs_at_500_hz(lb: Loopback) -> None:
+    lb.reset(pose=(0.0, -0.5, 0.006, np.pi, 0.0, 0.0))
+    robot = UR10(lb.host, [PLACEMENT], SafetyLimits(approach_speed=0.01))
+    try:
+        assert robot.frequency == 500.0
+        z = in_contact(robot, FakeSkin(lb))
+        robot.press(0.001, 0.1)
+        assert lb.state()["pose"][2] == pytest.approx(z - 0.001, abs=1e-6)
+        robot.lift(0.005)
+    finally:
+        robot.close()
