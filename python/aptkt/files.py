@@ -29,6 +29,7 @@ import json
 import math
 import os
 import stat
+import sys
 import uuid
 import zipfile
 import zlib
@@ -39,7 +40,12 @@ from typing import IO, Any
 
 import numpy as np
 
-from aptkt.errors import AptktError, InvalidInputError
+from aptkt.errors import AptktError, ConfigError, InvalidInputError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.10 only
+    import tomli as tomllib
 
 __all__ = [
     "NPZ_MAX_BYTES",
@@ -54,6 +60,7 @@ __all__ = [
     "write_json_atomically",
     "strict_json",
     "present",
+    "read_toml",
 ]
 
 #: Largest total (uncompressed) size of the arrays of a ``.npz`` file aptkt reads (prior
@@ -350,3 +357,22 @@ def json_member(
     if not isinstance(value, dict):
         raise error(f"{path}: member {member!r}: expected a JSON object")
     return value
+
+
+def read_toml(path: str | Path, what: str) -> dict[str, Any]:
+    """A TOML file a user gave (``what``: "a workspace file", "an object library"), each way of
+    failing one :class:`ConfigError` naming the path."""
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: {what.split(' ', 1)[-1]} not found") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a directory, not {what}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError:  # a binary file given by mistake (a prior's .npz, say)
+        raise ConfigError(f"{path}: not {what} (TOML text), not even UTF-8 text") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc}") from None

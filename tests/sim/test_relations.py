@@ -8,9 +8,10 @@ observation must lie nearest to its designed relative's. The presses' force must
 depth differently for different objects (soft layers on hard ones lock up).
 
 The relations are properties of the objects, so they are measured without the recording's
-sessions and drift (``RecordingDrift.off()``): in the default world the new objects are recorded
-in another session than the priors, whose room and skin calibration move every new object's
-observations away from the priors' (docs/simulation.md, "Sessions and drift").
+sessions and drift (``RecordingDrift.off()``) and at the physical noise level: in the default
+world the new objects are recorded in another session than the priors, whose room and skin
+calibration move every new object's observations away from the priors' (docs/simulation.md,
+"Sessions and drift"), and its noise is fitted to a real sensor's ("Noise fitted to a table").
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from aptkt.actions import PAPER_ACTIONS
 from aptkt.learning.extract import observations_from_recordings
 from aptkt.learning.pipeline import FeaturePipeline
 from aptkt.sim import RecordingDrift, SimWorld
+from aptkt.sim.noise import PHYSICAL
 from aptkt.sim.objects import default_library
 
 pytestmark = pytest.mark.slow
@@ -35,7 +37,7 @@ def world_features():
     lib = default_library()
     priors, new = lib.with_role("prior"), lib.with_role("new")
     actions = {"P1", "P2"} | {a for o in new for r in lib[o].relations for a in r.actions}
-    world = SimWorld(lib, seed=0, drift=RecordingDrift.off())
+    world = SimWorld(lib, seed=0, drift=RecordingDrift.off(), noise=PHYSICAL)
     out = {}
     for a in sorted(actions):
         objects = priors + [o for o in new if a in {"P1", "P2"} or _uses(lib[o], a)]

@@ -207,3 +207,24 @@ def object_list(objects: list[str], most: int = 10) -> str:
     """Up to ``most`` object names, then how many more (a library may hold thousands)."""
     shown = ", ".join(objects[:most])
     return shown + (f", ... ({len(objects) - most} more)" if len(objects) > most else "")
+
+
+def add_noise_option(p: argparse._ActionsContainer) -> None:
+    p.add_argument(
+        "--noise",
+        metavar="NOISE",
+        help="the simulated world's noise level: a file from 'aptkt dataset fit-noise', or "
+        "'physical' for the simulation's physical defaults alone (default: the level fitted to "
+        "a real sensor, docs/simulation.md)",
+    )
+
+
+def noise_level(text: str | None) -> Any:  # -> NoiseLevel
+    """``--noise`` as given: None is the world's default."""
+    from aptkt.sim.noise import FITTED, PHYSICAL, load_noise_level
+
+    if text is None:
+        return FITTED
+    if text == "physical":
+        return PHYSICAL
+    return load_noise_level(input_file(text, "--noise"))

@@ -18,7 +18,8 @@ from aptkt.commands._checks import (
     rewritable_file,
     trial_plan,
 )
-from aptkt.commands._session import split_names
+from aptkt.commands._inputs import add_trials_option, check_trials, parse_trials, refuse_data_set
+from aptkt.commands._session import add_noise_option, noise_level, split_names
 from aptkt.errors import ConfigError
 from aptkt.files import present
 from aptkt.progress import Progress
@@ -69,6 +70,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument(
         "--seed", type=int, default=0, metavar="N", help="world seed (default %(default)s)"
     )
+    add_noise_option(g)
     add_jobs_option(g, "simulate")
     g.add_argument(
         "--resume",
@@ -154,6 +156,42 @@ def register(sub: argparse._SubParsersAction) -> None:
     im.add_argument("--no-progress", action="store_true", help="no progress bar")
     im.set_defaults(func=run_import)
 
+    fn = ds.add_parser(
+        "fit-noise",
+        help="fit the simulated world's noise to a real sensor's feature table",
+        description="Measure the table's noise (how far apart its objects lie in units of the "
+        "noise, how much a run of trials drifts, how much the noise differs from object to "
+        "object; docs/simulation.md) and find the simulated world's noise level that matches it, "
+        "by simulating probe data sets (the library's objects and the 7 paper actions, the "
+        "table's trials per object up to 40; a few minutes each on 2 cores). Writes a noise "
+        "level file for 'aptkt dataset generate --noise' and 'aptkt reproduce --noise'.",
+    )
+    fn.add_argument("table", metavar="TABLE", help="feature table of a real sensor (.csv, .h5)")
+    fn.add_argument(
+        "-o", "--output", required=True, metavar="NOISE", help="noise level file to write (.toml)"
+    )
+    add_trials_option(fn, "rows")
+    fn.add_argument(
+        "--probes",
+        type=int,
+        default=3,
+        metavar="N",
+        help="probe data sets to simulate; the closest is the fit (default %(default)s)",
+    )
+    fn.add_argument(
+        "--probe-trials",
+        type=int,
+        metavar="N",
+        help="trials per object and action in a probe (default: the table's, from 8 to 40)",
+    )
+    fn.add_argument(
+        "--seed", type=int, default=0, metavar="N", help="world seed (default %(default)s)"
+    )
+    add_jobs_option(fn, "simulate")
+    fn.add_argument("--force", action="store_true", help="replace an existing NOISE file")
+    fn.add_argument("--json", action="store_true", help="print the fit as JSON")
+    fn.set_defaults(func=run_fit_noise)
+
     r = ds.add_parser(
         "repair",
         help="make a file whose writer died appendable again (keeps every complete recording)",
@@ -211,6 +249,7 @@ def build_plan(args: argparse.Namespace):  # -> GenerationPlan
         args.seed,
         args.first_trial,
         tuple(str(f) for f in args.objects_file),
+        world_options={"noise": noise_level(args.noise).to_dict()},
     )
 
 
@@ -402,4 +441,53 @@ def run_import(args: argparse.Namespace) -> int:
             f"{m} ({observations.modalities[m].shape[1]})" for m in observations.modality_names
         )
     )
+    return 0
+
+
+def run_fit_noise(args: argparse.Namespace) -> int:
+    from aptkt.experiments.noise_fit import fit_noise
+    from aptkt.learning.feature_table import read_feature_table
+    from aptkt.sim.noise import noise_level_toml
+
+    trials = parse_trials(args.trials)
+    at_least(args.probes, 1, "--probes")
+    at_least(args.probe_trials, 4, "--probe-trials")
+    at_least(args.seed, 0, "--seed")
+    jobs(args.jobs)
+    output = output_file(args.output)
+    not_an_input(output, "--output", {"TABLE": args.table})
+    if present(output) and not args.force:
+        raise ConfigError(f"--output {output}: exists (give --force to replace it)")
+    refuse_data_set(args.table, "aptkt dataset fit-noise")
+    table = read_feature_table(args.table)
+    if trials is not None:
+        check_trials(trials, table.trials.tolist(), args.table)
+        table = table.take(trials.mask(table.trials))
+    fit = fit_noise(
+        table.observations(),
+        probes=args.probes,
+        trials=args.probe_trials,
+        seed=args.seed,
+        jobs=args.jobs,
+        say=(lambda _: None) if args.json else print,
+    )
+    t, r = fit.target, fit.reached
+    comments = (
+        f"aptkt dataset fit-noise {args.table}: the simulated world's noise level fitted to it",
+        f"the table: separation {t.separation:.2f}, drift {t.drift:.2f}, heterogeneity "
+        f"{t.heterogeneity:.2f} (medians over actions and modalities)",
+        f"the world at this level: separation {r.separation:.2f}, drift {r.drift:.2f}, "
+        f"heterogeneity {r.heterogeneity:.2f} ({r.trials} trials per object, seed {args.seed})",
+    )
+    from aptkt.files import write_text_atomically
+
+    write_text_atomically(output, noise_level_toml(fit.level, comments), ConfigError)
+    if args.json:
+        print(json.dumps(fit.as_dict(), indent=2))
+    else:
+        lv = fit.level
+        print(
+            f"{output}: trial {lv.trial:.3f}, drift {lv.drift:.3f}, objects {lv.objects:.3f} "
+            f"(use it with --noise {output})"
+        )
     return 0

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from aptkt.commands._checks import add_jobs_option, add_scheduler_option
 from aptkt.commands._method import add_method_arguments, learner_config
+from aptkt.commands._session import add_noise_option, noise_level
 
 NAMES = ("fig6", "fig7", "fig8", "fig9", "fig10", "fig11", "all")
 
@@ -58,6 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="an aptkt benchmark output directory: the report sets its real-data gains beside "
         "this run's",
     )
+    add_noise_option(p)
     add_method_arguments(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
@@ -81,6 +83,9 @@ def run(args: argparse.Namespace) -> int:
     if args.data is not None:
         input_file(args.data, "--data")
         intact_data_set(args.data, "--data")
+    if args.data is not None and args.noise is not None:
+        raise ConfigError("--noise: only without --data (a given data set was simulated already)")
+    noise = noise_level(args.noise)
     scheduler_available(args.scheduler)
     figures = FIGURE_NAMES if args.name == "all" else (args.name,)
     if args.real_data is not None:
@@ -102,6 +107,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         base=base,
         real_data=args.real_data,
+        noise=noise,
         command=_command(args),
     )
     try:
@@ -122,6 +128,8 @@ def _command(args: argparse.Namespace) -> str:
         parts.append(f"--data {args.data}")
     if args.quick:
         parts.append("--quick")
+    if args.noise is not None:
+        parts.append(f"--noise {args.noise}")
     parts.append(f"--jobs {args.jobs}")
     if args.scheduler:
         parts.append(f"--scheduler {args.scheduler}")

@@ -43,7 +43,7 @@ from aptkt.learning import GPSettings, LearnerConfig, PriorKnowledge
 from aptkt.learning.dataset import extract_features, load_observations, stale_features
 from aptkt.learning.transfer_summary import summary_lines
 from aptkt.progress import Progress
-from aptkt.runtime.generation import GenerationPlan, generate
+from aptkt.runtime.generation import GenerationPlan, complete_kept
 
 __all__ = ["DemoSettings", "report_results", "run_demo", "DEMO_PRIORS", "DEMO_NEW"]
 
@@ -150,7 +150,9 @@ def _simulate(s: DemoSettings, data: Path, progress: bool) -> None:
         f"[1/5] simulating {len(objects)} objects x {len(actions)} actions x {reps} trials -> {data}"
     )
     plan = GenerationPlan(objects, actions, reps, s.seed)
-    info = generate(data, plan, jobs=s.jobs, resume=data.exists(), progress=progress)
+    info = complete_kept(
+        data, plan, jobs=s.jobs, progress=progress, say=lambda m: _say(f"      {m}")
+    )
     _say(
         f"      {info['recordings']} recordings, {info['file_bytes'] / 1e6:.1f} MB "
         f"({info['simulated']} simulated now, {info['wall_seconds']:.0f} s)"

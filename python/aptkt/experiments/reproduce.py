@@ -41,7 +41,8 @@ from aptkt.experiments.scale import Scale
 from aptkt.files import open_atomically, write_json_atomically, write_text_atomically
 from aptkt.learning import LearnerConfig
 from aptkt.learning.dataset import extract_features, stale_features
-from aptkt.runtime.generation import GenerationPlan, generate
+from aptkt.runtime.generation import GenerationPlan, complete_kept
+from aptkt.sim.noise import FITTED, NoiseLevel
 from aptkt.sim.objects import default_library
 
 __all__ = ["ReproduceSettings", "reproduce", "FIGURE_NAMES"]
@@ -68,6 +69,8 @@ class ReproduceSettings:
     #: An ``aptkt benchmark`` output directory whose real-data gains the report sets beside
     #: this run's.
     real_data: Path | None = None
+    #: The simulated world's noise level (None: its default, :data:`aptkt.sim.noise.FITTED`).
+    noise: NoiseLevel | None = None
 
     def resolved_scale(self) -> Scale:
         if self.scale is not None:
@@ -105,15 +108,22 @@ def prepare_data(
             raise ConfigError(f"--data {path}: no such file")
         info["source"] = "given"
     else:
-        path = s.output / f"data-{scale.name}-seed{s.seed}.h5"
+        noise = s.noise if s.noise is not None else FITTED
+        # (Another noise level is another world: its data set has its own name.)
+        tag = "" if noise == FITTED else f"-noise-{_noise_tag(noise)}"
+        path = s.output / f"data-{scale.name}-seed{s.seed}{tag}.h5"
         plan = GenerationPlan(
-            scale.objects, tuple(PAPER_ACTIONS[a] for a in scale.actions), scale.repetitions, s.seed
+            scale.objects,
+            tuple(PAPER_ACTIONS[a] for a in scale.actions),
+            scale.repetitions,
+            s.seed,
+            world_options={"noise": noise.to_dict()},
         )
         _say(
             f"simulating the data set: {len(scale.objects)} objects × {len(scale.actions)} actions × "
             f"{scale.repetitions} trials -> {path}" + (" (resuming)" if path.exists() else "")
         )
-        gen = generate(path, plan, jobs=s.jobs, resume=path.exists(), progress=s.progress)
+        gen = complete_kept(path, plan, jobs=s.jobs, progress=s.progress, say=_say)
         info.update(
             source="generated",
             generation_seconds=gen["wall_seconds"],
@@ -146,6 +156,10 @@ def prepare_data(
         )
         info["feature_seconds"] = time.perf_counter() - t0
     return path, info
+
+
+def _noise_tag(noise: NoiseLevel) -> str:
+    return "-".join(f"{v:g}" for v in noise.to_dict().values())
 
 
 @dataclass

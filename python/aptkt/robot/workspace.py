@@ -26,18 +26,13 @@ Every problem raises :class:`~aptkt.errors.ConfigError` naming the file and the 
 from __future__ import annotations
 
 import math
-import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - exercised on Python 3.10 only
-    import tomli as tomllib
-
 from aptkt.errors import ConfigError
+from aptkt.files import read_toml
 from aptkt.robot.base import Placement, SafetyLimits
 
 __all__ = ["WorkspaceConfig", "load_workspace", "parse_workspace", "DEFAULT_TOOL_ORIENTATION"]
@@ -70,20 +65,7 @@ class WorkspaceConfig:
 
 def load_workspace(path: str | Path) -> WorkspaceConfig:
     """Read and validate a workspace TOML file."""
-    path = Path(path)
-    try:
-        with path.open("rb") as fh:
-            doc = tomllib.load(fh)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: workspace file not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
-    except UnicodeDecodeError:  # a binary file given by mistake (a prior's .npz, say)
-        raise ConfigError(
-            f"{path}: not a workspace file (TOML text), not even UTF-8 text"
-        ) from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read: {exc}") from None
+    doc = read_toml(path, "a workspace file")
     return parse_workspace(doc, source=str(path))
 
 

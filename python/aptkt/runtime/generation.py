@@ -23,10 +23,18 @@ from aptkt.errors import DatasetError, InvalidInputError, WorkerDiedError
 from aptkt.runtime.grid import TrialGrid
 from aptkt.runtime.trial_file import TrialFile
 from aptkt.runtime.worker_start import WorkerPool, start_worker
+from aptkt.sim.noise import FITTED, PHYSICAL, NoiseLevel
 from aptkt.sim.objects import default_library, load_library
 from aptkt.sim.world import SimWorld
 
-__all__ = ["GenerationPlan", "generate", "paper_plan"]
+__all__ = [
+    "GenerationPlan",
+    "generate",
+    "paper_plan",
+    "other_world",
+    "complete_kept",
+    "describe_noise",
+]
 
 
 @dataclass(frozen=True)
@@ -49,6 +57,15 @@ class GenerationPlan(TrialGrid):
         names = [a.name for a in self.actions]
         if len(set(names)) != len(names):
             raise InvalidInputError(f"action names must be unique, got {names}")
+        # The noise level is always written down: a file says which world made it, whatever
+        # the default was then.
+        noise = self.world_options.get("noise", FITTED)
+        level = noise if isinstance(noise, NoiseLevel) else NoiseLevel.from_dict(noise)
+        object.__setattr__(self, "world_options", {**self.world_options, "noise": level.to_dict()})
+
+    @property
+    def noise(self) -> NoiseLevel:
+        return NoiseLevel.from_dict(self.world_options["noise"])
 
     def describe(self) -> dict[str, Any]:
         return {
@@ -107,10 +124,17 @@ def generate(
     with the wall time and the file size."""
     t0 = time.perf_counter()
 
-    def same_seed(description: dict[str, Any]) -> None:
+    def same_world(description: dict[str, Any]) -> None:
         stored = description.get("seed")
         if stored is not None and stored != plan.seed:
             raise DatasetError(f"{path} was generated with seed {stored}, not {plan.seed}")
+        noise = stored_noise(description)
+        if stored is not None and noise != plan.noise:
+            raise DatasetError(
+                f"{path} was generated with the noise level {describe_noise(noise)}, not "
+                f"{describe_noise(plan.noise)}; completing it would mix two worlds (give "
+                "another file, or --force to replace it)"
+            )
 
     with TrialFile(
         path,
@@ -118,7 +142,7 @@ def generate(
         description=plan.describe(),
         resume=resume,
         overwrite=overwrite,
-        check=same_seed,
+        check=same_world,
         progress=progress is True,
     ) as out:
         writer, bar = out.writer, out.bar
@@ -131,6 +155,61 @@ def generate(
             elif callable(progress):
                 progress(len(writer), len(plan))
     return out.summary(wall_seconds=time.perf_counter() - t0, simulated=len(out.todo))
+
+
+def describe_noise(noise: NoiseLevel) -> str:
+    return ", ".join(f"{k} {v:g}" for k, v in noise.to_dict().items())
+
+
+def stored_noise(description: dict[str, Any]) -> NoiseLevel:
+    """The noise level a data set was simulated at (a file from before levels were written down
+    was made at the physical one)."""
+    options = description.get("world_options") or {}
+    return NoiseLevel.from_dict(options.get("noise", PHYSICAL.to_dict()))
+
+
+def other_world(path: Path, plan: GenerationPlan) -> NoiseLevel | None:
+    """The noise level of an existing data set at ``path`` if it is not ``plan``'s: a data set
+    a command keeps to reuse (the demo's, reproduce's) is then simulated again."""
+    from aptkt.data import DatasetReader
+
+    if not path.exists():
+        return None
+    try:
+        with DatasetReader(path) as rd:
+            description = rd.description
+    except (DatasetError, OSError):
+        return None  # (the writer's own checks say what is wrong with it)
+    if description.get("generator") != "aptkt.runtime.generation":
+        return None
+    noise = stored_noise(description)
+    return noise if noise != plan.noise else None
+
+
+def complete_kept(
+    path: Path,
+    plan: GenerationPlan,
+    *,
+    jobs: int,
+    progress: bool | Callable[[int, int], None],
+    say: Callable[[str], None],
+) -> dict[str, Any]:
+    """Complete a data set a command keeps to reuse (the demo's, reproduce's): resumed if it was
+    simulated in this world, simulated again if at another noise level (an older default)."""
+    stale = other_world(path, plan)
+    if stale is not None:
+        say(
+            f"{path} was simulated at another noise level ({describe_noise(stale)}): "
+            "simulating it again"
+        )
+    return generate(
+        path,
+        plan,
+        jobs=jobs,
+        resume=path.exists() and stale is None,
+        overwrite=stale is not None,
+        progress=progress,
+    )
 
 
 def _run(

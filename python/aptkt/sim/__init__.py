@@ -8,6 +8,7 @@ UR controller with its simulated skin, for the real UR10 backend without an arm
 """
 
 from aptkt.sim.drift import RecordingDrift, Wander
+from aptkt.sim.noise import NoiseLevel
 from aptkt.sim.objects import ObjectLibrary, ObjectSpec, default_library, load_library
 from aptkt.sim.robot import SimRobot
 from aptkt.sim.skin_stream import PtySkinLink, SimSkin
@@ -28,4 +29,5 @@ __all__ = [
     "TrialVariation",
     "RecordingDrift",
     "Wander",
+    "NoiseLevel",
 ]

@@ -10,19 +10,14 @@ from __future__ import annotations
 
 import math
 import re
-import sys
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - exercised on Python 3.10 only
-    import tomli as tomllib
-
 from aptkt.errors import ConfigError, UnknownNameError
+from aptkt.files import read_toml
 
 __all__ = [
     "Layer",
@@ -467,27 +462,13 @@ def _parse_document(doc: Mapping[str, Any], source: str, first_auto_index: int) 
     return out
 
 
-def _read_toml(path: Path) -> Mapping[str, Any]:
-    try:
-        with path.open("rb") as fh:
-            return tomllib.load(fh)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: object library not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
-    except UnicodeDecodeError:
-        raise ConfigError(
-            f"{path}: not an object library (TOML text), not even UTF-8 text"
-        ) from None
-    except IsADirectoryError:
-        raise ConfigError(f"{path}: is a directory, not an object library") from None
-
-
 def default_library() -> ObjectLibrary:
     """The package's library: the paper's 10 prior (index 1-10) and 5 new (11-15) objects."""
     ref = resources.files("aptkt.sim").joinpath("objects.toml")
     with resources.as_file(ref) as path:
-        return ObjectLibrary(_parse_document(_read_toml(Path(path)), "objects.toml", 1))
+        return ObjectLibrary(
+            _parse_document(read_toml(Path(path), "an object library"), "objects.toml", 1)
+        )
 
 
 def load_library(*paths: str | Path, include_default: bool = True) -> ObjectLibrary:
@@ -499,5 +480,5 @@ def load_library(*paths: str | Path, include_default: bool = True) -> ObjectLibr
     for p in paths:
         path = Path(p)
         next_index = max((o.index for o in objects), default=0) + 1
-        objects.extend(_parse_document(_read_toml(path), str(path), next_index))
+        objects.extend(_parse_document(read_toml(path, "an object library"), str(path), next_index))
     return ObjectLibrary(objects)

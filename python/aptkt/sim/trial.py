@@ -53,6 +53,8 @@ class TrialVariation:
     force_gain_sd: float = 0.025  # relative change of the force sensors' gain between trials,
     # common to the patch (its slow creep over a run: drift.py)
     cell_gain_sd: float = 0.03  # ... and per cell
+    # multiplies each object's own material variability (its ``variability``): 1 is the object's
+    material_scale: float = 1.0
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
@@ -119,7 +121,7 @@ class TrialConditions:
         )
         pose, mat, th, arm = g["pose"], g["material"], g["thermal"], g["arm"]
         tilt = np.tan(np.deg2rad(variation.tilt_sd) * pose.standard_normal(2))
-        cv = obj.variability
+        cv = obj.variability * variation.material_scale
         ambient = variation.ambient + slow.room + variation.ambient_sd * th.standard_normal()
         return cls(
             shift=(

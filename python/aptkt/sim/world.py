@@ -25,6 +25,7 @@ from aptkt.errors import InvalidInputError, UnknownNameError
 from aptkt.robot.base import Placement, SafetyLimits
 from aptkt.sim.drift import RecordingDrift
 from aptkt.sim.engine import FastDriver, RealTimeDriver, SimEngine
+from aptkt.sim.noise import FITTED, NoiseLevel
 from aptkt.sim.objects import ObjectLibrary, ObjectSpec, default_library
 from aptkt.sim.patch import DEFAULT_CELL_IDS, PatchGeometry, PatchImperfections, SkinConstants
 from aptkt.sim.physics import ContactPhysics, ObjectPose
@@ -65,7 +66,10 @@ class SimWorld:
     ``session``) and over a run of trials (trial ``t`` of an object and action is the run's
     ``t``-th); :meth:`RecordingDrift.off` gives independent trials around a fixed skin. ``layout`` takes the cell ids and
     positions from a skin patch file; the force calibration is always the simulated patch's
-    own (:attr:`patch`, the one to give a skin source reading this world).
+    own (:attr:`patch`, the one to give a skin source reading this world). ``noise`` scales the
+    trials' variation and the drift together (:class:`~aptkt.sim.noise.NoiseLevel`; default
+    :data:`~aptkt.sim.noise.FITTED`, fitted to a real sensor's table; ``PHYSICAL``: the
+    physical defaults alone).
     """
 
     def __init__(
@@ -81,13 +85,20 @@ class SimWorld:
         layout: PatchConfig | None = None,
         settings: ExplorationSettings | None = None,
         drift: RecordingDrift | None = None,
+        noise: NoiseLevel | dict[str, float] | None = None,
     ):
         if not isinstance(seed, (int, np.integer)) or seed < 0:
             raise InvalidInputError(f"seed must be an integer >= 0, got {seed!r}")
         self.objects = objects if objects is not None else default_library()
         self.seed = int(seed)
         self.variation = variation or TrialVariation()
-        self.drift = drift if drift is not None else RecordingDrift()
+        if noise is None:
+            noise = FITTED
+        elif not isinstance(noise, NoiseLevel):
+            noise = NoiseLevel.from_dict(noise)
+        self.noise = noise
+        self.drift = noise.recording_drift(drift if drift is not None else RecordingDrift())
+        self._variations: dict[str, TrialVariation] = {}
         self.limits = limits or SafetyLimits()
         if layout is not None:  # cell ids and positions from a skin patch file
             self.geometry = PatchGeometry.from_patch(
@@ -147,9 +158,11 @@ class SimWorld:
 
     def conditions(self, object_name: str, action_name: str, trial: int) -> TrialConditions:
         obj = self.objects[object_name]
+        if obj.name not in self._variations:
+            self._variations[obj.name] = self.noise.variation(self.variation, self.seed, obj.name)
         return TrialConditions.draw(
             obj,
-            self.variation,
+            self._variations[obj.name],
             trial_seed_sequence(self.seed, obj.name, action_name, trial),
             self.geometry.n_cells,
             self.drift.at(self.seed, obj, action_name, trial, self.geometry.n_cells),
