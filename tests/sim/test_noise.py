@@ -23,7 +23,8 @@ from aptkt.sim.noise import (
 from aptkt.sim.trial import TrialVariation
 from aptkt.sim.world import SimWorld
 
-scale = st.floats(min_value=0.0, max_value=5.0, allow_nan=False)
+scale = st.floats(min_value=0.0, max_value=4.0, allow_nan=False)
+spread = st.floats(min_value=0.0, max_value=2.0, allow_nan=False)
 
 
 @given(k=scale)
@@ -87,7 +88,7 @@ def test_the_physical_level_is_the_world_of_the_physical_defaults():
 
 
 @settings(max_examples=50)
-@given(trial=scale, drift=scale, objects=scale)
+@given(trial=scale, drift=scale, objects=spread)
 def test_a_noise_file_reads_back_what_was_written(tmp_path_factory, trial, drift, objects):
     level = NoiseLevel(trial=trial, drift=drift, objects=objects)
     path = tmp_path_factory.mktemp("noise") / "noise.toml"
@@ -103,3 +104,29 @@ def test_a_level_that_is_no_scale_is_refused(bad):
         NoiseLevel(trial=bad)
     with pytest.raises(InvalidInputError, match="unknown noise level field"):
         SimWorld(seed=0, noise={"loudness": 1.0})
+
+
+def test_a_level_beyond_the_worlds_range_is_refused_and_the_fit_stays_within_it():
+    from aptkt.experiments.noise_fit import NoiseSummary, next_level
+    from aptkt.sim.noise import MAX_LEVEL
+
+    with pytest.raises(InvalidInputError, match="noise level trial 5 is above its largest, 4"):
+        NoiseLevel(trial=5.0)
+    # A table far noisier than the world can be: the nearest level, not an error.
+    measured = NoiseSummary(separation=4.0, drift=1.1, heterogeneity=1.0, trials=30)
+    hopeless = NoiseSummary(separation=0.1, drift=50.0, heterogeneity=400.0, trials=30)
+    level = next_level(NoiseLevel(), measured, hopeless)
+    assert level.to_dict() == MAX_LEVEL
+
+
+def test_the_docs_quote_the_default_level_and_the_largest_ones():
+    from pathlib import Path
+
+    from aptkt.sim.noise import MAX_LEVEL
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "simulation.md").read_text()
+    fit = FITTED.to_dict()
+    row = f"| **{fit['trial']:.3f}** | **{fit['drift']:.3f}** | **{fit['objects']:.3f}** |"
+    assert row in page
+    largest = ", ".join(f"{k} {v:g}" for k, v in MAX_LEVEL.items())
+    assert f"`MAX_LEVEL`: {largest};" in page

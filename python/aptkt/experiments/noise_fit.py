@@ -32,7 +32,7 @@ from aptkt.actions import PAPER_ACTIONS
 from aptkt.errors import ConfigError
 from aptkt.experiments.noise_profile import NoiseProfile, noise_profile
 from aptkt.learning.observations import ObservationTable
-from aptkt.sim.noise import NoiseLevel
+from aptkt.sim.noise import MAX_LEVEL, NoiseLevel
 
 __all__ = ["NoiseSummary", "NoiseFit", "summarise", "next_level", "fit_noise"]
 
@@ -124,7 +124,10 @@ def next_level(level: NoiseLevel, measured: NoiseSummary, target: NoiseSummary) 
     rest = max(measured.heterogeneity**2 - added**2, 0.0)
     missing = max(target.heterogeneity**2 - rest, 0.0)
     objects = math.sqrt(missing) * chance / _DECADE
-    return NoiseLevel(trial=trial, drift=drift, objects=objects)
+    # (Within the world's range: a table beyond it gets the nearest level, and the fit reports
+    # what that level reached.)
+    wanted = {"trial": trial, "drift": drift, "objects": objects}
+    return NoiseLevel(**{k: min(v, MAX_LEVEL[k]) for k, v in wanted.items()})
 
 
 def simulated_summary(

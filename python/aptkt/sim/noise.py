@@ -35,6 +35,7 @@ from aptkt.sim.trial import TrialVariation
 __all__ = [
     "NoiseLevel",
     "TRIAL_SPREADS",
+    "MAX_LEVEL",
     "PHYSICAL",
     "FITTED",
     "load_noise_level",
@@ -62,6 +63,13 @@ TRIAL_SPREADS = (
 )
 
 
+#: The largest level of each number. Four times the trials' spreads moves an object by up to
+#: ±32 mm and turns it by up to ±120° between touches (a touch may then miss a small object's
+#: face), ten times the drift shifts the room by 6 K between sessions, and an object factor of 2
+#: makes one object in six more than 7 times as noisy as the median one.
+MAX_LEVEL = {"trial": 4.0, "drift": 10.0, "objects": 2.0}
+
+
 @dataclass(frozen=True)
 class NoiseLevel:
     """The world's noise against its physical defaults (``NoiseLevel()`` changes nothing)."""
@@ -72,10 +80,15 @@ class NoiseLevel:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            value = getattr(self, f.name)
+            value, most = getattr(self, f.name), MAX_LEVEL[f.name]
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise InvalidInputError(
                     f"noise level {f.name} must be a finite number >= 0, got {value!r}"
+                )
+            if value > most:
+                raise InvalidInputError(
+                    f"noise level {f.name} {value:g} is above its largest, {most:g} (a world "
+                    "noisier than that is not a sensor the simulation describes)"
                 )
 
     @classmethod
@@ -92,10 +105,6 @@ class NoiseLevel:
 
     def to_dict(self) -> dict[str, float]:
         return asdict(self)
-
-    @property
-    def is_default(self) -> bool:
-        return self == NoiseLevel()
 
     def repeatability(self, seed: int, object_name: str) -> float:
         """Object ``object_name``'s factor on its trial spreads (1 when ``objects`` is 0)."""
@@ -139,7 +148,7 @@ def load_noise_level(path: str | Path) -> NoiseLevel:
     ``objects``, as ``aptkt dataset fit-noise`` writes it)."""
     doc = read_toml(path, "a noise level file")
     table = doc.get("noise")
-    if not isinstance(table, Mapping) or set(doc) - {"noise", "fit"}:
+    if not isinstance(table, Mapping) or set(doc) - {"noise"}:
         raise ConfigError(
             f"{path}: a noise level file holds a [noise] table (trial, drift, objects), as "
             "'aptkt dataset fit-noise' writes it"
