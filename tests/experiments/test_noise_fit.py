@@ -195,3 +195,12 @@ def test_a_kept_data_set_of_another_world_is_simulated_again(tmp_path):
     # In its own world it is reused as it is.
     again = complete_kept(path, plan(FITTED), jobs=1, progress=False, say=said.append)
     assert again["simulated"] == 0 and len(said) == 1
+
+
+def test_a_table_of_identical_objects_is_one_clear_error():
+    rng = np.random.default_rng(0)
+    X = np.tile(rng.normal(size=(10, 3)), (3, 1))  # three objects, the same ten trials each
+    objects = np.repeat(["a", "b", "c"], 10)
+    table = {"A": Observations("A", {"m": X}, objects, np.tile(np.arange(10), 3))}
+    with pytest.raises(ConfigError, match="objects do not differ"):
+        fit_noise(table, simulate=_probe)

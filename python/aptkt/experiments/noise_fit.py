@@ -179,6 +179,10 @@ def fit_noise(
     if probes < 1:
         raise ConfigError(f"probes must be >= 1, got {probes}")
     target = summarise(noise_profile(table), trials_per_object(table))
+    if not target.separation > 1e-9:  # (rounding: identical objects give about 1e-16)
+        raise ConfigError(
+            "the table's objects do not differ (separation 0): no noise level can match it"
+        )
     n = trials if trials is not None else min(max(target.trials, 8), 40)
     say(
         f"the table: separation {target.separation:.2f}, drift {target.drift:.2f}, "
