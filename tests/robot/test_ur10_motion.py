@@ -185,16 +185,24 @@ def _slide_keeps_the_normal_force_at_constant_tangential_speed(robot, loopback, 
     window = (trace["host_t_ns"] >= start_ns + 20_000_000) & (trace["host_t_ns"] < stop_ns)
     assert np.all(cruising[window])
     # Seen throughout the window: a busy host reads fewer samples (44 of the controller's 72
-    # were seen once), but no stretch went unseen for longer than this process or the
-    # controller was kept waiting (a late controller sends its packets in bursts), on the
-    # controller's clock, which a late read does not shift.
+    # were seen once), but no stretch of the controller's clock went unseen for longer than
+    # the reading was kept waiting, give or take 20 ms and however late the controller ran (a
+    # late controller sends its packets in bursts). Two threads of this process read: the
+    # supervision loop, as late as a probe thread of the process (`late`), and ur_rtde's
+    # receiving thread, whose wait shows in the trace itself as the age of the data read (a
+    # loaded run missed 32 ms of samples with the probe 6.5 ms late: the receiving thread
+    # had been kept waiting, which the probe does not see).
     seen = trace["robot_timestamp"][window]
-    margin = 0.02 + late.seconds + lag
-    assert seen.size >= 2 and np.diff(seen).max() <= margin, (
+    read = trace["host_t_ns"][window] * 1e-9
+    age = (read - seen) - (read - seen).min()  # past the freshest read's
+    waited = np.maximum(late.seconds, age[:-1])
+    assert seen.size >= 2 and np.all(np.diff(seen) <= 0.02 + lag + waited), (
         np.diff(seen).max(),
         late.seconds,
+        age.max(),
         lag,
     )
+    margin = 0.02 + late.seconds + lag
     assert seen[-1] - seen[0] >= 0.58 - 2 * margin
     np.testing.assert_allclose(
         trace["tcp_speed"][cruising, 1], 0.0, atol=1e-12
