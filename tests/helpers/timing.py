@@ -194,9 +194,12 @@ def repeat_if_disturbed(
         try:
             check(result)
             return
-        except Exception:  # (an assertion, or a file the check reads missing)
+        except Exception as exc:  # (an assertion, or a file the check reads missing)
             late = stall()
             if late <= budget or k == attempts:
+                # (What was measured, for whoever reads the failure: a fault of the code, or
+                # a delay no probe saw.)
+                exc.add_note(f"attempt {k}: kept waiting {late:.3f} s; budget {budget:.3f} s")
                 raise
             print(
                 f"attempt {k} disturbed: kept waiting {late:.2f} s, more than {budget:.2f} s; again"
