@@ -1,75 +1,563 @@
-"""The README's real-data figures are a benchmark run's own.
+"""The docs' real-data figures are benchmark runs' own.
 
 The BioTac set has no licence, so neither it nor anything derived from it is committed, its
 benchmark results included: the figures cannot be checked against a file in the repository as
-the simulated world's are (tests/docs/test_figures.py). Point ``APTKT_BIOTAC_BENCHMARK`` at the
-output directory of the README's own command (``aptkt benchmark biotac.csv -o DIR -j 2``) and
-this checks the README's table and its step-20 gains against that run's ``summary.json``; without
-it the check is skipped, saying why. Re-measure, then run it, whenever the learner changes.
+the simulated world's are (tests/docs/test_figures.py). Point ``APTKT_BIOTAC_RUNS`` at a
+directory holding the output directories of the docs' own commands (docs/real-data.md, "Checking
+the figures": ``biotac-benchmark``, ``biotac-paper``, ``sweep``, ``lifelong``, ``recognition``)
+and this renders every real-data table row and figure of the README, docs/results.md,
+docs/real-data.md and docs/method.md from those runs' ``summary.json`` and ``results.csv``, and
+finds it in the page. Without the variable the checks are skipped, saying why; a run the
+directory lacks skips its own checks. Re-measure, then run it, whenever the learner changes.
+
+The renderers are checked on made-up runs below, so that the checks cannot pass vacuously.
 """
 
 from __future__ import annotations
 
+import csv
 import json
 import os
+import re
+import statistics
+from collections import defaultdict
 from pathlib import Path
 
 import pytest
 
-from aptkt.experiments.aggregate import Estimate
-from aptkt.experiments.report import ci
+from aptkt.experiments.aggregate import Estimate, estimate
+from aptkt.experiments.report import ci, pp, span
 
 ROOT = Path(__file__).resolve().parents[2]
-BENCHMARK = os.environ.get("APTKT_BIOTAC_BENCHMARK")
-#: The README's names for the benchmark's prior choices.
+RUNS = os.environ.get("APTKT_BIOTAC_RUNS")
+#: The docs' names for the benchmark's prior choices.
 CHOICES = {
     "random": "random priors",
     "nearest": "the most similar priors",
     "farthest": "the least similar priors",
 }
+#: The steps the docs' accuracy tables show.
+STEPS = (0, 1, 2, 3, 5, 10, 20)
 
-needs_the_run = pytest.mark.skipif(
-    BENCHMARK is None,
-    reason="the BioTac benchmark's results may not be committed: set APTKT_BIOTAC_BENCHMARK to "
-    "an 'aptkt benchmark biotac.csv' output directory to check the README against it",
-)
+# ----------------------------------------------------------------------------- rendering
+
+
+def cell(e: dict | Estimate) -> str:
+    return ci(e if isinstance(e, Estimate) else Estimate(**_fields(e)), cell=True)
+
+
+def _fields(e: dict) -> dict:
+    return {k: e[k] for k in ("mean", "low", "high", "n", "unit")}
+
+
+def accuracy_row(summary: dict, label: str, choice: str, method: str, library: str = "3") -> str:
+    """A row of mean accuracy at :data:`STEPS` (a reference measured at step 0 only leaves
+    the later cells empty)."""
+    curve = summary["results"][library][choice]["mean"][method]
+    cells = [f"{curve[s]:.3f}" if s < len(curve) else "" for s in STEPS]
+    return f"| {label} | {' | '.join(cells)} |"
 
 
 def readme_rows(summary: dict) -> list[str]:
-    """The README's table rows at one observation per new material, rendered from a run."""
+    """The README's table rows at one observation per new material."""
     rows = []
     for choice, label in CHOICES.items():
         result = summary["results"]["3"][choice]
-        gain = Estimate(**result["gain"]["APTKT"][0])
         baseline, aptkt = result["mean"]["baseline"][0], result["mean"]["APTKT"][0]
-        rows.append(f"| {label} | {baseline:.3f} | {aptkt:.3f} | {ci(gain, cell=True)} |")
+        gain = cell(result["gain"]["APTKT"][0])
+        rows.append(f"| {label} | {baseline:.3f} | {aptkt:.3f} | {gain} |")
     return rows
 
 
-def step_20_gains(summary: dict) -> str:
-    gains = [summary["results"]["3"][c]["gain"]["APTKT"][20]["mean"] for c in CHOICES]
+def gains_at(summary: dict, step: int, library: str = "3") -> str:
+    """``+1.9, +2.4 and +0.4 pp``: APTKT − baseline at ``step``, random, nearest, farthest."""
+    g = [summary["results"][library][c]["gain"]["APTKT"][step]["mean"] for c in CHOICES]
+    return f"{100 * g[0]:+.1f}, {100 * g[1]:+.1f} and {100 * g[2]:+.1f} pp"
+
+
+def checks(summary: dict) -> str:
+    """How many checks hold and reference figures are reached, as the docs say it."""
+    invariants = [c for c in summary["checks"] if c["kind"] == "invariant"]
+    references = [c for c in summary["checks"] if c["kind"] == "reference"]
+    held = sum(c["holds"] for c in invariants)
+    reached = sum(c["holds"] for c in references)
+    first = "all" if held == len(invariants) else f"{held} of"
+    second = "all" if reached == len(references) else f"{reached} of"
     return (
-        f"at step 20 by {100 * gains[0]:+.1f}, {100 * gains[1]:+.1f} and {100 * gains[2]:+.1f} pp"
+        f"{first} {len(invariants)} checks that must hold on any data hold, "
+        f"{second} {len(references)} reference figures reached"
     )
 
 
-@needs_the_run
-def test_the_readme_quotes_the_biotac_run():
-    summary = json.loads((Path(str(BENCHMARK)) / "summary.json").read_text())
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    for row in readme_rows(summary):
-        assert row in readme, f"README.md lacks the run's row:\n{row}"
-    assert step_20_gains(summary) in " ".join(readme.split())
+def measured(summary: dict, claim_starts: str) -> str:
+    """The report's own figure for the check whose claim starts so."""
+    (found,) = [c for c in summary["checks"] if c["claim"].startswith(claim_starts)]
+    return found["measured"]
 
 
-def test_the_rows_are_rendered_as_the_readme_writes_them():
-    """The renderer itself, on a made-up run (so that the check above cannot pass vacuously)."""
-    estimate = {"mean": 0.111, "low": 0.088, "high": 0.134, "n": 60, "unit": "groups"}
-    later = {"mean": 0.019, "low": 0.005, "high": 0.033, "n": 60, "unit": "groups"}
-    result = {
-        "mean": {"baseline": [0.7657], "APTKT": [0.8771]},
-        "gain": {"APTKT": [estimate] + [later] * 20},
+def largest_fall(summary: dict) -> str:
+    return measured(summary, "no method unlearns").split(" (")[0]
+
+
+def active_row(summary: dict, learner: str) -> str:
+    """docs/results.md's row of a learner's own choice against random picks."""
+    (a,) = [x for x in summary["active_against_random"] if x["learner"] == learner]
+    lo, hi = a["touches_interval"]
+    return (
+        f"| {learner} | {cell(a['mean_gain'])} | {pp(a['lowest'])} (step {a['lowest_step']}) "
+        f"| {a['touches']:.1f} [{lo:.1f}, {hi:.1f}] | {100 * a['saved']:.0f} % |"
+    )
+
+
+def rule_row(summary: dict, learner: str, rule: str) -> str:
+    """docs/method.md's row of a learner's own choice by ``rule`` against random picks."""
+    (a,) = [x for x in summary["active_against_random"] if x["learner"] == learner]
+    return (
+        f"| {learner} | {rule} | {cell(a['mean_gain'])} | {pp(a['lowest'])} "
+        f"(step {a['lowest_step']}) | {100 * a['largest_fall']:.2f} pp |"
+    )
+
+
+def own_estimate(summary: dict) -> list[str]:
+    """APTKT's and the baseline's own estimate against the held-out and the same-period
+    accuracy (mean absolute error over the steps)."""
+    e = {x["learner"]: x for x in summary["own_estimate"]}
+    a, b = e["APTKT"], e["baseline"]
+    return [
+        f"{100 * a['mean_absolute_error']:.1f} pp (APTKT) and "
+        f"{100 * b['mean_absolute_error']:.1f} pp (baseline) of the held-out accuracy",
+        f"{100 * a['same_period_mean_absolute_error']:.1f} and "
+        f"{100 * b['same_period_mean_absolute_error']:.1f} pp of the accuracy on the pool's",
+    ]
+
+
+def sweep_row(summary: dict, library: str) -> str:
+    """docs/results.md's row of a library size (random priors)."""
+    r = summary["results"][library]["random"]
+    m, vs_control = r["mean"], r["gain"]["APTKT vs control"]
+    worst = min(range(len(vs_control)), key=lambda s: vs_control[s]["mean"])
+    spans = " | ".join(f"{m[k][0]:.3f} → {m[k][20]:.3f}" for k in ("baseline", "control", "APTKT"))
+    gains = f"{cell(r['gain']['APTKT'][0])} | {cell(r['gain']['APTKT'][20])}"
+    return f"| {library} | {spans} | {gains} | {pp(vs_control[worst]['mean'])} (step {worst}) |"
+
+
+def sweep_gains(summary: dict, step: int) -> str:
+    """``+11.1, +10.6, +10.5 and +11.8 pp``: APTKT − baseline at ``step`` by library size."""
+    g = [
+        f"{100 * summary['results'][k]['random']['gain']['APTKT'][step]['mean']:+.1f}"
+        for k in map(str, summary["libraries"])
+    ]
+    return f"{', '.join(g[:-1])} and {g[-1]} pp"
+
+
+def sweep_nearest(summary: dict) -> str:
+    """The largest library's APTKT against both 1-NN rules at one shot."""
+    k = str(summary["libraries"][-1])
+    m = summary["results"][k]["random"]["mean"]
+    return (
+        f"with {k} priors: {m['APTKT'][0]:.3f} against {m['1-NN'][0]:.3f} in its own metric "
+        f"and {m['1-NN shrunk'][0]:.3f} in the priors' shrunk covariance"
+    )
+
+
+def sweep_lowest(summary: dict) -> str:
+    """Over every size, APTKT's lowest mean gain over the baseline and its worst step
+    against the control."""
+    lowest = min(
+        g["mean"]
+        for k in map(str, summary["libraries"])
+        for g in summary["results"][k]["random"]["gain"]["APTKT"]
+    )
+    worst = min(
+        g["mean"]
+        for k in map(str, summary["libraries"])
+        for g in summary["results"][k]["random"]["gain"]["APTKT vs control"]
+    )
+    return f"(lowest {pp(lowest)}), never more than {-100 * worst:.1f} pp below the control"
+
+
+def paired_over_steps(
+    a: Path, b: Path, method: str, choice: str, steps: range = range(1, 21)
+) -> Estimate:
+    """``a`` − ``b`` (two runs' ``results.csv`` on the same groups), each group's mean over
+    ``steps``, with its interval over groups."""
+    acc: dict[Path, dict[str, list[float]]] = {}
+    for path in (a, b):
+        per_group: dict[str, list[float]] = defaultdict(list)
+        with path.open(newline="") as f:
+            for row in csv.DictReader(f):
+                if (
+                    row["method"] == method
+                    and row["priors"] == choice
+                    and int(row["step"]) in steps
+                ):
+                    per_group[row["group"]].append(float(row["accuracy"]))
+        acc[path] = per_group
+    groups = sorted(acc[a], key=int)
+    assert groups == sorted(acc[b], key=int), "the two runs are not on the same groups"
+    diffs = [sum(acc[a][g]) / len(acc[a][g]) - sum(acc[b][g]) / len(acc[b][g]) for g in groups]
+    return estimate(diffs)
+
+
+def no_fall_above(summary: dict) -> str:
+    """``falls by more than 0.1 pp``: the report's largest fall of a mean curve."""
+    (fall,) = re.findall(r"largest fall ([0-9.]+) pp", measured(summary, "no method unlearns"))
+    return f"falls by more than {fall} pp"
+
+
+def active_gist(summary: dict) -> str:
+    """The README's sentence on APTKT's own choice against random picks."""
+    (a,) = [x for x in summary["active_against_random"] if x["learner"] == "APTKT"]
+    return (
+        f"APTKT gains {cell(a['mean_gain'])} on average over the 20 steps and reaches random "
+        f"picks' final accuracy after {a['touches']:.1f} touches"
+    )
+
+
+def noise_profile(summary: dict) -> dict[str, dict[str, float]]:
+    """Each figure of the report's noise profile by modality."""
+    figures = ("separation", "drift", "heterogeneity")
+    return {f: {r["modality"]: r[f] for r in summary["noise_profile"]} for f in figures}
+
+
+def noise_spans_row(summary: dict) -> str:
+    """docs/real-data.md's row of the set's noise profile: each figure's range."""
+    spans = [span(list(v.values()), "{:.1f}", "") for v in noise_profile(summary).values()]
+    return f"| BioTac, 4 modalities | {' | '.join(spans)} |"
+
+
+def noise_medians_row(summary: dict) -> str:
+    """docs/simulation.md's row of the table in the noise fit: each figure's median."""
+    medians = [f"{statistics.median(v.values()):.2f}" for v in noise_profile(summary).values()]
+    return f"| the table |  |  |  | {' | '.join(medians)} |"
+
+
+def noise_by_modality(summary: dict) -> list[str]:
+    """docs/simulation.md's BioTac figures beside the simulated world's, by modality."""
+    n = noise_profile(summary)
+    sep = n["separation"]
+    return [
+        f"(the BioTac pressure {sep['pressure']:.1f})",
+        f"(temperature {sep['temperature']:.1f})",
+        f"(vibration {sep['vibration']:.1f})",
+        f"against {n['drift']['vibration']:.1f})",
+    ]
+
+
+def lifelong_row(summary: dict, batch: str) -> str:
+    """docs/results.md's row of a lifelong batch."""
+    r = summary["results"][batch]
+    library, ncm = r["mean"]["library"][0], r["mean"]["NCM"][0]
+    return (
+        f"| {batch} | {r['learned_with']:.0f} | {cell(r['gain_one_shot'])} "
+        f"| {cell(r['gain_last_step'])} | {library:.3f} ({ncm:.3f}), "
+        f"{r['library_size']:.0f} materials |"
+    )
+
+
+def lifelong_gist(summary: dict) -> list[str]:
+    """docs/method.md's figures of the lifelong benchmark."""
+    batches = sorted(summary["results"], key=int)
+    g = [f"{100 * summary['results'][b]['gain_one_shot']['mean']:+.1f}" for b in batches]
+    last = summary["results"][batches[-1]]["mean"]
+    return [
+        f"gains {', '.join(g[:-1])} and {g[-1]} pp at one observation",
+        f"with {last['library'][0]:.3f} (the nearest class mean in its metric, on the same "
+        f"observations: {last['NCM'][0]:.3f})",
+    ]
+
+
+def recognition_rows(summary: dict, draws: Path) -> list[str]:
+    """docs/recognition.md's table and docs/results.md's sentence."""
+    r = summary["results"]
+
+    def three(e: dict) -> str:
+        return f"{e['mean']:.3f}** [{e['low']:.3f}, {e['high']:.3f}]"
+
+    def percent(e: dict, digits: int) -> str:
+        m, lo, hi = (f"{100 * e[k]:.{digits}f}" for k in ("mean", "low", "high"))
+        return f"{m} % [{lo}, {hi}]"
+
+    with draws.open(newline="") as f:
+        lowest = min(float(row["auroc"]) for row in csv.DictReader(f))
+    ncm = three(r["ncm"]).replace("**", "")
+    return [
+        f"| accuracy on the library's materials | **{three(r['accuracy'])} (nearest class mean "
+        f"in the library's metric: {ncm}) |",
+        f"| novelty AUROC | **{three(r['auroc'])} (lowest draw {lowest:.3f}) |",
+        f"| touches of known materials flagged as new (asked: 5 %) | "
+        f"{percent(r['false_alarms'], 1)} |",
+        f"| touches of unknown materials flagged as new | {percent(r['detected'], 0)} |",
+    ]
+
+
+def recognition_gist(summary: dict) -> list[str]:
+    r = summary["results"]
+    return [
+        f"with {r['accuracy']['mean']:.3f} (the nearest class mean: {r['ncm']['mean']:.3f})",
+        f"novelty AUROC of {r['auroc']['mean']:.3f} ({r['auroc']['n']} draws)",
+    ]
+
+
+# ----------------------------------------------------------------------------- the checks
+
+
+def page(name: str) -> str:
+    """A page's text with its minus signs as Python writes them, whitespace as single spaces
+    (a figure may be wrapped over two lines)."""
+    text = (ROOT / name).read_text(encoding="utf-8").replace("−", "-")
+    return " ".join(text.lower().split())
+
+
+def run(name: str) -> Path:
+    if RUNS is None:
+        pytest.skip(
+            "the BioTac benchmark's results may not be committed: set APTKT_BIOTAC_RUNS to a "
+            "directory of the runs docs/real-data.md names to check the docs against them"
+        )
+    d = Path(RUNS) / name
+    if not (d / "summary.json").is_file():
+        pytest.skip(f"{d} holds no benchmark run ({d / 'summary.json'} is missing)")
+    return d
+
+
+def summary_of(name: str) -> dict:
+    return json.loads((run(name) / "summary.json").read_text())
+
+
+def assert_quoted(name: str, figures: list[str]) -> None:
+    text = page(name)
+    missing = [f for f in figures if " ".join(f.lower().split()) not in text]
+    assert not missing, f"{name} lacks the run's:\n" + "\n".join(missing)
+
+
+def test_the_readme_quotes_the_default_run():
+    s = summary_of("biotac-benchmark")
+    figures = [f"at step 20 by {gains_at(s, 20)}", no_fall_above(s), active_gist(s), checks(s)]
+    assert_quoted("README.md", [*readme_rows(s), *figures])
+
+
+def test_real_data_md_quotes_the_default_run():
+    s = summary_of("biotac-benchmark")
+    rows = [
+        accuracy_row(s, "baseline", "random", "baseline"),
+        accuracy_row(s, "baseline, random picks", "random", "baseline random"),
+        accuracy_row(s, "APTKT, random priors", "random", "APTKT"),
+        accuracy_row(s, "APTKT, random priors, random picks", "random", "APTKT random"),
+        accuracy_row(s, "APTKT, most similar priors", "nearest", "APTKT"),
+        accuracy_row(s, "APTKT, least similar priors", "farthest", "APTKT"),
+    ]
+    assert_quoted(
+        "docs/real-data.md",
+        [*rows, f"({gains_at(s, 0)}", f"at step 20 {gains_at(s, 20)}", checks(s)],
+    )
+    assert_quoted("docs/real-data.md", [noise_spans_row(s)])
+    assert_quoted("docs/simulation.md", [noise_medians_row(s), *noise_by_modality(s)])
+    # "APTKT with auxiliary features learned exactly as APTKT in every group"
+    for choice in CHOICES:
+        mean = s["results"]["3"][choice]["mean"]
+        assert mean["APTKT+aux"] == mean["APTKT"], choice
+
+
+def test_real_data_md_quotes_the_paper_selection_run():
+    s = summary_of("biotac-paper")
+    rows = [
+        accuracy_row(s, "baseline", "random", "baseline"),
+        accuracy_row(s, "APTKT, random priors", "random", "APTKT"),
+        accuracy_row(s, "APTKT, most similar priors", "nearest", "APTKT"),
+        accuracy_row(s, "APTKT, least similar priors", "farthest", "APTKT"),
+        accuracy_row(s, "1-NN in the prior's metric (random priors)", "random", "1-NN"),
+    ]
+    assert_quoted(
+        "docs/real-data.md",
+        [*rows, f"({gains_at(s, 0)}", f"at step 20 {gains_at(s, 20)}", checks(s)],
+    )
+    (estimate_check,) = [c for c in s["checks"] if c["claim"].startswith("APTKT's own estimate")]
+    assert not estimate_check["holds"], "the page says this reference figure is not reached"
+    own = estimate_check["measured"].split(" (")[0]
+    assert_quoted("docs/real-data.md", [f"own estimate of its accuracy is {own} from"])
+    mean = s["results"]["3"]["random"]["mean"]
+    ends = f"the baseline ends at {mean['baseline'][20]:.3f} and APTKT at {mean['APTKT'][20]:.3f}"
+    assert_quoted("docs/results.md", [ends])
+
+
+def test_the_rules_compared_are_the_runs():
+    """The two rules for the next touch, each against random picks (docs/method.md,
+    docs/results.md) and against each other on the same groups (docs/real-data.md)."""
+    default, paper = run("biotac-benchmark"), run("biotac-paper")
+    d, p = summary_of("biotac-benchmark"), summary_of("biotac-paper")
+    assert_quoted(
+        "docs/method.md",
+        [
+            rule_row(d, "baseline", "error reduction"),
+            rule_row(p, "baseline", "AT-LPP"),
+            rule_row(d, "APTKT", "error reduction"),
+            rule_row(p, "APTKT", "AT-LPP"),
+            *own_estimate(d)[:1],
+        ],
+    )
+    assert_quoted(
+        "docs/results.md",
+        [active_row(d, "baseline"), active_row(d, "APTKT"), *own_estimate(d)],
+    )
+    against = [
+        f"{who} {cell(paired_over_steps(default / 'results.csv', paper / 'results.csv', m, c))}"
+        for who, m, c in [
+            ("baseline", "baseline", "random"),
+            ("APTKT with random priors", "APTKT", "random"),
+            ("with the most similar", "APTKT", "nearest"),
+            ("with the least similar", "APTKT", "farthest"),
+        ]
+    ]
+    assert_quoted("docs/real-data.md", against)
+
+
+def test_the_library_sweep_is_the_run():
+    s = summary_of("sweep")
+    rows = [sweep_row(s, str(k)) for k in s["libraries"]]
+    assert_quoted(
+        "docs/results.md",
+        [*rows, sweep_nearest(s), sweep_lowest(s), checks(s), largest_fall(s)],
+    )
+    assert_quoted(
+        "docs/method.md",
+        [f"is {sweep_gains(s, 0)} with", f"at step 20 {sweep_gains(s, 20)}"],
+    )
+
+
+def test_the_lifelong_benchmark_is_the_run():
+    s = summary_of("lifelong")
+    rows = [lifelong_row(s, b) for b in sorted(s["results"], key=int)]
+    assert_quoted("docs/results.md", rows)
+    assert_quoted("docs/method.md", lifelong_gist(s))
+
+
+def test_the_recognition_benchmark_is_the_run():
+    s = summary_of("recognition")
+    assert_quoted("docs/recognition.md", recognition_rows(s, run("recognition") / "results.csv"))
+    assert_quoted("docs/results.md", recognition_gist(s))
+
+
+# ------------------------------------------------------------- the renderers on made-up runs
+
+
+def made_up_run() -> dict:
+    """A summary.json of the benchmark's shape with known figures."""
+
+    def est(mean: float) -> dict:
+        return {"mean": mean, "low": mean - 0.023, "high": mean + 0.023, "n": 60, "unit": "groups"}
+
+    def result(offset: float) -> dict:
+        curve = [0.7657 + 0.01 * s for s in range(21)]
+        return {
+            "mean": {
+                "baseline": curve,
+                "control": [x + 0.1 for x in curve],
+                "APTKT": [x + offset for x in curve],
+                "1-NN": [0.8526],
+                "1-NN shrunk": [0.8504],
+            },
+            "gain": {
+                "APTKT": [est(offset)] * 21,
+                "APTKT vs control": [est(0.001 * (s - 3) ** 2 - 0.002) for s in range(21)],
+            },
+        }
+
+    return {
+        "libraries": [3, 15],
+        "results": {
+            "3": {c: result(0.111 - 0.01 * i) for i, c in enumerate(CHOICES)},
+            "15": {"random": result(0.118)},
+        },
+        "checks": [
+            {"kind": "invariant", "holds": True, "claim": "a", "measured": "x"},
+            {"kind": "invariant", "holds": False, "claim": "b", "measured": "y"},
+            {"kind": "reference", "holds": True, "claim": "c", "measured": "z"},
+            {
+                "kind": "invariant",
+                "holds": True,
+                "claim": "no method unlearns: no mean curve falls",
+                "measured": "largest fall 0.1 pp (APTKT+aux, random priors, step 15)",
+            },
+        ],
+        "active_against_random": [
+            {
+                "learner": "APTKT",
+                "mean_gain": est(0.023),
+                "lowest": -0.002,
+                "lowest_step": 1,
+                "largest_fall": 0.0009,
+                "touches": 7.4545,
+                "touches_interval": [4.73, 12.49],
+                "saved": 0.6272,
+            }
+        ],
+        "own_estimate": [
+            {
+                "learner": "APTKT",
+                "mean_absolute_error": 0.0297,
+                "same_period_mean_absolute_error": 0.0061,
+            },
+            {
+                "learner": "baseline",
+                "mean_absolute_error": 0.0317,
+                "same_period_mean_absolute_error": 0.0084,
+            },
+        ],
     }
-    summary = {"results": {"3": {c: result for c in CHOICES}}}
-    assert readme_rows(summary)[0] == "| random priors | 0.766 | 0.877 | +11.1 pp [+8.8, +13.4] |"
-    assert step_20_gains(summary) == "at step 20 by +1.9, +1.9 and +1.9 pp"
+
+
+def test_the_renderers_write_as_the_docs_do():
+    s = made_up_run()
+    assert readme_rows(s)[0] == "| random priors | 0.766 | 0.877 | +11.1 pp [+8.8, +13.4] |"
+    assert readme_rows(s)[1].startswith("| the most similar priors | 0.766 | 0.867 | +10.1 pp")
+    assert gains_at(s, 20) == "+11.1, +10.1 and +9.1 pp"
+    assert accuracy_row(s, "b", "random", "baseline") == (
+        "| b | 0.766 | 0.776 | 0.786 | 0.796 | 0.816 | 0.866 | 0.966 |"
+    )
+    assert accuracy_row(s, "1-NN", "random", "1-NN") == "| 1-NN | 0.853 |  |  |  |  |  |  |"
+    assert checks(s) == (
+        "2 of 3 checks that must hold on any data hold, all 1 reference figures reached"
+    )
+    assert largest_fall(s) == "largest fall 0.1 pp"
+    assert active_row(s, "APTKT") == (
+        "| APTKT | +2.3 pp [+0.0, +4.6] | -0.2 pp (step 1) | 7.5 [4.7, 12.5] | 63 % |"
+    )
+    assert rule_row(s, "APTKT", "AT-LPP") == (
+        "| APTKT | AT-LPP | +2.3 pp [+0.0, +4.6] | -0.2 pp (step 1) | 0.09 pp |"
+    )
+    assert own_estimate(s) == [
+        "3.0 pp (APTKT) and 3.2 pp (baseline) of the held-out accuracy",
+        "0.6 and 0.8 pp of the accuracy on the pool's",
+    ]
+    # (APTKT vs control is lowest, −0.2 pp, at step 3.)
+    assert sweep_row(s, "15") == (
+        "| 15 | 0.766 → 0.966 | 0.866 → 1.066 | 0.884 → 1.084 | +11.8 pp [+9.5, +14.1] "
+        "| +11.8 pp [+9.5, +14.1] | -0.2 pp (step 3) |"
+    )
+    assert sweep_gains(s, 0) == "+11.1 and +11.8 pp"
+    assert sweep_nearest(s) == (
+        "with 15 priors: 0.884 against 0.853 in its own metric and 0.850 in the priors' shrunk "
+        "covariance"
+    )
+    assert sweep_lowest(s) == "(lowest +11.1 pp), never more than 0.2 pp below the control"
+
+
+def test_paired_differences_pair_by_group(tmp_path: Path):
+    """Group by group, the mean over the steps of one run minus the other's, then a t interval
+    over groups (checked against the closed form for three groups)."""
+    header = "group,library,priors,new_objects,prior_objects,method,step,accuracy\n"
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    rows_a, rows_b = [header], [header]
+    for g, shift in enumerate([0.01, 0.02, 0.06]):
+        for step in range(21):
+            acc = 0.8 + 0.005 * step
+            rows_a.append(f"{g},3,random,x,y,APTKT,{step},{acc + shift}\n")
+            rows_b.append(f"{g},3,random,x,y,APTKT,{step},{acc}\n")
+            rows_b.append(f"{g},3,random,x,y,baseline,{step},0.1\n")
+    a.write_text("".join(rows_a))
+    b.write_text("".join(rows_b))
+    e = paired_over_steps(a, b, "APTKT", "random")
+    assert e.n == 3 and e.mean == pytest.approx(0.03)
+    # sd of (0.01, 0.02, 0.06) is 0.026458; t(0.975, 2) = 4.302653
+    assert e.high - e.mean == pytest.approx(4.302653 * 0.0264575 / 3**0.5, rel=1e-4)
