@@ -39,3 +39,53 @@ def test_the_simulated_world_beside_real_data_is_the_runs_comparison():
 
 def test_the_simulated_worlds_time_is_its_runs():
     assert f"Time: {_summary()['seconds']:,.0f} s wall" in PAGE.read_text()
+
+
+LIBRARY_SCALE = ROOT / "benches" / "results" / "library-scale.json"
+
+
+def _figure(x: float) -> str:
+    """Two significant figures below 10 (one decimal from 1), whole numbers above."""
+    return f"{x:.2f}" if x < 1 else f"{x:.1f}" if x < 10 else f"{x:.0f}"
+
+
+def library_scale_row(row: dict) -> str:
+    """docs/results.md's row of the library benchmark at one size."""
+    label = f"{row['objects']:,}" + (", the exact model" if row["model"] == "exact" else "")
+    gb = row["peak MB"] / 1000
+    cells = [
+        f"{_figure(row['build CPU-s'])} CPU-s",
+        f"{_figure(row['learn CPU-s'])} CPU-s",
+        f"{row['update max ms']:.0f} ms",
+        f"{_figure(row['recognise ms/touch'])} ms",
+        f"{_figure(row['merge CPU-s'])} CPU-s",
+        f"{gb:.2f} GB" if gb < 1 else f"{gb:.1f} GB",
+    ]
+    return f"| {label} | {' | '.join(cells)} |"
+
+
+def test_the_library_of_thousands_is_the_benchmarks_file():
+    """The table of what a library costs as it grows is benches/results/library-scale.json's,
+    with the command that wrote it."""
+    bench, page = json.loads(LIBRARY_SCALE.read_text()), PAGE.read_text()
+    rows = {(r["objects"], r["model"]): r for r in bench["rows"]}
+    shown = [(100, "exact"), (100, "local"), (1000, "local"), (10000, "local")]
+    for key in shown:
+        assert library_scale_row(rows[key]) in page, library_scale_row(rows[key])
+    assert f"python benches/{' '.join(bench['command'])}" in page
+
+
+def test_the_library_rows_render_as_the_page_writes_them():
+    row = {
+        "objects": 1000,
+        "model": "local",
+        "build CPU-s": 6.46,
+        "learn CPU-s": 2.02,
+        "update max ms": 64.9,
+        "recognise ms/touch": 0.368,
+        "merge CPU-s": 66.63,
+        "peak MB": 8757,
+    }
+    assert library_scale_row(row) == (
+        "| 1,000 | 6.5 CPU-s | 2.0 CPU-s | 65 ms | 0.37 ms | 67 CPU-s | 8.8 GB |"
+    )

@@ -299,6 +299,25 @@ def recognition_gist(summary: dict) -> list[str]:
     ]
 
 
+def noise_fit_rows(fit: dict) -> list[str]:
+    """docs/simulation.md's table of the noise fit's probes (``fit-noise --json``)."""
+
+    def level(v: float) -> str:
+        return str(int(v)) if v == int(v) else f"{v:.3f}"
+
+    rows = []
+    for i, probe in enumerate(fit["probes"], 1):
+        lv = probe["level"]
+        cells = [level(lv[k]) for k in ("trial", "drift", "objects")]
+        cells += [f"{probe[k]:.2f}" for k in ("separation", "drift", "heterogeneity")]
+        if lv == fit["level"]:
+            cells = [f"**{c}**" for c in [f"{i}: the fit", *cells]]
+        else:
+            cells = [f"{i} (physical defaults)" if i == 1 else str(i), *cells]
+        rows.append(f"| {' | '.join(cells)} |")
+    return rows
+
+
 # ----------------------------------------------------------------------------- the checks
 
 
@@ -319,6 +338,14 @@ def run(name: str) -> Path:
     if not (d / "summary.json").is_file():
         pytest.skip(f"{d} holds no benchmark run ({d / 'summary.json'} is missing)")
     return d
+
+
+def run_file(name: str) -> Path:
+    run("biotac-benchmark")  # (skips without the runs)
+    path = Path(str(RUNS)) / name
+    if not path.is_file():
+        pytest.skip(f"{path} is missing")
+    return path
 
 
 def summary_of(name: str) -> dict:
@@ -423,6 +450,11 @@ def test_the_library_sweep_is_the_run():
         "docs/method.md",
         [f"is {sweep_gains(s, 0)} with", f"at step 20 {sweep_gains(s, 20)}"],
     )
+
+
+def test_the_noise_fit_is_the_run():
+    fit = json.loads(run_file("biotac-noise.json").read_text())
+    assert_quoted("docs/simulation.md", noise_fit_rows(fit))
 
 
 def test_the_lifelong_benchmark_is_the_run():
@@ -541,6 +573,24 @@ def test_the_renderers_write_as_the_docs_do():
         "covariance"
     )
     assert sweep_lowest(s) == "(lowest +11.1 pp), never more than 0.2 pp below the control"
+
+
+def test_the_noise_fit_renders_as_the_page_does():
+    def probe(trial: float, drift: float, objects: float, figures: tuple) -> dict:
+        level = {"trial": trial, "drift": drift, "objects": objects}
+        return {"level": level, **dict(zip(("separation", "drift", "heterogeneity"), figures))}
+
+    fit = {
+        "level": {"trial": 1.0306, "drift": 1.5041, "objects": 0.5131},
+        "probes": [
+            probe(1.0, 1.0, 0.0, (3.02, 1.849, 3.27)),
+            probe(1.0306, 1.5041, 0.5131, (2.46, 2.08, 4.371)),
+        ],
+    }
+    assert noise_fit_rows(fit) == [
+        "| 1 (physical defaults) | 1 | 1 | 0 | 3.02 | 1.85 | 3.27 |",
+        "| **2: the fit** | **1.031** | **1.504** | **0.513** | **2.46** | **2.08** | **4.37** |",
+    ]
 
 
 def test_paired_differences_pair_by_group(tmp_path: Path):
