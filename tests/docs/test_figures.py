@@ -89,3 +89,38 @@ def test_the_library_rows_render_as_the_page_writes_them():
     assert library_scale_row(row) == (
         "| 1,000 | 6.5 CPU-s | 2.0 CPU-s | 65 ms | 0.37 ms | 67 CPU-s | 8.8 GB |"
     )
+
+
+SELECTION = ROOT / "docs" / "results" / "simulated-selection.json"
+
+
+def test_the_simulated_selection_study_is_its_run():
+    """docs/method.md's figures of the learners' own choice against random picks on the
+    simulated world are docs/results/simulated-selection.json's (that run's summary.json)."""
+    from aptkt.experiments.aggregate import Estimate
+    from aptkt.experiments.report import ci, pp
+
+    summary = json.loads(SELECTION.read_text())
+    arms = {a["learner"]: a for a in summary["active_against_random"]}
+
+    def touches(a: dict) -> str:
+        lo, hi = a["touches_interval"]
+        return f"{a['touches']:.1f} touches [{lo:.1f}, {hi:.1f}]"
+
+    def gain(a: dict) -> str:
+        return ci(Estimate(**a["mean_gain"]), cell=True)
+
+    aptkt, baseline = arms["APTKT"], arms["baseline"]
+    mean = summary["results"]["3"]["random"]["mean"]["APTKT"]
+    figures = [
+        f"APTKT {gain(aptkt)} over random picks",
+        f"(lowest {pp(aptkt['lowest'])}, step {aptkt['lowest_step']})",
+        f"never falling by more than {100 * aptkt['largest_fall']:.1f} pp",
+        f"after {touches(aptkt)}",
+        f"the baseline {gain(baseline)} (lowest {pp(baseline['lowest'])}, {touches(baseline)})",
+        f"rises {100 * (mean[20] - mean[0]):.1f} pp in 20 touches",
+        summary["date"],
+    ]
+    page = " ".join((ROOT / "docs" / "method.md").read_text().replace("−", "-").split())
+    missing = [f for f in figures if f not in page]
+    assert not missing, missing
