@@ -318,6 +318,27 @@ def noise_fit_rows(fit: dict) -> list[str]:
     return rows
 
 
+def stream_rows(summary: dict, shown: tuple[int, ...] = (5, 80, 480, 980)) -> list[str]:
+    """docs/results.md's rows of the synthetic stream at the batches learned with ``shown``
+    objects, up to the accuracies (the CPU seconds and memory after them are the machine's)."""
+    rows = []
+    for r in summary["results"].values():
+        if int(r["learned_with"]) in shown:
+            library, ncm = r["mean"]["library"][0], r["mean"]["NCM"][0]
+            rows.append(
+                f"| {r['learned_with']:.0f} | {cell(r['gain_one_shot'])} "
+                f"| {cell(r['gain_last_step'])} | {library:.3f} / {ncm:.3f} |"
+            )
+    assert len(rows) == len(shown), "the run has no batch learned with some of them"
+    return rows
+
+
+def differences(summary: dict) -> list[str]:
+    """The growth checks' paired differences, as the report measured them."""
+    found = [re.search(r"\(difference (.+)\)$", c["measured"]) for c in summary["checks"]]
+    return [f.group(1) for f in found if f is not None]
+
+
 # ----------------------------------------------------------------------------- the checks
 
 
@@ -464,6 +485,13 @@ def test_the_lifelong_benchmark_is_the_run():
     assert_quoted("docs/method.md", lifelong_gist(s))
 
 
+def test_the_stream_of_a_thousand_objects_is_the_run():
+    s = summary_of("stream")
+    gist = [*differences(s), f"all {len(s['checks'])} checks hold"]
+    assert all(c["holds"] for c in s["checks"]), "the page says every check holds"
+    assert_quoted("docs/results.md", [*stream_rows(s), *gist])
+
+
 def test_the_recognition_benchmark_is_the_run():
     s = summary_of("recognition")
     assert_quoted("docs/recognition.md", recognition_rows(s, run("recognition") / "results.csv"))
@@ -591,6 +619,35 @@ def test_the_noise_fit_renders_as_the_page_does():
         "| 1 (physical defaults) | 1 | 1 | 0 | 3.02 | 1.85 | 3.27 |",
         "| **2: the fit** | **1.031** | **1.504** | **0.513** | **2.46** | **2.08** | **4.37** |",
     ]
+
+
+def test_the_lifelong_renderers_write_as_the_page_does():
+    def est(mean: float) -> dict:
+        return {"mean": mean, "low": mean - 0.05, "high": mean + 0.05, "n": 8, "unit": "orders"}
+
+    def batch(learned_with: int, one_shot: float) -> dict:
+        return {
+            "learned_with": float(learned_with),
+            "library_size": float(learned_with + 5),
+            "gain_one_shot": est(one_shot),
+            "gain_last_step": est(0.06),
+            "mean": {"library": [0.9861], "NCM": [0.97]},
+        }
+
+    s = {
+        "results": {"1": batch(5, 0.142), "2": batch(10, 0.15), "3": batch(80, 0.146)},
+        "checks": [{"measured": "+27.8 pp against +14.2 pp (difference +13.6 pp [+7.5, +19.7])"}],
+    }
+    assert stream_rows(s, shown=(5, 80)) == [
+        "| 5 | +14.2 pp [+9.2, +19.2] | +6.0 pp [+1.0, +11.0] | 0.986 / 0.970 |",
+        "| 80 | +14.6 pp [+9.6, +19.6] | +6.0 pp [+1.0, +11.0] | 0.986 / 0.970 |",
+    ]
+    assert differences(s) == ["+13.6 pp [+7.5, +19.7]"]
+    assert lifelong_row(s, "2") == (
+        "| 2 | 10 | +15.0 pp [+10.0, +20.0] | +6.0 pp [+1.0, +11.0] | 0.986 (0.970), 15 materials |"
+    )
+    with pytest.raises(AssertionError, match="no batch"):
+        stream_rows(s, shown=(5, 480))
 
 
 def test_paired_differences_pair_by_group(tmp_path: Path):
