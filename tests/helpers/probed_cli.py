@@ -33,7 +33,9 @@ def main() -> None:
         connected.append([time.monotonic(), None])
 
     def dropping(connection: Connection) -> None:
-        if connected and connected[-1][1] is None:
+        # (connect() drops a connection not yet open first: no teardown then.)
+        opened_now = connection.receive is not None or connection.control is not None
+        if opened_now and connected and connected[-1][1] is None:
             connected[-1][1] = time.monotonic()
         drop_clients(connection)
 
