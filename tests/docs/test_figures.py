@@ -124,3 +124,40 @@ def test_the_simulated_selection_study_is_its_run():
     page = " ".join((ROOT / "docs" / "method.md").read_text().replace("−", "-").split())
     missing = [f for f in figures if f not in page]
     assert not missing, missing
+
+
+NOISE_PROFILE = ROOT / "docs" / "results" / "simulated-noise-profile.json"
+
+
+def test_the_simulated_worlds_noise_by_modality_is_its_profile():
+    """docs/simulation.md's figures of the reproduction's data set by modality are
+    docs/results/simulated-noise-profile.json's."""
+    from aptkt.experiments.report import span
+
+    profile = json.loads(NOISE_PROFILE.read_text())["profile"]
+
+    def figures(figure: str, *modalities: str, actions: tuple[str, ...] = ()) -> str:
+        values = [
+            p[figure]
+            for p in profile
+            if p["modality"] in modalities and (not actions or p["action"] in actions)
+        ]
+        return span(values, "{:.1f}", "")
+
+    drifting_little = tuple(
+        p["action"] for p in profile if p["modality"] == "texture" and p["drift"] < 1.5
+    )
+    named = ", ".join(drifting_little[:-1]) + f" and {drifting_little[-1]}"
+    quoted = [
+        f"the force separates the objects by {figures('separation', 'force')}",
+        f"the thermal curve by {figures('separation', 'thermal')}",
+        f"the texture by {figures('separation', 'texture')}",
+        f"the texture of {named} still drifts little "
+        f"({figures('drift', 'texture', actions=drifting_little)}, against",
+        f"less unequal between objects ({figures('heterogeneity', 'thermal')}) than the force's "
+        f"and the texture's ({figures('heterogeneity', 'force', 'texture')})",
+        "docs/results/simulated-noise-profile.json",
+    ]
+    page = " ".join((ROOT / "docs" / "simulation.md").read_text().split())
+    missing = [q for q in quoted if q not in page]
+    assert not missing, missing
