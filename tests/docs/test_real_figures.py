@@ -349,24 +349,25 @@ def page(name: str) -> str:
     return " ".join(text.lower().split())
 
 
-def run(name: str) -> Path:
+def run_file(name: str) -> Path:
+    """A file or directory of the runs, or skip saying why it is not there."""
     if RUNS is None:
         pytest.skip(
             "the BioTac benchmark's results may not be committed: set APTKT_BIOTAC_RUNS to a "
             "directory of the runs docs/real-data.md names to check the docs against them"
         )
-    d = Path(RUNS) / name
+    path = Path(RUNS) / name
+    if not path.exists():
+        pytest.skip(f"{path} is missing")
+    return path
+
+
+def run(name: str) -> Path:
+    """A benchmark's output directory."""
+    d = run_file(name)
     if not (d / "summary.json").is_file():
         pytest.skip(f"{d} holds no benchmark run ({d / 'summary.json'} is missing)")
     return d
-
-
-def run_file(name: str) -> Path:
-    run("biotac-benchmark")  # (skips without the runs)
-    path = Path(str(RUNS)) / name
-    if not path.is_file():
-        pytest.skip(f"{path} is missing")
-    return path
 
 
 def summary_of(name: str) -> dict:
@@ -388,19 +389,26 @@ def test_the_readme_quotes_the_default_run():
         assert min(g["mean"] for g in s["results"]["3"][choice]["gain"]["APTKT"]) > 0, choice
 
 
+def quotes_three_ways(summary: dict, rows: list[tuple[str, str, str]]) -> None:
+    """docs/real-data.md's section on a run with priors chosen three ways: its accuracy
+    ``rows`` (label, prior choice, method), the gains at steps 0 and 20 and the checks."""
+    table = [accuracy_row(summary, *row) for row in rows]
+    gains = [f"({gains_at(summary, 0)}", f"at step 20 {gains_at(summary, 20)}"]
+    assert_quoted("docs/real-data.md", [*table, *gains, checks(summary)])
+
+
 def test_real_data_md_quotes_the_default_run():
     s = summary_of("biotac-benchmark")
-    rows = [
-        accuracy_row(s, "baseline", "random", "baseline"),
-        accuracy_row(s, "baseline, random picks", "random", "baseline random"),
-        accuracy_row(s, "APTKT, random priors", "random", "APTKT"),
-        accuracy_row(s, "APTKT, random priors, random picks", "random", "APTKT random"),
-        accuracy_row(s, "APTKT, most similar priors", "nearest", "APTKT"),
-        accuracy_row(s, "APTKT, least similar priors", "farthest", "APTKT"),
-    ]
-    assert_quoted(
-        "docs/real-data.md",
-        [*rows, f"({gains_at(s, 0)}", f"at step 20 {gains_at(s, 20)}", checks(s)],
+    quotes_three_ways(
+        s,
+        [
+            ("baseline", "random", "baseline"),
+            ("baseline, random picks", "random", "baseline random"),
+            ("APTKT, random priors", "random", "APTKT"),
+            ("APTKT, random priors, random picks", "random", "APTKT random"),
+            ("APTKT, most similar priors", "nearest", "APTKT"),
+            ("APTKT, least similar priors", "farthest", "APTKT"),
+        ],
     )
     assert_quoted("docs/real-data.md", [noise_spans_row(s)])
     assert_quoted("docs/simulation.md", [noise_medians_row(s), *noise_by_modality(s)])
@@ -412,16 +420,15 @@ def test_real_data_md_quotes_the_default_run():
 
 def test_real_data_md_quotes_the_paper_selection_run():
     s = summary_of("biotac-paper")
-    rows = [
-        accuracy_row(s, "baseline", "random", "baseline"),
-        accuracy_row(s, "APTKT, random priors", "random", "APTKT"),
-        accuracy_row(s, "APTKT, most similar priors", "nearest", "APTKT"),
-        accuracy_row(s, "APTKT, least similar priors", "farthest", "APTKT"),
-        accuracy_row(s, "1-NN in the prior's metric (random priors)", "random", "1-NN"),
-    ]
-    assert_quoted(
-        "docs/real-data.md",
-        [*rows, f"({gains_at(s, 0)}", f"at step 20 {gains_at(s, 20)}", checks(s)],
+    quotes_three_ways(
+        s,
+        [
+            ("baseline", "random", "baseline"),
+            ("APTKT, random priors", "random", "APTKT"),
+            ("APTKT, most similar priors", "nearest", "APTKT"),
+            ("APTKT, least similar priors", "farthest", "APTKT"),
+            ("1-NN in the prior's metric (random priors)", "random", "1-NN"),
+        ],
     )
     (estimate_check,) = [c for c in s["checks"] if c["claim"].startswith("APTKT's own estimate")]
     assert not estimate_check["holds"], "the page says this reference figure is not reached"

@@ -4,7 +4,8 @@ exit included), writes to REPORT the worst lateness of its own threads from the 
 robot connection was open until that connection began to be dropped (its teardown holds the
 GIL 0.5 s by design, and is no stall of the machine's). A test that runs aptkt in a child
 process measures there what the in-process tests measure in their own process: how long the
-machine kept aptkt's supervision and skin reader waiting.
+machine kept aptkt's supervision and skin reader waiting. :func:`watch_connections` marks
+the same moments for the tests that run aptkt in their own process.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import json
 import runpy
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from timing import LatenessProbe
@@ -21,29 +23,46 @@ from timing import LatenessProbe
 from aptkt.robot.ur10.connection import Connection
 
 
+def watch_connections(
+    opened: Callable[[], None], teardown: Callable[[], None]
+) -> Callable[[], None]:
+    """Have :class:`Connection` call ``opened()`` once a connection is open and
+    ``teardown()`` as one that holds clients begins to drop them (``connect()`` first drops
+    the clients of a connection not yet open, as a reset: no teardown). Returns the undo."""
+    open_, drop_clients = Connection.open, Connection.drop_clients
+
+    def opening(connection: Connection) -> None:
+        open_(connection)
+        opened()
+
+    def dropping(connection: Connection) -> None:
+        if connection.receive is not None or connection.control is not None:
+            teardown()
+        drop_clients(connection)
+
+    def undo() -> None:
+        Connection.open = open_  # type: ignore[method-assign]
+        Connection.drop_clients = drop_clients  # type: ignore[method-assign]
+
+    Connection.open = opening  # type: ignore[method-assign]
+    Connection.drop_clients = dropping  # type: ignore[method-assign]
+    return undo
+
+
 def main() -> None:
     report, argv = Path(sys.argv[1]), sys.argv[2:]
     probe = LatenessProbe().start()  # (the parameters of the in-process tests' probe)
-    # Each robot connection's [opened, teardown began] (a run may open more than one).
-    connected: list[list[float | None]] = []
-    open_, drop_clients = Connection.open, Connection.drop_clients
+    # Each robot connection's [opened, teardown began] ([opened] until it begins).
+    connected: list[list[float]] = []
 
-    def opened(connection: Connection) -> None:
-        open_(connection)
-        connected.append([time.monotonic(), None])
+    def teardown() -> None:
+        if connected and len(connected[-1]) == 1:
+            connected[-1].append(time.monotonic())
 
-    def dropping(connection: Connection) -> None:
-        # (connect() drops a connection not yet open first: no teardown then.)
-        opened_now = connection.receive is not None or connection.control is not None
-        if opened_now and connected and connected[-1][1] is None:
-            connected[-1][1] = time.monotonic()
-        drop_clients(connection)
-
-    Connection.open = opened  # type: ignore[method-assign]
-    Connection.drop_clients = dropping  # type: ignore[method-assign]
+    watch_connections(lambda: connected.append([time.monotonic()]), teardown)
 
     def write() -> None:
-        worst = max((probe.worst(a, b) for a, b in connected if a is not None), default=None)
+        worst = max((probe.worst(*window) for window in connected), default=None)
         report.write_text(json.dumps({"worst_lateness": worst, "connected": connected}))
 
     atexit.register(write)

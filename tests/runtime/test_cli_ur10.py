@@ -29,6 +29,7 @@ import numpy as np
 import pytest
 import rtde_control  # noqa: E402,F401 - the test extra installs ur_rtde; a missing one must fail, not skip
 from loopback_helpers import free_loopback_host  # noqa: E402
+from probed_cli import watch_connections  # noqa: E402
 from processes import default_signals  # noqa: E402
 from timing import (  # noqa: E402
     FeedStall,
@@ -43,7 +44,6 @@ from aptkt.cli import main  # noqa: E402
 from aptkt.data import DatasetReader  # noqa: E402
 from aptkt.learning import PriorKnowledge  # noqa: E402
 from aptkt.learning.dataset import load_observations  # noqa: E402
-from aptkt.robot.ur10.connection import Connection  # noqa: E402
 from aptkt.sim.loopback import Loopback  # noqa: E402
 
 DOWN = (math.pi, 0.0, 0.0)
@@ -225,20 +225,11 @@ def cell(tmp_path_factory: pytest.TempPathFactory):
             (d / "patch.toml").write_text(patch)
             (d / "actions.toml").write_text(actions_toml(2 * timeout))
             timing = Timing(probe, FeedStall(lb, machine), timeout, 2 * timeout)
-            drop_clients = Connection.drop_clients
-
-            def noted(connection: Connection) -> None:
-                # (connect() drops the clients of a connection not yet open, as a reset: no
-                # teardown, and no end of the window in which the reader's lateness counts.)
-                if connection.receive is not None or connection.control is not None:
-                    timing.note_teardown()
-                drop_clients(connection)
-
-            Connection.drop_clients = noted  # type: ignore[method-assign]
+            undo = watch_connections(lambda: None, timing.note_teardown)
             try:
                 yield d, lb, timing
             finally:
-                Connection.drop_clients = drop_clients  # type: ignore[method-assign]
+                undo()
     finally:
         probe.stop()
         machine.close()
