@@ -176,3 +176,51 @@ def test_data_that_stays_old_is_a_lost_link_after_the_second_look():
     assert link.lost is not None
     assert link.receive.stamp_reads > 2  # it looked again (until its deadline) before saying so
     assert not _away(None).link_ok()
+
+
+class _AnsweringControl:
+    """A control process that answers every request at once."""
+
+    ended = False
+
+    def request(self, name: str, *args: object) -> int:
+        return 1
+
+    def reply(self, timeout: float, want: int | None = None) -> str:
+        return "done"
+
+    def close(self, timeout: float) -> None: ...
+
+    def kill(self) -> None: ...
+
+    def release(self) -> None: ...
+
+
+def test_a_signal_between_taking_the_call_lock_and_its_try_does_not_hang_the_teardown():
+    """Ctrl-C raises in the main thread wherever it is, also right after ``call()`` took the
+    lock and before the ``try`` that releases it: the lock stays taken. That thread's stop and
+    teardown must still go through (it once hung there for good); another thread stays out."""
+    import threading
+
+    link = Connection("127.0.0.1", watchdog_timeout=0.5)
+    link.control = _AnsweringControl()  # type: ignore[assignment]
+    outcome: list[object] = []
+    other_thread_kept_out: list[bool] = []
+
+    def interrupted_then_closing() -> None:
+        link._calls.acquire()  # what the interrupted call leaves behind
+        probe = threading.Thread(
+            target=lambda: other_thread_kept_out.append(not link._calls.acquire(timeout=0.05))
+        )
+        probe.start()
+        probe.join()
+        outcome.append(link.call("stopScript"))
+        link.drop_clients()
+        outcome.append(link.control)
+
+    worker = threading.Thread(target=interrupted_then_closing, daemon=True)
+    worker.start()
+    worker.join(timeout=10.0)
+    assert not worker.is_alive(), "the teardown waited for a lock its own thread held"
+    assert outcome == ["done", None]
+    assert other_thread_kept_out == [True]

@@ -107,8 +107,12 @@ class Connection:
         #: The real-time command repeated every supervision cycle (see :meth:`command`).
         self.hold: tuple[str, tuple[Any, ...]] | None = None
         self._in_motion = False
-        # Held for every exchange with the control process.
-        self._calls = threading.Lock()
+        # Held for every exchange with the control process. Re-entrant: Ctrl-C or SIGTERM
+        # raises in the main thread, and one that lands between `acquire()` returning and
+        # the `try` that releases it leaves the lock held by that thread for good; with a
+        # plain lock its own stop and teardown then waited forever (seen: a signal test's
+        # aptkt hung in `drop_clients`). Other threads are still kept out.
+        self._calls = threading.RLock()
         self.reset_freshness()
 
     # ------------------------------------------------------------------ open / close
